@@ -1,0 +1,87 @@
+//! The `mocapstore` command line. Each subcommand lives in its own module; this one only
+//! parses arguments and dispatches.
+
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+
+mod convert;
+mod inspect;
+
+#[derive(Parser)]
+#[command(
+    name = "mocapstore",
+    version,
+    about = "Archive motion capture with error-bounded compression"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Start the HTTP service (SQLite file by default).
+    Serve(ServeArgs),
+    /// Describe mocap files: format, points, frames, fps, duration, unit, gaps, warnings.
+    Inspect(inspect::InspectArgs),
+    /// Convert a take between formats (output format from the extension or --to).
+    Convert(convert::ConvertArgs),
+}
+
+#[derive(Args)]
+struct ServeArgs {
+    /// Address to listen on.
+    #[arg(long, env = "MOCAP_LISTEN", default_value = "127.0.0.1:8080")]
+    listen: String,
+    /// Database: a SQLite file (created if missing) or a postgres:// URL.
+    #[arg(long, env = "DATABASE_URL", default_value = "sqlite://mocapstore.db")]
+    database_url: String,
+}
+
+/// Options every command that reads takes accepts.
+#[derive(Args, Debug, Clone, Default)]
+pub struct ReadArgs {
+    /// Unit of the input coordinates (mm, cm, m, in, ft, cmu, or metres per unit);
+    /// overrides the file's own and disables inference.
+    #[arg(long)]
+    pub unit: Option<String>,
+    /// Frame rate of the input (needed for NPY, which has none).
+    #[arg(long)]
+    pub fps: Option<f64>,
+}
+
+impl ReadArgs {
+    pub fn options(&self) -> Result<mocapstore_motion::ReadOptions, String> {
+        let unit = match &self.unit {
+            Some(u) => Some(mocapstore_motion::parse_unit(u).map_err(|e| e.to_string())?),
+            None => None,
+        };
+        Ok(mocapstore_motion::ReadOptions {
+            unit,
+            fps: self.fps,
+            ..Default::default()
+        })
+    }
+}
+
+/// Short paths to the motion layer for the subcommands.
+mod mocapstore_motion {
+    pub use crate::motion::formats::ReadOptions;
+    pub use crate::motion::units::parse_unit;
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Serve(args) => {
+            eprintln!(
+                "mocapstore serve: not yet implemented (would listen on {} with {}); the service lands with the store and HTTP layers",
+                args.listen, args.database_url
+            );
+            ExitCode::from(2)
+        }
+        Command::Inspect(args) => inspect::run(&args),
+        Command::Convert(args) => convert::run(&args),
+    }
+}

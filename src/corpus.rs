@@ -1,0 +1,94 @@
+//! The real-data corpus that tests and benchmarks run on: where it is (`MOCAP_CORPUS`,
+//! default `../shared/data` beside the crate) and its `manifest.csv`, the frame and point
+//! counts an independent parser found for each file.
+
+use std::path::{Path, PathBuf};
+
+/// One row of `manifest.csv`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Entry {
+    /// Relative to the corpus root.
+    pub path: String,
+    pub format: String,
+    pub points: Option<usize>,
+    pub frames: Option<usize>,
+    pub fps: Option<f64>,
+    /// Whether the reference parser read the file; `None` where it was not run (TRC).
+    pub reference_ok: Option<bool>,
+}
+
+/// The corpus root: `$MOCAP_CORPUS`, else `../shared/data` relative to the crate root.
+pub fn root() -> PathBuf {
+    match std::env::var_os("MOCAP_CORPUS") {
+        Some(p) if !p.is_empty() => PathBuf::from(p),
+        _ => Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"),
+    }
+}
+
+/// Read and parse `manifest.csv` under `root`.
+pub fn manifest(root: &Path) -> Result<Vec<Entry>, String> {
+    let path = root.join("manifest.csv");
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        format!(
+            "cannot read {}: {e} (set MOCAP_CORPUS to the corpus folder)",
+            path.display()
+        )
+    })?;
+    parse_manifest(&text)
+}
+
+fn parse_manifest(text: &str) -> Result<Vec<Entry>, String> {
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().ok_or("empty manifest")?.split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| h.trim() == name)
+            .ok_or(format!("manifest has no {name} column"))
+    };
+    let (c_path, c_fmt, c_pts, c_frames, c_fps, c_ok) = (
+        col("path")?,
+        col("format")?,
+        col("points")?,
+        col("frames")?,
+        col("fps")?,
+        col("reference_parser_ok")?,
+    );
+    lines
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let get = |i: usize| f.get(i).map(|s| s.trim()).unwrap_or("");
+            Ok(Entry {
+                path: get(c_path).to_string(),
+                format: get(c_fmt).to_string(),
+                points: get(c_pts).parse().ok(),
+                frames: get(c_frames).parse().ok(),
+                fps: get(c_fps).parse().ok(),
+                reference_ok: match get(c_ok) {
+                    "True" => Some(true),
+                    "False" => Some(false),
+                    _ => None,
+                },
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_rows_with_blanks() {
+        let m = parse_manifest(
+            "path,format,points,frames,fps,reference_parser_ok,sha256\n\
+             a.bvh,bvh,22,128,30.0,True,x\nb.c3d,c3d,,,,False,y\nc.trc,trc,,,,,z\n",
+        )
+        .unwrap();
+        assert_eq!(m.len(), 3);
+        assert_eq!(m[0].points, Some(22));
+        assert_eq!(m[1].reference_ok, Some(false));
+        assert_eq!(m[2].reference_ok, None);
+    }
+}

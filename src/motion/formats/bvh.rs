@@ -1,0 +1,464 @@
+//! BVH (Biovision Hierarchy): a joint tree with per-joint channel lists, then one row of
+//! channel values per frame.
+//!
+//! Read: any rotation order per joint, 3 or 6 (or any subset of the six) channels on any
+//! joint, End Sites as points, tabs/CRLF, scientific notation, names with spaces. A header
+//! frame count that disagrees with the rows present is a warning, not an error: the rows are
+//! the data. Write: the same hierarchy and channel values, printed in the shortest form that
+//! parses back to the same f64.
+
+use std::fmt::Write as _;
+
+use super::text::{as_text, numbered_lines};
+use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use crate::motion::error::{Error, Location, Result};
+use crate::motion::model::Motion;
+use crate::motion::skeleton::{Channel, Joint, Skeleton};
+
+const FMT: Format = Format::Bvh;
+
+fn err(line: usize, reason: impl Into<String>) -> Error {
+    perr(FMT, Location::Line(line), reason)
+}
+
+/// Header tokens with the line each came from.
+struct Tokens<'a> {
+    toks: Vec<(usize, &'a str)>,
+    pos: usize,
+    last_line: usize,
+}
+
+impl<'a> Tokens<'a> {
+    fn next(&mut self) -> Result<(usize, &'a str)> {
+        let t = self
+            .toks
+            .get(self.pos)
+            .copied()
+            .ok_or_else(|| err(self.last_line, "unexpected end of the hierarchy"))?;
+        self.pos += 1;
+        Ok(t)
+    }
+
+    fn expect(&mut self, want: &str) -> Result<usize> {
+        let (line, t) = self.next()?;
+        if t != want {
+            return Err(err(line, format!("expected {want:?}, found {t:?}")));
+        }
+        Ok(line)
+    }
+
+    fn number(&mut self, what: &str) -> Result<f64> {
+        let (line, t) = self.next()?;
+        parse_f64(t).ok_or_else(|| err(line, format!("{what}: {t:?} is not a number")))
+    }
+
+    /// The rest of `line`'s tokens (a joint name may contain spaces), stopping at `{`.
+    fn name_on(&mut self, line: usize) -> Result<String> {
+        let mut parts = Vec::new();
+        while let Some(&(l, t)) = self.toks.get(self.pos) {
+            if l != line || t == "{" {
+                break;
+            }
+            parts.push(t);
+            self.pos += 1;
+        }
+        if parts.is_empty() {
+            return Err(err(line, "joint without a name"));
+        }
+        Ok(parts.join(" "))
+    }
+}
+
+fn parse_f64(t: &str) -> Option<f64> {
+    t.parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+/// Parse a BVH file.
+pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
+    let text = as_text(bytes);
+    let mut lines = numbered_lines(&text);
+
+    // Hierarchy: every token up to the MOTION line.
+    let mut toks = Vec::new();
+    let mut motion_line = None;
+    let mut last_line = 1;
+    for (n, line) in lines.by_ref() {
+        last_line = n;
+        let trimmed = line.trim();
+        if trimmed.eq_ignore_ascii_case("MOTION") {
+            motion_line = Some(n);
+            break;
+        }
+        for t in trimmed.split_ascii_whitespace() {
+            // A brace glued to a name ("Hips{") is still a brace.
+            if t.len() > 1 && t.ends_with('{') {
+                toks.push((n, &t[..t.len() - 1]));
+                toks.push((n, "{"));
+            } else {
+                toks.push((n, t));
+            }
+        }
+    }
+    let mut tokens = Tokens {
+        toks,
+        pos: 0,
+        last_line,
+    };
+    let joints = parse_hierarchy(&mut tokens, limits)?;
+    let motion_line = motion_line.ok_or_else(|| err(last_line, "no MOTION section"))?;
+
+    // Frames: N / Frame Time: t
+    let mut header_frames = None;
+    let mut frame_time = None;
+    let mut line_no = motion_line;
+    for (n, line) in lines.by_ref() {
+        line_no = n;
+        let l = line.trim();
+        if l.is_empty() {
+            continue;
+        }
+        let (key, value) = l.split_once(':').ok_or_else(|| {
+            err(
+                n,
+                format!("expected \"Frames:\" or \"Frame Time:\", found {l:?}"),
+            )
+        })?;
+        let key = key.split_ascii_whitespace().collect::<Vec<_>>().join(" ");
+        let value = value.trim();
+        if key.eq_ignore_ascii_case("Frames") {
+            let v: usize = value
+                .parse()
+                .map_err(|_| err(n, format!("frame count {value:?} is not a whole number")))?;
+            header_frames = Some(v);
+        } else if key.eq_ignore_ascii_case("Frame Time") {
+            let v = parse_f64(value)
+                .filter(|v| *v > 0.0)
+                .ok_or_else(|| err(n, format!("frame time {value:?} is not a positive number")))?;
+            frame_time = Some(v);
+        } else {
+            return Err(err(n, format!("unexpected {key:?} in the MOTION header")));
+        }
+        if header_frames.is_some() && frame_time.is_some() {
+            break;
+        }
+    }
+    let header_frames = header_frames.ok_or_else(|| err(line_no, "missing \"Frames:\""))?;
+    let frame_time = frame_time.ok_or_else(|| err(line_no, "missing \"Frame Time:\""))?;
+    limits.check_shape(header_frames, joints.len())?;
+
+    let cc: usize = joints.iter().map(|j| j.channels.len()).sum();
+    // Trust the header for the reservation only as far as the input could back it up (every
+    // value takes at least two bytes), so a forged frame count cannot make us allocate.
+    let mut values: Vec<f64> = Vec::with_capacity((header_frames * cc).min(bytes.len() / 2));
+    let mut rows = 0usize;
+    for (n, line) in lines {
+        let mut count = 0;
+        for t in line.split_ascii_whitespace() {
+            let v = parse_f64(t)
+                .ok_or_else(|| err(n, format!("channel value {t:?} is not a number")))?;
+            values.push(v);
+            count += 1;
+        }
+        if count == 0 {
+            continue;
+        }
+        if count != cc {
+            return Err(err(
+                n,
+                format!(
+                    "frame {} has {count} values, the hierarchy has {cc} channels",
+                    rows + 1
+                ),
+            ));
+        }
+        rows += 1;
+        limits.check_shape(rows, joints.len())?;
+    }
+    let mut warnings = Vec::new();
+    if rows != header_frames {
+        warnings.push(format!(
+            "header says {header_frames} frames but {rows} rows are present; loaded the {rows} rows"
+        ));
+    }
+    if cc == 0 && rows == 0 && header_frames > 0 {
+        return Err(err(
+            line_no,
+            "frames declared but the hierarchy has no channels",
+        ));
+    }
+
+    let names = joints.iter().map(|j| j.name.clone()).collect();
+    let skeleton = Skeleton::new(joints, values)?;
+    let positions = skeleton
+        .forward_kinematics()
+        .into_iter()
+        .map(|v| v as f32)
+        .collect();
+    let motion = Motion::new(
+        1.0 / frame_time,
+        unsettled_unit(),
+        names,
+        positions,
+        Some(skeleton),
+    )?;
+    Ok(Parsed {
+        motion,
+        declared_unit: None,
+        warnings,
+    })
+}
+
+fn parse_hierarchy(t: &mut Tokens<'_>, limits: &Limits) -> Result<Vec<Joint>> {
+    let (line, first) = t.next()?;
+    if !first.eq_ignore_ascii_case("HIERARCHY") {
+        return Err(err(line, format!("expected HIERARCHY, found {first:?}")));
+    }
+    let (line, root) = t.next()?;
+    if root != "ROOT" {
+        return Err(err(line, format!("expected ROOT, found {root:?}")));
+    }
+    let mut joints = Vec::new();
+    parse_joint(t, line, None, false, &mut joints, limits)?;
+    if let Some(&(line, extra)) = t.toks.get(t.pos) {
+        return Err(err(
+            line,
+            format!("{extra:?} after the root joint (only one ROOT is supported)"),
+        ));
+    }
+    Ok(joints)
+}
+
+/// Parse one joint (its keyword already consumed) and, recursively, its children.
+fn parse_joint(
+    t: &mut Tokens<'_>,
+    line: usize,
+    parent: Option<usize>,
+    end_site: bool,
+    joints: &mut Vec<Joint>,
+    limits: &Limits,
+) -> Result<()> {
+    if joints.len() as u64 >= limits.max_points {
+        return Err(Error::Limit {
+            what: "joint count",
+            actual: joints.len() as u64 + 1,
+            limit: limits.max_points,
+        });
+    }
+    let name = if end_site {
+        // "End Site" — the word "Site" follows on the same line.
+        let (l, site) = t.next()?;
+        if !site.eq_ignore_ascii_case("Site") {
+            return Err(err(
+                l,
+                format!("expected \"End Site\", found \"End {site}\""),
+            ));
+        }
+        let parent_name = parent.map_or("root", |p| joints[p].name.as_str());
+        unique_name(joints, &format!("{parent_name}_End"))
+    } else {
+        t.name_on(line)?
+    };
+    t.expect("{")?;
+    let index = joints.len();
+    joints.push(Joint {
+        name,
+        parent,
+        offset: [0.0; 3],
+        channels: Vec::new(),
+        end_site,
+    });
+    let mut seen_offset = false;
+    loop {
+        let (l, kw) = t.next()?;
+        match kw {
+            "}" => break,
+            "OFFSET" => {
+                let mut o = [0.0; 3];
+                for v in &mut o {
+                    *v = t.number("OFFSET")?;
+                }
+                joints[index].offset = o;
+                seen_offset = true;
+            }
+            "CHANNELS" if !end_site => {
+                let (cl, n) = t.next()?;
+                let n: usize = n
+                    .parse()
+                    .ok()
+                    .filter(|n| *n <= 6)
+                    .ok_or_else(|| err(cl, format!("channel count {n:?} is not 0..=6")))?;
+                let mut chans = Vec::with_capacity(n);
+                for _ in 0..n {
+                    let (cl, c) = t.next()?;
+                    let ch = Channel::parse(c)
+                        .ok_or_else(|| err(cl, format!("unknown channel {c:?}")))?;
+                    if chans.contains(&ch) {
+                        return Err(err(cl, format!("channel {c} listed twice")));
+                    }
+                    chans.push(ch);
+                }
+                joints[index].channels = chans;
+            }
+            "JOINT" if !end_site => parse_joint(t, l, Some(index), false, joints, limits)?,
+            "End" if !end_site => parse_joint(t, l, Some(index), true, joints, limits)?,
+            other => return Err(err(l, format!("unexpected {other:?} in joint block"))),
+        }
+    }
+    if !seen_offset {
+        return Err(err(
+            line,
+            format!("joint {:?} has no OFFSET", joints[index].name),
+        ));
+    }
+    Ok(())
+}
+
+fn unique_name(joints: &[Joint], base: &str) -> String {
+    let mut name = base.to_string();
+    let mut k = 2;
+    while joints.iter().any(|j| j.name == name) {
+        name = format!("{base}{k}");
+        k += 1;
+    }
+    name
+}
+
+/// Write a take that has a skeleton as BVH.
+pub fn write(motion: &Motion) -> Result<Vec<u8>> {
+    let s = motion.skeleton.as_ref().ok_or_else(|| {
+        Error::Unsupported("BVH output needs a skeleton; this take is point data only".into())
+    })?;
+    let mut out = String::with_capacity(64 * s.joints.len() + 12 * s.values.len());
+    out.push_str("HIERARCHY\n");
+    if !s.joints.is_empty() {
+        write_joint(s, 0, 0, &mut out);
+    }
+    let frames = s.frame_count();
+    let _ = write!(out, "MOTION\nFrames: {frames}\nFrame Time: ");
+    out.push_str(&format_frame_time(1.0 / motion.fps));
+    out.push('\n');
+    let cc = s.channel_count();
+    for f in 0..frames {
+        for (i, v) in s.values[f * cc..(f + 1) * cc].iter().enumerate() {
+            if i > 0 {
+                out.push(' ');
+            }
+            let _ = write!(out, "{v}");
+        }
+        out.push('\n');
+    }
+    Ok(out.into_bytes())
+}
+
+fn format_frame_time(t: f64) -> String {
+    // 1/fps rarely prints back exactly; 10 decimals keep fps exact to ~1e-6 at 1000 fps.
+    let s = format!("{t:.10}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+fn write_joint(s: &Skeleton, i: usize, depth: usize, out: &mut String) {
+    let ind = "\t".repeat(depth);
+    let j = &s.joints[i];
+    if j.end_site {
+        let _ = writeln!(out, "{ind}End Site");
+    } else if j.parent.is_none() {
+        let _ = writeln!(out, "{ind}ROOT {}", j.name);
+    } else {
+        let _ = writeln!(out, "{ind}JOINT {}", j.name);
+    }
+    let _ = writeln!(out, "{ind}{{");
+    let [x, y, z] = j.offset;
+    let _ = writeln!(out, "{ind}\tOFFSET {x} {y} {z}");
+    if !j.end_site {
+        let _ = write!(out, "{ind}\tCHANNELS {}", j.channels.len());
+        for c in &j.channels {
+            let _ = write!(out, " {}", c.name());
+        }
+        out.push('\n');
+    }
+    for (k, child) in s.joints.iter().enumerate().skip(i + 1) {
+        if child.parent == Some(i) {
+            write_joint(s, k, depth + 1, out);
+        }
+    }
+    let _ = writeln!(out, "{ind}}}");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TOY: &str = "HIERARCHY\r\nROOT Hips\r\n{\r\n\tOFFSET 0 0 0\r\n\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\r\n\tJOINT Left Leg\r\n\t{\r\n\t\tOFFSET 1.5e0 -2 0\r\n\t\tCHANNELS 3 Xrotation Yrotation Zrotation\r\n\t\tEnd Site\r\n\t\t{\r\n\t\t\tOFFSET 0 -3 0\r\n\t\t}\r\n\t}\r\n}\r\nMOTION\r\nFrames:\t2\r\nFrame Time:\t0.0333333\r\n0 10 0 0 0 0 0 0 0\r\n1 10 0 90 0 0 0 0 90\r\n";
+
+    #[test]
+    fn reads_joints_end_sites_and_positions() {
+        let p = read(TOY.as_bytes(), &Limits::default()).unwrap();
+        let m = p.motion;
+        assert_eq!(m.point_names, vec!["Hips", "Left Leg", "Left Leg_End"]);
+        assert_eq!(m.frame_count(), 2);
+        assert!((m.fps - 30.0).abs() < 1e-3);
+        assert!(p.warnings.is_empty());
+        // Frame 0: root at (0,10,0), leg at (1.5,8,0), foot at (1.5,5,0).
+        assert_eq!(m.frame(0), &[0.0, 10.0, 0.0, 1.5, 8.0, 0.0, 1.5, 5.0, 0.0]);
+        // Frame 1: root Z 90° maps the leg offset (1.5,-2,0) to (2,1.5,0); the leg's own
+        // Z 90° composed with the root's makes 180°: (0,-3,0) → (0,3,0).
+        let f1 = m.frame(1);
+        let want = [1.0, 10.0, 0.0, 3.0, 11.5, 0.0, 3.0, 14.5, 0.0];
+        for (a, b) in f1.iter().zip(want) {
+            assert!((a - b).abs() < 1e-5, "{f1:?}");
+        }
+    }
+
+    #[test]
+    fn round_trips_channel_values_exactly() {
+        let m = read(TOY.as_bytes(), &Limits::default()).unwrap().motion;
+        let text = write(&m).unwrap();
+        let again = read(&text, &Limits::default()).unwrap().motion;
+        assert_eq!(again.skeleton, m.skeleton);
+        assert_eq!(again.point_names, m.point_names);
+        assert!((again.fps - m.fps).abs() < 1e-6);
+    }
+
+    #[test]
+    fn header_count_mismatch_is_a_warning() {
+        let more = TOY.replace("Frames:\t2", "Frames:\t1");
+        let p = read(more.as_bytes(), &Limits::default()).unwrap();
+        assert_eq!(p.motion.frame_count(), 2);
+        assert_eq!(p.warnings.len(), 1);
+    }
+
+    #[test]
+    fn errors_name_the_line() {
+        let bad = TOY.replace("1 10 0 90 0 0 0 0 90", "1 10 0 90 0 0 0 0");
+        match read(bad.as_bytes(), &Limits::default()) {
+            Err(Error::Parse { at, .. }) => assert_eq!(at, Location::Line(20)),
+            other => panic!("{other:?}"),
+        }
+        let bad = TOY.replace(
+            "Xrotation Yrotation Zrotation",
+            "Xrotation Wrotation Zrotation",
+        );
+        assert!(matches!(
+            read(bad.as_bytes(), &Limits::default()),
+            Err(Error::Parse {
+                at: Location::Line(9),
+                ..
+            })
+        ));
+        let bad = TOY.replace("0.0333333", "0");
+        assert!(read(bad.as_bytes(), &Limits::default()).is_err());
+        assert!(read(b"HIERARCHY\nROOT", &Limits::default()).is_err());
+        assert!(read(
+            b"HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\n}\n",
+            &Limits::default()
+        )
+        .is_err());
+    }
+
+    #[test]
+    fn every_prefix_fails_cleanly_or_loads() {
+        for cut in 0..TOY.len() {
+            let _ = read(&TOY.as_bytes()[..cut], &Limits::default());
+        }
+    }
+}

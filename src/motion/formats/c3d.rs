@@ -1,0 +1,546 @@
+//! C3D: the biomechanics binary format (a 512-byte header block, a parameter section of
+//! groups and typed parameters, then frames of points and analog samples).
+//!
+//! We read point data only; analog samples are measured so they can be skipped, never
+//! interpreted. Supported: Intel (IEEE LE), DEC (VAX F-float, LE integers) and SGI/MIPS
+//! (IEEE BE) processor types; integer storage with `POINT:SCALE` and float storage;
+//! `TRIAL:ACTUAL_START_FIELD/END_FIELD` for files longer than 65535 frames; residual < 0
+//! as a missing sample.
+//!
+//! Why not the `c3dio` crate: on this project's corpus it refuses 9 files that ezc3d reads
+//! (force-plate and analog parameter checks that fail on real files, `POINT:UNITS` treated
+//! as mandatory) and has no DEC/SGI float path we could verify; reading points needs a
+//! fraction of what it does, so we keep a small reader we can test against the manifest.
+
+use std::collections::HashMap;
+
+use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use crate::motion::error::{Error, Location, Result};
+use crate::motion::model::Motion;
+use crate::motion::units::parse_unit;
+
+const BLOCK: usize = 512;
+const FMT: Format = Format::C3d;
+
+fn err(offset: usize, reason: impl Into<String>) -> Error {
+    perr(FMT, Location::Offset(offset), reason)
+}
+
+/// Byte order and float encoding, from the parameter section's processor byte.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Processor {
+    Intel,
+    Dec,
+    Mips,
+}
+
+impl Processor {
+    fn from_byte(b: u8) -> Option<Self> {
+        match b {
+            84 => Some(Processor::Intel),
+            85 => Some(Processor::Dec),
+            86 => Some(Processor::Mips),
+            _ => None,
+        }
+    }
+
+    fn i16(self, b: &[u8]) -> i16 {
+        let a = [b[0], b[1]];
+        match self {
+            Processor::Mips => i16::from_be_bytes(a),
+            _ => i16::from_le_bytes(a),
+        }
+    }
+
+    fn u16(self, b: &[u8]) -> u16 {
+        self.i16(b) as u16
+    }
+
+    fn f32(self, b: &[u8]) -> f32 {
+        match self {
+            Processor::Intel => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            Processor::Mips => f32::from_be_bytes([b[0], b[1], b[2], b[3]]),
+            Processor::Dec => dec_f32([b[0], b[1], b[2], b[3]]),
+        }
+    }
+}
+
+/// VAX F-float to IEEE: the two 16-bit words are swapped relative to IEEE little-endian,
+/// and the exponent bias and hidden-bit position together make the value 4 times larger.
+fn dec_f32(b: [u8; 4]) -> f32 {
+    let ieee = f32::from_le_bytes([b[2], b[3], b[0], b[1]]);
+    if (b[1] & 0x7f) == 0 && (b[0] & 0x80) == 0 {
+        // Exponent zero is zero on a VAX (no denormals).
+        return 0.0;
+    }
+    ieee / 4.0
+}
+
+/// A parameter's raw data with the processor needed to decode it.
+#[derive(Debug, Clone)]
+struct Param {
+    kind: i8,
+    dims: Vec<usize>,
+    data_at: usize,
+    len: usize,
+}
+
+struct Params<'a> {
+    bytes: &'a [u8],
+    proc: Processor,
+    map: HashMap<(String, String), Param>,
+}
+
+impl Params<'_> {
+    fn get(&self, group: &str, name: &str) -> Option<&Param> {
+        self.map.get(&(group.to_string(), name.to_string()))
+    }
+
+    fn data(&self, p: &Param) -> &[u8] {
+        &self.bytes[p.data_at..p.data_at + p.len]
+    }
+
+    /// First value as a number, whatever the stored type.
+    fn number(&self, group: &str, name: &str) -> Option<f64> {
+        let p = self.get(group, name)?;
+        let d = self.data(p);
+        match p.kind {
+            1 if !d.is_empty() => Some(f64::from(d[0])),
+            2 if d.len() >= 2 => Some(f64::from(self.proc.i16(d))),
+            4 if d.len() >= 4 => Some(f64::from(self.proc.f32(d))),
+            _ => None,
+        }
+    }
+
+    /// 16-bit integers, read unsigned (counts in C3D overflow i16 long before u16).
+    fn u16s(&self, group: &str, name: &str) -> Option<Vec<u16>> {
+        let p = self.get(group, name)?;
+        if p.kind != 2 {
+            return None;
+        }
+        Some(
+            self.data(p)
+                .chunks_exact(2)
+                .map(|c| self.proc.u16(c))
+                .collect(),
+        )
+    }
+
+    /// A character parameter as strings: dims `[len, count]` (or `[len]` for one string).
+    fn strings(&self, group: &str, name: &str) -> Option<Vec<String>> {
+        let p = self.get(group, name)?;
+        if p.kind != -1 {
+            return None;
+        }
+        let d = self.data(p);
+        let width = p.dims.first().copied().unwrap_or(d.len()).max(1);
+        Some(
+            d.chunks(width)
+                .map(|c| {
+                    String::from_utf8_lossy(c)
+                        .trim_matches(|ch: char| ch == '\0' || ch.is_whitespace())
+                        .to_string()
+                })
+                .collect(),
+        )
+    }
+}
+
+/// Parse the parameter section starting at `start`. `end` bounds it (the data section's
+/// start): some writers leave a bogus "next" offset on the last parameter, which we take as
+/// the end of the list rather than follow into the point data.
+fn parse_params(bytes: &[u8], start: usize, end: usize, proc: Processor) -> Result<Params<'_>> {
+    let mut group_names: HashMap<i8, String> = HashMap::new();
+    let mut raw: Vec<(i8, String, Param)> = Vec::new();
+    let mut pos = start + 4;
+    loop {
+        if pos + 2 > bytes.len() {
+            return Err(err(pos, "parameter section runs past the end of the file"));
+        }
+        let name_len = (bytes[pos] as i8).unsigned_abs() as usize;
+        let id = bytes[pos + 1] as i8;
+        if name_len == 0 || id == 0 {
+            break;
+        }
+        let name_end = pos + 2 + name_len;
+        if name_end + 2 > bytes.len() {
+            return Err(err(pos, "parameter name runs past the end of the file"));
+        }
+        let name = String::from_utf8_lossy(&bytes[pos + 2..name_end])
+            .trim()
+            .to_ascii_uppercase();
+        let next_field = name_end;
+        let next = proc.i16(&bytes[next_field..]);
+        let body = next_field + 2;
+        if id < 0 {
+            group_names.insert(-id, name);
+        } else {
+            if body + 2 > bytes.len() {
+                return Err(err(pos, format!("parameter {name} is cut off")));
+            }
+            let kind = bytes[body] as i8;
+            let ndims = bytes[body + 1] as usize;
+            let dims_end = body + 2 + ndims;
+            if dims_end > bytes.len() {
+                return Err(err(
+                    body,
+                    format!("parameter {name} dimensions are cut off"),
+                ));
+            }
+            let dims: Vec<usize> = bytes[body + 2..dims_end]
+                .iter()
+                .map(|&d| d as usize)
+                .collect();
+            let elem: usize = match kind {
+                -1 | 1 => 1,
+                2 => 2,
+                4 => 4,
+                k => return Err(err(body, format!("parameter {name} has unknown type {k}"))),
+            };
+            let len = dims
+                .iter()
+                .try_fold(elem, |acc, &d| acc.checked_mul(d))
+                .filter(|&len| dims_end + len <= bytes.len());
+            let Some(len) = len else {
+                return Err(err(
+                    dims_end,
+                    format!("parameter {name} data runs past the end"),
+                ));
+            };
+            raw.push((
+                id,
+                name,
+                Param {
+                    kind,
+                    dims,
+                    data_at: dims_end,
+                    len,
+                },
+            ));
+        }
+        if next <= 0 {
+            break;
+        }
+        let np = next_field + next as usize;
+        if np >= end {
+            break;
+        }
+        pos = np;
+    }
+    let mut map = HashMap::new();
+    for (id, name, p) in raw {
+        let group = group_names
+            .get(&id)
+            .cloned()
+            .unwrap_or_else(|| format!("#{id}"));
+        map.entry((group, name)).or_insert(p);
+    }
+    Ok(Params { bytes, proc, map })
+}
+
+pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
+    if bytes.len() < BLOCK {
+        return Err(err(
+            0,
+            format!("{} bytes is shorter than the 512-byte header", bytes.len()),
+        ));
+    }
+    if bytes[1] != 0x50 {
+        return Err(err(1, "missing the C3D key byte 0x50"));
+    }
+    let pstart = (bytes[0] as usize)
+        .checked_sub(1)
+        .map(|b| b * BLOCK)
+        .filter(|&s| s + 4 <= bytes.len())
+        .ok_or_else(|| {
+            err(
+                0,
+                format!("parameter block {} is outside the file", bytes[0]),
+            )
+        })?;
+    let proc = Processor::from_byte(bytes[pstart + 3]).ok_or_else(|| {
+        err(
+            pstart + 3,
+            format!(
+                "unknown processor type {} (84 Intel, 85 DEC, 86 MIPS)",
+                bytes[pstart + 3]
+            ),
+        )
+    })?;
+    let h = |word: usize| proc.u16(&bytes[(word - 1) * 2..]);
+    let header_points = h(2) as usize;
+    let analog_per_frame = h(3) as usize;
+    let first = h(4) as usize;
+    let last = h(5) as usize;
+    let header_scale = proc.f32(&bytes[12..16]);
+    let header_data_start = h(9) as usize;
+    let header_rate = proc.f32(&bytes[20..24]);
+
+    let params_end = match header_data_start.checked_sub(1).map(|b| b * BLOCK) {
+        Some(d) if d > pstart => d.min(bytes.len()),
+        _ => bytes.len(),
+    };
+    let params = parse_params(bytes, pstart, params_end, proc)?;
+    let mut warnings = Vec::new();
+
+    let points = params
+        .u16s("POINT", "USED")
+        .and_then(|v| v.first().copied())
+        .map(usize::from)
+        .unwrap_or(header_points);
+    if points != header_points {
+        warnings.push(format!(
+            "header says {header_points} points, POINT:USED says {points}; using POINT:USED"
+        ));
+    }
+
+    // Frame count: the header's 16-bit range, extended by TRIAL for long files.
+    let mut frames = if last >= first && last > 0 {
+        last - first + 1
+    } else {
+        0
+    };
+    let field = |name: &str| {
+        params.u16s("TRIAL", name).and_then(|v| match v.as_slice() {
+            [lo, hi, ..] => Some(usize::from(*lo) + (usize::from(*hi) << 16)),
+            [lo] => Some(usize::from(*lo)),
+            [] => None,
+        })
+    };
+    if let (Some(s), Some(e)) = (field("ACTUAL_START_FIELD"), field("ACTUAL_END_FIELD")) {
+        if e >= s && e - s + 1 > frames {
+            frames = e - s + 1;
+        }
+    }
+    limits.check_shape(frames, points)?;
+
+    let scale = params
+        .number("POINT", "SCALE")
+        .map(|v| v as f32)
+        .unwrap_or(header_scale);
+    let float = scale < 0.0;
+    let value_size = if float { 4 } else { 2 };
+    let rate = params
+        .number("POINT", "RATE")
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .unwrap_or(f64::from(header_rate));
+    if !(rate.is_finite() && rate > 0.0) {
+        return Err(err(20, format!("frame rate {rate} is not positive")));
+    }
+    let data_block = if header_data_start > 0 {
+        header_data_start
+    } else {
+        params.number("POINT", "DATA_START").unwrap_or(0.0) as usize
+    };
+    let data_start = data_block
+        .checked_sub(1)
+        .map(|b| b * BLOCK)
+        .ok_or_else(|| err(16, "data start block is 0"))?;
+
+    let frame_bytes = (points * 4 + analog_per_frame) * value_size;
+    let available = bytes
+        .len()
+        .saturating_sub(data_start)
+        .checked_div(frame_bytes)
+        .unwrap_or(frames);
+    if available < frames {
+        if available == 0 && frames > 0 {
+            return Err(err(
+                data_start.min(bytes.len()),
+                format!("data section holds no whole frame ({frames} declared)"),
+            ));
+        }
+        warnings.push(format!(
+            "file is truncated: {frames} frames declared, {available} present; loaded {available}"
+        ));
+        frames = available;
+    }
+
+    let unit = match params
+        .strings("POINT", "UNITS")
+        .and_then(|v| v.into_iter().next())
+    {
+        Some(u) if !u.is_empty() => match parse_unit(&u) {
+            Ok(m) => Some(m),
+            Err(_) => {
+                warnings.push(format!(
+                    "POINT:UNITS {u:?} is not a unit we know; inferring"
+                ));
+                None
+            }
+        },
+        _ => {
+            warnings.push("POINT:UNITS missing; assuming mm, the C3D default".into());
+            Some(0.001)
+        }
+    };
+
+    let names = point_names(&params, points);
+    let abs_scale = scale.abs();
+    let mut positions = vec![f32::NAN; frames * points * 3];
+    for f in 0..frames {
+        let frame = &bytes[data_start + f * frame_bytes..];
+        for p in 0..points {
+            let at = p * 4 * value_size;
+            let (xyz, residual) = if float {
+                let v = |k: usize| proc.f32(&frame[at + k * 4..]);
+                ([v(0), v(1), v(2)], v(3))
+            } else {
+                let v = |k: usize| f32::from(proc.i16(&frame[at + k * 2..]));
+                ([v(0) * abs_scale, v(1) * abs_scale, v(2) * abs_scale], v(3))
+            };
+            if residual >= 0.0 && xyz.iter().all(|c| c.is_finite()) {
+                positions[(f * points + p) * 3..(f * points + p) * 3 + 3].copy_from_slice(&xyz);
+            }
+        }
+    }
+
+    let motion = if points == 0 {
+        Motion::without_points(rate, unsettled_unit(), frames)?
+    } else {
+        Motion::new(rate, unsettled_unit(), names, positions, None)?
+    };
+    Ok(Parsed {
+        motion,
+        declared_unit: unit,
+        warnings,
+    })
+}
+
+/// Labels from POINT:LABELS, LABELS2, … ; blank or repeated labels get a unique name.
+fn point_names(params: &Params<'_>, points: usize) -> Vec<String> {
+    let mut labels = params.strings("POINT", "LABELS").unwrap_or_default();
+    for k in 2.. {
+        match params.strings("POINT", &format!("LABELS{k}")) {
+            Some(more) => labels.extend(more),
+            None => break,
+        }
+    }
+    let mut names: Vec<String> = Vec::with_capacity(points);
+    for i in 0..points {
+        let base = labels
+            .get(i)
+            .filter(|s| !s.is_empty())
+            .cloned()
+            .unwrap_or_else(|| format!("P{}", i + 1));
+        let mut name = base.clone();
+        let mut k = 2;
+        while names.contains(&name) {
+            name = format!("{base}_{k}");
+            k += 1;
+        }
+        names.push(name);
+    }
+    names
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dec_floats_convert() {
+        // 1.0 in VAX F is 0x4080 0x0000 (words), stored little-endian per word.
+        assert_eq!(dec_f32([0x80, 0x40, 0x00, 0x00]), 1.0);
+        // -2.5: IEEE 0xC0200000 → VAX exponent +2 → 0xC120 0000.
+        assert_eq!(dec_f32([0x20, 0xC1, 0x00, 0x00]), -2.5);
+        assert_eq!(dec_f32([0, 0, 0, 0]), 0.0);
+    }
+
+    /// A minimal Intel integer C3D: 1 point, 2 frames, scale 0.5, mm.
+    pub(crate) fn tiny_c3d(residual_frame1: i16) -> Vec<u8> {
+        let mut b = vec![0u8; 3 * BLOCK];
+        b[0] = 2;
+        b[1] = 0x50;
+        let w = |b: &mut Vec<u8>, word: usize, v: u16| {
+            b[(word - 1) * 2..(word - 1) * 2 + 2].copy_from_slice(&v.to_le_bytes())
+        };
+        w(&mut b, 2, 1);
+        w(&mut b, 3, 0);
+        w(&mut b, 4, 1);
+        w(&mut b, 5, 2);
+        b[12..16].copy_from_slice(&0.5f32.to_le_bytes());
+        w(&mut b, 9, 3);
+        b[20..24].copy_from_slice(&100f32.to_le_bytes());
+        // Parameter section at block 2.
+        let p = BLOCK;
+        b[p + 2] = 1;
+        b[p + 3] = 84;
+        let mut at = p + 4;
+        let mut push = |b: &mut Vec<u8>, bytes: &[u8]| {
+            b[at..at + bytes.len()].copy_from_slice(bytes);
+            at += bytes.len();
+        };
+        // Group POINT, id 1.
+        push(&mut b, &[5, (-1i8) as u8]);
+        push(&mut b, b"POINT");
+        push(&mut b, &3i16.to_le_bytes());
+        push(&mut b, &[0]);
+        // POINT:UNITS = "mm" (char, dims [2]).
+        let body = [
+            &[5u8, 1][..],
+            b"UNITS",
+            &8i16.to_le_bytes(),
+            &[0xff, 1, 2],
+            b"mm",
+            &[0],
+        ]
+        .concat();
+        push(&mut b, &body);
+        // POINT:LABELS = ["HEAD"] (dims [4, 1]).
+        let body = [
+            &[6u8, 1][..],
+            b"LABELS",
+            &11i16.to_le_bytes(),
+            &[0xff, 2, 4, 1],
+            b"HEAD",
+            &[0],
+        ]
+        .concat();
+        push(&mut b, &body);
+        push(&mut b, &[0, 0]);
+        let d = 2 * BLOCK;
+        for (f, vals) in [[2i16, 4, 6, 0], [8, 10, 12, residual_frame1]]
+            .iter()
+            .enumerate()
+        {
+            for (k, v) in vals.iter().enumerate() {
+                let o = d + f * 8 + k * 2;
+                b[o..o + 2].copy_from_slice(&v.to_le_bytes());
+            }
+        }
+        b
+    }
+
+    #[test]
+    fn reads_a_hand_made_file() {
+        let p = read(&tiny_c3d(0), &Limits::default()).unwrap();
+        let m = p.motion;
+        assert_eq!(m.point_names, vec!["HEAD"]);
+        assert_eq!(m.frame_count(), 2);
+        assert_eq!(m.fps, 100.0);
+        assert_eq!(p.declared_unit, Some(0.001));
+        assert_eq!(m.positions(), &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert!(p.warnings.is_empty(), "{:?}", p.warnings);
+    }
+
+    #[test]
+    fn negative_residual_is_a_gap() {
+        let m = read(&tiny_c3d(-1), &Limits::default()).unwrap().motion;
+        assert_eq!(m.gap_count(), 1);
+        assert!(m.sample(1, 0).is_none());
+    }
+
+    #[test]
+    fn truncation_and_corruption_never_panic() {
+        let good = tiny_c3d(0);
+        for cut in 0..good.len() {
+            let _ = read(&good[..cut], &Limits::default());
+        }
+        for i in 0..1100 {
+            let mut b = good.clone();
+            b[i] ^= 0xA5;
+            let _ = read(&b, &Limits::default());
+        }
+    }
+}

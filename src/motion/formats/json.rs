@@ -1,0 +1,152 @@
+//! JSON point arrays: `{"fps": 120, "unit": "mm", "points": ["a", …],
+//! "frames": [[[x, y, z], …], …]}`; a missing sample is `null`. `unit` may be a name or a
+//! number of metres per unit and may be omitted (then it is inferred).
+
+use serde::{Deserialize, Serialize};
+
+use super::text::push_f32;
+use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use crate::motion::error::{Error, Location, Result};
+use crate::motion::model::Motion;
+use crate::motion::units::{parse_unit, unit_name};
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum UnitField {
+    Name(String),
+    Metres(f64),
+}
+
+#[derive(Deserialize)]
+struct Doc {
+    fps: f64,
+    #[serde(default)]
+    unit: Option<UnitField>,
+    points: Vec<String>,
+    frames: Vec<Vec<Option<[f32; 3]>>>,
+}
+
+#[derive(Serialize)]
+struct Header<'a> {
+    fps: f64,
+    unit: serde_json::Value,
+    points: &'a [String],
+}
+
+fn err(at: Location, reason: impl Into<String>) -> Error {
+    perr(Format::Json, at, reason)
+}
+
+pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
+    let doc: Doc = serde_json::from_slice(bytes).map_err(|e| {
+        err(
+            Location::Line(e.line()),
+            format!("{e} (expected {{fps, unit, points, frames:[[[x,y,z],…],…]}})"),
+        )
+    })?;
+    limits.check_shape(doc.frames.len(), doc.points.len())?;
+    let n = doc.points.len();
+    let mut positions = Vec::with_capacity(doc.frames.len() * n * 3);
+    for (f, frame) in doc.frames.iter().enumerate() {
+        if frame.len() != n {
+            return Err(err(
+                Location::Whole,
+                format!("frame {f} has {} points, \"points\" names {n}", frame.len()),
+            ));
+        }
+        for p in frame {
+            positions.extend_from_slice(&p.unwrap_or([f32::NAN; 3]));
+        }
+    }
+    let declared_unit = match doc.unit {
+        None => None,
+        Some(UnitField::Name(s)) => Some(parse_unit(&s)?),
+        Some(UnitField::Metres(m)) => Some(parse_unit(&m.to_string())?),
+    };
+    let motion = if n == 0 {
+        Motion::without_points(doc.fps, unsettled_unit(), doc.frames.len())?
+    } else {
+        Motion::new(doc.fps, unsettled_unit(), doc.points, positions, None)?
+    };
+    Ok(Parsed {
+        motion,
+        declared_unit,
+        warnings: Vec::new(),
+    })
+}
+
+/// Write as JSON; coordinates in the take's own unit, named in `unit`.
+pub fn write(motion: &Motion) -> Vec<u8> {
+    let m = motion.unit.metres_per_unit;
+    let name = unit_name(m);
+    // Named units as their name, anything else as a number of metres.
+    let unit = if parse_unit(&name).is_ok() {
+        serde_json::Value::from(name)
+    } else {
+        serde_json::Value::from(m)
+    };
+    let header = serde_json::to_string(&Header {
+        fps: motion.fps,
+        unit,
+        points: &motion.point_names,
+    })
+    .expect("strings and numbers serialise");
+    // Frames are written by hand: serde_json would print f32 through f64 with noise digits.
+    let mut out = String::with_capacity(header.len() + motion.positions().len() * 10);
+    out.push_str(&header[..header.len() - 1]);
+    out.push_str(",\"frames\":[");
+    for f in 0..motion.frame_count() {
+        if f > 0 {
+            out.push(',');
+        }
+        out.push('[');
+        for (i, p) in motion.frame(f).chunks_exact(3).enumerate() {
+            if i > 0 {
+                out.push(',');
+            }
+            if p[0].is_nan() {
+                out.push_str("null");
+            } else {
+                out.push('[');
+                for (k, v) in p.iter().enumerate() {
+                    if k > 0 {
+                        out.push(',');
+                    }
+                    push_f32(&mut out, *v, "null");
+                }
+                out.push(']');
+            }
+        }
+        out.push(']');
+    }
+    out.push_str("]}\n");
+    out.into_bytes()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_gaps_and_units() {
+        let doc = br#"{"fps": 60, "unit": "cm", "points": ["a","b"],
+            "frames": [[[1,2,3], null], [[4,5,6],[7,8,9.5]]]}"#;
+        let p = read(doc, &Limits::default()).unwrap();
+        assert_eq!(p.declared_unit, Some(0.01));
+        assert_eq!(p.motion.gap_count(), 1);
+        assert_eq!(p.motion.sample(1, 1), Some([7.0, 8.0, 9.5]));
+    }
+
+    #[test]
+    fn shape_errors_are_clear() {
+        let doc = br#"{"fps": 60, "points": ["a"], "frames": [[[1,2,3],[4,5,6]]]}"#;
+        let e = read(doc, &Limits::default()).unwrap_err().to_string();
+        assert!(e.contains("frame 0 has 2 points"), "{e}");
+        assert!(read(br#"{"fps": 60"#, &Limits::default()).is_err());
+        assert!(read(
+            br#"{"fps": -1, "points": [], "frames": []}"#,
+            &Limits::default()
+        )
+        .is_err());
+    }
+}

@@ -1,0 +1,366 @@
+//! File formats in and out: detection from content, limits on untrusted input, and one
+//! reader/writer module per format.
+//!
+//! Readers take bytes, not paths, so the HTTP layer can hand them a request body and tests
+//! can hand them mutations.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{Error, Location, Result};
+use super::model::Motion;
+use super::units::{Unit, UnitSource};
+
+pub mod bvh;
+pub mod c3d;
+pub mod csv;
+pub mod json;
+pub mod npy;
+pub mod rawf32;
+mod text;
+pub mod trc;
+
+/// A file format we read and/or write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    Bvh,
+    C3d,
+    Trc,
+    Json,
+    Npy,
+    Csv,
+    /// Bare little-endian f32, `frames × points × 3`; write only (it has no header).
+    F32,
+}
+
+impl Format {
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Bvh => "bvh",
+            Format::C3d => "c3d",
+            Format::Trc => "trc",
+            Format::Json => "json",
+            Format::Npy => "npy",
+            Format::Csv => "csv",
+            Format::F32 => "f32",
+        }
+    }
+
+    /// From a file name's extension (for writing; reading detects from content).
+    pub fn from_extension(path: &str) -> Option<Format> {
+        let ext = path.rsplit_once('.')?.1;
+        ext.parse().ok()
+    }
+
+    pub fn can_read(self) -> bool {
+        !matches!(self, Format::Csv | Format::F32)
+    }
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.name().to_ascii_uppercase())
+    }
+}
+
+impl FromStr for Format {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        Ok(match s.to_ascii_lowercase().as_str() {
+            "bvh" => Format::Bvh,
+            "c3d" => Format::C3d,
+            "trc" => Format::Trc,
+            "json" => Format::Json,
+            "npy" => Format::Npy,
+            "csv" => Format::Csv,
+            "f32" | "bin" | "raw" => Format::F32,
+            other => {
+                return Err(Error::Unsupported(format!(
+                    "unknown format {other:?} (bvh, c3d, trc, json, npy, csv, f32)"
+                )))
+            }
+        })
+    }
+}
+
+/// Bounds on untrusted input, checked before anything proportional to them is allocated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    pub max_bytes: u64,
+    pub max_points: u64,
+    pub max_frames: u64,
+    /// Points × frames: what memory really scales with.
+    pub max_samples: u64,
+}
+
+impl Default for Limits {
+    /// Generous for real capture (a 4-hour 200-marker session at 240 fps is ~690 M samples
+    /// over the default) yet small enough that a hostile header cannot make us allocate
+    /// tens of GiB.
+    fn default() -> Self {
+        Limits {
+            max_bytes: 2 << 30,
+            max_points: 10_000,
+            max_frames: 20_000_000,
+            max_samples: 200_000_000,
+        }
+    }
+}
+
+impl Limits {
+    pub fn check_bytes(&self, n: usize) -> Result<()> {
+        check("input size in bytes", n as u64, self.max_bytes)
+    }
+
+    pub fn check_shape(&self, frames: usize, points: usize) -> Result<()> {
+        check("point count", points as u64, self.max_points)?;
+        check("frame count", frames as u64, self.max_frames)?;
+        check(
+            "sample count (frames × points)",
+            (frames as u64).saturating_mul(points as u64),
+            self.max_samples,
+        )
+    }
+}
+
+fn check(what: &'static str, actual: u64, limit: u64) -> Result<()> {
+    if actual > limit {
+        Err(Error::Limit {
+            what,
+            actual,
+            limit,
+        })
+    } else {
+        Ok(())
+    }
+}
+
+/// How to read: limits, and a unit that overrides whatever the file says or lacks.
+#[derive(Debug, Clone, Default)]
+pub struct ReadOptions {
+    pub limits: Limits,
+    /// Metres per stored unit, stated by the user.
+    pub unit: Option<f64>,
+    /// Frames per second, stated by the user (overrides the file; NPY has none).
+    pub fps: Option<f64>,
+}
+
+/// A take as read from a file, with what the reader noticed but could work around.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    pub motion: Motion,
+    pub format: Format,
+    pub warnings: Vec<String>,
+}
+
+/// What a format reader returns before units are settled.
+#[derive(Debug)]
+pub(crate) struct Parsed {
+    pub motion: Motion,
+    /// Unit the file declared, if it declares one.
+    pub declared_unit: Option<f64>,
+    pub warnings: Vec<String>,
+}
+
+/// Guess the format from the first bytes.
+pub fn detect(bytes: &[u8]) -> Result<Format> {
+    let trimmed = skip_bom_and_space(bytes);
+    if bytes.is_empty() || trimmed.is_empty() {
+        return Err(Error::UnknownFormat("the input is empty".into()));
+    }
+    if bytes.starts_with(b"\x93NUMPY") {
+        return Ok(Format::Npy);
+    }
+    // C3D: byte 2 of the header is the key 0x50, byte 1 points at the parameter block.
+    if bytes.len() >= 512 && bytes[1] == 0x50 && bytes[0] >= 2 {
+        return Ok(Format::C3d);
+    }
+    let head = &trimmed[..trimmed.len().min(64)];
+    let starts = |w: &[u8]| head.len() >= w.len() && head[..w.len()].eq_ignore_ascii_case(w);
+    if starts(b"HIERARCHY") {
+        return Ok(Format::Bvh);
+    }
+    if starts(b"PathFileType") {
+        return Ok(Format::Trc);
+    }
+    if trimmed[0] == b'{' {
+        return Ok(Format::Json);
+    }
+    Err(Error::UnknownFormat(
+        "not BVH (HIERARCHY), C3D (0x50 key), TRC (PathFileType), JSON ({) or NPY (\\x93NUMPY)"
+            .into(),
+    ))
+}
+
+fn skip_bom_and_space(bytes: &[u8]) -> &[u8] {
+    let b = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let start = b
+        .iter()
+        .position(|c| !c.is_ascii_whitespace())
+        .unwrap_or(b.len());
+    &b[start..]
+}
+
+/// Read a take from bytes of any supported format, detected from the content.
+pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<Loaded> {
+    options.limits.check_bytes(bytes.len())?;
+    let format = detect(bytes)?;
+    read_as(format, bytes, options)
+}
+
+/// Read bytes known to be of `format`.
+pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Loaded> {
+    options.limits.check_bytes(bytes.len())?;
+    let limits = &options.limits;
+    let parsed = match format {
+        Format::Bvh => bvh::read(bytes, limits)?,
+        Format::C3d => c3d::read(bytes, limits)?,
+        Format::Trc => trc::read(bytes, limits)?,
+        Format::Json => json::read(bytes, limits)?,
+        Format::Npy => npy::read(bytes, limits)?,
+        Format::Csv | Format::F32 => {
+            return Err(Error::Unsupported(format!(
+                "{format} is an output format only"
+            )))
+        }
+    };
+    let Parsed {
+        mut motion,
+        declared_unit,
+        mut warnings,
+    } = parsed;
+    motion.unit = settle_unit(&motion, declared_unit, options.unit, &mut warnings)?;
+    match options.fps {
+        Some(fps) if fps.is_finite() && fps > 0.0 => motion.fps = fps,
+        Some(fps) => {
+            return Err(Error::Invalid(format!(
+                "frame rate must be positive, got {fps}"
+            )))
+        }
+        None if format == Format::Npy => warnings.push(format!(
+            "NPY has no frame rate; assumed {} fps (state one to override)",
+            npy::DEFAULT_FPS
+        )),
+        None => {}
+    }
+    Ok(Loaded {
+        motion,
+        format,
+        warnings,
+    })
+}
+
+fn settle_unit(
+    motion: &Motion,
+    declared: Option<f64>,
+    explicit: Option<f64>,
+    warnings: &mut Vec<String>,
+) -> Result<Unit> {
+    if let Some(m) = explicit {
+        return Unit::new(m, UnitSource::Explicit);
+    }
+    if let Some(m) = declared {
+        return Unit::new(m, UnitSource::Declared);
+    }
+    // The posed figure, not the rest pose: some rigs (Bandai) lay bones along X in the
+    // rest pose and only stand up once rotated.
+    let height = motion
+        .figure_height()
+        .or_else(|| motion.skeleton.as_ref().map(|s| s.rest_height()));
+    match height.and_then(Unit::infer_from_height) {
+        Some(u) => {
+            warnings.push(format!(
+                "no unit in the file; inferred {} from the figure's height",
+                u.name()
+            ));
+            Ok(u)
+        }
+        None => {
+            warnings.push("no unit in the file and no figure to infer it from; assuming mm".into());
+            Unit::new(
+                0.001,
+                UnitSource::Inferred("nothing to measure; default mm".into()),
+            )
+        }
+    }
+}
+
+/// Write a take in `format`.
+pub fn write(motion: &Motion, format: Format) -> Result<Vec<u8>> {
+    match format {
+        Format::Bvh => bvh::write(motion),
+        Format::Trc => Ok(trc::write(motion)),
+        Format::Json => Ok(json::write(motion)),
+        Format::Npy => Ok(npy::write(motion)),
+        Format::Csv => Ok(csv::write(motion)),
+        Format::F32 => Ok(rawf32::write(motion)),
+        Format::C3d => Err(Error::Unsupported(
+            "writing C3D is not supported yet".into(),
+        )),
+    }
+}
+
+/// Shorthand for a parse error at a location.
+pub(crate) fn perr(format: Format, at: Location, reason: impl Into<String>) -> Error {
+    Error::parse(format, at, reason)
+}
+
+/// Placeholder unit for readers that leave the decision to [`read_as`].
+pub(crate) fn unsettled_unit() -> Unit {
+    Unit::millimetres()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn detects_from_content() {
+        assert_eq!(
+            detect(b"\xEF\xBB\xBF  HIERARCHY\nROOT").unwrap(),
+            Format::Bvh
+        );
+        assert_eq!(detect(b"PathFileType\t4").unwrap(), Format::Trc);
+        assert_eq!(detect(b"\n {\"fps\":1}").unwrap(), Format::Json);
+        assert_eq!(detect(b"\x93NUMPY\x01\x00").unwrap(), Format::Npy);
+        let mut c3d = vec![0u8; 512];
+        c3d[0] = 2;
+        c3d[1] = 0x50;
+        assert_eq!(detect(&c3d).unwrap(), Format::C3d);
+        assert!(matches!(detect(b""), Err(Error::UnknownFormat(_))));
+        assert!(matches!(detect(b"  \n"), Err(Error::UnknownFormat(_))));
+        assert!(matches!(detect(b"hello"), Err(Error::UnknownFormat(_))));
+    }
+
+    #[test]
+    fn limits_are_enforced() {
+        let l = Limits {
+            max_bytes: 10,
+            max_points: 2,
+            max_frames: 5,
+            max_samples: 6,
+        };
+        assert!(l.check_bytes(11).is_err());
+        assert!(l.check_shape(5, 2).is_err()); // 10 samples
+        assert!(l.check_shape(3, 2).is_ok());
+        assert!(l.check_shape(1, 3).is_err());
+        let opts = ReadOptions {
+            limits: l,
+            ..ReadOptions::default()
+        };
+        assert!(matches!(
+            read(b"HIERARCHY\nROOT a", &opts),
+            Err(Error::Limit { .. })
+        ));
+    }
+
+    #[test]
+    fn format_names_parse() {
+        assert_eq!("NPY".parse::<Format>().unwrap(), Format::Npy);
+        assert_eq!(Format::from_extension("out/x.trc"), Some(Format::Trc));
+        assert!("xls".parse::<Format>().is_err());
+    }
+}

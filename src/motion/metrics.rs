@@ -1,0 +1,230 @@
+//! Error measures by which every codec is judged.
+//!
+//! All distances are reported in millimetres. Samples missing in the original (gaps) are
+//! excluded; a sample present in the original but missing or non-finite in the
+//! reconstruction counts as an infinite error, so it can never pass a bound by accident.
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{Error, Result};
+use super::skeleton::Skeleton;
+
+/// Distortion of a reconstruction against its original.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ErrorStats {
+    /// Mean Euclidean distance per point sample (the papers' d̄), mm.
+    pub mean_mm: f64,
+    /// Root of the mean squared Euclidean distance, mm.
+    pub rms_mm: f64,
+    /// Largest Euclidean distance of any sample, mm.
+    pub max_mm: f64,
+    /// Where `max_mm` occurs: (frame, point).
+    pub worst: Option<(usize, usize)>,
+    /// Largest distance per point, mm.
+    pub per_point_max_mm: Vec<f64>,
+    /// Karni–Gotsman distortion rate d% = 100·‖A−Ã‖/‖A−E(A)‖, with E(A) holding each
+    /// frame's centroid (the consensus reading of the KG paper used by the mesh-compression
+    /// literature).
+    pub kg_percent: f64,
+    /// Point samples compared (gaps excluded).
+    pub samples: usize,
+}
+
+/// Compare `decoded` with `original`, both `frames × points × 3` in the same units.
+pub fn compare(
+    original: &[f32],
+    decoded: &[f32],
+    points: usize,
+    mm_per_unit: f64,
+) -> Result<ErrorStats> {
+    if original.len() != decoded.len() {
+        return Err(Error::Invalid(format!(
+            "cannot compare {} coordinates with {}",
+            original.len(),
+            decoded.len()
+        )));
+    }
+    if points == 0 || original.len() % (points * 3) != 0 {
+        return Err(Error::Invalid(format!(
+            "{} coordinates are not whole frames of {points} points",
+            original.len()
+        )));
+    }
+    let mut per_point_max = vec![0.0f64; points];
+    let (mut sum, mut sum_sq, mut max, mut worst) = (0.0f64, 0.0f64, 0.0f64, None);
+    let mut spread_sq = 0.0f64;
+    let mut samples = 0usize;
+    for (f, (a, b)) in original
+        .chunks_exact(points * 3)
+        .zip(decoded.chunks_exact(points * 3))
+        .enumerate()
+    {
+        let centroid = centroid(a);
+        for p in 0..points {
+            let pa = &a[p * 3..p * 3 + 3];
+            if pa[0].is_nan() {
+                continue;
+            }
+            let pb = &b[p * 3..p * 3 + 3];
+            let d2: f64 = (0..3)
+                .map(|k| (f64::from(pa[k]) - f64::from(pb[k])).powi(2))
+                .sum();
+            let d = if d2.is_finite() {
+                d2.sqrt()
+            } else {
+                f64::INFINITY
+            };
+            sum += d;
+            sum_sq += d * d;
+            if d > max || worst.is_none() {
+                max = d.max(max);
+                worst = Some((f, p));
+            }
+            per_point_max[p] = per_point_max[p].max(d);
+            spread_sq += (0..3)
+                .map(|k| (f64::from(pa[k]) - centroid[k]).powi(2))
+                .sum::<f64>();
+            samples += 1;
+        }
+    }
+    let s = mm_per_unit;
+    let n = samples.max(1) as f64;
+    let kg = if spread_sq > 0.0 {
+        100.0 * (sum_sq / spread_sq).sqrt()
+    } else if sum_sq == 0.0 {
+        0.0
+    } else {
+        f64::INFINITY
+    };
+    Ok(ErrorStats {
+        mean_mm: sum / n * s,
+        rms_mm: (sum_sq / n).sqrt() * s,
+        max_mm: max * s,
+        worst,
+        per_point_max_mm: per_point_max.into_iter().map(|v| v * s).collect(),
+        kg_percent: kg,
+        samples,
+    })
+}
+
+fn centroid(frame: &[f32]) -> [f64; 3] {
+    let mut c = [0.0f64; 3];
+    let mut n = 0usize;
+    for p in frame.chunks_exact(3).filter(|p| !p[0].is_nan()) {
+        for k in 0..3 {
+            c[k] += f64::from(p[k]);
+        }
+        n += 1;
+    }
+    if n > 0 {
+        c.iter_mut().for_each(|v| *v /= n as f64);
+    }
+    c
+}
+
+/// How far bone lengths in `positions` stray from the skeleton's own (per frame: the offset,
+/// or the position channels where a joint has them).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BoneDrift {
+    pub max_mm: f64,
+    pub mean_mm: f64,
+    /// Largest drift relative to the bone's length, over bones longer than zero.
+    pub max_relative: f64,
+    pub bones: usize,
+}
+
+/// Bone-length drift of `positions` (`frames × joints × 3`, the skeleton's own units).
+pub fn bone_length_drift(
+    skeleton: &Skeleton,
+    positions: &[f64],
+    mm_per_unit: f64,
+) -> Result<BoneDrift> {
+    let n = skeleton.joints.len();
+    let frames = skeleton.frame_count();
+    if positions.len() != frames * n * 3 {
+        return Err(Error::Invalid(format!(
+            "{} coordinates for {frames} frames of {n} joints",
+            positions.len()
+        )));
+    }
+    let (mut max, mut max_rel, mut sum, mut count) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+    let mut local = Vec::with_capacity(n);
+    for f in 0..frames {
+        skeleton.local_translations(f, &mut local);
+        let frame = &positions[f * n * 3..(f + 1) * n * 3];
+        for (i, j) in skeleton.joints.iter().enumerate() {
+            let Some(p) = j.parent else { continue };
+            let expected = norm(local[i]);
+            let actual = norm([
+                frame[i * 3] - frame[p * 3],
+                frame[i * 3 + 1] - frame[p * 3 + 1],
+                frame[i * 3 + 2] - frame[p * 3 + 2],
+            ]);
+            let d = (actual - expected).abs();
+            max = max.max(d);
+            if expected > 0.0 {
+                max_rel = max_rel.max(d / expected);
+            }
+            sum += d;
+            count += 1;
+        }
+    }
+    Ok(BoneDrift {
+        max_mm: max * mm_per_unit,
+        mean_mm: sum / count.max(1) as f64 * mm_per_unit,
+        max_relative: max_rel,
+        bones: n.saturating_sub(1),
+    })
+}
+
+fn norm(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hand_computed_case() {
+        // Two frames, two points, unit = 1 mm.
+        let a = [0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0];
+        let b = [0.0, 0.0, 0.0, 5.0, 4.0, 0.0, 0.0, 1.0, 0.0, 2.0, 0.0, 0.0];
+        let s = compare(&a, &b, 2, 1.0).unwrap();
+        // distances: 0, 5, 1, 0
+        assert!((s.mean_mm - 1.5).abs() < 1e-12);
+        assert!((s.rms_mm - (26.0f64 / 4.0).sqrt()).abs() < 1e-12);
+        assert_eq!(s.max_mm, 5.0);
+        assert_eq!(s.worst, Some((0, 1)));
+        assert_eq!(s.per_point_max_mm, vec![1.0, 5.0]);
+        // Centroid of each frame is (1,0,0): spread² = 1+1+1+1 = 4; error² = 26.
+        assert!((s.kg_percent - 100.0 * (26.0f64 / 4.0).sqrt()).abs() < 1e-9);
+        assert_eq!(s.samples, 4);
+    }
+
+    #[test]
+    fn units_scale_to_millimetres() {
+        let a = [0.0f32; 3];
+        let b = [0.0, 0.0, 2.0];
+        let s = compare(&a, &b, 1, 10.0).unwrap(); // centimetres
+        assert_eq!(s.max_mm, 20.0);
+    }
+
+    #[test]
+    fn gaps_in_original_are_skipped_and_missing_output_is_infinite() {
+        let nan = f32::NAN;
+        let a = [nan, nan, nan, 1.0, 1.0, 1.0];
+        let b = [5.0, 5.0, 5.0, 1.0, 1.0, 1.0];
+        let s = compare(&a, &b, 2, 1.0).unwrap();
+        assert_eq!((s.samples, s.max_mm), (1, 0.0));
+        let c = [0.0, 0.0, 0.0, nan, nan, nan];
+        let s = compare(&a, &c, 2, 1.0).unwrap();
+        assert!(s.max_mm.is_infinite());
+    }
+
+    #[test]
+    fn shape_mismatch_is_an_error() {
+        assert!(compare(&[0.0; 6], &[0.0; 3], 1, 1.0).is_err());
+        assert!(compare(&[0.0; 4], &[0.0; 4], 1, 1.0).is_err());
+    }
+}

@@ -1,0 +1,16 @@
+//! The motion model and everything that reads, writes or measures it. Pure: bytes and
+//! numbers in, bytes and numbers out; no files, no async, no database.
+
+pub mod error;
+pub mod formats;
+pub mod layout;
+pub mod metrics;
+pub mod model;
+pub mod skeleton;
+pub mod units;
+
+pub use error::{Error, Location, Result};
+pub use layout::LayoutSignature;
+pub use model::Motion;
+pub use skeleton::{Channel, Joint, Skeleton};
+pub use units::{Unit, UnitSource};

@@ -1,0 +1,340 @@
+//! Joint hierarchies (as in BVH) and forward kinematics.
+//!
+//! A skeleton keeps exactly what a BVH file says — offsets, channel order, per-frame channel
+//! values — so that a take can be written back as BVH, and computes joint positions from it.
+//! FK runs in f64: positions are stored as f32 later, but accumulating rotations down a
+//! 10-joint chain in f32 would already cost more precision than the codecs are allowed.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::error::{Error, Result};
+
+/// One animated degree of freedom, in the order the file lists them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Channel {
+    Xposition,
+    Yposition,
+    Zposition,
+    Xrotation,
+    Yrotation,
+    Zrotation,
+}
+
+impl Channel {
+    pub fn parse(name: &str) -> Option<Channel> {
+        Some(match name.to_ascii_lowercase().as_str() {
+            "xposition" => Channel::Xposition,
+            "yposition" => Channel::Yposition,
+            "zposition" => Channel::Zposition,
+            "xrotation" => Channel::Xrotation,
+            "yrotation" => Channel::Yrotation,
+            "zrotation" => Channel::Zrotation,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Channel::Xposition => "Xposition",
+            Channel::Yposition => "Yposition",
+            Channel::Zposition => "Zposition",
+            Channel::Xrotation => "Xrotation",
+            Channel::Yrotation => "Yrotation",
+            Channel::Zrotation => "Zrotation",
+        }
+    }
+
+    /// The axis (0 = x, 1 = y, 2 = z) and whether it is a rotation.
+    fn axis(self) -> (usize, bool) {
+        match self {
+            Channel::Xposition => (0, false),
+            Channel::Yposition => (1, false),
+            Channel::Zposition => (2, false),
+            Channel::Xrotation => (0, true),
+            Channel::Yrotation => (1, true),
+            Channel::Zrotation => (2, true),
+        }
+    }
+}
+
+/// A joint or an end site. End sites have no channels; they are points all the same,
+/// because end effectors (hands, feet, head top) are what a viewer notices first.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Joint {
+    pub name: String,
+    pub parent: Option<usize>,
+    pub offset: [f64; 3],
+    pub channels: Vec<Channel>,
+    pub end_site: bool,
+}
+
+/// A hierarchy plus its per-frame channel values.
+///
+/// Joints are stored parents-first (the order of the BVH file), so FK is one forward pass.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Skeleton {
+    pub joints: Vec<Joint>,
+    /// `frames × channel_count()` values in file order: degrees for rotations, file units
+    /// for positions.
+    pub values: Vec<f64>,
+}
+
+impl Skeleton {
+    pub fn new(joints: Vec<Joint>, values: Vec<f64>) -> Result<Self> {
+        for (i, j) in joints.iter().enumerate() {
+            if let Some(p) = j.parent {
+                if p >= i {
+                    return Err(Error::Invalid(format!(
+                        "joint {:?} comes before its parent",
+                        j.name
+                    )));
+                }
+                if joints[p].end_site {
+                    return Err(Error::Invalid(format!(
+                        "joint {:?} has an end site as parent",
+                        j.name
+                    )));
+                }
+            } else if i != 0 {
+                return Err(Error::Invalid(format!(
+                    "joint {:?} has no parent but is not the root",
+                    j.name
+                )));
+            }
+            if j.end_site && !j.channels.is_empty() {
+                return Err(Error::Invalid(format!(
+                    "end site {:?} has channels",
+                    j.name
+                )));
+            }
+        }
+        let s = Skeleton { joints, values };
+        let cc = s.channel_count();
+        if cc == 0 && !s.values.is_empty() || cc > 0 && s.values.len() % cc != 0 {
+            return Err(Error::Invalid(format!(
+                "{} channel values do not fill whole frames of {cc} channels",
+                s.values.len()
+            )));
+        }
+        Ok(s)
+    }
+
+    pub fn channel_count(&self) -> usize {
+        self.joints.iter().map(|j| j.channels.len()).sum()
+    }
+
+    pub fn frame_count(&self) -> usize {
+        match self.channel_count() {
+            0 => 0,
+            cc => self.values.len() / cc,
+        }
+    }
+
+    /// Joints that are not end sites: what BVH tools call "the joints".
+    pub fn joint_count(&self) -> usize {
+        self.joints.iter().filter(|j| !j.end_site).count()
+    }
+
+    pub fn frame_values(&self, frame: usize) -> &[f64] {
+        let cc = self.channel_count();
+        &self.values[frame * cc..(frame + 1) * cc]
+    }
+
+    /// Keep frames `start..end` only.
+    pub fn slice_frames(&self, start: usize, end: usize) -> Skeleton {
+        let cc = self.channel_count();
+        Skeleton {
+            joints: self.joints.clone(),
+            values: self.values[start * cc..end * cc].to_vec(),
+        }
+    }
+
+    /// The translation of each joint relative to its parent in one frame: the offset, with
+    /// any position channel replacing its component. (Exporters such as Vicon and Bandai
+    /// write position channels on every joint whose values repeat the offset, so replacing
+    /// — not adding — is the reading that keeps bones rigid.)
+    pub fn local_translations(&self, frame: usize, out: &mut Vec<[f64; 3]>) {
+        out.clear();
+        let vals = self.frame_values(frame);
+        let mut k = 0;
+        for j in &self.joints {
+            let mut t = j.offset;
+            for &c in &j.channels {
+                let (axis, rot) = c.axis();
+                if !rot {
+                    t[axis] = vals[k];
+                }
+                k += 1;
+            }
+            out.push(t);
+        }
+    }
+
+    /// Joint positions (file units) of every frame, `frames × joints × 3`, in f64.
+    pub fn forward_kinematics(&self) -> Vec<f64> {
+        let n = self.joints.len();
+        let frames = self.frame_count();
+        let mut out = vec![0.0; frames * n * 3];
+        let mut fk = Fk::new(self);
+        for f in 0..frames {
+            fk.frame(self, f, &mut out[f * n * 3..(f + 1) * n * 3]);
+        }
+        out
+    }
+
+    /// Height of the rest pose (offsets only, no channels) along the axis with the
+    /// largest extent among Y (BVH's usual up axis) and Z; used to guess the unit.
+    pub fn rest_height(&self) -> f64 {
+        let mut pos: Vec<[f64; 3]> = Vec::with_capacity(self.joints.len());
+        for j in &self.joints {
+            let base = j.parent.map(|p| pos[p]).unwrap_or([0.0; 3]);
+            pos.push([
+                base[0] + j.offset[0],
+                base[1] + j.offset[1],
+                base[2] + j.offset[2],
+            ]);
+        }
+        let extent = |axis: usize| {
+            let (lo, hi) = pos.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+                (lo.min(p[axis]), hi.max(p[axis]))
+            });
+            if pos.is_empty() {
+                0.0
+            } else {
+                hi - lo
+            }
+        };
+        // A T-pose is as wide as it is tall, so X is never taken as up.
+        extent(1).max(extent(2))
+    }
+}
+
+/// Reusable FK state: global rotations per joint and the channel layout, computed once.
+pub struct Fk {
+    rotations: Vec<Matrix3<f64>>,
+    translations: Vec<[f64; 3]>,
+}
+
+impl Fk {
+    pub fn new(skeleton: &Skeleton) -> Self {
+        Fk {
+            rotations: vec![Matrix3::identity(); skeleton.joints.len()],
+            translations: Vec::with_capacity(skeleton.joints.len()),
+        }
+    }
+
+    /// Positions of one frame into `out` (`joints × 3`).
+    pub fn frame(&mut self, skeleton: &Skeleton, frame: usize, out: &mut [f64]) {
+        skeleton.local_translations(frame, &mut self.translations);
+        let vals = skeleton.frame_values(frame);
+        let mut k = 0;
+        for (i, j) in skeleton.joints.iter().enumerate() {
+            let mut local = Matrix3::identity();
+            for &c in &j.channels {
+                let (axis, rot) = c.axis();
+                if rot {
+                    local *= axis_rotation(axis, vals[k].to_radians());
+                }
+                k += 1;
+            }
+            let t = Vector3::from(self.translations[i]);
+            let (pos, rot) = match j.parent {
+                Some(p) => {
+                    let pr = self.rotations[p];
+                    let pp = Vector3::new(out[p * 3], out[p * 3 + 1], out[p * 3 + 2]);
+                    (pp + pr * t, pr * local)
+                }
+                None => (t, local),
+            };
+            self.rotations[i] = rot;
+            out[i * 3..i * 3 + 3].copy_from_slice(pos.as_slice());
+        }
+    }
+}
+
+/// Right-handed rotation about one coordinate axis, applied as in BVH: the channels of a
+/// joint compose left to right, `R = R_c0 · R_c1 · R_c2`.
+fn axis_rotation(axis: usize, a: f64) -> Matrix3<f64> {
+    let (s, c) = a.sin_cos();
+    match axis {
+        0 => Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c),
+        1 => Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c),
+        _ => Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chain(channels: Vec<Channel>, values: Vec<f64>) -> Skeleton {
+        let mut root_channels = vec![Channel::Xposition, Channel::Yposition, Channel::Zposition];
+        root_channels.extend(channels);
+        Skeleton::new(
+            vec![
+                Joint {
+                    name: "root".into(),
+                    parent: None,
+                    offset: [0.0; 3],
+                    channels: root_channels,
+                    end_site: false,
+                },
+                Joint {
+                    name: "tip".into(),
+                    parent: Some(0),
+                    offset: [1.0, 0.0, 0.0],
+                    channels: vec![],
+                    end_site: true,
+                },
+            ],
+            values,
+        )
+        .unwrap()
+    }
+
+    fn close(a: &[f64], b: &[f64]) {
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() < 1e-12, "{a:?} != {b:?}");
+        }
+    }
+
+    #[test]
+    fn single_axis_rotations_follow_the_right_hand_rule() {
+        // Z 90°: x → y.
+        let s = chain(vec![Channel::Zrotation], vec![1.0, 2.0, 3.0, 90.0]);
+        close(&s.forward_kinematics()[3..], &[1.0, 3.0, 3.0]);
+        // Y 90°: x → -z.
+        let s = chain(vec![Channel::Yrotation], vec![0.0, 0.0, 0.0, 90.0]);
+        close(&s.forward_kinematics()[3..], &[0.0, 0.0, -1.0]);
+    }
+
+    #[test]
+    fn channel_order_composes_left_to_right() {
+        // R = Rz(90)·Rx(90) applied to x: Rx leaves x alone, Rz takes it to y.
+        let s = chain(
+            vec![Channel::Zrotation, Channel::Xrotation],
+            vec![0.0, 0.0, 0.0, 90.0, 90.0],
+        );
+        close(&s.forward_kinematics()[3..], &[0.0, 1.0, 0.0]);
+        // R = Rx(90)·Rz(90) applied to x: Rz takes x to y, Rx takes y to z.
+        let s = chain(
+            vec![Channel::Xrotation, Channel::Zrotation],
+            vec![0.0, 0.0, 0.0, 90.0, 90.0],
+        );
+        close(&s.forward_kinematics()[3..], &[0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn rejects_children_before_parents() {
+        let j = |name: &str, parent| Joint {
+            name: name.into(),
+            parent,
+            offset: [0.0; 3],
+            channels: vec![],
+            end_site: false,
+        };
+        assert!(Skeleton::new(vec![j("a", None), j("b", Some(1))], vec![]).is_err());
+        assert!(Skeleton::new(vec![j("a", None), j("b", None)], vec![]).is_err());
+    }
+}
