@@ -223,6 +223,40 @@ mod tests {
     }
 
     #[test]
+    fn bone_drift_measures_stretch_against_offsets() {
+        use crate::motion::skeleton::{Channel, Joint, Skeleton};
+        let s = Skeleton::new(
+            vec![
+                Joint {
+                    name: "root".into(),
+                    parent: None,
+                    offset: [0.0; 3],
+                    channels: vec![Channel::Xposition],
+                    end_site: false,
+                },
+                Joint {
+                    name: "tip".into(),
+                    parent: Some(0),
+                    offset: [0.0, 2.0, 0.0],
+                    channels: vec![],
+                    end_site: true,
+                },
+            ],
+            vec![0.0, 5.0],
+        )
+        .unwrap();
+        // Exact FK: no drift.
+        let d = bone_length_drift(&s, &s.forward_kinematics(), 10.0).unwrap();
+        assert_eq!((d.max_mm, d.bones), (0.0, 1));
+        // Tip 2.5 units from the root in frame 1: 0.5 units = 5 mm too long, 25 %.
+        let pos = [0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 5.0, 0.0, 0.0, 5.0, 2.5, 0.0];
+        let d = bone_length_drift(&s, &pos, 10.0).unwrap();
+        assert!((d.max_mm - 5.0).abs() < 1e-12);
+        assert!((d.mean_mm - 2.5).abs() < 1e-12);
+        assert!((d.max_relative - 0.25).abs() < 1e-12);
+    }
+
+    #[test]
     fn shape_mismatch_is_an_error() {
         assert!(compare(&[0.0; 6], &[0.0; 3], 1, 1.0).is_err());
         assert!(compare(&[0.0; 4], &[0.0; 4], 1, 1.0).is_err());

@@ -447,69 +447,96 @@ mod tests {
         assert_eq!(dec_f32([0, 0, 0, 0]), 0.0);
     }
 
-    /// A minimal Intel integer C3D: 1 point, 2 frames, scale 0.5, mm.
-    pub(crate) fn tiny_c3d(residual_frame1: i16) -> Vec<u8> {
-        let mut b = vec![0u8; 3 * BLOCK];
-        b[0] = 2;
-        b[1] = 0x50;
-        let w = |b: &mut Vec<u8>, word: usize, v: u16| {
-            b[(word - 1) * 2..(word - 1) * 2 + 2].copy_from_slice(&v.to_le_bytes())
-        };
-        w(&mut b, 2, 1);
-        w(&mut b, 3, 0);
-        w(&mut b, 4, 1);
-        w(&mut b, 5, 2);
-        b[12..16].copy_from_slice(&0.5f32.to_le_bytes());
-        w(&mut b, 9, 3);
-        b[20..24].copy_from_slice(&100f32.to_le_bytes());
-        // Parameter section at block 2.
-        let p = BLOCK;
-        b[p + 2] = 1;
-        b[p + 3] = 84;
-        let mut at = p + 4;
-        let mut push = |b: &mut Vec<u8>, bytes: &[u8]| {
-            b[at..at + bytes.len()].copy_from_slice(bytes);
-            at += bytes.len();
-        };
-        // Group POINT, id 1.
-        push(&mut b, &[5, (-1i8) as u8]);
-        push(&mut b, b"POINT");
-        push(&mut b, &3i16.to_le_bytes());
-        push(&mut b, &[0]);
-        // POINT:UNITS = "mm" (char, dims [2]).
-        let body = [
-            &[5u8, 1][..],
-            b"UNITS",
-            &8i16.to_le_bytes(),
-            &[0xff, 1, 2],
-            b"mm",
-            &[0],
-        ]
-        .concat();
-        push(&mut b, &body);
-        // POINT:LABELS = ["HEAD"] (dims [4, 1]).
-        let body = [
-            &[6u8, 1][..],
-            b"LABELS",
-            &11i16.to_le_bytes(),
-            &[0xff, 2, 4, 1],
-            b"HEAD",
-            &[0],
-        ]
-        .concat();
-        push(&mut b, &body);
-        push(&mut b, &[0, 0]);
-        let d = 2 * BLOCK;
-        for (f, vals) in [[2i16, 4, 6, 0], [8, 10, 12, residual_frame1]]
-            .iter()
-            .enumerate()
-        {
-            for (k, v) in vals.iter().enumerate() {
-                let o = d + f * 8 + k * 2;
-                b[o..o + 2].copy_from_slice(&v.to_le_bytes());
-            }
+    /// Builds small Intel integer C3D files (scale 0.5, 100 fps, one point "HEAD").
+    struct Builder {
+        params: Vec<u8>,
+    }
+
+    impl Builder {
+        fn new() -> Self {
+            let mut b = Builder { params: Vec::new() };
+            b.group(1, "POINT");
+            b.group(2, "TRIAL");
+            b.param(1, "UNITS", -1, &[2], b"mm");
+            b.param(1, "LABELS", -1, &[4, 1], b"HEAD");
+            b
         }
-        b
+
+        fn group(&mut self, id: i8, name: &str) {
+            self.params
+                .extend_from_slice(&[name.len() as u8, (-id) as u8]);
+            self.params.extend_from_slice(name.as_bytes());
+            self.params.extend_from_slice(&3i16.to_le_bytes());
+            self.params.push(0);
+        }
+
+        fn param(&mut self, group: i8, name: &str, kind: i8, dims: &[u8], data: &[u8]) {
+            self.params
+                .extend_from_slice(&[name.len() as u8, group as u8]);
+            self.params.extend_from_slice(name.as_bytes());
+            let next = 2 + 2 + dims.len() + data.len() + 1;
+            self.params.extend_from_slice(&(next as i16).to_le_bytes());
+            self.params
+                .extend_from_slice(&[kind as u8, dims.len() as u8]);
+            self.params.extend_from_slice(dims);
+            self.params.extend_from_slice(data);
+            self.params.push(0);
+        }
+
+        /// `frames` rows of `[x, y, z, residual]` raw integers; the header claims
+        /// `header_frames`.
+        fn build(&self, header_frames: u16, frames: &[[i16; 4]]) -> Vec<u8> {
+            let mut b = vec![0u8; 2 * BLOCK];
+            b[0] = 2;
+            b[1] = 0x50;
+            let w = |b: &mut Vec<u8>, word: usize, v: u16| {
+                b[(word - 1) * 2..(word - 1) * 2 + 2].copy_from_slice(&v.to_le_bytes())
+            };
+            w(&mut b, 2, 1);
+            w(&mut b, 4, 1);
+            w(&mut b, 5, header_frames);
+            b[12..16].copy_from_slice(&0.5f32.to_le_bytes());
+            w(&mut b, 9, 3);
+            b[20..24].copy_from_slice(&100f32.to_le_bytes());
+            b[BLOCK + 2] = 1;
+            b[BLOCK + 3] = 84;
+            b[BLOCK + 4..BLOCK + 4 + self.params.len()].copy_from_slice(&self.params);
+            for f in frames {
+                for v in f {
+                    b.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            b
+        }
+    }
+
+    fn tiny_c3d(residual_frame1: i16) -> Vec<u8> {
+        Builder::new().build(2, &[[2, 4, 6, 0], [8, 10, 12, residual_frame1]])
+    }
+
+    fn u16s(v: &[u16]) -> Vec<u8> {
+        v.iter().flat_map(|x| x.to_le_bytes()).collect()
+    }
+
+    #[test]
+    fn trial_fields_extend_the_16_bit_frame_count() {
+        let rows = [[1, 1, 1, 0], [2, 2, 2, 0], [3, 3, 3, 0]];
+        let mut b = Builder::new();
+        b.param(2, "ACTUAL_START_FIELD", 2, &[2], &u16s(&[1, 0]));
+        b.param(2, "ACTUAL_END_FIELD", 2, &[2], &u16s(&[3, 0]));
+        let p = read(&b.build(2, &rows), &Limits::default()).unwrap();
+        assert_eq!(p.motion.frame_count(), 3);
+        // The high word counts 65536 frames: more than the file holds, so it is truncated
+        // to what is present, with a warning.
+        let mut b = Builder::new();
+        b.param(2, "ACTUAL_START_FIELD", 2, &[2], &u16s(&[1, 0]));
+        b.param(2, "ACTUAL_END_FIELD", 2, &[2], &u16s(&[2, 1]));
+        let p = read(&b.build(2, &rows), &Limits::default()).unwrap();
+        assert_eq!(p.motion.frame_count(), 3);
+        assert!(p
+            .warnings
+            .iter()
+            .any(|w| w.contains("65538 frames declared")));
     }
 
     #[test]
@@ -537,7 +564,7 @@ mod tests {
         for cut in 0..good.len() {
             let _ = read(&good[..cut], &Limits::default());
         }
-        for i in 0..1100 {
+        for i in 0..good.len() {
             let mut b = good.clone();
             b[i] ^= 0xA5;
             let _ = read(&b, &Limits::default());

@@ -1,0 +1,73 @@
+//! The `mocapstore` binary as a user runs it.
+
+use std::process::Command;
+
+use mocapstore::corpus;
+
+fn mocapstore(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mocapstore"))
+        .args(args)
+        .output()
+        .expect("binary runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn corpus_file(rel: &str) -> String {
+    corpus::root().join(rel).display().to_string()
+}
+
+#[test]
+fn inspect_reports_counts_units_and_failures() {
+    let bvh = corpus_file("bvh/cmu/01_01.bvh");
+    let (ok, out, _) = mocapstore(&["inspect", "--json", &bvh]);
+    assert!(ok);
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["frames"], 2752);
+    assert_eq!(v["skeleton_joints"], 31);
+    assert_eq!(v["unit"], "cmu");
+    assert_eq!(v["unit_inferred"], true);
+
+    let empty = corpus_file("trc/TRCSamples__Empty.trc");
+    let (ok, out, err) = mocapstore(&["inspect", &bvh, &empty]);
+    assert!(!ok, "a failed file makes the exit status non-zero");
+    assert!(out.contains("01_01.bvh"), "{out}");
+    assert!(
+        err.contains("TRCSamples__Empty.trc") && err.contains("empty"),
+        "{err}"
+    );
+}
+
+#[test]
+fn convert_round_trips_and_explains_errors() {
+    let dir = std::env::temp_dir().join(format!("mocapstore-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let c3d = corpus_file("c3d/btkdata__others__Gait.c3d");
+    let json = dir.join("gait.json").display().to_string();
+    let (ok, _, err) = mocapstore(&["convert", &c3d, &json]);
+    assert!(ok, "{err}");
+    let (ok, out, _) = mocapstore(&["inspect", "--json", &json]);
+    assert!(ok);
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(
+        (v["points"].as_u64(), v["frames"].as_u64()),
+        (Some(33), Some(487))
+    );
+    assert_eq!(v["unit"], "mm");
+
+    // Point data cannot become BVH; the message says why and nothing is left behind.
+    let bvh = dir.join("gait.bvh");
+    let (ok, _, err) = mocapstore(&["convert", &c3d, &bvh.display().to_string()]);
+    assert!(!ok);
+    assert!(err.contains("skeleton"), "{err}");
+    assert!(!bvh.exists());
+
+    let (ok, _, err) = mocapstore(&["convert", &c3d, "out.xyz"]);
+    assert!(!ok && err.contains("--to"), "{err}");
+    let (ok, _, err) = mocapstore(&["convert", &c3d, &json, "--unit", "furlong"]);
+    assert!(!ok && err.contains("furlong"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
