@@ -15,5 +15,6 @@
 //! `http/` (axum).
 
 pub mod cli;
+pub mod codec;
 pub mod corpus;
 pub mod motion;

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 
+mod bench;
 mod convert;
 mod inspect;
 
@@ -27,6 +28,8 @@ enum Command {
     Inspect(inspect::InspectArgs),
     /// Convert a take between formats (output format from the extension or --to).
     Convert(convert::ConvertArgs),
+    /// Compare codecs on real files: ratio, errors, speed (Markdown, CSV, plot).
+    Bench(bench::BenchArgs),
 }
 
 #[derive(Args)]
@@ -83,5 +86,6 @@ pub fn main() -> ExitCode {
         }
         Command::Inspect(args) => inspect::run(&args),
         Command::Convert(args) => convert::run(&args),
+        Command::Bench(args) => bench::run(&args),
     }
 }

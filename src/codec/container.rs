@@ -1,0 +1,447 @@
+//! The container: a header that says what was coded and how, and a list of independently
+//! decodable chunks. Byte layout in `docs/FORMAT.md`; keep the two in step.
+
+use std::ops::Range;
+
+use super::entropy::{get_varint, put_varint};
+use super::error::{malformed, Error, Result};
+use super::id::CodecId;
+
+pub const MAGIC: &[u8; 4] = b"MCST";
+pub const VERSION: u16 = 1;
+const FIXED_HEADER: usize = 36;
+const CHUNK_ENTRY: usize = 16;
+
+/// Bounds on what a decoder of untrusted bytes agrees to allocate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    pub max_frames: u64,
+    pub max_points: u64,
+    pub max_samples: u64,
+    pub max_params_bytes: u64,
+    pub max_chunk_bytes: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_frames: 20_000_000,
+            max_points: 10_000,
+            max_samples: 200_000_000,
+            max_params_bytes: 64 << 20,
+            max_chunk_bytes: 256 << 20,
+        }
+    }
+}
+
+fn limit(what: &'static str, actual: u64, limit: u64) -> Result<()> {
+    if actual > limit {
+        Err(Error::Limit {
+            what,
+            actual,
+            limit,
+        })
+    } else {
+        Ok(())
+    }
+}
+
+/// Where one chunk sits in the take and how to check it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChunkMeta {
+    pub first_frame: u32,
+    pub frames: u32,
+    pub len: u32,
+    pub crc32c: u32,
+}
+
+impl ChunkMeta {
+    pub fn frame_range(&self) -> Range<usize> {
+        self.first_frame as usize..(self.first_frame + self.frames) as usize
+    }
+}
+
+/// Everything needed to decode any chunk, apart from the chunk's own bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Header {
+    pub codec: CodecId,
+    pub frames: u32,
+    pub points: u32,
+    pub fps: f64,
+    pub metres_per_unit: f64,
+    /// Codec parameters and per-take side data (e.g. MDTT's basis), codec-defined.
+    pub params: Vec<u8>,
+    /// Content hash of a shared basis the chunks were coded with, if any.
+    pub basis: Option<[u8; 32]>,
+    pub chunks: Vec<ChunkMeta>,
+}
+
+impl Header {
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b =
+            Vec::with_capacity(FIXED_HEADER + self.params.len() + 40 + 16 * self.chunks.len());
+        b.extend_from_slice(MAGIC);
+        b.extend_from_slice(&VERSION.to_le_bytes());
+        b.push(self.codec as u8);
+        b.push(u8::from(self.basis.is_some()));
+        b.extend_from_slice(&self.frames.to_le_bytes());
+        b.extend_from_slice(&self.points.to_le_bytes());
+        b.extend_from_slice(&self.fps.to_le_bytes());
+        b.extend_from_slice(&self.metres_per_unit.to_le_bytes());
+        b.extend_from_slice(&(self.params.len() as u32).to_le_bytes());
+        b.extend_from_slice(&self.params);
+        if let Some(h) = &self.basis {
+            b.extend_from_slice(h);
+        }
+        b.extend_from_slice(&(self.chunks.len() as u32).to_le_bytes());
+        for c in &self.chunks {
+            for v in [c.first_frame, c.frames, c.len, c.crc32c] {
+                b.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let crc = crc32c::crc32c(&b);
+        b.extend_from_slice(&crc.to_le_bytes());
+        b
+    }
+
+    /// Parse a header from the start of `bytes`; returns it and its length in bytes.
+    pub fn parse(bytes: &[u8], limits: &Limits) -> Result<(Header, usize)> {
+        let mut r = Reader { b: bytes, pos: 0 };
+        if r.take(4)? != MAGIC {
+            return Err(malformed("not a mocapstore bitstream (bad magic)"));
+        }
+        let version = r.u16()?;
+        if version != VERSION {
+            return Err(Error::Unsupported(format!("container version {version}")));
+        }
+        let codec_byte = r.u8()?;
+        let codec = CodecId::from_byte(codec_byte)
+            .ok_or_else(|| Error::Unsupported(format!("codec id {codec_byte}")))?;
+        let flags = r.u8()?;
+        if flags > 1 {
+            return Err(Error::Unsupported(format!("header flags {flags:#x}")));
+        }
+        let frames = r.u32()?;
+        let points = r.u32()?;
+        limit("frame count", frames.into(), limits.max_frames)?;
+        limit("point count", points.into(), limits.max_points)?;
+        limit(
+            "sample count",
+            u64::from(frames) * u64::from(points),
+            limits.max_samples,
+        )?;
+        let fps = r.f64()?;
+        let metres_per_unit = r.f64()?;
+        if !(fps.is_finite() && fps > 0.0 && metres_per_unit.is_finite() && metres_per_unit > 0.0) {
+            return Err(malformed("frame rate or unit is not a positive number"));
+        }
+        let params_len = r.u32()?;
+        limit(
+            "codec parameter bytes",
+            params_len.into(),
+            limits.max_params_bytes,
+        )?;
+        let params = r.take(params_len as usize)?.to_vec();
+        let basis = if flags & 1 == 1 {
+            Some(r.take(32)?.try_into().expect("32 bytes"))
+        } else {
+            None
+        };
+        let count = r.u32()? as usize;
+        if count > frames.max(1) as usize {
+            return Err(malformed(format!("{count} chunks for {frames} frames")));
+        }
+        let entries = r.take(
+            count
+                .checked_mul(CHUNK_ENTRY)
+                .ok_or_else(|| malformed("chunk count"))?,
+        )?;
+        let mut chunks = Vec::with_capacity(count);
+        let mut next = 0u64;
+        for e in entries.chunks_exact(CHUNK_ENTRY) {
+            let w = |i: usize| u32::from_le_bytes(e[i * 4..i * 4 + 4].try_into().expect("4"));
+            let c = ChunkMeta {
+                first_frame: w(0),
+                frames: w(1),
+                len: w(2),
+                crc32c: w(3),
+            };
+            if u64::from(c.first_frame) != next || c.frames == 0 {
+                return Err(malformed("chunk index does not tile the frames in order"));
+            }
+            limit("chunk bytes", c.len.into(), limits.max_chunk_bytes)?;
+            next += u64::from(c.frames);
+            chunks.push(c);
+        }
+        if next != u64::from(frames) {
+            return Err(malformed(format!("chunks cover {next} of {frames} frames")));
+        }
+        let body_end = r.pos;
+        let crc = r.u32()?;
+        if crc32c::crc32c(&bytes[..body_end]) != crc {
+            return Err(Error::Checksum("header".into()));
+        }
+        Ok((
+            Header {
+                codec,
+                frames,
+                points,
+                fps,
+                metres_per_unit,
+                params,
+                basis,
+                chunks,
+            },
+            r.pos,
+        ))
+    }
+
+    pub fn width(&self) -> usize {
+        self.points as usize * 3
+    }
+
+    /// Indices of the chunks that overlap frames `start..end`.
+    pub fn chunks_for(&self, start: usize, end: usize) -> Range<usize> {
+        let first = self
+            .chunks
+            .partition_point(|c| (c.first_frame + c.frames) as usize <= start);
+        let last = self
+            .chunks
+            .partition_point(|c| (c.first_frame as usize) < end);
+        first..last.max(first)
+    }
+}
+
+/// A whole encoded take: header plus chunk payloads, as stored in one file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Container {
+    pub header: Header,
+    pub chunks: Vec<Vec<u8>>,
+}
+
+impl Container {
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = self.header.to_bytes();
+        for c in &self.chunks {
+            b.extend_from_slice(c);
+        }
+        b
+    }
+
+    pub fn parse(bytes: &[u8], limits: &Limits) -> Result<Container> {
+        let (header, mut pos) = Header::parse(bytes, limits)?;
+        let mut chunks = Vec::with_capacity(header.chunks.len());
+        for (i, meta) in header.chunks.iter().enumerate() {
+            let end = pos
+                .checked_add(meta.len as usize)
+                .filter(|&e| e <= bytes.len())
+                .ok_or_else(|| malformed(format!("chunk {i} runs past the end")))?;
+            let payload = &bytes[pos..end];
+            verify_chunk(meta, payload, i)?;
+            chunks.push(payload.to_vec());
+            pos = end;
+        }
+        if pos != bytes.len() {
+            return Err(malformed(format!("{} trailing bytes", bytes.len() - pos)));
+        }
+        Ok(Container { header, chunks })
+    }
+
+    /// Stored size: header plus payloads (what compression ratios divide by).
+    pub fn stored_bytes(&self) -> usize {
+        self.header.to_bytes().len() + self.chunks.iter().map(Vec::len).sum::<usize>()
+    }
+}
+
+/// Check a chunk's length and checksum against its index entry.
+pub fn verify_chunk(meta: &ChunkMeta, payload: &[u8], index: usize) -> Result<()> {
+    if payload.len() != meta.len as usize {
+        return Err(malformed(format!(
+            "chunk {index} is {} bytes, index says {}",
+            payload.len(),
+            meta.len
+        )));
+    }
+    if crc32c::crc32c(payload) != meta.crc32c {
+        return Err(Error::Checksum(format!("chunk {index}")));
+    }
+    Ok(())
+}
+
+/// A chunk payload: the gap mask of its samples, then the codec's bytes.
+///
+/// The mask is a run-length list (varints) of alternating present/missing runs over the
+/// chunk's samples (frame-major), starting with present; an empty list means no gaps.
+pub fn pack_chunk(valid: Option<&[bool]>, codec_bytes: &[u8]) -> Vec<u8> {
+    let mut mask = Vec::new();
+    if let Some(v) = valid.filter(|v| v.iter().any(|x| !x)) {
+        let mut current = true;
+        let mut run = 0u64;
+        for &x in v {
+            if x == current {
+                run += 1;
+            } else {
+                put_varint(&mut mask, run);
+                current = x;
+                run = 1;
+            }
+        }
+        put_varint(&mut mask, run);
+    }
+    let mut out = Vec::with_capacity(mask.len() + codec_bytes.len() + 4);
+    put_varint(&mut out, mask.len() as u64);
+    out.extend_from_slice(&mask);
+    out.extend_from_slice(codec_bytes);
+    out
+}
+
+/// Split a chunk payload into its gap mask (`None` when all present) and codec bytes.
+pub fn unpack_chunk(payload: &[u8], samples: usize) -> Result<(Option<Vec<bool>>, &[u8])> {
+    let mut pos = 0;
+    let mask_len = get_varint(payload, &mut pos).ok_or_else(|| malformed("gap mask length"))?;
+    let end = usize::try_from(mask_len)
+        .ok()
+        .and_then(|l| pos.checked_add(l))
+        .filter(|&e| e <= payload.len())
+        .ok_or_else(|| malformed("gap mask runs past the chunk"))?;
+    let codec_bytes = &payload[end..];
+    if mask_len == 0 {
+        return Ok((None, codec_bytes));
+    }
+    let mask_bytes = &payload[pos..end];
+    let mut valid = Vec::with_capacity(samples);
+    let mut p = 0;
+    let mut current = true;
+    while p < mask_bytes.len() {
+        let run = get_varint(mask_bytes, &mut p).ok_or_else(|| malformed("gap mask run"))?;
+        if run > (samples - valid.len()) as u64 {
+            return Err(malformed("gap mask longer than the chunk"));
+        }
+        valid.extend(std::iter::repeat_n(current, run as usize));
+        current = !current;
+    }
+    if valid.len() != samples {
+        return Err(malformed("gap mask shorter than the chunk"));
+    }
+    Ok((Some(valid), codec_bytes))
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
+        let end = self
+            .pos
+            .checked_add(n)
+            .filter(|&e| e <= self.b.len())
+            .ok_or_else(|| malformed("header is truncated"))?;
+        let s = &self.b[self.pos..end];
+        self.pos = end;
+        Ok(s)
+    }
+    fn u8(&mut self) -> Result<u8> {
+        Ok(self.take(1)?[0])
+    }
+    fn u16(&mut self) -> Result<u16> {
+        Ok(u16::from_le_bytes(self.take(2)?.try_into().expect("2")))
+    }
+    fn u32(&mut self) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4")))
+    }
+    fn f64(&mut self) -> Result<f64> {
+        Ok(f64::from_le_bytes(self.take(8)?.try_into().expect("8")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Container {
+        let chunks = vec![vec![1u8, 2, 3], vec![4u8; 10]];
+        let metas = vec![
+            ChunkMeta {
+                first_frame: 0,
+                frames: 5,
+                len: 3,
+                crc32c: crc32c::crc32c(&chunks[0]),
+            },
+            ChunkMeta {
+                first_frame: 5,
+                frames: 2,
+                len: 10,
+                crc32c: crc32c::crc32c(&chunks[1]),
+            },
+        ];
+        Container {
+            header: Header {
+                codec: CodecId::Quant,
+                frames: 7,
+                points: 2,
+                fps: 120.0,
+                metres_per_unit: 0.001,
+                params: vec![9, 9],
+                basis: Some([7; 32]),
+                chunks: metas,
+            },
+            chunks,
+        }
+    }
+
+    #[test]
+    fn round_trips_and_finds_chunks() {
+        let c = sample();
+        let bytes = c.to_bytes();
+        assert_eq!(Container::parse(&bytes, &Limits::default()).unwrap(), c);
+        assert_eq!(c.header.chunks_for(0, 1), 0..1);
+        assert_eq!(c.header.chunks_for(4, 6), 0..2);
+        assert_eq!(c.header.chunks_for(5, 7), 1..2);
+        assert_eq!(c.header.chunks_for(7, 7), 2..2);
+    }
+
+    #[test]
+    fn every_truncation_and_bit_flip_is_a_typed_error() {
+        let bytes = sample().to_bytes();
+        for cut in 0..bytes.len() {
+            assert!(Container::parse(&bytes[..cut], &Limits::default()).is_err());
+        }
+        for i in 0..bytes.len() {
+            for bit in 0..8 {
+                let mut b = bytes.clone();
+                b[i] ^= 1 << bit;
+                assert!(
+                    Container::parse(&b, &Limits::default()).is_err(),
+                    "flip {i}.{bit}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn limits_reject_before_allocating() {
+        let bytes = sample().to_bytes();
+        let tight = Limits {
+            max_frames: 6,
+            ..Limits::default()
+        };
+        assert!(matches!(
+            Container::parse(&bytes, &tight),
+            Err(Error::Limit { .. })
+        ));
+    }
+
+    #[test]
+    fn gap_masks_round_trip() {
+        let valid = vec![true, true, false, false, true, false];
+        let p = pack_chunk(Some(&valid), b"xyz");
+        let (v, rest) = unpack_chunk(&p, 6).unwrap();
+        assert_eq!(v.unwrap(), valid);
+        assert_eq!(rest, b"xyz");
+        let p = pack_chunk(Some(&[true; 4]), b"q");
+        assert_eq!(unpack_chunk(&p, 4).unwrap(), (None, &b"q"[..]));
+        assert!(unpack_chunk(&pack_chunk(Some(&valid), b""), 5).is_err());
+    }
+}

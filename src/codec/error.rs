@@ -1,0 +1,33 @@
+//! The one error type of the codec layer.
+
+/// Errors of encoding and decoding. Decoding untrusted bytes yields only these, never a
+/// panic: `Malformed` for structure that does not parse, `Checksum` for bytes that parse but
+/// were altered, `Unsupported` for versions or codecs we do not know, `Limit` for sizes past
+/// what we agree to allocate.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum Error {
+    #[error("malformed bitstream: {0}")]
+    Malformed(String),
+    #[error("checksum mismatch in {0}")]
+    Checksum(String),
+    #[error("unsupported: {0}")]
+    Unsupported(String),
+    #[error("{what} is {actual}, over the limit of {limit}")]
+    Limit {
+        what: &'static str,
+        actual: u64,
+        limit: u64,
+    },
+    /// Arguments that cannot be encoded (no points, a negative bound, ...).
+    #[error("invalid: {0}")]
+    Invalid(String),
+    /// The encoder could not meet the bound; a bug in a codec, reported rather than hidden.
+    #[error("codec {codec} missed the bound: {detail}")]
+    BoundMissed { codec: String, detail: String },
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+pub(crate) fn malformed(msg: impl Into<String>) -> Error {
+    Error::Malformed(msg.into())
+}

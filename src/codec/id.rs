@@ -1,0 +1,172 @@
+//! Codec identifiers, error bounds and latency classes: the words a user states.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{Error, Result};
+
+/// Every codec the container format knows. The numeric value is written in bitstreams:
+/// never reuse one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
+#[serde(rename_all = "kebab-case")]
+pub enum CodecId {
+    Raw = 1,
+    Quant = 2,
+    Mdtt = 3,
+    LsdtClip = 4,
+    LsdtFrame = 5,
+    Spca = 6,
+    Pga = 7,
+}
+
+impl CodecId {
+    pub const ALL: [CodecId; 7] = [
+        CodecId::Raw,
+        CodecId::Quant,
+        CodecId::Mdtt,
+        CodecId::LsdtClip,
+        CodecId::LsdtFrame,
+        CodecId::Spca,
+        CodecId::Pga,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            CodecId::Raw => "raw",
+            CodecId::Quant => "quant",
+            CodecId::Mdtt => "mdtt",
+            CodecId::LsdtClip => "lsdt-clip",
+            CodecId::LsdtFrame => "lsdt-frame",
+            CodecId::Spca => "spca",
+            CodecId::Pga => "pga",
+        }
+    }
+
+    pub fn from_byte(b: u8) -> Option<CodecId> {
+        CodecId::ALL.into_iter().find(|c| *c as u8 == b)
+    }
+
+    /// How many frames a decoder must see before it can emit the first one.
+    pub fn latency(self) -> Latency {
+        match self {
+            CodecId::Raw | CodecId::Quant | CodecId::LsdtFrame => Latency::Frame,
+            CodecId::LsdtClip => Latency::Clip,
+            CodecId::Mdtt | CodecId::Spca | CodecId::Pga => Latency::Sequence,
+        }
+    }
+}
+
+impl fmt::Display for CodecId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for CodecId {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        CodecId::ALL
+            .into_iter()
+            .find(|c| c.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| {
+                let names: Vec<_> = CodecId::ALL.iter().map(|c| c.name()).collect();
+                Error::Invalid(format!("unknown codec {s:?}; known: {}", names.join(", ")))
+            })
+    }
+}
+
+/// Latency classes, ordered: a codec fits a request if its class is at most the requested.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Latency {
+    Frame,
+    Clip,
+    Sequence,
+}
+
+impl FromStr for Latency {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "frame" => Ok(Latency::Frame),
+            "clip" => Ok(Latency::Clip),
+            "sequence" | "any" => Ok(Latency::Sequence),
+            other => Err(Error::Invalid(format!(
+                "unknown latency {other:?}; use frame, clip, sequence or any"
+            ))),
+        }
+    }
+}
+
+/// The fidelity a user asks for, in millimetres, judged on decoded output.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorBound {
+    /// No sample farther than this from the original.
+    MaxMm(f64),
+    /// Mean Euclidean error at most this.
+    MeanMm(f64),
+}
+
+impl ErrorBound {
+    pub fn new_max(mm: f64) -> Result<Self> {
+        check_mm(mm).map(ErrorBound::MaxMm)
+    }
+
+    pub fn new_mean(mm: f64) -> Result<Self> {
+        check_mm(mm).map(ErrorBound::MeanMm)
+    }
+
+    pub fn mm(self) -> f64 {
+        match self {
+            ErrorBound::MaxMm(v) | ErrorBound::MeanMm(v) => v,
+        }
+    }
+
+    /// Whether measured errors (mm) satisfy the bound.
+    pub fn holds(self, max_mm: f64, mean_mm: f64) -> bool {
+        match self {
+            ErrorBound::MaxMm(b) => max_mm <= b,
+            ErrorBound::MeanMm(b) => mean_mm <= b,
+        }
+    }
+}
+
+impl fmt::Display for ErrorBound {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ErrorBound::MaxMm(v) => write!(f, "max {v} mm"),
+            ErrorBound::MeanMm(v) => write!(f, "mean {v} mm"),
+        }
+    }
+}
+
+fn check_mm(mm: f64) -> Result<f64> {
+    if mm.is_finite() && mm > 0.0 {
+        Ok(mm)
+    } else {
+        Err(Error::Invalid(format!(
+            "an error bound must be a positive number of millimetres, got {mm}"
+        )))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_bytes_are_stable() {
+        for c in CodecId::ALL {
+            assert_eq!(c.name().parse::<CodecId>().unwrap(), c);
+            assert_eq!(CodecId::from_byte(c as u8), Some(c));
+        }
+        assert_eq!(CodecId::Mdtt as u8, 3);
+        assert!("zip".parse::<CodecId>().is_err());
+        assert!(ErrorBound::new_max(-1.0).is_err());
+        assert!(ErrorBound::new_mean(f64::NAN).is_err());
+        assert!(Latency::Frame < Latency::Sequence);
+    }
+}

@@ -1,0 +1,105 @@
+//! Codecs: pure encoders and decoders over point matrices, the container they write, the
+//! entropy stage they share, and rate control to a stated error bound. No I/O, no async,
+//! no database: bytes and matrices in, bytes and matrices out.
+//!
+//! # Layout
+//! - [`id`]: codec ids, latency classes, error bounds — the user's vocabulary.
+//! - [`container`]: header + chunk index + per-chunk gap masks and checksums.
+//! - [`entropy`]: adaptive binary range coder and integer models (and the zstd alternative).
+//! - [`pipeline`]: encode a `Motion` with any codec to a bound, verify it, decode ranges.
+//! - [`raw`], [`quant`]: the baselines. [`mdtt`]: Hou et al. 2015 with a residual layer.
+//! - [`dct`], [`residual`], [`gaps`], [`measure`]: shared pieces of the above.
+
+pub mod container;
+pub mod dct;
+pub mod entropy;
+pub mod error;
+pub mod gaps;
+pub mod id;
+pub mod mdtt;
+pub mod measure;
+pub mod pipeline;
+pub mod quant;
+pub mod raw;
+pub mod residual;
+mod wire;
+
+pub use container::{Container, Header, Limits};
+pub use error::{Error, Result};
+pub use id::{CodecId, ErrorBound, Latency};
+pub use pipeline::{decode_all, decode_range, encode, Encoded};
+
+/// What an encoder sees: gap-filled positions (`frames × points × 3`, the take's units) and
+/// which samples are real, so that errors are judged on those only.
+pub struct Input<'a> {
+    pub data: &'a [f32],
+    pub valid: Option<&'a [bool]>,
+    pub frames: usize,
+    pub points: usize,
+    pub fps: f64,
+}
+
+impl Input<'_> {
+    pub fn width(&self) -> usize {
+        self.points * 3
+    }
+}
+
+/// A bound in the take's own units (the pipeline converts from millimetres).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Target {
+    Max(f64),
+    Mean(f64),
+}
+
+impl Target {
+    pub fn holds(self, max: f64, mean: f64) -> bool {
+        match self {
+            Target::Max(t) => max <= t,
+            Target::Mean(t) => mean <= t,
+        }
+    }
+}
+
+/// An encoder's output: parameters and side data for the header, and consecutive chunks.
+pub struct CodecOutput {
+    pub params: Vec<u8>,
+    pub chunks: Vec<ChunkOut>,
+}
+
+pub struct ChunkOut {
+    pub frames: usize,
+    pub bytes: Vec<u8>,
+}
+
+/// One codec. Implementations are stateless; per-take state lives in the header params.
+pub trait Codec: Send + Sync {
+    fn id(&self) -> CodecId;
+    /// Encode to meet `target` with as few bytes as the codec can.
+    fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput>;
+    /// Parse the header params once; the decoder then decodes any chunk.
+    fn decoder(&self, params: &[u8], points: usize) -> Result<Box<dyn ChunkDecoder>>;
+}
+
+pub trait ChunkDecoder: Send + Sync {
+    /// Decode one chunk of `frames` frames into `out` (`frames × points × 3`).
+    fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()>;
+}
+
+/// The codec for an id, or `Unsupported` for ids whose codec has not landed yet.
+pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
+    match id {
+        CodecId::Raw => Ok(&raw::Raw),
+        CodecId::Quant => Ok(&quant::Quant),
+        CodecId::Mdtt => Ok(&mdtt::Mdtt),
+        other => Err(Error::Unsupported(format!(
+            "codec {other} is not implemented yet"
+        ))),
+    }
+}
+
+/// Frames per chunk for codecs free to choose: about one second, so a range request reads
+/// at most a second more than it needs.
+pub fn default_chunk_frames(fps: f64) -> usize {
+    (fps.round() as usize).clamp(16, 1024)
+}

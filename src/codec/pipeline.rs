@@ -1,0 +1,174 @@
+//! Encode a take with one codec to a bound and prove it; decode any frame range.
+
+use super::container::{pack_chunk, unpack_chunk, verify_chunk, ChunkMeta, Container, Header};
+use super::error::{malformed, Error, Result};
+use super::id::{CodecId, ErrorBound};
+use super::{codec, gaps, Input, Target};
+use crate::motion::metrics::{self, ErrorStats};
+use crate::motion::Motion;
+
+/// Codecs aim a hair inside the bound so that converting their error to millimetres
+/// (a multiplication that can round up) never crosses it.
+const BOUND_MARGIN: f64 = 1.0 - 1e-6;
+
+/// A take encoded and checked: the container, the errors measured on its decoded output,
+/// and its stored size.
+#[derive(Debug, Clone)]
+pub struct Encoded {
+    pub container: Container,
+    pub stats: ErrorStats,
+    pub stored_bytes: usize,
+}
+
+/// Encode `motion` with `codec_id` so that its decoded output meets `bound`.
+///
+/// The returned statistics come from decoding the container just built with the same code
+/// a reader uses, so the bound is a measured fact, not a codec's claim.
+pub fn encode(motion: &Motion, codec_id: CodecId, bound: ErrorBound) -> Result<Encoded> {
+    let (frames, points) = (motion.frame_count(), motion.point_count());
+    if frames == 0 || points == 0 {
+        return Err(Error::Invalid(format!(
+            "nothing to encode: {frames} frames of {points} points"
+        )));
+    }
+    let c = codec(codec_id)?;
+    let positions = motion.positions();
+    let valid = gaps::validity(positions);
+    if valid.as_ref().is_some_and(|v| !v.iter().any(|x| *x)) {
+        return Err(Error::Invalid("every sample of the take is missing".into()));
+    }
+    let filled = gaps::fill(positions, points);
+    let to_mm = motion.unit.to_mm();
+    let units = bound.mm() / to_mm * BOUND_MARGIN;
+    let target = match bound {
+        ErrorBound::MaxMm(_) => Target::Max(units),
+        ErrorBound::MeanMm(_) => Target::Mean(units),
+    };
+    let input = Input {
+        data: &filled,
+        valid: valid.as_deref(),
+        frames,
+        points,
+        fps: motion.fps,
+    };
+    let out = c.encode(&input, target)?;
+
+    let mut metas = Vec::with_capacity(out.chunks.len());
+    let mut payloads = Vec::with_capacity(out.chunks.len());
+    let mut first = 0usize;
+    for ch in out.chunks {
+        let mask = valid
+            .as_ref()
+            .map(|v| &v[first * points..(first + ch.frames) * points]);
+        let payload = pack_chunk(mask, &ch.bytes);
+        metas.push(ChunkMeta {
+            first_frame: first as u32,
+            frames: ch.frames as u32,
+            len: payload.len() as u32,
+            crc32c: crc32c::crc32c(&payload),
+        });
+        payloads.push(payload);
+        first += ch.frames;
+    }
+    if first != frames {
+        return Err(Error::Invalid(format!(
+            "codec {codec_id} produced chunks for {first} of {frames} frames"
+        )));
+    }
+    let container = Container {
+        header: Header {
+            codec: codec_id,
+            frames: frames as u32,
+            points: points as u32,
+            fps: motion.fps,
+            metres_per_unit: motion.unit.metres_per_unit,
+            params: out.params,
+            basis: None,
+            chunks: metas,
+        },
+        chunks: payloads,
+    };
+    let decoded = decode_all(&container)?;
+    let stats = metrics::compare(positions, &decoded, points, to_mm)
+        .map_err(|e| Error::Invalid(e.to_string()))?;
+    if !bound.holds(stats.max_mm, stats.mean_mm) {
+        return Err(Error::BoundMissed {
+            codec: codec_id.to_string(),
+            detail: format!(
+                "asked {bound}, decoded max {:.4} mm, mean {:.4} mm",
+                stats.max_mm, stats.mean_mm
+            ),
+        });
+    }
+    let stored_bytes = container.stored_bytes();
+    Ok(Encoded {
+        container,
+        stats,
+        stored_bytes,
+    })
+}
+
+/// Decode every frame.
+pub fn decode_all(container: &Container) -> Result<Vec<f32>> {
+    let chunks: Vec<&[u8]> = container.chunks.iter().map(Vec::as_slice).collect();
+    decode_range(
+        &container.header,
+        &chunks,
+        0,
+        container.header.frames as usize,
+    )
+}
+
+/// Decode frames `start..end`. `chunks` holds the payloads of exactly the chunks
+/// `header.chunks_for(start, end)` names, in order; nothing else is read.
+///
+/// Missing samples come back as NaN.
+pub fn decode_range(
+    header: &Header,
+    chunks: &[&[u8]],
+    start: usize,
+    end: usize,
+) -> Result<Vec<f32>> {
+    if start > end || end > header.frames as usize {
+        return Err(Error::Invalid(format!(
+            "frames {start}..{end} outside 0..{}",
+            header.frames
+        )));
+    }
+    let wanted = header.chunks_for(start, end);
+    if chunks.len() != wanted.len() {
+        return Err(Error::Invalid(format!(
+            "range {start}..{end} needs chunks {wanted:?}, got {}",
+            chunks.len()
+        )));
+    }
+    let points = header.points as usize;
+    let w = header.width();
+    let decoder = codec(header.codec)?.decoder(&header.params, points)?;
+    let mut out = vec![0f32; (end - start) * w];
+    let mut scratch = Vec::new();
+    for (i, payload) in wanted.clone().zip(chunks) {
+        let meta = &header.chunks[i];
+        verify_chunk(meta, payload, i)?;
+        let n = meta.frames as usize;
+        let (mask, codec_bytes) = unpack_chunk(payload, n * points)?;
+        scratch.clear();
+        scratch.resize(n * w, 0.0);
+        decoder.decode_chunk(codec_bytes, n, &mut scratch)?;
+        if let Some(mask) = mask {
+            for (s, ok) in scratch.chunks_exact_mut(3).zip(mask) {
+                if !ok {
+                    s.fill(f32::NAN);
+                }
+            }
+        }
+        let r = meta.frame_range();
+        let (lo, hi) = (r.start.max(start), r.end.min(end));
+        out[(lo - start) * w..(hi - start) * w]
+            .copy_from_slice(&scratch[(lo - r.start) * w..(hi - r.start) * w]);
+    }
+    if out.iter().any(|v| v.is_infinite()) {
+        return Err(malformed("decoded values are not finite"));
+    }
+    Ok(out)
+}

@@ -1,0 +1,202 @@
+//! `quant`: uniform scalar quantisation with the step derived from the bound, temporal
+//! prediction of the integers (first or second order, whichever is smaller per chunk), and
+//! the adaptive range coder. Prediction works on the integers, so it is lossless and the
+//! error stays exactly the quantiser's: at most step/2 per coordinate, step·√3/2 per point.
+
+use super::entropy::{magnitude_context, Decoder, Encoder, IntModel};
+use super::error::{malformed, Error, Result};
+use super::measure::max_mean;
+use super::wire::{Reader, Writer};
+use super::{
+    default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target,
+};
+
+const CONTEXTS: usize = 12;
+
+pub struct Quant;
+
+/// Quantise with `step` and reconstruct, as the decoder will.
+pub fn dequantised(data: &[f32], step: f64) -> Vec<f32> {
+    data.iter()
+        .map(|&x| ((f64::from(x) / step).round() * step) as f32)
+        .collect()
+}
+
+/// The largest step whose reconstruction meets `target`.
+pub fn step_for(data: &[f32], valid: Option<&[bool]>, target: Target) -> Result<f64> {
+    let meets = |step: f64| {
+        let (max, mean) = max_mean(data, &dequantised(data, step), valid);
+        target.holds(max, mean)
+    };
+    let amplitude = data.iter().fold(0f64, |a, &x| a.max(f64::from(x).abs()));
+    // Integers must stay well inside i32 after prediction (which can double them).
+    let min_step = amplitude / f64::from(1 << 28);
+    let t = match target {
+        Target::Max(t) | Target::Mean(t) => t,
+    };
+    // Per coordinate error ≤ step/2, so step = 2t/√3 meets a max bound by construction.
+    let mut step = 2.0 * t / 3f64.sqrt();
+    if let Target::Mean(_) = target {
+        // The mean error of uniform quantisation is ~0.48·step: grow, then bisect.
+        let (mut lo, mut hi) = (step, step);
+        while meets(hi) && hi < 1e12 {
+            lo = hi;
+            hi *= 2.0;
+        }
+        for _ in 0..30 {
+            let mid = (lo * hi).sqrt();
+            if meets(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        step = lo;
+    }
+    // Float rounding of the reconstruction can put a sample a hair over; shrink until not.
+    for _ in 0..200 {
+        if step < min_step {
+            break;
+        }
+        if meets(step) {
+            return Ok(step);
+        }
+        step *= 0.999;
+    }
+    Err(Error::Invalid(format!(
+        "bound {t} is too tight to quantise coordinates of magnitude {amplitude}"
+    )))
+}
+
+impl Codec for Quant {
+    fn id(&self) -> CodecId {
+        CodecId::Quant
+    }
+
+    fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput> {
+        let step = step_for(input.data, input.valid, target)?;
+        let w = input.width();
+        let q: Vec<i32> = input
+            .data
+            .iter()
+            .map(|&x| (f64::from(x) / step).round() as i32)
+            .collect();
+        let per = default_chunk_frames(input.fps);
+        let chunks = (0..input.frames)
+            .step_by(per)
+            .map(|f0| {
+                let n = per.min(input.frames - f0);
+                let block = &q[f0 * w..(f0 + n) * w];
+                let a = encode_block(block, n, w, 1);
+                let b = encode_block(block, n, w, 2);
+                ChunkOut {
+                    frames: n,
+                    bytes: if b.len() < a.len() { b } else { a },
+                }
+            })
+            .collect();
+        let mut params = Writer::new();
+        params.f64(step);
+        Ok(CodecOutput {
+            params: params.0,
+            chunks,
+        })
+    }
+
+    fn decoder(&self, params: &[u8], _points: usize) -> Result<Box<dyn ChunkDecoder>> {
+        let mut r = Reader::new(params);
+        let step = r.f64()?;
+        r.finish()?;
+        if !(step.is_finite() && step > 0.0) {
+            return Err(malformed("quant step is not positive"));
+        }
+        Ok(Box::new(QuantDecoder { step }))
+    }
+}
+
+#[inline]
+fn predict(prev1: i32, prev2: i32, f: usize, order: u8) -> i32 {
+    match (f, order) {
+        (0, _) => 0,
+        (1, _) | (_, 1) => prev1,
+        _ => prev1.wrapping_mul(2).wrapping_sub(prev2),
+    }
+}
+
+/// Integers of one chunk (`frames × w`) → bytes: the predictor order, then each
+/// trajectory's first value and prediction residuals through the range coder.
+pub fn encode_block(q: &[i32], frames: usize, w: usize, order: u8) -> Vec<u8> {
+    let mut enc = Encoder::new();
+    let mut intra = IntModel::default();
+    let mut models = vec![IntModel::default(); CONTEXTS];
+    for c in 0..w {
+        let (mut p1, mut p2, mut last_r) = (0i32, 0i32, 0i32);
+        for f in 0..frames {
+            let v = q[f * w + c];
+            let r = v.wrapping_sub(predict(p1, p2, f, order));
+            if f == 0 {
+                intra.encode(&mut enc, r);
+            } else {
+                models[magnitude_context(last_r, CONTEXTS)].encode(&mut enc, r);
+                last_r = r;
+            }
+            p2 = p1;
+            p1 = v;
+        }
+    }
+    let mut out = vec![order];
+    out.extend(enc.finish());
+    out
+}
+
+/// Inverse of [`encode_block`].
+pub fn decode_block(
+    bytes: &[u8],
+    frames: usize,
+    w: usize,
+    mut emit: impl FnMut(usize, i32),
+) -> Result<()> {
+    let (&order, rest) = bytes
+        .split_first()
+        .ok_or_else(|| malformed("empty quant chunk"))?;
+    if order != 1 && order != 2 {
+        return Err(malformed(format!("predictor order {order}")));
+    }
+    let mut dec = Decoder::new(rest);
+    let mut intra = IntModel::default();
+    let mut models = vec![IntModel::default(); CONTEXTS];
+    for c in 0..w {
+        let (mut p1, mut p2, mut last_r) = (0i32, 0i32, 0i32);
+        for f in 0..frames {
+            let r = if f == 0 {
+                intra.decode(&mut dec)
+            } else {
+                let r = models[magnitude_context(last_r, CONTEXTS)].decode(&mut dec);
+                last_r = r;
+                r
+            };
+            let v = r.wrapping_add(predict(p1, p2, f, order));
+            emit(f * w + c, v);
+            p2 = p1;
+            p1 = v;
+        }
+    }
+    if dec.overran() {
+        return Err(malformed("quant chunk ends early"));
+    }
+    Ok(())
+}
+
+struct QuantDecoder {
+    step: f64,
+}
+
+impl ChunkDecoder for QuantDecoder {
+    fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
+        let w = out.len() / frames.max(1);
+        let step = self.step;
+        decode_block(bytes, frames, w, |i, v| {
+            out[i] = (f64::from(v) * step) as f32
+        })
+    }
+}
