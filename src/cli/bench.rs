@@ -265,8 +265,17 @@ pub fn run(args: &BenchArgs) -> ExitCode {
             .map_err(|e| e.to_string())
             .and_then(|b| formats::read(&b, &opts).map_err(|e| e.to_string()))
         {
-            Ok(l) if l.motion.point_count() > 0 && l.motion.frame_count() > 0 => l.motion,
-            Ok(_) => continue,
+            Ok(l)
+                if l.motion.point_count() > 0
+                    && l.motion.frame_count() > 0
+                    && l.motion.gap_fraction() < 1.0 =>
+            {
+                l.motion
+            }
+            Ok(_) => {
+                eprintln!("{name}: skipped: no point samples");
+                continue;
+            }
             Err(e) => {
                 eprintln!("{name}: skipped: {e}");
                 continue;

@@ -8,7 +8,7 @@
 //! - [`entropy`]: adaptive binary range coder and integer models (and the zstd alternative).
 //! - [`pipeline`]: encode a `Motion` with any codec to a bound, verify it, decode ranges.
 //! - [`raw`], [`quant`]: the baselines. [`mdtt`]: Hou et al. 2015 with a residual layer.
-//! - [`dct`], [`residual`], [`gaps`], [`measure`]: shared pieces of the above.
+//! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`]: shared pieces of the above.
 
 pub mod container;
 pub mod dct;
@@ -16,6 +16,7 @@ pub mod entropy;
 pub mod error;
 pub mod gaps;
 pub mod id;
+pub mod linalg;
 pub mod mdtt;
 pub mod measure;
 pub mod pipeline;

@@ -5,7 +5,7 @@
 
 use super::entropy::{magnitude_context, Decoder, Encoder, IntModel};
 use super::error::{malformed, Error, Result};
-use super::measure::max_mean;
+use super::measure::{max_mean, quantise};
 use super::wire::{Reader, Writer};
 use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target,
@@ -18,7 +18,7 @@ pub struct Quant;
 /// Quantise with `step` and reconstruct, as the decoder will.
 pub fn dequantised(data: &[f32], step: f64) -> Vec<f32> {
     data.iter()
-        .map(|&x| ((f64::from(x) / step).round() * step) as f32)
+        .map(|&x| (f64::from(quantise(f64::from(x) / step)) * step) as f32)
         .collect()
 }
 
@@ -79,7 +79,7 @@ impl Codec for Quant {
         let q: Vec<i32> = input
             .data
             .iter()
-            .map(|&x| (f64::from(x) / step).round() as i32)
+            .map(|&x| quantise(f64::from(x) / step))
             .collect();
         let per = default_chunk_frames(input.fps);
         let chunks = (0..input.frames)

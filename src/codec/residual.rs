@@ -8,7 +8,7 @@
 //! construction, so the bound holds on every sample whatever the transform did.
 
 use super::entropy::{Bit, Decoder, Encoder, IntModel};
-use super::measure::sample_distance;
+use super::measure::{quantise, sample_distance};
 
 /// The quantisation step that guarantees distance ≤ `t` after correction.
 pub fn step_for(t: f64) -> f64 {
@@ -72,7 +72,7 @@ pub fn encode(
             corrected += 1;
             for k in 0..3 {
                 let i = f * w + p * 3 + k;
-                let q = ((f64::from(orig[i]) - f64::from(recon[i])) / step).round() as i32;
+                let q = quantise((f64::from(orig[i]) - f64::from(recon[i])) / step);
                 m.value[k].encode(enc, q);
                 recon[i] += (f64::from(q) * step) as f32;
             }

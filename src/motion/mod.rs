@@ -7,6 +7,7 @@ pub mod layout;
 pub mod metrics;
 pub mod model;
 pub mod skeleton;
+pub mod synthetic;
 pub mod units;
 
 pub use error::{Error, Location, Result};

@@ -1,0 +1,214 @@
+//! The MDTT transform proper: clip DCTs, the covariance of their truncated coefficients,
+//! its leading eigenvectors, and the inverse that encoder and decoder share.
+
+use std::collections::HashMap;
+
+use nalgebra::{DMatrix, SymmetricEigen};
+
+use super::params::Params;
+use crate::codec::linalg::add_outer_products;
+use crate::codec::{dct, Input};
+
+/// Clip length: the paper's 280 frames at 120 fps, scaled to the take's frame rate.
+pub fn clip_len(fps: f64) -> usize {
+    ((280.0 * fps / 120.0).round() as usize).clamp(8, 4096)
+}
+
+/// The paper's ratio r = l/k = 0.1·⌈L/50⌉, with L in 120 fps frames.
+pub fn ratio(clip: usize, fps: f64) -> f64 {
+    let l120 = clip as f64 * 120.0 / fps;
+    0.1 * (l120 / 50.0).ceil()
+}
+
+/// DCT coefficients kept for a clip of `len` frames when a full clip of `clip` keeps `l`.
+pub fn coefs_for(len: usize, clip: usize, l: usize) -> usize {
+    (((l * len) as f64 / clip as f64).round() as usize).clamp(1, len)
+}
+
+/// Clip boundaries `(first_frame, len)`.
+pub fn clips(frames: usize, clip: usize) -> Vec<(usize, usize)> {
+    (0..frames)
+        .step_by(clip)
+        .map(|f| (f, clip.min(frames - f)))
+        .collect()
+}
+
+/// f32 DCT bases by (length, kept), computed once: `cos` per entry is the costliest part of
+/// a decode otherwise.
+#[derive(Default)]
+pub struct DctTables(HashMap<(usize, usize), Vec<f32>>);
+
+impl DctTables {
+    pub fn get(&mut self, len: usize, keep: usize) -> &[f32] {
+        self.0.entry((len, keep)).or_insert_with(|| {
+            dct::basis(len, keep)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect()
+        })
+    }
+}
+
+/// Reconstruct a clip from its dequantised coefficients (`k × lc`): `mean + (B S D̃ᵀ)ᵀ`, in
+/// f32 in a fixed order, so that encoder and decoder produce the same bits.
+pub fn reconstruct(p: &Params, coefs: &[f32], d: &[f32], len: usize, lc: usize, out: &mut [f32]) {
+    let w = p.width();
+    let k = p.k;
+    // T = B·S laid out j-major (lc × w) so the per-frame loop runs along coordinates.
+    let mut t = vec![0f32; lc * w];
+    for j in 0..lc {
+        let row = &mut t[j * w..(j + 1) * w];
+        for b in 0..k {
+            let s = coefs[b * lc + j];
+            if s == 0.0 {
+                continue;
+            }
+            for (v, bc) in row.iter_mut().zip(&p.basis[b * w..(b + 1) * w]) {
+                *v += bc * s;
+            }
+        }
+    }
+    for f in 0..len {
+        let o = &mut out[f * w..(f + 1) * w];
+        o.copy_from_slice(&p.mean);
+        for (j, tj) in t.chunks_exact(w).enumerate() {
+            let dj = d[f * lc + j];
+            for (v, tv) in o.iter_mut().zip(tj) {
+                *v += tv * dj;
+            }
+        }
+    }
+}
+
+/// The per-take analysis shared by every parameter candidate: the mean, each clip's
+/// leading DCT coefficients, and eigenvectors per coefficient count.
+pub struct Analysis {
+    pub w: usize,
+    pub clip: usize,
+    pub clips: Vec<(usize, usize)>,
+    pub mean: Vec<f32>,
+    /// Per clip, `w × lmax_i` DCT coefficients of the centred trajectories.
+    pub coefs: Vec<DMatrix<f64>>,
+    /// Eigenvectors (columns, largest first) and eigenvalues of `C(l)`, by `l`.
+    eigen: HashMap<usize, (DMatrix<f64>, Vec<f64>)>,
+    cov: std::collections::BTreeMap<usize, DMatrix<f64>>,
+    pub tables: DctTables,
+}
+
+impl Analysis {
+    pub fn new(input: &Input<'_>, clip: usize, lmax: usize) -> Analysis {
+        let w = input.width();
+        let frames = input.frames;
+        let mut sum = vec![0f64; w];
+        for row in input.data.chunks_exact(w) {
+            for (m, &x) in sum.iter_mut().zip(row) {
+                *m += f64::from(x);
+            }
+        }
+        let mean: Vec<f32> = sum.iter().map(|m| (m / frames as f64) as f32).collect();
+        let clips = clips(frames, clip);
+        let coefs = clips
+            .iter()
+            .map(|&(f0, len)| {
+                let lc = coefs_for(len, clip, lmax);
+                let d = dct::basis(len, lc);
+                // Column j of M_i D̃_i is Σ_f d[f][j] · (x_f − mean): axpys over frames.
+                let mut c = DMatrix::<f64>::zeros(w, lc);
+                let mut x = vec![0f64; w];
+                for f in 0..len {
+                    for ((v, &raw), &m) in x.iter_mut().zip(&input.data[(f0 + f) * w..]).zip(&mean)
+                    {
+                        *v = f64::from(raw) - f64::from(m);
+                    }
+                    for j in 0..lc {
+                        let dj = d[f * lc + j];
+                        for (cv, xv) in c.column_mut(j).iter_mut().zip(&x) {
+                            *cv += xv * dj;
+                        }
+                    }
+                }
+                c
+            })
+            .collect();
+        Analysis {
+            w,
+            clip,
+            clips,
+            mean,
+            coefs,
+            eigen: HashMap::new(),
+            cov: Default::default(),
+            tables: DctTables::default(),
+        }
+    }
+
+    pub fn lc(&self, len: usize, l: usize) -> usize {
+        coefs_for(len, self.clip, l)
+    }
+
+    /// `C = Σ_i (M_i D̃_i)(M_i D̃_i)ᵀ` with `l` coefficients per full clip. Built from the
+    /// largest cached `C(l₀)` with `l₀ ≤ l` by adding the columns in between: the search
+    /// asks for many nearby `l`, and each full rebuild costs `w²·Σl`.
+    pub fn covariance(&mut self, l: usize) -> DMatrix<f64> {
+        let (l0, mut c) = match self.cov.range(..=l).next_back() {
+            Some((&l0, c)) => (l0, c.clone()),
+            None => (0, DMatrix::<f64>::zeros(self.w, self.w)),
+        };
+        for (m, &(_, len)) in self.coefs.iter().zip(&self.clips) {
+            let from = if l0 == 0 {
+                0
+            } else {
+                self.lc(len, l0).min(m.ncols())
+            };
+            let to = self.lc(len, l).min(m.ncols());
+            if to > from {
+                add_outer_products(&mut c, m.columns(from, to - from));
+            }
+        }
+        self.cov.insert(l, c.clone());
+        c
+    }
+
+    /// The `k` leading eigenvectors of `C(l)` and their eigenvalues (the energy of each
+    /// coefficient row over the take); all are computed once per `l`.
+    pub fn basis(&mut self, l: usize, k: usize) -> (DMatrix<f64>, Vec<f64>) {
+        if !self.eigen.contains_key(&l) {
+            let all = leading_eigen(&self.covariance(l), self.w);
+            self.eigen.insert(l, all);
+        }
+        let (v, e) = &self.eigen[&l];
+        (v.columns(0, k).into_owned(), e[..k].to_vec())
+    }
+
+    /// Coefficients per basis row over the take at `l` per full clip.
+    pub fn coefficient_count(&self, l: usize) -> usize {
+        self.clips.iter().map(|&(_, len)| self.lc(len, l)).sum()
+    }
+}
+
+/// The `k` leading eigenvectors of a symmetric matrix, as columns, largest first; signs
+/// fixed (largest entry positive) so that the result does not depend on the solver.
+pub fn leading_eigenvectors(c: &DMatrix<f64>, k: usize) -> DMatrix<f64> {
+    leading_eigen(c, k).0
+}
+
+fn leading_eigen(c: &DMatrix<f64>, k: usize) -> (DMatrix<f64>, Vec<f64>) {
+    let eig = SymmetricEigen::new(c.clone());
+    let mut order: Vec<usize> = (0..eig.eigenvalues.len()).collect();
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let values = order
+        .iter()
+        .take(k)
+        .map(|&i| eig.eigenvalues[i].max(0.0))
+        .collect();
+    let mut b = DMatrix::<f64>::zeros(c.nrows(), k);
+    for (dst, &src) in order.iter().take(k).enumerate() {
+        let mut v = eig.eigenvectors.column(src).clone_owned();
+        let imax = v.iamax();
+        if v[imax] < 0.0 {
+            v = -v;
+        }
+        b.set_column(dst, &v);
+    }
+    (b, values)
+}

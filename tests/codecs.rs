@@ -1,0 +1,195 @@
+//! Codec properties: bounds hold on decoded output, any sub-range decodes to the same bits
+//! as a full decode, and damaged bitstreams give typed errors, never panics.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use mocapstore::codec::{self, CodecId, Container, Error, ErrorBound, Limits};
+use mocapstore::corpus;
+use mocapstore::motion::formats::{self, ReadOptions};
+use mocapstore::motion::metrics;
+use mocapstore::motion::synthetic::{walker, Rng};
+use mocapstore::motion::Motion;
+use proptest::prelude::*;
+
+const CODECS: [CodecId; 3] = [CodecId::Raw, CodecId::Quant, CodecId::Mdtt];
+
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// Encode, check the bound on a fresh decode, and check sub-ranges against the full decode.
+fn check(name: &str, m: &Motion, codec: CodecId, bound: ErrorBound, rng: &mut Rng) {
+    let enc =
+        codec::encode(m, codec, bound).unwrap_or_else(|e| panic!("{name} {codec} {bound}: {e}"));
+    let bytes = enc.container.to_bytes();
+    let c = Container::parse(&bytes, &Limits::default()).unwrap();
+    let full = codec::decode_all(&c).unwrap();
+    let s = metrics::compare(m.positions(), &full, m.point_count(), m.unit.to_mm()).unwrap();
+    let ok = match bound {
+        ErrorBound::MaxMm(b) => s.max_mm <= b,
+        ErrorBound::MeanMm(b) => s.mean_mm <= b,
+    };
+    assert!(
+        ok,
+        "{name} {codec} {bound}: max {} mean {}",
+        s.max_mm, s.mean_mm
+    );
+    if codec == CodecId::Raw {
+        assert_eq!(bits(&full), bits(m.positions()), "{name}: raw is lossless");
+    }
+    // Gaps come back as gaps, and only gaps.
+    for (a, b) in m.positions().iter().zip(&full) {
+        assert_eq!(a.is_nan(), b.is_nan(), "{name} {codec}: gap mask");
+    }
+    let frames = m.frame_count();
+    let w = m.point_count() * 3;
+    for _ in 0..4 {
+        let start = rng.below(frames);
+        let end = start + 1 + rng.below(frames - start);
+        let range = c.header.chunks_for(start, end);
+        let chunks: Vec<&[u8]> = c.chunks[range].iter().map(Vec::as_slice).collect();
+        let part = codec::decode_range(&c.header, &chunks, start, end).unwrap();
+        assert_eq!(
+            bits(&part),
+            bits(&full[start * w..end * w]),
+            "{name} {codec} {start}..{end}"
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_smooth_motions_meet_bounds_and_decode_ranges_exactly(
+        frames in 1usize..700,
+        points in 1usize..24,
+        fps in prop::sample::select(vec![30.0, 60.0, 100.0, 120.0, 240.0]),
+        seed in any::<u64>(),
+        gaps in prop::sample::select(vec![0.0, 0.3]),
+        bound in prop_oneof![
+            (0.2f64..6.0).prop_map(ErrorBound::MaxMm),
+            (0.5f64..6.0).prop_map(ErrorBound::MeanMm),
+        ],
+    ) {
+        let m = walker(frames, points, fps, seed, gaps);
+        prop_assume!(m.gap_fraction() < 1.0);
+        let mut rng = Rng::new(seed);
+        for codec in CODECS {
+            check("synthetic", &m, codec, bound, &mut rng);
+        }
+    }
+}
+
+fn corpus_takes() -> Vec<(String, Motion)> {
+    let root = corpus::root();
+    let manifest = corpus::manifest(&root).unwrap_or_else(|e| panic!("{e}"));
+    manifest
+        .iter()
+        .filter_map(|e| {
+            let bytes = std::fs::read(root.join(&e.path)).ok()?;
+            let m = formats::read(&bytes, &ReadOptions::default()).ok()?.motion;
+            (m.point_count() > 0 && m.frame_count() > 0 && m.gap_fraction() < 1.0)
+                .then(|| (e.path.clone(), m))
+        })
+        .collect()
+}
+
+#[test]
+fn every_corpus_take_meets_max_and_mean_bounds_with_every_codec() {
+    let takes = corpus_takes();
+    assert!(takes.len() > 280, "{} takes", takes.len());
+    let threads = std::thread::available_parallelism()
+        .map_or(2, |n| n.get())
+        .min(4);
+    std::thread::scope(|s| {
+        for t in 0..threads {
+            let takes = &takes;
+            s.spawn(move || {
+                let mut rng = Rng::new(t as u64 + 1);
+                for (name, m) in takes.iter().skip(t).step_by(threads) {
+                    for codec in CODECS {
+                        check(name, m, codec, ErrorBound::MaxMm(1.0), &mut rng);
+                    }
+                    for codec in [CodecId::Quant, CodecId::Mdtt] {
+                        check(name, m, codec, ErrorBound::MeanMm(3.0), &mut rng);
+                    }
+                }
+            });
+        }
+    });
+}
+
+/// Damage a valid bitstream in many ways. With checksums intact, every change is caught by
+/// a checksum; with checksums recomputed, the codec decoders themselves face garbage.
+#[test]
+fn mutated_bitstreams_give_typed_errors_never_panics() {
+    let m = walker(300, 6, 120.0, 42, 0.3);
+    let mut rng = Rng::new(99);
+    let mut outcomes = [0usize; 3];
+    for codec in CODECS {
+        let enc = codec::encode(&m, codec, ErrorBound::MaxMm(1.0)).unwrap();
+        let good = enc.container.to_bytes();
+        let header_len = enc.container.header.to_bytes().len();
+        for case in 0..1500 {
+            let mut b = good.clone();
+            match case % 3 {
+                0 => b.truncate(rng.below(b.len())),
+                1 => {
+                    for _ in 0..1 + rng.below(4) {
+                        let i = rng.below(b.len());
+                        b[i] ^= 1 << rng.below(8);
+                    }
+                }
+                _ => {
+                    let i = rng.below(b.len());
+                    b[i] = rng.next_u64() as u8;
+                }
+            }
+            let r = catch_unwind(AssertUnwindSafe(|| {
+                Container::parse(&b, &Limits::default()).and_then(|c| codec::decode_all(&c))
+            }));
+            match r {
+                Ok(Ok(_)) => outcomes[0] += 1,
+                Ok(Err(
+                    Error::Malformed(_)
+                    | Error::Checksum(_)
+                    | Error::Unsupported(_)
+                    | Error::Limit { .. },
+                )) => outcomes[1] += 1,
+                Ok(Err(e)) => panic!("{codec} case {case}: untyped error {e:?}"),
+                Err(_) => panic!("{codec} case {case}: decoder panicked"),
+            }
+        }
+        // Garbage behind valid checksums: corrupt chunk payloads, then re-seal them.
+        for case in 0..1500 {
+            let mut c = enc.container.clone();
+            let i = rng.below(c.chunks.len());
+            let chunk = &mut c.chunks[i];
+            if chunk.is_empty() {
+                continue;
+            }
+            for _ in 0..1 + rng.below(6) {
+                let j = rng.below(chunk.len());
+                chunk[j] = rng.next_u64() as u8;
+            }
+            if case % 5 == 0 {
+                let cut = rng.below(chunk.len());
+                chunk.truncate(cut);
+            }
+            c.header.chunks[i].len = c.chunks[i].len() as u32;
+            c.header.chunks[i].crc32c = crc32c::crc32c(&c.chunks[i]);
+            let r = catch_unwind(AssertUnwindSafe(|| codec::decode_all(&c)));
+            match r {
+                Ok(Ok(_)) => outcomes[2] += 1,
+                Ok(Err(_)) => outcomes[1] += 1,
+                Err(_) => panic!("{codec} resealed case {case}: decoder panicked"),
+            }
+        }
+        assert!(header_len > 0);
+    }
+    println!(
+        "mutations: {} decoded, {} typed errors, {} resealed garbage decoded to numbers",
+        outcomes[0], outcomes[1], outcomes[2]
+    );
+}

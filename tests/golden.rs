@@ -1,0 +1,50 @@
+//! Golden bitstreams: the BLAKE3 of a few encodings is committed in `tests/golden/hashes.txt`,
+//! so that any change to the container format, an entropy coder or an encoder's choices
+//! shows up as a failing test and is made deliberately. After such a change, regenerate the
+//! table with `MOCAPSTORE_BLESS=1 cargo test --test golden` and say why in the commit.
+
+use mocapstore::codec::{self, CodecId, ErrorBound};
+use mocapstore::motion::synthetic::walker;
+
+const TABLE: &str = "tests/golden/hashes.txt";
+
+fn cases() -> Vec<(String, String)> {
+    let motions = [
+        ("walker-240x8@120", walker(240, 8, 120.0, 1, 0.0)),
+        ("walker-500x5@60-gaps", walker(500, 5, 60.0, 2, 0.3)),
+    ];
+    let encodings = [
+        (CodecId::Raw, ErrorBound::MaxMm(1.0)),
+        (CodecId::Quant, ErrorBound::MaxMm(1.0)),
+        (CodecId::Quant, ErrorBound::MeanMm(3.0)),
+        (CodecId::Mdtt, ErrorBound::MaxMm(1.0)),
+        (CodecId::Mdtt, ErrorBound::MeanMm(3.0)),
+    ];
+    let mut out = Vec::new();
+    for (name, m) in &motions {
+        for (codec, bound) in encodings {
+            let enc = codec::encode(m, codec, bound).expect("encodes");
+            let hash = blake3::hash(&enc.container.to_bytes());
+            out.push((
+                format!("{name} {codec} {bound}"),
+                hash.to_hex()[..32].to_string(),
+            ));
+        }
+    }
+    out
+}
+
+#[test]
+fn encodings_match_the_committed_hashes() {
+    let got: String = cases().iter().map(|(k, h)| format!("{h}  {k}\n")).collect();
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(TABLE);
+    if std::env::var_os("MOCAPSTORE_BLESS").is_some() {
+        std::fs::write(&path, &got).unwrap();
+        return;
+    }
+    let want = std::fs::read_to_string(&path).unwrap_or_default();
+    assert_eq!(
+        got, want,
+        "bitstreams changed; if deliberate, run MOCAPSTORE_BLESS=1 cargo test --test golden"
+    );
+}
