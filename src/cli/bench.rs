@@ -33,6 +33,10 @@ pub struct BenchArgs {
     decode_repeats: usize,
     #[arg(long)]
     unit: Option<String>,
+    /// Instead of codecs, compare the entropy coders (adaptive range coder vs zigzag
+    /// varints + zstd) on the integer streams `quant` produces at each max bound.
+    #[arg(long)]
+    entropy: bool,
 }
 
 /// One (file, codec, bound) measurement.
@@ -257,6 +261,9 @@ pub fn run(args: &BenchArgs) -> ExitCode {
         unit,
         ..Default::default()
     };
+    if args.entropy {
+        return entropy_comparison(&files, &args.max_error, &opts, &args.out);
+    }
     let mut rows = Vec::new();
     let mut failures = 0;
     for path in &files {
@@ -332,4 +339,95 @@ fn write_outputs(dir: &Path, table: &str, csv: &str) -> Result<(), String> {
     std::fs::write(dir.join("table.md"), table).map_err(|e| e.to_string())?;
     std::fs::write(dir.join("results.csv"), csv).map_err(|e| e.to_string())?;
     Ok(())
+}
+
+/// Bytes and encode time of each entropy coder over the same integers.
+#[derive(Default, Clone, Copy)]
+struct CoderTotals {
+    bytes: usize,
+    seconds: f64,
+}
+
+/// Range coder vs zstd on `quant`'s per-chunk integer streams (and, for zstd's benefit, on
+/// whole takes as one stream).
+fn entropy_comparison(
+    files: &[PathBuf],
+    bounds: &[f64],
+    opts: &ReadOptions,
+    out: &Path,
+) -> ExitCode {
+    use crate::codec::entropy::zstd_varint;
+    use crate::codec::{default_chunk_frames, quant, Target};
+    let names = [
+        "range coder (per chunk)",
+        "zstd-3 (per chunk)",
+        "zstd-19 (per chunk)",
+        "zstd-19 (whole take)",
+    ];
+    let mut table = String::from("| max bound mm | integers | coder | bytes | bits/integer | encode MB/s of integers |\n|---:|---:|---|---:|---:|---:|\n");
+    for &b in bounds {
+        let mut totals = [CoderTotals::default(); 4];
+        let mut count = 0usize;
+        for path in files {
+            let Ok(m) = std::fs::read(path)
+                .map_err(|e| e.to_string())
+                .and_then(|bytes| formats::read(&bytes, opts).map_err(|e| e.to_string()))
+                .map(|l| l.motion)
+            else {
+                continue;
+            };
+            if m.point_count() == 0 || m.frame_count() == 0 || m.gap_fraction() >= 1.0 {
+                continue;
+            }
+            let filled = crate::codec::gaps::fill(m.positions(), m.point_count());
+            let target = Target::Max(b / m.unit.to_mm());
+            let Ok(step) = quant::step_for(&filled, None, target) else {
+                continue;
+            };
+            let q: Vec<i32> = filled
+                .iter()
+                .map(|&x| crate::codec::measure::quantise(f64::from(x) / step))
+                .collect();
+            let w = m.point_count() * 3;
+            let per = default_chunk_frames(m.fps);
+            let mut whole = Vec::with_capacity(q.len());
+            for f0 in (0..m.frame_count()).step_by(per) {
+                let n = per.min(m.frame_count() - f0);
+                let block = &q[f0 * w..(f0 + n) * w];
+                let ints = quant::prediction_residuals(block, n, w, 2);
+                count += ints.len();
+                let timed = |t: &mut CoderTotals, f: &dyn Fn() -> usize| {
+                    let t0 = Instant::now();
+                    t.bytes += f();
+                    t.seconds += t0.elapsed().as_secs_f64();
+                };
+                timed(&mut totals[0], &|| {
+                    quant::encode_block(block, n, w, 2).len()
+                });
+                timed(&mut totals[1], &|| zstd_varint::encode(&ints, 3).len());
+                timed(&mut totals[2], &|| zstd_varint::encode(&ints, 19).len());
+                whole.extend(ints);
+            }
+            let t0 = Instant::now();
+            totals[3].bytes += zstd_varint::encode(&whole, 19).len();
+            totals[3].seconds += t0.elapsed().as_secs_f64();
+        }
+        for (name, t) in names.iter().zip(totals) {
+            let _ = writeln!(
+                table,
+                "| {b} | {count} | {name} | {} | {:.3} | {:.1} |",
+                t.bytes,
+                t.bytes as f64 * 8.0 / count.max(1) as f64,
+                count as f64 * 4.0 / 1e6 / t.seconds.max(1e-9)
+            );
+        }
+    }
+    println!("{table}");
+    if let Err(e) =
+        std::fs::create_dir_all(out).and_then(|_| std::fs::write(out.join("entropy.md"), &table))
+    {
+        eprintln!("mocapstore bench: {}: {e}", out.display());
+        return ExitCode::FAILURE;
+    }
+    ExitCode::SUCCESS
 }

@@ -11,7 +11,17 @@ use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target,
 };
 
-const CONTEXTS: usize = 12;
+/// Context classes per neighbour (magnitude buckets, see `magnitude_context`).
+const BUCKETS: usize = 6;
+/// Trajectories back whose residual at the same frame conditions the model: the same axis
+/// of the previous point, which moves with this one more often than not.
+const NEIGHBOUR: usize = 3;
+
+/// Model index from the previous residual in time and the neighbour's at this frame.
+#[inline]
+fn context(previous: i32, neighbour: i32) -> usize {
+    magnitude_context(previous, BUCKETS) * BUCKETS + magnitude_context(neighbour, BUCKETS)
+}
 
 pub struct Quant;
 
@@ -123,30 +133,111 @@ fn predict(prev1: i32, prev2: i32, f: usize, order: u8) -> i32 {
     }
 }
 
-/// Integers of one chunk (`frames × w`) → bytes: the predictor order, then each
-/// trajectory's first value and prediction residuals through the range coder.
-pub fn encode_block(q: &[i32], frames: usize, w: usize, order: u8) -> Vec<u8> {
-    let mut enc = Encoder::new();
-    let mut intra = IntModel::default();
-    let mut models = vec![IntModel::default(); CONTEXTS];
+/// The integers the entropy stage sees for one chunk (`frames × w` quantised values):
+/// trajectory after trajectory, the first value as is, then prediction residuals.
+pub fn prediction_residuals(q: &[i32], frames: usize, w: usize, order: u8) -> Vec<i32> {
+    let mut out = Vec::with_capacity(q.len());
     for c in 0..w {
-        let (mut p1, mut p2, mut last_r) = (0i32, 0i32, 0i32);
+        let (mut p1, mut p2) = (0i32, 0i32);
         for f in 0..frames {
             let v = q[f * w + c];
-            let r = v.wrapping_sub(predict(p1, p2, f, order));
-            if f == 0 {
-                intra.encode(&mut enc, r);
-            } else {
-                models[magnitude_context(last_r, CONTEXTS)].encode(&mut enc, r);
-                last_r = r;
-            }
+            out.push(v.wrapping_sub(predict(p1, p2, f, order)));
             p2 = p1;
             p1 = v;
+        }
+    }
+    out
+}
+
+/// How many points back a trajectory may take its reference from.
+const MAX_REFERENCE: usize = 8;
+
+/// Pick the reference for trajectory `c`: 0 for none, or `k` for trajectory `c − 3k` (the
+/// same axis of a point `k` before), whichever leaves the smallest differences. Points on
+/// one rigid segment accelerate alike, so their prediction residuals nearly cancel — and
+/// duplicated points (zero-length bones, a marker exported twice) cancel exactly.
+fn choose_reference(r: &[i32], c: usize, frames: usize) -> usize {
+    let own = &r[c * frames..(c + 1) * frames];
+    let cost = |reference: Option<&[i32]>| -> u64 {
+        own.iter()
+            .enumerate()
+            .map(|(f, &v)| u64::from(v.wrapping_sub(reference.map_or(0, |x| x[f])).unsigned_abs()))
+            .sum()
+    };
+    let mut best = (cost(None), 0);
+    for k in 1..=MAX_REFERENCE.min(c / 3) {
+        let rc = c - 3 * k;
+        let cand = cost(Some(&r[rc * frames..(rc + 1) * frames]));
+        if cand < best.0 {
+            best = (cand, k);
+        }
+    }
+    best.1
+}
+
+/// Integers of one chunk (`frames × w`) → bytes: the predictor order, then per trajectory
+/// its reference (see [`choose_reference`]) and the differences of its
+/// [`prediction_residuals`] from the reference's, through the range coder, each in the
+/// context of the previous difference and of the neighbouring trajectory's residual.
+pub fn encode_block(q: &[i32], frames: usize, w: usize, order: u8) -> Vec<u8> {
+    let mut enc = Encoder::new();
+    let mut m = BlockModels::new();
+    let residuals = prediction_residuals(q, frames, w, order);
+    for c in 0..w {
+        let k = choose_reference(&residuals, c, frames);
+        m.reference.encode(&mut enc, k as i32);
+        let mut last = 0;
+        for f in 0..frames {
+            let d = residuals[c * frames + f]
+                .wrapping_sub(reference_value(&residuals, c, k, f, frames));
+            if f == 0 {
+                m.intra.encode(&mut enc, d);
+            } else {
+                m.diffs[diff_context(&residuals, c, f, frames, last)].encode(&mut enc, d);
+                last = d;
+            }
         }
     }
     let mut out = vec![order];
     out.extend(enc.finish());
     out
+}
+
+#[inline]
+fn reference_value(r: &[i32], c: usize, k: usize, f: usize, frames: usize) -> i32 {
+    if k == 0 {
+        0
+    } else {
+        r[(c - 3 * k) * frames + f]
+    }
+}
+
+struct BlockModels {
+    reference: IntModel,
+    intra: IntModel,
+    diffs: Vec<IntModel>,
+}
+
+impl BlockModels {
+    fn new() -> Self {
+        BlockModels {
+            reference: IntModel::default(),
+            intra: IntModel::default(),
+            diffs: vec![IntModel::default(); BUCKETS * BUCKETS],
+        }
+    }
+}
+
+/// Context of a difference: the previous one on this trajectory and the neighbouring
+/// trajectory's residual at the same frame.
+#[inline]
+fn diff_context(r: &[i32], c: usize, f: usize, frames: usize, last: i32) -> usize {
+    let above = if c >= NEIGHBOUR {
+        r[(c - NEIGHBOUR) * frames + f]
+    } else {
+        0
+    };
+    context(last, above)
 }
 
 /// Inverse of [`encode_block`].
@@ -163,18 +254,25 @@ pub fn decode_block(
         return Err(malformed(format!("predictor order {order}")));
     }
     let mut dec = Decoder::new(rest);
-    let mut intra = IntModel::default();
-    let mut models = vec![IntModel::default(); CONTEXTS];
+    let mut m = BlockModels::new();
+    let mut residuals = vec![0i32; w * frames];
     for c in 0..w {
-        let (mut p1, mut p2, mut last_r) = (0i32, 0i32, 0i32);
+        let k = m.reference.decode(&mut dec);
+        let k = usize::try_from(k)
+            .ok()
+            .filter(|&k| k <= MAX_REFERENCE && 3 * k <= c)
+            .ok_or_else(|| malformed(format!("trajectory {c} refers {k} points back")))?;
+        let (mut p1, mut p2, mut last) = (0i32, 0i32, 0i32);
         for f in 0..frames {
-            let r = if f == 0 {
-                intra.decode(&mut dec)
+            let d = if f == 0 {
+                m.intra.decode(&mut dec)
             } else {
-                let r = models[magnitude_context(last_r, CONTEXTS)].decode(&mut dec);
-                last_r = r;
-                r
+                let d = m.diffs[diff_context(&residuals, c, f, frames, last)].decode(&mut dec);
+                last = d;
+                d
             };
+            let r = d.wrapping_add(reference_value(&residuals, c, k, f, frames));
+            residuals[c * frames + f] = r;
             let v = r.wrapping_add(predict(p1, p2, f, order));
             emit(f * w + c, v);
             p2 = p1;

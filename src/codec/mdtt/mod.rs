@@ -254,145 +254,20 @@ impl Codec for Mdtt {
     }
 
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput> {
-        let w = input.width();
-        let clip = clip_len(input.fps).min(input.frames);
-        let r = ratio(clip, input.fps);
-        let l_of = |k: usize, m: f64| ((r * m * k as f64).round() as usize).clamp(1, clip);
-        let t = match target {
-            Target::Max(t) | Target::Mean(t) => t,
+        let best = match target {
+            Target::Max(t) => search(input, target, t),
+            // A mean bound no transform setting meets alone (noise-like or tiny takes) is
+            // met with the residual layer bounding every sample at a few times the mean.
+            Target::Mean(t) => search(input, target, 0.0).or_else(|| {
+                [3.0, 2.0, 1.4, 1.0]
+                    .into_iter()
+                    .filter_map(|m| search(input, target, m * t))
+                    .min_by_key(|tr| tr.bytes)
+            }),
         };
-        // The quantisation error of S spreads over a whole clip (B and D̃ are orthonormal),
-        // so the step scales with √(L·w / k·l) relative to the bound.
-        let step = |k: usize, l: usize, beta: f64| {
-            beta * t * ((clip * w) as f64 / (k * l) as f64).sqrt().min(8.0)
-        };
-        let (betas, beta0): (&[f64], f64) = match target {
-            Target::Max(_) => (&[0.25, 0.35, 0.5, 0.7, 1.0], 0.5),
-            Target::Mean(_) => (&[], 1.0),
-        };
-        let rt = residual_for(target);
-        let mut a = Analysis::new(input, clip, l_of(w, 3.0));
-        let mut best = Best {
-            target,
-            trial: None,
-        };
-        let choice = |k: usize, m: f64, beta: f64, gamma: f64| {
-            let l = l_of(k, m);
-            Choice {
-                k,
-                l,
-                coef_step: step(k, l, beta),
-                basis_gamma: gamma,
-            }
-        };
-
-        // 1. Rank, on a geometric ladder, with the paper's ratio; stop two rungs past the
-        //    best once sizes grow again.
-        let ks = rank_ladder(w);
-        let mut sizes: Vec<Option<usize>> = Vec::new();
-        for &k in &ks {
-            sizes.push(best.offer(code(input, &mut a, choice(k, 1.0, beta0, GAMMA0), rt)));
-            let met: Vec<usize> = sizes.iter().flatten().copied().collect();
-            if met.len() >= 3 {
-                let min = *met.iter().min().expect("non-empty");
-                if met[met.len() - 1] > min && met[met.len() - 2] > min {
-                    break;
-                }
-            }
-        }
-        // 2. Refine the rank between the neighbours of the best rung.
-        if let Some(c) = best.choice() {
-            let i = ks.iter().position(|&k| k == c.k).unwrap_or(0);
-            let (lo, hi) = (ks[i.saturating_sub(1)], ks[(i + 1).min(ks.len() - 1)]);
-            let stride = ((hi - lo) / 4).max(1);
-            for k in (lo..=hi).step_by(stride).filter(|k| !ks.contains(k)) {
-                best.offer(code(input, &mut a, choice(k, 1.0, beta0, GAMMA0), rt));
-            }
-        }
-        // 3. Temporal bandwidth (l relative to the paper's ratio), the basis precision, then
-        //    the coefficient step, each around the best so far.
-        let mut m_best = 1.0;
-        if let Some(c) = best.choice() {
-            for m in [0.6, 0.8, 1.3, 1.7, 2.2, 3.0] {
-                let before = best.choice();
-                best.offer(code(input, &mut a, choice(c.k, m, beta0, GAMMA0), rt));
-                if best.choice() != before {
-                    m_best = m;
-                }
-            }
-        }
-        if let Some(c) = best.choice() {
-            for gamma in [0.0, 0.08, 0.12, 0.25, 0.5] {
-                best.offer(code(
-                    input,
-                    &mut a,
-                    Choice {
-                        basis_gamma: gamma,
-                        ..c
-                    },
-                    rt,
-                ));
-            }
-        }
-        if let Some(c) = best.choice() {
-            match target {
-                // Mean error grows with the step: bisect for the largest step that meets it.
-                Target::Mean(_) => {
-                    let (mut lo, mut hi) = (beta0, beta0);
-                    while hi < 64.0
-                        && best
-                            .offer(code(
-                                input,
-                                &mut a,
-                                choice(c.k, m_best, hi * 1.5, c.basis_gamma),
-                                rt,
-                            ))
-                            .is_some()
-                    {
-                        lo = hi * 1.5;
-                        hi = lo;
-                    }
-                    hi *= 1.5;
-                    for _ in 0..5 {
-                        let mid = (lo * hi).sqrt();
-                        if best
-                            .offer(code(
-                                input,
-                                &mut a,
-                                choice(c.k, m_best, mid, c.basis_gamma),
-                                rt,
-                            ))
-                            .is_some()
-                        {
-                            lo = mid;
-                        } else {
-                            hi = mid;
-                        }
-                    }
-                }
-                // Max bounds always hold (the residual layer): scan for the fewest bytes.
-                Target::Max(_) => {
-                    for &beta in betas.iter().filter(|&&b| b != beta0) {
-                        best.offer(code(
-                            input,
-                            &mut a,
-                            choice(c.k, m_best, beta, c.basis_gamma),
-                            rt,
-                        ));
-                    }
-                }
-            }
-        }
-        // A mean bound no transform setting met (noise-like or tiny takes): enforce it on
-        // every sample with the residual layer, which meets the mean a fortiori.
-        if best.trial.is_none() {
-            if let Target::Mean(t) = target {
-                return self.encode(input, Target::Max(t));
-            }
-        }
-        let best = best.trial.ok_or_else(|| Error::BoundMissed {
+        let best = best.ok_or_else(|| Error::BoundMissed {
             codec: "mdtt".into(),
-            detail: format!("no rank up to {w} meets {target:?}"),
+            detail: format!("no setting meets {target:?}"),
         })?;
         Ok(CodecOutput {
             params: best.params.to_bytes(),
@@ -408,6 +283,143 @@ impl Codec for Mdtt {
             .collect();
         Ok(Box::new(MdttDecoder { p, points, full }))
     }
+}
+
+/// Search the parameters for the fewest bytes that meet `target`, with the residual layer
+/// at `rt` (0: none). `None` if no setting meets it.
+fn search(input: &Input<'_>, target: Target, rt: f64) -> Option<Trial> {
+    let w = input.width();
+    let clip = clip_len(input.fps).min(input.frames);
+    let r = ratio(clip, input.fps);
+    let l_of = |k: usize, m: f64| ((r * m * k as f64).round() as usize).clamp(1, clip);
+    let t = match target {
+        Target::Max(t) | Target::Mean(t) => t,
+    };
+    // The quantisation error of S spreads over a whole clip (B and D̃ are orthonormal),
+    // so the step scales with √(L·w / k·l) relative to the bound.
+    let step = |k: usize, l: usize, beta: f64| {
+        beta * t * ((clip * w) as f64 / (k * l) as f64).sqrt().min(8.0)
+    };
+    // With a residual layer every step meets the bound, and the fewest bytes come from a
+    // scan; without one, error grows with the step and bisection finds the largest.
+    let (betas, beta0): (&[f64], f64) = if rt > 0.0 {
+        (&[0.25, 0.35, 0.5, 0.7, 1.0], 0.5)
+    } else {
+        (&[], 1.0)
+    };
+    let mut a = Analysis::new(input, clip, l_of(w, 3.0));
+    let mut best = Best {
+        target,
+        trial: None,
+    };
+    let choice = |k: usize, m: f64, beta: f64, gamma: f64| {
+        let l = l_of(k, m);
+        Choice {
+            k,
+            l,
+            coef_step: step(k, l, beta),
+            basis_gamma: gamma,
+        }
+    };
+
+    // 1. Rank, on a geometric ladder, with the paper's ratio; stop two rungs past the
+    //    best once sizes grow again.
+    let ks = rank_ladder(w);
+    let mut sizes: Vec<Option<usize>> = Vec::new();
+    for &k in &ks {
+        sizes.push(best.offer(code(input, &mut a, choice(k, 1.0, beta0, GAMMA0), rt)));
+        let met: Vec<usize> = sizes.iter().flatten().copied().collect();
+        if met.len() >= 3 {
+            let min = *met.iter().min().expect("non-empty");
+            if met[met.len() - 1] > min && met[met.len() - 2] > min {
+                break;
+            }
+        }
+    }
+    // 2. Refine the rank between the neighbours of the best rung.
+    if let Some(c) = best.choice() {
+        let i = ks.iter().position(|&k| k == c.k).unwrap_or(0);
+        let (lo, hi) = (ks[i.saturating_sub(1)], ks[(i + 1).min(ks.len() - 1)]);
+        let stride = ((hi - lo) / 4).max(1);
+        for k in (lo..=hi).step_by(stride).filter(|k| !ks.contains(k)) {
+            best.offer(code(input, &mut a, choice(k, 1.0, beta0, GAMMA0), rt));
+        }
+    }
+    // 3. Temporal bandwidth (l relative to the paper's ratio), the basis precision, then
+    //    the coefficient step, each around the best so far.
+    let mut m_best = 1.0;
+    if let Some(c) = best.choice() {
+        for m in [0.6, 0.8, 1.3, 1.7, 2.2, 3.0] {
+            let before = best.choice();
+            best.offer(code(input, &mut a, choice(c.k, m, beta0, GAMMA0), rt));
+            if best.choice() != before {
+                m_best = m;
+            }
+        }
+    }
+    if let Some(c) = best.choice() {
+        for gamma in [0.0, 0.08, 0.12, 0.25, 0.5] {
+            best.offer(code(
+                input,
+                &mut a,
+                Choice {
+                    basis_gamma: gamma,
+                    ..c
+                },
+                rt,
+            ));
+        }
+    }
+    if let Some(c) = best.choice() {
+        match rt == 0.0 {
+            // Mean error grows with the step: bisect for the largest step that meets it.
+            true => {
+                let (mut lo, mut hi) = (beta0, beta0);
+                while hi < 64.0
+                    && best
+                        .offer(code(
+                            input,
+                            &mut a,
+                            choice(c.k, m_best, hi * 1.5, c.basis_gamma),
+                            rt,
+                        ))
+                        .is_some()
+                {
+                    lo = hi * 1.5;
+                    hi = lo;
+                }
+                hi *= 1.5;
+                for _ in 0..5 {
+                    let mid = (lo * hi).sqrt();
+                    if best
+                        .offer(code(
+                            input,
+                            &mut a,
+                            choice(c.k, m_best, mid, c.basis_gamma),
+                            rt,
+                        ))
+                        .is_some()
+                    {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+            }
+            // The residual layer holds the bound at any step: scan for the fewest bytes.
+            false => {
+                for &beta in betas.iter().filter(|&&b| b != beta0) {
+                    best.offer(code(
+                        input,
+                        &mut a,
+                        choice(c.k, m_best, beta, c.basis_gamma),
+                        rt,
+                    ));
+                }
+            }
+        }
+    }
+    best.trial
 }
 
 struct MdttDecoder {
