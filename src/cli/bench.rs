@@ -311,14 +311,18 @@ pub fn run(args: &BenchArgs) -> ExitCode {
             }
         }
     }
+    let sums = totals(&rows);
     let mut all = rows.clone();
-    all.extend(totals(&rows));
+    all.extend(sums.iter().cloned());
     let table = markdown(&all);
     println!("{table}");
-    if let Err(e) = write_outputs(&args.out, &table, &csv(&all)) {
+    if let Err(e) = write_outputs(&args.out, &table, &csv(&all))
+        .and_then(|()| super::plot::rate_distortion(&sums, &args.out.join("rd.png")))
+    {
         eprintln!("mocapstore bench: {e}");
         return ExitCode::FAILURE;
     }
+    eprintln!("wrote {}/table.md, results.csv, rd.png", args.out.display());
     if failures > 0 {
         eprintln!("{failures} encodes failed");
         return ExitCode::FAILURE;

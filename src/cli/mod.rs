@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand};
 mod bench;
 mod convert;
 mod inspect;
+mod plot;
 
 #[derive(Parser)]
 #[command(
