@@ -7,7 +7,7 @@
 //! `2t/√3` (less a margin for f32 rounding), a corrected sample is within `t` by
 //! construction, so the bound holds on every sample whatever the transform did.
 
-use super::entropy::{Bit, Decoder, Encoder, IntModel};
+use super::entropy::{magnitude_context, Bit, Decoder, Encoder, IntModel};
 use super::measure::{quantise, sample_distance};
 
 /// The quantisation step that guarantees distance ≤ `t` after correction.
@@ -15,19 +15,59 @@ pub fn step_for(t: f64) -> f64 {
     2.0 * t / 3f64.sqrt() * 0.99
 }
 
+/// Magnitude buckets of the previous frame's correction that condition a value's model.
+const BUCKETS: usize = 4;
+
 struct Models {
     frame: [Bit; 2],
-    point: [Bit; 2],
-    value: [IntModel; 3],
+    /// By (flagged in the previous frame, previous point flagged in this frame).
+    point: [Bit; 4],
+    /// By axis and the bucket of the same coordinate's correction in the previous frame.
+    value: Vec<IntModel>,
 }
 
 impl Models {
     fn new() -> Self {
         Models {
             frame: [Bit::default(); 2],
-            point: [Bit::default(); 2],
-            value: Default::default(),
+            point: [Bit::default(); 4],
+            value: vec![IntModel::default(); 3 * BUCKETS],
         }
+    }
+}
+
+/// State carried from frame to frame: which points were corrected, and by how much.
+struct History {
+    flagged: Vec<bool>,
+    /// Last frame's correction per coordinate (0 where none).
+    q: Vec<i32>,
+}
+
+impl History {
+    fn new(points: usize) -> Self {
+        History {
+            flagged: vec![false; points],
+            q: vec![0; points * 3],
+        }
+    }
+
+    #[inline]
+    fn point_context(&self, p: usize, previous_point_flagged: bool) -> usize {
+        usize::from(self.flagged[p]) * 2 + usize::from(previous_point_flagged)
+    }
+
+    /// Model index of coordinate `i` (axis `k`): by the size of its correction in the last
+    /// frame, since the transform misses features for a few frames at a time. (Using that
+    /// correction as a prediction was measured and is worse: corrections of one or two
+    /// steps flip sign from frame to frame.)
+    #[inline]
+    fn value_context(&self, i: usize, k: usize) -> usize {
+        k * BUCKETS + magnitude_context(self.q[i], BUCKETS)
+    }
+
+    fn clear(&mut self) {
+        self.flagged.fill(false);
+        self.q.fill(0);
     }
 }
 
@@ -45,7 +85,7 @@ pub fn encode(
     let w = points * 3;
     let frames = orig.len() / w.max(1);
     let mut m = Models::new();
-    let mut prev = vec![false; points];
+    let mut h = History::new(points);
     let mut prev_frame = false;
     let mut corrected = 0;
     let mut flags = vec![false; points];
@@ -60,22 +100,27 @@ pub fn encode(
         enc.encode(&mut m.frame[usize::from(prev_frame)], any);
         prev_frame = any;
         if !any {
-            prev.fill(false);
+            h.clear();
             continue;
         }
+        let mut previous_point = false;
         for p in 0..points {
-            enc.encode(&mut m.point[usize::from(prev[p])], flags[p]);
-            prev[p] = flags[p];
-            if !flags[p] {
-                continue;
-            }
-            corrected += 1;
+            enc.encode(&mut m.point[h.point_context(p, previous_point)], flags[p]);
+            previous_point = flags[p];
+            h.flagged[p] = flags[p];
             for k in 0..3 {
+                let ctx = h.value_context(p * 3 + k, k);
+                if !flags[p] {
+                    h.q[p * 3 + k] = 0;
+                    continue;
+                }
                 let i = f * w + p * 3 + k;
                 let q = quantise((f64::from(orig[i]) - f64::from(recon[i])) / step);
-                m.value[k].encode(enc, q);
+                m.value[ctx].encode(enc, q);
                 recon[i] += (f64::from(q) * step) as f32;
+                h.q[p * 3 + k] = q;
             }
+            corrected += usize::from(flags[p]);
         }
     }
     corrected
@@ -87,24 +132,29 @@ pub fn decode(dec: &mut Decoder<'_>, recon: &mut [f32], points: usize, t: f64) {
     let w = points * 3;
     let frames = recon.len() / w.max(1);
     let mut m = Models::new();
-    let mut prev = vec![false; points];
+    let mut h = History::new(points);
     let mut prev_frame = false;
     for f in 0..frames {
         let any = dec.decode(&mut m.frame[usize::from(prev_frame)]);
         prev_frame = any;
         if !any {
-            prev.fill(false);
+            h.clear();
             continue;
         }
-        for (p, was) in prev.iter_mut().enumerate() {
-            let flag = dec.decode(&mut m.point[usize::from(*was)]);
-            *was = flag;
-            if !flag {
-                continue;
-            }
+        let mut previous_point = false;
+        for p in 0..points {
+            let flag = dec.decode(&mut m.point[h.point_context(p, previous_point)]);
+            previous_point = flag;
+            h.flagged[p] = flag;
             for k in 0..3 {
-                let q = m.value[k].decode(dec);
+                let ctx = h.value_context(p * 3 + k, k);
+                if !flag {
+                    h.q[p * 3 + k] = 0;
+                    continue;
+                }
+                let q = m.value[ctx].decode(dec);
                 recon[f * w + p * 3 + k] += (f64::from(q) * step) as f32;
+                h.q[p * 3 + k] = q;
             }
         }
     }

@@ -51,6 +51,17 @@ fn coef_context(b: usize, j: usize) -> usize {
 }
 const COEF_CONTEXTS: usize = 36;
 
+/// Rounding offset taken off each coefficient's magnitude before rounding: values within
+/// 0.5 + DEADZONE of zero become zero. Small coefficients cost more bits than the error
+/// they remove; the decoder is unaffected (it only multiplies by the step).
+const DEADZONE: f64 = 0.2;
+
+#[inline]
+fn deadzone(x: f64, dz: f64) -> i32 {
+    let m = (x.abs() - dz).max(0.0);
+    quantise(m).saturating_mul(if x < 0.0 { -1 } else { 1 })
+}
+
 /// Starting basis precision of the search (see [`basis_bits`]).
 const GAMMA0: f64 = 0.17;
 
@@ -142,7 +153,7 @@ fn code(input: &Input<'_>, a: &mut Analysis, c: Choice, residual_t: f64) -> Tria
         let mut deq = vec![0f32; c.k * lc];
         for b in 0..c.k {
             for j in 0..lc {
-                let q = quantise(s[(b, j)] / c.coef_step);
+                let q = deadzone(s[(b, j)] / c.coef_step, DEADZONE);
                 models[coef_context(b, j)].encode(&mut enc, q);
                 deq[b * lc + j] = (f64::from(q) * c.coef_step) as f32;
             }
