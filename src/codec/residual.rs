@@ -104,13 +104,13 @@ pub fn encode(
             continue;
         }
         let mut previous_point = false;
-        for p in 0..points {
-            enc.encode(&mut m.point[h.point_context(p, previous_point)], flags[p]);
-            previous_point = flags[p];
-            h.flagged[p] = flags[p];
+        for (p, &flag) in flags.iter().enumerate() {
+            enc.encode(&mut m.point[h.point_context(p, previous_point)], flag);
+            previous_point = flag;
+            h.flagged[p] = flag;
             for k in 0..3 {
                 let ctx = h.value_context(p * 3 + k, k);
-                if !flags[p] {
+                if !flag {
                     h.q[p * 3 + k] = 0;
                     continue;
                 }
@@ -120,7 +120,7 @@ pub fn encode(
                 recon[i] += (f64::from(q) * step) as f32;
                 h.q[p * 3 + k] = q;
             }
-            corrected += usize::from(flags[p]);
+            corrected += usize::from(flag);
         }
     }
     corrected
