@@ -4,15 +4,18 @@
 //!
 //! Dependencies point one way, from the top of this list to the bottom:
 //!
-//! - [`cli`]: the `mocapstore` command line (`inspect`, `convert`, later `serve`, `ingest`,
-//!   `bench`); the only place that touches files and the terminal.
+//! - [`cli`]: the `mocapstore` command line (`inspect`, `convert`, `bench`; later `serve`,
+//!   `ingest`); the only place that touches files and the terminal.
+//! - [`codec`]: codecs (`raw`, `quant`, `mdtt`), the chunked container, the entropy stage
+//!   and rate control to an error bound. Pure, like `motion`.
 //! - [`motion`]: the `Motion` model (positions, units, gaps, skeletons), forward kinematics,
 //!   error metrics and the file formats in [`motion::formats`] (BVH, C3D, TRC, JSON, NPY in;
 //!   BVH, TRC, JSON, NPY, CSV, raw f32 out). Pure: no I/O, no async, no database.
 //!
-//! Still to come, in this order (see `../shared/DESIGN.md`): `codec/` (pure encoders and the
-//! container format), `store/` (SQLite and Postgres via sqlx), `service/` (use-cases) and
-//! `http/` (axum).
+//! - [`corpus`]: where the real-data corpus is, and its manifest (tests and benchmarks).
+//!
+//! Still to come (see `../shared/DESIGN.md`): `store/` (SQLite and Postgres via sqlx),
+//! `service/` (use-cases) and `http/` (axum).
 
 pub mod cli;
 pub mod codec;
