@@ -21,3 +21,4 @@ pub mod cli;
 pub mod codec;
 pub mod corpus;
 pub mod motion;
+pub mod store;

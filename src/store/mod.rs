@@ -1,0 +1,205 @@
+//! Persistence: takes (metadata, codec header, chunks, tags) in SQLite — one file, zero set-up,
+//! the default — or Postgres. Migrations for each live in `migrations/{sqlite,postgres}` and run
+//! when the store opens.
+//!
+//! Both backends run the same SQL text (numbered `$n` placeholders, each used once in order,
+//! which SQLite binds by position too); [`dispatch!`] expands one body for either pool, so a
+//! query is written once.
+//!
+//! A take and its chunks go in one transaction: readers never see half a take, and a failed
+//! ingest leaves nothing behind. Chunk payloads are checked against their CRC-32C on read.
+
+mod rows;
+
+use std::str::FromStr;
+use std::time::Duration;
+
+use sqlx::postgres::{PgPool, PgPoolOptions};
+use sqlx::sqlite::{
+    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
+};
+use sqlx::Row;
+
+pub use rows::{ChunkRow, NewSequence, SequenceRow};
+
+/// Errors of the store layer.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("database: {0}")]
+    Database(#[from] sqlx::Error),
+    #[error("migration: {0}")]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+    #[error("unsupported database URL {0:?}: use sqlite://FILE or postgres://…")]
+    Url(String),
+    /// Stored bytes that fail their checksum or do not parse.
+    #[error("corrupt data in the store: {0}")]
+    Corrupt(String),
+    #[error("{0} already exists")]
+    Conflict(String),
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A connection pool to one of the two backends.
+#[derive(Clone, Debug)]
+pub enum Store {
+    Sqlite(SqlitePool),
+    Postgres(PgPool),
+}
+
+/// Run `$body` with `$pool` bound to whichever pool the store holds.
+macro_rules! dispatch {
+    ($store:expr, $pool:ident => $body:expr) => {
+        match $store {
+            Store::Sqlite($pool) => $body,
+            Store::Postgres($pool) => $body,
+        }
+    };
+}
+
+impl Store {
+    /// Open (creating a SQLite file if needed) and migrate.
+    pub async fn open(url: &str) -> Result<Store> {
+        let store = if url.starts_with("sqlite:") {
+            let opts = SqliteConnectOptions::from_str(url)?
+                .create_if_missing(true)
+                .journal_mode(SqliteJournalMode::Wal)
+                .synchronous(SqliteSynchronous::Normal)
+                .foreign_keys(true)
+                .busy_timeout(Duration::from_secs(10));
+            let pool = SqlitePoolOptions::new()
+                .max_connections(8)
+                .connect_with(opts)
+                .await?;
+            sqlx::migrate!("migrations/sqlite").run(&pool).await?;
+            Store::Sqlite(pool)
+        } else if url.starts_with("postgres:") || url.starts_with("postgresql:") {
+            let pool = PgPoolOptions::new()
+                .max_connections(16)
+                .acquire_timeout(Duration::from_secs(10))
+                .connect(url)
+                .await?;
+            sqlx::migrate!("migrations/postgres").run(&pool).await?;
+            Store::Postgres(pool)
+        } else {
+            return Err(Error::Url(url.to_string()));
+        };
+        Ok(store)
+    }
+
+    pub fn backend(&self) -> &'static str {
+        match self {
+            Store::Sqlite(_) => "sqlite",
+            Store::Postgres(_) => "postgres",
+        }
+    }
+
+    pub async fn close(&self) {
+        dispatch!(self, pool => pool.close().await)
+    }
+
+    /// Insert a take, its tags and its chunks atomically.
+    pub async fn insert(&self, s: &NewSequence) -> Result<()> {
+        dispatch!(self, pool => {
+            let mut tx = pool.begin().await?;
+            let r = rows::bind_sequence(sqlx::query(rows::INSERT_SEQUENCE), s)
+                .execute(&mut *tx)
+                .await;
+            if let Err(e) = r {
+                return Err(conflict_or(e, &s.id));
+            }
+            for tag in &s.tags {
+                sqlx::query("INSERT INTO sequence_tags (sequence_id, tag) VALUES ($1, $2)")
+                    .bind(&s.id)
+                    .bind(tag)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            for c in &s.chunks {
+                sqlx::query(
+                    "INSERT INTO chunks (sequence_id, idx, first_frame, frames, crc32c, payload) \
+                     VALUES ($1, $2, $3, $4, $5, $6)",
+                )
+                .bind(&s.id)
+                .bind(c.idx)
+                .bind(c.first_frame)
+                .bind(c.frames)
+                .bind(i64::from(c.crc32c))
+                .bind(&c.payload)
+                .execute(&mut *tx)
+                .await?;
+            }
+            tx.commit().await?;
+            Ok(())
+        })
+    }
+
+    /// A take's metadata and tags, without chunks.
+    pub async fn get(&self, id: &str) -> Result<Option<SequenceRow>> {
+        dispatch!(self, pool => {
+            let row = sqlx::query(&format!("SELECT {} FROM sequences WHERE id = $1", rows::SEQUENCE_COLUMNS))
+                .bind(id)
+                .fetch_optional(pool)
+                .await?;
+            let Some(row) = row else { return Ok(None) };
+            let mut s = rows::sequence_from_row(&row)?;
+            s.tags = sqlx::query("SELECT tag FROM sequence_tags WHERE sequence_id = $1 ORDER BY tag")
+                .bind(id)
+                .fetch_all(pool)
+                .await?
+                .iter()
+                .map(|r| r.try_get::<String, _>("tag"))
+                .collect::<Result<_, _>>()?;
+            Ok(Some(s))
+        })
+    }
+
+    /// Chunks `first..end` (indices) of a take, checked against their CRC-32C.
+    pub async fn chunks(&self, id: &str, first: i64, end: i64) -> Result<Vec<ChunkRow>> {
+        dispatch!(self, pool => {
+            let rows = sqlx::query(
+                "SELECT idx, first_frame, frames, crc32c, payload FROM chunks \
+                 WHERE sequence_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
+            )
+            .bind(id)
+            .bind(first)
+            .bind(end)
+            .fetch_all(pool)
+            .await?;
+            rows.iter().map(rows::chunk_from_row).collect()
+        })
+    }
+
+    /// Delete a take (chunks and tags cascade); false if there was none.
+    pub async fn delete(&self, id: &str) -> Result<bool> {
+        dispatch!(self, pool => {
+            let r = sqlx::query("DELETE FROM sequences WHERE id = $1").bind(id).execute(pool).await?;
+            Ok(r.rows_affected() > 0)
+        })
+    }
+
+    /// Number of takes stored (operations and tests).
+    pub async fn count(&self) -> Result<i64> {
+        dispatch!(self, pool => {
+            let row = sqlx::query("SELECT COUNT(*) AS n FROM sequences").fetch_one(pool).await?;
+            Ok(row.try_get::<i64, _>("n")?)
+        })
+    }
+
+    /// Number of chunk rows stored (tests check nothing is left behind).
+    pub async fn chunk_count(&self) -> Result<i64> {
+        dispatch!(self, pool => {
+            let row = sqlx::query("SELECT COUNT(*) AS n FROM chunks").fetch_one(pool).await?;
+            Ok(row.try_get::<i64, _>("n")?)
+        })
+    }
+}
+
+fn conflict_or(e: sqlx::Error, id: &str) -> Error {
+    match &e {
+        sqlx::Error::Database(d) if d.is_unique_violation() => {
+            Error::Conflict(format!("sequence {id}"))
+        }
+        _ => Error::Database(e),
+    }
+}

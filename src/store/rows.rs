@@ -1,0 +1,171 @@
+//! Row types and the mapping between them and SQL, shared by both backends.
+
+use serde::{Deserialize, Serialize};
+use sqlx::Row;
+
+use super::{Error, Result};
+
+/// One stored chunk.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChunkRow {
+    pub idx: i64,
+    pub first_frame: i64,
+    pub frames: i64,
+    pub crc32c: u32,
+    pub payload: Vec<u8>,
+}
+
+/// Everything stored about a take except its chunks.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SequenceRow {
+    pub id: String,
+    pub name: String,
+    pub library: String,
+    pub tags: Vec<String>,
+    pub fps: f64,
+    pub frames: i64,
+    pub points: i64,
+    pub duration_s: f64,
+    pub metres_per_unit: f64,
+    pub layout: String,
+    pub source_format: String,
+    pub codec: String,
+    pub bound_kind: String,
+    pub bound_mm: f64,
+    pub raw_bytes: i64,
+    pub stored_bytes: i64,
+    pub ratio: f64,
+    pub mean_mm: f64,
+    pub rms_mm: f64,
+    pub max_mm: f64,
+    pub kg_percent: f64,
+    /// The codec container header (chunk index included).
+    #[serde(skip)]
+    pub header: Vec<u8>,
+    /// Point names, unit provenance, skeleton, codec decision, warnings: JSON.
+    pub meta: serde_json::Value,
+    /// Milliseconds since the Unix epoch.
+    pub created_at: i64,
+}
+
+/// A take to insert: its row and its chunks.
+#[derive(Debug, Clone)]
+pub struct NewSequence {
+    pub row: SequenceRow,
+    pub chunks: Vec<ChunkRow>,
+}
+
+impl std::ops::Deref for NewSequence {
+    type Target = SequenceRow;
+    fn deref(&self) -> &SequenceRow {
+        &self.row
+    }
+}
+
+pub const SEQUENCE_COLUMNS: &str = "id, name, library, fps, frames, points, duration_s, \
+    metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, raw_bytes, \
+    stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at";
+
+pub const INSERT_SEQUENCE: &str = "INSERT INTO sequences (id, name, library, fps, frames, \
+    points, duration_s, metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, \
+    raw_bytes, stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, \
+    created_at) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, \
+    $16, $17, $18, $19, $20, $21, $22, $23)";
+
+/// Bind a take's columns, in [`INSERT_SEQUENCE`] order, to a query of either backend.
+pub fn bind_sequence<'q, DB: sqlx::Database>(
+    q: sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>,
+    s: &'q SequenceRow,
+) -> sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>
+where
+    String: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    f64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    Vec<u8>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+{
+    q.bind(s.id.clone())
+        .bind(s.name.clone())
+        .bind(s.library.clone())
+        .bind(s.fps)
+        .bind(s.frames)
+        .bind(s.points)
+        .bind(s.duration_s)
+        .bind(s.metres_per_unit)
+        .bind(s.layout.clone())
+        .bind(s.source_format.clone())
+        .bind(s.codec.clone())
+        .bind(s.bound_kind.clone())
+        .bind(s.bound_mm)
+        .bind(s.raw_bytes)
+        .bind(s.stored_bytes)
+        .bind(s.ratio)
+        .bind(s.mean_mm)
+        .bind(s.rms_mm)
+        .bind(s.max_mm)
+        .bind(s.kg_percent)
+        .bind(s.header.clone())
+        .bind(s.meta.to_string())
+        .bind(s.created_at)
+}
+
+/// Read a [`SequenceRow`] (tags left empty) from either backend's row.
+pub fn sequence_from_row<R: Row>(r: &R) -> Result<SequenceRow>
+where
+    for<'a> &'a str: sqlx::ColumnIndex<R>,
+    for<'a> String: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> f64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> i64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+{
+    let meta: String = r.try_get("meta")?;
+    Ok(SequenceRow {
+        id: r.try_get("id")?,
+        name: r.try_get("name")?,
+        library: r.try_get("library")?,
+        tags: Vec::new(),
+        fps: r.try_get("fps")?,
+        frames: r.try_get("frames")?,
+        points: r.try_get("points")?,
+        duration_s: r.try_get("duration_s")?,
+        metres_per_unit: r.try_get("metres_per_unit")?,
+        layout: r.try_get("layout")?,
+        source_format: r.try_get("source_format")?,
+        codec: r.try_get("codec")?,
+        bound_kind: r.try_get("bound_kind")?,
+        bound_mm: r.try_get("bound_mm")?,
+        raw_bytes: r.try_get("raw_bytes")?,
+        stored_bytes: r.try_get("stored_bytes")?,
+        ratio: r.try_get("ratio")?,
+        mean_mm: r.try_get("mean_mm")?,
+        rms_mm: r.try_get("rms_mm")?,
+        max_mm: r.try_get("max_mm")?,
+        kg_percent: r.try_get("kg_percent")?,
+        header: r.try_get("header")?,
+        meta: serde_json::from_str(&meta).map_err(|e| Error::Corrupt(format!("meta JSON: {e}")))?,
+        created_at: r.try_get("created_at")?,
+    })
+}
+
+/// Read a chunk and check its payload against the stored CRC-32C.
+pub fn chunk_from_row<R: Row>(r: &R) -> Result<ChunkRow>
+where
+    for<'a> &'a str: sqlx::ColumnIndex<R>,
+    for<'a> i64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+{
+    let crc: i64 = r.try_get("crc32c")?;
+    let c = ChunkRow {
+        idx: r.try_get("idx")?,
+        first_frame: r.try_get("first_frame")?,
+        frames: r.try_get("frames")?,
+        crc32c: u32::try_from(crc).map_err(|_| Error::Corrupt(format!("crc {crc}")))?,
+        payload: r.try_get("payload")?,
+    };
+    if crc32c::crc32c(&c.payload) != c.crc32c {
+        return Err(Error::Corrupt(format!(
+            "chunk {} fails its checksum",
+            c.idx
+        )));
+    }
+    Ok(c)
+}

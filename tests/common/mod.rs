@@ -1,0 +1,87 @@
+//! Shared test set-up: a fresh store on each backend.
+//!
+//! SQLite: a new file in a temporary folder. Postgres: a new database on the server named by
+//! `MOCAP_TEST_PG_URL` (`.ci/run` sets it), dropped afterwards. When that variable is set
+//! and the server cannot be reached, the test fails; when it is unset, the Postgres half is
+//! skipped with a message on stderr.
+
+#![allow(dead_code)]
+
+use mocapstore::store::Store;
+
+pub struct TestStore {
+    pub name: &'static str,
+    pub store: Store,
+    cleanup: Cleanup,
+}
+
+enum Cleanup {
+    Dir(std::path::PathBuf),
+    Database { admin_url: String, db: String },
+}
+
+impl TestStore {
+    pub async fn finish(self) {
+        self.store.close().await;
+        match self.cleanup {
+            Cleanup::Dir(d) => {
+                let _ = std::fs::remove_dir_all(d);
+            }
+            Cleanup::Database { admin_url, db } => {
+                if let Ok(admin) = sqlx::PgPool::connect(&admin_url).await {
+                    let _ = sqlx::query(&format!("DROP DATABASE IF EXISTS {db} WITH (FORCE)"))
+                        .execute(&admin)
+                        .await;
+                    admin.close().await;
+                }
+            }
+        }
+    }
+}
+
+fn unique(prefix: &str) -> String {
+    format!("{prefix}_{}", uuid::Uuid::now_v7().simple())
+}
+
+pub async fn sqlite() -> TestStore {
+    let dir = std::env::temp_dir().join(unique("mocapstore-test"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let url = format!("sqlite://{}", dir.join("store.db").display());
+    TestStore {
+        name: "sqlite",
+        store: Store::open(&url).await.expect("open sqlite"),
+        cleanup: Cleanup::Dir(dir),
+    }
+}
+
+pub async fn postgres() -> Option<TestStore> {
+    let Ok(admin_url) = std::env::var("MOCAP_TEST_PG_URL") else {
+        eprintln!("MOCAP_TEST_PG_URL is not set: skipping the Postgres half of this test");
+        return None;
+    };
+    let admin = sqlx::PgPool::connect(&admin_url)
+        .await
+        .unwrap_or_else(|e| panic!("MOCAP_TEST_PG_URL={admin_url} is set but unreachable: {e}"));
+    let db = unique("mocapstore_test");
+    sqlx::query(&format!("CREATE DATABASE {db}"))
+        .execute(&admin)
+        .await
+        .expect("create test database");
+    admin.close().await;
+    let (base, _) = admin_url.rsplit_once('/').expect("URL has a database path");
+    let url = format!("{base}/{db}");
+    Some(TestStore {
+        name: "postgres",
+        store: Store::open(&url).await.expect("open postgres"),
+        cleanup: Cleanup::Database { admin_url, db },
+    })
+}
+
+/// SQLite always, Postgres when configured.
+pub async fn all() -> Vec<TestStore> {
+    let mut v = vec![sqlite().await];
+    if let Some(pg) = postgres().await {
+        v.push(pg);
+    }
+    v
+}

@@ -1,0 +1,123 @@
+//! The store on both backends: atomic takes, checked chunks, nothing half-written.
+
+mod common;
+
+use mocapstore::store::{ChunkRow, Error, NewSequence, SequenceRow, Store};
+
+fn take(id: &str, n: usize) -> NewSequence {
+    let chunks: Vec<ChunkRow> = (0..n)
+        .map(|i| {
+            let payload: Vec<u8> = (0..100 + i).map(|b| (b * 7 + i) as u8).collect();
+            ChunkRow {
+                idx: i as i64,
+                first_frame: (i * 120) as i64,
+                frames: 120,
+                crc32c: crc32c::crc32c(&payload),
+                payload,
+            }
+        })
+        .collect();
+    NewSequence {
+        row: SequenceRow {
+            id: id.to_string(),
+            name: format!("take {id}"),
+            library: "lib".into(),
+            tags: vec!["walk".into(), "test".into()],
+            fps: 120.0,
+            frames: 120 * n as i64,
+            points: 31,
+            duration_s: n as f64,
+            metres_per_unit: 0.001,
+            layout: "abc".into(),
+            source_format: "bvh".into(),
+            codec: "quant".into(),
+            bound_kind: "max".into(),
+            bound_mm: 1.0,
+            raw_bytes: 1000,
+            stored_bytes: 100,
+            ratio: 10.0,
+            mean_mm: 0.5,
+            rms_mm: 0.55,
+            max_mm: 0.99,
+            kg_percent: 0.1,
+            header: vec![1, 2, 3, 255],
+            meta: serde_json::json!({"points": ["a", "b"], "decision": {"winner": "quant"}}),
+            created_at: 1_700_000_000_000,
+        },
+        chunks,
+    }
+}
+
+#[tokio::test]
+async fn takes_round_trip_atomically_on_every_backend() {
+    for t in common::all().await {
+        let s = &t.store;
+        let new = take("one", 3);
+        s.insert(&new).await.unwrap();
+        let mut want = new.row.clone();
+        want.tags.sort();
+        assert_eq!(s.get("one").await.unwrap().unwrap(), want, "{}", t.name);
+        assert!(s.get("none").await.unwrap().is_none());
+        let chunks = s.chunks("one", 1, 3).await.unwrap();
+        assert_eq!(chunks, new.chunks[1..3].to_vec(), "{}", t.name);
+
+        // A duplicate id is a conflict and changes nothing.
+        assert!(
+            matches!(s.insert(&new).await, Err(Error::Conflict(_))),
+            "{}",
+            t.name
+        );
+        assert_eq!(s.count().await.unwrap(), 1);
+
+        // A take whose chunks cannot all be written leaves nothing behind.
+        let mut bad = take("two", 2);
+        bad.chunks[1].idx = 0; // duplicate primary key, after the row and tags went in
+        assert!(s.insert(&bad).await.is_err(), "{}", t.name);
+        assert!(s.get("two").await.unwrap().is_none(), "{}", t.name);
+        assert_eq!(
+            (s.count().await.unwrap(), s.chunk_count().await.unwrap()),
+            (1, 3),
+            "{}",
+            t.name
+        );
+
+        // Deleting removes chunks and tags too.
+        assert!(s.delete("one").await.unwrap());
+        assert!(!s.delete("one").await.unwrap());
+        assert_eq!(s.chunk_count().await.unwrap(), 0, "{}", t.name);
+        t.finish().await;
+    }
+}
+
+#[tokio::test]
+async fn altered_chunks_fail_their_checksum() {
+    for t in common::all().await {
+        t.store.insert(&take("x", 2)).await.unwrap();
+        let q = "UPDATE chunks SET payload = $1 WHERE sequence_id = 'x' AND idx = 1";
+        match &t.store {
+            Store::Sqlite(p) => sqlx::query(q)
+                .bind(vec![0u8; 5])
+                .execute(p)
+                .await
+                .map(|_| ()),
+            Store::Postgres(p) => sqlx::query(q)
+                .bind(vec![0u8; 5])
+                .execute(p)
+                .await
+                .map(|_| ()),
+        }
+        .unwrap();
+        assert!(t.store.chunks("x", 0, 1).await.is_ok());
+        assert!(
+            matches!(t.store.chunks("x", 0, 2).await, Err(Error::Corrupt(_))),
+            "{}",
+            t.name
+        );
+        t.finish().await;
+    }
+}
+
+#[tokio::test]
+async fn bad_urls_are_refused() {
+    assert!(matches!(Store::open("mysql://x").await, Err(Error::Url(_))));
+}
