@@ -20,5 +20,7 @@
 pub mod cli;
 pub mod codec;
 pub mod corpus;
+pub mod http;
 pub mod motion;
+pub mod service;
 pub mod store;

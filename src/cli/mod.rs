@@ -38,9 +38,12 @@ struct ServeArgs {
     /// Address to listen on.
     #[arg(long, env = "MOCAP_LISTEN", default_value = "127.0.0.1:8080")]
     listen: String,
-    /// Database: a SQLite file (created if missing) or a postgres:// URL.
+    /// Database: a SQLite file (created with its tables if missing) or a postgres:// URL.
     #[arg(long, env = "DATABASE_URL", default_value = "sqlite://mocapstore.db")]
     database_url: String,
+    /// Largest upload accepted, in MiB (larger ones get 413).
+    #[arg(long, env = "MOCAP_MAX_UPLOAD_MIB", default_value_t = 512)]
+    max_upload_mib: usize,
 }
 
 /// Options every command that reads takes accepts.
@@ -78,15 +81,48 @@ mod mocapstore_motion {
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Serve(args) => {
-            eprintln!(
-                "mocapstore serve: not yet implemented (would listen on {} with {}); the service lands with the store and HTTP layers",
-                args.listen, args.database_url
-            );
-            ExitCode::from(2)
-        }
+        Command::Serve(args) => serve(args),
         Command::Inspect(args) => inspect::run(&args),
         Command::Convert(args) => convert::run(&args),
         Command::Bench(args) => bench::run(&args),
     }
+}
+
+fn serve(args: ServeArgs) -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,tower_http=info,sqlx=warn".into()),
+        )
+        .init();
+    let config = crate::http::Config {
+        listen: args.listen,
+        database_url: args.database_url,
+        max_body_bytes: args.max_upload_mib << 20,
+    };
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("mocapstore serve: cannot start the runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    runtime.block_on(async move {
+        let database = config.database_url.clone();
+        let app = match crate::http::Application::build(config).await {
+            Ok(a) => a,
+            Err(e) => {
+                eprintln!("mocapstore serve: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        tracing::info!(address = %app.local_addr(), %database, "mocapstore listening");
+        match app.run_until(crate::http::shutdown_signal()).await {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("mocapstore serve: {e}");
+                ExitCode::FAILURE
+            }
+        }
+    })
 }

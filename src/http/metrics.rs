@@ -1,0 +1,103 @@
+//! Prometheus text metrics: request counts and latency, ingested and decoded frames.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use axum::extract::{Request, State};
+use axum::http::header;
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+
+/// Latency histogram bucket bounds in seconds.
+const BUCKETS: [f64; 10] = [0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.5, 1.0, 5.0];
+
+#[derive(Default)]
+pub struct Metrics {
+    requests: AtomicU64,
+    errors: AtomicU64,
+    latency_us_sum: AtomicU64,
+    latency_buckets: [AtomicU64; BUCKETS.len()],
+    ingested_frames: AtomicU64,
+    decoded_frames: AtomicU64,
+}
+
+impl Metrics {
+    pub fn ingested(&self, frames: usize) {
+        self.ingested_frames
+            .fetch_add(frames as u64, Ordering::Relaxed);
+    }
+
+    pub fn decoded(&self, frames: usize) {
+        self.decoded_frames
+            .fetch_add(frames as u64, Ordering::Relaxed);
+    }
+
+    fn observe(&self, seconds: f64, error: bool) {
+        self.requests.fetch_add(1, Ordering::Relaxed);
+        if error {
+            self.errors.fetch_add(1, Ordering::Relaxed);
+        }
+        self.latency_us_sum
+            .fetch_add((seconds * 1e6) as u64, Ordering::Relaxed);
+        for (b, c) in BUCKETS.iter().zip(&self.latency_buckets) {
+            if seconds <= *b {
+                c.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    pub fn render_text(&self) -> String {
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        let mut s = String::new();
+        s += "# TYPE mocapstore_http_requests_total counter\n";
+        s += &format!("mocapstore_http_requests_total {}\n", g(&self.requests));
+        s += "# TYPE mocapstore_http_errors_total counter\n";
+        s += &format!("mocapstore_http_errors_total {}\n", g(&self.errors));
+        s += "# TYPE mocapstore_http_request_seconds histogram\n";
+        for (b, c) in BUCKETS.iter().zip(&self.latency_buckets) {
+            s += &format!(
+                "mocapstore_http_request_seconds_bucket{{le=\"{b}\"}} {}\n",
+                g(c)
+            );
+        }
+        s += &format!(
+            "mocapstore_http_request_seconds_bucket{{le=\"+Inf\"}} {}\n",
+            g(&self.requests)
+        );
+        s += &format!(
+            "mocapstore_http_request_seconds_sum {}\n",
+            g(&self.latency_us_sum) as f64 / 1e6
+        );
+        s += &format!(
+            "mocapstore_http_request_seconds_count {}\n",
+            g(&self.requests)
+        );
+        s += "# TYPE mocapstore_ingested_frames_total counter\n";
+        s += &format!(
+            "mocapstore_ingested_frames_total {}\n",
+            g(&self.ingested_frames)
+        );
+        s += "# TYPE mocapstore_decoded_frames_total counter\n";
+        s += &format!(
+            "mocapstore_decoded_frames_total {}\n",
+            g(&self.decoded_frames)
+        );
+        s
+    }
+}
+
+pub async fn count_requests(State(m): State<Arc<Metrics>>, req: Request, next: Next) -> Response {
+    let t0 = Instant::now();
+    let resp = next.run(req).await;
+    m.observe(t0.elapsed().as_secs_f64(), !resp.status().is_success());
+    resp
+}
+
+pub async fn render(State(state): State<super::AppState>) -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.metrics.render_text(),
+    )
+        .into_response()
+}

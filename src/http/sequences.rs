@@ -1,0 +1,221 @@
+//! `/v1/sequences`: ingest, metadata, frame ranges, delete. Handlers parse the request into
+//! domain types and call the service; no math, no SQL.
+
+use std::sync::Arc;
+
+use axum::body::Bytes;
+use axum::extract::rejection::{BytesRejection, QueryRejection};
+use axum::extract::{Path, Query, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde::Deserialize;
+
+use super::error::ApiError;
+use super::AppState;
+use crate::codec::{CodecId, ErrorBound, Latency};
+use crate::motion::formats::{self, Format};
+use crate::motion::units::parse_unit;
+use crate::motion::{Motion, Unit, UnitSource};
+use crate::service::choose::CodecRequest;
+use crate::service::fetch::{self, TimeRange};
+use crate::service::ingest::{self, IngestRequest};
+
+#[derive(Deserialize)]
+pub struct IngestQuery {
+    name: Option<String>,
+    library: Option<String>,
+    tags: Option<String>,
+    unit: Option<String>,
+    fps: Option<f64>,
+    codec: Option<String>,
+    max_error_mm: Option<f64>,
+    mean_error_mm: Option<f64>,
+    latency: Option<String>,
+}
+
+impl IngestQuery {
+    /// Parse, don't validate: the query becomes an [`IngestRequest`] or a 400.
+    fn into_request(self, body: Bytes, state: &AppState) -> Result<IngestRequest, ApiError> {
+        let bad = |e: &dyn std::fmt::Display| ApiError::bad_request(e.to_string());
+        let bound = match (self.max_error_mm, self.mean_error_mm) {
+            (Some(_), Some(_)) => {
+                return Err(ApiError::bad_request(
+                    "give max_error_mm or mean_error_mm, not both",
+                ))
+            }
+            (Some(m), None) => ErrorBound::new_max(m).map_err(|e| bad(&e))?,
+            (None, Some(m)) => ErrorBound::new_mean(m).map_err(|e| bad(&e))?,
+            (None, None) => ErrorBound::MaxMm(1.0),
+        };
+        let codec = match self.codec.as_deref().map(str::trim) {
+            None | Some("") | Some("auto") => CodecRequest::Auto,
+            Some(c) => CodecRequest::Only(c.parse::<CodecId>().map_err(|e| bad(&e))?),
+        };
+        let latency = match self.latency.as_deref() {
+            None => Latency::Sequence,
+            Some(l) => l.parse::<Latency>().map_err(|e| bad(&e))?,
+        };
+        let unit = match self.unit.as_deref() {
+            None => None,
+            Some(u) => Some(parse_unit(u).map_err(|e| bad(&e))?),
+        };
+        if let Some(f) = self.fps {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(ApiError::bad_request(format!(
+                    "fps must be positive, got {f}"
+                )));
+            }
+        }
+        if body.is_empty() {
+            return Err(ApiError::bad_request(
+                "empty body: send the file as the request body",
+            ));
+        }
+        Ok(IngestRequest {
+            bytes: Arc::new(body.to_vec()),
+            name: self.name,
+            library: self.library.unwrap_or_default(),
+            tags: self
+                .tags
+                .map(|t| t.split(',').map(str::to_string).collect())
+                .unwrap_or_default(),
+            unit,
+            fps: self.fps,
+            codec,
+            bound,
+            latency,
+            limits: state.limits,
+        })
+    }
+}
+
+pub async fn create(
+    State(state): State<AppState>,
+    query: Result<Query<IngestQuery>, QueryRejection>,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query?;
+    let req = q.into_request(body?, &state)?;
+    let report = ingest::ingest(&state.store, req).await?;
+    state.metrics.ingested(report.frames);
+    Ok((StatusCode::CREATED, Json(report)).into_response())
+}
+
+pub async fn get(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let row = fetch::sequence(&state.store, &id).await?;
+    Ok(Json(row).into_response())
+}
+
+pub async fn delete(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    if state
+        .store
+        .delete(&id)
+        .await
+        .map_err(crate::service::Error::from)?
+    {
+        Ok(StatusCode::NO_CONTENT.into_response())
+    } else {
+        Err(crate::service::Error::NotFound(format!("sequence {id}")).into())
+    }
+}
+
+#[derive(Deserialize)]
+pub struct FramesQuery {
+    start: Option<usize>,
+    end: Option<usize>,
+    t0: Option<f64>,
+    t1: Option<f64>,
+    points: Option<String>,
+    format: Option<String>,
+}
+
+pub async fn frames(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    query: Result<Query<FramesQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query?;
+    let range = match (q.start, q.end, q.t0, q.t1) {
+        (None, None, None, None) => TimeRange::All,
+        (s, e, None, None) => TimeRange::Frames {
+            start: s.unwrap_or(0),
+            end: e,
+        },
+        (None, None, t0, t1) => TimeRange::Seconds {
+            t0: t0.unwrap_or(0.0),
+            t1,
+        },
+        _ => {
+            return Err(ApiError::bad_request(
+                "give start/end (frames) or t0/t1 (seconds), not both",
+            ))
+        }
+    };
+    let format = match q.format.as_deref() {
+        None | Some("json") => None,
+        Some(f) => Some(
+            f.parse::<Format>()
+                .map_err(|e| ApiError::bad_request(e.to_string()))?,
+        ),
+    };
+    if format == Some(Format::Bvh) {
+        return Err(crate::service::Error::Unsatisfiable(
+            "BVH output needs joint rotations, and the stored codecs keep point positions only"
+                .into(),
+        )
+        .into());
+    }
+    let subset: Option<Vec<String>> = q.points.map(|p| p.split(',').map(str::to_string).collect());
+    let (row, frames) = fetch::frames(&state.store, &id, range, subset.as_deref()).await?;
+    state.metrics.decoded(frames.end - frames.start);
+    let mut headers = HeaderMap::new();
+    let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
+    headers.insert("x-frames", hv((frames.end - frames.start).to_string()));
+    headers.insert("x-points", hv(frames.points.len().to_string()));
+    headers.insert("x-start-frame", hv(frames.start.to_string()));
+    headers.insert("x-fps", hv(row.fps.to_string()));
+    headers.insert("x-metres-per-unit", hv(row.metres_per_unit.to_string()));
+    let Some(format) = format else {
+        let per = frames.points.len() * 3;
+        let data: Vec<Vec<Option<[f32; 3]>>> = frames
+            .data
+            .chunks_exact(per.max(1))
+            .map(|f| {
+                f.chunks_exact(3)
+                    .map(|p| p[0].is_finite().then(|| [p[0], p[1], p[2]]))
+                    .collect()
+            })
+            .collect();
+        let body = serde_json::json!({
+            "id": row.id,
+            "start": frames.start,
+            "end": frames.end,
+            "fps": row.fps,
+            "metres_per_unit": row.metres_per_unit,
+            "points": frames.points,
+            "frames": data,
+        });
+        return Ok((headers, Json(body)).into_response());
+    };
+    let unit = Unit::new(row.metres_per_unit, UnitSource::Declared)
+        .map_err(|e| ApiError::bad_request(e.to_string()))?;
+    let motion = Motion::new(row.fps, unit, frames.points, frames.data, None)
+        .map_err(|e| crate::service::Error::Internal(e.to_string()))?;
+    let bytes = formats::write(&motion, format)
+        .map_err(|e| crate::service::Error::Unsatisfiable(e.to_string()))?;
+    let content_type = match format {
+        Format::Csv => "text/csv",
+        Format::Trc => "text/plain",
+        Format::Json => "application/json",
+        _ => "application/octet-stream",
+    };
+    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    Ok((headers, bytes).into_response())
+}

@@ -1,0 +1,219 @@
+//! Ingest one take: parse, encode with every candidate codec in parallel on the blocking
+//! pool, keep the smallest that meets the bound, store it with its decision record.
+
+use std::sync::Arc;
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+
+use serde::Serialize;
+
+use super::choose::{self, CodecRequest, Decision, Tried};
+use super::{blocking, Error, Result};
+use crate::codec::{self, CodecId, Encoded, ErrorBound, Latency};
+use crate::motion::formats::{self, Limits, ReadOptions};
+use crate::store::{ChunkRow, NewSequence, SequenceRow, Store};
+
+/// An upload and what the user asked of it.
+#[derive(Debug, Clone)]
+pub struct IngestRequest {
+    pub bytes: Arc<Vec<u8>>,
+    pub name: Option<String>,
+    pub library: String,
+    pub tags: Vec<String>,
+    /// Metres per unit of the upload, overriding the file's own.
+    pub unit: Option<f64>,
+    pub fps: Option<f64>,
+    pub codec: CodecRequest,
+    pub bound: ErrorBound,
+    pub latency: Latency,
+    pub limits: Limits,
+}
+
+/// What ingest reports back.
+#[derive(Debug, Clone, Serialize)]
+pub struct IngestReport {
+    pub id: String,
+    pub name: String,
+    pub codec: CodecId,
+    pub frames: usize,
+    pub points: usize,
+    pub fps: f64,
+    pub raw_bytes: usize,
+    pub stored_bytes: usize,
+    pub ratio: f64,
+    pub max_mm: f64,
+    pub mean_mm: f64,
+    pub rms_mm: f64,
+    pub kg_percent: f64,
+    pub decision: Decision,
+    pub warnings: Vec<String>,
+}
+
+pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
+    let bytes = req.bytes.clone();
+    let options = ReadOptions {
+        limits: req.limits,
+        unit: req.unit,
+        fps: req.fps,
+    };
+    let loaded = blocking(move || formats::read(&bytes, &options)).await??;
+    let motion = Arc::new(loaded.motion);
+    if motion.point_count() == 0 || motion.frame_count() == 0 || motion.gap_fraction() >= 1.0 {
+        return Err(Error::Unsatisfiable(format!(
+            "the take has no point samples to store ({} points, {} frames)",
+            motion.point_count(),
+            motion.frame_count()
+        )));
+    }
+    let (run, skipped) = choose::candidates(req.codec, req.latency, &motion);
+    let mut jobs = Vec::with_capacity(run.len());
+    for codec in run {
+        let m = motion.clone();
+        let bound = req.bound;
+        jobs.push(tokio::task::spawn_blocking(move || {
+            let t0 = Instant::now();
+            let r = codec::encode(&m, codec, bound);
+            (codec, r, t0.elapsed().as_secs_f64() * 1e3)
+        }));
+    }
+    let mut tried = Vec::new();
+    let mut encodings: Vec<(CodecId, Encoded)> = Vec::new();
+    for job in jobs {
+        let (codec, r, ms) = job
+            .await
+            .map_err(|e| Error::Internal(format!("encoder failed: {e}")))?;
+        match r {
+            Ok(e) => {
+                tried.push(Tried {
+                    codec,
+                    stored_bytes: Some(e.stored_bytes),
+                    max_mm: Some(e.stats.max_mm),
+                    mean_mm: Some(e.stats.mean_mm),
+                    encode_ms: ms,
+                    error: None,
+                });
+                encodings.push((codec, e));
+            }
+            Err(e) => tried.push(Tried {
+                codec,
+                stored_bytes: None,
+                max_mm: None,
+                mean_mm: None,
+                encode_ms: ms,
+                error: Some(e.to_string()),
+            }),
+        }
+    }
+    let errors: Vec<String> = tried.iter().filter_map(|t| t.error.clone()).collect();
+    let decision = choose::decide(tried, skipped, &req.bound.to_string()).ok_or_else(|| {
+        if let CodecRequest::Only(c) = req.codec {
+            Error::Unsatisfiable(format!(
+                "{c} cannot encode this take: {}",
+                errors.join("; ")
+            ))
+        } else {
+            Error::Internal(format!(
+                "no codec could encode the take: {}",
+                errors.join("; ")
+            ))
+        }
+    })?;
+    let (_, enc) = encodings
+        .into_iter()
+        .find(|(c, _)| *c == decision.winner)
+        .expect("the winner was encoded");
+
+    let id = uuid::Uuid::now_v7().to_string();
+    let name = req
+        .name
+        .clone()
+        .filter(|n| !n.trim().is_empty())
+        .unwrap_or_else(|| id.clone());
+    let m = &motion;
+    let raw_bytes = m.frame_count() * m.point_count() * 12;
+    let meta = serde_json::json!({
+        "point_names": m.point_names,
+        "unit": m.unit,
+        "skeleton": m.skeleton.as_ref().map(|s| &s.joints),
+        "warnings": loaded.warnings,
+        "decision": decision,
+    });
+    let (bound_kind, bound_mm) = match req.bound {
+        ErrorBound::MaxMm(v) => ("max", v),
+        ErrorBound::MeanMm(v) => ("mean", v),
+    };
+    let header = &enc.container.header;
+    let chunks = header
+        .chunks
+        .iter()
+        .zip(&enc.container.chunks)
+        .enumerate()
+        .map(|(i, (meta, payload))| ChunkRow {
+            idx: i as i64,
+            first_frame: i64::from(meta.first_frame),
+            frames: i64::from(meta.frames),
+            crc32c: meta.crc32c,
+            payload: payload.clone(),
+        })
+        .collect();
+    let row = SequenceRow {
+        id: id.clone(),
+        name: name.clone(),
+        library: req.library.clone(),
+        tags: dedup(&req.tags),
+        fps: m.fps,
+        frames: m.frame_count() as i64,
+        points: m.point_count() as i64,
+        duration_s: m.duration_s(),
+        metres_per_unit: m.unit.metres_per_unit,
+        layout: m.layout_signature().to_hex(),
+        source_format: loaded.format.name().to_string(),
+        codec: decision.winner.to_string(),
+        bound_kind: bound_kind.to_string(),
+        bound_mm,
+        raw_bytes: raw_bytes as i64,
+        stored_bytes: enc.stored_bytes as i64,
+        ratio: raw_bytes as f64 / enc.stored_bytes as f64,
+        mean_mm: enc.stats.mean_mm,
+        rms_mm: enc.stats.rms_mm,
+        max_mm: enc.stats.max_mm,
+        kg_percent: enc.stats.kg_percent,
+        header: header.to_bytes(),
+        meta,
+        created_at: now_ms(),
+    };
+    store.insert(&NewSequence { row, chunks }).await?;
+    Ok(IngestReport {
+        id,
+        name,
+        codec: decision.winner,
+        frames: m.frame_count(),
+        points: m.point_count(),
+        fps: m.fps,
+        raw_bytes,
+        stored_bytes: enc.stored_bytes,
+        ratio: raw_bytes as f64 / enc.stored_bytes as f64,
+        max_mm: enc.stats.max_mm,
+        mean_mm: enc.stats.mean_mm,
+        rms_mm: enc.stats.rms_mm,
+        kg_percent: enc.stats.kg_percent,
+        decision,
+        warnings: loaded.warnings,
+    })
+}
+
+fn dedup(tags: &[String]) -> Vec<String> {
+    let mut t: Vec<String> = tags
+        .iter()
+        .map(|s| s.trim().to_string())
+        .filter(|s| !s.is_empty())
+        .collect();
+    t.sort();
+    t.dedup();
+    t
+}
+
+fn now_ms() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}

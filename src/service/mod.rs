@@ -1,0 +1,49 @@
+//! Use-cases: what the HTTP layer and the CLI ask for, in terms of the layers below. Owns
+//! transactions (through the store) and moves codec work off the async executor.
+//!
+//! # Layout
+//! - [`choose`]: which codecs compete for a take, and the decision record.
+//! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
+//! - [`fetch`]: metadata and decoded frame ranges.
+
+pub mod choose;
+pub mod fetch;
+pub mod ingest;
+
+use crate::{codec, motion, store};
+
+/// Errors of the service layer, each mapped to one HTTP status by the HTTP layer.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The upload is not a take we can read.
+    #[error("{0}")]
+    BadInput(#[from] motion::Error),
+    /// The request's own fields make no sense (unknown codec, negative bound, bad range…).
+    #[error("{0}")]
+    InvalidRequest(String),
+    #[error("{0} not found")]
+    NotFound(String),
+    /// The range asked for lies outside the take.
+    #[error("{0}")]
+    OutOfRange(String),
+    /// The request is valid but this take cannot satisfy it (e.g. BVH of point data).
+    #[error("{0}")]
+    Unsatisfiable(String),
+    #[error("codec: {0}")]
+    Codec(#[from] codec::Error),
+    #[error("store: {0}")]
+    Store(#[from] store::Error),
+    #[error("internal: {0}")]
+    Internal(String),
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Run CPU-heavy work on the blocking pool, never on the async executor.
+pub(crate) async fn blocking<T: Send + 'static>(
+    f: impl FnOnce() -> T + Send + 'static,
+) -> Result<T> {
+    tokio::task::spawn_blocking(f)
+        .await
+        .map_err(|e| Error::Internal(format!("worker failed: {e}")))
+}

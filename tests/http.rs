@@ -1,0 +1,322 @@
+//! The real server on 127.0.0.1:0, over HTTP, on SQLite and (with MOCAP_TEST_PG_URL) Postgres.
+
+mod common;
+
+use mocapstore::corpus;
+use mocapstore::http::{Application, Config};
+use mocapstore::motion::formats::{self, Format, ReadOptions};
+use mocapstore::motion::{metrics, Motion};
+use mocapstore::store::Store;
+use serde_json::Value;
+
+struct Server {
+    base: String,
+    client: reqwest::Client,
+    stop: tokio::sync::oneshot::Sender<()>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+async fn start(store: Store, max_body_bytes: usize) -> Server {
+    let config = Config {
+        listen: "127.0.0.1:0".into(),
+        database_url: String::new(),
+        max_body_bytes,
+    };
+    let app = Application::with_store(store, config).await.unwrap();
+    let base = format!("http://{}", app.local_addr());
+    let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(async move {
+        app.run_until(async {
+            let _ = rx.await;
+        })
+        .await
+        .unwrap();
+    });
+    Server {
+        base,
+        client: reqwest::Client::new(),
+        stop,
+        task,
+    }
+}
+
+impl Server {
+    async fn stop(self) {
+        let _ = self.stop.send(());
+        let _ = self.task.await;
+    }
+
+    async fn post(&self, query: &str, body: Vec<u8>) -> (u16, Value) {
+        let r = self
+            .client
+            .post(format!("{}/v1/sequences?{query}", self.base))
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        let status = r.status().as_u16();
+        (status, r.json().await.unwrap_or(Value::Null))
+    }
+
+    async fn get(&self, path: &str) -> (u16, reqwest::header::HeaderMap, Vec<u8>) {
+        let r = self
+            .client
+            .get(format!("{}{path}", self.base))
+            .send()
+            .await
+            .unwrap();
+        let status = r.status().as_u16();
+        let headers = r.headers().clone();
+        (status, headers, r.bytes().await.unwrap().to_vec())
+    }
+}
+
+fn corpus_bytes(rel: &str) -> Vec<u8> {
+    std::fs::read(corpus::root().join(rel)).unwrap()
+}
+
+fn load(bytes: &[u8], opts: &ReadOptions) -> Motion {
+    formats::read(bytes, opts).unwrap().motion
+}
+
+/// Error body shape: {"error": {"code", "message"}}.
+fn assert_error(status: u16, body: &Value, want: u16) {
+    assert_eq!(status, want, "{body}");
+    assert!(
+        body["error"]["code"].is_string() && body["error"]["message"].is_string(),
+        "{body}"
+    );
+}
+
+#[tokio::test]
+async fn ingest_fetch_and_errors_on_every_backend() {
+    for t in common::all().await {
+        let store = t.store.clone();
+        let srv = start(store.clone(), 8 << 20).await;
+        let (status, _, body) = srv.get("/healthz").await;
+        assert_eq!((status, body.as_slice()), (200, &b"ok"[..]));
+
+        // One take of each input format; NPY and JSON written from a C3D take.
+        let c3d = corpus_bytes("c3d/btkdata__others__Gait.c3d");
+        let c3d_motion = load(&c3d, &ReadOptions::default());
+        let npy = formats::write(&c3d_motion, Format::Npy).unwrap();
+        let json = formats::write(&c3d_motion, Format::Json).unwrap();
+        let uploads: Vec<(&str, Vec<u8>, String)> = vec![
+            (
+                "bvh",
+                corpus_bytes("bvh/cmu/131_02.bvh"),
+                "max_error_mm=1".into(),
+            ),
+            ("c3d", c3d.clone(), "mean_error_mm=3&codec=quant".into()),
+            (
+                "trc",
+                corpus_bytes("trc/TRCSamples__Knee.trc"),
+                "max_error_mm=0.5".into(),
+            ),
+            ("json", json, "max_error_mm=2&latency=frame".into()),
+            ("npy", npy.clone(), "max_error_mm=1&fps=100&unit=mm".into()),
+        ];
+        let mut ids = Vec::new();
+        for (kind, bytes, query) in &uploads {
+            let (status, report) = srv
+                .post(
+                    &format!("{query}&name={kind}&library=lib&tags=a,b"),
+                    bytes.clone(),
+                )
+                .await;
+            assert_eq!(status, 201, "{} {kind}: {report}", t.name);
+            let id = report["id"].as_str().unwrap().to_string();
+            // The bound holds on what is served, measured against the original here.
+            let opts = if *kind == "npy" {
+                ReadOptions {
+                    unit: Some(0.001),
+                    fps: Some(100.0),
+                    ..Default::default()
+                }
+            } else {
+                ReadOptions::default()
+            };
+            let original = load(bytes, &opts);
+            let (status, headers, served) = srv
+                .get(&format!("/v1/sequences/{id}/frames?format=f32"))
+                .await;
+            assert_eq!(status, 200);
+            assert_eq!(
+                headers["x-frames"].to_str().unwrap(),
+                original.frame_count().to_string()
+            );
+            let served: Vec<f32> = served
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+                .collect();
+            let s = metrics::compare(
+                original.positions(),
+                &served,
+                original.point_count(),
+                original.unit.to_mm(),
+            )
+            .unwrap();
+            let bound: f64 = query
+                .split('&')
+                .find_map(|kv| {
+                    kv.strip_prefix("max_error_mm=")
+                        .or(kv.strip_prefix("mean_error_mm="))
+                })
+                .unwrap()
+                .parse()
+                .unwrap();
+            if query.contains("max_error_mm") {
+                assert!(
+                    s.max_mm <= bound,
+                    "{kind}: served max {} > {bound}",
+                    s.max_mm
+                );
+            } else {
+                assert!(
+                    s.mean_mm <= bound,
+                    "{kind}: served mean {} > {bound}",
+                    s.mean_mm
+                );
+            }
+            if *kind == "json" {
+                assert_eq!(report["codec"], "quant", "latency=frame excludes mdtt");
+            }
+            ids.push((kind.to_string(), id, original));
+        }
+
+        // Ranges: frames, seconds, a subset of points, every format.
+        let (_, id, original) = &ids[0];
+        let w = original.point_count() * 3;
+        let (_, _, full) = srv
+            .get(&format!("/v1/sequences/{id}/frames?format=f32"))
+            .await;
+        let (status, h, part) = srv
+            .get(&format!(
+                "/v1/sequences/{id}/frames?start=100&end=340&format=f32"
+            ))
+            .await;
+        assert_eq!(status, 200);
+        assert_eq!(h["x-start-frame"], "100");
+        assert!(
+            part == full[100 * w * 4..340 * w * 4],
+            "a range equals the same frames of the whole"
+        );
+        // Seconds select frames whose time f / fps lies in [t0, t1): at 120.00048 fps (this
+        // take's), frame 120 is at 0.999996 s, so 1 s starts at frame 121.
+        let (status, h, secs) = srv
+            .get(&format!("/v1/sequences/{id}/frames?t0=1&t1=2&format=f32"))
+            .await;
+        assert_eq!(status, 200);
+        let first: usize = h["x-start-frame"].to_str().unwrap().parse().unwrap();
+        let n: usize = h["x-frames"].to_str().unwrap().parse().unwrap();
+        assert_eq!((first, n), (121, 120));
+        assert!(secs == full[first * w * 4..(first + n) * w * 4]);
+        let (status, _, body) = srv
+            .get(&format!(
+                "/v1/sequences/{id}/frames?start=5&end=7&points=Head,Hips"
+            ))
+            .await;
+        assert_eq!(status, 200);
+        let v: Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(v["points"], serde_json::json!(["Head", "Hips"]));
+        assert_eq!(v["frames"].as_array().unwrap().len(), 2);
+        for (format, check) in [
+            ("csv", &b"frame,time,"[..]),
+            ("npy", &b"\x93NUMPY"[..]),
+            ("trc", &b"PathFileType"[..]),
+            ("json", &b"{"[..]),
+        ] {
+            let (status, _, body) = srv
+                .get(&format!(
+                    "/v1/sequences/{id}/frames?start=0&end=10&format={format}"
+                ))
+                .await;
+            assert_eq!(status, 200, "{format}");
+            assert!(body.starts_with(check), "{format}");
+        }
+        let (status, _, body) = srv
+            .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
+            .await;
+        assert_error(status, &serde_json::from_slice(&body).unwrap(), 409);
+
+        // Metadata, with the decision record.
+        let (status, _, body) = srv.get(&format!("/v1/sequences/{id}")).await;
+        assert_eq!(status, 200);
+        let meta: Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(meta["tags"], serde_json::json!(["a", "b"]));
+        assert!(meta["meta"]["decision"]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("meets max 1 mm"));
+
+        // Bad requests: each a 4xx JSON error, and nothing stored.
+        let before = (
+            store.count().await.unwrap(),
+            store.chunk_count().await.unwrap(),
+        );
+        let bvh = corpus_bytes("bvh/cmu/131_02.bvh");
+        for (query, body, want) in [
+            ("", b"not a mocap file".to_vec(), 422),
+            ("", bvh[..bvh.len() / 3].to_vec(), 422),
+            ("", Vec::new(), 400),
+            ("codec=zip", bvh.clone(), 400),
+            ("max_error_mm=-1", bvh.clone(), 400),
+            ("max_error_mm=NaN", bvh.clone(), 400),
+            ("max_error_mm=1&mean_error_mm=1", bvh.clone(), 400),
+            ("latency=soon", bvh.clone(), 400),
+            ("unit=furlong", bvh.clone(), 400),
+            ("fps=0", bvh.clone(), 400),
+            ("", corpus_bytes("c3d/btkdata__others__1123x01EMG.c3d"), 409),
+            ("", vec![0u8; 9 << 20], 413),
+        ] {
+            let (status, body) = srv.post(query, body).await;
+            assert_error(status, &body, want);
+        }
+        for (path, want) in [
+            ("/v1/sequences/nope".to_string(), 404),
+            ("/v1/sequences/nope/frames".to_string(), 404),
+            (format!("/v1/sequences/{id}/frames?start=0&end=99999"), 416),
+            (format!("/v1/sequences/{id}/frames?start=9&end=3"), 400),
+            (format!("/v1/sequences/{id}/frames?start=x"), 400),
+            (format!("/v1/sequences/{id}/frames?t0=1&start=2"), 400),
+            (format!("/v1/sequences/{id}/frames?points=Nose"), 400),
+            (format!("/v1/sequences/{id}/frames?format=xls"), 400),
+        ] {
+            let (status, _, body) = srv.get(&path).await;
+            assert_error(
+                status,
+                &serde_json::from_slice(&body).unwrap_or(Value::Null),
+                want,
+            );
+        }
+        assert_eq!(
+            (
+                store.count().await.unwrap(),
+                store.chunk_count().await.unwrap()
+            ),
+            before
+        );
+
+        // Delete.
+        let r = srv
+            .client
+            .delete(format!("{}/v1/sequences/{id}", srv.base))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 204);
+        let r = srv
+            .client
+            .delete(format!("{}/v1/sequences/{id}", srv.base))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 404);
+        let (_, _, metrics_text) = srv.get("/metrics").await;
+        assert!(String::from_utf8(metrics_text)
+            .unwrap()
+            .contains("mocapstore_ingested_frames_total"));
+        srv.stop().await;
+        t.finish().await;
+    }
+}
