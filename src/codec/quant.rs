@@ -176,7 +176,7 @@ fn choose_reference(r: &[i32], c: usize, frames: usize) -> usize {
 }
 
 /// Integers of one chunk (`frames × w`) → bytes: the predictor order, then per trajectory
-/// its reference (see [`choose_reference`]) and the differences of its
+/// its reference (`choose_reference`) and the differences of its
 /// [`prediction_residuals`] from the reference's, through the range coder, each in the
 /// context of the previous difference and of the neighbouring trajectory's residual.
 pub fn encode_block(q: &[i32], frames: usize, w: usize, order: u8) -> Vec<u8> {

@@ -3,7 +3,7 @@
 //! when the store opens.
 //!
 //! Both backends run the same SQL text (numbered `$n` placeholders, each used once in order,
-//! which SQLite binds by position too); [`dispatch!`] expands one body for either pool, so a
+//! which SQLite binds by position too); the `dispatch!` macro expands one body for either pool, so a
 //! query is written once.
 //!
 //! A take and its chunks go in one transaction: readers never see half a take, and a failed

@@ -14,7 +14,7 @@ pub struct Params {
     pub coef_step: f64,
     /// Bound the residual layer enforces; 0 when there is none (mean bounds).
     pub residual_t: f64,
-    /// Column b of the basis holds multiples of 2^-basis_bits[b] (the paper: 16 for all).
+    /// Column b of the basis holds multiples of `2^-basis_bits[b]` (the paper: 16 for all).
     pub basis_bits: Vec<u8>,
     pub mean: Vec<f32>,
     /// Column-major (`k` columns of `w`), already dequantised: column b is contiguous, which
