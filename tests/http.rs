@@ -2,74 +2,12 @@
 
 mod common;
 
+use common::start;
+
 use mocapstore::corpus;
-use mocapstore::http::{Application, Config};
 use mocapstore::motion::formats::{self, Format, ReadOptions};
 use mocapstore::motion::{metrics, Motion};
-use mocapstore::store::Store;
 use serde_json::Value;
-
-struct Server {
-    base: String,
-    client: reqwest::Client,
-    stop: tokio::sync::oneshot::Sender<()>,
-    task: tokio::task::JoinHandle<()>,
-}
-
-async fn start(store: Store, max_body_bytes: usize) -> Server {
-    let config = Config {
-        listen: "127.0.0.1:0".into(),
-        database_url: String::new(),
-        max_body_bytes,
-    };
-    let app = Application::with_store(store, config).await.unwrap();
-    let base = format!("http://{}", app.local_addr());
-    let (stop, rx) = tokio::sync::oneshot::channel::<()>();
-    let task = tokio::spawn(async move {
-        app.run_until(async {
-            let _ = rx.await;
-        })
-        .await
-        .unwrap();
-    });
-    Server {
-        base,
-        client: reqwest::Client::new(),
-        stop,
-        task,
-    }
-}
-
-impl Server {
-    async fn stop(self) {
-        let _ = self.stop.send(());
-        let _ = self.task.await;
-    }
-
-    async fn post(&self, query: &str, body: Vec<u8>) -> (u16, Value) {
-        let r = self
-            .client
-            .post(format!("{}/v1/sequences?{query}", self.base))
-            .body(body)
-            .send()
-            .await
-            .unwrap();
-        let status = r.status().as_u16();
-        (status, r.json().await.unwrap_or(Value::Null))
-    }
-
-    async fn get(&self, path: &str) -> (u16, reqwest::header::HeaderMap, Vec<u8>) {
-        let r = self
-            .client
-            .get(format!("{}{path}", self.base))
-            .send()
-            .await
-            .unwrap();
-        let status = r.status().as_u16();
-        let headers = r.headers().clone();
-        (status, headers, r.bytes().await.unwrap().to_vec())
-    }
-}
 
 fn corpus_bytes(rel: &str) -> Vec<u8> {
     std::fs::read(corpus::root().join(rel)).unwrap()

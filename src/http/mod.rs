@@ -4,6 +4,7 @@
 //! tests start the real server on `127.0.0.1:0` and read the port back.
 
 mod error;
+mod library;
 mod metrics;
 mod sequences;
 
@@ -53,11 +54,17 @@ pub fn router(state: AppState, max_body_bytes: usize) -> Router {
     Router::new()
         .route("/healthz", get(|| async { "ok" }))
         .route("/metrics", get(metrics::render))
-        .route("/v1/sequences", axum::routing::post(sequences::create))
+        .route(
+            "/v1/sequences",
+            axum::routing::post(sequences::create).get(library::list),
+        )
         .route(
             "/v1/sequences/{id}",
-            get(sequences::get).delete(sequences::delete),
+            get(sequences::get)
+                .delete(sequences::delete)
+                .patch(library::patch),
         )
+        .route("/v1/stats", get(library::stats))
         .route("/v1/sequences/{id}/frames", get(sequences::frames))
         .layer(DefaultBodyLimit::max(max_body_bytes))
         .layer(axum::middleware::from_fn_with_state(

@@ -159,7 +159,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         id: id.clone(),
         name: name.clone(),
         library: req.library.clone(),
-        tags: dedup(&req.tags),
+        tags: super::normalise_tags(&req.tags),
         fps: m.fps,
         frames: m.frame_count() as i64,
         points: m.point_count() as i64,
@@ -199,17 +199,6 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         decision,
         warnings: loaded.warnings,
     })
-}
-
-fn dedup(tags: &[String]) -> Vec<String> {
-    let mut t: Vec<String> = tags
-        .iter()
-        .map(|s| s.trim().to_string())
-        .filter(|s| !s.is_empty())
-        .collect();
-    t.sort();
-    t.dedup();
-    t
 }
 
 fn now_ms() -> i64 {

@@ -5,10 +5,12 @@
 //! - [`choose`]: which codecs compete for a take, and the decision record.
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
 //! - [`fetch`]: metadata and decoded frame ranges.
+//! - [`library`]: listings, statistics, edits.
 
 pub mod choose;
 pub mod fetch;
 pub mod ingest;
+pub mod library;
 
 use crate::{codec, motion, store};
 
@@ -46,4 +48,16 @@ pub(crate) async fn blocking<T: Send + 'static>(
     tokio::task::spawn_blocking(f)
         .await
         .map_err(|e| Error::Internal(format!("worker failed: {e}")))
+}
+
+/// Tags as stored: trimmed, non-empty, sorted, unique.
+pub(crate) fn normalise_tags(tags: &[String]) -> Vec<String> {
+    let mut t: Vec<String> = tags
+        .iter()
+        .map(|s| s.trim().to_string())
+        .filter(|s| !s.is_empty())
+        .collect();
+    t.sort();
+    t.dedup();
+    t
 }

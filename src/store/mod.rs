@@ -9,6 +9,7 @@
 //! A take and its chunks go in one transaction: readers never see half a take, and a failed
 //! ingest leaves nothing behind. Chunk payloads are checked against their CRC-32C on read.
 
+pub mod query;
 mod rows;
 
 use std::str::FromStr;
@@ -20,6 +21,7 @@ use sqlx::sqlite::{
 };
 use sqlx::Row;
 
+pub use query::{Cursor, Filter, SortKey, StatRow, Totals};
 pub use rows::{ChunkRow, NewSequence, SequenceRow};
 
 /// Errors of the store layer.
@@ -191,6 +193,163 @@ impl Store {
         dispatch!(self, pool => {
             let row = sqlx::query("SELECT COUNT(*) AS n FROM chunks").fetch_one(pool).await?;
             Ok(row.try_get::<i64, _>("n")?)
+        })
+    }
+}
+
+/// Bind `values` in order to a query of either backend.
+macro_rules! bind_all {
+    ($q:expr, $values:expr) => {{
+        let mut q = $q;
+        for v in $values {
+            q = match v {
+                query::Value::Int(i) => q.bind(*i),
+                query::Value::Real(r) => q.bind(*r),
+                query::Value::Text(t) => q.bind(t.clone()),
+            };
+        }
+        q
+    }};
+}
+
+/// One page of a listing.
+#[derive(Debug, Clone)]
+pub struct Page {
+    pub items: Vec<SequenceRow>,
+    /// Pass back to get the next page; `None` on the last.
+    pub next: Option<Cursor>,
+}
+
+impl Store {
+    /// Takes matching `filter`, sorted, `limit` at a time after `cursor`.
+    pub async fn list(
+        &self,
+        filter: &Filter,
+        sort: SortKey,
+        descending: bool,
+        limit: usize,
+        cursor: Option<&Cursor>,
+    ) -> Result<Page> {
+        let w = query::where_clause(filter, cursor);
+        let sql = format!(
+            "SELECT {} FROM sequences {} {} LIMIT {}",
+            rows::SEQUENCE_COLUMNS,
+            w.text,
+            query::order_by(sort, descending),
+            limit + 1
+        );
+        let mut items: Vec<SequenceRow> = dispatch!(self, pool => {
+            let rows = bind_all!(sqlx::query(&sql), &w.values).fetch_all(pool).await?;
+            rows.iter().map(rows::sequence_from_row).collect::<Result<Vec<_>>>()?
+        });
+        let more = items.len() > limit;
+        items.truncate(limit);
+        self.attach_tags(&mut items).await?;
+        let next = match (more, items.last()) {
+            (true, Some(last)) => Some(Cursor {
+                sort,
+                descending,
+                value: query::sort_value(sort, last),
+                id: last.id.clone(),
+            }),
+            _ => None,
+        };
+        Ok(Page { items, next })
+    }
+
+    async fn attach_tags(&self, items: &mut [SequenceRow]) -> Result<()> {
+        if items.is_empty() {
+            return Ok(());
+        }
+        let marks: Vec<String> = (1..=items.len()).map(|i| format!("${i}")).collect();
+        let sql = format!(
+            "SELECT sequence_id, tag FROM sequence_tags WHERE sequence_id IN ({}) ORDER BY tag",
+            marks.join(", ")
+        );
+        let ids: Vec<query::Value> = items
+            .iter()
+            .map(|s| query::Value::Text(s.id.clone()))
+            .collect();
+        let pairs: Vec<(String, String)> = dispatch!(self, pool => {
+            let rows = bind_all!(sqlx::query(&sql), &ids).fetch_all(pool).await?;
+            rows.iter()
+                .map(|r| Ok((r.try_get::<String, _>("sequence_id")?, r.try_get::<String, _>("tag")?)))
+                .collect::<Result<Vec<_>>>()?
+        });
+        for s in items.iter_mut() {
+            s.tags = pairs
+                .iter()
+                .filter(|(id, _)| *id == s.id)
+                .map(|(_, t)| t.clone())
+                .collect();
+        }
+        Ok(())
+    }
+
+    /// The numbers statistics aggregate, for every take matching `filter`.
+    pub async fn stat_rows(&self, filter: &Filter) -> Result<Vec<StatRow>> {
+        let w = query::where_clause(filter, None);
+        let sql = format!(
+            "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, max_mm              FROM sequences {}",
+            w.text
+        );
+        dispatch!(self, pool => {
+            let rows = bind_all!(sqlx::query(&sql), &w.values).fetch_all(pool).await?;
+            rows.iter()
+                .map(|r| {
+                    Ok(StatRow {
+                        library: r.try_get("library")?,
+                        codec: r.try_get("codec")?,
+                        frames: r.try_get("frames")?,
+                        points: r.try_get("points")?,
+                        duration_s: r.try_get("duration_s")?,
+                        raw_bytes: r.try_get("raw_bytes")?,
+                        stored_bytes: r.try_get("stored_bytes")?,
+                        mean_mm: r.try_get("mean_mm")?,
+                        max_mm: r.try_get("max_mm")?,
+                    })
+                })
+                .collect()
+        })
+    }
+
+    /// Change a take's name, library and/or tags (tags replace the old set); false if no
+    /// such take.
+    pub async fn update(
+        &self,
+        id: &str,
+        name: Option<&str>,
+        library: Option<&str>,
+        tags: Option<&[String]>,
+    ) -> Result<bool> {
+        dispatch!(self, pool => {
+            let mut tx = pool.begin().await?;
+            let found = sqlx::query("SELECT id FROM sequences WHERE id = $1")
+                .bind(id)
+                .fetch_optional(&mut *tx)
+                .await?
+                .is_some();
+            if !found {
+                return Ok(false);
+            }
+            if let Some(n) = name {
+                sqlx::query("UPDATE sequences SET name = $1 WHERE id = $2").bind(n).bind(id).execute(&mut *tx).await?;
+            }
+            if let Some(l) = library {
+                sqlx::query("UPDATE sequences SET library = $1 WHERE id = $2").bind(l).bind(id).execute(&mut *tx).await?;
+            }
+            if let Some(tags) = tags {
+                sqlx::query("DELETE FROM sequence_tags WHERE sequence_id = $1").bind(id).execute(&mut *tx).await?;
+                for t in tags {
+                    sqlx::query("INSERT INTO sequence_tags (sequence_id, tag) VALUES ($1, $2)")
+                        .bind(id)
+                        .bind(t)
+                        .execute(&mut *tx)
+                        .await?;
+                }
+            }
+            tx.commit().await?;
+            Ok(true)
         })
     }
 }

@@ -1,0 +1,130 @@
+//! `GET /v1/sequences` (listing), `PATCH /v1/sequences/{id}`, `GET /v1/stats`.
+
+use axum::extract::rejection::{JsonRejection, QueryRejection};
+use axum::extract::{Path, Query, State};
+use axum::Json;
+use serde::Deserialize;
+
+use super::error::ApiError;
+use super::AppState;
+use crate::service::library::{self, Listing, Stats};
+use crate::store::{Filter, SequenceRow, SortKey};
+
+/// Query of a listing: the filter fields, then sort, order, limit and cursor. Written out
+/// rather than flattened: urlencoded flattening cannot parse numbers.
+#[derive(Deserialize)]
+pub struct ListQuery {
+    library: Option<String>,
+    tag: Option<String>,
+    name_prefix: Option<String>,
+    fps: Option<f64>,
+    points: Option<i64>,
+    layout: Option<String>,
+    codec: Option<String>,
+    min_duration_s: Option<f64>,
+    max_duration_s: Option<f64>,
+    min_frames: Option<i64>,
+    max_frames: Option<i64>,
+    min_ratio: Option<f64>,
+    created_after: Option<i64>,
+    created_before: Option<i64>,
+    sort: Option<SortKey>,
+    order: Option<String>,
+    limit: Option<usize>,
+    cursor: Option<String>,
+}
+
+impl ListQuery {
+    fn filter(&self) -> Filter {
+        Filter {
+            library: self.library.clone(),
+            tag: self.tag.clone(),
+            name_prefix: self.name_prefix.clone(),
+            fps: self.fps,
+            points: self.points,
+            layout: self.layout.clone(),
+            codec: self.codec.clone(),
+            min_duration_s: self.min_duration_s,
+            max_duration_s: self.max_duration_s,
+            min_frames: self.min_frames,
+            max_frames: self.max_frames,
+            min_ratio: self.min_ratio,
+            created_after: self.created_after,
+            created_before: self.created_before,
+        }
+    }
+}
+
+pub async fn list(
+    State(state): State<AppState>,
+    query: Result<Query<ListQuery>, QueryRejection>,
+) -> Result<Json<Listing>, ApiError> {
+    let Query(q) = query?;
+    let descending = match q.order.as_deref() {
+        None => matches!(q.sort, None | Some(SortKey::Created)),
+        Some("asc") => false,
+        Some("desc") => true,
+        Some(o) => {
+            return Err(ApiError::bad_request(format!(
+                "order must be asc or desc, got {o:?}"
+            )))
+        }
+    };
+    let filter = q.filter();
+    let listing = library::list(
+        &state.store,
+        &filter,
+        q.sort.unwrap_or_default(),
+        descending,
+        q.limit,
+        q.cursor.as_deref(),
+    )
+    .await?;
+    Ok(Json(listing))
+}
+
+#[derive(Deserialize)]
+pub struct StatsQuery {
+    library: Option<String>,
+    tag: Option<String>,
+    codec: Option<String>,
+}
+
+pub async fn stats(
+    State(state): State<AppState>,
+    query: Result<Query<StatsQuery>, QueryRejection>,
+) -> Result<Json<Stats>, ApiError> {
+    let Query(q) = query?;
+    let filter = Filter {
+        library: q.library,
+        tag: q.tag,
+        codec: q.codec,
+        ..Filter::default()
+    };
+    Ok(Json(library::stats(&state.store, &filter).await?))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Patch {
+    name: Option<String>,
+    library: Option<String>,
+    tags: Option<Vec<String>>,
+}
+
+pub async fn patch(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    body: Result<Json<Patch>, JsonRejection>,
+) -> Result<Json<SequenceRow>, ApiError> {
+    let Json(p) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let row = library::update(
+        &state.store,
+        &id,
+        p.name.as_deref(),
+        p.library.as_deref(),
+        p.tags.as_deref(),
+    )
+    .await?;
+    Ok(Json(row))
+}

@@ -1,0 +1,111 @@
+//! The library as a whole: listings with filters and cursors, statistics, edits.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::{Error, Result};
+use crate::store::{Cursor, Filter, SequenceRow, SortKey, Store, Totals};
+
+pub const MAX_PAGE: usize = 500;
+
+/// One page of takes and the cursor of the next.
+#[derive(Debug, Clone, Serialize)]
+pub struct Listing {
+    pub items: Vec<SequenceRow>,
+    pub next_cursor: Option<String>,
+}
+
+pub async fn list(
+    store: &Store,
+    filter: &Filter,
+    sort: SortKey,
+    descending: bool,
+    limit: Option<usize>,
+    cursor: Option<&str>,
+) -> Result<Listing> {
+    let limit = limit.unwrap_or(50);
+    if limit == 0 || limit > MAX_PAGE {
+        return Err(Error::InvalidRequest(format!(
+            "limit must be 1..={MAX_PAGE}, got {limit}"
+        )));
+    }
+    let cursor = match cursor {
+        None => None,
+        Some(c) => {
+            let c = Cursor::decode(c).ok_or_else(|| {
+                Error::InvalidRequest("cursor is not one this server issued".into())
+            })?;
+            if c.sort != sort || c.descending != descending {
+                return Err(Error::InvalidRequest(
+                    "cursor belongs to a listing with another sort order".into(),
+                ));
+            }
+            Some(c)
+        }
+    };
+    let page = store
+        .list(filter, sort, descending, limit, cursor.as_ref())
+        .await?;
+    Ok(Listing {
+        items: page.items,
+        next_cursor: page.next.map(|c| c.encode()),
+    })
+}
+
+/// Library-wide statistics: totals, and the same per codec and per library.
+#[derive(Debug, Clone, Serialize)]
+pub struct Stats {
+    pub total: Totals,
+    pub by_codec: BTreeMap<String, Totals>,
+    pub by_library: BTreeMap<String, Totals>,
+}
+
+pub async fn stats(store: &Store, filter: &Filter) -> Result<Stats> {
+    let rows = store.stat_rows(filter).await?;
+    let mut codecs: Vec<&str> = rows.iter().map(|r| r.codec.as_str()).collect();
+    codecs.sort();
+    codecs.dedup();
+    let mut libraries: Vec<&str> = rows.iter().map(|r| r.library.as_str()).collect();
+    libraries.sort();
+    libraries.dedup();
+    Ok(Stats {
+        total: crate::store::query::totals(rows.iter()),
+        by_codec: codecs
+            .iter()
+            .map(|c| {
+                (
+                    c.to_string(),
+                    crate::store::query::totals(rows.iter().filter(|r| r.codec == *c)),
+                )
+            })
+            .collect(),
+        by_library: libraries
+            .iter()
+            .map(|l| {
+                (
+                    l.to_string(),
+                    crate::store::query::totals(rows.iter().filter(|r| r.library == *l)),
+                )
+            })
+            .collect(),
+    })
+}
+
+/// Rename, move to another library and/or replace the tags of a take.
+pub async fn update(
+    store: &Store,
+    id: &str,
+    name: Option<&str>,
+    library: Option<&str>,
+    tags: Option<&[String]>,
+) -> Result<SequenceRow> {
+    if name.is_some_and(|n| n.trim().is_empty()) {
+        return Err(Error::InvalidRequest("name must not be empty".into()));
+    }
+    let tags = tags.map(super::normalise_tags);
+    if !store.update(id, name, library, tags.as_deref()).await? {
+        return Err(Error::NotFound(format!("sequence {id}")));
+    }
+    super::fetch::sequence(store, id).await
+}

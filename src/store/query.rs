@@ -1,0 +1,312 @@
+//! Library queries: filters, sorting, keyset (cursor) pagination, and aggregate statistics.
+//! SQL is assembled with numbered placeholders and the values bound in order, so one text
+//! serves both backends.
+
+use serde::{Deserialize, Serialize};
+
+/// Filters on takes; every field is optional and they combine with AND.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+pub struct Filter {
+    pub library: Option<String>,
+    pub tag: Option<String>,
+    pub name_prefix: Option<String>,
+    pub fps: Option<f64>,
+    pub points: Option<i64>,
+    pub layout: Option<String>,
+    pub codec: Option<String>,
+    pub min_duration_s: Option<f64>,
+    pub max_duration_s: Option<f64>,
+    pub min_frames: Option<i64>,
+    pub max_frames: Option<i64>,
+    pub min_ratio: Option<f64>,
+    /// Milliseconds since the Unix epoch.
+    pub created_after: Option<i64>,
+    pub created_before: Option<i64>,
+}
+
+/// Sort keys; every sort ends with the id, so pages are stable.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SortKey {
+    #[default]
+    Created,
+    Name,
+    Duration,
+    Frames,
+    Ratio,
+}
+
+impl SortKey {
+    fn column(self) -> &'static str {
+        match self {
+            SortKey::Created => "created_at",
+            SortKey::Name => "name",
+            SortKey::Duration => "duration_s",
+            SortKey::Frames => "frames",
+            SortKey::Ratio => "ratio",
+        }
+    }
+}
+
+/// A value to bind, in placeholder order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Value {
+    Int(i64),
+    Real(f64),
+    Text(String),
+}
+
+/// Where the previous page ended: the sort value and id of its last take.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Cursor {
+    pub sort: SortKey,
+    pub descending: bool,
+    pub value: Value,
+    pub id: String,
+}
+
+impl Cursor {
+    /// Opaque to clients: hex of its JSON.
+    pub fn encode(&self) -> String {
+        serde_json::to_string(self)
+            .expect("serialisable")
+            .bytes()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
+    pub fn decode(s: &str) -> Option<Cursor> {
+        if s.len() % 2 != 0 || s.len() > 4096 {
+            return None;
+        }
+        let bytes: Option<Vec<u8>> = (0..s.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(s.get(i..i + 2)?, 16).ok())
+            .collect();
+        serde_json::from_slice(&bytes?).ok()
+    }
+}
+
+/// A `WHERE` clause and its values, numbered from `$1`.
+pub struct Sql {
+    pub text: String,
+    pub values: Vec<Value>,
+}
+
+impl Sql {
+    fn push(&mut self, clause: &str, v: Value) {
+        self.values.push(v);
+        let n = self.values.len();
+        self.text += &format!(" AND {}", clause.replace('?', &format!("${n}")));
+    }
+}
+
+/// `WHERE …` for a filter (and, for a page, the cursor).
+pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
+    let mut s = Sql {
+        text: "WHERE 1 = 1".into(),
+        values: Vec::new(),
+    };
+    if let Some(v) = &f.library {
+        s.push("library = ?", Value::Text(v.clone()));
+    }
+    if let Some(v) = &f.tag {
+        s.push(
+            "id IN (SELECT sequence_id FROM sequence_tags WHERE tag = ?)",
+            Value::Text(v.clone()),
+        );
+    }
+    if let Some(v) = &f.name_prefix {
+        // Range on the name rather than LIKE: no wildcard escaping, and it uses an index.
+        s.push("name >= ?", Value::Text(v.clone()));
+        s.push("name < ?", Value::Text(format!("{v}\u{10FFFF}")));
+    }
+    if let Some(v) = f.fps {
+        // Frame rates like 120.00048 come from 1/frame-time; match to 0.1 %.
+        s.push("fps >= ?", Value::Real(v * 0.999));
+        s.push("fps <= ?", Value::Real(v * 1.001));
+    }
+    if let Some(v) = f.points {
+        s.push("points = ?", Value::Int(v));
+    }
+    if let Some(v) = &f.layout {
+        s.push("layout = ?", Value::Text(v.clone()));
+    }
+    if let Some(v) = &f.codec {
+        s.push("codec = ?", Value::Text(v.clone()));
+    }
+    for (v, clause) in [
+        (f.min_duration_s, "duration_s >= ?"),
+        (f.max_duration_s, "duration_s <= ?"),
+        (f.min_ratio, "ratio >= ?"),
+    ] {
+        if let Some(v) = v {
+            s.push(clause, Value::Real(v));
+        }
+    }
+    for (v, clause) in [
+        (f.min_frames, "frames >= ?"),
+        (f.max_frames, "frames <= ?"),
+        (f.created_after, "created_at > ?"),
+        (f.created_before, "created_at < ?"),
+    ] {
+        if let Some(v) = v {
+            s.push(clause, Value::Int(v));
+        }
+    }
+    if let Some(c) = cursor {
+        let col = c.sort.column();
+        let op = if c.descending { "<" } else { ">" };
+        s.values.push(c.value.clone());
+        s.values.push(Value::Text(c.id.clone()));
+        let n = s.values.len();
+        s.text += &format!(" AND ({col}, id) {op} (${}, ${n})", n - 1);
+    }
+    s
+}
+
+/// `ORDER BY …` for a sort.
+pub fn order_by(sort: SortKey, descending: bool) -> String {
+    let dir = if descending { "DESC" } else { "ASC" };
+    format!("ORDER BY {} {dir}, id {dir}", sort.column())
+}
+
+/// The cursor value of a row for a sort key.
+pub fn sort_value(sort: SortKey, row: &super::SequenceRow) -> Value {
+    match sort {
+        SortKey::Created => Value::Int(row.created_at),
+        SortKey::Name => Value::Text(row.name.clone()),
+        SortKey::Duration => Value::Real(row.duration_s),
+        SortKey::Frames => Value::Int(row.frames),
+        SortKey::Ratio => Value::Real(row.ratio),
+    }
+}
+
+/// Totals over a set of takes.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Totals {
+    pub takes: i64,
+    pub frames: i64,
+    pub hours: f64,
+    pub raw_bytes: i64,
+    pub stored_bytes: i64,
+    /// raw_bytes / stored_bytes over the set (not the mean of per-take ratios).
+    pub ratio: f64,
+    pub mean_mm: f64,
+    pub max_mm: f64,
+    /// Percentiles of the per-take max error.
+    pub max_mm_p50: f64,
+    pub max_mm_p95: f64,
+}
+
+/// One take's numbers, enough to aggregate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StatRow {
+    pub library: String,
+    pub codec: String,
+    pub frames: i64,
+    pub points: i64,
+    pub duration_s: f64,
+    pub raw_bytes: i64,
+    pub stored_bytes: i64,
+    pub mean_mm: f64,
+    pub max_mm: f64,
+}
+
+pub fn totals<'a>(rows: impl Iterator<Item = &'a StatRow>) -> Totals {
+    let rows: Vec<&StatRow> = rows.collect();
+    let mut t = Totals {
+        takes: rows.len() as i64,
+        ..Totals::default()
+    };
+    let mut samples = 0f64;
+    let mut maxes: Vec<f64> = Vec::with_capacity(rows.len());
+    for r in &rows {
+        t.frames += r.frames;
+        t.hours += r.duration_s / 3600.0;
+        t.raw_bytes += r.raw_bytes;
+        t.stored_bytes += r.stored_bytes;
+        let n = (r.frames * r.points) as f64;
+        t.mean_mm += r.mean_mm * n;
+        samples += n;
+        t.max_mm = t.max_mm.max(r.max_mm);
+        maxes.push(r.max_mm);
+    }
+    if samples > 0.0 {
+        t.mean_mm /= samples;
+    }
+    if t.stored_bytes > 0 {
+        t.ratio = t.raw_bytes as f64 / t.stored_bytes as f64;
+    }
+    maxes.sort_by(f64::total_cmp);
+    let pct = |p: f64| {
+        if maxes.is_empty() {
+            0.0
+        } else {
+            maxes[((maxes.len() - 1) as f64 * p).round() as usize]
+        }
+    };
+    t.max_mm_p50 = pct(0.5);
+    t.max_mm_p95 = pct(0.95);
+    t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cursors_round_trip_and_reject_garbage() {
+        let c = Cursor {
+            sort: SortKey::Ratio,
+            descending: true,
+            value: Value::Real(12.5),
+            id: "abc".into(),
+        };
+        assert_eq!(Cursor::decode(&c.encode()), Some(c));
+        assert_eq!(Cursor::decode("zz"), None);
+        assert_eq!(Cursor::decode("abc"), None);
+    }
+
+    #[test]
+    fn where_clause_numbers_placeholders_in_order() {
+        let f = Filter {
+            library: Some("cmu".into()),
+            min_frames: Some(10),
+            ..Filter::default()
+        };
+        let c = Cursor {
+            sort: SortKey::Name,
+            descending: false,
+            value: Value::Text("m".into()),
+            id: "x".into(),
+        };
+        let s = where_clause(&f, Some(&c));
+        assert_eq!(
+            s.text,
+            "WHERE 1 = 1 AND library = $1 AND frames >= $2 AND (name, id) > ($3, $4)"
+        );
+        assert_eq!(s.values.len(), 4);
+    }
+
+    #[test]
+    fn totals_weight_errors_by_samples() {
+        let row = |frames, mean, max| StatRow {
+            library: "l".into(),
+            codec: "quant".into(),
+            frames,
+            points: 10,
+            duration_s: frames as f64 / 100.0,
+            raw_bytes: frames * 120,
+            stored_bytes: frames * 12,
+            mean_mm: mean,
+            max_mm: max,
+        };
+        let rows = [row(100, 1.0, 2.0), row(300, 2.0, 4.0)];
+        let t = totals(rows.iter());
+        assert_eq!((t.takes, t.frames), (2, 400));
+        assert!((t.mean_mm - 1.75).abs() < 1e-12);
+        assert_eq!((t.max_mm, t.ratio), (4.0, 10.0));
+    }
+}
