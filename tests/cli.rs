@@ -1,5 +1,7 @@
 //! The `mocapstore` binary as a user runs it.
 
+mod common;
+
 use std::process::Command;
 
 use mocapstore::corpus;
@@ -70,4 +72,44 @@ fn convert_round_trips_and_explains_errors() {
     let (ok, _, err) = mocapstore(&["convert", &c3d, &json, "--unit", "furlong"]);
     assert!(!ok && err.contains("furlong"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[tokio::test]
+async fn ingest_uploads_a_folder_and_lists_failures() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let base = srv.base.clone();
+    let trc = corpus::root().join("trc").display().to_string();
+    let out = tokio::task::spawn_blocking(move || {
+        Command::new(env!("CARGO_BIN_EXE_mocapstore"))
+            .args([
+                "ingest",
+                &trc,
+                "--server",
+                &base,
+                "--library",
+                "trc",
+                "--max-error-mm",
+                "2",
+            ])
+            .output()
+            .expect("binary runs")
+    })
+    .await
+    .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // Empty.trc and Truncated.trc cannot be read; the other 11 store.
+    assert!(
+        !out.status.success(),
+        "a failed file makes the exit status non-zero"
+    );
+    assert!(stdout.contains("11 stored, 2 failed"), "{stdout}");
+    assert!(
+        stderr.contains("TRCSamples__Empty.trc") && stderr.contains("TRCSamples__Truncated.trc"),
+        "{stderr}"
+    );
+    assert_eq!(t.store.count().await.unwrap(), 11);
+    srv.stop().await;
+    t.finish().await;
 }

@@ -66,7 +66,8 @@ impl Row {
     }
 }
 
-fn collect_files(paths: &[PathBuf]) -> Vec<PathBuf> {
+/// Mocap files under `paths`, recursively, sorted.
+pub(super) fn collect_files(paths: &[PathBuf]) -> Vec<PathBuf> {
     let mut out = Vec::new();
     let mut stack: Vec<PathBuf> = paths.to_vec();
     while let Some(p) = stack.pop() {

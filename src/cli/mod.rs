@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand};
 
 mod bench;
 mod convert;
+mod ingest;
 mod inspect;
 mod plot;
 
@@ -31,6 +32,8 @@ enum Command {
     Convert(convert::ConvertArgs),
     /// Compare codecs on real files: ratio, errors, speed (Markdown, CSV, plot).
     Bench(bench::BenchArgs),
+    /// Upload files or whole folders to a running service.
+    Ingest(ingest::IngestArgs),
 }
 
 #[derive(Args)]
@@ -85,6 +88,7 @@ pub fn main() -> ExitCode {
         Command::Inspect(args) => inspect::run(&args),
         Command::Convert(args) => convert::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Ingest(args) => ingest::run(&args),
     }
 }
 

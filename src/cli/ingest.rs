@@ -1,0 +1,176 @@
+//! `mocapstore ingest DIR|FILE… --server URL`: upload a folder of takes with a progress
+//! bar and a few uploads in flight, then a summary; exit non-zero if any file failed.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::Value;
+use tokio::sync::Semaphore;
+
+#[derive(Args)]
+pub struct IngestArgs {
+    /// Files or folders (searched recursively for .bvh .c3d .trc .json .npy).
+    #[arg(required = true)]
+    paths: Vec<PathBuf>,
+    /// The service to upload to.
+    #[arg(long, env = "MOCAP_SERVER", default_value = "http://127.0.0.1:8080")]
+    server: String,
+    #[arg(long)]
+    library: Option<String>,
+    /// Comma-separated tags for every file.
+    #[arg(long)]
+    tags: Option<String>,
+    #[arg(long = "max-error-mm")]
+    max_error_mm: Option<f64>,
+    #[arg(long = "mean-error-mm")]
+    mean_error_mm: Option<f64>,
+    /// auto, or a codec id.
+    #[arg(long)]
+    codec: Option<String>,
+    /// frame, clip, sequence or any.
+    #[arg(long)]
+    latency: Option<String>,
+    /// Unit of the files (mm, cm, m, in, cmu or metres per unit).
+    #[arg(long)]
+    unit: Option<String>,
+    /// Uploads in flight at once.
+    #[arg(long, default_value_t = 4)]
+    concurrency: usize,
+}
+
+struct Outcome {
+    file: String,
+    result: Result<Value, String>,
+}
+
+pub fn run(args: &IngestArgs) -> ExitCode {
+    let files = super::bench::collect_files(&args.paths);
+    if files.is_empty() {
+        eprintln!("mocapstore ingest: no mocap files under {:?}", args.paths);
+        return ExitCode::FAILURE;
+    }
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("mocapstore ingest: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let outcomes = runtime.block_on(upload_all(args, files));
+    let failed: Vec<&Outcome> = outcomes.iter().filter(|o| o.result.is_err()).collect();
+    println!(
+        "{:<48} {:<8} {:>8} {:>9} {:>9}",
+        "file", "codec", "frames", "ratio", "max mm"
+    );
+    for o in &outcomes {
+        if let Ok(v) = &o.result {
+            println!(
+                "{:<48} {:<8} {:>8} {:>9.1} {:>9.3}",
+                o.file,
+                v["codec"].as_str().unwrap_or("?"),
+                v["frames"].as_u64().unwrap_or(0),
+                v["ratio"].as_f64().unwrap_or(0.0),
+                v["max_mm"].as_f64().unwrap_or(0.0)
+            );
+        }
+    }
+    println!(
+        "{} stored, {} failed",
+        outcomes.len() - failed.len(),
+        failed.len()
+    );
+    for o in &failed {
+        if let Err(e) = &o.result {
+            eprintln!("{}: {e}", o.file);
+        }
+    }
+    if failed.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
+
+async fn upload_all(args: &IngestArgs, files: Vec<PathBuf>) -> Vec<Outcome> {
+    let bar = ProgressBar::new(files.len() as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {wide_msg}")
+            .expect("valid template"),
+    );
+    let client = reqwest::Client::new();
+    let slots = Arc::new(Semaphore::new(args.concurrency.max(1)));
+    let mut fixed: Vec<(&str, String)> = Vec::new();
+    for (k, v) in [
+        ("library", &args.library),
+        ("tags", &args.tags),
+        ("codec", &args.codec),
+        ("latency", &args.latency),
+        ("unit", &args.unit),
+    ] {
+        if let Some(v) = v {
+            fixed.push((k, v.clone()));
+        }
+    }
+    if let Some(v) = args.max_error_mm {
+        fixed.push(("max_error_mm", v.to_string()));
+    }
+    if let Some(v) = args.mean_error_mm {
+        fixed.push(("mean_error_mm", v.to_string()));
+    }
+    let url = format!("{}/v1/sequences", args.server.trim_end_matches('/'));
+    let mut tasks = Vec::new();
+    for path in files {
+        let (client, slots, bar, url) = (client.clone(), slots.clone(), bar.clone(), url.clone());
+        let mut query = fixed.clone();
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        query.push(("name", name));
+        tasks.push(tokio::spawn(async move {
+            let _slot = slots.acquire().await.expect("semaphore open");
+            let file = path.display().to_string();
+            bar.set_message(file.clone());
+            let result = upload(&client, &url, &query, &path).await;
+            bar.inc(1);
+            Outcome { file, result }
+        }));
+    }
+    let mut out = Vec::new();
+    for t in tasks {
+        if let Ok(o) = t.await {
+            out.push(o);
+        }
+    }
+    bar.finish_and_clear();
+    out
+}
+
+async fn upload(
+    client: &reqwest::Client,
+    url: &str,
+    query: &[(&str, String)],
+    path: &PathBuf,
+) -> Result<Value, String> {
+    let body = tokio::fs::read(path).await.map_err(|e| e.to_string())?;
+    let resp = client
+        .post(url)
+        .query(query)
+        .body(body)
+        .send()
+        .await
+        .map_err(|e| format!("cannot reach the server: {e}"))?;
+    let status = resp.status();
+    let v: Value = resp.json().await.unwrap_or(Value::Null);
+    if status.is_success() {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{status}: {}",
+            v["error"]["message"].as_str().unwrap_or("no error message")
+        ))
+    }
+}
