@@ -1,0 +1,184 @@
+//! `openapi.yaml` is the contract: every route answers as it says, and live responses match
+//! the schemas it gives (a small validator for the JSON Schema subset the file uses).
+
+mod common;
+
+use mocapstore::motion::formats::{self, Format};
+use mocapstore::motion::synthetic::walker;
+use serde_json::Value;
+
+fn spec() -> Value {
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml")).unwrap();
+    serde_yaml_ng::from_str(&text).expect("openapi.yaml parses")
+}
+
+fn resolve<'a>(spec: &'a Value, v: &'a Value) -> &'a Value {
+    match v.get("$ref").and_then(Value::as_str) {
+        Some(r) => {
+            let mut node = spec;
+            for part in r.trim_start_matches("#/").split('/') {
+                node = &node[part];
+            }
+            resolve(spec, node)
+        }
+        None => v,
+    }
+}
+
+/// Check `value` against `schema`; errors name the JSON path.
+fn check(spec: &Value, schema: &Value, value: &Value, path: &str, errors: &mut Vec<String>) {
+    let schema = resolve(spec, schema);
+    let types: Vec<&str> = match &schema["type"] {
+        Value::String(t) => vec![t.as_str()],
+        Value::Array(ts) => ts.iter().filter_map(Value::as_str).collect(),
+        _ => vec![],
+    };
+    if !types.is_empty() {
+        let ok = types.iter().any(|t| match *t {
+            "object" => value.is_object(),
+            "array" => value.is_array(),
+            "string" => value.is_string(),
+            "integer" => value.is_i64() || value.is_u64(),
+            "number" => value.is_number(),
+            "boolean" => value.is_boolean(),
+            "null" => value.is_null(),
+            _ => false,
+        });
+        if !ok {
+            errors.push(format!("{path}: {value} is not {types:?}"));
+            return;
+        }
+    }
+    if let Some(options) = schema["enum"].as_array() {
+        if !options.contains(value) {
+            errors.push(format!("{path}: {value} not in {options:?}"));
+        }
+    }
+    if let Value::Object(obj) = value {
+        for req in schema["required"].as_array().into_iter().flatten() {
+            let k = req.as_str().unwrap();
+            if !obj.contains_key(k) {
+                errors.push(format!("{path}: missing {k}"));
+            }
+        }
+        for (k, v) in obj {
+            let sub = schema["properties"]
+                .get(k)
+                .or_else(|| schema.get("additionalProperties").filter(|a| a.is_object()));
+            if let Some(sub) = sub {
+                check(spec, sub, v, &format!("{path}.{k}"), errors);
+            }
+        }
+    }
+    if let (Value::Array(items), Some(item_schema)) = (value, schema.get("items")) {
+        for (i, v) in items.iter().enumerate().take(50) {
+            check(spec, item_schema, v, &format!("{path}[{i}]"), errors);
+        }
+    }
+}
+
+/// The operation's response schema for `status` (JSON bodies only).
+fn response_schema<'a>(spec: &'a Value, path: &str, method: &str, status: u16) -> &'a Value {
+    let op = &spec["paths"][path][method];
+    assert!(op.is_object(), "{method} {path} is not in openapi.yaml");
+    let resp = resolve(spec, &op["responses"][status.to_string()]);
+    assert!(
+        resp.is_object(),
+        "{method} {path} → {status} is not in openapi.yaml"
+    );
+    &resp["content"]["application/json"]["schema"]
+}
+
+fn conforms(spec: &Value, path: &str, method: &str, status: u16, body: &Value) {
+    let schema = response_schema(spec, path, method, status);
+    let mut errors = Vec::new();
+    check(spec, schema, body, "$", &mut errors);
+    assert!(
+        errors.is_empty(),
+        "{method} {path} {status}: {}",
+        errors.join("; ")
+    );
+}
+
+#[tokio::test]
+async fn live_responses_match_the_contract() {
+    let spec = spec();
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let take = formats::write(&walker(300, 6, 120.0, 3, 0.2), Format::Json).unwrap();
+    let (status, report) = srv.post("name=a&tags=x,y&max_error_mm=1", take).await;
+    conforms(&spec, "/v1/sequences", "post", status, &report);
+    let id = report["id"].as_str().unwrap().to_string();
+    for (status, body) in [
+        srv.post("codec=zip", vec![1]).await,
+        srv.post("", b"junk".to_vec()).await,
+    ] {
+        conforms(&spec, "/v1/sequences", "post", status, &body);
+    }
+    let get = |p: String| {
+        let srv = &srv;
+        async move {
+            let (s, _, b) = srv.get(&p).await;
+            (
+                s,
+                serde_json::from_slice::<Value>(&b).unwrap_or(Value::Null),
+            )
+        }
+    };
+    for (route, path) in [
+        ("/v1/sequences", "/v1/sequences?limit=1".to_string()),
+        ("/v1/sequences", "/v1/sequences?limit=0".to_string()),
+        ("/v1/sequences/{id}", format!("/v1/sequences/{id}")),
+        ("/v1/sequences/{id}", "/v1/sequences/nope".to_string()),
+        (
+            "/v1/sequences/{id}/frames",
+            format!("/v1/sequences/{id}/frames?start=3&end=9"),
+        ),
+        (
+            "/v1/sequences/{id}/frames",
+            format!("/v1/sequences/{id}/frames?end=9999"),
+        ),
+        (
+            "/v1/sequences/{id}/frames",
+            format!("/v1/sequences/{id}/frames?format=bvh"),
+        ),
+        ("/v1/stats", "/v1/stats".to_string()),
+    ] {
+        let (status, body) = get(path).await;
+        conforms(&spec, route, "get", status, &body);
+    }
+    let r = srv
+        .client
+        .patch(format!("{}/v1/sequences/{id}", srv.base))
+        .json(&serde_json::json!({"library": "moved"}))
+        .send()
+        .await
+        .unwrap();
+    let status = r.status().as_u16();
+    conforms(
+        &spec,
+        "/v1/sequences/{id}",
+        "patch",
+        status,
+        &r.json().await.unwrap(),
+    );
+    let r = srv
+        .client
+        .delete(format!("{}/v1/sequences/{id}", srv.base))
+        .send()
+        .await
+        .unwrap();
+    assert!(
+        spec["paths"]["/v1/sequences/{id}"]["delete"]["responses"][r.status().as_str()].is_object()
+    );
+    for p in ["/healthz", "/metrics"] {
+        let (status, _, _) = srv.get(p).await;
+        assert!(
+            spec["paths"][p]["get"]["responses"][status.to_string()].is_object(),
+            "{p}"
+        );
+    }
+    srv.stop().await;
+    t.finish().await;
+}
