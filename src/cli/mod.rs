@@ -9,6 +9,7 @@ mod bench;
 mod convert;
 mod ingest;
 mod inspect;
+mod loadtest;
 mod plot;
 
 #[derive(Parser)]
@@ -34,6 +35,8 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Upload files or whole folders to a running service.
     Ingest(ingest::IngestArgs),
+    /// Range-fetch latency and throughput over HTTP against raw SQLite BLOB reads.
+    Loadtest(loadtest::LoadArgs),
 }
 
 #[derive(Args)]
@@ -89,6 +92,7 @@ pub fn main() -> ExitCode {
         Command::Convert(args) => convert::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Ingest(args) => ingest::run(&args),
+        Command::Loadtest(args) => loadtest::run(&args),
     }
 }
 

@@ -3,7 +3,7 @@
 use super::container::{pack_chunk, unpack_chunk, verify_chunk, ChunkMeta, Container, Header};
 use super::error::{malformed, Error, Result};
 use super::id::{CodecId, ErrorBound};
-use super::{codec, gaps, Input, Target};
+use super::{codec, gaps, ChunkDecoder, Input, Target};
 use crate::motion::metrics::{self, ErrorStats};
 use crate::motion::Motion;
 
@@ -129,6 +129,19 @@ pub fn decode_range(
     start: usize,
     end: usize,
 ) -> Result<Vec<f32>> {
+    let decoder = codec(header.codec)?.decoder(&header.params, header.points as usize)?;
+    decode_range_with(header, decoder.as_ref(), chunks, start, end)
+}
+
+/// As [`decode_range`], with a decoder prepared once from the header (parsing a shared or
+/// per-take basis costs more than decoding a second of frames, so servers keep it).
+pub fn decode_range_with(
+    header: &Header,
+    decoder: &dyn ChunkDecoder,
+    chunks: &[&[u8]],
+    start: usize,
+    end: usize,
+) -> Result<Vec<f32>> {
     if start > end || end > header.frames as usize {
         return Err(Error::Invalid(format!(
             "frames {start}..{end} outside 0..{}",
@@ -144,7 +157,6 @@ pub fn decode_range(
     }
     let points = header.points as usize;
     let w = header.width();
-    let decoder = codec(header.codec)?.decoder(&header.params, points)?;
     let mut out = vec![0f32; (end - start) * w];
     let mut scratch = Vec::new();
     for (i, payload) in wanted.clone().zip(chunks) {

@@ -21,6 +21,7 @@ pub use error::ApiError;
 pub use metrics::Metrics;
 
 use crate::motion::formats::Limits;
+use crate::service::prepared::DecoderCache;
 use crate::store::Store;
 
 /// How to run the service.
@@ -48,6 +49,7 @@ pub struct AppState {
     pub store: Store,
     pub limits: Limits,
     pub metrics: Arc<Metrics>,
+    pub decoders: Arc<DecoderCache>,
 }
 
 pub fn router(state: AppState, max_body_bytes: usize) -> Router {
@@ -104,6 +106,7 @@ impl Application {
             store: store.clone(),
             limits,
             metrics: Arc::new(Metrics::default()),
+            decoders: Arc::new(DecoderCache::default()),
         };
         Ok(Application {
             listener,

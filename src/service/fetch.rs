@@ -1,8 +1,11 @@
 //! Read side: a take's metadata, and any frame range decoded from only the chunks that
 //! overlap it.
 
+use std::sync::Arc;
+
+use super::prepared::{DecoderCache, Prepared};
 use super::{blocking, Error, Result};
-use crate::codec::{self, container::Header, Limits};
+use crate::codec;
 use crate::store::{SequenceRow, Store};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
@@ -76,16 +79,30 @@ pub fn point_names(row: &SequenceRow) -> Vec<String> {
         .unwrap_or_default()
 }
 
-/// Decode `range` of take `id`, optionally only the named points.
+/// Decode `range` of take `id`, optionally only the named points. Only the chunks that
+/// overlap the range are read; the take's decoder comes from `cache` when it is there.
 pub async fn frames(
     store: &Store,
+    cache: &DecoderCache,
     id: &str,
     range: TimeRange,
     subset: Option<&[String]>,
-) -> Result<(SequenceRow, Frames)> {
-    let row = sequence(store, id).await?;
-    let (start, end) = range.resolve(row.frames as usize, row.fps)?;
-    let names = point_names(&row);
+) -> Result<(Arc<Prepared>, Frames)> {
+    let prepared = match cache.get(id) {
+        Some(p) => p,
+        None => {
+            let row = sequence(store, id).await?;
+            let p = Arc::new(
+                blocking(move || Prepared::new(&row))
+                    .await?
+                    .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?,
+            );
+            cache.insert(p.clone());
+            p
+        }
+    };
+    let (start, end) = range.resolve(prepared.frames, prepared.fps)?;
+    let names = &prepared.point_names;
     let selected: Vec<usize> = match subset {
         None => (0..names.len()).collect(),
         Some(wanted) => wanted
@@ -97,21 +114,23 @@ pub async fn frames(
             })
             .collect::<Result<_>>()?,
     };
-    let (header, _) = Header::parse(&row.header, &Limits::default())
-        .map_err(|e| Error::Internal(format!("stored header of {id}: {e}")))?;
-    let wanted = header.chunks_for(start, end);
+    let wanted = prepared.header.chunks_for(start, end);
     let chunks = store
         .chunks(id, wanted.start as i64, wanted.end as i64)
         .await?;
     if chunks.len() != wanted.len() {
+        // Deleted since its decoder was cached: forget it, and say so.
+        cache.remove(id);
+        sequence(store, id).await?;
         return Err(Error::Internal(format!(
             "take {id} is missing chunks {wanted:?}"
         )));
     }
     let all_points = names.len();
+    let p = prepared.clone();
     let data = blocking(move || {
         let payloads: Vec<&[u8]> = chunks.iter().map(|c| c.payload.as_slice()).collect();
-        codec::decode_range(&header, &payloads, start, end)
+        codec::decode_range_with(&p.header, p.decoder.as_ref(), &payloads, start, end)
     })
     .await??;
     let data = if selected.len() == all_points {
@@ -127,7 +146,7 @@ pub async fn frames(
     };
     let points = selected.iter().map(|&p| names[p].clone()).collect();
     Ok((
-        row,
+        prepared,
         Frames {
             start,
             end,

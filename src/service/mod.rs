@@ -6,11 +6,13 @@
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
 //! - [`fetch`]: metadata and decoded frame ranges.
 //! - [`library`]: listings, statistics, edits.
+//! - [`prepared`]: decoders kept ready per take for range requests.
 
 pub mod choose;
 pub mod fetch;
 pub mod ingest;
 pub mod library;
+pub mod prepared;
 
 use crate::{codec, motion, store};
 

@@ -1,0 +1,227 @@
+//! `mocapstore loadtest`: latency and throughput of range fetches over HTTP, against reading
+//! the same ranges as raw f32 from a SQLite BLOB through an equivalent route, in one run.
+//!
+//! It starts the real service on 127.0.0.1:0 over a temporary SQLite file, ingests a
+//! generated take (default 10 minutes, 38 points, 120 fps), stores the same frames as raw f32
+//! in one-second BLOBs, then runs a fixed number of requests from concurrent clients to
+//! each route and prints p50/p99 latency and requests per second.
+
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use axum::extract::{Query, State};
+use axum::routing::get;
+use clap::Args;
+use serde::Deserialize;
+use sqlx::SqlitePool;
+
+use crate::http::{Application, Config};
+use crate::motion::formats::{self, Format};
+use crate::motion::synthetic::{walker, Rng};
+use crate::store::Store;
+
+#[derive(Args)]
+pub struct LoadArgs {
+    /// Length of the generated take, seconds.
+    #[arg(long, default_value_t = 600)]
+    seconds: usize,
+    #[arg(long, default_value_t = 120.0)]
+    fps: f64,
+    #[arg(long, default_value_t = 38)]
+    points: usize,
+    /// Concurrent clients.
+    #[arg(long, default_value_t = 16)]
+    clients: usize,
+    /// Requests per route (spread over the clients).
+    #[arg(long, default_value_t = 20_000)]
+    requests: usize,
+}
+
+#[derive(Deserialize)]
+struct RawQuery {
+    second: i64,
+}
+
+/// The baseline: one-second raw f32 BLOBs straight out of SQLite.
+async fn raw_blob(State(pool): State<SqlitePool>, Query(q): Query<RawQuery>) -> Vec<u8> {
+    sqlx::query_scalar::<_, Vec<u8>>("SELECT data FROM raw_seconds WHERE second = $1")
+        .bind(q.second)
+        .fetch_one(&pool)
+        .await
+        .unwrap_or_default()
+}
+
+pub fn run(args: &LoadArgs) -> ExitCode {
+    let rt = match tokio::runtime::Runtime::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("mocapstore loadtest: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match rt.block_on(load(args)) {
+        Ok(report) => {
+            println!("{report}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("mocapstore loadtest: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+async fn load(args: &LoadArgs) -> Result<String, String> {
+    let dir = std::env::temp_dir().join(format!("mocapstore-load-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let url = format!("sqlite://{}", dir.join("load.db").display());
+    let store = Store::open(&url).await.map_err(|e| e.to_string())?;
+    let app = Application::with_store(
+        store.clone(),
+        Config {
+            listen: "127.0.0.1:0".into(),
+            database_url: url.clone(),
+            max_body_bytes: 2 << 30,
+        },
+    )
+    .await?;
+    let base = format!("http://{}", app.local_addr());
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(app.run_until(async {
+        let _ = stopped.await;
+    }));
+
+    // The take, ingested over HTTP (timed: ingest throughput).
+    let frames = (args.seconds as f64 * args.fps) as usize;
+    let motion = walker(frames, args.points, args.fps, 11, 0.0);
+    let body = formats::write(&motion, Format::Npy).map_err(|e| e.to_string())?;
+    let client = reqwest::Client::new();
+    let t0 = Instant::now();
+    let r = client
+        .post(format!(
+            "{base}/v1/sequences?name=load&unit=mm&fps={}&max_error_mm=1",
+            args.fps
+        ))
+        .body(body)
+        .send()
+        .await
+        .map_err(|e| e.to_string())?;
+    let ingest_s = t0.elapsed().as_secs_f64();
+    let report: serde_json::Value = r.json().await.map_err(|e| e.to_string())?;
+    let id = report["id"]
+        .as_str()
+        .ok_or(format!("ingest failed: {report}"))?
+        .to_string();
+
+    // The baseline table and its route, on a second listener.
+    let Store::Sqlite(pool) = &store else {
+        unreachable!("loadtest uses SQLite")
+    };
+    sqlx::query(
+        "CREATE TABLE IF NOT EXISTS raw_seconds (second INTEGER PRIMARY KEY, data BLOB NOT NULL)",
+    )
+    .execute(pool)
+    .await
+    .map_err(|e| e.to_string())?;
+    let per = args.fps.round() as usize * args.points * 3;
+    for (s, chunk) in motion.positions().chunks(per).enumerate() {
+        let bytes: Vec<u8> = chunk.iter().flat_map(|v| v.to_le_bytes()).collect();
+        sqlx::query("INSERT INTO raw_seconds (second, data) VALUES ($1, $2)")
+            .bind(s as i64)
+            .bind(bytes)
+            .execute(pool)
+            .await
+            .map_err(|e| e.to_string())?;
+    }
+    let raw_app = axum::Router::new()
+        .route("/raw", get(raw_blob))
+        .with_state(pool.clone());
+    let raw_listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .map_err(|e| e.to_string())?;
+    let raw_base = format!(
+        "http://{}",
+        raw_listener.local_addr().map_err(|e| e.to_string())?
+    );
+    let raw_server = tokio::spawn(async move { axum::serve(raw_listener, raw_app).await });
+
+    let seconds = args.seconds.max(2);
+    let fps = args.fps;
+    let codec_url = move |s: usize| {
+        format!(
+            "{base}/v1/sequences/{id}/frames?t0={s}&t1={}&format=f32",
+            s + 1
+        )
+    };
+    let raw_url = move |s: usize| format!("{raw_base}/raw?second={s}");
+    let mut out = format!(
+        "take: {frames} frames × {} points at {fps} fps ({} s); stored as {} at ratio {:.1}, max error {:.3} mm\n\
+         ingest over HTTP: {:.2} s = {:.0} frames/s (parse + every candidate codec + store)\n\n\
+         | route (1-s range, {} clients, {} requests) | p50 ms | p99 ms | req/s |\n|---|---:|---:|---:|\n",
+        args.points,
+        args.seconds,
+        report["codec"].as_str().unwrap_or("?"),
+        report["ratio"].as_f64().unwrap_or(0.0),
+        report["max_mm"].as_f64().unwrap_or(0.0),
+        ingest_s,
+        frames as f64 / ingest_s,
+        args.clients,
+        args.requests
+    );
+    for (name, url) in [
+        (
+            "GET /v1/sequences/{id}/frames?t0&t1&format=f32",
+            Arc::new(codec_url) as Arc<dyn Fn(usize) -> String + Send + Sync>,
+        ),
+        ("raw f32 BLOB from SQLite (baseline)", Arc::new(raw_url)),
+    ] {
+        let (p50, p99, rps) =
+            hammer(&client, url, seconds - 1, args.clients, args.requests).await?;
+        out += &format!("| {name} | {p50:.3} | {p99:.3} | {rps:.0} |\n");
+    }
+    let _ = stop.send(());
+    let _ = server.await;
+    raw_server.abort();
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(out)
+}
+
+/// `requests` GETs of random ranges from `clients` concurrent tasks; (p50 ms, p99 ms, req/s).
+async fn hammer(
+    client: &reqwest::Client,
+    url: Arc<dyn Fn(usize) -> String + Send + Sync>,
+    ranges: usize,
+    clients: usize,
+    requests: usize,
+) -> Result<(f64, f64, f64), String> {
+    let per_client = requests.div_ceil(clients.max(1));
+    let t0 = Instant::now();
+    let mut tasks = Vec::new();
+    for c in 0..clients.max(1) {
+        let (client, url) = (client.clone(), url.clone());
+        tasks.push(tokio::spawn(async move {
+            let mut rng = Rng::new(c as u64 + 1);
+            let mut lat = Vec::with_capacity(per_client);
+            for _ in 0..per_client {
+                let u = url(rng.below(ranges));
+                let t = Instant::now();
+                let r = client.get(&u).send().await.map_err(|e| e.to_string())?;
+                if !r.status().is_success() {
+                    return Err(format!("{u}: {}", r.status()));
+                }
+                r.bytes().await.map_err(|e| e.to_string())?;
+                lat.push(t.elapsed());
+            }
+            Ok::<Vec<Duration>, String>(lat)
+        }));
+    }
+    let mut all = Vec::new();
+    for t in tasks {
+        all.extend(t.await.map_err(|e| e.to_string())??);
+    }
+    let elapsed = t0.elapsed().as_secs_f64();
+    all.sort();
+    let pct = |p: f64| all[((all.len() - 1) as f64 * p) as usize].as_secs_f64() * 1e3;
+    Ok((pct(0.5), pct(0.99), all.len() as f64 / elapsed))
+}
