@@ -39,10 +39,13 @@ impl Prepared {
     }
 }
 
+/// Entries by id, and ids in insertion order (for eviction).
+type Entries = (HashMap<String, Arc<Prepared>>, VecDeque<String>);
+
 /// A bounded map from take id to [`Prepared`], oldest entry evicted first.
 pub struct DecoderCache {
     capacity: usize,
-    inner: Mutex<(HashMap<String, Arc<Prepared>>, VecDeque<String>)>,
+    inner: Mutex<Entries>,
 }
 
 impl DecoderCache {
