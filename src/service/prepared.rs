@@ -88,3 +88,46 @@ impl Default for DecoderCache {
         DecoderCache::new(256)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codec::{CodecId, ErrorBound};
+    use crate::motion::synthetic::walker;
+
+    fn prepared(id: &str) -> Arc<Prepared> {
+        let enc = codec::encode(
+            &walker(20, 2, 30.0, 1, 0.0),
+            CodecId::Quant,
+            ErrorBound::MaxMm(1.0),
+        )
+        .unwrap();
+        Arc::new(Prepared {
+            id: id.into(),
+            decoder: codec::codec(CodecId::Quant)
+                .unwrap()
+                .decoder(&enc.container.header.params, 2)
+                .unwrap(),
+            header: enc.container.header,
+            point_names: vec!["a".into(), "b".into()],
+            fps: 30.0,
+            metres_per_unit: 0.001,
+            frames: 20,
+        })
+    }
+
+    #[test]
+    fn evicts_the_oldest_and_forgets_removed() {
+        let c = DecoderCache::new(2);
+        c.insert(prepared("a"));
+        c.insert(prepared("b"));
+        c.insert(prepared("a")); // refresh, not a new entry
+        c.insert(prepared("c"));
+        assert!(c.get("a").is_none(), "oldest goes first");
+        assert!(c.get("b").is_some() && c.get("c").is_some());
+        c.remove("b");
+        assert!(c.get("b").is_none());
+        c.insert(prepared("d"));
+        assert!(c.get("c").is_some() && c.get("d").is_some());
+    }
+}
