@@ -7,6 +7,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use mocapstore::corpus::{self, Entry};
 use mocapstore::motion::formats::{self, Format, Loaded, ReadOptions};
 use mocapstore::motion::metrics::bone_length_drift;
+use mocapstore::motion::synthetic::Rng;
 use mocapstore::motion::Motion;
 
 fn entries() -> (std::path::PathBuf, Vec<Entry>) {
@@ -276,20 +277,6 @@ fn units_are_known_or_inferred_sensibly() {
     }
 }
 
-/// Deterministic xorshift, so a failure names a reproducible case.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
 #[test]
 fn mutated_corpus_files_give_errors_not_panics() {
     let root = corpus::root();
@@ -316,7 +303,7 @@ fn mutated_corpus_files_give_errors_not_panics() {
             formats::write(&take, format).unwrap(),
         ));
     }
-    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut rng = Rng::new(0x9E37_79B9_7F4A_7C15);
     let mut outcomes = [0usize; 2];
     for (rel, good) in &inputs {
         for case in 0..1000 {
@@ -326,7 +313,7 @@ fn mutated_corpus_files_give_errors_not_panics() {
                 1 => {
                     for _ in 0..1 + rng.below(8) {
                         let i = rng.below(b.len());
-                        b[i] = rng.next() as u8;
+                        b[i] = rng.next_u64() as u8;
                     }
                 }
                 2 => {
@@ -336,7 +323,7 @@ fn mutated_corpus_files_give_errors_not_panics() {
                 }
                 _ => {
                     let i = rng.below(b.len());
-                    let junk: Vec<u8> = (0..rng.below(64)).map(|_| rng.next() as u8).collect();
+                    let junk: Vec<u8> = (0..rng.below(64)).map(|_| rng.next_u64() as u8).collect();
                     b.splice(i..i, junk);
                 }
             }

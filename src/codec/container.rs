@@ -6,6 +6,7 @@ use std::ops::Range;
 use super::entropy::{get_varint, put_varint};
 use super::error::{malformed, Error, Result};
 use super::id::CodecId;
+use super::wire::Reader;
 
 pub const MAGIC: &[u8; 4] = b"MCST";
 pub const VERSION: u16 = 1;
@@ -106,7 +107,7 @@ impl Header {
 
     /// Parse a header from the start of `bytes`; returns it and its length in bytes.
     pub fn parse(bytes: &[u8], limits: &Limits) -> Result<(Header, usize)> {
-        let mut r = Reader { b: bytes, pos: 0 };
+        let mut r = Reader::named(bytes, "header");
         if r.take(4)? != MAGIC {
             return Err(malformed("not a mocapstore bitstream (bad magic)"));
         }
@@ -176,7 +177,7 @@ impl Header {
         if next != u64::from(frames) {
             return Err(malformed(format!("chunks cover {next} of {frames} frames")));
         }
-        let body_end = r.pos;
+        let body_end = r.position();
         let crc = r.u32()?;
         if crc32c::crc32c(&bytes[..body_end]) != crc {
             return Err(Error::Checksum("header".into()));
@@ -192,7 +193,7 @@ impl Header {
                 basis,
                 chunks,
             },
-            r.pos,
+            r.position(),
         ))
     }
 
@@ -324,36 +325,6 @@ pub fn unpack_chunk(payload: &[u8], samples: usize) -> Result<(Option<Vec<bool>>
         return Err(malformed("gap mask shorter than the chunk"));
     }
     Ok((Some(valid), codec_bytes))
-}
-
-struct Reader<'a> {
-    b: &'a [u8],
-    pos: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
-        let end = self
-            .pos
-            .checked_add(n)
-            .filter(|&e| e <= self.b.len())
-            .ok_or_else(|| malformed("header is truncated"))?;
-        let s = &self.b[self.pos..end];
-        self.pos = end;
-        Ok(s)
-    }
-    fn u8(&mut self) -> Result<u8> {
-        Ok(self.take(1)?[0])
-    }
-    fn u16(&mut self) -> Result<u16> {
-        Ok(u16::from_le_bytes(self.take(2)?.try_into().expect("2")))
-    }
-    fn u32(&mut self) -> Result<u32> {
-        Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4")))
-    }
-    fn f64(&mut self) -> Result<f64> {
-        Ok(f64::from_le_bytes(self.take(8)?.try_into().expect("8")))
-    }
 }
 
 #[cfg(test)]

@@ -26,24 +26,39 @@ impl Writer {
     }
 }
 
+/// Reads little-endian fields, failing with `Malformed` ("<what> is truncated") at the end.
 pub struct Reader<'a> {
     b: &'a [u8],
     pos: usize,
+    what: &'static str,
 }
 
 impl<'a> Reader<'a> {
+    /// A reader of codec parameters.
     pub fn new(b: &'a [u8]) -> Self {
-        Reader { b, pos: 0 }
+        Reader::named(b, "codec parameters")
+    }
+    pub fn named(b: &'a [u8], what: &'static str) -> Self {
+        Reader { b, pos: 0, what }
+    }
+    pub fn position(&self) -> usize {
+        self.pos
     }
     pub fn take(&mut self, n: usize) -> Result<&'a [u8]> {
         let end = self
             .pos
             .checked_add(n)
             .filter(|&e| e <= self.b.len())
-            .ok_or_else(|| malformed("codec parameters are truncated"))?;
+            .ok_or_else(|| malformed(format!("{} is truncated", self.what)))?;
         let s = &self.b[self.pos..end];
         self.pos = end;
         Ok(s)
+    }
+    pub fn u8(&mut self) -> Result<u8> {
+        Ok(self.take(1)?[0])
+    }
+    pub fn u16(&mut self) -> Result<u16> {
+        Ok(u16::from_le_bytes(self.take(2)?.try_into().expect("2")))
     }
     pub fn u32(&mut self) -> Result<u32> {
         Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4")))
@@ -58,7 +73,7 @@ impl<'a> Reader<'a> {
         if self.pos == self.b.len() {
             Ok(())
         } else {
-            Err(malformed("trailing bytes in codec parameters"))
+            Err(malformed(format!("trailing bytes in {}", self.what)))
         }
     }
 }
