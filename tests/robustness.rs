@@ -120,3 +120,33 @@ async fn interrupted_uploads_leave_nothing() {
         t.finish().await;
     }
 }
+
+/// Two servers share one database: a take deleted through one is gone from the other at
+/// once, although the other had its decoded chunks cached.
+#[tokio::test]
+async fn deletes_through_another_server_are_seen_despite_caches() {
+    for t in common::all().await {
+        let a = common::start(t.store.clone(), 8 << 20).await;
+        let b = common::start(t.store.clone(), 8 << 20).await;
+        let (status, r) = a.post("name=shared", take_json(3, 300)).await;
+        assert_eq!(status, 201, "{r}");
+        let id = r["id"].as_str().unwrap().to_string();
+        let frames = format!("/v1/sequences/{id}/frames?start=0&end=100&format=f32");
+        let (s1, _, first) = a.get(&frames).await;
+        let (s2, _, again) = a.get(&frames).await; // served from the caches
+        assert_eq!((s1, s2), (200, 200));
+        assert!(first == again);
+        let r = b
+            .client
+            .delete(format!("{}/v1/sequences/{id}", b.base))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 204);
+        let (status, _, _) = a.get(&frames).await;
+        assert_eq!(status, 404, "{}", t.name);
+        a.stop().await;
+        b.stop().await;
+        t.finish().await;
+    }
+}

@@ -36,6 +36,9 @@ pub struct LoadArgs {
     /// Requests per route (spread over the clients).
     #[arg(long, default_value_t = 20_000)]
     requests: usize,
+    /// The service's decoded-chunk cache, MiB (0: every request decodes).
+    #[arg(long, default_value_t = 256)]
+    decoded_cache_mib: usize,
 }
 
 #[derive(Deserialize)]
@@ -83,6 +86,7 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
             listen: "127.0.0.1:0".into(),
             database_url: url.clone(),
             max_body_bytes: 2 << 30,
+            decoded_cache_mib: args.decoded_cache_mib,
         },
     )
     .await?;
@@ -158,7 +162,7 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
     let mut out = format!(
         "take: {frames} frames × {} points at {fps} fps ({} s); stored as {} at ratio {:.1}, max error {:.3} mm\n\
          ingest over HTTP: {:.2} s = {:.0} frames/s (parse + every candidate codec + store)\n\n\
-         | route (1-s range, {} clients, {} requests) | p50 ms | p99 ms | req/s |\n|---|---:|---:|---:|\n",
+         | route (1-s range, {} clients, {} requests; decoded-chunk cache {} MiB) | p50 ms | p99 ms | req/s |\n|---|---:|---:|---:|\n",
         args.points,
         args.seconds,
         report["codec"].as_str().unwrap_or("?"),
@@ -167,7 +171,8 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
         ingest_s,
         frames as f64 / ingest_s,
         args.clients,
-        args.requests
+        args.requests,
+        args.decoded_cache_mib
     );
     for (name, url) in [
         (

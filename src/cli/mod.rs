@@ -50,6 +50,9 @@ struct ServeArgs {
     /// Largest upload accepted, in MiB (larger ones get 413).
     #[arg(long, env = "MOCAP_MAX_UPLOAD_MIB", default_value_t = 512)]
     max_upload_mib: usize,
+    /// Memory for decoded chunks kept between range requests, in MiB (0 turns it off).
+    #[arg(long, env = "MOCAP_DECODED_CACHE_MIB", default_value_t = 256)]
+    decoded_cache_mib: usize,
 }
 
 /// Options every command that reads takes accepts.
@@ -107,6 +110,7 @@ fn serve(args: ServeArgs) -> ExitCode {
         listen: args.listen,
         database_url: args.database_url,
         max_body_bytes: args.max_upload_mib << 20,
+        decoded_cache_mib: args.decoded_cache_mib,
     };
     let runtime = match tokio::runtime::Runtime::new() {
         Ok(r) => r,

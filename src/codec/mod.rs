@@ -28,7 +28,7 @@ mod wire;
 pub use container::{Container, Header, Limits};
 pub use error::{Error, Result};
 pub use id::{CodecId, ErrorBound, Latency};
-pub use pipeline::{decode_all, decode_range, decode_range_with, encode, Encoded};
+pub use pipeline::{decode_all, decode_chunk, decode_range, decode_range_with, encode, Encoded};
 
 /// What an encoder sees: gap-filled positions (`frames × points × 3`, the take's units) and
 /// which samples are real, so that errors are judged on those only.

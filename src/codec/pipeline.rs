@@ -133,6 +133,36 @@ pub fn decode_range(
     decode_range_with(header, decoder.as_ref(), chunks, start, end)
 }
 
+/// Decode chunk `index` (its payload as stored): all its frames, NaN where the take has
+/// gaps. The unit a server caches.
+pub fn decode_chunk(
+    header: &Header,
+    decoder: &dyn ChunkDecoder,
+    index: usize,
+    payload: &[u8],
+) -> Result<Vec<f32>> {
+    let meta = header
+        .chunks
+        .get(index)
+        .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
+    verify_chunk(meta, payload, index)?;
+    let n = meta.frames as usize;
+    let (mask, codec_bytes) = unpack_chunk(payload, n * header.points as usize)?;
+    let mut out = vec![0f32; n * header.width()];
+    decoder.decode_chunk(codec_bytes, n, &mut out)?;
+    if let Some(mask) = mask {
+        for (s, ok) in out.chunks_exact_mut(3).zip(mask) {
+            if !ok {
+                s.fill(f32::NAN);
+            }
+        }
+    }
+    if out.iter().any(|v| v.is_infinite()) {
+        return Err(malformed("decoded values are not finite"));
+    }
+    Ok(out)
+}
+
 /// As [`decode_range`], with a decoder prepared once from the header (parsing a shared or
 /// per-take basis costs more than decoding a second of frames, so servers keep it).
 pub fn decode_range_with(
@@ -155,32 +185,14 @@ pub fn decode_range_with(
             chunks.len()
         )));
     }
-    let points = header.points as usize;
     let w = header.width();
     let mut out = vec![0f32; (end - start) * w];
-    let mut scratch = Vec::new();
-    for (i, payload) in wanted.clone().zip(chunks) {
-        let meta = &header.chunks[i];
-        verify_chunk(meta, payload, i)?;
-        let n = meta.frames as usize;
-        let (mask, codec_bytes) = unpack_chunk(payload, n * points)?;
-        scratch.clear();
-        scratch.resize(n * w, 0.0);
-        decoder.decode_chunk(codec_bytes, n, &mut scratch)?;
-        if let Some(mask) = mask {
-            for (s, ok) in scratch.chunks_exact_mut(3).zip(mask) {
-                if !ok {
-                    s.fill(f32::NAN);
-                }
-            }
-        }
-        let r = meta.frame_range();
+    for (i, payload) in wanted.zip(chunks) {
+        let decoded = decode_chunk(header, decoder, i, payload)?;
+        let r = header.chunks[i].frame_range();
         let (lo, hi) = (r.start.max(start), r.end.min(end));
         out[(lo - start) * w..(hi - start) * w]
-            .copy_from_slice(&scratch[(lo - r.start) * w..(hi - r.start) * w]);
-    }
-    if out.iter().any(|v| v.is_infinite()) {
-        return Err(malformed("decoded values are not finite"));
+            .copy_from_slice(&decoded[(lo - r.start) * w..(hi - r.start) * w]);
     }
     Ok(out)
 }

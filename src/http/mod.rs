@@ -21,7 +21,7 @@ pub use error::ApiError;
 pub use metrics::Metrics;
 
 use crate::motion::formats::Limits;
-use crate::service::prepared::DecoderCache;
+use crate::service::prepared::ReadCaches;
 use crate::store::Store;
 
 /// How to run the service.
@@ -31,6 +31,8 @@ pub struct Config {
     pub database_url: String,
     /// Largest upload accepted; larger bodies get 413.
     pub max_body_bytes: usize,
+    /// Memory for decoded chunks kept between range requests, MiB.
+    pub decoded_cache_mib: usize,
 }
 
 impl Default for Config {
@@ -39,6 +41,7 @@ impl Default for Config {
             listen: "127.0.0.1:8080".into(),
             database_url: "sqlite://mocapstore.db".into(),
             max_body_bytes: 512 << 20,
+            decoded_cache_mib: 256,
         }
     }
 }
@@ -49,7 +52,7 @@ pub struct AppState {
     pub store: Store,
     pub limits: Limits,
     pub metrics: Arc<Metrics>,
-    pub decoders: Arc<DecoderCache>,
+    pub caches: Arc<ReadCaches>,
 }
 
 pub fn router(state: AppState, max_body_bytes: usize) -> Router {
@@ -106,7 +109,7 @@ impl Application {
             store: store.clone(),
             limits,
             metrics: Arc::new(Metrics::default()),
-            decoders: Arc::new(DecoderCache::default()),
+            caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
         };
         Ok(Application {
             listener,

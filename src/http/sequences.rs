@@ -174,7 +174,7 @@ pub async fn frames(
     }
     let subset: Option<Vec<String>> = q.points.map(|p| p.split(',').map(str::to_string).collect());
     let (row, frames) =
-        fetch::frames(&state.store, &state.decoders, &id, range, subset.as_deref()).await?;
+        fetch::frames(&state.store, &state.caches, &id, range, subset.as_deref()).await?;
     state.metrics.decoded(frames.end - frames.start);
     let mut headers = HeaderMap::new();
     let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use super::prepared::{DecoderCache, Prepared};
+use super::prepared::{Prepared, ReadCaches};
 use super::{blocking, Error, Result};
 use crate::codec;
 use crate::store::{SequenceRow, Store};
@@ -79,17 +79,25 @@ pub fn point_names(row: &SequenceRow) -> Vec<String> {
         .unwrap_or_default()
 }
 
-/// Decode `range` of take `id`, optionally only the named points. Only the chunks that
-/// overlap the range are read; the take's decoder comes from `cache` when it is there.
+/// Decode `range` of take `id`, optionally only the named points. Chunks already decoded
+/// come from `caches`; of the rest, only those overlapping the range are read and decoded.
 pub async fn frames(
     store: &Store,
-    cache: &DecoderCache,
+    caches: &ReadCaches,
     id: &str,
     range: TimeRange,
     subset: Option<&[String]>,
 ) -> Result<(Arc<Prepared>, Frames)> {
-    let prepared = match cache.get(id) {
-        Some(p) => p,
+    let prepared = match caches.decoders.get(id) {
+        // Cached state may outlive a delete made through another server sharing the
+        // database: one indexed lookup keeps every answer true.
+        Some(p) => {
+            if !store.exists(id).await? {
+                caches.forget(id);
+                return Err(Error::NotFound(format!("sequence {id}")));
+            }
+            p
+        }
         None => {
             let row = sequence(store, id).await?;
             let p = Arc::new(
@@ -97,7 +105,7 @@ pub async fn frames(
                     .await?
                     .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?,
             );
-            cache.insert(p.clone());
+            caches.decoders.insert(p.clone());
             p
         }
     };
@@ -115,35 +123,56 @@ pub async fn frames(
             .collect::<Result<_>>()?,
     };
     let wanted = prepared.header.chunks_for(start, end);
-    let chunks = store
-        .chunks(id, wanted.start as i64, wanted.end as i64)
-        .await?;
-    if chunks.len() != wanted.len() {
-        // Deleted since its decoder was cached: forget it, and say so.
-        cache.remove(id);
-        sequence(store, id).await?;
-        return Err(Error::Internal(format!(
-            "take {id} is missing chunks {wanted:?}"
-        )));
+    let mut decoded: Vec<Option<Arc<Vec<f32>>>> =
+        wanted.clone().map(|i| caches.chunks.get(id, i)).collect();
+    let missing: Vec<usize> = wanted
+        .clone()
+        .filter(|&i| decoded[i - wanted.start].is_none())
+        .collect();
+    if let (Some(&lo), Some(&hi)) = (missing.first(), missing.last()) {
+        let rows = store.chunks(id, lo as i64, hi as i64 + 1).await?;
+        if rows.len() != hi + 1 - lo {
+            // Deleted since its decoder was cached: forget it, and say so.
+            caches.forget(id);
+            sequence(store, id).await?;
+            return Err(Error::Internal(format!(
+                "take {id} is missing chunks {lo}..={hi}"
+            )));
+        }
+        let p = prepared.clone();
+        let wanted_missing = missing.clone();
+        let fresh = blocking(move || {
+            wanted_missing
+                .iter()
+                .map(|&i| {
+                    let payload = &rows[i - lo].payload;
+                    codec::decode_chunk(&p.header, p.decoder.as_ref(), i, payload).map(Arc::new)
+                })
+                .collect::<Result<Vec<_>, _>>()
+        })
+        .await??;
+        for (i, chunk) in missing.into_iter().zip(fresh) {
+            caches.chunks.insert(id, i, chunk.clone());
+            decoded[i - wanted.start] = Some(chunk);
+        }
     }
-    let all_points = names.len();
-    let p = prepared.clone();
-    let data = blocking(move || {
-        let payloads: Vec<&[u8]> = chunks.iter().map(|c| c.payload.as_slice()).collect();
-        codec::decode_range_with(&p.header, p.decoder.as_ref(), &payloads, start, end)
-    })
-    .await??;
-    let data = if selected.len() == all_points {
-        data
-    } else {
-        data.chunks_exact(all_points * 3)
-            .flat_map(|frame| {
-                selected
-                    .iter()
-                    .flat_map(move |&p| frame[p * 3..p * 3 + 3].iter().copied())
-            })
-            .collect()
-    };
+    // Copy the requested frames (and points) out of the decoded chunks.
+    let all = names.len();
+    let mut data = Vec::with_capacity((end - start) * selected.len() * 3);
+    for (i, chunk) in wanted.clone().zip(&decoded) {
+        let chunk = chunk.as_ref().expect("every wanted chunk is decoded");
+        let r = prepared.header.chunks[i].frame_range();
+        let (a, b) = (r.start.max(start) - r.start, r.end.min(end) - r.start);
+        for frame in chunk[a * all * 3..b * all * 3].chunks_exact(all * 3) {
+            if selected.len() == all {
+                data.extend_from_slice(frame);
+            } else {
+                for &p in &selected {
+                    data.extend_from_slice(&frame[p * 3..p * 3 + 3]);
+                }
+            }
+        }
+    }
     let points = selected.iter().map(|&p| names[p].clone()).collect();
     Ok((
         prepared,

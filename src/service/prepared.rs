@@ -1,6 +1,9 @@
-//! Decoders kept ready per take. Building one parses the header and, for MDTT, range-decodes
-//! the basis and tabulates the DCT — more work than decoding a one-second range — and a
-//! stored take's bitstream never changes, so the server keeps the last few hundred.
+//! What the server keeps ready between range requests. A stored take's bitstream never
+//! changes, so both are safe to keep until the take is deleted:
+//! - a decoder per take ([`DecoderCache`]): building one parses the header and, for MDTT,
+//!   range-decodes the basis and tabulates the DCT — more work than decoding a second;
+//! - decoded chunks ([`ChunkCache`], bounded in bytes): a one-second request decodes up to
+//!   two whole chunks, so hot ranges are served from memory.
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
@@ -83,6 +86,98 @@ impl DecoderCache {
     }
 }
 
+/// Both caches, as the read path uses them.
+pub struct ReadCaches {
+    pub decoders: DecoderCache,
+    pub chunks: ChunkCache,
+}
+
+impl ReadCaches {
+    pub fn new(decoded_chunk_bytes: usize) -> Self {
+        ReadCaches {
+            decoders: DecoderCache::default(),
+            chunks: ChunkCache::new(decoded_chunk_bytes),
+        }
+    }
+
+    /// Forget a take (after it is deleted).
+    pub fn forget(&self, id: &str) {
+        self.decoders.remove(id);
+        self.chunks.remove_take(id);
+    }
+}
+
+/// Decoded chunks by (take, chunk index), bounded in bytes, oldest evicted first.
+pub struct ChunkCache {
+    budget: usize,
+    inner: Mutex<ChunkEntries>,
+}
+
+#[derive(Default)]
+struct ChunkEntries {
+    map: HashMap<(String, usize), Arc<Vec<f32>>>,
+    order: VecDeque<(String, usize)>,
+    bytes: usize,
+}
+
+impl ChunkCache {
+    pub fn new(budget_bytes: usize) -> Self {
+        ChunkCache {
+            budget: budget_bytes,
+            inner: Mutex::new(ChunkEntries::default()),
+        }
+    }
+
+    pub fn get(&self, id: &str, index: usize) -> Option<Arc<Vec<f32>>> {
+        self.inner
+            .lock()
+            .expect("cache lock")
+            .map
+            .get(&(id.to_string(), index))
+            .cloned()
+    }
+
+    pub fn insert(&self, id: &str, index: usize, frames: Arc<Vec<f32>>) {
+        let size = frames.len() * 4;
+        if size > self.budget {
+            return;
+        }
+        let mut g = self.inner.lock().expect("cache lock");
+        let key = (id.to_string(), index);
+        if let Some(old) = g.map.insert(key.clone(), frames) {
+            g.bytes -= old.len() * 4;
+        } else {
+            g.order.push_back(key);
+        }
+        g.bytes += size;
+        while g.bytes > self.budget {
+            let Some(old) = g.order.pop_front() else {
+                break;
+            };
+            if let Some(v) = g.map.remove(&old) {
+                g.bytes -= v.len() * 4;
+            }
+        }
+    }
+
+    pub fn remove_take(&self, id: &str) {
+        let mut g = self.inner.lock().expect("cache lock");
+        let ChunkEntries { map, order, bytes } = &mut *g;
+        map.retain(|(k, _), v| {
+            let keep = k != id;
+            if !keep {
+                *bytes -= v.len() * 4;
+            }
+            keep
+        });
+        order.retain(|(k, _)| k != id);
+    }
+
+    pub fn bytes(&self) -> usize {
+        self.inner.lock().expect("cache lock").bytes
+    }
+}
+
 impl Default for DecoderCache {
     fn default() -> Self {
         DecoderCache::new(256)
@@ -114,6 +209,21 @@ mod tests {
             metres_per_unit: 0.001,
             frames: 20,
         })
+    }
+
+    #[test]
+    fn chunk_cache_stays_within_its_budget() {
+        let c = ChunkCache::new(100);
+        c.insert("a", 0, Arc::new(vec![0.0; 10])); // 40 bytes
+        c.insert("a", 1, Arc::new(vec![0.0; 10]));
+        c.insert("b", 0, Arc::new(vec![0.0; 10])); // 120 > 100: the oldest goes
+        assert!(c.get("a", 0).is_none() && c.get("a", 1).is_some() && c.get("b", 0).is_some());
+        assert_eq!(c.bytes(), 80);
+        c.insert("c", 0, Arc::new(vec![0.0; 100])); // larger than the budget: not kept
+        assert!(c.get("c", 0).is_none());
+        c.remove_take("a");
+        assert!(c.get("a", 1).is_none());
+        assert_eq!(c.bytes(), 40);
     }
 
     #[test]

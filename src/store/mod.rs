@@ -172,6 +172,17 @@ impl Store {
         })
     }
 
+    /// Whether a take exists (one indexed lookup).
+    pub async fn exists(&self, id: &str) -> Result<bool> {
+        dispatch!(self, pool => {
+            Ok(sqlx::query("SELECT 1 AS one FROM sequences WHERE id = $1")
+                .bind(id)
+                .fetch_optional(pool)
+                .await?
+                .is_some())
+        })
+    }
+
     /// Delete a take (chunks and tags cascade); false if there was none.
     pub async fn delete(&self, id: &str) -> Result<bool> {
         dispatch!(self, pool => {

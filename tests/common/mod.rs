@@ -101,6 +101,7 @@ pub async fn start(store: Store, max_body_bytes: usize) -> Server {
         listen: "127.0.0.1:0".into(),
         database_url: String::new(),
         max_body_bytes,
+        decoded_cache_mib: 64,
     };
     let app = Application::with_store(store, config).await.unwrap();
     let base = format!("http://{}", app.local_addr());
