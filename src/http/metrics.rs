@@ -20,17 +20,27 @@ pub struct Metrics {
     latency_buckets: [AtomicU64; BUCKETS.len()],
     ingested_frames: AtomicU64,
     decoded_frames: AtomicU64,
+    uploaded_bytes: AtomicU64,
+    stored_bytes: AtomicU64,
+    served_bytes: AtomicU64,
 }
 
 impl Metrics {
-    pub fn ingested(&self, frames: usize) {
+    /// A take stored: its frames, the upload's size and what it takes in the store.
+    pub fn ingested(&self, frames: usize, uploaded: usize, stored: usize) {
         self.ingested_frames
             .fetch_add(frames as u64, Ordering::Relaxed);
+        self.uploaded_bytes
+            .fetch_add(uploaded as u64, Ordering::Relaxed);
+        self.stored_bytes
+            .fetch_add(stored as u64, Ordering::Relaxed);
     }
 
-    pub fn decoded(&self, frames: usize) {
+    /// A range served: its frames and the decoded bytes behind the response.
+    pub fn decoded(&self, frames: usize, bytes: usize) {
         self.decoded_frames
             .fetch_add(frames as u64, Ordering::Relaxed);
+        self.served_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
     }
 
     fn observe(&self, seconds: f64, error: bool) {
@@ -83,6 +93,14 @@ impl Metrics {
             "mocapstore_decoded_frames_total {}\n",
             g(&self.decoded_frames)
         );
+        for (name, v) in [
+            ("uploaded", &self.uploaded_bytes),
+            ("stored", &self.stored_bytes),
+            ("served", &self.served_bytes),
+        ] {
+            s += &format!("# TYPE mocapstore_{name}_bytes_total counter\n");
+            s += &format!("mocapstore_{name}_bytes_total {}\n", g(v));
+        }
         s
     }
 }

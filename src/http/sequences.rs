@@ -97,8 +97,11 @@ pub async fn create(
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
     let req = q.into_request(body?, &state)?;
+    let uploaded = req.bytes.len();
     let report = ingest::ingest(&state.store, req).await?;
-    state.metrics.ingested(report.frames);
+    state
+        .metrics
+        .ingested(report.frames, uploaded, report.stored_bytes);
     Ok((StatusCode::CREATED, Json(report)).into_response())
 }
 
@@ -175,7 +178,8 @@ pub async fn frames(
     let subset: Option<Vec<String>> = q.points.map(|p| p.split(',').map(str::to_string).collect());
     let (row, frames) =
         fetch::frames(&state.store, &state.caches, &id, range, subset.as_deref()).await?;
-    state.metrics.decoded(frames.end - frames.start);
+    let served = frames.data.len() * 4;
+    state.metrics.decoded(frames.end - frames.start, served);
     let mut headers = HeaderMap::new();
     let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
     headers.insert("x-frames", hv((frames.end - frames.start).to_string()));
