@@ -258,3 +258,46 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         t.finish().await;
     }
 }
+
+#[tokio::test]
+async fn fields_may_come_as_headers() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let body = corpus_bytes("trc/TRCSamples__Knee.trc");
+    let r = srv
+        .client
+        .post(format!("{}/v1/sequences?library=q", srv.base))
+        .header("x-mocap-name", "knee")
+        .header("x-mocap-library", "ignored: the query wins")
+        .header("x-mocap-mean-error-mm", "2.5")
+        .header("content-type", "text/x-trc")
+        .body(body.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 201);
+    let v: Value = r.json().await.unwrap();
+    let (_, _, meta) = srv
+        .get(&format!("/v1/sequences/{}", v["id"].as_str().unwrap()))
+        .await;
+    let meta: Value = serde_json::from_slice(&meta).unwrap();
+    assert_eq!(
+        (meta["name"].as_str(), meta["library"].as_str()),
+        (Some("knee"), Some("q"))
+    );
+    assert_eq!(
+        (meta["bound_kind"].as_str(), meta["bound_mm"].as_f64()),
+        (Some("mean"), Some(2.5))
+    );
+    let r = srv
+        .client
+        .post(format!("{}/v1/sequences", srv.base))
+        .header("x-mocap-max-error-mm", "lots")
+        .body(body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 400);
+    srv.stop().await;
+    t.finish().await;
+}

@@ -34,7 +34,59 @@ pub struct IngestQuery {
     latency: Option<String>,
 }
 
+/// Format named by `Content-Type` (e.g. `application/x-bvh`, `text/x-trc`), used only when
+/// the content itself does not say.
+fn content_type_format(headers: &HeaderMap) -> Option<Format> {
+    let ct = headers
+        .get(header::CONTENT_TYPE)?
+        .to_str()
+        .ok()?
+        .to_ascii_lowercase();
+    let sub = ct
+        .split(';')
+        .next()?
+        .rsplit('/')
+        .next()?
+        .trim_start_matches("x-");
+    sub.parse::<Format>().ok().filter(|f| f.can_read())
+}
+
 impl IngestQuery {
+    /// Fields may also come as `x-mocap-<field>` headers (e.g. `x-mocap-max-error-mm`);
+    /// the query wins where both are given.
+    fn with_headers(mut self, h: &HeaderMap) -> Result<Self, ApiError> {
+        let get = |name: &str| -> Option<String> {
+            h.get(format!("x-mocap-{name}"))
+                .and_then(|v| v.to_str().ok())
+                .map(str::to_string)
+        };
+        let num = |name: &str| -> Result<Option<f64>, ApiError> {
+            get(name)
+                .map(|v| {
+                    v.trim().parse::<f64>().map_err(|_| {
+                        ApiError::bad_request(format!(
+                            "header x-mocap-{name}: {v:?} is not a number"
+                        ))
+                    })
+                })
+                .transpose()
+        };
+        self.name = self.name.or_else(|| get("name"));
+        self.library = self.library.or_else(|| get("library"));
+        self.tags = self.tags.or_else(|| get("tags"));
+        self.unit = self.unit.or_else(|| get("unit"));
+        self.codec = self.codec.or_else(|| get("codec"));
+        self.latency = self.latency.or_else(|| get("latency"));
+        if self.fps.is_none() {
+            self.fps = num("fps")?;
+        }
+        if self.max_error_mm.is_none() && self.mean_error_mm.is_none() {
+            self.max_error_mm = num("max-error-mm")?;
+            self.mean_error_mm = num("mean-error-mm")?;
+        }
+        Ok(self)
+    }
+
     /// Parse, don't validate: the query becomes an [`IngestRequest`] or a 400.
     fn into_request(self, body: Bytes, state: &AppState) -> Result<IngestRequest, ApiError> {
         let bad = |e: &dyn std::fmt::Display| ApiError::bad_request(e.to_string());
@@ -86,17 +138,20 @@ impl IngestQuery {
             bound,
             latency,
             limits: state.limits,
+            format_hint: None,
         })
     }
 }
 
 pub async fn create(
     State(state): State<AppState>,
+    headers: HeaderMap,
     query: Result<Query<IngestQuery>, QueryRejection>,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
-    let req = q.into_request(body?, &state)?;
+    let mut req = q.with_headers(&headers)?.into_request(body?, &state)?;
+    req.format_hint = content_type_format(&headers);
     let uploaded = req.bytes.len();
     let report = ingest::ingest(&state.store, req).await?;
     state

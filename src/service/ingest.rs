@@ -9,7 +9,7 @@ use serde::Serialize;
 use super::choose::{self, CodecRequest, Decision, Tried};
 use super::{blocking, Error, Result};
 use crate::codec::{self, CodecId, Encoded, ErrorBound, Latency};
-use crate::motion::formats::{self, Limits, ReadOptions};
+use crate::motion::formats::{self, Format, Limits, ReadOptions};
 use crate::store::{ChunkRow, NewSequence, SequenceRow, Store};
 
 /// An upload and what the user asked of it.
@@ -26,6 +26,8 @@ pub struct IngestRequest {
     pub bound: ErrorBound,
     pub latency: Latency,
     pub limits: Limits,
+    /// Format to assume when the content does not identify itself (from `Content-Type`).
+    pub format_hint: Option<Format>,
 }
 
 /// What ingest reports back.
@@ -55,7 +57,12 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         unit: req.unit,
         fps: req.fps,
     };
-    let loaded = blocking(move || formats::read(&bytes, &options)).await??;
+    let hint = req.format_hint;
+    let loaded = blocking(move || match (formats::detect(&bytes), hint) {
+        (Err(_), Some(f)) => formats::read_as(f, &bytes, &options),
+        _ => formats::read(&bytes, &options),
+    })
+    .await??;
     let motion = Arc::new(loaded.motion);
     if motion.point_count() == 0 || motion.frame_count() == 0 || motion.gap_fraction() >= 1.0 {
         return Err(Error::Unsatisfiable(format!(
