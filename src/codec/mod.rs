@@ -80,6 +80,19 @@ pub trait Codec: Send + Sync {
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput>;
     /// Parse the header params once; the decoder then decodes any chunk.
     fn decoder(&self, params: &[u8], points: usize) -> Result<Box<dyn ChunkDecoder>>;
+    /// Why this codec should not compete for a take of this shape, if it should not (per-take
+    /// choice skips it and records the reason). Every codec can still be asked for by name.
+    fn unsuited(&self, _frames: usize, _fps: f64) -> Option<String> {
+        None
+    }
+}
+
+/// Every codec that is implemented, in id order: what per-take choice considers.
+pub fn available() -> Vec<CodecId> {
+    CodecId::ALL
+        .into_iter()
+        .filter(|&c| codec(c).is_ok())
+        .collect()
 }
 
 pub trait ChunkDecoder: Send + Sync {

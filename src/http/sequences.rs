@@ -1,8 +1,6 @@
 //! `/v1/sequences`: ingest, metadata, frame ranges, delete. Handlers parse the request into
 //! domain types and call the service; no math, no SQL.
 
-use std::sync::Arc;
-
 use axum::body::Bytes;
 use axum::extract::rejection::{BytesRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
@@ -125,7 +123,7 @@ impl IngestQuery {
             ));
         }
         Ok(IngestRequest {
-            bytes: Arc::new(body.to_vec()),
+            bytes: body,
             name: self.name,
             library: self.library.unwrap_or_default(),
             tags: self

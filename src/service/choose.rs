@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::codec::{CodecId, Latency};
+use crate::codec::{self, CodecId, Latency};
 use crate::motion::Motion;
 
 /// What the user asked for: one codec, or the smallest that meets the bound.
@@ -12,13 +12,6 @@ pub enum CodecRequest {
     Auto,
     Only(CodecId),
 }
-
-/// Codecs implemented today; later codecs join by being listed here.
-const IMPLEMENTED: [CodecId; 3] = [CodecId::Raw, CodecId::Quant, CodecId::Mdtt];
-
-/// Takes shorter than this many seconds do not try a per-take basis: it costs more than it
-/// saves (measured on the Bandai takes, mean 6 s, where mdtt already loses at max bounds).
-const MIN_SECONDS_FOR_PER_TAKE_BASIS: f64 = 1.0;
 
 /// The codecs to run, and those left out with the reason.
 pub fn candidates(
@@ -31,20 +24,18 @@ pub fn candidates(
     }
     let mut run = Vec::new();
     let mut skipped = Vec::new();
-    for c in IMPLEMENTED {
+    // New codecs take part by being implemented in `codec`: nothing here names one.
+    for c in codec::available() {
         let why = if c.latency() > latency {
             Some(format!(
                 "latency class {:?} exceeds the requested {:?}",
                 c.latency(),
                 latency
             ))
-        } else if c == CodecId::Mdtt && m.duration_s() < MIN_SECONDS_FOR_PER_TAKE_BASIS {
-            Some(format!(
-                "take is {:.2} s; a per-take basis needs at least {MIN_SECONDS_FOR_PER_TAKE_BASIS} s to pay for itself",
-                m.duration_s()
-            ))
         } else {
-            None
+            codec::codec(c)
+                .ok()
+                .and_then(|k| k.unsuited(m.frame_count(), m.fps))
         };
         match why {
             Some(reason) => skipped.push(Skipped { codec: c, reason }),

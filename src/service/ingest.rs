@@ -15,7 +15,8 @@ use crate::store::{ChunkRow, NewSequence, SequenceRow, Store};
 /// An upload and what the user asked of it.
 #[derive(Debug, Clone)]
 pub struct IngestRequest {
-    pub bytes: Arc<Vec<u8>>,
+    /// The upload, received once and shared (not copied) with the parser.
+    pub bytes: bytes::Bytes,
     pub name: Option<String>,
     pub library: String,
     pub tags: Vec<String>,

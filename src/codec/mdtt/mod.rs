@@ -286,6 +286,15 @@ impl Codec for Mdtt {
         })
     }
 
+    /// A per-take basis costs more than it saves on takes under a second (measured on the
+    /// Bandai takes, mean 6 s, where mdtt already loses at max bounds).
+    fn unsuited(&self, frames: usize, fps: f64) -> Option<String> {
+        let seconds = frames as f64 / fps;
+        (seconds < 1.0).then(|| {
+            format!("take is {seconds:.2} s; a per-take basis needs at least 1 s to pay for itself")
+        })
+    }
+
     fn decoder(&self, params: &[u8], points: usize) -> Result<Box<dyn ChunkDecoder>> {
         let p = Params::parse(params, points)?;
         let full = crate::codec::dct::basis(p.clip, p.l)
