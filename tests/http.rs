@@ -236,20 +236,8 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         );
 
         // Delete.
-        let r = srv
-            .client
-            .delete(format!("{}/v1/sequences/{id}", srv.base))
-            .send()
-            .await
-            .unwrap();
-        assert_eq!(r.status().as_u16(), 204);
-        let r = srv
-            .client
-            .delete(format!("{}/v1/sequences/{id}", srv.base))
-            .send()
-            .await
-            .unwrap();
-        assert_eq!(r.status().as_u16(), 404);
+        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 204);
+        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 404);
         let (_, _, metrics_text) = srv.get("/metrics").await;
         assert!(String::from_utf8(metrics_text)
             .unwrap()

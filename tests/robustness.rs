@@ -136,13 +136,7 @@ async fn deletes_through_another_server_are_seen_despite_caches() {
         let (s2, _, again) = a.get(&frames).await; // served from the caches
         assert_eq!((s1, s2), (200, 200));
         assert!(first == again);
-        let r = b
-            .client
-            .delete(format!("{}/v1/sequences/{id}", b.base))
-            .send()
-            .await
-            .unwrap();
-        assert_eq!(r.status().as_u16(), 204);
+        assert_eq!(b.delete(&format!("/v1/sequences/{id}")).await, 204);
         let (status, _, _) = a.get(&frames).await;
         assert_eq!(status, 404, "{}", t.name);
         a.stop().await;

@@ -139,6 +139,17 @@ impl Server {
         (status, r.json().await.unwrap_or(Value::Null))
     }
 
+    /// DELETE `path`; the status.
+    pub async fn delete(&self, path: &str) -> u16 {
+        self.client
+            .delete(format!("{}{path}", self.base))
+            .send()
+            .await
+            .unwrap()
+            .status()
+            .as_u16()
+    }
+
     pub async fn get(&self, path: &str) -> (u16, reqwest::header::HeaderMap, Vec<u8>) {
         let r = self
             .client
