@@ -8,6 +8,7 @@
 //! - [`entropy`]: adaptive binary range coder and integer models (and the zstd alternative).
 //! - [`pipeline`]: encode a `Motion` with any codec to a bound, verify it, decode ranges.
 //! - [`raw`], [`quant`]: the baselines. [`mdtt`]: Hou et al. 2015 with a residual layer.
+//! - [`lsdt`]: Hou et al. 2016's learned spatial transform (training; codecs to come).
 //! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`]: shared pieces of the above.
 
 pub mod container;
@@ -17,6 +18,7 @@ pub mod error;
 pub mod gaps;
 pub mod id;
 pub mod linalg;
+pub mod lsdt;
 pub mod mdtt;
 pub mod measure;
 pub mod pipeline;
