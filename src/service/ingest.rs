@@ -138,6 +138,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         .unwrap_or_else(|| id.clone());
     let m = &motion;
     let raw_bytes = m.frame_count() * m.point_count() * 12;
+    let ratio = raw_bytes as f64 / enc.stored_bytes as f64;
     let meta = serde_json::json!({
         "point_names": m.point_names,
         "unit": m.unit,
@@ -180,7 +181,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         bound_mm,
         raw_bytes: raw_bytes as i64,
         stored_bytes: enc.stored_bytes as i64,
-        ratio: raw_bytes as f64 / enc.stored_bytes as f64,
+        ratio,
         mean_mm: enc.stats.mean_mm,
         rms_mm: enc.stats.rms_mm,
         max_mm: enc.stats.max_mm,
@@ -199,7 +200,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         fps: m.fps,
         raw_bytes,
         stored_bytes: enc.stored_bytes,
-        ratio: raw_bytes as f64 / enc.stored_bytes as f64,
+        ratio,
         max_mm: enc.stats.max_mm,
         mean_mm: enc.stats.mean_mm,
         rms_mm: enc.stats.rms_mm,
