@@ -44,6 +44,7 @@ fn encode(c: &mut Criterion) {
         frames: m.frame_count(),
         points: m.point_count(),
         fps: m.fps,
+        shared: None,
     };
     let mut g = c.benchmark_group("encode_cmu_01_03");
     g.sample_size(10);

@@ -1,9 +1,13 @@
 //! Codec properties: bounds hold on decoded output, any sub-range decodes to the same bits
 //! as a full decode, and damaged bitstreams give typed errors, never panics.
 
+use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::Arc;
 
-use mocapstore::codec::{self, CodecId, Container, Error, ErrorBound, Limits};
+use mocapstore::codec::lsdt::spatial::dct_basis;
+use mocapstore::codec::lsdt::train::{train_basis, TrainOptions};
+use mocapstore::codec::{self, Basis, CodecId, Container, Error, ErrorBound, Limits};
 use mocapstore::corpus;
 use mocapstore::motion::formats::{self, ReadOptions};
 use mocapstore::motion::metrics;
@@ -12,6 +16,21 @@ use mocapstore::motion::Motion;
 use proptest::prelude::*;
 
 const CODECS: [CodecId; 3] = [CodecId::Raw, CodecId::Quant, CodecId::Mdtt];
+/// The codecs that code with a shared basis.
+const SHARED: [CodecId; 2] = [CodecId::LsdtClip, CodecId::LsdtFrame];
+
+/// An LSDT basis trained on the motion's own frames (or the DCT if none is complete).
+fn basis_for(m: &Motion) -> Arc<Basis> {
+    let opts = TrainOptions {
+        max_iterations: 15,
+        ..TrainOptions::default()
+    };
+    Arc::new(
+        train_basis(&[m.positions()], m.point_count(), &opts, 4000)
+            .map(|t| t.basis)
+            .unwrap_or_else(|_| dct_basis(m.point_count())),
+    )
+}
 
 fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|x| x.to_bits()).collect()
@@ -19,11 +38,22 @@ fn bits(v: &[f32]) -> Vec<u32> {
 
 /// Encode, check the bound on a fresh decode, and check sub-ranges against the full decode.
 fn check(name: &str, m: &Motion, codec: CodecId, bound: ErrorBound, rng: &mut Rng) {
-    let enc =
-        codec::encode(m, codec, bound).unwrap_or_else(|e| panic!("{name} {codec} {bound}: {e}"));
+    check_with(name, m, codec, bound, None, rng)
+}
+
+fn check_with(
+    name: &str,
+    m: &Motion,
+    codec: CodecId,
+    bound: ErrorBound,
+    shared: Option<&Arc<Basis>>,
+    rng: &mut Rng,
+) {
+    let enc = codec::encode_with(m, codec, bound, shared)
+        .unwrap_or_else(|e| panic!("{name} {codec} {bound}: {e}"));
     let bytes = enc.container.to_bytes();
     let c = Container::parse(&bytes, &Limits::default()).unwrap();
-    let full = codec::decode_all(&c).unwrap();
+    let full = codec::decode_all_with(&c, shared.cloned()).unwrap();
     let s = metrics::compare(m.positions(), &full, m.point_count(), m.unit.to_mm()).unwrap();
     let ok = match bound {
         ErrorBound::MaxMm(b) => s.max_mm <= b,
@@ -48,7 +78,8 @@ fn check(name: &str, m: &Motion, codec: CodecId, bound: ErrorBound, rng: &mut Rn
         let end = start + 1 + rng.below(frames - start);
         let range = c.header.chunks_for(start, end);
         let chunks: Vec<&[u8]> = c.chunks[range].iter().map(Vec::as_slice).collect();
-        let part = codec::decode_range(&c.header, &chunks, start, end).unwrap();
+        let d = codec::decoder(&c.header, shared.cloned()).unwrap();
+        let part = codec::decode_range_with(&c.header, d.as_ref(), &chunks, start, end).unwrap();
         assert_eq!(
             bits(&part),
             bits(&full[start * w..end * w]),
@@ -77,6 +108,10 @@ proptest! {
         let mut rng = Rng::new(seed);
         for codec in CODECS {
             check("synthetic", &m, codec, bound, &mut rng);
+        }
+        let basis = if seed % 2 == 0 { basis_for(&m) } else { Arc::new(dct_basis(points)) };
+        for codec in SHARED {
+            check_with("synthetic", &m, codec, bound, Some(&basis), &mut rng);
         }
     }
 }
@@ -120,6 +155,108 @@ fn every_corpus_take_meets_max_and_mean_bounds_with_every_codec() {
     });
 }
 
+/// The acceptance test of the shared-basis codecs: a basis per layout, trained on all takes
+/// of that layout, and both codecs at both bounds on every corpus take.
+#[test]
+fn every_corpus_take_meets_bounds_with_the_shared_basis_codecs() {
+    let takes = corpus_takes();
+    let mut by_layout: HashMap<String, Vec<&Motion>> = HashMap::new();
+    for (_, m) in &takes {
+        by_layout
+            .entry(m.layout_signature().to_hex())
+            .or_default()
+            .push(m);
+    }
+    let opts = TrainOptions {
+        max_iterations: 15,
+        ..TrainOptions::default()
+    };
+    let bases: HashMap<String, Arc<Basis>> = by_layout
+        .iter()
+        .map(|(layout, ms)| {
+            let frames: Vec<&[f32]> = ms.iter().map(|m| m.positions()).collect();
+            let b = train_basis(&frames, ms[0].point_count(), &opts, 8000)
+                .map(|t| t.basis)
+                .unwrap_or_else(|_| dct_basis(ms[0].point_count()));
+            (layout.clone(), Arc::new(b))
+        })
+        .collect();
+    let threads = std::thread::available_parallelism()
+        .map_or(2, |n| n.get())
+        .min(4);
+    std::thread::scope(|s| {
+        for t in 0..threads {
+            let (takes, bases) = (&takes, &bases);
+            s.spawn(move || {
+                let mut rng = Rng::new(t as u64 + 7);
+                for (name, m) in takes.iter().skip(t).step_by(threads) {
+                    let b = &bases[&m.layout_signature().to_hex()];
+                    for codec in SHARED {
+                        for bound in [ErrorBound::MaxMm(1.0), ErrorBound::MeanMm(3.0)] {
+                            check_with(name, m, codec, bound, Some(b), &mut rng);
+                        }
+                    }
+                }
+            });
+        }
+    });
+}
+
+/// `lsdt-frame` predicts each frame from the last: a range that starts between intra frames
+/// must still decode exactly, from the chunk's own intra frame.
+#[test]
+fn lsdt_frame_decodes_a_range_starting_between_intra_frames() {
+    let m = walker(700, 9, 120.0, 3, 0.1);
+    let b = basis_for(&m);
+    let enc = codec::encode_with(&m, CodecId::LsdtFrame, ErrorBound::MaxMm(0.5), Some(&b)).unwrap();
+    let c = &enc.container;
+    assert!(c.header.chunks.len() >= 5, "one intra frame per second");
+    let full = codec::decode_all_with(c, Some(b.clone())).unwrap();
+    let w = m.point_count() * 3;
+    let d = codec::decoder(&c.header, Some(b)).unwrap();
+    for (start, end) in [(130, 131), (177, 420), (599, 700)] {
+        let chunks: Vec<&[u8]> = c.chunks[c.header.chunks_for(start, end)]
+            .iter()
+            .map(Vec::as_slice)
+            .collect();
+        let part = codec::decode_range_with(&c.header, d.as_ref(), &chunks, start, end).unwrap();
+        assert_eq!(
+            bits(&part),
+            bits(&full[start * w..end * w]),
+            "{start}..{end}"
+        );
+    }
+}
+
+#[test]
+fn a_take_decodes_only_with_the_basis_it_was_coded_with() {
+    let m = walker(200, 5, 60.0, 8, 0.0);
+    let b = basis_for(&m);
+    let other = Arc::new(dct_basis(5));
+    for codec in SHARED {
+        assert!(matches!(
+            codec::encode(&m, codec, ErrorBound::MaxMm(1.0)),
+            Err(Error::Basis(_))
+        ));
+        let enc = codec::encode_with(&m, codec, ErrorBound::MaxMm(1.0), Some(&b)).unwrap();
+        assert_eq!(enc.container.header.basis, Some(b.hash()));
+        let bytes = enc.container.to_bytes();
+        let c = Container::parse(&bytes, &Limits::default()).unwrap();
+        assert!(matches!(codec::decode_all(&c), Err(Error::Basis(_))));
+        assert!(matches!(
+            codec::decode_all_with(&c, Some(other.clone())),
+            Err(Error::Basis(_))
+        ));
+        assert!(codec::decode_all_with(&c, Some(b.clone())).is_ok());
+        // A basis of the wrong size is refused before any coding.
+        let wrong = Arc::new(dct_basis(4));
+        assert!(matches!(
+            codec::encode_with(&m, codec, ErrorBound::MaxMm(1.0), Some(&wrong)),
+            Err(Error::Basis(_))
+        ));
+    }
+}
+
 /// Damage a valid bitstream in many ways. With checksums intact, every change is caught by
 /// a checksum; with checksums recomputed, the codec decoders themselves face garbage.
 #[test]
@@ -127,8 +264,10 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
     let m = walker(300, 6, 120.0, 42, 0.3);
     let mut rng = Rng::new(99);
     let mut outcomes = [0usize; 3];
-    for codec in CODECS {
-        let enc = codec::encode(&m, codec, ErrorBound::MaxMm(1.0)).unwrap();
+    let basis = basis_for(&m);
+    for codec in CODECS.into_iter().chain(SHARED) {
+        let shared = Some(&basis);
+        let enc = codec::encode_with(&m, codec, ErrorBound::MaxMm(1.0), shared).unwrap();
         let good = enc.container.to_bytes();
         let header_len = enc.container.header.to_bytes().len();
         for case in 0..1500 {
@@ -147,7 +286,8 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
                 }
             }
             let r = catch_unwind(AssertUnwindSafe(|| {
-                Container::parse(&b, &Limits::default()).and_then(|c| codec::decode_all(&c))
+                Container::parse(&b, &Limits::default())
+                    .and_then(|c| codec::decode_all_with(&c, shared.cloned()))
             }));
             match r {
                 Ok(Ok(_)) => outcomes[0] += 1,
@@ -155,7 +295,8 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
                     Error::Malformed(_)
                     | Error::Checksum(_)
                     | Error::Unsupported(_)
-                    | Error::Limit { .. },
+                    | Error::Limit { .. }
+                    | Error::Basis(_),
                 )) => outcomes[1] += 1,
                 Ok(Err(e)) => panic!("{codec} case {case}: untyped error {e:?}"),
                 Err(_) => panic!("{codec} case {case}: decoder panicked"),
@@ -179,7 +320,9 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
             }
             c.header.chunks[i].len = c.chunks[i].len() as u32;
             c.header.chunks[i].crc32c = crc32c::crc32c(&c.chunks[i]);
-            let r = catch_unwind(AssertUnwindSafe(|| codec::decode_all(&c)));
+            let r = catch_unwind(AssertUnwindSafe(|| {
+                codec::decode_all_with(&c, shared.cloned())
+            }));
             match r {
                 Ok(Ok(_)) => outcomes[2] += 1,
                 Ok(Err(_)) => outcomes[1] += 1,

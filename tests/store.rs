@@ -45,6 +45,7 @@ fn take(id: &str, n: usize) -> NewSequence {
             created_at: 1_700_000_000_000,
         },
         chunks,
+        basis: None,
     }
 }
 

@@ -1,13 +1,15 @@
 //! `mocapstore bench`: compression ratio, errors and speed of codecs on real files.
 
+use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::time::Instant;
 
 use clap::Args;
 
-use crate::codec::{self, CodecId, ErrorBound};
+use crate::codec::{self, Basis, CodecId, ErrorBound};
 use crate::corpus;
 use crate::motion::formats::{self, ReadOptions};
 use crate::motion::Motion;
@@ -33,6 +35,16 @@ pub struct BenchArgs {
     decode_repeats: usize,
     #[arg(long)]
     unit: Option<String>,
+    /// Codecs with a shared basis train it per layout on every N-th take (in name order)
+    /// and every codec is then measured on the other takes only.
+    #[arg(long, default_value_t = 2)]
+    train_every: usize,
+    /// Clip lengths (seconds) to measure `lsdt-clip` at; each is its own row.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    clip_seconds: Vec<f64>,
+    /// Intra periods (seconds; `inf` for none) to measure `lsdt-frame` at.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    intra_seconds: Vec<f64>,
     /// Instead of codecs, compare the entropy coders (adaptive range coder vs zigzag
     /// varints + zstd) on the integer streams `quant` produces at each max bound.
     #[arg(long)]
@@ -44,6 +56,8 @@ pub struct BenchArgs {
 pub struct Row {
     pub file: String,
     pub codec: CodecId,
+    /// The codec and any setting measured apart (e.g. `lsdt-clip L=0.5s`).
+    pub label: String,
     pub bound: ErrorBound,
     pub frames: usize,
     pub points: usize,
@@ -88,25 +102,90 @@ pub(super) fn collect_files(paths: &[PathBuf]) -> Vec<PathBuf> {
     out
 }
 
+/// A codec and the setting it is measured at.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Variant {
+    /// As per-take choice runs it.
+    Default(CodecId),
+    /// `lsdt-clip` with clips of this many seconds.
+    Clip(f64),
+    /// `lsdt-frame` with an intra frame every this many seconds (infinite: none).
+    Intra(f64),
+}
+
+impl Variant {
+    fn codec(self) -> CodecId {
+        match self {
+            Variant::Default(c) => c,
+            Variant::Clip(_) => CodecId::LsdtClip,
+            Variant::Intra(_) => CodecId::LsdtFrame,
+        }
+    }
+
+    fn label(self) -> String {
+        match self {
+            Variant::Default(c) => c.to_string(),
+            Variant::Clip(s) => format!("lsdt-clip L={s}s"),
+            Variant::Intra(s) if s.is_infinite() => "lsdt-frame no intra".to_string(),
+            Variant::Intra(s) => format!("lsdt-frame I={s}s"),
+        }
+    }
+
+    fn encode(
+        self,
+        motion: &Motion,
+        bound: ErrorBound,
+        shared: Option<&Arc<Basis>>,
+    ) -> codec::Result<codec::Encoded> {
+        use crate::codec::lsdt::{clip, frame};
+        let frames_of = |s: f64| {
+            if s.is_infinite() {
+                motion.frame_count()
+            } else {
+                ((s * motion.fps).round() as usize).max(1)
+            }
+        };
+        match self {
+            Variant::Default(c) => codec::encode_with(motion, c, bound, shared),
+            Variant::Clip(s) => {
+                codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
+                    clip::encode_with_clip(i, t, frames_of(s))
+                })
+            }
+            Variant::Intra(s) => {
+                codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
+                    frame::encode_with_period(i, t, frames_of(s))
+                })
+            }
+        }
+    }
+}
+
 /// Measure one take with one codec at one bound.
 pub fn measure(
     name: &str,
     motion: &Motion,
-    codec: CodecId,
+    variant: Variant,
     bound: ErrorBound,
+    shared: Option<&Arc<Basis>>,
     repeats: usize,
 ) -> Result<Row, String> {
     let t0 = Instant::now();
-    let enc = codec::encode(motion, codec, bound).map_err(|e| e.to_string())?;
+    let enc = variant
+        .encode(motion, bound, shared)
+        .map_err(|e| e.to_string())?;
     let encode_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     for _ in 0..repeats.max(1) {
-        std::hint::black_box(codec::decode_all(&enc.container).map_err(|e| e.to_string())?);
+        std::hint::black_box(
+            codec::decode_all_with(&enc.container, shared.cloned()).map_err(|e| e.to_string())?,
+        );
     }
     let decode_s = t1.elapsed().as_secs_f64() / repeats.max(1) as f64;
     Ok(Row {
         file: name.to_string(),
-        codec,
+        codec: variant.codec(),
+        label: variant.label(),
         bound,
         frames: motion.frame_count(),
         points: motion.point_count(),
@@ -130,18 +209,18 @@ fn bound_label(b: ErrorBound) -> String {
 
 /// Totals per (codec, bound) over all files: sizes add, errors weight by samples.
 pub fn totals(rows: &[Row]) -> Vec<Row> {
-    let mut keys: Vec<(CodecId, String)> = Vec::new();
+    let mut keys: Vec<(String, String)> = Vec::new();
     for r in rows {
-        let k = (r.codec, bound_label(r.bound));
+        let k = (r.label.clone(), bound_label(r.bound));
         if !keys.contains(&k) {
             keys.push(k);
         }
     }
     keys.into_iter()
-        .map(|(codec, label)| {
+        .map(|(variant, label)| {
             let sel: Vec<&Row> = rows
                 .iter()
-                .filter(|r| r.codec == codec && bound_label(r.bound) == label)
+                .filter(|r| r.label == variant && bound_label(r.bound) == label)
                 .collect();
             let samples: f64 = sel.iter().map(|r| (r.frames * r.points) as f64).sum();
             let wavg = |f: &dyn Fn(&Row) -> f64| {
@@ -152,7 +231,8 @@ pub fn totals(rows: &[Row]) -> Vec<Row> {
             };
             Row {
                 file: format!("TOTAL ({} takes)", sel.len()),
-                codec,
+                codec: sel[0].codec,
+                label: variant,
                 bound: sel[0].bound,
                 frames: sel.iter().map(|r| r.frames).sum(),
                 points: 0,
@@ -178,7 +258,7 @@ pub fn markdown(rows: &[Row]) -> String {
             s,
             "| {} | {} | {} | {} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {:.3} | {:.0} | {:.0} |",
             r.file,
-            r.codec,
+            r.label,
             bound_label(r.bound),
             r.frames,
             r.ratio(),
@@ -205,7 +285,7 @@ fn csv(rows: &[Row]) -> String {
             s,
             "{},{},{kind},{v},{},{},{},{},{:.4},{:.2},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1}",
             r.file.replace(',', ";"),
-            r.codec,
+            r.label,
             r.frames,
             r.points,
             r.raw_bytes,
@@ -265,11 +345,10 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     if args.entropy {
         return entropy_comparison(&files, &args.max_error, &opts, &args.out);
     }
-    let mut rows = Vec::new();
-    let mut failures = 0;
+    let mut takes = Vec::new();
     for path in &files {
         let name = short_name(path);
-        let motion = match std::fs::read(path)
+        match std::fs::read(path)
             .map_err(|e| e.to_string())
             .and_then(|b| formats::read(&b, &opts).map_err(|e| e.to_string()))
         {
@@ -278,26 +357,54 @@ pub fn run(args: &BenchArgs) -> ExitCode {
                     && l.motion.frame_count() > 0
                     && l.motion.gap_fraction() < 1.0 =>
             {
-                l.motion
+                takes.push((name, l.motion))
             }
-            Ok(_) => {
-                eprintln!("{name}: skipped: no point samples");
-                continue;
+            Ok(_) => eprintln!("{name}: skipped: no point samples"),
+            Err(e) => eprintln!("{name}: skipped: {e}"),
+        }
+    }
+    let mut variants = Vec::new();
+    for &c in &args.codecs {
+        match c {
+            CodecId::LsdtClip => {
+                variants.extend(args.clip_seconds.iter().map(|&s| Variant::Clip(s)))
             }
+            CodecId::LsdtFrame => {
+                variants.extend(args.intra_seconds.iter().map(|&s| Variant::Intra(s)))
+            }
+            c => variants.push(Variant::Default(c)),
+        }
+    }
+    let shared_needed = args
+        .codecs
+        .iter()
+        .any(|&c| codec::codec(c).is_ok_and(|k| k.basis_kind().is_some()));
+    let (test, bases) = if shared_needed {
+        match split_and_train(takes, args.train_every) {
+            Ok(x) => x,
             Err(e) => {
-                eprintln!("{name}: skipped: {e}");
-                continue;
+                eprintln!("mocapstore bench: {e}");
+                return ExitCode::FAILURE;
             }
-        };
-        for &codec in &args.codecs {
+        }
+    } else {
+        (takes, Default::default())
+    };
+    let mut rows = Vec::new();
+    let mut failures = 0;
+    for (name, motion) in &test {
+        let layout = motion.layout_signature().to_hex();
+        for &variant in &variants {
+            let shared = bases.get(&layout);
             for &bound in &bounds {
-                if codec == CodecId::Raw && bound != bounds[0] {
+                if variant.codec() == CodecId::Raw && bound != bounds[0] {
                     continue; // lossless: one row is enough
                 }
-                match measure(&name, &motion, codec, bound, args.decode_repeats) {
+                let label = variant.label();
+                match measure(name, motion, variant, bound, shared, args.decode_repeats) {
                     Ok(r) => {
                         eprintln!(
-                            "{name} {codec} {}: CR {:.1}, max {:.3} mm",
+                            "{name} {label} {}: CR {:.1}, max {:.3} mm",
                             bound_label(bound),
                             r.ratio(),
                             r.max_mm
@@ -306,7 +413,7 @@ pub fn run(args: &BenchArgs) -> ExitCode {
                     }
                     Err(e) => {
                         failures += 1;
-                        eprintln!("{name} {codec} {}: FAILED: {e}", bound_label(bound));
+                        eprintln!("{name} {label} {}: FAILED: {e}", bound_label(bound));
                     }
                 }
             }
@@ -329,6 +436,65 @@ pub fn run(args: &BenchArgs) -> ExitCode {
         return ExitCode::FAILURE;
     }
     ExitCode::SUCCESS
+}
+
+/// Split takes per layout into training (every `every`-th in name order) and test, and
+/// train an LSDT basis per layout on its training takes. Layouts with a single take are
+/// left out: nothing could be held apart.
+#[allow(clippy::type_complexity)]
+fn split_and_train(
+    takes: Vec<(String, Motion)>,
+    every: usize,
+) -> Result<(Vec<(String, Motion)>, HashMap<String, Arc<Basis>>), String> {
+    use crate::codec::lsdt::train::{train_basis, TrainOptions};
+    let every = every.max(2);
+    let mut groups: HashMap<String, Vec<(String, Motion)>> = HashMap::new();
+    for t in takes {
+        groups
+            .entry(t.1.layout_signature().to_hex())
+            .or_default()
+            .push(t);
+    }
+    let mut test = Vec::new();
+    let mut bases = HashMap::new();
+    let mut layouts: Vec<_> = groups.into_iter().collect();
+    layouts.sort_by(|a, b| a.1[0].0.cmp(&b.1[0].0));
+    for (layout, mut group) in layouts {
+        if group.len() < 2 {
+            eprintln!("{}: skipped: the only take of its layout", group[0].0);
+            continue;
+        }
+        group.sort_by(|a, b| a.0.cmp(&b.0));
+        let (train, held): (Vec<_>, Vec<_>) = group
+            .into_iter()
+            .enumerate()
+            .partition(|(i, _)| i % every == 0);
+        let mm: Vec<Vec<f32>> = train
+            .iter()
+            .map(|(_, (_, m))| {
+                let k = m.unit.to_mm() as f32;
+                m.positions().iter().map(|v| v * k).collect()
+            })
+            .collect();
+        let slices: Vec<&[f32]> = mm.iter().map(Vec::as_slice).collect();
+        let t0 = Instant::now();
+        let points = train[0].1 .1.point_count();
+        let t = train_basis(&slices, points, &TrainOptions::default(), 50_000)
+            .map_err(|e| e.to_string())?;
+        eprintln!(
+            "layout {}: trained lsdt on {} takes ({} frames sampled) in {:.1} s; objective x {:.4e} → {:.4e}, {} iterations",
+            &layout[..8],
+            train.len(),
+            t.samples,
+            t0.elapsed().as_secs_f64(),
+            t.runs[0].objective[0],
+            t.runs[0].objective.last().unwrap_or(&0.0),
+            t.runs[0].objective.len() - 1
+        );
+        bases.insert(layout, Arc::new(t.basis));
+        test.extend(held.into_iter().map(|(_, t)| t));
+    }
+    Ok((test, bases))
 }
 
 fn short_name(p: &Path) -> String {

@@ -30,9 +30,9 @@ pub fn rate_distortion(totals: &[Row], path: &Path) -> Result<(), String> {
             continue;
         };
         let bpf = r.stored_bytes as f64 * 8.0 / r.frames as f64;
-        match series.iter_mut().find(|(c, _)| *c == r.codec.name()) {
+        match series.iter_mut().find(|(c, _)| *c == r.label) {
             Some((_, pts)) => pts.push((bpf, b)),
-            None => series.push((r.codec.name().to_string(), vec![(bpf, b)])),
+            None => series.push((r.label.clone(), vec![(bpf, b)])),
         }
     }
     series.retain(|(_, pts)| pts.len() >= 2);

@@ -21,6 +21,9 @@ pub enum Error {
     /// Arguments that cannot be encoded (no points, a negative bound, ...).
     #[error("invalid: {0}")]
     Invalid(String),
+    /// A shared basis is missing, of the wrong kind or shape, or not the one the header names.
+    #[error("shared basis: {0}")]
+    Basis(String),
     /// The encoder could not meet the bound; a bug in a codec, reported rather than hidden.
     #[error("codec {codec} missed the bound: {detail}")]
     BoundMissed { codec: String, detail: String },

@@ -8,9 +8,12 @@
 //! - [`entropy`]: adaptive binary range coder and integer models (and the zstd alternative).
 //! - [`pipeline`]: encode a `Motion` with any codec to a bound, verify it, decode ranges.
 //! - [`raw`], [`quant`]: the baselines. [`mdtt`]: Hou et al. 2015 with a residual layer.
-//! - [`lsdt`]: Hou et al. 2016's learned spatial transform (training; codecs to come).
+//! - [`lsdt`]: Hou et al. 2016's learned spatial transform, its training, `lsdt-clip` and
+//!   `lsdt-frame`.
+//! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
 //! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`]: shared pieces of the above.
 
+pub mod basis;
 pub mod container;
 pub mod dct;
 pub mod entropy;
@@ -27,10 +30,16 @@ pub mod raw;
 pub mod residual;
 mod wire;
 
+use std::sync::Arc;
+
+pub use basis::{Basis, BasisKind};
 pub use container::{Container, Header, Limits};
 pub use error::{Error, Result};
 pub use id::{CodecId, ErrorBound, Latency};
-pub use pipeline::{decode_all, decode_chunk, decode_range, decode_range_with, encode, Encoded};
+pub use pipeline::{
+    decode_all, decode_all_with, decode_chunk, decode_range, decode_range_with, decoder, encode,
+    encode_variant, encode_with, Encoded,
+};
 
 /// What an encoder sees: gap-filled positions (`frames × points × 3`, the take's units) and
 /// which samples are real, so that errors are judged on those only.
@@ -40,6 +49,8 @@ pub struct Input<'a> {
     pub frames: usize,
     pub points: usize,
     pub fps: f64,
+    /// The shared basis to code with, for codecs that use one ([`Codec::basis_kind`]).
+    pub shared: Option<&'a Basis>,
 }
 
 impl Input<'_> {
@@ -80,8 +91,19 @@ pub trait Codec: Send + Sync {
     fn id(&self) -> CodecId;
     /// Encode to meet `target` with as few bytes as the codec can.
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput>;
-    /// Parse the header params once; the decoder then decodes any chunk.
-    fn decoder(&self, params: &[u8], points: usize) -> Result<Box<dyn ChunkDecoder>>;
+    /// Parse the header params once; the decoder then decodes any chunk. `shared` is the
+    /// basis the header names (the pipeline checks its hash), for codecs that use one.
+    fn decoder(
+        &self,
+        params: &[u8],
+        points: usize,
+        shared: Option<Arc<Basis>>,
+    ) -> Result<Box<dyn ChunkDecoder>>;
+    /// The kind of shared basis this codec codes with, if it uses one: it then competes only
+    /// for takes whose layout has such a basis.
+    fn basis_kind(&self) -> Option<BasisKind> {
+        None
+    }
     /// Why this codec should not compete for a take of this shape, if it should not (per-take
     /// choice skips it and records the reason). Every codec can still be asked for by name.
     fn unsuited(&self, _frames: usize, _fps: f64) -> Option<String> {
@@ -108,6 +130,8 @@ pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
         CodecId::Raw => Ok(&raw::Raw),
         CodecId::Quant => Ok(&quant::Quant),
         CodecId::Mdtt => Ok(&mdtt::Mdtt),
+        CodecId::LsdtClip => Ok(&lsdt::clip::LsdtClip),
+        CodecId::LsdtFrame => Ok(&lsdt::frame::LsdtFrame),
         other => Err(Error::Unsupported(format!(
             "codec {other} is not implemented yet"
         ))),

@@ -1,9 +1,12 @@
 //! Encode a take with one codec to a bound and prove it; decode any frame range.
 
+use std::sync::Arc;
+
+use super::basis::{hex, Basis};
 use super::container::{pack_chunk, unpack_chunk, verify_chunk, ChunkMeta, Container, Header};
 use super::error::{malformed, Error, Result};
 use super::id::{CodecId, ErrorBound};
-use super::{codec, gaps, ChunkDecoder, Input, Target};
+use super::{codec, gaps, ChunkDecoder, Codec, Input, Target};
 use crate::motion::metrics::{self, ErrorStats};
 use crate::motion::Motion;
 
@@ -25,6 +28,33 @@ pub struct Encoded {
 /// The returned statistics come from decoding the container just built with the same code
 /// a reader uses, so the bound is a measured fact, not a codec's claim.
 pub fn encode(motion: &Motion, codec_id: CodecId, bound: ErrorBound) -> Result<Encoded> {
+    encode_with(motion, codec_id, bound, None)
+}
+
+/// As [`encode`], with the shared basis that codecs of [`Codec::basis_kind`] code with
+/// (ignored by the others). The header records its hash.
+pub fn encode_with(
+    motion: &Motion,
+    codec_id: CodecId,
+    bound: ErrorBound,
+    shared: Option<&Arc<Basis>>,
+) -> Result<Encoded> {
+    let c = codec(codec_id)?;
+    encode_variant(motion, codec_id, bound, shared, |input, target| {
+        c.encode(input, target)
+    })
+}
+
+/// As [`encode_with`], with the codec's encoder called through `encoder`: for benchmarks
+/// and tests of a codec's own settings (a clip length, an intra period) that per-take
+/// choice does not search. The result is checked and decodes like any other.
+pub fn encode_variant(
+    motion: &Motion,
+    codec_id: CodecId,
+    bound: ErrorBound,
+    shared: Option<&Arc<Basis>>,
+    encoder: impl FnOnce(&Input<'_>, Target) -> Result<super::CodecOutput>,
+) -> Result<Encoded> {
     let (frames, points) = (motion.frame_count(), motion.point_count());
     if frames == 0 || points == 0 {
         return Err(Error::Invalid(format!(
@@ -32,6 +62,7 @@ pub fn encode(motion: &Motion, codec_id: CodecId, bound: ErrorBound) -> Result<E
         )));
     }
     let c = codec(codec_id)?;
+    let shared = usable_basis(c, shared, points)?;
     let positions = motion.positions();
     let valid = gaps::validity(positions);
     if valid.as_ref().is_some_and(|v| !v.iter().any(|x| *x)) {
@@ -50,8 +81,9 @@ pub fn encode(motion: &Motion, codec_id: CodecId, bound: ErrorBound) -> Result<E
         frames,
         points,
         fps: motion.fps,
+        shared: shared.map(|b| b.as_ref()),
     };
-    let out = c.encode(&input, target)?;
+    let out = encoder(&input, target)?;
 
     let mut metas = Vec::with_capacity(out.chunks.len());
     let mut payloads = Vec::with_capacity(out.chunks.len());
@@ -83,12 +115,12 @@ pub fn encode(motion: &Motion, codec_id: CodecId, bound: ErrorBound) -> Result<E
             fps: motion.fps,
             metres_per_unit: motion.unit.metres_per_unit,
             params: out.params,
-            basis: None,
+            basis: shared.map(|b| b.hash()),
             chunks: metas,
         },
         chunks: payloads,
     };
-    let decoded = decode_all(&container)?;
+    let decoded = decode_all_with(&container, shared.cloned())?;
     let stats = metrics::compare(positions, &decoded, points, to_mm)
         .map_err(|e| Error::Invalid(e.to_string()))?;
     if !bound.holds(stats.max_mm, stats.mean_mm) {
@@ -108,11 +140,81 @@ pub fn encode(motion: &Motion, codec_id: CodecId, bound: ErrorBound) -> Result<E
     })
 }
 
+/// The basis codec `c` needs, checked against the take; `None` for codecs that use none.
+fn usable_basis<'a>(
+    c: &dyn Codec,
+    shared: Option<&'a Arc<Basis>>,
+    points: usize,
+) -> Result<Option<&'a Arc<Basis>>> {
+    let Some(kind) = c.basis_kind() else {
+        return Ok(None);
+    };
+    let b = shared.ok_or_else(|| {
+        Error::Basis(format!(
+            "codec {} codes with a shared {kind} basis and none was given",
+            c.id()
+        ))
+    })?;
+    if b.kind() != kind {
+        return Err(Error::Basis(format!(
+            "codec {} needs a {kind} basis, {} is {}",
+            c.id(),
+            b.id(),
+            b.kind()
+        )));
+    }
+    if b.points() != points {
+        return Err(Error::Basis(format!(
+            "basis {} is for {} points, the take has {points}",
+            b.id(),
+            b.points()
+        )));
+    }
+    Ok(Some(b))
+}
+
+/// The chunk decoder for a header, given the shared basis it names (if it names one): the
+/// basis's hash must be the header's, so a take is never decoded with the wrong basis.
+pub fn decoder(header: &Header, shared: Option<Arc<Basis>>) -> Result<Box<dyn ChunkDecoder>> {
+    let c = codec(header.codec)?;
+    let shared = match (&header.basis, shared) {
+        (None, _) => None,
+        (Some(want), None) => {
+            return Err(Error::Basis(format!(
+                "the take was coded with basis {} and it was not supplied",
+                hex(want)
+            )))
+        }
+        (Some(want), Some(b)) if b.hash() != *want => {
+            return Err(Error::Basis(format!(
+                "the take was coded with basis {}, got {}",
+                hex(want),
+                b.id()
+            )))
+        }
+        (Some(_), Some(b)) => Some(b),
+    };
+    if c.basis_kind().is_some() && shared.is_none() {
+        return Err(malformed(format!(
+            "codec {} needs a shared basis and the header names none",
+            header.codec
+        )));
+    }
+    c.decoder(&header.params, header.points as usize, shared)
+}
+
 /// Decode every frame.
 pub fn decode_all(container: &Container) -> Result<Vec<f32>> {
+    decode_all_with(container, None)
+}
+
+/// Decode every frame of a take coded with a shared basis.
+pub fn decode_all_with(container: &Container, shared: Option<Arc<Basis>>) -> Result<Vec<f32>> {
     let chunks: Vec<&[u8]> = container.chunks.iter().map(Vec::as_slice).collect();
-    decode_range(
+    let d = decoder(&container.header, shared)?;
+    decode_range_with(
         &container.header,
+        d.as_ref(),
         &chunks,
         0,
         container.header.frames as usize,
@@ -129,7 +231,7 @@ pub fn decode_range(
     start: usize,
     end: usize,
 ) -> Result<Vec<f32>> {
-    let decoder = codec(header.codec)?.decoder(&header.params, header.points as usize)?;
+    let decoder = decoder(header, None)?;
     decode_range_with(header, decoder.as_ref(), chunks, start, end)
 }
 

@@ -113,7 +113,12 @@ impl Codec for Quant {
         })
     }
 
-    fn decoder(&self, params: &[u8], _points: usize) -> Result<Box<dyn ChunkDecoder>> {
+    fn decoder(
+        &self,
+        params: &[u8],
+        _points: usize,
+        _shared: Option<std::sync::Arc<super::Basis>>,
+    ) -> Result<Box<dyn ChunkDecoder>> {
         let mut r = Reader::new(params);
         let step = r.f64()?;
         r.finish()?;

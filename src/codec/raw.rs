@@ -36,7 +36,12 @@ impl Codec for Raw {
         })
     }
 
-    fn decoder(&self, params: &[u8], _points: usize) -> Result<Box<dyn ChunkDecoder>> {
+    fn decoder(
+        &self,
+        params: &[u8],
+        _points: usize,
+        _shared: Option<std::sync::Arc<super::Basis>>,
+    ) -> Result<Box<dyn ChunkDecoder>> {
         if !params.is_empty() {
             return Err(malformed("raw takes no parameters"));
         }

@@ -71,40 +71,56 @@ impl History {
     }
 }
 
-/// Code corrections for the samples of `recon` farther than `t` from `orig`, applying them
-/// to `recon` as the decoder will. Returns how many samples were corrected.
-pub fn encode(
-    enc: &mut Encoder,
-    orig: &[f32],
-    recon: &mut [f32],
-    valid: Option<&[bool]>,
-    points: usize,
+/// The residual layer's state, one frame at a time: what frame-by-frame coders (which must
+/// correct a frame before predicting the next from it) drive directly, and what [`encode`]
+/// and [`decode`] loop over.
+pub struct FrameResidual {
+    m: Models,
+    h: History,
+    prev_frame: bool,
+    flags: Vec<bool>,
+    step: f64,
     t: f64,
-) -> usize {
-    let step = step_for(t);
-    let w = points * 3;
-    let frames = orig.len() / w.max(1);
-    let mut m = Models::new();
-    let mut h = History::new(points);
-    let mut prev_frame = false;
-    let mut corrected = 0;
-    let mut flags = vec![false; points];
-    for f in 0..frames {
-        let mut any = false;
-        for p in 0..points {
-            let i = f * w + p * 3;
-            let ok = valid.is_none_or(|v| v[f * points + p]);
-            flags[p] = ok && sample_distance(&orig[i..i + 3], &recon[i..i + 3]) > t;
-            any |= flags[p];
+}
+
+impl FrameResidual {
+    pub fn new(points: usize, t: f64) -> Self {
+        FrameResidual {
+            m: Models::new(),
+            h: History::new(points),
+            prev_frame: false,
+            flags: vec![false; points],
+            step: step_for(t),
+            t,
         }
-        enc.encode(&mut m.frame[usize::from(prev_frame)], any);
-        prev_frame = any;
+    }
+
+    /// Correct the samples of one frame's `recon` farther than `t` from `orig`, coding the
+    /// corrections; returns how many were corrected.
+    pub fn encode_frame(
+        &mut self,
+        enc: &mut Encoder,
+        orig: &[f32],
+        recon: &mut [f32],
+        valid: Option<&[bool]>,
+    ) -> usize {
+        let (m, h) = (&mut self.m, &mut self.h);
+        let mut any = false;
+        for (p, flag) in self.flags.iter_mut().enumerate() {
+            let i = p * 3;
+            let ok = valid.is_none_or(|v| v[p]);
+            *flag = ok && sample_distance(&orig[i..i + 3], &recon[i..i + 3]) > self.t;
+            any |= *flag;
+        }
+        enc.encode(&mut m.frame[usize::from(self.prev_frame)], any);
+        self.prev_frame = any;
         if !any {
             h.clear();
-            continue;
+            return 0;
         }
+        let mut corrected = 0;
         let mut previous_point = false;
-        for (p, &flag) in flags.iter().enumerate() {
+        for (p, &flag) in self.flags.iter().enumerate() {
             enc.encode(&mut m.point[h.point_context(p, previous_point)], flag);
             previous_point = flag;
             h.flagged[p] = flag;
@@ -114,35 +130,28 @@ pub fn encode(
                     h.q[p * 3 + k] = 0;
                     continue;
                 }
-                let i = f * w + p * 3 + k;
-                let q = quantise((f64::from(orig[i]) - f64::from(recon[i])) / step);
+                let i = p * 3 + k;
+                let q = quantise((f64::from(orig[i]) - f64::from(recon[i])) / self.step);
                 m.value[ctx].encode(enc, q);
-                recon[i] += (f64::from(q) * step) as f32;
+                recon[i] += (f64::from(q) * self.step) as f32;
                 h.q[p * 3 + k] = q;
             }
             corrected += usize::from(flag);
         }
+        corrected
     }
-    corrected
-}
 
-/// Apply the corrections coded by [`encode`] to `recon`.
-pub fn decode(dec: &mut Decoder<'_>, recon: &mut [f32], points: usize, t: f64) {
-    let step = step_for(t);
-    let w = points * 3;
-    let frames = recon.len() / w.max(1);
-    let mut m = Models::new();
-    let mut h = History::new(points);
-    let mut prev_frame = false;
-    for f in 0..frames {
-        let any = dec.decode(&mut m.frame[usize::from(prev_frame)]);
-        prev_frame = any;
+    /// Apply one frame's corrections to `recon`.
+    pub fn decode_frame(&mut self, dec: &mut Decoder<'_>, recon: &mut [f32]) {
+        let (m, h) = (&mut self.m, &mut self.h);
+        let any = dec.decode(&mut m.frame[usize::from(self.prev_frame)]);
+        self.prev_frame = any;
         if !any {
             h.clear();
-            continue;
+            return;
         }
         let mut previous_point = false;
-        for p in 0..points {
+        for p in 0..self.flags.len() {
             let flag = dec.decode(&mut m.point[h.point_context(p, previous_point)]);
             previous_point = flag;
             h.flagged[p] = flag;
@@ -153,10 +162,42 @@ pub fn decode(dec: &mut Decoder<'_>, recon: &mut [f32], points: usize, t: f64) {
                     continue;
                 }
                 let q = m.value[ctx].decode(dec);
-                recon[f * w + p * 3 + k] += (f64::from(q) * step) as f32;
+                recon[p * 3 + k] += (f64::from(q) * self.step) as f32;
                 h.q[p * 3 + k] = q;
             }
         }
+    }
+}
+
+/// Code corrections for the samples of `recon` farther than `t` from `orig`, applying them
+/// to `recon` as the decoder will. Returns how many samples were corrected.
+pub fn encode(
+    enc: &mut Encoder,
+    orig: &[f32],
+    recon: &mut [f32],
+    valid: Option<&[bool]>,
+    points: usize,
+    t: f64,
+) -> usize {
+    let w = points * 3;
+    let mut r = FrameResidual::new(points, t);
+    let mut corrected = 0;
+    for (f, (o, rc)) in orig
+        .chunks_exact(w)
+        .zip(recon.chunks_exact_mut(w))
+        .enumerate()
+    {
+        let v = valid.map(|v| &v[f * points..(f + 1) * points]);
+        corrected += r.encode_frame(enc, o, rc, v);
+    }
+    corrected
+}
+
+/// Apply the corrections coded by [`encode`] to `recon`.
+pub fn decode(dec: &mut Decoder<'_>, recon: &mut [f32], points: usize, t: f64) {
+    let mut r = FrameResidual::new(points, t);
+    for rc in recon.chunks_exact_mut(points * 3) {
+        r.decode_frame(dec, rc);
     }
 }
 

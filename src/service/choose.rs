@@ -1,9 +1,11 @@
 //! Per-take codec choice: the candidates that fit the request and the take, and the record
 //! of what each achieved and why the winner won.
 
+use std::sync::Arc;
+
 use serde::{Deserialize, Serialize};
 
-use crate::codec::{self, CodecId, Latency};
+use crate::codec::{self, Basis, BasisKind, CodecId, Latency};
 use crate::motion::Motion;
 
 /// What the user asked for: one codec, or the smallest that meets the bound.
@@ -13,11 +15,13 @@ pub enum CodecRequest {
     Only(CodecId),
 }
 
-/// The codecs to run, and those left out with the reason.
+/// The codecs to run, and those left out with the reason. `bases` are the kinds of shared
+/// basis trained for the take's layout: codecs that need another kind sit out.
 pub fn candidates(
     request: CodecRequest,
     latency: Latency,
     m: &Motion,
+    bases: &[BasisKind],
 ) -> (Vec<CodecId>, Vec<Skipped>) {
     if let CodecRequest::Only(c) = request {
         return (vec![c], Vec::new());
@@ -33,9 +37,12 @@ pub fn candidates(
                 latency
             ))
         } else {
-            codec::codec(c)
-                .ok()
-                .and_then(|k| k.unsuited(m.frame_count(), m.fps))
+            codec::codec(c).ok().and_then(|k| match k.basis_kind() {
+                Some(kind) if !bases.contains(&kind) => Some(format!(
+                    "no shared {kind} basis is trained for this layout (POST /v1/bases)"
+                )),
+                _ => k.unsuited(m.frame_count(), m.fps),
+            })
         };
         match why {
             Some(reason) => skipped.push(Skipped { codec: c, reason }),
@@ -43,6 +50,12 @@ pub fn candidates(
         }
     }
     (run, skipped)
+}
+
+/// The shared basis `codec` codes with, among those trained for the take's layout.
+pub fn basis_for(codec: CodecId, bases: &[Arc<Basis>]) -> Option<Arc<Basis>> {
+    let kind = codec::codec(codec).ok()?.basis_kind()?;
+    bases.iter().find(|b| b.kind() == kind).cloned()
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -116,16 +129,48 @@ mod tests {
     #[test]
     fn latency_and_length_filter_candidates() {
         let long = walker(600, 4, 120.0, 1, 0.0);
-        let (run, skipped) = candidates(CodecRequest::Auto, Latency::Sequence, &long);
+        let (run, skipped) = candidates(CodecRequest::Auto, Latency::Sequence, &long, &[]);
         assert_eq!(run, vec![CodecId::Raw, CodecId::Quant, CodecId::Mdtt]);
+        // Without a trained basis the shared-basis codecs sit out, and say why.
+        assert_eq!(
+            skipped.iter().map(|s| s.codec).collect::<Vec<_>>(),
+            vec![CodecId::LsdtClip, CodecId::LsdtFrame]
+        );
+        assert!(skipped[0].reason.contains("no shared lsdt basis"));
+        let (run, skipped) = candidates(
+            CodecRequest::Auto,
+            Latency::Sequence,
+            &long,
+            &[BasisKind::Lsdt],
+        );
+        assert_eq!(
+            run,
+            vec![
+                CodecId::Raw,
+                CodecId::Quant,
+                CodecId::Mdtt,
+                CodecId::LsdtClip,
+                CodecId::LsdtFrame
+            ]
+        );
         assert!(skipped.is_empty());
-        let (run, skipped) = candidates(CodecRequest::Auto, Latency::Frame, &long);
-        assert_eq!(run, vec![CodecId::Raw, CodecId::Quant]);
+        let (run, skipped) = candidates(
+            CodecRequest::Auto,
+            Latency::Frame,
+            &long,
+            &[BasisKind::Lsdt],
+        );
+        assert_eq!(run, vec![CodecId::Raw, CodecId::Quant, CodecId::LsdtFrame]);
         assert_eq!(skipped[0].codec, CodecId::Mdtt);
         let short = walker(60, 4, 120.0, 1, 0.0);
-        let (run, _) = candidates(CodecRequest::Auto, Latency::Sequence, &short);
+        let (run, _) = candidates(CodecRequest::Auto, Latency::Sequence, &short, &[]);
         assert!(!run.contains(&CodecId::Mdtt));
-        let (run, _) = candidates(CodecRequest::Only(CodecId::Mdtt), Latency::Frame, &short);
+        let (run, _) = candidates(
+            CodecRequest::Only(CodecId::Mdtt),
+            Latency::Frame,
+            &short,
+            &[],
+        );
         assert_eq!(run, vec![CodecId::Mdtt]);
     }
 

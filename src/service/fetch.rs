@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use super::prepared::{Prepared, ReadCaches};
 use super::{blocking, Error, Result};
-use crate::codec;
+use crate::codec::{self, basis::hex, Header, Limits};
 use crate::store::{SequenceRow, Store};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
@@ -100,8 +100,14 @@ pub async fn frames(
         }
         None => {
             let row = sequence(store, id).await?;
+            let (header, _) = Header::parse(&row.header, &Limits::default())
+                .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?;
+            let shared = match &header.basis {
+                Some(h) => Some(super::bases::load(store, &hex(h)).await?),
+                None => None,
+            };
             let p = Arc::new(
-                blocking(move || Prepared::new(&row))
+                blocking(move || Prepared::new(&row, header, shared))
                     .await?
                     .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?,
             );

@@ -72,14 +72,18 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
             motion.frame_count()
         )));
     }
-    let (run, skipped) = choose::candidates(req.codec, req.latency, &motion);
+    let layout = motion.layout_signature().to_hex();
+    let bases = super::bases::latest_for(store, &layout).await?;
+    let kinds: Vec<_> = bases.iter().map(|b| b.kind()).collect();
+    let (run, skipped) = choose::candidates(req.codec, req.latency, &motion, &kinds);
     let mut jobs = Vec::with_capacity(run.len());
     for codec in run {
         let m = motion.clone();
         let bound = req.bound;
+        let shared = choose::basis_for(codec, &bases);
         jobs.push(tokio::task::spawn_blocking(move || {
             let t0 = Instant::now();
-            let r = codec::encode(&m, codec, bound);
+            let r = codec::encode_with(&m, codec, bound, shared.as_ref());
             (codec, r, t0.elapsed().as_secs_f64() * 1e3)
         }));
     }
@@ -174,7 +178,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         points: m.point_count() as i64,
         duration_s: m.duration_s(),
         metres_per_unit: m.unit.metres_per_unit,
-        layout: m.layout_signature().to_hex(),
+        layout,
         source_format: loaded.format.name().to_string(),
         codec: decision.winner.to_string(),
         bound_kind: bound_kind.to_string(),
@@ -190,7 +194,8 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         meta,
         created_at: now_ms(),
     };
-    store.insert(&NewSequence { row, chunks }).await?;
+    let basis = header.basis.as_ref().map(codec::basis::hex);
+    store.insert(&NewSequence { row, chunks, basis }).await?;
     Ok(IngestReport {
         id,
         name,

@@ -2,12 +2,14 @@
 //! transactions (through the store) and moves codec work off the async executor.
 //!
 //! # Layout
+//! - [`bases`]: shared bases — loading, the newest per layout, training jobs.
 //! - [`choose`]: which codecs compete for a take, and the decision record.
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
 //! - [`fetch`]: metadata and decoded frame ranges.
 //! - [`library`]: listings, statistics, edits.
 //! - [`prepared`]: decoders kept ready per take for range requests.
 
+pub mod bases;
 pub mod choose;
 pub mod fetch;
 pub mod ingest;

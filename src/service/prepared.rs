@@ -9,7 +9,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
 
 use crate::codec::container::Header;
-use crate::codec::{self, ChunkDecoder, Limits};
+use crate::codec::{self, Basis, ChunkDecoder};
 use crate::store::SequenceRow;
 
 /// What range requests of one take need, ready to use.
@@ -24,12 +24,13 @@ pub struct Prepared {
 }
 
 impl Prepared {
-    pub fn new(row: &SequenceRow) -> Result<Prepared, String> {
-        let (header, _) =
-            Header::parse(&row.header, &Limits::default()).map_err(|e| e.to_string())?;
-        let decoder = codec::codec(header.codec)
-            .and_then(|c| c.decoder(&header.params, header.points as usize))
-            .map_err(|e| e.to_string())?;
+    /// `shared` is the basis the header names, if it names one.
+    pub fn new(
+        row: &SequenceRow,
+        header: Header,
+        shared: Option<Arc<Basis>>,
+    ) -> Result<Prepared, codec::Error> {
+        let decoder = codec::decoder(&header, shared)?;
         Ok(Prepared {
             id: row.id.clone(),
             header,
@@ -199,10 +200,7 @@ mod tests {
         .unwrap();
         Arc::new(Prepared {
             id: id.into(),
-            decoder: codec::codec(CodecId::Quant)
-                .unwrap()
-                .decoder(&enc.container.header.params, 2)
-                .unwrap(),
+            decoder: codec::decoder(&enc.container.header, None).unwrap(),
             header: enc.container.header,
             point_names: vec!["a".into(), "b".into()],
             fps: 30.0,

@@ -131,6 +131,13 @@ impl Store {
                 .execute(&mut *tx)
                 .await?;
             }
+            if let Some(b) = &s.basis {
+                sqlx::query("INSERT INTO sequence_bases (sequence_id, basis_id) VALUES ($1, $2)")
+                    .bind(&s.id)
+                    .bind(b)
+                    .execute(&mut *tx)
+                    .await?;
+            }
             tx.commit().await?;
             Ok(())
         })
@@ -222,6 +229,9 @@ macro_rules! bind_all {
         q
     }};
 }
+
+mod bases;
+pub use bases::{BasisDeletion, BasisRow};
 
 /// One page of a listing.
 #[derive(Debug, Clone)]

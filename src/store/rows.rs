@@ -53,6 +53,9 @@ pub struct SequenceRow {
 pub struct NewSequence {
     pub row: SequenceRow,
     pub chunks: Vec<ChunkRow>,
+    /// The shared basis the take was coded with (its id), if any: the take then holds a
+    /// reference that keeps the basis from being deleted.
+    pub basis: Option<String>,
 }
 
 impl std::ops::Deref for NewSequence {

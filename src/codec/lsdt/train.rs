@@ -79,6 +79,68 @@ pub fn train(samples: &DMatrix<f64>, opts: &TrainOptions) -> Trained {
     }
 }
 
+/// A trained LSDT basis and each coordinate's run.
+pub struct TrainedBasis {
+    pub basis: crate::codec::Basis,
+    /// x, y, z.
+    pub runs: [Trained; 3],
+    /// Frames the samples were drawn from.
+    pub samples: usize,
+}
+
+/// Train the three per-coordinate transforms of a layout on the frames of `takes` (each
+/// `frames × points × 3`, NaN for gaps; frames with a gap are left out), using at most
+/// `max_samples` frames spread evenly over all of them.
+pub fn train_basis(
+    takes: &[&[f32]],
+    points: usize,
+    opts: &TrainOptions,
+    max_samples: usize,
+) -> crate::codec::Result<TrainedBasis> {
+    let w = points * 3;
+    if points == 0 {
+        return Err(crate::codec::Error::Invalid("no points to train on".into()));
+    }
+    let complete: Vec<&[f32]> = takes
+        .iter()
+        .flat_map(|t| t.chunks_exact(w))
+        .filter(|f| f.iter().all(|v| v.is_finite()))
+        .collect();
+    if complete.is_empty() {
+        return Err(crate::codec::Error::Invalid(
+            "no complete frame to train on".into(),
+        ));
+    }
+    let n = complete.len().min(max_samples.max(1));
+    let stride = complete.len() as f64 / n as f64;
+    let picked: Vec<&[f32]> = (0..n)
+        .map(|i| complete[((i as f64 * stride) as usize).min(complete.len() - 1)])
+        .collect();
+    let runs = [0, 1, 2].map(|d| {
+        let m = DMatrix::from_fn(points, n, |p, c| f64::from(picked[c][p * 3 + d]));
+        let mut t = train(&m, opts);
+        t.basis = by_energy(&t.basis, &m);
+        t
+    });
+    let basis = super::spatial::basis_from([&runs[0].basis, &runs[1].basis, &runs[2].basis])?;
+    Ok(TrainedBasis {
+        basis,
+        runs,
+        samples: n,
+    })
+}
+
+/// `B` with its rows in order of decreasing energy over the samples (`Σ (B M)²` per row).
+/// Any row order is as orthogonal and as sparse; this one lets the codecs code where a
+/// coordinate's last non-zero coefficient is and skip the zeros after it.
+fn by_energy(b: &DMatrix<f64>, m: &DMatrix<f64>) -> DMatrix<f64> {
+    let e = b * m;
+    let energy: Vec<f64> = e.row_iter().map(|r| r.norm_squared()).collect();
+    let mut order: Vec<usize> = (0..b.nrows()).collect();
+    order.sort_by(|&x, &y| energy[y].total_cmp(&energy[x]));
+    DMatrix::from_fn(b.nrows(), b.ncols(), |r, c| b[(order[r], c)])
+}
+
 /// The best `P`-sparse codes for `B`, and the objective `‖B M − E‖²`.
 fn sparse_codes(b: &DMatrix<f64>, m: &DMatrix<f64>, p: usize) -> (DMatrix<f64>, f64) {
     let mut e = b * m;

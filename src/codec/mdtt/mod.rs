@@ -295,7 +295,12 @@ impl Codec for Mdtt {
         })
     }
 
-    fn decoder(&self, params: &[u8], points: usize) -> Result<Box<dyn ChunkDecoder>> {
+    fn decoder(
+        &self,
+        params: &[u8],
+        points: usize,
+        _shared: Option<std::sync::Arc<super::Basis>>,
+    ) -> Result<Box<dyn ChunkDecoder>> {
         let p = Params::parse(params, points)?;
         let full = crate::codec::dct::basis(p.clip, p.l)
             .into_iter()
@@ -529,6 +534,7 @@ mod tests {
             frames,
             points,
             fps: 120.0,
+            shared: None,
         };
         let (k, l) = (5, 3);
         let mut a = Analysis::new(&input, clip_len(120.0), l);

@@ -1,0 +1,130 @@
+//! The learned spatial transform as the codecs apply it: one orthogonal `J × J` matrix per
+//! coordinate, `e = B_d m` forward (encoder, f64) and `m = B_dᵀ e` inverse (both sides, f32,
+//! one function so that an encoder's reconstruction is bit-identical to the decoder's).
+//!
+//! Vectors are frames as stored: `J` points interleaved x, y, z. Coefficients are laid out
+//! per coordinate: `[d][r]`, `3 × J`.
+
+use nalgebra::DMatrix;
+
+use crate::codec::basis::{Basis, BasisKind, Matrix};
+use crate::codec::error::{Error, Result};
+
+pub struct Spatial {
+    j: usize,
+    /// `B_d` row-major for d = x, y, z: row `r` is basis vector `r`.
+    b: [Vec<f32>; 3],
+}
+
+impl Spatial {
+    pub fn new(basis: &Basis) -> Result<Spatial> {
+        if basis.kind() != BasisKind::Lsdt {
+            return Err(Error::Basis(format!(
+                "LSDT codecs need an lsdt basis, got {}",
+                basis.kind()
+            )));
+        }
+        let m = basis.matrices();
+        Ok(Spatial {
+            j: basis.points(),
+            b: [m[0].data.clone(), m[1].data.clone(), m[2].data.clone()],
+        })
+    }
+
+    pub fn points(&self) -> usize {
+        self.j
+    }
+
+    /// `e[d·J + r] = Σ_j B_d[r][j] · x[3j + d]`.
+    pub fn forward(&self, x: &[f64], e: &mut [f64]) {
+        let j = self.j;
+        for d in 0..3 {
+            let b = &self.b[d];
+            for r in 0..j {
+                let row = &b[r * j..(r + 1) * j];
+                let mut acc = 0.0;
+                for (p, &v) in row.iter().enumerate() {
+                    acc += f64::from(v) * x[p * 3 + d];
+                }
+                e[d * j + r] = acc;
+            }
+        }
+    }
+
+    /// `out[3j + d] += Σ_r B_d[r][j] · q[d·J + r] · step` over the non-zero `q` only (after
+    /// thresholding most are zero, which makes this the decoder's fast path). Rows are
+    /// accumulated per coordinate in `scratch` (`3 × J`, contiguous, so the adds vectorise)
+    /// and then interleaved into `out`.
+    #[inline]
+    pub fn inverse_add(&self, q: &[i32], step: f32, scratch: &mut [f32], out: &mut [f32]) {
+        let j = self.j;
+        scratch[..3 * j].fill(0.0);
+        for d in 0..3 {
+            let b = &self.b[d];
+            let acc = &mut scratch[d * j..(d + 1) * j];
+            let mut any = false;
+            for (r, &v) in q[d * j..(d + 1) * j].iter().enumerate() {
+                if v == 0 {
+                    continue;
+                }
+                any = true;
+                let a = v as f32 * step;
+                for (o, &bv) in acc.iter_mut().zip(&b[r * j..(r + 1) * j]) {
+                    *o += a * bv;
+                }
+            }
+            if any {
+                for (p, &v) in acc.iter().enumerate() {
+                    out[p * 3 + d] += v;
+                }
+            }
+        }
+    }
+}
+
+/// Build an LSDT [`Basis`] from trained per-coordinate matrices (`B` applied as `B m`).
+pub fn basis_from(trained: [&DMatrix<f64>; 3]) -> Result<Basis> {
+    let j = trained[0].nrows();
+    let matrices = trained
+        .iter()
+        .map(|b| Matrix {
+            rows: j,
+            cols: j,
+            data: (0..j * j).map(|i| b[(i / j, i % j)] as f32).collect(),
+        })
+        .collect();
+    Basis::new(BasisKind::Lsdt, j, matrices)
+}
+
+/// The DCT as an LSDT basis: what the codecs fall back to in tests, and the paper's
+/// starting point.
+pub fn dct_basis(j: usize) -> Basis {
+    let d = crate::codec::dct::basis(j, j);
+    let b = DMatrix::from_fn(j, j, |r, c| d[c * j + r]);
+    basis_from([&b, &b, &b]).expect("square matrices of the right size")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inverse_undoes_forward() {
+        let j = 7;
+        let s = Spatial::new(&dct_basis(j)).unwrap();
+        let x: Vec<f64> = (0..j * 3).map(|i| (i as f64 * 0.7).sin() * 50.0).collect();
+        let mut e = vec![0.0; j * 3];
+        s.forward(&x, &mut e);
+        // Quantise with a fine step and invert.
+        let step = 1e-3f32;
+        let q: Vec<i32> = e
+            .iter()
+            .map(|v| (v / f64::from(step)).round() as i32)
+            .collect();
+        let mut out = vec![0f32; j * 3];
+        s.inverse_add(&q, step, &mut vec![0.0; j * 3], &mut out);
+        for (a, b) in x.iter().zip(&out) {
+            assert!((a - f64::from(*b)).abs() < 1e-2, "{a} vs {b}");
+        }
+    }
+}

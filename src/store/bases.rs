@@ -1,0 +1,168 @@
+//! Shared bases: content-addressed rows, and the references takes hold on them.
+
+use serde::{Deserialize, Serialize};
+use sqlx::Row;
+
+use super::{Error, Result, Store};
+
+/// A stored basis. `payload` is empty in listings (it can be megabytes).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BasisRow {
+    /// BLAKE3 of the payload, hex.
+    pub id: String,
+    pub kind: String,
+    pub layout: String,
+    pub points: i64,
+    /// Shape, e.g. `3×31×31` (matrices × rows × columns).
+    pub dims: String,
+    #[serde(skip)]
+    pub payload: Vec<u8>,
+    /// Which takes, which parameters, the objective per iteration: JSON.
+    pub provenance: serde_json::Value,
+    /// Milliseconds since the Unix epoch.
+    pub created_at: i64,
+    /// How many takes reference it.
+    pub used_by: i64,
+}
+
+/// What deleting a basis did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BasisDeletion {
+    Deleted,
+    NotFound,
+    /// Takes still reference it; nothing was deleted.
+    InUse(i64),
+}
+
+const COLUMNS: &str = "id, kind, layout, points, dims, provenance, created_at, \
+    (SELECT COUNT(*) FROM sequence_bases sb WHERE sb.basis_id = bases.id) AS used_by";
+
+fn basis_from_row<R: Row>(r: &R, with_payload: bool) -> Result<BasisRow>
+where
+    for<'a> &'a str: sqlx::ColumnIndex<R>,
+    for<'a> String: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> i64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+{
+    let provenance: String = r.try_get("provenance")?;
+    Ok(BasisRow {
+        id: r.try_get("id")?,
+        kind: r.try_get("kind")?,
+        layout: r.try_get("layout")?,
+        points: r.try_get("points")?,
+        dims: r.try_get("dims")?,
+        payload: if with_payload {
+            r.try_get("payload")?
+        } else {
+            Vec::new()
+        },
+        provenance: serde_json::from_str(&provenance)
+            .map_err(|e| Error::Corrupt(format!("basis provenance JSON: {e}")))?,
+        created_at: r.try_get("created_at")?,
+        used_by: r.try_get("used_by")?,
+    })
+}
+
+impl Store {
+    /// Store a basis. Content addressed, so storing the same bytes again changes nothing;
+    /// returns whether it was new.
+    pub async fn insert_basis(&self, b: &BasisRow) -> Result<bool> {
+        dispatch!(self, pool => {
+            let r = sqlx::query(
+                "INSERT INTO bases (id, kind, layout, points, dims, payload, provenance, created_at) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8) ON CONFLICT (id) DO NOTHING",
+            )
+            .bind(&b.id)
+            .bind(&b.kind)
+            .bind(&b.layout)
+            .bind(b.points)
+            .bind(&b.dims)
+            .bind(&b.payload)
+            .bind(b.provenance.to_string())
+            .bind(b.created_at)
+            .execute(pool)
+            .await?;
+            Ok(r.rows_affected() > 0)
+        })
+    }
+
+    /// A basis with its payload.
+    pub async fn basis(&self, id: &str) -> Result<Option<BasisRow>> {
+        let sql = format!("SELECT {COLUMNS}, payload FROM bases WHERE id = $1");
+        dispatch!(self, pool => {
+            sqlx::query(&sql)
+                .bind(id)
+                .fetch_optional(pool)
+                .await?
+                .map(|r| basis_from_row(&r, true))
+                .transpose()
+        })
+    }
+
+    /// Bases (without payloads), newest first, optionally of one layout and kind.
+    pub async fn bases(&self, layout: Option<&str>, kind: Option<&str>) -> Result<Vec<BasisRow>> {
+        let sql = format!(
+            "SELECT {COLUMNS} FROM bases WHERE ($1 = '' OR layout = $2) AND ($3 = '' OR kind = $4) \
+             ORDER BY created_at DESC, id"
+        );
+        let (l, k) = (layout.unwrap_or(""), kind.unwrap_or(""));
+        dispatch!(self, pool => {
+            sqlx::query(&sql)
+                .bind(l)
+                .bind(l)
+                .bind(k)
+                .bind(k)
+                .fetch_all(pool)
+                .await?
+                .iter()
+                .map(|r| basis_from_row(r, false))
+                .collect()
+        })
+    }
+
+    /// The newest basis of `kind` for `layout`, with its payload: what takes of that layout
+    /// are coded with.
+    pub async fn latest_basis(&self, layout: &str, kind: &str) -> Result<Option<BasisRow>> {
+        let sql = format!(
+            "SELECT {COLUMNS}, payload FROM bases WHERE layout = $1 AND kind = $2 \
+             ORDER BY created_at DESC, id LIMIT 1"
+        );
+        dispatch!(self, pool => {
+            sqlx::query(&sql)
+                .bind(layout)
+                .bind(kind)
+                .fetch_optional(pool)
+                .await?
+                .map(|r| basis_from_row(&r, true))
+                .transpose()
+        })
+    }
+
+    /// Delete a basis unless a take references it (checked and deleted in one transaction;
+    /// the foreign key refuses it too, should another writer race us).
+    pub async fn delete_basis(&self, id: &str) -> Result<BasisDeletion> {
+        dispatch!(self, pool => {
+            let mut tx = pool.begin().await?;
+            let used: i64 = sqlx::query("SELECT COUNT(*) AS n FROM sequence_bases WHERE basis_id = $1")
+                .bind(id)
+                .fetch_one(&mut *tx)
+                .await?
+                .try_get("n")?;
+            if used > 0 {
+                return Ok(BasisDeletion::InUse(used));
+            }
+            let r = sqlx::query("DELETE FROM bases WHERE id = $1").bind(id).execute(&mut *tx).await;
+            match r {
+                Ok(r) if r.rows_affected() == 0 => Ok(BasisDeletion::NotFound),
+                Ok(_) => {
+                    tx.commit().await?;
+                    Ok(BasisDeletion::Deleted)
+                }
+                Err(sqlx::Error::Database(d)) if d.is_foreign_key_violation() => {
+                    Ok(BasisDeletion::InUse(1))
+                }
+                Err(e) => Err(e.into()),
+            }
+        })
+    }
+}
