@@ -11,6 +11,7 @@ mod ingest;
 mod inspect;
 mod loadtest;
 mod plot;
+mod train_bases;
 
 #[derive(Parser)]
 #[command(
@@ -35,6 +36,8 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Upload files or whole folders to a running service.
     Ingest(ingest::IngestArgs),
+    /// Train a shared basis on a running service's takes (library, tag, layout or ids).
+    TrainBases(train_bases::TrainArgs),
     /// Range-fetch latency and throughput over HTTP against raw SQLite BLOB reads.
     Loadtest(loadtest::LoadArgs),
 }
@@ -96,6 +99,7 @@ pub fn main() -> ExitCode {
         Command::Bench(args) => bench::run(&args),
         Command::Ingest(args) => ingest::run(&args),
         Command::Loadtest(args) => loadtest::run(&args),
+        Command::TrainBases(args) => train_bases::run(&args),
     }
 }
 

@@ -41,6 +41,7 @@ impl From<service::Error> for ApiError {
             E::NotFound(_) => (StatusCode::NOT_FOUND, "not_found"),
             E::OutOfRange(_) => (StatusCode::RANGE_NOT_SATISFIABLE, "out_of_range"),
             E::Unsatisfiable(_) => (StatusCode::CONFLICT, "unsatisfiable"),
+            E::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
             E::Codec(crate::codec::Error::Invalid(_)) => (StatusCode::BAD_REQUEST, "bad_request"),
             E::Store(crate::store::Error::Conflict(_)) => (StatusCode::CONFLICT, "conflict"),
             E::Codec(_) | E::Store(_) | E::Internal(_) => {

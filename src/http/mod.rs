@@ -3,6 +3,7 @@
 //! [`Application::build`] binds the listener first, so it knows its port before serving:
 //! tests start the real server on `127.0.0.1:0` and read the port back.
 
+mod bases;
 mod error;
 mod library;
 mod metrics;
@@ -21,6 +22,7 @@ pub use error::ApiError;
 pub use metrics::Metrics;
 
 use crate::motion::formats::Limits;
+use crate::service::jobs::Jobs;
 use crate::service::prepared::ReadCaches;
 use crate::store::Store;
 
@@ -53,6 +55,7 @@ pub struct AppState {
     pub limits: Limits,
     pub metrics: Arc<Metrics>,
     pub caches: Arc<ReadCaches>,
+    pub jobs: Arc<Jobs>,
 }
 
 pub fn router(state: AppState, max_body_bytes: usize) -> Router {
@@ -70,6 +73,9 @@ pub fn router(state: AppState, max_body_bytes: usize) -> Router {
                 .patch(library::patch),
         )
         .route("/v1/stats", get(library::stats))
+        .route("/v1/bases", get(bases::list).post(bases::train))
+        .route("/v1/bases/{id}", get(bases::get).delete(bases::delete))
+        .route("/v1/jobs/{id}", get(bases::job))
         .route("/v1/sequences/{id}/frames", get(sequences::frames))
         .layer(DefaultBodyLimit::max(max_body_bytes))
         .layer(axum::middleware::from_fn_with_state(
@@ -110,6 +116,7 @@ impl Application {
             limits,
             metrics: Arc::new(Metrics::default()),
             caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
+            jobs: Arc::new(Jobs::default()),
         };
         Ok(Application {
             listener,

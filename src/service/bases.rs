@@ -3,9 +3,13 @@
 
 use std::sync::Arc;
 
+use serde::Deserialize;
+
+use super::jobs::{Jobs, Progress};
 use super::{blocking, Error, Result};
+use crate::codec::lsdt::train::{train_basis_reporting, TrainOptions};
 use crate::codec::{Basis, BasisKind};
-use crate::store::{BasisRow, Store};
+use crate::store::{BasisRow, Filter, SequenceRow, SortKey, Store};
 
 /// Parse a stored basis, checking that its bytes still hash to its id.
 fn parse(row: &BasisRow) -> Result<Basis> {
@@ -40,4 +44,186 @@ pub async fn latest_for(store: &Store, layout: &str) -> Result<Vec<Arc<Basis>>> 
         }
     }
     Ok(out)
+}
+
+/// What to train and on which takes.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainRequest {
+    /// `lsdt` (the default).
+    pub kind: Option<BasisKind>,
+    pub library: Option<String>,
+    pub tag: Option<String>,
+    /// Layout signature; needed when the selection spans several layouts.
+    pub layout: Option<String>,
+    /// Exactly these takes (instead of a library/tag/layout selection).
+    #[serde(default)]
+    pub ids: Vec<String>,
+    /// Non-zeros per sample (the paper's P = 8).
+    pub sparsity: Option<usize>,
+    pub max_iterations: Option<usize>,
+    /// Frames sampled (evenly) from the selection.
+    pub max_samples: Option<usize>,
+}
+
+/// A validated training request: the takes, all of one layout.
+pub struct Selection {
+    pub kind: BasisKind,
+    pub layout: String,
+    pub points: usize,
+    pub takes: Vec<SequenceRow>,
+    pub options: TrainOptions,
+    pub max_samples: usize,
+}
+
+/// Resolve a request to its takes, refusing what cannot be trained (nothing selected,
+/// several layouts, a kind not trainable) before any job starts.
+pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
+    let kind = req.kind.unwrap_or(BasisKind::Lsdt);
+    if kind != BasisKind::Lsdt {
+        return Err(Error::InvalidRequest(format!(
+            "training {kind} bases is not available yet; kind must be lsdt"
+        )));
+    }
+    let sparsity = req.sparsity.unwrap_or(8);
+    let max_iterations = req.max_iterations.unwrap_or(50);
+    let max_samples = req.max_samples.unwrap_or(50_000);
+    if sparsity == 0 || !(1..=1000).contains(&max_iterations) || max_samples < 16 {
+        return Err(Error::InvalidRequest(
+            "sparsity must be ≥ 1, max_iterations 1..=1000, max_samples ≥ 16".into(),
+        ));
+    }
+    let mut takes = Vec::new();
+    if req.ids.is_empty() {
+        let filter = Filter {
+            library: req.library.clone(),
+            tag: req.tag.clone(),
+            layout: req.layout.clone(),
+            ..Filter::default()
+        };
+        let mut cursor = None;
+        loop {
+            let page = store
+                .list(&filter, SortKey::Created, false, 500, cursor.as_ref())
+                .await?;
+            takes.extend(page.items);
+            match page.next {
+                Some(c) => cursor = Some(c),
+                None => break,
+            }
+        }
+    } else {
+        for id in &req.ids {
+            takes.push(super::fetch::sequence(store, id).await?);
+        }
+    }
+    if takes.is_empty() {
+        return Err(Error::InvalidRequest("the selection holds no takes".into()));
+    }
+    let mut layouts: Vec<(String, usize)> = Vec::new();
+    for t in &takes {
+        match layouts.iter_mut().find(|(l, _)| *l == t.layout) {
+            Some((_, n)) => *n += 1,
+            None => layouts.push((t.layout.clone(), 1)),
+        }
+    }
+    if layouts.len() > 1 {
+        let list: Vec<String> = layouts
+            .iter()
+            .map(|(l, n)| format!("{l} ({n} takes)"))
+            .collect();
+        return Err(Error::InvalidRequest(format!(
+            "a basis is for one layout and the selection spans {}: {}; choose one with layout",
+            layouts.len(),
+            list.join(", ")
+        )));
+    }
+    Ok(Selection {
+        kind,
+        layout: layouts.remove(0).0,
+        points: takes[0].points as usize,
+        takes,
+        options: TrainOptions {
+            sparsity,
+            max_iterations,
+            ..TrainOptions::default()
+        },
+        max_samples,
+    })
+}
+
+/// Decode the selected takes, train, store the basis; reports progress as it goes.
+pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result<BasisRow> {
+    let t0 = std::time::Instant::now();
+    let n = sel.takes.len();
+    let mut frames_mm: Vec<Vec<f32>> = Vec::with_capacity(n);
+    for (i, t) in sel.takes.iter().enumerate() {
+        progress.report(
+            0.5 * i as f64 / n as f64,
+            format!("decoding take {} of {n}", i + 1),
+        );
+        // Train in millimetres, so takes stored in other units weigh alike.
+        let k = (t.metres_per_unit * 1000.0) as f32;
+        let mut f = super::fetch::whole_take(store, t).await?;
+        f.iter_mut().for_each(|v| *v *= k);
+        frames_mm.push(f);
+    }
+    progress.report(0.5, "training");
+    let (points, options, max_samples) = (sel.points, sel.options, sel.max_samples);
+    let p2 = progress.clone();
+    let trained = blocking(move || {
+        let slices: Vec<&[f32]> = frames_mm.iter().map(Vec::as_slice).collect();
+        train_basis_reporting(&slices, points, &options, max_samples, &mut |d| {
+            p2.report(
+                0.5 + 0.5 * (d + 1) as f64 / 3.0,
+                format!("trained coordinate {} of 3", d + 1),
+            );
+        })
+    })
+    .await??;
+    let objective: Vec<&Vec<f64>> = trained.runs.iter().map(|r| &r.objective).collect();
+    let m = &trained.basis.matrices()[0];
+    let row = BasisRow {
+        id: trained.basis.id(),
+        kind: sel.kind.name().to_string(),
+        layout: sel.layout,
+        points: points as i64,
+        dims: format!("{}×{}×{}", trained.basis.matrices().len(), m.rows, m.cols),
+        payload: trained.basis.bytes().to_vec(),
+        provenance: serde_json::json!({
+            "takes": sel.takes.iter().map(|t| &t.id).collect::<Vec<_>>(),
+            "frames": sel.takes.iter().map(|t| t.frames).sum::<i64>(),
+            "samples": trained.samples,
+            "algorithm": "LSDT (Hou et al. 2016, Algorithm 1), DCT start, rows by energy",
+            "sparsity": options.sparsity,
+            "max_iterations": options.max_iterations,
+            "tolerance": options.tolerance,
+            "objective": { "x": objective[0], "y": objective[1], "z": objective[2] },
+            "seconds": t0.elapsed().as_secs_f64(),
+        }),
+        created_at: super::now_ms(),
+        used_by: 0,
+    };
+    store.insert_basis(&row).await?;
+    Ok(row)
+}
+
+/// Start training in the background; obvious mistakes are refused before a job exists.
+pub async fn start_training(
+    store: &Store,
+    jobs: &Arc<Jobs>,
+    req: TrainRequest,
+) -> Result<crate::service::jobs::Job> {
+    let sel = select(store, &req).await?;
+    let progress = jobs.start("train-bases");
+    let (store, p) = (store.clone(), progress.clone());
+    tokio::spawn(async move {
+        match train(&store, sel, &p).await {
+            Ok(row) => p.succeed(serde_json::to_value(&row).unwrap_or_default()),
+            Err(e) => p.fail(e.to_string()),
+        }
+    });
+    progress
+        .job()
+        .ok_or_else(|| Error::Internal("job vanished".into()))
 }

@@ -191,6 +191,29 @@ pub async fn frames(
     ))
 }
 
+/// Every frame of a stored take, decoded without touching the read caches (for bulk work
+/// such as training, which would otherwise evict what range requests keep hot).
+pub async fn whole_take(store: &Store, row: &SequenceRow) -> Result<Vec<f32>> {
+    let id = &row.id;
+    let (header, _) = Header::parse(&row.header, &Limits::default())
+        .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?;
+    let shared = match &header.basis {
+        Some(h) => Some(super::bases::load(store, &hex(h)).await?),
+        None => None,
+    };
+    let rows = store.chunks(id, 0, header.chunks.len() as i64).await?;
+    if rows.len() != header.chunks.len() {
+        return Err(Error::NotFound(format!("sequence {id}")));
+    }
+    let frames = header.frames as usize;
+    Ok(blocking(move || {
+        let payloads: Vec<&[u8]> = rows.iter().map(|r| r.payload.as_slice()).collect();
+        let d = codec::decoder(&header, shared)?;
+        codec::decode_range_with(&header, d.as_ref(), &payloads, 0, frames)
+    })
+    .await??)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -2,7 +2,7 @@
 //! pool, keep the smallest that meets the bound, store it with its decision record.
 
 use std::sync::Arc;
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::Instant;
 
 use serde::Serialize;
 
@@ -192,7 +192,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         kg_percent: enc.stats.kg_percent,
         header: header.to_bytes(),
         meta,
-        created_at: now_ms(),
+        created_at: super::now_ms(),
     };
     let basis = header.basis.as_ref().map(codec::basis::hex);
     store.insert(&NewSequence { row, chunks, basis }).await?;
@@ -213,10 +213,4 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         decision,
         warnings: loaded.warnings,
     })
-}
-
-fn now_ms() -> i64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as i64)
 }

@@ -3,6 +3,7 @@
 //!
 //! # Layout
 //! - [`bases`]: shared bases — loading, the newest per layout, training jobs.
+//! - [`jobs`]: background jobs and their progress.
 //! - [`choose`]: which codecs compete for a take, and the decision record.
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
 //! - [`fetch`]: metadata and decoded frame ranges.
@@ -13,6 +14,7 @@ pub mod bases;
 pub mod choose;
 pub mod fetch;
 pub mod ingest;
+pub mod jobs;
 pub mod library;
 pub mod prepared;
 
@@ -35,6 +37,9 @@ pub enum Error {
     /// The request is valid but this take cannot satisfy it (e.g. BVH of point data).
     #[error("{0}")]
     Unsatisfiable(String),
+    /// The request clashes with what is stored (e.g. deleting a basis takes still use).
+    #[error("{0}")]
+    Conflict(String),
     #[error("codec: {0}")]
     Codec(#[from] codec::Error),
     #[error("store: {0}")]
@@ -64,4 +69,11 @@ pub(crate) fn normalise_tags(tags: &[String]) -> Vec<String> {
     t.sort();
     t.dedup();
     t
+}
+
+/// Milliseconds since the Unix epoch.
+pub(crate) fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
 }

@@ -139,6 +139,29 @@ impl Server {
         (status, r.json().await.unwrap_or(Value::Null))
     }
 
+    /// POST a JSON body to `path`; the status, the `Location` header and the JSON answer.
+    pub async fn post_json(&self, path: &str, body: &Value) -> (u16, Option<String>, Value) {
+        let r = self
+            .client
+            .post(format!("{}{path}", self.base))
+            .json(body)
+            .send()
+            .await
+            .unwrap();
+        let status = r.status().as_u16();
+        let location = r
+            .headers()
+            .get("location")
+            .map(|v| v.to_str().unwrap().to_string());
+        (status, location, r.json().await.unwrap_or(Value::Null))
+    }
+
+    /// GET `path` as JSON.
+    pub async fn get_json(&self, path: &str) -> (u16, Value) {
+        let (status, _, body) = self.get(path).await;
+        (status, serde_json::from_slice(&body).unwrap_or(Value::Null))
+    }
+
     /// DELETE `path`; the status.
     pub async fn delete(&self, path: &str) -> u16 {
         self.client

@@ -97,6 +97,17 @@ pub fn train_basis(
     opts: &TrainOptions,
     max_samples: usize,
 ) -> crate::codec::Result<TrainedBasis> {
+    train_basis_reporting(takes, points, opts, max_samples, &mut |_| {})
+}
+
+/// As [`train_basis`], calling `done(d)` as each coordinate's transform is trained.
+pub fn train_basis_reporting(
+    takes: &[&[f32]],
+    points: usize,
+    opts: &TrainOptions,
+    max_samples: usize,
+    done: &mut dyn FnMut(usize),
+) -> crate::codec::Result<TrainedBasis> {
     let w = points * 3;
     if points == 0 {
         return Err(crate::codec::Error::Invalid("no points to train on".into()));
@@ -120,6 +131,7 @@ pub fn train_basis(
         let m = DMatrix::from_fn(points, n, |p, c| f64::from(picked[c][p * 3 + d]));
         let mut t = train(&m, opts);
         t.basis = by_energy(&t.basis, &m);
+        done(d);
         t
     });
     let basis = super::spatial::basis_from([&runs[0].basis, &runs[1].basis, &runs[2].basis])?;

@@ -1,0 +1,88 @@
+//! `/v1/bases` (shared bases: train, list, show, delete) and `/v1/jobs/{id}`.
+
+use axum::extract::rejection::{JsonRejection, QueryRejection};
+use axum::extract::{Path, Query, State};
+use axum::http::{header, StatusCode};
+use axum::response::IntoResponse;
+use axum::Json;
+use serde::Deserialize;
+
+use super::error::ApiError;
+use super::AppState;
+use crate::service::bases::{self, TrainRequest};
+use crate::service::jobs::Job;
+use crate::service::Error;
+use crate::store::{BasisDeletion, BasisRow};
+
+/// `POST /v1/bases`: 202 with the training job (and its address in `Location`).
+pub async fn train(
+    State(state): State<AppState>,
+    body: Result<Json<TrainRequest>, JsonRejection>,
+) -> Result<impl IntoResponse, ApiError> {
+    let Json(req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let job = bases::start_training(&state.store, &state.jobs, req).await?;
+    let location = format!("/v1/jobs/{}", job.id);
+    Ok((
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, location)],
+        Json(job),
+    ))
+}
+
+#[derive(Deserialize)]
+pub struct ListQuery {
+    layout: Option<String>,
+    kind: Option<String>,
+}
+
+pub async fn list(
+    State(state): State<AppState>,
+    query: Result<Query<ListQuery>, QueryRejection>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let Query(q) = query?;
+    let items = state
+        .store
+        .bases(q.layout.as_deref(), q.kind.as_deref())
+        .await
+        .map_err(Error::from)?;
+    Ok(Json(serde_json::json!({ "items": items })))
+}
+
+pub async fn get(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<BasisRow>, ApiError> {
+    let row = state
+        .store
+        .basis(&id)
+        .await
+        .map_err(Error::from)?
+        .ok_or_else(|| Error::NotFound(format!("basis {id}")))?;
+    Ok(Json(row))
+}
+
+/// 204, 404, or 409 while takes still reference the basis.
+pub async fn delete(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    match state.store.delete_basis(&id).await.map_err(Error::from)? {
+        BasisDeletion::Deleted => Ok(StatusCode::NO_CONTENT),
+        BasisDeletion::NotFound => Err(Error::NotFound(format!("basis {id}")).into()),
+        BasisDeletion::InUse(n) => Err(Error::Conflict(format!(
+            "basis {id} codes {n} stored take(s); delete them first"
+        ))
+        .into()),
+    }
+}
+
+pub async fn job(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Job>, ApiError> {
+    state
+        .jobs
+        .get(&id)
+        .map(Json)
+        .ok_or_else(|| Error::NotFound(format!("job {id}")).into())
+}

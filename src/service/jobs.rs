@@ -1,0 +1,150 @@
+//! Background jobs (training bases): their state and progress, as `GET /v1/jobs/{id}` reports
+//! it. Jobs live in the server's memory: a restart forgets a job's record (what it made — a
+//! stored basis — stays), and a job that was running when the server stopped is simply gone.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Mutex};
+
+use serde::Serialize;
+
+/// Finished jobs kept for inspection before the oldest are forgotten.
+const KEEP_FINISHED: usize = 256;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobState {
+    Running,
+    Succeeded,
+    Failed,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Job {
+    pub id: String,
+    pub kind: String,
+    pub state: JobState,
+    /// 0 to 1.
+    pub progress: f64,
+    /// What it is doing now, or did last.
+    pub message: String,
+    /// What it made (for training: the basis).
+    pub result: Option<serde_json::Value>,
+    pub error: Option<String>,
+    /// Milliseconds since the Unix epoch.
+    pub created_at: i64,
+    pub finished_at: Option<i64>,
+}
+
+#[derive(Default)]
+pub struct Jobs {
+    inner: Mutex<(HashMap<String, Job>, VecDeque<String>)>,
+}
+
+impl Jobs {
+    /// Register a running job and return the handle its worker reports through.
+    pub fn start(self: &Arc<Self>, kind: &str) -> Progress {
+        let id = uuid::Uuid::now_v7().to_string();
+        let job = Job {
+            id: id.clone(),
+            kind: kind.to_string(),
+            state: JobState::Running,
+            progress: 0.0,
+            message: "queued".into(),
+            result: None,
+            error: None,
+            created_at: super::now_ms(),
+            finished_at: None,
+        };
+        self.inner
+            .lock()
+            .expect("jobs lock")
+            .0
+            .insert(id.clone(), job);
+        Progress {
+            jobs: self.clone(),
+            id,
+        }
+    }
+
+    pub fn get(&self, id: &str) -> Option<Job> {
+        self.inner.lock().expect("jobs lock").0.get(id).cloned()
+    }
+
+    fn update(&self, id: &str, f: impl FnOnce(&mut Job)) {
+        let mut g = self.inner.lock().expect("jobs lock");
+        let (map, finished) = &mut *g;
+        let Some(job) = map.get_mut(id) else { return };
+        f(job);
+        if job.state != JobState::Running && job.finished_at.is_none() {
+            job.finished_at = Some(super::now_ms());
+            finished.push_back(id.to_string());
+            while finished.len() > KEEP_FINISHED {
+                if let Some(old) = finished.pop_front() {
+                    map.remove(&old);
+                }
+            }
+        }
+    }
+}
+
+/// A worker's handle on its job.
+#[derive(Clone)]
+pub struct Progress {
+    jobs: Arc<Jobs>,
+    pub id: String,
+}
+
+impl Progress {
+    pub fn report(&self, progress: f64, message: impl Into<String>) {
+        let message = message.into();
+        self.jobs.update(&self.id, |j| {
+            j.progress = progress.clamp(0.0, 1.0);
+            j.message = message;
+        });
+    }
+
+    pub fn succeed(&self, result: serde_json::Value) {
+        self.jobs.update(&self.id, |j| {
+            j.state = JobState::Succeeded;
+            j.progress = 1.0;
+            j.message = "done".into();
+            j.result = Some(result);
+        });
+    }
+
+    pub fn fail(&self, error: String) {
+        self.jobs.update(&self.id, |j| {
+            j.state = JobState::Failed;
+            j.message = "failed".into();
+            j.error = Some(error);
+        });
+    }
+
+    pub fn job(&self) -> Option<Job> {
+        self.jobs.get(&self.id)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_job_reports_progress_then_its_outcome() {
+        let jobs = Arc::new(Jobs::default());
+        let p = jobs.start("train-bases");
+        p.report(0.5, "training x");
+        let j = jobs.get(&p.id).unwrap();
+        assert_eq!(
+            (j.state, j.progress, j.message.as_str()),
+            (JobState::Running, 0.5, "training x")
+        );
+        p.succeed(serde_json::json!({"id": "abc"}));
+        let j = jobs.get(&p.id).unwrap();
+        assert_eq!(j.state, JobState::Succeeded);
+        assert!(j.finished_at.is_some() && j.result.is_some());
+        let q = jobs.start("train-bases");
+        q.fail("no takes".into());
+        assert_eq!(jobs.get(&q.id).unwrap().error.as_deref(), Some("no takes"));
+    }
+}
