@@ -8,6 +8,7 @@ mod error;
 mod library;
 mod metrics;
 mod sequences;
+mod streams;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -24,6 +25,7 @@ pub use metrics::Metrics;
 use crate::motion::formats::Limits;
 use crate::service::jobs::Jobs;
 use crate::service::prepared::ReadCaches;
+use crate::service::streams::Streams;
 use crate::store::Store;
 
 /// How to run the service.
@@ -56,6 +58,7 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     pub caches: Arc<ReadCaches>,
     pub jobs: Arc<Jobs>,
+    pub streams: Arc<Streams>,
 }
 
 pub fn router(state: AppState, max_body_bytes: usize) -> Router {
@@ -76,6 +79,16 @@ pub fn router(state: AppState, max_body_bytes: usize) -> Router {
         .route("/v1/bases", get(bases::list).post(bases::train))
         .route("/v1/bases/{id}", get(bases::get).delete(bases::delete))
         .route("/v1/jobs/{id}", get(bases::job))
+        .route("/v1/streams", axum::routing::post(streams::open))
+        .route("/v1/streams/{id}", get(streams::get))
+        .route(
+            "/v1/streams/{id}/frames",
+            axum::routing::post(streams::append),
+        )
+        .route(
+            "/v1/streams/{id}/finish",
+            axum::routing::post(streams::finish),
+        )
         .route("/v1/sequences/{id}/frames", get(sequences::frames))
         .layer(DefaultBodyLimit::max(max_body_bytes))
         .layer(axum::middleware::from_fn_with_state(
@@ -91,6 +104,7 @@ pub struct Application {
     listener: TcpListener,
     router: Router,
     store: Store,
+    state: AppState,
 }
 
 impl Application {
@@ -117,11 +131,13 @@ impl Application {
             metrics: Arc::new(Metrics::default()),
             caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
             jobs: Arc::new(Jobs::default()),
+            streams: Arc::new(Streams::default()),
         };
         Ok(Application {
             listener,
-            router: router(state, config.max_body_bytes),
+            router: router(state.clone(), config.max_body_bytes),
             store,
+            state,
         })
     }
 
@@ -136,9 +152,20 @@ impl Application {
         self,
         shutdown: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> std::io::Result<()> {
-        axum::serve(self.listener, self.router)
+        // Streams nobody writes to any more are finished in the background.
+        let state = self.state.clone();
+        let reaper = tokio::spawn(async move {
+            let mut tick = tokio::time::interval(std::time::Duration::from_secs(30));
+            loop {
+                tick.tick().await;
+                state.streams.reap_idle(&state.store, &state.caches).await;
+            }
+        });
+        let served = axum::serve(self.listener, self.router)
             .with_graceful_shutdown(shutdown)
-            .await?;
+            .await;
+        reaper.abort();
+        served?;
         self.store.close().await;
         Ok(())
     }

@@ -50,61 +50,103 @@ pub fn compare(
             original.len()
         )));
     }
-    let mut per_point_max = vec![0.0f64; points];
-    let (mut sum, mut sum_sq, mut max, mut worst) = (0.0f64, 0.0f64, 0.0f64, None);
-    let mut spread_sq = 0.0f64;
-    let mut samples = 0usize;
-    for (f, (a, b)) in original
-        .chunks_exact(points * 3)
-        .zip(decoded.chunks_exact(points * 3))
-        .enumerate()
-    {
-        let centroid = centroid(a);
-        for p in 0..points {
-            let pa = &a[p * 3..p * 3 + 3];
-            if pa[0].is_nan() {
-                continue;
-            }
-            let pb = &b[p * 3..p * 3 + 3];
-            let d2: f64 = (0..3)
-                .map(|k| (f64::from(pa[k]) - f64::from(pb[k])).powi(2))
-                .sum();
-            let d = if d2.is_finite() {
-                d2.sqrt()
-            } else {
-                f64::INFINITY
-            };
-            sum += d;
-            sum_sq += d * d;
-            if d > max || worst.is_none() {
-                max = d.max(max);
-                worst = Some((f, p));
-            }
-            per_point_max[p] = per_point_max[p].max(d);
-            spread_sq += (0..3)
-                .map(|k| (f64::from(pa[k]) - centroid[k]).powi(2))
-                .sum::<f64>();
-            samples += 1;
+    let mut acc = Accumulator::new(points);
+    acc.add(original, decoded);
+    Ok(acc.finish(mm_per_unit))
+}
+
+/// Error sums over frames as they come (a live stream's chunks), giving the same
+/// [`ErrorStats`] as [`compare`] over all of them at once.
+#[derive(Debug, Clone)]
+pub struct Accumulator {
+    points: usize,
+    frames: usize,
+    sum: f64,
+    sum_sq: f64,
+    max: f64,
+    worst: Option<(usize, usize)>,
+    per_point_max: Vec<f64>,
+    spread_sq: f64,
+    samples: usize,
+}
+
+impl Accumulator {
+    pub fn new(points: usize) -> Self {
+        Accumulator {
+            points,
+            frames: 0,
+            sum: 0.0,
+            sum_sq: 0.0,
+            max: 0.0,
+            worst: None,
+            per_point_max: vec![0.0; points],
+            spread_sq: 0.0,
+            samples: 0,
         }
     }
-    let s = mm_per_unit;
-    let n = samples.max(1) as f64;
-    let kg = if spread_sq > 0.0 {
-        100.0 * (sum_sq / spread_sq).sqrt()
-    } else if sum_sq == 0.0 {
-        0.0
-    } else {
-        f64::INFINITY
-    };
-    Ok(ErrorStats {
-        mean_mm: sum / n * s,
-        rms_mm: (sum_sq / n).sqrt() * s,
-        max_mm: max * s,
-        worst,
-        per_point_max_mm: per_point_max.into_iter().map(|v| v * s).collect(),
-        kg_percent: kg,
-        samples,
-    })
+
+    /// Add whole frames (`original` and `decoded` of equal length, in the take's units).
+    pub fn add(&mut self, original: &[f32], decoded: &[f32]) {
+        let points = self.points;
+        if points == 0 {
+            return;
+        }
+        for (a, b) in original
+            .chunks_exact(points * 3)
+            .zip(decoded.chunks_exact(points * 3))
+        {
+            let f = self.frames;
+            self.frames += 1;
+            let centroid = centroid(a);
+            for p in 0..points {
+                let pa = &a[p * 3..p * 3 + 3];
+                if pa[0].is_nan() {
+                    continue;
+                }
+                let pb = &b[p * 3..p * 3 + 3];
+                let d2: f64 = (0..3)
+                    .map(|k| (f64::from(pa[k]) - f64::from(pb[k])).powi(2))
+                    .sum();
+                let d = if d2.is_finite() {
+                    d2.sqrt()
+                } else {
+                    f64::INFINITY
+                };
+                self.sum += d;
+                self.sum_sq += d * d;
+                if d > self.max || self.worst.is_none() {
+                    self.max = d.max(self.max);
+                    self.worst = Some((f, p));
+                }
+                self.per_point_max[p] = self.per_point_max[p].max(d);
+                self.spread_sq += (0..3)
+                    .map(|k| (f64::from(pa[k]) - centroid[k]).powi(2))
+                    .sum::<f64>();
+                self.samples += 1;
+            }
+        }
+    }
+
+    pub fn finish(&self, mm_per_unit: f64) -> ErrorStats {
+        let s = mm_per_unit;
+        let n = self.samples.max(1) as f64;
+        let kg = if self.spread_sq > 0.0 {
+            100.0 * (self.sum_sq / self.spread_sq).sqrt()
+        } else if self.sum_sq == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+        ErrorStats {
+            mean_mm: self.sum / n * s,
+            rms_mm: (self.sum_sq / n).sqrt() * s,
+            max_mm: self.max * s,
+            worst: self.worst,
+            per_point_max_mm: self.per_point_max.iter().map(|v| v * s).collect(),
+            kg_percent: kg,
+            samples: self.samples,
+        }
+    }
 }
 
 fn centroid(frame: &[f32]) -> [f64; 3] {

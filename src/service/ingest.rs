@@ -10,6 +10,7 @@ use super::choose::{self, CodecRequest, Decision, Tried};
 use super::{blocking, Error, Result};
 use crate::codec::{self, CodecId, Encoded, ErrorBound, Latency};
 use crate::motion::formats::{self, Format, Limits, ReadOptions};
+use crate::motion::Motion;
 use crate::store::{ChunkRow, NewSequence, SequenceRow, Store};
 
 /// An upload and what the user asked of it.
@@ -73,66 +74,15 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         )));
     }
     let layout = motion.layout_signature().to_hex();
-    let bases = super::bases::latest_for(store, &layout).await?;
-    let kinds: Vec<_> = bases.iter().map(|b| b.kind()).collect();
-    let (run, skipped) = choose::candidates(req.codec, req.latency, &motion, &kinds);
-    let mut jobs = Vec::with_capacity(run.len());
-    for codec in run {
-        let m = motion.clone();
-        let bound = req.bound;
-        let shared = choose::basis_for(codec, &bases);
-        jobs.push(tokio::task::spawn_blocking(move || {
-            let t0 = Instant::now();
-            let r = codec::encode_with(&m, codec, bound, shared.as_ref());
-            (codec, r, t0.elapsed().as_secs_f64() * 1e3)
-        }));
-    }
-    let mut tried = Vec::new();
-    let mut encodings: Vec<(CodecId, Encoded)> = Vec::new();
-    for job in jobs {
-        let (codec, r, ms) = job
-            .await
-            .map_err(|e| Error::Internal(format!("encoder failed: {e}")))?;
-        match r {
-            Ok(e) => {
-                tried.push(Tried {
-                    codec,
-                    stored_bytes: Some(e.stored_bytes),
-                    max_mm: Some(e.stats.max_mm),
-                    mean_mm: Some(e.stats.mean_mm),
-                    encode_ms: ms,
-                    error: None,
-                });
-                encodings.push((codec, e));
-            }
-            Err(e) => tried.push(Tried {
-                codec,
-                stored_bytes: None,
-                max_mm: None,
-                mean_mm: None,
-                encode_ms: ms,
-                error: Some(e.to_string()),
-            }),
-        }
-    }
-    let errors: Vec<String> = tried.iter().filter_map(|t| t.error.clone()).collect();
-    let decision = choose::decide(tried, skipped, &req.bound.to_string()).ok_or_else(|| {
-        if let CodecRequest::Only(c) = req.codec {
-            Error::Unsatisfiable(format!(
-                "{c} cannot encode this take: {}",
-                errors.join("; ")
-            ))
-        } else {
-            Error::Internal(format!(
-                "no codec could encode the take: {}",
-                errors.join("; ")
-            ))
-        }
-    })?;
-    let (_, enc) = encodings
-        .into_iter()
-        .find(|(c, _)| *c == decision.winner)
-        .expect("the winner was encoded");
+    let (decision, enc) = encode_best(
+        store,
+        motion.clone(),
+        &layout,
+        req.codec,
+        req.bound,
+        req.latency,
+    )
+    .await?;
 
     let id = uuid::Uuid::now_v7().to_string();
     let name = req
@@ -155,19 +105,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         ErrorBound::MeanMm(v) => ("mean", v),
     };
     let header = &enc.container.header;
-    let chunks = header
-        .chunks
-        .iter()
-        .zip(&enc.container.chunks)
-        .enumerate()
-        .map(|(i, (meta, payload))| ChunkRow {
-            idx: i as i64,
-            first_frame: i64::from(meta.first_frame),
-            frames: i64::from(meta.frames),
-            crc32c: meta.crc32c,
-            payload: payload.clone(),
-        })
-        .collect();
+    let chunks = chunk_rows(&enc.container);
     let row = SequenceRow {
         id: id.clone(),
         name: name.clone(),
@@ -213,4 +151,94 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         decision,
         warnings: loaded.warnings,
     })
+}
+
+/// Encode `motion` with every candidate codec (shared-basis codecs with the newest basis of
+/// its layout) in parallel on the blocking pool, and keep the smallest that meets `bound`.
+pub async fn encode_best(
+    store: &Store,
+    motion: Arc<Motion>,
+    layout: &str,
+    request: CodecRequest,
+    bound: ErrorBound,
+    latency: Latency,
+) -> Result<(Decision, Encoded)> {
+    let bases = super::bases::latest_for(store, layout).await?;
+    let kinds: Vec<_> = bases.iter().map(|b| b.kind()).collect();
+    let (run, skipped) = choose::candidates(request, latency, &motion, &kinds);
+    let mut jobs = Vec::with_capacity(run.len());
+    for codec in run {
+        let m = motion.clone();
+
+        let shared = choose::basis_for(codec, &bases);
+        jobs.push(tokio::task::spawn_blocking(move || {
+            let t0 = Instant::now();
+            let r = codec::encode_with(&m, codec, bound, shared.as_ref());
+            (codec, r, t0.elapsed().as_secs_f64() * 1e3)
+        }));
+    }
+    let mut tried = Vec::new();
+    let mut encodings: Vec<(CodecId, Encoded)> = Vec::new();
+    for job in jobs {
+        let (codec, r, ms) = job
+            .await
+            .map_err(|e| Error::Internal(format!("encoder failed: {e}")))?;
+        match r {
+            Ok(e) => {
+                tried.push(Tried {
+                    codec,
+                    stored_bytes: Some(e.stored_bytes),
+                    max_mm: Some(e.stats.max_mm),
+                    mean_mm: Some(e.stats.mean_mm),
+                    encode_ms: ms,
+                    error: None,
+                });
+                encodings.push((codec, e));
+            }
+            Err(e) => tried.push(Tried {
+                codec,
+                stored_bytes: None,
+                max_mm: None,
+                mean_mm: None,
+                encode_ms: ms,
+                error: Some(e.to_string()),
+            }),
+        }
+    }
+    let errors: Vec<String> = tried.iter().filter_map(|t| t.error.clone()).collect();
+    let decision = choose::decide(tried, skipped, &bound.to_string()).ok_or_else(|| {
+        if let CodecRequest::Only(c) = request {
+            Error::Unsatisfiable(format!(
+                "{c} cannot encode this take: {}",
+                errors.join("; ")
+            ))
+        } else {
+            Error::Internal(format!(
+                "no codec could encode the take: {}",
+                errors.join("; ")
+            ))
+        }
+    })?;
+    let (_, enc) = encodings
+        .into_iter()
+        .find(|(c, _)| *c == decision.winner)
+        .expect("the winner was encoded");
+    Ok((decision, enc))
+}
+
+/// A container's chunks as rows to store.
+pub fn chunk_rows(c: &codec::Container) -> Vec<ChunkRow> {
+    c.header
+        .chunks
+        .iter()
+        .zip(&c.chunks)
+        .enumerate()
+        .map(|(i, (meta, payload))| ChunkRow {
+            idx: i as i64,
+            first_frame: i64::from(meta.first_frame),
+            frames: i64::from(meta.frames),
+            crc32c: meta.crc32c,
+            payload: payload.clone(),
+        })
+        .collect()
 }

@@ -8,6 +8,7 @@
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
 //! - [`fetch`]: metadata and decoded frame ranges.
 //! - [`library`]: listings, statistics, edits.
+//! - [`streams`]: live takes coded and committed chunk by chunk as frames arrive.
 //! - [`prepared`]: decoders kept ready per take for range requests.
 
 pub mod bases;
@@ -17,6 +18,7 @@ pub mod ingest;
 pub mod jobs;
 pub mod library;
 pub mod prepared;
+pub mod streams;
 
 use crate::{codec, motion, store};
 

@@ -143,6 +143,83 @@ impl Store {
         })
     }
 
+    /// Extend or replace a take's encoding in one transaction: its row's encoding columns
+    /// (frames, codec, sizes, statistics, header, meta) take `row`'s values and `chunks` are
+    /// added; with `replace`, its old chunks and basis reference go first. Live streams
+    /// commit chunk by chunk this way; a finished stream's re-encoding replaces them.
+    /// False if there is no such take.
+    pub async fn update_encoding(
+        &self,
+        row: &SequenceRow,
+        chunks: &[ChunkRow],
+        replace: bool,
+        basis: Option<&str>,
+    ) -> Result<bool> {
+        dispatch!(self, pool => {
+            let mut tx = pool.begin().await?;
+            let r = sqlx::query(
+                "UPDATE sequences SET frames = $1, duration_s = $2, codec = $3, bound_kind = $4, \
+                 bound_mm = $5, raw_bytes = $6, stored_bytes = $7, ratio = $8, mean_mm = $9, \
+                 rms_mm = $10, max_mm = $11, kg_percent = $12, header = $13, meta = $14 \
+                 WHERE id = $15",
+            )
+            .bind(row.frames)
+            .bind(row.duration_s)
+            .bind(&row.codec)
+            .bind(&row.bound_kind)
+            .bind(row.bound_mm)
+            .bind(row.raw_bytes)
+            .bind(row.stored_bytes)
+            .bind(row.ratio)
+            .bind(row.mean_mm)
+            .bind(row.rms_mm)
+            .bind(row.max_mm)
+            .bind(row.kg_percent)
+            .bind(&row.header)
+            .bind(row.meta.to_string())
+            .bind(&row.id)
+            .execute(&mut *tx)
+            .await?;
+            if r.rows_affected() == 0 {
+                return Ok(false);
+            }
+            if replace {
+                for sql in [
+                    "DELETE FROM chunks WHERE sequence_id = $1",
+                    "DELETE FROM sequence_bases WHERE sequence_id = $1",
+                ] {
+                    sqlx::query(sql).bind(&row.id).execute(&mut *tx).await?;
+                }
+            }
+            for c in chunks {
+                sqlx::query(
+                    "INSERT INTO chunks (sequence_id, idx, first_frame, frames, crc32c, payload) \
+                     VALUES ($1, $2, $3, $4, $5, $6)",
+                )
+                .bind(&row.id)
+                .bind(c.idx)
+                .bind(c.first_frame)
+                .bind(c.frames)
+                .bind(i64::from(c.crc32c))
+                .bind(&c.payload)
+                .execute(&mut *tx)
+                .await?;
+            }
+            if let Some(b) = basis {
+                sqlx::query(
+                    "INSERT INTO sequence_bases (sequence_id, basis_id) VALUES ($1, $2) \
+                     ON CONFLICT DO NOTHING",
+                )
+                .bind(&row.id)
+                .bind(b)
+                .execute(&mut *tx)
+                .await?;
+            }
+            tx.commit().await?;
+            Ok(true)
+        })
+    }
+
     /// A take's metadata and tags, without chunks.
     pub async fn get(&self, id: &str) -> Result<Option<SequenceRow>> {
         dispatch!(self, pool => {

@@ -14,6 +14,7 @@ use serde_json::Value;
 pub struct TestStore {
     pub name: &'static str,
     pub store: Store,
+    url: String,
     cleanup: Cleanup,
 }
 
@@ -23,6 +24,11 @@ enum Cleanup {
 }
 
 impl TestStore {
+    /// Open the store again (a stopped server closes its pool), as a restarted server would.
+    pub async fn reopen(&mut self) {
+        self.store = Store::open(&self.url).await.expect("reopen the store");
+    }
+
     pub async fn finish(self) {
         self.store.close().await;
         match self.cleanup {
@@ -52,6 +58,7 @@ pub async fn sqlite() -> TestStore {
     TestStore {
         name: "sqlite",
         store: Store::open(&url).await.expect("open sqlite"),
+        url,
         cleanup: Cleanup::Dir(dir),
     }
 }
@@ -75,6 +82,7 @@ pub async fn postgres() -> Option<TestStore> {
     Some(TestStore {
         name: "postgres",
         store: Store::open(&url).await.expect("open postgres"),
+        url,
         cleanup: Cleanup::Database { admin_url, db },
     })
 }
@@ -97,6 +105,11 @@ pub struct Server {
 }
 
 pub async fn start(store: Store, max_body_bytes: usize) -> Server {
+    // Server-side errors (500s carry no detail) show in a failing test's output.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter("warn")
+        .with_test_writer()
+        .try_init();
     let config = Config {
         listen: "127.0.0.1:0".into(),
         database_url: String::new(),

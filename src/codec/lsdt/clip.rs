@@ -215,6 +215,26 @@ fn code(
     (chunks, max, mean)
 }
 
+/// Parameters for live streams, where no search is possible: the bound as a max bound,
+/// held by the residual layer, at the step the batch search most often picks.
+pub fn stream_params(t: f64, fps: f64) -> ClipParams {
+    ClipParams {
+        clip: default_clip(fps),
+        step: 1.3 * t,
+        residual_t: t,
+    }
+}
+
+/// Encode with fixed parameters (live streams code each clip as it fills).
+pub fn encode_fixed(input: &Input<'_>, p: ClipParams) -> Result<Vec<ChunkOut>> {
+    let basis = input
+        .shared
+        .ok_or_else(|| Error::Basis("lsdt-clip needs a shared lsdt basis".into()))?;
+    let spatial = Spatial::new(basis)?;
+    let a = Analysis::new(input, &spatial, p.clip.max(1));
+    Ok(code(input, &spatial, &a, p).0)
+}
+
 /// Encode with clips of `clip` frames, searching the step for the fewest bytes that meet
 /// `target`.
 pub fn encode_with_clip(input: &Input<'_>, target: Target, clip: usize) -> Result<CodecOutput> {

@@ -254,6 +254,12 @@ impl FrameEncoder {
 
     /// The last, partial chunk, if frames are pending.
     pub fn finish(mut self) -> Option<ChunkOut> {
+        self.flush()
+    }
+
+    /// End the current chunk early (if frames are pending): the next frame starts a new
+    /// chunk with an intra frame. Live streams flush to make frames fetchable sooner.
+    pub fn flush(&mut self) -> Option<ChunkOut> {
         (self.chunk_frames > 0).then(|| self.take_chunk())
     }
 
