@@ -163,6 +163,64 @@ async fn live_responses_match_the_contract() {
         status,
         &r.json().await.unwrap(),
     );
+    // Bases and jobs.
+    let (status, _, job) = srv
+        .post_json("/v1/bases", &serde_json::json!({"max_iterations": 5}))
+        .await;
+    conforms(&spec, "/v1/bases", "post", status, &job);
+    let (status, _, bad) = srv
+        .post_json("/v1/bases", &serde_json::json!({"library": "none"}))
+        .await;
+    conforms(&spec, "/v1/bases", "post", status, &bad);
+    let job_path = format!("/v1/jobs/{}", job["id"].as_str().unwrap());
+    let basis = loop {
+        let (status, j) = get(job_path.clone()).await;
+        conforms(&spec, "/v1/jobs/{id}", "get", status, &j);
+        if j["state"] != "running" {
+            break j["result"]["id"].as_str().unwrap().to_string();
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    };
+    for (route, path) in [
+        ("/v1/bases", "/v1/bases".to_string()),
+        ("/v1/bases/{id}", format!("/v1/bases/{basis}")),
+        ("/v1/bases/{id}", "/v1/bases/nope".to_string()),
+        ("/v1/jobs/{id}", "/v1/jobs/nope".to_string()),
+    ] {
+        let (status, body) = get(path).await;
+        conforms(&spec, route, "get", status, &body);
+    }
+    // Streams.
+    let (status, _, stream) = srv
+        .post_json(
+            "/v1/streams",
+            &serde_json::json!({"fps": 60.0, "points": ["a", "b"], "chunk_seconds": 0.1}),
+        )
+        .await;
+    conforms(&spec, "/v1/streams", "post", status, &stream);
+    let (status, _, bad) = srv
+        .post_json("/v1/streams", &serde_json::json!({"fps": -1.0, "points": 2}))
+        .await;
+    conforms(&spec, "/v1/streams", "post", status, &bad);
+    let sid = stream["id"].as_str().unwrap().to_string();
+    let frames = serde_json::json!({"frames": vec![[0.0, 1.0, 2.0, 3.0, 4.0, 5.0]; 8]});
+    for body in [frames, serde_json::json!({"frames": [[1.0]]})] {
+        let (status, _, r) = srv
+            .post_json(&format!("/v1/streams/{sid}/frames"), &body)
+            .await;
+        conforms(&spec, "/v1/streams/{id}/frames", "post", status, &r);
+    }
+    let (status, s) = get(format!("/v1/streams/{sid}")).await;
+    conforms(&spec, "/v1/streams/{id}", "get", status, &s);
+    for _ in 0..2 {
+        let (status, _, r) = srv
+            .post_json(&format!("/v1/streams/{sid}/finish"), &serde_json::json!({}))
+            .await;
+        conforms(&spec, "/v1/streams/{id}/finish", "post", status, &r);
+    }
+    let status = srv.delete(&format!("/v1/bases/{basis}")).await;
+    assert!(spec["paths"]["/v1/bases/{id}"]["delete"]["responses"][status.to_string()].is_object());
+
     let status = srv.delete(&format!("/v1/sequences/{id}")).await;
     assert!(
         spec["paths"]["/v1/sequences/{id}"]["delete"]["responses"][status.to_string()].is_object()
