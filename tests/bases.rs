@@ -50,8 +50,8 @@ async fn bases_train_in_the_background_code_takes_and_are_kept_while_used() {
             (json!({}), "spans 2:"),
             (json!({"library": "none"}), "no takes"),
             (
-                json!({"library": "lib", "kind": "mdtt-set"}),
-                "not available yet",
+                json!({"library": "lib", "kind": "mdtt-set", "k": [0]}),
+                "1..=32",
             ),
         ] {
             let (status, _, r) = srv.post_json("/v1/bases", &body).await;
@@ -140,6 +140,47 @@ async fn bases_train_in_the_background_code_takes_and_are_kept_while_used() {
             .collect();
         assert!(tried.contains(&"lsdt-frame"), "{tried:?}");
         let auto_id = r["id"].as_str().unwrap().to_string();
+
+        // MDTT's database mode: K shared bases, K chosen by total size; takes then code
+        // with `mdtt-shared`.
+        let (status, location, job) = srv
+            .post_json(
+                "/v1/bases",
+                &json!({"library": "lib", "kind": "mdtt-set", "k": [1, 2]}),
+            )
+            .await;
+        assert_eq!(status, 202, "{job}");
+        let done = wait_for_job(&srv, &location.unwrap()).await;
+        assert_eq!(done["state"], "succeeded", "{done}");
+        let set = &done["result"];
+        assert_eq!(set["kind"], "mdtt-set");
+        assert_eq!(
+            set["provenance"]["k_candidates"].as_array().unwrap().len(),
+            2
+        );
+        let k = set["provenance"]["k"].as_u64().unwrap();
+        assert_eq!(set["dims"], format!("{k}×24×24"));
+        let (status, r) = srv
+            .post(
+                "codec=mdtt-shared&max_error_mm=0.5",
+                formats::write(&fresh, Format::Json).unwrap(),
+            )
+            .await;
+        assert_eq!(status, 201, "{r}");
+        assert!(r["max_mm"].as_f64().unwrap() <= 0.5);
+        let shared_id = r["id"].as_str().unwrap().to_string();
+        let (_, _, served) = srv
+            .get(&format!(
+                "/v1/sequences/{shared_id}/frames?start=17&end=250&format=f32"
+            ))
+            .await;
+        let served: Vec<f32> = served
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        let s = metrics::compare(&fresh.positions()[17 * 24..250 * 24], &served, 8, 1.0).unwrap();
+        assert!(s.max_mm <= 0.5, "{}", s.max_mm);
+        assert_eq!(srv.delete(&format!("/v1/sequences/{shared_id}")).await, 204);
 
         // In use: 409, and nothing deleted. Unused again: 204.
         let (status, b) = srv.get_json(&format!("/v1/bases/{id}")).await;

@@ -6,6 +6,7 @@
 use std::sync::Arc;
 
 use mocapstore::codec::lsdt::spatial::dct_basis;
+use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::{self, CodecId, ErrorBound};
 use mocapstore::motion::synthetic::walker;
 
@@ -26,13 +27,29 @@ fn cases() -> Vec<(String, String)> {
         (CodecId::LsdtClip, ErrorBound::MeanMm(3.0)),
         (CodecId::LsdtFrame, ErrorBound::MaxMm(1.0)),
         (CodecId::LsdtFrame, ErrorBound::MeanMm(3.0)),
+        (CodecId::MdttShared, ErrorBound::MaxMm(1.0)),
+        (CodecId::MdttShared, ErrorBound::MeanMm(3.0)),
     ];
     let mut out = Vec::new();
     for (name, m) in &motions {
         for (codec, bound) in encodings {
             // The shared-basis codecs code with the DCT as their basis: fixed, not trained,
             // so the hash follows only the codec.
-            let basis = Arc::new(dct_basis(m.point_count()));
+            let basis = Arc::new(if codec == CodecId::MdttShared {
+                // Two bases annealed from the take itself: deterministic (fixed seed).
+                let filled = codec::gaps::fill(m.positions(), m.point_count());
+                let input = codec::Input {
+                    data: &filled,
+                    valid: None,
+                    frames: m.frame_count(),
+                    points: m.point_count(),
+                    fps: m.fps,
+                    shared: None,
+                };
+                train_bases(&[input], 2, &SetOptions::default()).expect("trains")
+            } else {
+                dct_basis(m.point_count())
+            });
             let enc = codec::encode_with(m, codec, bound, Some(&basis)).expect("encodes");
             let hash = blake3::hash(&enc.container.to_bytes());
             out.push((

@@ -199,7 +199,10 @@ async fn live_responses_match_the_contract() {
         .await;
     conforms(&spec, "/v1/streams", "post", status, &stream);
     let (status, _, bad) = srv
-        .post_json("/v1/streams", &serde_json::json!({"fps": -1.0, "points": 2}))
+        .post_json(
+            "/v1/streams",
+            &serde_json::json!({"fps": -1.0, "points": 2}),
+        )
         .await;
     conforms(&spec, "/v1/streams", "post", status, &bad);
     let sid = stream["id"].as_str().unwrap().to_string();

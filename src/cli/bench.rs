@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use clap::Args;
 
-use crate::codec::{self, Basis, CodecId, ErrorBound};
+use crate::codec::{self, Basis, BasisKind, CodecId, ErrorBound};
 use crate::corpus;
 use crate::motion::formats::{self, ReadOptions};
 use crate::motion::Motion;
@@ -42,6 +42,9 @@ pub struct BenchArgs {
     /// Clip lengths (seconds) to measure `lsdt-clip` at; each is its own row.
     #[arg(long, value_delimiter = ',', default_value = "1")]
     clip_seconds: Vec<f64>,
+    /// Report only takes at most this long (seconds), e.g. 5 for the short-take comparison.
+    #[arg(long)]
+    max_seconds: Option<f64>,
     /// Intra periods (seconds; `inf` for none) to measure `lsdt-frame` at.
     #[arg(long, value_delimiter = ',', default_value = "1")]
     intra_seconds: Vec<f64>,
@@ -379,8 +382,13 @@ pub fn run(args: &BenchArgs) -> ExitCode {
         .codecs
         .iter()
         .any(|&c| codec::codec(c).is_ok_and(|k| k.basis_kind().is_some()));
+    let kinds: Vec<BasisKind> = args
+        .codecs
+        .iter()
+        .filter_map(|&c| codec::codec(c).ok().and_then(|k| k.basis_kind()))
+        .collect();
     let (test, bases) = if shared_needed {
-        match split_and_train(takes, args.train_every) {
+        match split_and_train(takes, args.train_every, &kinds) {
             Ok(x) => x,
             Err(e) => {
                 eprintln!("mocapstore bench: {e}");
@@ -392,10 +400,14 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     };
     let mut rows = Vec::new();
     let mut failures = 0;
-    for (name, motion) in &test {
+    let short_enough = |m: &Motion| args.max_seconds.is_none_or(|s| m.duration_s() <= s);
+    for (name, motion) in test.iter().filter(|(_, m)| short_enough(m)) {
         let layout = motion.layout_signature().to_hex();
         for &variant in &variants {
-            let shared = bases.get(&layout);
+            let shared = bases
+                .get(&layout)
+                .and_then(|bs| crate::service::choose::basis_for(variant.codec(), bs));
+            let shared = shared.as_ref();
             for &bound in &bounds {
                 if variant.codec() == CodecId::Raw && bound != bounds[0] {
                     continue; // lossless: one row is enough
@@ -445,7 +457,8 @@ pub fn run(args: &BenchArgs) -> ExitCode {
 fn split_and_train(
     takes: Vec<(String, Motion)>,
     every: usize,
-) -> Result<(Vec<(String, Motion)>, HashMap<String, Arc<Basis>>), String> {
+    kinds: &[BasisKind],
+) -> Result<(Vec<(String, Motion)>, HashMap<String, Vec<Arc<Basis>>>), String> {
     use crate::codec::lsdt::train::{train_basis, TrainOptions};
     let every = every.max(2);
     let mut groups: HashMap<String, Vec<(String, Motion)>> = HashMap::new();
@@ -479,19 +492,66 @@ fn split_and_train(
         let slices: Vec<&[f32]> = mm.iter().map(Vec::as_slice).collect();
         let t0 = Instant::now();
         let points = train[0].1 .1.point_count();
-        let t = train_basis(&slices, points, &TrainOptions::default(), 50_000)
-            .map_err(|e| e.to_string())?;
-        eprintln!(
-            "layout {}: trained lsdt on {} takes ({} frames sampled) in {:.1} s; objective x {:.4e} → {:.4e}, {} iterations",
-            &layout[..8],
-            train.len(),
-            t.samples,
-            t0.elapsed().as_secs_f64(),
-            t.runs[0].objective[0],
-            t.runs[0].objective.last().unwrap_or(&0.0),
-            t.runs[0].objective.len() - 1
-        );
-        bases.insert(layout, Arc::new(t.basis));
+        let mut trained = Vec::new();
+        if kinds.contains(&BasisKind::Lsdt) {
+            let t = train_basis(&slices, points, &TrainOptions::default(), 50_000)
+                .map_err(|e| e.to_string())?;
+            eprintln!(
+                "layout {}: trained lsdt on {} takes ({} frames sampled) in {:.1} s; objective x {:.4e} → {:.4e}, {} iterations",
+                &layout[..8],
+                train.len(),
+                t.samples,
+                t0.elapsed().as_secs_f64(),
+                t.runs[0].objective[0],
+                t.runs[0].objective.last().unwrap_or(&0.0),
+                t.runs[0].objective.len() - 1
+            );
+            trained.push(Arc::new(t.basis));
+        }
+        if kinds.contains(&BasisKind::MdttSet) {
+            use crate::codec::mdtt::database::{train_set, SetOptions};
+            let t1 = Instant::now();
+            let filled: Vec<(Vec<f32>, Vec<bool>)> = train
+                .iter()
+                .map(|(_, (_, m))| {
+                    let p = m.positions();
+                    (
+                        codec::gaps::fill(p, m.point_count()),
+                        p.chunks_exact(3).map(|s| !s[0].is_nan()).collect(),
+                    )
+                })
+                .collect();
+            let inputs: Vec<codec::Input<'_>> = train
+                .iter()
+                .zip(&filled)
+                .map(|((_, (_, m)), (data, valid))| codec::Input {
+                    data,
+                    valid: Some(valid),
+                    frames: m.frame_count(),
+                    points,
+                    fps: m.fps,
+                    shared: None,
+                })
+                .collect();
+            let targets: Vec<codec::Target> = train
+                .iter()
+                .map(|(_, (_, m))| codec::Target::Max(1.0 / m.unit.to_mm()))
+                .collect();
+            let t =
+                train_set(&inputs, &targets, &SetOptions::default()).map_err(|e| e.to_string())?;
+            eprintln!(
+                "layout {}: trained mdtt-set on {} takes ({} clips, rank {}) in {:.1} s; K chosen {} by total bytes (K, takes, bases): {:?}",
+                &layout[..8],
+                train.len(),
+                t.clips,
+                t.rank,
+                t1.elapsed().as_secs_f64(),
+                t.basis.matrices().len(),
+                t.sizes
+            );
+            trained.push(Arc::new(t.basis));
+        }
+        bases.insert(layout, trained);
         test.extend(held.into_iter().map(|(_, t)| t));
     }
     Ok((test, bases))

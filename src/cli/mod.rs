@@ -11,6 +11,7 @@ mod ingest;
 mod inspect;
 mod loadtest;
 mod plot;
+mod streamtest;
 mod train_bases;
 
 #[derive(Parser)]
@@ -36,6 +37,8 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Upload files or whole folders to a running service.
     Ingest(ingest::IngestArgs),
+    /// Live-stream ingest over HTTP: frames/s sustained, capture-to-fetchable delay.
+    Streamtest(streamtest::StreamArgs),
     /// Train a shared basis on a running service's takes (library, tag, layout or ids).
     TrainBases(train_bases::TrainArgs),
     /// Range-fetch latency and throughput over HTTP against raw SQLite BLOB reads.
@@ -100,6 +103,7 @@ pub fn main() -> ExitCode {
         Command::Ingest(args) => ingest::run(&args),
         Command::Loadtest(args) => loadtest::run(&args),
         Command::TrainBases(args) => train_bases::run(&args),
+        Command::Streamtest(args) => streamtest::run(&args),
     }
 }
 

@@ -19,10 +19,12 @@ pub enum CodecId {
     LsdtFrame = 5,
     Spca = 6,
     Pga = 7,
+    /// MDTT's database mode: `K` spatial bases shared by a library.
+    MdttShared = 8,
 }
 
 impl CodecId {
-    pub const ALL: [CodecId; 7] = [
+    pub const ALL: [CodecId; 8] = [
         CodecId::Raw,
         CodecId::Quant,
         CodecId::Mdtt,
@@ -30,6 +32,7 @@ impl CodecId {
         CodecId::LsdtFrame,
         CodecId::Spca,
         CodecId::Pga,
+        CodecId::MdttShared,
     ];
 
     pub fn name(self) -> &'static str {
@@ -41,6 +44,7 @@ impl CodecId {
             CodecId::LsdtFrame => "lsdt-frame",
             CodecId::Spca => "spca",
             CodecId::Pga => "pga",
+            CodecId::MdttShared => "mdtt-shared",
         }
     }
 
@@ -53,7 +57,7 @@ impl CodecId {
         match self {
             CodecId::Raw | CodecId::Quant | CodecId::LsdtFrame => Latency::Frame,
             CodecId::LsdtClip => Latency::Clip,
-            CodecId::Mdtt | CodecId::Spca | CodecId::Pga => Latency::Sequence,
+            CodecId::Mdtt | CodecId::MdttShared | CodecId::Spca | CodecId::Pga => Latency::Sequence,
         }
     }
 }

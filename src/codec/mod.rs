@@ -132,6 +132,7 @@ pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
         CodecId::Mdtt => Ok(&mdtt::Mdtt),
         CodecId::LsdtClip => Ok(&lsdt::clip::LsdtClip),
         CodecId::LsdtFrame => Ok(&lsdt::frame::LsdtFrame),
+        CodecId::MdttShared => Ok(&mdtt::database::MdttShared),
         other => Err(Error::Unsupported(format!(
             "codec {other} is not implemented yet"
         ))),

@@ -8,7 +8,8 @@ use serde::Deserialize;
 use super::jobs::{Jobs, Progress};
 use super::{blocking, Error, Result};
 use crate::codec::lsdt::train::{train_basis_reporting, TrainOptions};
-use crate::codec::{Basis, BasisKind};
+use crate::codec::mdtt::database::{train_set, SetOptions};
+use crate::codec::{Basis, BasisKind, Input, Target};
 use crate::store::{BasisRow, Filter, SequenceRow, SortKey, Store};
 
 /// Parse a stored basis, checking that its bytes still hash to its id.
@@ -62,8 +63,12 @@ pub struct TrainRequest {
     /// Non-zeros per sample (the paper's P = 8).
     pub sparsity: Option<usize>,
     pub max_iterations: Option<usize>,
-    /// Frames sampled (evenly) from the selection.
+    /// Frames sampled (evenly) from the selection (lsdt).
     pub max_samples: Option<usize>,
+    /// Candidate numbers of bases (mdtt-set); the smallest total size wins.
+    pub k: Option<Vec<usize>>,
+    /// The bound at which candidate sets are compared (mdtt-set), mm; default 1.
+    pub max_error_mm: Option<f64>,
 }
 
 /// A validated training request: the takes, all of one layout.
@@ -74,16 +79,25 @@ pub struct Selection {
     pub takes: Vec<SequenceRow>,
     pub options: TrainOptions,
     pub max_samples: usize,
+    pub set: SetOptions,
+    pub bound_mm: f64,
 }
 
 /// Resolve a request to its takes, refusing what cannot be trained (nothing selected,
 /// several layouts, a kind not trainable) before any job starts.
 pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
     let kind = req.kind.unwrap_or(BasisKind::Lsdt);
-    if kind != BasisKind::Lsdt {
-        return Err(Error::InvalidRequest(format!(
-            "training {kind} bases is not available yet; kind must be lsdt"
-        )));
+    let ks = req.k.clone().unwrap_or_else(|| SetOptions::default().ks);
+    if ks.is_empty() || ks.iter().any(|&k| !(1..=32).contains(&k)) {
+        return Err(Error::InvalidRequest(
+            "k must list numbers of bases in 1..=32".into(),
+        ));
+    }
+    let bound_mm = req.max_error_mm.unwrap_or(1.0);
+    if !(bound_mm.is_finite() && bound_mm > 0.0) {
+        return Err(Error::InvalidRequest(
+            "max_error_mm must be positive".into(),
+        ));
     }
     let sparsity = req.sparsity.unwrap_or(8);
     let max_iterations = req.max_iterations.unwrap_or(50);
@@ -149,6 +163,11 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
             ..TrainOptions::default()
         },
         max_samples,
+        set: SetOptions {
+            ks,
+            ..SetOptions::default()
+        },
+        bound_mm,
     })
 }
 
@@ -168,7 +187,40 @@ pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result
         f.iter_mut().for_each(|v| *v *= k);
         frames_mm.push(f);
     }
-    progress.report(0.5, "training");
+    progress.report(0.5, format!("training {}", sel.kind));
+    let row = match sel.kind {
+        BasisKind::Lsdt => train_lsdt(&sel, frames_mm, progress).await?,
+        BasisKind::MdttSet => train_mdtt_set(&sel, frames_mm).await?,
+    };
+    let mut row = row;
+    row.provenance["takes"] =
+        serde_json::json!(sel.takes.iter().map(|t| &t.id).collect::<Vec<_>>());
+    row.provenance["frames"] = serde_json::json!(sel.takes.iter().map(|t| t.frames).sum::<i64>());
+    row.provenance["seconds"] = serde_json::json!(t0.elapsed().as_secs_f64());
+    store.insert_basis(&row).await?;
+    Ok(row)
+}
+
+fn basis_row(sel: &Selection, basis: &Basis, provenance: serde_json::Value) -> BasisRow {
+    let m = &basis.matrices()[0];
+    BasisRow {
+        id: basis.id(),
+        kind: sel.kind.name().to_string(),
+        layout: sel.layout.clone(),
+        points: sel.points as i64,
+        dims: format!("{}×{}×{}", basis.matrices().len(), m.rows, m.cols),
+        payload: basis.bytes().to_vec(),
+        provenance,
+        created_at: super::now_ms(),
+        used_by: 0,
+    }
+}
+
+async fn train_lsdt(
+    sel: &Selection,
+    frames_mm: Vec<Vec<f32>>,
+    progress: &Progress,
+) -> Result<BasisRow> {
     let (points, options, max_samples) = (sel.points, sel.options, sel.max_samples);
     let p2 = progress.clone();
     let trained = blocking(move || {
@@ -182,30 +234,69 @@ pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result
     })
     .await??;
     let objective: Vec<&Vec<f64>> = trained.runs.iter().map(|r| &r.objective).collect();
-    let m = &trained.basis.matrices()[0];
-    let row = BasisRow {
-        id: trained.basis.id(),
-        kind: sel.kind.name().to_string(),
-        layout: sel.layout,
-        points: points as i64,
-        dims: format!("{}×{}×{}", trained.basis.matrices().len(), m.rows, m.cols),
-        payload: trained.basis.bytes().to_vec(),
-        provenance: serde_json::json!({
-            "takes": sel.takes.iter().map(|t| &t.id).collect::<Vec<_>>(),
-            "frames": sel.takes.iter().map(|t| t.frames).sum::<i64>(),
+    Ok(basis_row(
+        sel,
+        &trained.basis,
+        serde_json::json!({
             "samples": trained.samples,
             "algorithm": "LSDT (Hou et al. 2016, Algorithm 1), DCT start, rows by energy",
             "sparsity": options.sparsity,
             "max_iterations": options.max_iterations,
             "tolerance": options.tolerance,
             "objective": { "x": objective[0], "y": objective[1], "z": objective[2] },
-            "seconds": t0.elapsed().as_secs_f64(),
         }),
-        created_at: super::now_ms(),
-        used_by: 0,
-    };
-    store.insert_basis(&row).await?;
-    Ok(row)
+    ))
+}
+
+async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<BasisRow> {
+    let points = sel.points;
+    let fps: Vec<f64> = sel.takes.iter().map(|t| t.fps).collect();
+    let (set, bound_mm) = (sel.set.clone(), sel.bound_mm);
+    let trained = blocking(move || {
+        let filled: Vec<(Vec<f32>, Vec<bool>)> = frames_mm
+            .iter()
+            .map(|f| {
+                (
+                    crate::codec::gaps::fill(f, points),
+                    f.chunks_exact(3).map(|s| !s[0].is_nan()).collect(),
+                )
+            })
+            .collect();
+        let inputs: Vec<Input<'_>> = filled
+            .iter()
+            .zip(&fps)
+            .map(|((data, valid), &fps)| Input {
+                data,
+                valid: Some(valid),
+                frames: data.len() / (points * 3),
+                points,
+                fps,
+                shared: None,
+            })
+            .collect();
+        // Frames are in millimetres here, so the bound is too.
+        let targets = vec![Target::Max(bound_mm); inputs.len()];
+        train_set(&inputs, &targets, &set)
+    })
+    .await??;
+    let sizes: Vec<serde_json::Value> = trained
+        .sizes
+        .iter()
+        .map(|(k, takes, basis)| serde_json::json!({"k": k, "takes_bytes": takes, "basis_bytes": basis}))
+        .collect();
+    Ok(basis_row(
+        sel,
+        &trained.basis,
+        serde_json::json!({
+            "algorithm": "MDTT database mode (Hou et al. 2015): deterministic annealing, k-means++ seeds",
+            "clips": trained.clips,
+            "rank": trained.rank,
+            "k_candidates": sizes,
+            "k": trained.basis.matrices().len(),
+            "bound_mm": sel.bound_mm,
+            "objective": trained.distortion,
+        }),
+    ))
 }
 
 /// Start training in the background; obvious mistakes are refused before a job exists.

@@ -23,8 +23,10 @@
 //! # Layout
 //! - [`params`]: the header block (shape, steps, mean, basis) and its bytes.
 //! - [`transform`]: clip DCTs, covariance, eigenvectors, the shared inverse.
+//! - [`database`]: the database mode, `mdtt-shared` — `K` bases shared by a library.
 //! - this module: candidate coding, the parameter search, the chunk decoder.
 
+pub mod database;
 pub mod params;
 pub mod transform;
 

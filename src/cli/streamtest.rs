@@ -1,0 +1,273 @@
+//! `mocapstore streamtest`: live-stream ingest over HTTP — frames per second sustained, and
+//! the delay from a frame's arrival to its being fetchable.
+//!
+//! It starts the real service on 127.0.0.1:0 over a temporary SQLite file, trains an lsdt
+//! basis on a generated take of the same layout, then
+//! 1. appends a long generated take as fast as the service takes it (batches of `--batch`
+//!    frames) and reports frames per second;
+//! 2. replays a take in real time (`--live-batch` frames per request, as a capture system
+//!    would send them) with and without `flush`, and reports, per frame, the time from when
+//!    it was captured until a range fetch that includes it succeeds.
+
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use serde_json::{json, Value};
+
+use crate::http::{Application, Config};
+use crate::motion::formats::{self, Format};
+use crate::motion::synthetic::walker;
+use crate::store::Store;
+
+#[derive(Args)]
+pub struct StreamArgs {
+    /// Seconds of frames appended as fast as possible.
+    #[arg(long, default_value_t = 120)]
+    seconds: usize,
+    #[arg(long, default_value_t = 120.0)]
+    fps: f64,
+    #[arg(long, default_value_t = 38)]
+    points: usize,
+    /// Frames per append in the throughput run.
+    #[arg(long, default_value_t = 120)]
+    batch: usize,
+    /// Frames per append in the real-time runs.
+    #[arg(long, default_value_t = 12)]
+    live_batch: usize,
+    /// Seconds replayed in real time (per run).
+    #[arg(long, default_value_t = 10)]
+    live_seconds: usize,
+}
+
+pub fn run(args: &StreamArgs) -> ExitCode {
+    let rt = match tokio::runtime::Runtime::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("mocapstore streamtest: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match rt.block_on(test(args)) {
+        Ok(report) => {
+            println!("{report}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("mocapstore streamtest: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+async fn post_json(client: &reqwest::Client, url: String, body: &Value) -> Result<Value, String> {
+    let r = client
+        .post(url)
+        .json(body)
+        .send()
+        .await
+        .map_err(|e| e.to_string())?;
+    let status = r.status();
+    let v: Value = r.json().await.map_err(|e| e.to_string())?;
+    if !status.is_success() {
+        return Err(format!("{status}: {v}"));
+    }
+    Ok(v)
+}
+
+async fn open(
+    client: &reqwest::Client,
+    base: &str,
+    fps: f64,
+    points: usize,
+) -> Result<String, String> {
+    let v = post_json(
+        client,
+        format!("{base}/v1/streams"),
+        &json!({"fps": fps, "points": points, "max_error_mm": 1.0}),
+    )
+    .await?;
+    v["id"]
+        .as_str()
+        .map(str::to_string)
+        .ok_or("no stream id".into())
+}
+
+async fn append(
+    client: &reqwest::Client,
+    base: &str,
+    id: &str,
+    frames: &[f32],
+    flush: bool,
+) -> Result<Value, String> {
+    let r = client
+        .post(format!("{base}/v1/streams/{id}/frames?flush={flush}"))
+        .header("content-type", "application/octet-stream")
+        .body(f32_bytes(frames))
+        .send()
+        .await
+        .map_err(|e| e.to_string())?;
+    let status = r.status();
+    let v: Value = r.json().await.map_err(|e| e.to_string())?;
+    if !status.is_success() {
+        return Err(format!("{status}: {v}"));
+    }
+    Ok(v)
+}
+
+async fn test(args: &StreamArgs) -> Result<String, String> {
+    let dir = std::env::temp_dir().join(format!("mocapstore-stream-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let url = format!("sqlite://{}", dir.join("store.db").display());
+    let store = Store::open(&url).await.map_err(|e| e.to_string())?;
+    let app = Application::with_store(
+        store,
+        Config {
+            listen: "127.0.0.1:0".into(),
+            database_url: url,
+            max_body_bytes: 256 << 20,
+            decoded_cache_mib: 64,
+        },
+    )
+    .await?;
+    let base = format!("http://{}", app.local_addr());
+    let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(app.run_until(async {
+        let _ = rx.await;
+    }));
+    let client = reqwest::Client::new();
+    let (fps, points) = (args.fps, args.points);
+    let w = points * 3;
+
+    // A basis for the layout, trained on a minute of another take of it.
+    let training = walker((60.0 * fps) as usize, points, fps, 1, 0.0);
+    let r = client
+        .post(format!("{base}/v1/sequences?library=training&codec=quant"))
+        .body(formats::write(&training, Format::Json).map_err(|e| e.to_string())?)
+        .send()
+        .await
+        .map_err(|e| e.to_string())?;
+    if !r.status().is_success() {
+        return Err(format!("ingest of the training take: {}", r.status()));
+    }
+    let job = post_json(
+        &client,
+        format!("{base}/v1/bases"),
+        &json!({"library": "training"}),
+    )
+    .await?;
+    let job_id = job["id"].as_str().unwrap_or_default().to_string();
+    loop {
+        let j: Value = client
+            .get(format!("{base}/v1/jobs/{job_id}"))
+            .send()
+            .await
+            .map_err(|e| e.to_string())?
+            .json()
+            .await
+            .map_err(|e| e.to_string())?;
+        match j["state"].as_str() {
+            Some("succeeded") => break,
+            Some("failed") => return Err(format!("training failed: {j}")),
+            _ => tokio::time::sleep(Duration::from_millis(50)).await,
+        }
+    }
+
+    // 1. Throughput.
+    let take = walker(args.seconds * fps as usize, points, fps, 2, 0.0);
+    let id = open(&client, &base, fps, points).await?;
+    let t0 = Instant::now();
+    for batch in take.positions().chunks(args.batch.max(1) * w) {
+        append(&client, &base, &id, batch, false).await?;
+    }
+    let info = post_json(
+        &client,
+        format!("{base}/v1/streams/{id}/finish"),
+        &json!({}),
+    )
+    .await?;
+    let secs = t0.elapsed().as_secs_f64();
+    let frames = take.frame_count();
+    let mut report = format!(
+        "streaming {} frames of {points} points at {fps} fps, batches of {}: {:.0} frames/s sustained ({:.1}× real time), ratio {:.1}, max {:.3} mm\n",
+        frames,
+        args.batch,
+        frames as f64 / secs,
+        frames as f64 / secs / fps,
+        info["ratio"].as_f64().unwrap_or(0.0),
+        info["max_mm"].as_f64().unwrap_or(0.0),
+    );
+
+    // 2. Delay from capture to fetchable, in real time.
+    let live = walker(args.live_seconds * fps as usize, points, fps, 3, 0.0);
+    for flush in [true, false] {
+        let id = open(&client, &base, fps, points).await?;
+        let start = Instant::now();
+        let mut delays = Vec::new();
+        let mut committed = 0usize;
+        let mut captured_at: Vec<f64> = Vec::new();
+        let batch = args.live_batch.max(1);
+        for (i, chunk) in live.positions().chunks(batch * w).enumerate() {
+            // The batch's last frame is captured at this moment of the take.
+            let n = chunk.len() / w;
+            let due = ((i * batch + n) as f64 / fps) as f32;
+            let now = start.elapsed().as_secs_f32();
+            if due > now {
+                tokio::time::sleep(Duration::from_secs_f32(due - now)).await;
+            }
+            for f in 0..n {
+                captured_at.push((i * batch + f + 1) as f64 / fps);
+            }
+            let info = append(&client, &base, &id, chunk, flush).await?;
+            let now_committed = info["frames_committed"].as_u64().unwrap_or(0) as usize;
+            if now_committed > committed {
+                // Fetchable from now: prove it with a range fetch of the newest frames.
+                let r = client
+                    .get(format!(
+                        "{base}/v1/sequences/{id}/frames?start={}&end={now_committed}&format=f32",
+                        now_committed - 1
+                    ))
+                    .send()
+                    .await
+                    .map_err(|e| e.to_string())?;
+                if !r.status().is_success() {
+                    return Err(format!("fetch of committed frames: {}", r.status()));
+                }
+                let t = start.elapsed().as_secs_f64();
+                for &c in &captured_at[committed..now_committed] {
+                    delays.push((t - c) * 1e3);
+                }
+                committed = now_committed;
+            }
+        }
+        post_json(
+            &client,
+            format!("{base}/v1/streams/{id}/finish"),
+            &json!({}),
+        )
+        .await?;
+        delays.sort_by(f64::total_cmp);
+        report += &format!(
+            "real time, {batch} frames per append, flush={flush}: capture→fetchable p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms ({} frames)\n",
+            percentile(&delays, 0.5),
+            percentile(&delays, 0.99),
+            delays.last().copied().unwrap_or(0.0),
+            delays.len()
+        );
+    }
+    let _ = stop.send(());
+    let _ = server.await;
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(report)
+}
