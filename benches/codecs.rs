@@ -3,13 +3,21 @@
 //! setting, no search) next to the rate-controlled one.
 //! Run: `cargo bench --bench codecs` (MOCAP_CORPUS points at the corpus).
 
+use std::sync::Arc;
+
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use mocapstore::codec::lsdt::train::{train_basis, TrainOptions};
+use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::{self, mdtt, CodecId, ErrorBound, Input, Target};
 use mocapstore::corpus;
 use mocapstore::motion::formats::{read, ReadOptions};
 
 fn take() -> mocapstore::motion::Motion {
-    let path = corpus::root().join("bvh/cmu/01_03.bvh");
+    load("01_03")
+}
+
+fn load(name: &str) -> mocapstore::motion::Motion {
+    let path = corpus::root().join(format!("bvh/cmu/{name}.bvh"));
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     read(&bytes, &ReadOptions::default()).expect("loads").motion
 }
@@ -29,6 +37,47 @@ fn decode(c: &mut Criterion) {
         let enc = codec::encode(&m, codec, bound).expect("encodes");
         g.bench_function(format!("{codec} {bound}"), |b| {
             b.iter(|| codec::decode_all(&enc.container).unwrap())
+        });
+    }
+    // Shared-basis codecs, with bases trained on another take of the layout (CMU 01_01).
+    let other = load("01_01");
+    let lsdt = Arc::new(
+        train_basis(
+            &[other.positions()],
+            other.point_count(),
+            &TrainOptions::default(),
+            50_000,
+        )
+        .expect("trains")
+        .basis,
+    );
+    let filled = codec::gaps::fill(other.positions(), other.point_count());
+    let input = Input {
+        data: &filled,
+        valid: None,
+        frames: other.frame_count(),
+        points: other.point_count(),
+        fps: other.fps,
+        shared: None,
+    };
+    let set = Arc::new(train_bases(&[input], 4, &SetOptions::default()).expect("trains"));
+    for (codec, bound, basis) in [
+        (CodecId::LsdtFrame, ErrorBound::MaxMm(1.0), &lsdt),
+        (CodecId::LsdtFrame, ErrorBound::MeanMm(3.0), &lsdt),
+        (CodecId::LsdtClip, ErrorBound::MaxMm(1.0), &lsdt),
+        (CodecId::LsdtClip, ErrorBound::MeanMm(3.0), &lsdt),
+        (CodecId::MdttShared, ErrorBound::MaxMm(1.0), &set),
+        (CodecId::MdttShared, ErrorBound::MeanMm(3.0), &set),
+    ] {
+        let enc = codec::encode_with(&m, codec, bound, Some(basis)).expect("encodes");
+        let d = codec::decoder(&enc.container.header, Some(basis.clone())).unwrap();
+        let chunks: Vec<&[u8]> = enc.container.chunks.iter().map(Vec::as_slice).collect();
+        let frames = m.frame_count();
+        g.bench_function(format!("{codec} {bound}"), |b| {
+            b.iter(|| {
+                codec::decode_range_with(&enc.container.header, d.as_ref(), &chunks, 0, frames)
+                    .unwrap()
+            })
         });
     }
     g.finish();
