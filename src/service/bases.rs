@@ -188,11 +188,10 @@ pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result
         frames_mm.push(f);
     }
     progress.report(0.5, format!("training {}", sel.kind));
-    let row = match sel.kind {
+    let mut row = match sel.kind {
         BasisKind::Lsdt => train_lsdt(&sel, frames_mm, progress).await?,
         BasisKind::MdttSet => train_mdtt_set(&sel, frames_mm).await?,
     };
-    let mut row = row;
     row.provenance["takes"] =
         serde_json::json!(sel.takes.iter().map(|t| &t.id).collect::<Vec<_>>());
     row.provenance["frames"] = serde_json::json!(sel.takes.iter().map(|t| t.frames).sum::<i64>());

@@ -169,6 +169,7 @@ async fn stream_basis(store: &Store, layout: &str, points: usize) -> Result<Arc<
             provenance: serde_json::json!({
                 "algorithm": "DCT-II, untrained: no lsdt basis was trained for this layout",
             }),
+            // Dated at the epoch, so that any basis trained later is the layout's newest.
             created_at: 0,
             used_by: 0,
         })
@@ -415,8 +416,8 @@ impl Streams {
         let w = points * 3;
         let basis = live.basis.clone();
         let fps = live.row.fps;
-        // Frames not yet coded: for clips, the pending ones beyond those already coded
-        // (none: clips are coded whole, so all pending frames are uncoded).
+        // A clip is coded only when whole (or flushed), so every pending frame is uncoded:
+        // the clip coder sees them followed by the new ones.
         let uncoded_clip: Vec<f32> = match &coder {
             Coder::Clip(_) => live
                 .pending
