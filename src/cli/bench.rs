@@ -494,8 +494,13 @@ fn split_and_train(
         let points = train[0].1 .1.point_count();
         let mut trained = Vec::new();
         if kinds.contains(&BasisKind::Lsdt) {
-            let t = train_basis(&slices, points, &TrainOptions::default(), 50_000)
-                .map_err(|e| e.to_string())?;
+            let t = match train_basis(&slices, points, &TrainOptions::default(), 50_000) {
+                Ok(t) => t,
+                Err(e) => {
+                    eprintln!("layout {}: skipped: lsdt training: {e}", &layout[..8]);
+                    continue;
+                }
+            };
             eprintln!(
                 "layout {}: trained lsdt on {} takes ({} frames sampled) in {:.1} s; objective x {:.4e} → {:.4e}, {} iterations",
                 &layout[..8],
@@ -537,8 +542,13 @@ fn split_and_train(
                 .iter()
                 .map(|(_, (_, m))| codec::Target::Max(1.0 / m.unit.to_mm()))
                 .collect();
-            let t =
-                train_set(&inputs, &targets, &SetOptions::default()).map_err(|e| e.to_string())?;
+            let t = match train_set(&inputs, &targets, &SetOptions::default()) {
+                Ok(t) => t,
+                Err(e) => {
+                    eprintln!("layout {}: skipped: mdtt-set training: {e}", &layout[..8]);
+                    continue;
+                }
+            };
             eprintln!(
                 "layout {}: trained mdtt-set on {} takes ({} clips, rank {}) in {:.1} s; K chosen {} by total bytes (K, takes, bases): {:?}",
                 &layout[..8],

@@ -615,6 +615,9 @@ fn anneal(
     // A few alternations at each temperature before it halves: cooling after a single one
     // freezes the first, poor split.
     const PER_TEMPERATURE: usize = 5;
+    let mut assigned: Vec<usize> = vec![usize::MAX; n];
+    // Every clip's assignment nearly hard in the last alternation: the split has happened.
+    let mut all_hard = false;
     for step in 0..opts.rounds * PER_TEMPERATURE {
         let round = step / PER_TEMPERATURE;
         for (j, b) in bases.iter_mut().enumerate() {
@@ -627,6 +630,9 @@ fn anneal(
             *b = eigen_full(&c).0;
         }
         let mut hard = 0.0;
+        let mut settled = true;
+        let quiet = all_hard || noise_off(round, opts.rounds);
+        let mut hard_now = true;
         for (i, (cov, e)) in covs.iter().zip(energy).enumerate() {
             let d: Vec<f64> = bases.iter().map(|b| e - kept(b, cov, r)).collect();
             let dmin = d.iter().copied().fold(f64::INFINITY, f64::min);
@@ -634,13 +640,28 @@ fn anneal(
             // While the temperature is high the bases coincide and nothing breaks the tie:
             // a little noise on the assignments lets them split at the critical temperature
             // (the paper's perturbation); the last rounds run without it.
-            let noise = if round + 4 < opts.rounds { 0.1 } else { 0.0 };
+            let noise = if quiet { 0.0 } else { 0.1 };
             let p: Vec<f64> = d
                 .iter()
                 .map(|x| (-(x - dmin) / temp).exp() * (1.0 + noise * (rng.unit() - 0.5)))
                 .collect();
             let s: f64 = p.iter().sum();
             weights[i] = p.into_iter().map(|x| x / s).collect();
+            let (best, top) =
+                weights[i]
+                    .iter()
+                    .enumerate()
+                    .fold((0, 0.0), |a, (j, &v)| if v > a.1 { (j, v) } else { a });
+            settled &= top > 1.0 - 1e-9 && assigned[i] == best;
+            hard_now &= top > 0.99;
+            assigned[i] = best;
+        }
+        all_hard = hard_now;
+        // Hard assignments that did not change: the bases are final (large layouts would
+        // otherwise pay for every remaining eigendecomposition).
+        if settled && quiet {
+            distortion.push(hard);
+            break;
         }
         if step % PER_TEMPERATURE == PER_TEMPERATURE - 1 {
             distortion.push(hard);
@@ -648,6 +669,11 @@ fn anneal(
         }
     }
     (bases, distortion)
+}
+
+/// The perturbation stops for the last rounds (and once assignments are hard).
+fn noise_off(round: usize, rounds: usize) -> bool {
+    round + 4 >= rounds
 }
 
 /// All eigenvectors (columns, largest eigenvalue first, signs fixed) and eigenvalues.
