@@ -192,9 +192,9 @@ fn code(
         let mut models = vec![IntModel::default(); CONTEXTS];
         let j = input.points;
         for k in 0..kn {
-            for r in 0..w {
-                let below = if k > 0 { q[(k - 1) * w + r] } else { 0 };
-                models[context(k, r % j, below)].encode(&mut enc, q[k * w + r]);
+            for (i, r) in (0..3).flat_map(|_| 0..j).enumerate() {
+                let below = if k > 0 { q[(k - 1) * w + i] } else { 0 };
+                models[context(k, r, below)].encode(&mut enc, q[k * w + i]);
             }
         }
         let out = &mut recon[f0 * w..(f0 + n) * w];
@@ -379,9 +379,9 @@ impl ChunkDecoder for ClipDecoder {
         let mut models = vec![IntModel::default(); CONTEXTS];
         let mut q = vec![0i32; kn * w];
         for k in 0..kn {
-            for r in 0..w {
-                let below = if k > 0 { q[(k - 1) * w + r] } else { 0 };
-                q[k * w + r] = models[context(k, r % self.points, below)].decode(&mut dec);
+            for (i, r) in (0..3).flat_map(|_| 0..self.points).enumerate() {
+                let below = if k > 0 { q[(k - 1) * w + i] } else { 0 };
+                q[k * w + i] = models[context(k, r, below)].decode(&mut dec);
             }
         }
         let own;

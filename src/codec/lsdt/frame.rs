@@ -228,8 +228,12 @@ impl FrameEncoder {
         for (q, &c) in st.q.iter_mut().zip(&self.coefs) {
             *q = deadzone(c / step);
         }
-        for (i, &q) in st.q.iter().enumerate() {
-            st.models[context(intra, i % j, st.prev_q[i])].encode(&mut self.enc, q);
+        // Rows by coordinate, so the row index needs no division per coefficient.
+        for d in 0..3 {
+            for r in 0..j {
+                let i = d * j + r;
+                st.models[context(intra, r, st.prev_q[i])].encode(&mut self.enc, st.q[i]);
+            }
         }
         self.spatial
             .inverse_add(&st.q, step as f32, &mut self.scratch, &mut self.recon);
@@ -449,8 +453,11 @@ impl ChunkDecoder for FrameDecoder {
         for frame in out.chunks_exact_mut(w).take(frames) {
             let intra = st.intra();
             st.predict(frame);
-            for i in 0..w {
-                st.q[i] = st.models[context(intra, i % j, st.prev_q[i])].decode(&mut dec);
+            for d in 0..3 {
+                for r in 0..j {
+                    let i = d * j + r;
+                    st.q[i] = st.models[context(intra, r, st.prev_q[i])].decode(&mut dec);
+                }
             }
             self.spatial.inverse_add(&st.q, step, &mut scratch, frame);
             if let Some(r) = &mut st.residual {
