@@ -118,18 +118,7 @@ impl Store {
                     .await?;
             }
             for c in &s.chunks {
-                sqlx::query(
-                    "INSERT INTO chunks (sequence_id, idx, first_frame, frames, crc32c, payload) \
-                     VALUES ($1, $2, $3, $4, $5, $6)",
-                )
-                .bind(&s.id)
-                .bind(c.idx)
-                .bind(c.first_frame)
-                .bind(c.frames)
-                .bind(i64::from(c.crc32c))
-                .bind(&c.payload)
-                .execute(&mut *tx)
-                .await?;
+                bind_chunk(sqlx::query(INSERT_CHUNK), &s.id, c).execute(&mut *tx).await?;
             }
             if let Some(b) = &s.basis {
                 sqlx::query("INSERT INTO sequence_bases (sequence_id, basis_id) VALUES ($1, $2)")
@@ -192,18 +181,7 @@ impl Store {
                 }
             }
             for c in chunks {
-                sqlx::query(
-                    "INSERT INTO chunks (sequence_id, idx, first_frame, frames, crc32c, payload) \
-                     VALUES ($1, $2, $3, $4, $5, $6)",
-                )
-                .bind(&row.id)
-                .bind(c.idx)
-                .bind(c.first_frame)
-                .bind(c.frames)
-                .bind(i64::from(c.crc32c))
-                .bind(&c.payload)
-                .execute(&mut *tx)
-                .await?;
+                bind_chunk(sqlx::query(INSERT_CHUNK), &row.id, c).execute(&mut *tx).await?;
             }
             if let Some(b) = basis {
                 sqlx::query(
@@ -290,6 +268,28 @@ impl Store {
             Ok(row.try_get::<i64, _>("n")?)
         })
     }
+}
+
+const INSERT_CHUNK: &str = "INSERT INTO chunks (sequence_id, idx, first_frame, frames, crc32c, \
+    payload) VALUES ($1, $2, $3, $4, $5, $6)";
+
+/// Bind a chunk's columns, in [`INSERT_CHUNK`] order, to a query of either backend.
+fn bind_chunk<'q, DB: sqlx::Database>(
+    q: sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>,
+    id: &'q str,
+    c: &'q ChunkRow,
+) -> sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>
+where
+    &'q str: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    &'q [u8]: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+{
+    q.bind(id)
+        .bind(c.idx)
+        .bind(c.first_frame)
+        .bind(c.frames)
+        .bind(i64::from(c.crc32c))
+        .bind(c.payload.as_slice())
 }
 
 /// Bind `values` in order to a query of either backend.

@@ -227,10 +227,7 @@ pub fn stream_params(t: f64, fps: f64) -> ClipParams {
 
 /// Encode with fixed parameters (live streams code each clip as it fills).
 pub fn encode_fixed(input: &Input<'_>, p: ClipParams) -> Result<Vec<ChunkOut>> {
-    let basis = input
-        .shared
-        .ok_or_else(|| Error::Basis("lsdt-clip needs a shared lsdt basis".into()))?;
-    let spatial = Spatial::new(basis)?;
+    let spatial = Spatial::for_take(input.shared, input.points, "lsdt-clip")?;
     let a = Analysis::new(input, &spatial, p.clip.max(1));
     Ok(code(input, &spatial, &a, p).0)
 }
@@ -238,10 +235,7 @@ pub fn encode_fixed(input: &Input<'_>, p: ClipParams) -> Result<Vec<ChunkOut>> {
 /// Encode with clips of `clip` frames, searching the step for the fewest bytes that meet
 /// `target`.
 pub fn encode_with_clip(input: &Input<'_>, target: Target, clip: usize) -> Result<CodecOutput> {
-    let basis = input
-        .shared
-        .ok_or_else(|| Error::Basis("lsdt-clip needs a shared lsdt basis".into()))?;
-    let spatial = Spatial::new(basis)?;
+    let spatial = Spatial::for_take(input.shared, input.points, "lsdt-clip")?;
     let clip = clip.clamp(1, input.frames.max(1));
     let a = Analysis::new(input, &spatial, clip);
     let mut best: Option<(usize, ClipParams, Vec<ChunkOut>)> = None;
@@ -332,14 +326,7 @@ impl Codec for LsdtClip {
         shared: Option<Arc<Basis>>,
     ) -> Result<Box<dyn ChunkDecoder>> {
         let p = ClipParams::parse(params)?;
-        let basis = shared.ok_or_else(|| Error::Basis("lsdt-clip needs its basis".into()))?;
-        let spatial = Spatial::new(&basis)?;
-        if spatial.points() != points {
-            return Err(Error::Basis(format!(
-                "basis for {} points, take has {points}",
-                spatial.points()
-            )));
-        }
+        let spatial = Spatial::for_take(shared.as_deref(), points, "lsdt-clip")?;
         let full = table(p.clip);
         Ok(Box::new(ClipDecoder {
             p,

@@ -323,10 +323,7 @@ pub fn encode_with_period(
     target: Target,
     intra_period: usize,
 ) -> Result<CodecOutput> {
-    let basis = input
-        .shared
-        .ok_or_else(|| Error::Basis("lsdt-frame needs a shared lsdt basis".into()))?;
-    let spatial = Arc::new(Spatial::new(basis)?);
+    let spatial = Arc::new(Spatial::for_take(input.shared, input.points, "lsdt-frame")?);
     let mut best: Option<(usize, FrameParams, Vec<ChunkOut>)> = None;
     let mut offer = |p: FrameParams| -> bool {
         let (chunks, max, mean) = code(input, &spatial, p);
@@ -418,14 +415,7 @@ impl Codec for LsdtFrame {
         shared: Option<Arc<Basis>>,
     ) -> Result<Box<dyn ChunkDecoder>> {
         let p = FrameParams::parse(params)?;
-        let basis = shared.ok_or_else(|| Error::Basis("lsdt-frame needs its basis".into()))?;
-        let spatial = Spatial::new(&basis)?;
-        if spatial.points() != points {
-            return Err(Error::Basis(format!(
-                "basis for {} points, take has {points}",
-                spatial.points()
-            )));
-        }
+        let spatial = Spatial::for_take(shared.as_deref(), points, "lsdt-frame")?;
         Ok(Box::new(FrameDecoder { p, spatial, points }))
     }
 }

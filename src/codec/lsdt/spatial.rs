@@ -35,6 +35,21 @@ impl Spatial {
         self.j
     }
 
+    /// The transform `codec` codes a take of `points` points with: the shared basis must be
+    /// there, of kind lsdt, and of the take's size.
+    pub fn for_take(shared: Option<&Basis>, points: usize, codec: &str) -> Result<Spatial> {
+        let basis =
+            shared.ok_or_else(|| Error::Basis(format!("{codec} needs a shared lsdt basis")))?;
+        let s = Spatial::new(basis)?;
+        if s.j != points {
+            return Err(Error::Basis(format!(
+                "basis for {} points, take has {points}",
+                s.j
+            )));
+        }
+        Ok(s)
+    }
+
     /// `e[d·J + r] = Σ_j B_d[r][j] · x[3j + d]`.
     pub fn forward(&self, x: &[f64], e: &mut [f64]) {
         let j = self.j;
