@@ -17,8 +17,8 @@ use std::sync::Arc;
 
 use nalgebra::DMatrix;
 
-use super::transform::{clip_len, coefs_for, ratio, reconstruct, Analysis, DctTables};
-use super::{coef_context, deadzone, rank_ladder, Params, COEF_CONTEXTS, DEADZONE};
+use super::transform::{clip_len, coefs_for, ratio, reconstruct, Analysis};
+use super::{decode_coefs, encode_coefs, rank_ladder, synthesise_clip, Params};
 use crate::codec::basis::{Basis, BasisKind, Matrix};
 use crate::codec::entropy::{Decoder, Encoder, IntModel};
 use crate::codec::error::{malformed, Error, Result};
@@ -178,15 +178,7 @@ fn code(
         let (b, _, s) = best;
         let mut enc = Encoder::new();
         IntModel::default().encode(&mut enc, b as i32);
-        let mut models = vec![IntModel::default(); COEF_CONTEXTS];
-        let mut deq = vec![0f32; k * lc];
-        for r in 0..k {
-            for j in 0..lc {
-                let q = deadzone(s[(r, j)] / coef_step, DEADZONE);
-                models[coef_context(r, j)].encode(&mut enc, q);
-                deq[r * lc + j] = (f64::from(q) * coef_step) as f32;
-            }
-        }
+        let deq = encode_coefs(&mut enc, &s, coef_step);
         let recon = &mut recon_all[f0 * w..(f0 + len) * w];
         reconstruct(&per[b], &deq, a.tables.get(len, lc), len, lc, recon);
         if rt > 0.0 {
@@ -384,20 +376,8 @@ impl ChunkDecoder for SharedDecoder {
             .and_then(|b| self.per.get(b))
             .ok_or_else(|| malformed(format!("mdtt-shared chunk names basis {b}")))?;
         let lc = coefs_for(frames, p.clip, p.l);
-        let mut models = vec![IntModel::default(); COEF_CONTEXTS];
-        let mut deq = vec![0f32; p.k * lc];
-        for r in 0..p.k {
-            for j in 0..lc {
-                let q = models[coef_context(r, j)].decode(&mut dec);
-                deq[r * lc + j] = (f64::from(q) * p.coef_step) as f32;
-            }
-        }
-        if frames == p.clip {
-            reconstruct(params, &deq, &self.full, frames, lc, out);
-        } else {
-            let mut t = DctTables::default();
-            reconstruct(params, &deq, t.get(frames, lc), frames, lc, out);
-        }
+        let deq = decode_coefs(&mut dec, p.k, lc, p.coef_step);
+        synthesise_clip(params, &deq, &self.full, frames, lc, out);
         if p.residual_t > 0.0 {
             residual::decode(&mut dec, out, self.points, p.residual_t);
         }

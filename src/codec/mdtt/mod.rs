@@ -64,6 +64,53 @@ fn deadzone(x: f64, dz: f64) -> i32 {
     quantise(m).saturating_mul(if x < 0.0 { -1 } else { 1 })
 }
 
+/// Quantise and code a clip's `k × lc` coefficients; returns them dequantised, as the
+/// decoder will see them. Shared by per-take and shared-basis MDTT.
+fn encode_coefs(enc: &mut Encoder, s: &DMatrix<f64>, step: f64) -> Vec<f32> {
+    let (k, lc) = s.shape();
+    let mut models = vec![IntModel::default(); COEF_CONTEXTS];
+    let mut deq = vec![0f32; k * lc];
+    for b in 0..k {
+        for j in 0..lc {
+            let q = deadzone(s[(b, j)] / step, DEADZONE);
+            models[coef_context(b, j)].encode(enc, q);
+            deq[b * lc + j] = (f64::from(q) * step) as f32;
+        }
+    }
+    deq
+}
+
+/// Decode what [`encode_coefs`] wrote.
+fn decode_coefs(dec: &mut Decoder<'_>, k: usize, lc: usize, step: f64) -> Vec<f32> {
+    let mut models = vec![IntModel::default(); COEF_CONTEXTS];
+    let mut deq = vec![0f32; k * lc];
+    for b in 0..k {
+        for j in 0..lc {
+            let q = models[coef_context(b, j)].decode(dec);
+            deq[b * lc + j] = (f64::from(q) * step) as f32;
+        }
+    }
+    deq
+}
+
+/// Reconstruct a decoded clip of `frames` frames: the full clip's DCT table is kept by the
+/// decoder, a shorter last clip computes its own.
+fn synthesise_clip(
+    p: &Params,
+    deq: &[f32],
+    full: &[f32],
+    frames: usize,
+    lc: usize,
+    out: &mut [f32],
+) {
+    if frames == p.clip {
+        reconstruct(p, deq, full, frames, lc, out);
+    } else {
+        let mut t = DctTables::default();
+        reconstruct(p, deq, t.get(frames, lc), frames, lc, out);
+    }
+}
+
 /// Starting basis precision of the search (see [`basis_bits`]).
 const GAMMA0: f64 = 0.17;
 
@@ -151,15 +198,7 @@ fn code(input: &Input<'_>, a: &mut Analysis, c: Choice, residual_t: f64) -> Tria
         let lc = a.lc(len, c.l).min(a.coefs[i].ncols());
         let s = projector.solve(a.coefs[i].columns(0, lc));
         let mut enc = Encoder::new();
-        let mut models = vec![IntModel::default(); COEF_CONTEXTS];
-        let mut deq = vec![0f32; c.k * lc];
-        for b in 0..c.k {
-            for j in 0..lc {
-                let q = deadzone(s[(b, j)] / c.coef_step, DEADZONE);
-                models[coef_context(b, j)].encode(&mut enc, q);
-                deq[b * lc + j] = (f64::from(q) * c.coef_step) as f32;
-            }
-        }
+        let deq = encode_coefs(&mut enc, &s, c.coef_step);
         let recon = &mut recon_all[f0 * w..(f0 + len) * w];
         reconstruct(&params, &deq, a.tables.get(len, lc), len, lc, recon);
         if residual_t > 0.0 {
@@ -467,20 +506,8 @@ impl ChunkDecoder for MdttDecoder {
         }
         let lc = coefs_for(frames, p.clip, p.l);
         let mut dec = Decoder::new(bytes);
-        let mut models = vec![IntModel::default(); COEF_CONTEXTS];
-        let mut deq = vec![0f32; p.k * lc];
-        for b in 0..p.k {
-            for j in 0..lc {
-                let q = models[coef_context(b, j)].decode(&mut dec);
-                deq[b * lc + j] = (f64::from(q) * p.coef_step) as f32;
-            }
-        }
-        if frames == p.clip {
-            reconstruct(p, &deq, &self.full, frames, lc, out);
-        } else {
-            let mut t = DctTables::default();
-            reconstruct(p, &deq, t.get(frames, lc), frames, lc, out);
-        }
+        let deq = decode_coefs(&mut dec, p.k, lc, p.coef_step);
+        synthesise_clip(p, &deq, &self.full, frames, lc, out);
         if p.residual_t > 0.0 {
             residual::decode(&mut dec, out, self.points, p.residual_t);
         }
