@@ -5,6 +5,7 @@
 
 use std::sync::Arc;
 
+use mocapstore::codec::lsdt::frame;
 use mocapstore::codec::lsdt::spatial::dct_basis;
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::{self, CodecId, ErrorBound};
@@ -57,6 +58,25 @@ fn cases() -> Vec<(String, String)> {
                 hash.to_hex()[..32].to_string(),
             ));
         }
+        // lsdt-frame's adaptive stage, what live streams are coded with (one frame at a
+        // time, stream parameters): their chunks are stored as they are.
+        let p = frame::stream_params(0.5 / m.unit.to_mm(), m.fps);
+        let mut e = frame::FrameEncoder::new(p, &dct_basis(m.point_count())).expect("basis");
+        let mut h = blake3::Hasher::new();
+        h.update(&p.to_bytes());
+        let w = m.point_count() * 3;
+        for f in m.positions().chunks_exact(w) {
+            if let (_, Some(c)) = e.push(f, None) {
+                h.update(&c.bytes);
+            }
+        }
+        if let Some(c) = e.finish() {
+            h.update(&c.bytes);
+        }
+        out.push((
+            format!("{name} lsdt-frame adaptive (stream) max 0.5 mm"),
+            h.finalize().to_hex()[..32].to_string(),
+        ));
     }
     out
 }

@@ -73,12 +73,17 @@ impl History {
 
 /// The residual layer's state, one frame at a time: what frame-by-frame coders (which must
 /// correct a frame before predicting the next from it) drive directly, and what [`encode`]
-/// and [`decode`] loop over.
+/// and [`decode`] loop over. Deciding the corrections ([`FrameResidual::correct`]) is apart
+/// from coding them ([`FrameResidual::code`]) so that a coder with its own entropy stage can
+/// take the corrections as they are.
 pub struct FrameResidual {
     m: Models,
     h: History,
     prev_frame: bool,
+    /// This frame's decision: which points are corrected, and by how many steps.
     flags: Vec<bool>,
+    q: Vec<i32>,
+    any: bool,
     step: f64,
     t: f64,
 }
@@ -90,13 +95,73 @@ impl FrameResidual {
             h: History::new(points),
             prev_frame: false,
             flags: vec![false; points],
+            q: vec![0; points * 3],
+            any: false,
             step: step_for(t),
             t,
         }
     }
 
-    /// Correct the samples of one frame's `recon` farther than `t` from `orig`, coding the
-    /// corrections; returns how many were corrected.
+    /// Correct the samples of one frame's `recon` farther than `t` from `orig`; returns how
+    /// many were corrected. [`FrameResidual::corrections`] then tells which and by how much.
+    pub fn correct(&mut self, orig: &[f32], recon: &mut [f32], valid: Option<&[bool]>) -> usize {
+        let mut corrected = 0;
+        for (p, flag) in self.flags.iter_mut().enumerate() {
+            let i = p * 3;
+            let ok = valid.is_none_or(|v| v[p]);
+            *flag = ok && sample_distance(&orig[i..i + 3], &recon[i..i + 3]) > self.t;
+            for k in i..i + 3 {
+                self.q[k] = if *flag {
+                    let q = quantise((f64::from(orig[k]) - f64::from(recon[k])) / self.step);
+                    recon[k] += (f64::from(q) * self.step) as f32;
+                    q
+                } else {
+                    0
+                };
+            }
+            corrected += usize::from(*flag);
+        }
+        self.any = corrected > 0;
+        corrected
+    }
+
+    /// The last [`FrameResidual::correct`]'s decision: a flag per point, steps per coordinate.
+    pub fn corrections(&self) -> (&[bool], &[i32]) {
+        (&self.flags, &self.q)
+    }
+
+    /// Apply a correction of `q` steps to coordinate `i` of `recon`, exactly as the encoder did.
+    #[inline]
+    pub fn apply(&self, recon: &mut [f32], i: usize, q: i32) {
+        recon[i] += (f64::from(q) * self.step) as f32;
+    }
+
+    /// Code the last [`FrameResidual::correct`]'s decision with the adaptive models.
+    pub fn code(&mut self, enc: &mut Encoder) {
+        let (m, h) = (&mut self.m, &mut self.h);
+        enc.encode(&mut m.frame[usize::from(self.prev_frame)], self.any);
+        self.prev_frame = self.any;
+        if !self.any {
+            h.clear();
+            return;
+        }
+        let mut previous_point = false;
+        for (p, &flag) in self.flags.iter().enumerate() {
+            enc.encode(&mut m.point[h.point_context(p, previous_point)], flag);
+            previous_point = flag;
+            h.flagged[p] = flag;
+            for k in 0..3 {
+                let i = p * 3 + k;
+                let ctx = h.value_context(i, k);
+                if flag {
+                    m.value[ctx].encode(enc, self.q[i]);
+                }
+                h.q[i] = self.q[i];
+            }
+        }
+    }
+
+    /// Correct one frame's `recon` (see [`FrameResidual::correct`]) and code the corrections.
     pub fn encode_frame(
         &mut self,
         enc: &mut Encoder,
@@ -104,41 +169,9 @@ impl FrameResidual {
         recon: &mut [f32],
         valid: Option<&[bool]>,
     ) -> usize {
-        let (m, h) = (&mut self.m, &mut self.h);
-        let mut any = false;
-        for (p, flag) in self.flags.iter_mut().enumerate() {
-            let i = p * 3;
-            let ok = valid.is_none_or(|v| v[p]);
-            *flag = ok && sample_distance(&orig[i..i + 3], &recon[i..i + 3]) > self.t;
-            any |= *flag;
-        }
-        enc.encode(&mut m.frame[usize::from(self.prev_frame)], any);
-        self.prev_frame = any;
-        if !any {
-            h.clear();
-            return 0;
-        }
-        let mut corrected = 0;
-        let mut previous_point = false;
-        for (p, &flag) in self.flags.iter().enumerate() {
-            enc.encode(&mut m.point[h.point_context(p, previous_point)], flag);
-            previous_point = flag;
-            h.flagged[p] = flag;
-            for k in 0..3 {
-                let ctx = h.value_context(p * 3 + k, k);
-                if !flag {
-                    h.q[p * 3 + k] = 0;
-                    continue;
-                }
-                let i = p * 3 + k;
-                let q = quantise((f64::from(orig[i]) - f64::from(recon[i])) / self.step);
-                m.value[ctx].encode(enc, q);
-                recon[i] += (f64::from(q) * self.step) as f32;
-                h.q[p * 3 + k] = q;
-            }
-            corrected += usize::from(flag);
-        }
-        corrected
+        let n = self.correct(orig, recon, valid);
+        self.code(enc);
+        n
     }
 
     /// Apply one frame's corrections to `recon`.

@@ -50,7 +50,7 @@ fn parse_frames(headers: &HeaderMap, body: &[u8]) -> Result<Vec<f32>, ApiError> 
         .and_then(|v| v.to_str().ok())
         .is_some_and(|t| t.starts_with("application/json"));
     if !json {
-        if body.len() % 4 != 0 {
+        if !body.len().is_multiple_of(4) {
             return Err(ApiError::bad_request(format!(
                 "{} bytes are not whole f32 values",
                 body.len()

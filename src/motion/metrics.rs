@@ -44,7 +44,7 @@ pub fn compare(
             decoded.len()
         )));
     }
-    if points == 0 || original.len() % (points * 3) != 0 {
+    if points == 0 || !original.len().is_multiple_of(points * 3) {
         return Err(Error::Invalid(format!(
             "{} coordinates are not whole frames of {points} points",
             original.len()

@@ -39,7 +39,7 @@ impl Motion {
             )));
         }
         let n = point_names.len();
-        if n == 0 && !positions.is_empty() || n > 0 && positions.len() % (n * 3) != 0 {
+        if n == 0 && !positions.is_empty() || n > 0 && !positions.len().is_multiple_of(n * 3) {
             return Err(Error::Invalid(format!(
                 "{} coordinates do not fill whole frames of {n} points",
                 positions.len()

@@ -111,7 +111,7 @@ impl Skeleton {
         }
         let s = Skeleton { joints, values };
         let cc = s.channel_count();
-        if cc == 0 && !s.values.is_empty() || cc > 0 && s.values.len() % cc != 0 {
+        if cc == 0 && !s.values.is_empty() || cc > 0 && !s.values.len().is_multiple_of(cc) {
             return Err(Error::Invalid(format!(
                 "{} channel values do not fill whole frames of {cc} channels",
                 s.values.len()

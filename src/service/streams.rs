@@ -380,7 +380,7 @@ impl Streams {
             )));
         }
         let w = live.points * 3;
-        if frames.len() % w != 0 {
+        if !frames.len().is_multiple_of(w) {
             return Err(Error::InvalidRequest(format!(
                 "{} values are not whole frames of {} points",
                 frames.len(),

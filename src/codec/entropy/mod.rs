@@ -10,8 +10,10 @@
 //! random access. MDTT's coefficient streams are a few hundred integers per chunk, where
 //! zstd has nothing to learn from.
 
+pub mod geometric;
 pub mod ints;
 pub mod rangecoder;
+pub mod rans;
 pub mod zstd_varint;
 
 pub use ints::{magnitude_context, IntModel};

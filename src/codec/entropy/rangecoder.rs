@@ -206,7 +206,7 @@ mod tests {
             let bit = if ctx == 0 {
                 rng % 100 < 5
             } else {
-                rng % 2 == 0
+                rng.is_multiple_of(2)
             };
             bits.push((ctx, bit, (rng >> 20) as u32 & 0x3ff));
         }

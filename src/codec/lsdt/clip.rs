@@ -99,7 +99,7 @@ fn synthesise(spatial: &Spatial, q: &[i32], step: f32, n: usize, table: &[f32], 
     let w = spatial.points() * 3;
     let kn = q.len() / w;
     let mut freq = vec![0f32; kn * w];
-    let mut scratch = vec![0f32; w];
+    let mut scratch = spatial.scratch();
     for (k, f) in freq.chunks_exact_mut(w).enumerate() {
         spatial.inverse_add(&q[k * w..(k + 1) * w], step, &mut scratch, f);
     }

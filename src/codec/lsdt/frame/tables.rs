@@ -1,0 +1,524 @@
+//! The per-take-tables entropy stage of `lsdt-frame` (parameters version 2).
+//!
+//! The encoder runs the closed loop over the whole take first ([`Recorder`]), then counts
+//! tokens per context, fits each context's two-parameter model (`entropy::geometric`), and
+//! codes every chunk with rANS against tables built from those models. The models travel
+//! with the take's parameters, so each chunk still decodes on its own.
+//!
+//! Contexts of a predicted coefficient: the size class of the same coefficient in the
+//! previous frame, of the previous row's in this frame (both known to the decoder), and
+//! the row's place in the basis (rows are ordered by energy). How finely each is split is
+//! the take's [`Shape`]: the encoder tries a few and keeps the smallest total, models
+//! included — fine shapes pay on long takes, coarse ones on short takes.
+//!
+//! Residual-layer corrections (max bounds) are coded per frame as the number of corrected
+//! points, the gaps between them, and three signed values per point.
+//!
+//! Chunk layout: `varint(rANS length) · rANS stream · raw bits` (signs and low bits).
+
+use super::{check_chunk, FrameParams, Loop, TABLES_VERSION};
+use crate::codec::entropy::geometric::{
+    read_models, token, write_models, Geometric, Stats, TOKENS, TOKEN_BASE, TOKEN_BITS, TOKEN_EXTRA,
+};
+use crate::codec::entropy::rans::{self, BitReader, BitWriter, Table, TableSet};
+use crate::codec::entropy::{get_varint, put_varint};
+use crate::codec::error::{malformed, Result};
+use crate::codec::lsdt::spatial::Spatial;
+use crate::codec::residual::FrameResidual;
+use crate::codec::wire::Reader;
+use crate::codec::{ChunkDecoder, ChunkOut};
+
+/// How finely coefficient contexts are split.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shape {
+    /// Row buckets (rows split evenly).
+    pub rows: u8,
+    /// Size classes of the same coefficient in the previous frame.
+    pub prev: u8,
+    /// Size classes of the previous row's coefficient in this frame.
+    pub left: u8,
+}
+
+/// What the encoder tries, finest first.
+const SHAPES: [Shape; 3] = [
+    Shape {
+        rows: 8,
+        prev: 5,
+        left: 3,
+    },
+    Shape {
+        rows: 4,
+        prev: 4,
+        left: 2,
+    },
+    Shape {
+        rows: 2,
+        prev: 3,
+        left: 1,
+    },
+];
+
+/// Residual contexts: the count after a frame without / with corrections, the gaps, and the
+/// values of each axis.
+const RESIDUAL_CONTEXTS: usize = 6;
+
+impl Shape {
+    fn predicted(&self) -> usize {
+        usize::from(self.rows) * usize::from(self.prev) * usize::from(self.left)
+    }
+
+    fn contexts(&self) -> usize {
+        self.predicted() + usize::from(self.rows) + RESIDUAL_CONTEXTS
+    }
+
+    fn valid(&self) -> bool {
+        (1..=16).contains(&self.rows)
+            && (1..=8).contains(&self.prev)
+            && (1..=8).contains(&self.left)
+    }
+}
+
+/// Size class of a value: 0 for 0, then its bit length, capped at `n − 1`.
+#[inline]
+fn class(v: i32, n: usize) -> usize {
+    ((32 - v.unsigned_abs().leading_zeros()) as usize).min(n - 1)
+}
+
+/// Context numbers of one layout (`j` points) under a shape.
+struct Contexts {
+    prev: usize,
+    left: usize,
+    rows: usize,
+    /// Row bucket of each row.
+    row: Vec<usize>,
+    intra: usize,
+    residual: usize,
+}
+
+impl Contexts {
+    fn new(shape: Shape, j: usize) -> Contexts {
+        let rows = usize::from(shape.rows);
+        Contexts {
+            prev: usize::from(shape.prev),
+            left: usize::from(shape.left),
+            rows,
+            row: (0..j).map(|r| r * rows / j.max(1)).collect(),
+            intra: shape.predicted(),
+            residual: shape.predicted() + rows,
+        }
+    }
+
+    #[inline]
+    fn coef(&self, intra: bool, r: usize, prev: i32, left: i32) -> usize {
+        if intra {
+            self.intra + self.row[r]
+        } else {
+            (class(prev, self.prev) * self.left + class(left, self.left)) * self.rows + self.row[r]
+        }
+    }
+}
+
+/// A take's models: the side data that the chunks' tables are built from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tables {
+    pub shape: Shape,
+    /// Per context; `None` where the take has no symbols.
+    models: Vec<Option<Geometric>>,
+}
+
+impl Tables {
+    /// The take's parameters in version 2: the loop's, the shape, the models.
+    pub fn params_bytes(&self, p: &FrameParams) -> Vec<u8> {
+        let mut w = p.with_version(TABLES_VERSION);
+        let models = write_models(&self.models);
+        w.bytes(&[self.shape.rows, self.shape.prev, self.shape.left])
+            .u32(models.len() as u32)
+            .bytes(&models);
+        w.0
+    }
+
+    pub(super) fn read(r: &mut Reader<'_>) -> Result<Tables> {
+        let shape = Shape {
+            rows: r.u8()?,
+            prev: r.u8()?,
+            left: r.u8()?,
+        };
+        if !shape.valid() {
+            return Err(malformed(format!("lsdt-frame context shape {shape:?}")));
+        }
+        let n = r.u32()? as usize;
+        let models = read_models(r.take(n)?, shape.contexts())
+            .ok_or_else(|| malformed("lsdt-frame entropy models"))?;
+        Ok(Tables { shape, models })
+    }
+
+    fn rans_tables(&self) -> Vec<Table> {
+        self.models
+            .iter()
+            .map(|m| match m {
+                Some(g) => g.table(),
+                // Never used by a valid stream; a one-symbol table keeps corrupt ones safe.
+                None => Table::from_weights(&[1.0]),
+            })
+            .collect()
+    }
+}
+
+/// Where the walk over a take's symbols sends each one.
+trait Sink {
+    /// Token `t` of magnitude `m` in context `ctx`, followed by `bits` raw bits `raw`.
+    fn put(&mut self, ctx: usize, m: u32, t: u32, bits: u32, raw: u32);
+}
+
+#[inline]
+fn put_signed(sink: &mut impl Sink, ctx: usize, v: i32) {
+    let m = v.unsigned_abs();
+    let (t, bits, extra) = token(m);
+    if t == 0 {
+        sink.put(ctx, 0, 0, 0, 0);
+    } else {
+        sink.put(ctx, m, t, bits + 1, (extra << 1) | u32::from(v < 0));
+    }
+}
+
+#[inline]
+fn put_unsigned(sink: &mut impl Sink, ctx: usize, m: u32) {
+    let (t, bits, extra) = token(m);
+    sink.put(ctx, m, t, bits, extra);
+}
+
+/// The encoder's record of a take: every frame's coefficients and corrections.
+pub(super) struct Recorder {
+    j: usize,
+    intra: Vec<bool>,
+    q: Vec<i32>,
+    residual: bool,
+    /// Corrected points `(point, steps per axis)` of all frames, and where each frame's end.
+    corrections: Vec<(u32, [i32; 3])>,
+    ends: Vec<usize>,
+}
+
+impl Recorder {
+    pub(super) fn new(points: usize) -> Recorder {
+        Recorder {
+            j: points,
+            intra: Vec::new(),
+            q: Vec::new(),
+            residual: false,
+            corrections: Vec::new(),
+            ends: Vec::new(),
+        }
+    }
+
+    pub(super) fn record(&mut self, intra: bool, q: &[i32], residual: Option<&FrameResidual>) {
+        self.intra.push(intra);
+        self.q.extend_from_slice(q);
+        if let Some(r) = residual {
+            self.residual = true;
+            let (flags, steps) = r.corrections();
+            for (p, _) in flags.iter().enumerate().filter(|(_, &f)| f) {
+                self.corrections
+                    .push((p as u32, [steps[p * 3], steps[p * 3 + 1], steps[p * 3 + 2]]));
+            }
+        }
+        self.ends.push(self.corrections.len());
+    }
+
+    /// Send the symbols of frames `a..b` (a chunk: `a` is an intra frame) to `sink`.
+    fn walk(&self, ctx: &Contexts, a: usize, b: usize, sink: &mut impl Sink) {
+        let (j, w) = (self.j, self.j * 3);
+        let zeros = vec![0i32; w];
+        let mut prev_any = false;
+        for f in a..b {
+            let intra = f == a;
+            let q = &self.q[f * w..(f + 1) * w];
+            let prev = if intra {
+                &zeros[..]
+            } else {
+                &self.q[(f - 1) * w..f * w]
+            };
+            for d in 0..3 {
+                let mut left = 0;
+                for r in 0..j {
+                    let i = d * j + r;
+                    put_signed(sink, ctx.coef(intra, r, prev[i], left), q[i]);
+                    left = q[i];
+                }
+            }
+            if self.residual {
+                let start = if f == 0 { 0 } else { self.ends[f - 1] };
+                let list = &self.corrections[start..self.ends[f]];
+                let any = usize::from(prev_any && !intra);
+                put_unsigned(sink, ctx.residual + any, list.len() as u32);
+                prev_any = !list.is_empty();
+                let mut next = 0;
+                for &(p, steps) in list {
+                    put_unsigned(sink, ctx.residual + 2, p - next);
+                    next = p + 1;
+                    for (k, &v) in steps.iter().enumerate() {
+                        put_signed(sink, ctx.residual + 3 + k, v);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Chunk boundaries: each chunk runs from an intra frame to the next.
+    fn chunks(&self) -> Vec<(usize, usize)> {
+        let starts: Vec<usize> = (0..self.intra.len()).filter(|&f| self.intra[f]).collect();
+        starts
+            .iter()
+            .enumerate()
+            .map(|(k, &a)| (a, starts.get(k + 1).copied().unwrap_or(self.intra.len())))
+            .collect()
+    }
+
+    /// Fit the models (trying each shape) and code the chunks.
+    pub(super) fn finish(self) -> (Tables, Vec<ChunkOut>) {
+        let chunks = self.chunks();
+        let mut best: Option<(f64, Tables)> = None;
+        for shape in SHAPES {
+            let ctx = Contexts::new(shape, self.j);
+            let mut stats = Counter {
+                stats: vec![Stats::default(); shape.contexts()],
+                raw: 0,
+            };
+            for &(a, b) in &chunks {
+                self.walk(&ctx, a, b, &mut stats);
+            }
+            let fitted: Vec<Option<(Geometric, f64)>> =
+                stats.stats.iter().map(Stats::fit).collect();
+            let models: Vec<Option<Geometric>> = fitted.iter().map(|f| f.map(|f| f.0)).collect();
+            let bits = stats.raw as f64
+                + fitted.iter().flatten().map(|f| f.1).sum::<f64>()
+                + 8.0 * write_models(&models).len() as f64;
+            if best.as_ref().is_none_or(|b| bits < b.0) {
+                best = Some((bits, Tables { shape, models }));
+            }
+        }
+        let (_, tables) = best.expect("at least one shape");
+        let ctx = Contexts::new(tables.shape, self.j);
+        let rans_tables = tables.rans_tables();
+        let out = chunks
+            .iter()
+            .map(|&(a, b)| {
+                let mut coder = Coder {
+                    tables: &rans_tables,
+                    rans: rans::Encoder::new(),
+                    bits: BitWriter::new(),
+                };
+                self.walk(&ctx, a, b, &mut coder);
+                let stream = coder.rans.finish();
+                let raw = coder.bits.finish();
+                let mut bytes = Vec::with_capacity(stream.len() + raw.len() + 4);
+                put_varint(&mut bytes, stream.len() as u64);
+                bytes.extend_from_slice(&stream);
+                bytes.extend_from_slice(&raw);
+                ChunkOut {
+                    frames: b - a,
+                    bytes,
+                }
+            })
+            .collect();
+        (tables, out)
+    }
+}
+
+struct Counter {
+    stats: Vec<Stats>,
+    raw: u64,
+}
+
+impl Sink for Counter {
+    #[inline]
+    fn put(&mut self, ctx: usize, m: u32, t: u32, bits: u32, _: u32) {
+        self.stats[ctx].add(m, t);
+        self.raw += u64::from(bits);
+    }
+}
+
+struct Coder<'a> {
+    tables: &'a [Table],
+    rans: rans::Encoder,
+    bits: BitWriter,
+}
+
+impl Sink for Coder<'_> {
+    #[inline]
+    fn put(&mut self, ctx: usize, _: u32, t: u32, bits: u32, raw: u32) {
+        self.rans.put(&self.tables[ctx], t as usize);
+        self.bits.put(raw, bits);
+    }
+}
+
+pub(super) struct Decoder {
+    p: FrameParams,
+    spatial: Spatial,
+    ctx: Contexts,
+    tables: TableSet,
+    /// Context offsets by the bit length of the previous frame's coefficient, and of the
+    /// previous row's (capped by the shape): the decoder's contexts without a multiply.
+    /// (256 entries, so that a byte indexes them without a bounds check.)
+    prev_part: [usize; 256],
+    left_part: [usize; 256],
+}
+
+impl Decoder {
+    pub(super) fn new(p: FrameParams, spatial: Spatial, t: &Tables) -> Result<Decoder> {
+        let ctx = Contexts::new(t.shape, spatial.points());
+        if t.models.len() != t.shape.contexts() {
+            return Err(malformed("lsdt-frame entropy models"));
+        }
+        let mut prev_part = [0; 256];
+        let mut left_part = [0; 256];
+        for bits in 0..256 {
+            prev_part[bits] = bits.min(ctx.prev - 1) * ctx.left * ctx.rows;
+            left_part[bits] = bits.min(ctx.left - 1) * ctx.rows;
+        }
+        Ok(Decoder {
+            p,
+            spatial,
+            ctx,
+            tables: TableSet::new(&t.rans_tables()),
+            prev_part,
+            left_part,
+        })
+    }
+}
+
+/// Raw bits after each token of a signed value: its low bits and the sign.
+const SIGNED_RAW: [u32; TOKENS] = {
+    let mut r = [0u32; TOKENS];
+    let mut t = 1;
+    while t < TOKENS {
+        r[t] = TOKEN_EXTRA[t] + 1;
+        t += 1;
+    }
+    r
+};
+
+/// The signed value of token `t` (< 64) and its raw bits, without a branch. Tokens cover
+/// `u32` exactly; corrupt streams that describe more than an `i32` holds wrap (they fail the
+/// chunk's end check) rather than panic.
+#[inline]
+fn signed(t: usize, raw: u32) -> i32 {
+    let m = TOKEN_BASE[t & (TOKENS - 1)].wrapping_add(raw >> 1) as i32;
+    let s = (raw & 1) as i32;
+    (m ^ s.wrapping_neg()).wrapping_add(s)
+}
+
+#[inline]
+fn get_signed(
+    dec: &mut rans::Decoder<'_>,
+    bits: &mut BitReader<'_>,
+    set: &TableSet,
+    ctx: usize,
+) -> i32 {
+    let t = dec.get_in(set, ctx);
+    signed(t, bits.get(SIGNED_RAW[t & (TOKENS - 1)]))
+}
+
+#[inline]
+fn get_unsigned(
+    dec: &mut rans::Decoder<'_>,
+    bits: &mut BitReader<'_>,
+    set: &TableSet,
+    ctx: usize,
+) -> u32 {
+    let t = dec.get_in(set, ctx) & (TOKENS - 1);
+    TOKEN_BASE[t].saturating_add(bits.get(TOKEN_EXTRA[t]))
+}
+
+/// One frame's coefficients as the decoder reads them.
+struct Frame {
+    q: Vec<i32>,
+    /// Bit length of each coefficient (the next frame's contexts).
+    bits: Vec<u8>,
+    prev_bits: Vec<u8>,
+    /// Non-zero rows per coordinate, for the inverse transform.
+    rows: [Vec<u16>; 3],
+}
+
+impl ChunkDecoder for Decoder {
+    fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
+        check_chunk(&self.p, frames)?;
+        let mut pos = 0;
+        let split = get_varint(bytes, &mut pos)
+            .and_then(|n| usize::try_from(n).ok())
+            .and_then(|n| n.checked_add(pos))
+            .filter(|&end| end <= bytes.len())
+            .ok_or_else(|| malformed("lsdt-frame chunk header"))?;
+        let mut dec = rans::Decoder::new(&bytes[pos..split]);
+        let mut bits = BitReader::new(&bytes[split..]);
+        let (set, c) = (&self.tables, &self.ctx);
+        let j = self.spatial.points();
+        let w = j * 3;
+        let step = self.p.step as f32;
+        let mut st = Loop::new(self.p, j);
+        let mut f = Frame {
+            q: vec![0; w],
+            bits: vec![0; w],
+            prev_bits: vec![0; w],
+            rows: [vec![0; j], vec![0; j], vec![0; j]],
+        };
+        let mut scratch = self.spatial.scratch();
+        let mut prev_any = false;
+        for frame in out.chunks_exact_mut(w).take(frames) {
+            let intra = st.intra();
+            st.predict(frame);
+            if intra {
+                prev_any = false;
+            }
+            for d in 0..3 {
+                let q = &mut f.q[d * j..(d + 1) * j];
+                let lens = &mut f.bits[d * j..(d + 1) * j];
+                let prev = &f.prev_bits[d * j..(d + 1) * j];
+                let rows = &mut f.rows[d][..j];
+                let mut n = 0;
+                let mut left = 0u8;
+                let cells = q.iter_mut().zip(lens.iter_mut()).zip(prev).zip(&c.row);
+                for (r, (((q, len), &prev), &row)) in cells.enumerate() {
+                    let ctx = if intra {
+                        c.intra + row
+                    } else {
+                        self.prev_part[usize::from(prev)] + self.left_part[usize::from(left)] + row
+                    };
+                    let t = dec.get_in(set, ctx) & (TOKENS - 1);
+                    *q = signed(t, bits.get(SIGNED_RAW[t]));
+                    left = TOKEN_BITS[t];
+                    *len = left;
+                    // Branch-free list of the non-zero rows (n ≤ r, always in bounds).
+                    rows[n] = r as u16;
+                    n += usize::from(t != 0);
+                }
+                self.spatial
+                    .inverse_add_rows(d, &rows[..n], q, step, &mut scratch, frame);
+            }
+            if let Some(r) = &st.residual {
+                let n = get_unsigned(&mut dec, &mut bits, set, c.residual + usize::from(prev_any));
+                if n as usize > j {
+                    return Err(malformed("lsdt-frame corrections exceed the points"));
+                }
+                prev_any = n > 0;
+                let mut next = 0usize;
+                for _ in 0..n {
+                    let p = next + get_unsigned(&mut dec, &mut bits, set, c.residual + 2) as usize;
+                    if p >= j {
+                        return Err(malformed("lsdt-frame correction past the last point"));
+                    }
+                    for k in 0..3 {
+                        let v = get_signed(&mut dec, &mut bits, set, c.residual + 3 + k);
+                        r.apply(frame, p * 3 + k, v);
+                    }
+                    next = p + 1;
+                }
+            }
+            std::mem::swap(&mut f.bits, &mut f.prev_bits);
+            st.advance(frame);
+        }
+        if !dec.finished_cleanly() || !bits.finished_cleanly() {
+            return Err(malformed("lsdt-frame chunk does not decode to its end"));
+        }
+        Ok(())
+    }
+}
