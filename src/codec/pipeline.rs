@@ -247,11 +247,27 @@ pub fn decode_chunk(
         .chunks
         .get(index)
         .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
+    let mut out = vec![0f32; meta.frames as usize * header.width()];
+    decode_chunk_into(header, decoder, index, payload, &mut out)?;
+    Ok(out)
+}
+
+/// [`decode_chunk`] into `out` (exactly the chunk's frames).
+fn decode_chunk_into(
+    header: &Header,
+    decoder: &dyn ChunkDecoder,
+    index: usize,
+    payload: &[u8],
+    out: &mut [f32],
+) -> Result<()> {
+    let meta = header
+        .chunks
+        .get(index)
+        .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
     verify_chunk(meta, payload, index)?;
     let n = meta.frames as usize;
     let (mask, codec_bytes) = unpack_chunk(payload, n * header.points as usize)?;
-    let mut out = vec![0f32; n * header.width()];
-    decoder.decode_chunk(codec_bytes, n, &mut out)?;
+    decoder.decode_chunk(codec_bytes, n, out)?;
     if let Some(mask) = mask {
         for (s, ok) in out.chunks_exact_mut(3).zip(mask) {
             if !ok {
@@ -262,7 +278,7 @@ pub fn decode_chunk(
     if out.iter().any(|v| v.is_infinite()) {
         return Err(malformed("decoded values are not finite"));
     }
-    Ok(out)
+    Ok(())
 }
 
 /// As [`decode_range`], with a decoder prepared once from the header (parsing a shared or
@@ -290,11 +306,16 @@ pub fn decode_range_with(
     let w = header.width();
     let mut out = vec![0f32; (end - start) * w];
     for (i, payload) in wanted.zip(chunks) {
-        let decoded = decode_chunk(header, decoder, i, payload)?;
         let r = header.chunks[i].frame_range();
         let (lo, hi) = (r.start.max(start), r.end.min(end));
-        out[(lo - start) * w..(hi - start) * w]
-            .copy_from_slice(&decoded[(lo - r.start) * w..(hi - r.start) * w]);
+        let dest = &mut out[(lo - start) * w..(hi - start) * w];
+        if (lo, hi) == (r.start, r.end) {
+            // The whole chunk is wanted: decode in place.
+            decode_chunk_into(header, decoder, i, payload, dest)?;
+        } else {
+            let decoded = decode_chunk(header, decoder, i, payload)?;
+            dest.copy_from_slice(&decoded[(lo - r.start) * w..(hi - r.start) * w]);
+        }
     }
     Ok(out)
 }

@@ -439,6 +439,43 @@ struct Frame {
     rows: [Vec<u16>; 3],
 }
 
+impl Decoder {
+    /// One coordinate's coefficients of a frame into `q` (and their bit lengths into
+    /// `lens`); returns how many are non-zero, their rows listed in `rows`. The decoder's
+    /// inner loop: monomorphised for intra and predicted frames so that neither pays for
+    /// the other's context.
+    #[inline(always)]
+    fn coordinate<const INTRA: bool>(
+        &self,
+        dec: &mut rans::Decoder<'_>,
+        bits: &mut BitReader<'_>,
+        q: &mut [i32],
+        lens: &mut [u8],
+        prev: &[u8],
+        rows: &mut [u16],
+    ) -> usize {
+        let (set, c) = (&self.tables, &self.ctx);
+        let mut n = 0;
+        let mut left = 0u8;
+        let cells = q.iter_mut().zip(lens.iter_mut()).zip(prev).zip(&c.row);
+        for (r, (((q, len), &prev), &row)) in cells.enumerate() {
+            let ctx = if INTRA {
+                c.intra + row
+            } else {
+                self.prev_part[usize::from(prev)] + self.left_part[usize::from(left)] + row
+            };
+            let t = dec.get_in(set, ctx) & (TOKENS - 1);
+            *q = signed(t, bits.get(SIGNED_RAW[t]));
+            left = TOKEN_BITS[t];
+            *len = left;
+            // Branch-free list of the non-zero rows (n ≤ r, always in bounds).
+            rows[n] = r as u16;
+            n += usize::from(t != 0);
+        }
+        n
+    }
+}
+
 impl ChunkDecoder for Decoder {
     fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
         check_chunk(&self.p, frames)?;
@@ -474,23 +511,11 @@ impl ChunkDecoder for Decoder {
                 let lens = &mut f.bits[d * j..(d + 1) * j];
                 let prev = &f.prev_bits[d * j..(d + 1) * j];
                 let rows = &mut f.rows[d][..j];
-                let mut n = 0;
-                let mut left = 0u8;
-                let cells = q.iter_mut().zip(lens.iter_mut()).zip(prev).zip(&c.row);
-                for (r, (((q, len), &prev), &row)) in cells.enumerate() {
-                    let ctx = if intra {
-                        c.intra + row
-                    } else {
-                        self.prev_part[usize::from(prev)] + self.left_part[usize::from(left)] + row
-                    };
-                    let t = dec.get_in(set, ctx) & (TOKENS - 1);
-                    *q = signed(t, bits.get(SIGNED_RAW[t]));
-                    left = TOKEN_BITS[t];
-                    *len = left;
-                    // Branch-free list of the non-zero rows (n ≤ r, always in bounds).
-                    rows[n] = r as u16;
-                    n += usize::from(t != 0);
-                }
+                let n = if intra {
+                    self.coordinate::<true>(&mut dec, &mut bits, q, lens, prev, rows)
+                } else {
+                    self.coordinate::<false>(&mut dec, &mut bits, q, lens, prev, rows)
+                };
                 self.spatial
                     .inverse_add_rows(d, &rows[..n], q, step, &mut scratch, frame);
             }
