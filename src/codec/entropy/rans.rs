@@ -142,14 +142,6 @@ impl TableSet {
             packed: tables.iter().map(Packed::new).collect(),
         }
     }
-
-    pub fn len(&self) -> usize {
-        self.packed.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.packed.is_empty()
-    }
 }
 
 /// Collects symbols in decoding order; [`Encoder::finish`] codes them (rANS runs backwards).
@@ -169,14 +161,6 @@ impl Encoder {
     pub fn put(&mut self, table: &Table, symbol: usize) {
         debug_assert!(symbol < table.len(), "symbol {symbol} outside the table");
         self.symbols.push((table.cum[symbol], table.freq[symbol]));
-    }
-
-    pub fn len(&self) -> usize {
-        self.symbols.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.symbols.is_empty()
     }
 
     /// The coded stream: both final states, then 16-bit words in the order they are read.
@@ -232,11 +216,6 @@ impl<'a> Decoder<'a> {
         };
         self.pos += 2;
         w
-    }
-
-    #[inline]
-    pub fn get(&mut self, table: &Table) -> usize {
-        self.next(&Packed::new(table))
     }
 
     /// The next symbol, coded with table `ctx` of `set`.
@@ -351,11 +330,6 @@ impl<'a> BitReader<'a> {
         }
     }
 
-    /// Whether reading stayed within the input (bits of the last byte may be padding).
-    pub fn within(&self) -> bool {
-        self.pos.saturating_sub(self.input.len()) * 8 <= self.n as usize
-    }
-
     /// Whether exactly the input was read, up to the padding of its last byte.
     pub fn finished_cleanly(&self) -> bool {
         let consumed = self.pos * 8 - self.n as usize;
@@ -411,23 +385,24 @@ mod tests {
             };
             items.push((t, s, (r >> 32) as u32 & 0x1fff));
         }
-        let tables = [&skewed, &flat, &one];
+        let tables = [skewed, flat, one];
         let mut enc = Encoder::new();
         let mut bits = BitWriter::new();
         for &(t, s, raw) in &items {
-            enc.put(tables[t], s);
+            enc.put(&tables[t], s);
             bits.put(raw, 13);
         }
+        let set = TableSet::new(&tables);
         let coded = enc.finish();
         let raw = bits.finish();
         let mut dec = Decoder::new(&coded);
         let mut br = BitReader::new(&raw);
         for &(t, s, r) in &items {
-            assert_eq!(dec.get(tables[t]), s);
+            assert_eq!(dec.get_in(&set, t), s);
             assert_eq!(br.get(13), r);
         }
         assert!(dec.finished_cleanly());
-        assert!(br.within() && br.finished_cleanly());
+        assert!(br.finished_cleanly());
         // Entropy: H(0.7,0.2,0.05,0.03,0.02) ≈ 1.29 bits, 6 bits flat, 0 for the certain one.
         let ideal = 50_000.0 / 3.0 * (1.29 + 6.0) / 8.0;
         assert!(
@@ -439,18 +414,18 @@ mod tests {
 
     #[test]
     fn corrupt_or_short_input_decodes_garbage_without_panicking() {
-        let t = Table::from_weights(&[0.5, 0.25, 0.25]);
+        let set = TableSet::new(&[Table::from_weights(&[0.5, 0.25, 0.25])]);
         for input in [&[][..], &[1, 2, 3], &[0xff; 40]] {
             let mut d = Decoder::new(input);
             for _ in 0..1000 {
-                assert!(d.get(&t) < 3);
+                assert!(d.get_in(&set, 0) < 3);
             }
             assert!(!d.finished_cleanly());
             let mut b = BitReader::new(input);
             for _ in 0..100 {
                 b.get(17);
             }
-            assert!(!b.within());
+            assert!(!b.finished_cleanly());
         }
     }
 }

@@ -248,8 +248,11 @@ impl Recorder {
             if self.residual {
                 let start = if f == 0 { 0 } else { self.ends[f - 1] };
                 let list = &self.corrections[start..self.ends[f]];
-                let any = usize::from(prev_any && !intra);
-                put_unsigned(sink, ctx.residual + any, list.len() as u32);
+                put_unsigned(
+                    sink,
+                    ctx.residual + usize::from(prev_any),
+                    list.len() as u32,
+                );
                 prev_any = !list.is_empty();
                 let mut next = 0;
                 for &(p, steps) in list {
