@@ -260,13 +260,14 @@ impl Quantiser {
 
 pub struct LsdtFrame;
 
-/// Encode every frame with fixed parameters against per-take tables; returns the take's
-/// parameters, its chunks and (max, mean) error.
-fn code(
+/// Run the closed loop over every frame with fixed parameters; returns what it decided and
+/// the (max, mean) error of its reconstruction. The entropy stage comes after, and only for
+/// settings worth coding ([`tables::Recorder::finish`]).
+fn quantise_take(
     input: &Input<'_>,
     spatial: &Arc<Spatial>,
     p: FrameParams,
-) -> (Vec<u8>, Vec<ChunkOut>, f64, f64) {
+) -> (tables::Recorder, f64, f64) {
     let w = input.width();
     let mut quantiser = Quantiser::new(p, spatial.clone());
     let mut frames = tables::Recorder::new(input.points);
@@ -281,8 +282,7 @@ fn code(
         quantiser.advance();
     }
     let (max, mean) = max_mean(input.data, &recon, input.valid);
-    let (tables, chunks) = frames.finish();
-    (tables.params_bytes(&p), chunks, max, mean)
+    (frames, max, mean)
 }
 
 /// The parameters a live stream is coded with when no search is possible: the bound as a
@@ -307,13 +307,17 @@ pub fn encode_with_period(
     let spatial = Arc::new(Spatial::for_take(input.shared, input.points, "lsdt-frame")?);
     let mut best: Option<(usize, Vec<u8>, Vec<ChunkOut>)> = None;
     let mut offer = |p: FrameParams| -> bool {
-        let (params, chunks, max, mean) = code(input, &spatial, p);
-        let ok = target.holds(max, mean);
+        let (frames, max, mean) = quantise_take(input, &spatial, p);
+        if !target.holds(max, mean) {
+            return false;
+        }
+        let (tables, chunks) = frames.finish();
+        let params = tables.params_bytes(&p);
         let bytes = params.len() + chunks.iter().map(|c| c.bytes.len() + 17).sum::<usize>();
-        if ok && best.as_ref().is_none_or(|b| bytes < b.0) {
+        if best.as_ref().is_none_or(|b| bytes < b.0) {
             best = Some((bytes, params, chunks));
         }
-        ok
+        true
     };
     let period = intra_period.max(1);
     for order in [1u8, 2] {
@@ -431,6 +435,17 @@ mod tests {
                 100.0 * (f * 0.03 + c * 0.7).sin() + 10.0 * c + 0.3 * noise
             })
             .collect()
+    }
+
+    /// Parameters, chunks and (max, mean) error of a take coded with fixed settings.
+    fn code(
+        input: &Input<'_>,
+        spatial: &Arc<Spatial>,
+        p: FrameParams,
+    ) -> (Vec<u8>, Vec<ChunkOut>, f64, f64) {
+        let (frames, max, mean) = quantise_take(input, spatial, p);
+        let (tables, chunks) = frames.finish();
+        (tables.params_bytes(&p), chunks, max, mean)
     }
 
     fn decode(params: &[u8], chunks: &[ChunkOut], basis: &Basis, points: usize) -> Vec<f32> {
