@@ -231,17 +231,37 @@ impl Stats {
     }
 }
 
+/// What [`write_models`] and [`read_models`] both keep: the used-flag and per-field models,
+/// and the last used context's values (what the next is coded against).
+struct SideData {
+    used: super::Bit,
+    m: [IntModel; 3],
+    prev: [i32; 3],
+}
+
+impl SideData {
+    fn new() -> Self {
+        SideData {
+            used: super::Bit::default(),
+            m: [
+                IntModel::default(),
+                IntModel::default(),
+                IntModel::default(),
+            ],
+            prev: [32, 32, 1],
+        }
+    }
+}
+
 /// Models of contexts coded with the adaptive range coder, each value against the previous
 /// context's (neighbouring contexts have similar statistics): a few bits per context.
 pub fn write_models(models: &[Option<Geometric>]) -> Vec<u8> {
     let mut enc = RangeEncoder::new();
-    let mut used = super::Bit::default();
-    let mut m = [
-        IntModel::default(),
-        IntModel::default(),
-        IntModel::default(),
-    ];
-    let mut prev = [32i32, 32, 1];
+    let SideData {
+        mut used,
+        mut m,
+        mut prev,
+    } = SideData::new();
     for g in models {
         enc.encode(&mut used, g.is_some());
         if let Some(g) = g {
@@ -258,13 +278,11 @@ pub fn write_models(models: &[Option<Geometric>]) -> Vec<u8> {
 /// Read `n` models written by [`write_models`]; `None` if the bytes don't hold them.
 pub fn read_models(bytes: &[u8], n: usize) -> Option<Vec<Option<Geometric>>> {
     let mut dec = RangeDecoder::new(bytes);
-    let mut used = super::Bit::default();
-    let mut m = [
-        IntModel::default(),
-        IntModel::default(),
-        IntModel::default(),
-    ];
-    let mut prev = [32i32, 32, 1];
+    let SideData {
+        mut used,
+        mut m,
+        mut prev,
+    } = SideData::new();
     let mut out = Vec::with_capacity(n);
     for _ in 0..n {
         if !dec.decode(&mut used) {

@@ -437,6 +437,22 @@ mod tests {
             .collect()
     }
 
+    fn take<'a>(
+        data: &'a [f32],
+        valid: Option<&'a [bool]>,
+        points: usize,
+        basis: &'a Basis,
+    ) -> Input<'a> {
+        Input {
+            data,
+            valid,
+            frames: data.len() / (points * 3),
+            points,
+            fps: 120.0,
+            shared: Some(basis),
+        }
+    }
+
     /// Parameters, chunks and (max, mean) error of a take coded with fixed settings.
     fn code(
         input: &Input<'_>,
@@ -470,14 +486,7 @@ mod tests {
         let basis = dct_basis(points);
         let spatial = Arc::new(Spatial::new(&basis).unwrap());
         for (residual_t, order, valid) in [(0.0, 1, None), (0.4, 2, Some(&valid[..]))] {
-            let input = Input {
-                data: &data,
-                valid,
-                frames,
-                points,
-                fps: 120.0,
-                shared: Some(&basis),
-            };
+            let input = take(&data, valid, points, &basis);
             let p = FrameParams {
                 step: 0.5,
                 residual_t,
@@ -516,14 +525,7 @@ mod tests {
         let data = motion(frames, points);
         let basis = dct_basis(points);
         let spatial = Arc::new(Spatial::new(&basis).unwrap());
-        let input = Input {
-            data: &data,
-            valid: None,
-            frames,
-            points,
-            fps: 60.0,
-            shared: Some(&basis),
-        };
+        let input = take(&data, None, points, &basis);
         let p = FrameParams {
             step: 0.3,
             residual_t: 0.2,
