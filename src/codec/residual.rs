@@ -133,7 +133,13 @@ impl FrameResidual {
     /// Apply a correction of `q` steps to coordinate `i` of `recon`, exactly as the encoder did.
     #[inline]
     pub fn apply(&self, recon: &mut [f32], i: usize, q: i32) {
-        recon[i] += (f64::from(q) * self.step) as f32;
+        recon[i] += self.correction(q);
+    }
+
+    /// What a correction of `q` steps adds to its sample.
+    #[inline]
+    pub fn correction(&self, q: i32) -> f32 {
+        (f64::from(q) * self.step) as f32
     }
 
     /// Code the last [`FrameResidual::correct`]'s decision with the adaptive models.

@@ -105,42 +105,35 @@ impl Table {
     }
 }
 
-/// A table as the decoder reads it: the symbol of every slot (one byte each, so that a hundred
-/// contexts stay in cache), then each symbol's frequency and first slot.
-#[derive(Clone)]
-struct Packed {
-    symbol: [u8; M as usize],
-    freq: [u16; MAX_SYMBOLS],
-    cum: [u16; MAX_SYMBOLS],
-}
-
-impl Packed {
-    fn new(t: &Table) -> Packed {
-        let mut p = Packed {
-            symbol: [0; M as usize],
-            freq: [0; MAX_SYMBOLS],
-            cum: [0; MAX_SYMBOLS],
-        };
-        for (s, (&c, &f)) in t.cum.iter().zip(&t.freq).enumerate() {
-            p.cum[s] = c;
-            p.freq[s] = f;
-            p.symbol[usize::from(c)..usize::from(c) + usize::from(f)].fill(s as u8);
-        }
-        p
-    }
-}
-
-/// The decoder's view of several tables, indexed by context (one load less per symbol
-/// than an index into shared tables; contexts of a take are few).
+/// The decoder's view of a take's tables, indexed by context: every context's slot→symbol
+/// map (one byte per slot) back to back, then each symbol's frequency and first slot
+/// packed in one word. A context is addressed by the offset of its first slot
+/// ([`TableSet::offset`]), so a decoder whose context is a sum of parts can keep each part
+/// as an offset and reach the next symbol's table with one add: on the decoder's critical
+/// path (symbol → next context → its table) every load and multiply counts.
 pub struct TableSet {
-    packed: Vec<Packed>,
+    symbols: Vec<u8>,
+    /// `freq | cum << 16`, [`MAX_SYMBOLS`] per context.
+    entries: Vec<u32>,
 }
 
 impl TableSet {
     pub fn new(tables: &[Table]) -> TableSet {
-        TableSet {
-            packed: tables.iter().map(Packed::new).collect(),
+        let mut symbols = vec![0u8; tables.len() << PREC];
+        let mut entries = vec![0u32; tables.len() * MAX_SYMBOLS];
+        for (c, t) in tables.iter().enumerate() {
+            let slots = &mut symbols[c << PREC..(c + 1) << PREC];
+            for (s, (&cum, &freq)) in t.cum.iter().zip(&t.freq).enumerate() {
+                entries[c * MAX_SYMBOLS + s] = u32::from(freq) | u32::from(cum) << 16;
+                slots[usize::from(cum)..usize::from(cum) + usize::from(freq)].fill(s as u8);
+            }
         }
+        TableSet { symbols, entries }
+    }
+
+    /// The offset of context `ctx` (offsets of contexts `a + b` are the sums of theirs).
+    pub const fn offset(ctx: usize) -> usize {
+        ctx << PREC
     }
 }
 
@@ -221,15 +214,16 @@ impl<'a> Decoder<'a> {
     /// The next symbol, coded with table `ctx` of `set`.
     #[inline]
     pub fn get_in(&mut self, set: &TableSet, ctx: usize) -> usize {
-        self.next(&set.packed[ctx])
+        self.get_at(set, TableSet::offset(ctx))
     }
 
+    /// The next symbol, coded with the table at `offset` ([`TableSet::offset`]) of `set`.
     #[inline]
-    fn next(&mut self, t: &Packed) -> usize {
+    pub fn get_at(&mut self, set: &TableSet, offset: usize) -> usize {
         let slot = self.x & (M - 1);
-        let s = usize::from(t.symbol[slot as usize]) & (MAX_SYMBOLS - 1);
-        let (freq, cum) = (u32::from(t.freq[s]), u32::from(t.cum[s]));
-        let mut x = freq * (self.x >> PREC) + slot - cum;
+        let s = usize::from(set.symbols[offset + slot as usize]) & (MAX_SYMBOLS - 1);
+        let e = set.entries[(offset >> (PREC - MAX_SYMBOLS.trailing_zeros())) + s];
+        let mut x = (e & 0xffff) * (self.x >> PREC) + slot - (e >> 16);
         if x < L {
             x = (x << 16) | u32::from(self.word());
         }

@@ -27,6 +27,60 @@ pub struct Spatial {
 /// Scratch space of the inverse (see [`Spatial::scratch`]).
 pub type Scratch = Vec<f32x8>;
 
+/// A frame in the transform's layout: per coordinate, the `J` values padded to whole SIMD
+/// vectors. A frame decoder keeps its loop state in this form so that prediction and
+/// reconstruction run in whole registers and the frame is interleaved only once, on output
+/// (scattering each coordinate into the interleaved frame cost more than the transform).
+/// Every operation is lane-wise IEEE arithmetic in the order the interleaved code uses, so
+/// results are bit-identical to it.
+#[derive(Clone)]
+pub struct Planar {
+    j: usize,
+    groups: usize,
+    /// `[d][group]`; padding lanes stay zero.
+    v: Vec<f32x8>,
+}
+
+impl Planar {
+    pub fn clear(&mut self) {
+        self.v.fill(f32x8::ZERO);
+    }
+
+    pub fn copy_from(&mut self, other: &Planar) {
+        self.v.copy_from_slice(&other.v);
+    }
+
+    /// `2a − b`: the order-2 prediction.
+    pub fn extrapolate(&mut self, a: &Planar, b: &Planar) {
+        let two = f32x8::splat(2.0);
+        for ((o, &a), &b) in self.v.iter_mut().zip(&a.v).zip(&b.v) {
+            *o = two * a - b;
+        }
+    }
+
+    /// Add `x` to sample `i` of the interleaved frame (`3 · point + axis`).
+    #[inline]
+    pub fn add(&mut self, i: usize, x: f32) {
+        let (p, d) = (i / 3, i % 3);
+        self.v[d * self.groups + p / 8].as_mut_array()[p % 8] += x;
+    }
+
+    /// Write the frame interleaved (`J` points × x, y, z) into `out`.
+    pub fn write_interleaved(&self, out: &mut [f32]) {
+        let g = self.groups;
+        let (x, rest) = self.v.split_at(g);
+        let (y, z) = rest.split_at(g);
+        for (c, o) in out[..self.j * 3].chunks_mut(24).enumerate() {
+            let (x, y, z) = (x[c].as_array(), y[c].as_array(), z[c].as_array());
+            for (k, o) in o.chunks_exact_mut(3).enumerate() {
+                o[0] = x[k];
+                o[1] = y[k];
+                o[2] = z[k];
+            }
+        }
+    }
+}
+
 impl Spatial {
     pub fn new(basis: &Basis) -> Result<Spatial> {
         if basis.kind() != BasisKind::Lsdt {
@@ -66,6 +120,15 @@ impl Spatial {
     /// Scratch space for [`Spatial::inverse_add`].
     pub fn scratch(&self) -> Scratch {
         vec![f32x8::ZERO; self.groups]
+    }
+
+    /// A zero frame in the layout of [`Spatial::inverse_add_planar`].
+    pub fn planar(&self) -> Planar {
+        Planar {
+            j: self.j,
+            groups: self.groups,
+            v: vec![f32x8::ZERO; 3 * self.groups],
+        }
     }
 
     /// The transform `codec` codes a take of `points` points with: the shared basis must be
@@ -129,6 +192,46 @@ impl Spatial {
         if rows.is_empty() {
             return;
         }
+        let acc = self.accumulate(d, rows, q, step, scratch);
+        let out = &mut out[d..];
+        for (g, v) in acc.iter().enumerate() {
+            let lanes = v.to_array();
+            for (k, &x) in lanes.iter().enumerate().take(self.j - g * 8) {
+                out[(g * 8 + k) * 3] += x;
+            }
+        }
+    }
+
+    /// [`Spatial::inverse_add_rows`] into a [`Planar`] frame: the same sums, added lane-wise.
+    pub fn inverse_add_planar(
+        &self,
+        d: usize,
+        rows: &[u16],
+        q: &[i32],
+        step: f32,
+        scratch: &mut [f32x8],
+        out: &mut Planar,
+    ) {
+        if rows.is_empty() {
+            return;
+        }
+        let acc = self.accumulate(d, rows, q, step, scratch);
+        let g = self.groups;
+        for (o, &a) in out.v[d * g..(d + 1) * g].iter_mut().zip(acc.iter()) {
+            *o += a;
+        }
+    }
+
+    /// `Σ_r B_d[r] · q[r] · step` over `rows`, from zero, in row order.
+    #[inline]
+    fn accumulate<'s>(
+        &self,
+        d: usize,
+        rows: &[u16],
+        q: &[i32],
+        step: f32,
+        scratch: &'s mut [f32x8],
+    ) -> &'s [f32x8] {
         let g = self.groups;
         let b = &self.padded[d];
         let acc = &mut scratch[..g];
@@ -140,13 +243,7 @@ impl Spatial {
                 *o += a * bv;
             }
         }
-        let out = &mut out[d..];
-        for (g, v) in acc.iter().enumerate() {
-            let lanes = v.to_array();
-            for (k, &x) in lanes.iter().enumerate().take(self.j - g * 8) {
-                out[(g * 8 + k) * 3] += x;
-            }
-        }
+        acc
     }
 }
 

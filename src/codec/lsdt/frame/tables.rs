@@ -16,7 +16,7 @@
 //!
 //! Chunk layout: `varint(rANS length) · rANS stream · raw bits` (signs and low bits).
 
-use super::{check_chunk, FrameParams, Loop, TABLES_VERSION};
+use super::{check_chunk, FrameParams, TABLES_VERSION};
 use crate::codec::entropy::geometric::{
     read_models, token, write_models, Geometric, Stats, TOKENS, TOKEN_BASE, TOKEN_BITS, TOKEN_EXTRA,
 };
@@ -359,11 +359,16 @@ pub(super) struct Decoder {
     spatial: Spatial,
     ctx: Contexts,
     tables: TableSet,
-    /// Context offsets by the bit length of the previous frame's coefficient, and of the
-    /// previous row's (capped by the shape): the decoder's contexts without a multiply.
-    /// (256 entries, so that a byte indexes them without a bounds check.)
+    /// A predicted coefficient's context is the sum of three parts, kept here as table
+    /// offsets ([`TableSet::offset`]): by the bit length of the previous frame's coefficient
+    /// (256 entries, so that a byte indexes them without a bounds check), by the row, and
+    /// by the previous row's *token*. Only the last depends on the symbol just decoded, so
+    /// the chain from one symbol to the next symbol's table is two loads and an add.
     prev_part: [usize; 256],
-    left_part: [usize; 256],
+    row_part: Vec<usize>,
+    left_part: [usize; TOKENS],
+    /// Intra contexts by row.
+    intra_part: Vec<usize>,
 }
 
 impl Decoder {
@@ -373,14 +378,22 @@ impl Decoder {
             return Err(malformed("lsdt-frame entropy models"));
         }
         let mut prev_part = [0; 256];
-        let mut left_part = [0; 256];
-        for bits in 0..256 {
-            prev_part[bits] = bits.min(ctx.prev - 1) * ctx.left * ctx.rows;
-            left_part[bits] = bits.min(ctx.left - 1) * ctx.rows;
+        for (bits, part) in prev_part.iter_mut().enumerate() {
+            *part = TableSet::offset(bits.min(ctx.prev - 1) * ctx.left * ctx.rows);
+        }
+        let mut left_part = [0; TOKENS];
+        for (t, part) in left_part.iter_mut().enumerate() {
+            *part = TableSet::offset(usize::from(TOKEN_BITS[t]).min(ctx.left - 1) * ctx.rows);
         }
         Ok(Decoder {
             p,
             spatial,
+            row_part: ctx.row.iter().map(|&r| TableSet::offset(r)).collect(),
+            intra_part: ctx
+                .row
+                .iter()
+                .map(|&r| TableSet::offset(ctx.intra + r))
+                .collect(),
             ctx,
             tables: TableSet::new(&t.rans_tables()),
             prev_part,
@@ -457,20 +470,25 @@ impl Decoder {
         prev: &[u8],
         rows: &mut [u16],
     ) -> usize {
-        let (set, c) = (&self.tables, &self.ctx);
+        let set = &self.tables;
         let mut n = 0;
-        let mut left = 0u8;
-        let cells = q.iter_mut().zip(lens.iter_mut()).zip(prev).zip(&c.row);
-        for (r, (((q, len), &prev), &row)) in cells.enumerate() {
-            let ctx = if INTRA {
-                c.intra + row
+        let mut left = self.left_part[0];
+        let parts = if INTRA {
+            &self.intra_part
+        } else {
+            &self.row_part
+        };
+        let cells = q.iter_mut().zip(lens.iter_mut()).zip(prev).zip(parts);
+        for (r, (((q, len), &prev), &part)) in cells.enumerate() {
+            let offset = if INTRA {
+                part
             } else {
-                self.prev_part[usize::from(prev)] + self.left_part[usize::from(left)] + row
+                self.prev_part[usize::from(prev)] + part + left
             };
-            let t = dec.get_in(set, ctx) & (TOKENS - 1);
+            let t = dec.get_at(set, offset) & (TOKENS - 1);
             *q = signed(t, bits.get(SIGNED_RAW[t]));
-            left = TOKEN_BITS[t];
-            *len = left;
+            left = self.left_part[t];
+            *len = TOKEN_BITS[t];
             // Branch-free list of the non-zero rows (n ≤ r, always in bounds).
             rows[n] = r as u16;
             n += usize::from(t != 0);
@@ -494,20 +512,25 @@ impl ChunkDecoder for Decoder {
         let j = self.spatial.points();
         let w = j * 3;
         let step = self.p.step as f32;
-        let mut st = Loop::new(self.p, j);
+        let residual = (self.p.residual_t > 0.0).then(|| FrameResidual::new(j, self.p.residual_t));
         let mut f = Frame {
             q: vec![0; w],
             bits: vec![0; w],
             prev_bits: vec![0; w],
             rows: [vec![0; j], vec![0; j], vec![0; j]],
         };
+        // The loop's state (this frame, the last two) in the transform's layout.
+        let mut cur = self.spatial.planar();
+        let mut prev = cur.clone();
+        let mut prev2 = cur.clone();
         let mut scratch = self.spatial.scratch();
         let mut prev_any = false;
-        for frame in out.chunks_exact_mut(w).take(frames) {
-            let intra = st.intra();
-            st.predict(frame);
-            if intra {
-                prev_any = false;
+        for (n, frame) in out.chunks_exact_mut(w).take(frames).enumerate() {
+            let intra = n == 0;
+            match (n, self.p.order) {
+                (0, _) => cur.clear(),
+                (1, _) | (_, 1) => cur.copy_from(&prev),
+                _ => cur.extrapolate(&prev, &prev2),
             }
             for d in 0..3 {
                 let q = &mut f.q[d * j..(d + 1) * j];
@@ -520,9 +543,9 @@ impl ChunkDecoder for Decoder {
                     self.coordinate::<false>(&mut dec, &mut bits, q, lens, prev, rows)
                 };
                 self.spatial
-                    .inverse_add_rows(d, &rows[..n], q, step, &mut scratch, frame);
+                    .inverse_add_planar(d, &rows[..n], q, step, &mut scratch, &mut cur);
             }
-            if let Some(r) = &st.residual {
+            if let Some(r) = &residual {
                 let n = get_unsigned(&mut dec, &mut bits, set, c.residual + usize::from(prev_any));
                 if n as usize > j {
                     return Err(malformed("lsdt-frame corrections exceed the points"));
@@ -536,13 +559,15 @@ impl ChunkDecoder for Decoder {
                     }
                     for k in 0..3 {
                         let v = get_signed(&mut dec, &mut bits, set, c.residual + 3 + k);
-                        r.apply(frame, p * 3 + k, v);
+                        cur.add(p * 3 + k, r.correction(v));
                     }
                     next = p + 1;
                 }
             }
+            cur.write_interleaved(frame);
             std::mem::swap(&mut f.bits, &mut f.prev_bits);
-            st.advance(frame);
+            std::mem::swap(&mut prev2, &mut prev);
+            std::mem::swap(&mut prev, &mut cur);
         }
         if !dec.finished_cleanly() || !bits.finished_cleanly() {
             return Err(malformed("lsdt-frame chunk does not decode to its end"));
