@@ -275,10 +275,18 @@ fn decode_chunk_into(
             }
         }
     }
-    if out.iter().any(|v| v.is_infinite()) {
+    if any_infinite(out) {
         return Err(malformed("decoded values are not finite"));
     }
     Ok(())
+}
+
+/// Whether any value is ±∞ (a corrupt stream). Blocks are folded without an early exit so
+/// that the compiler vectorises the scan: on fast decoders a per-value branch cost several
+/// per cent of the decode.
+fn any_infinite(v: &[f32]) -> bool {
+    v.chunks(256)
+        .any(|c| c.iter().fold(false, |any, x| any | x.is_infinite()))
 }
 
 /// As [`decode_range`], with a decoder prepared once from the header (parsing a shared or

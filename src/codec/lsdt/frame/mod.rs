@@ -42,8 +42,11 @@ pub use tables::{Shape, Tables};
 
 /// Parameters of takes coded with the adaptive entropy stage.
 const ADAPTIVE_VERSION: u8 = 1;
-/// Parameters of takes coded against per-take tables (followed by the tables).
-const TABLES_VERSION: u8 = 2;
+/// Parameters of takes coded against per-take tables (followed by the tables), the "left"
+/// context two rows back; what batch encodes write.
+const TABLES_VERSION: u8 = 3;
+/// As version 3 with the "left" context one row back: still decoded.
+const TABLES_V2: u8 = 2;
 
 /// Values within `0.5 + DEADZONE` steps of zero quantise to zero (the paper's hard
 /// threshold): small coefficients cost more bits than the error they remove.
@@ -88,7 +91,7 @@ impl FrameParams {
     pub fn parse(b: &[u8]) -> Result<(FrameParams, Coding)> {
         let mut r = Reader::new(b);
         let version = r.u8()?;
-        if version != ADAPTIVE_VERSION && version != TABLES_VERSION {
+        if ![ADAPTIVE_VERSION, TABLES_V2, TABLES_VERSION].contains(&version) {
             return Err(Error::Unsupported(format!(
                 "lsdt-frame parameters version {version}"
             )));
@@ -106,8 +109,8 @@ impl FrameParams {
         {
             return Err(malformed(format!("lsdt-frame parameters {p:?}")));
         }
-        let coding = if version == TABLES_VERSION {
-            Coding::Tables(Tables::read(&mut r)?)
+        let coding = if version != ADAPTIVE_VERSION {
+            Coding::Tables(Tables::read(&mut r, version)?)
         } else {
             Coding::Adaptive
         };
@@ -516,6 +519,25 @@ mod tests {
                 adaptive.extend_from_slice(recon);
             }
             assert_eq!(adaptive, out);
+            // Versions 2 and 3 (the left context one or two rows back) decode to the same
+            // frames, with a shape that splits by that context.
+            let shape = [Shape {
+                rows: 2,
+                prev: 3,
+                left: 3,
+            }];
+            let coded: Vec<_> = [1, 2]
+                .map(|lag| {
+                    let (recorded, _, _) = quantise_take(&input, &spatial, p);
+                    let (tables, chunks) = recorded.finish_with(lag, &shape);
+                    (tables.params_bytes(&p), chunks)
+                })
+                .into();
+            assert_eq!((coded[0].0[0], coded[1].0[0]), (TABLES_V2, TABLES_VERSION));
+            assert_ne!(coded[0].1[0].bytes, coded[1].1[0].bytes);
+            for (params, chunks) in &coded {
+                assert_eq!(decode(params, chunks, &basis, points), out);
+            }
         }
     }
 
