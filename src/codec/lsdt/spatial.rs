@@ -235,16 +235,52 @@ impl Spatial {
         let g = self.groups;
         let b = &self.padded[d];
         let acc = &mut scratch[..g];
-        acc.fill(f32x8::ZERO);
-        for &r in rows {
-            let r = usize::from(r);
-            let a = f32x8::splat(q[r] as f32 * step);
-            for (o, &bv) in acc.iter_mut().zip(&b[r * g..(r + 1) * g]) {
-                *o += a * bv;
+        // Skeletons and marker sets up to 64 points: the sums stay in registers for the
+        // whole frame (through memory, each row's adds wait for the last row's stores).
+        match g {
+            1 => in_registers::<1>(b, rows, q, step, acc),
+            2 => in_registers::<2>(b, rows, q, step, acc),
+            3 => in_registers::<3>(b, rows, q, step, acc),
+            4 => in_registers::<4>(b, rows, q, step, acc),
+            5 => in_registers::<5>(b, rows, q, step, acc),
+            6 => in_registers::<6>(b, rows, q, step, acc),
+            7 => in_registers::<7>(b, rows, q, step, acc),
+            8 => in_registers::<8>(b, rows, q, step, acc),
+            _ => {
+                acc.fill(f32x8::ZERO);
+                for &r in rows {
+                    let r = usize::from(r);
+                    let a = f32x8::splat(q[r] as f32 * step);
+                    for (o, &bv) in acc.iter_mut().zip(&b[r * g..(r + 1) * g]) {
+                        *o += a * bv;
+                    }
+                }
             }
         }
         acc
     }
+}
+
+/// [`Spatial::accumulate`] for `G` lane groups, with the sums in a local array (the same
+/// operations in the same order, so the same bits).
+#[inline(always)]
+fn in_registers<const G: usize>(
+    b: &[f32x8],
+    rows: &[u16],
+    q: &[i32],
+    step: f32,
+    out: &mut [f32x8],
+) {
+    let mut acc = [f32x8::ZERO; G];
+    for &r in rows {
+        let r = usize::from(r);
+        let a = f32x8::splat(q[r] as f32 * step);
+        let row: &[f32x8; G] = b[r * G..(r + 1) * G].try_into().expect("G groups per row");
+        for (o, &bv) in acc.iter_mut().zip(row) {
+            *o += a * bv;
+        }
+    }
+    out.copy_from_slice(&acc);
 }
 
 /// Build an LSDT [`Basis`] from trained per-coordinate matrices (`B` applied as `B m`).
