@@ -70,9 +70,23 @@ impl Planar {
         let g = self.groups;
         let (x, rest) = self.v.split_at(g);
         let (y, z) = rest.split_at(g);
-        for (c, o) in out[..self.j * 3].chunks_mut(24).enumerate() {
+        let out = &mut out[..self.j * 3];
+        let mut groups = out.chunks_exact_mut(24);
+        // Whole groups of eight points as fixed-size arrays: straight-line stores.
+        for (c, o) in (&mut groups).enumerate() {
+            let o: &mut [f32; 24] = o.try_into().expect("24 values");
             let (x, y, z) = (x[c].as_array(), y[c].as_array(), z[c].as_array());
-            for (k, o) in o.chunks_exact_mut(3).enumerate() {
+            for k in 0..8 {
+                o[3 * k] = x[k];
+                o[3 * k + 1] = y[k];
+                o[3 * k + 2] = z[k];
+            }
+        }
+        let rest = groups.into_remainder();
+        if !rest.is_empty() {
+            let c = self.j / 8;
+            let (x, y, z) = (x[c].as_array(), y[c].as_array(), z[c].as_array());
+            for (k, o) in rest.chunks_exact_mut(3).enumerate() {
                 o[0] = x[k];
                 o[1] = y[k];
                 o[2] = z[k];
@@ -326,6 +340,41 @@ mod tests {
         s.inverse_add(&q, step, &mut s.scratch(), &mut out);
         for (a, b) in x.iter().zip(&out) {
             assert!((a - f64::from(*b)).abs() < 1e-2, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn planar_reconstruction_is_bit_identical_to_interleaved() {
+        // Lane groups in registers (1..=8) and the generic path (9), whole and partial.
+        for j in [3, 7, 8, 16, 38, 70] {
+            let s = Spatial::new(&dct_basis(j)).unwrap();
+            let prediction: Vec<f32> = (0..j * 3).map(|i| (i as f32 * 1.3).cos() * 40.0).collect();
+            let q: Vec<i32> = (0..j * 3)
+                .map(|i| {
+                    if i % 3 == 0 {
+                        0
+                    } else {
+                        (i as i32 * 7) % 23 - 11
+                    }
+                })
+                .collect();
+            let step = 0.37f32;
+            let mut interleaved = prediction.clone();
+            s.inverse_add(&q, step, &mut s.scratch(), &mut interleaved);
+            let mut planar = s.planar();
+            for (i, &v) in prediction.iter().enumerate() {
+                planar.add(i, v);
+            }
+            let mut scratch = s.scratch();
+            for d in 0..3 {
+                let qd = &q[d * j..(d + 1) * j];
+                let rows: Vec<u16> = (0..j as u16).filter(|&r| qd[usize::from(r)] != 0).collect();
+                s.inverse_add_planar(d, &rows, qd, step, &mut scratch, &mut planar);
+            }
+            let mut out = vec![f32::NAN; j * 3];
+            planar.write_interleaved(&mut out);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&out), bits(&interleaved), "{j} points");
         }
     }
 }
