@@ -13,8 +13,11 @@ use crate::codec::error::{Error, Result};
 
 pub struct Spatial {
     j: usize,
-    /// `B_d` row-major for d = x, y, z: row `r` is basis vector `r`.
-    b: [Vec<f32>; 3],
+    /// `B_d` for d = x, y, z, transposed (column `r` is basis vector `r`) and widened to
+    /// f64 for the encoder's forward transform, whose inner loop then runs over rows in
+    /// contiguous memory and vectorises (each row's sum keeps its order, so the
+    /// coefficients are the same as with row-wise dot products).
+    bt: [Vec<f64>; 3],
     /// The same rows zero-padded to a multiple of eight and held as SIMD vectors (`wide`, so
     /// SSE or AVX as the build targets, with the scalar rounding of separate multiplies
     /// and adds): the inverse runs in whole registers with no remainder loop. Left to
@@ -121,7 +124,12 @@ impl Spatial {
         };
         Ok(Spatial {
             j,
-            b: [m[0].data.clone(), m[1].data.clone(), m[2].data.clone()],
+            bt: [0, 1, 2].map(|d| {
+                let b = &m[d].data;
+                (0..j * j)
+                    .map(|i| f64::from(b[(i % j) * j + i / j]))
+                    .collect()
+            }),
             padded: [pad(&m[0].data), pad(&m[1].data), pad(&m[2].data)],
             groups,
         })
@@ -164,14 +172,13 @@ impl Spatial {
     pub fn forward(&self, x: &[f64], e: &mut [f64]) {
         let j = self.j;
         for d in 0..3 {
-            let b = &self.b[d];
-            for r in 0..j {
-                let row = &b[r * j..(r + 1) * j];
-                let mut acc = 0.0;
-                for (p, &v) in row.iter().enumerate() {
-                    acc += f64::from(v) * x[p * 3 + d];
+            let sums = &mut e[d * j..(d + 1) * j];
+            sums.fill(0.0);
+            for (p, column) in self.bt[d].chunks_exact(j).enumerate() {
+                let v = x[p * 3 + d];
+                for (s, &b) in sums.iter_mut().zip(column) {
+                    *s += b * v;
                 }
-                e[d * j + r] = acc;
             }
         }
     }
