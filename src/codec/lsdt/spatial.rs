@@ -5,6 +5,8 @@
 //! Vectors are frames as stored: `J` points interleaved x, y, z. Coefficients are laid out
 //! per coordinate: `[d][r]`, `3 × J`.
 
+use std::sync::OnceLock;
+
 use nalgebra::DMatrix;
 use wide::f32x8;
 
@@ -16,8 +18,9 @@ pub struct Spatial {
     /// `B_d` for d = x, y, z, transposed (column `r` is basis vector `r`) and widened to
     /// f64 for the encoder's forward transform, whose inner loop then runs over rows in
     /// contiguous memory and vectorises (each row's sum keeps its order, so the
-    /// coefficients are the same as with row-wise dot products).
-    bt: [Vec<f64>; 3],
+    /// coefficients are the same as with row-wise dot products). Built on first use:
+    /// decoders never need it.
+    bt: OnceLock<[Vec<f64>; 3]>,
     /// The same rows zero-padded to a multiple of eight and held as SIMD vectors (`wide`, so
     /// SSE or AVX as the build targets, with the scalar rounding of separate multiplies
     /// and adds): the inverse runs in whole registers with no remainder loop. Left to
@@ -124,12 +127,7 @@ impl Spatial {
         };
         Ok(Spatial {
             j,
-            bt: [0, 1, 2].map(|d| {
-                let b = &m[d].data;
-                (0..j * j)
-                    .map(|i| f64::from(b[(i % j) * j + i / j]))
-                    .collect()
-            }),
+            bt: OnceLock::new(),
             padded: [pad(&m[0].data), pad(&m[1].data), pad(&m[2].data)],
             groups,
         })
@@ -142,6 +140,22 @@ impl Spatial {
     /// Scratch space for [`Spatial::inverse_add`].
     pub fn scratch(&self) -> Scratch {
         vec![f32x8::ZERO; self.groups]
+    }
+
+    /// `B_dᵀ` in f64, from the padded rows (see `bt`).
+    fn transposed(&self) -> &[Vec<f64>; 3] {
+        self.bt.get_or_init(|| {
+            let (j, g) = (self.j, self.groups);
+            [0, 1, 2].map(|d| {
+                let b = &self.padded[d];
+                (0..j * j)
+                    .map(|i| {
+                        let (p, r) = (i / j, i % j);
+                        f64::from(b[r * g + p / 8].as_array()[p % 8])
+                    })
+                    .collect()
+            })
+        })
     }
 
     /// A zero frame in the layout of [`Spatial::inverse_add_planar`].
@@ -174,7 +188,7 @@ impl Spatial {
         for d in 0..3 {
             let sums = &mut e[d * j..(d + 1) * j];
             sums.fill(0.0);
-            for (p, column) in self.bt[d].chunks_exact(j).enumerate() {
+            for (p, column) in self.transposed()[d].chunks_exact(j).enumerate() {
                 let v = x[p * 3 + d];
                 for (s, &b) in sums.iter_mut().zip(column) {
                     *s += b * v;
