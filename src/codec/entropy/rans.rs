@@ -233,7 +233,7 @@ impl<'a> Decoder<'a> {
         if x < L {
             x = (x << 16) | u32::from(self.word());
         }
-        // The next state codes the next symbol; this one comes back after the other three.
+        // The next state codes the next symbol; this one waits for its turn again.
         self.x.copy_within(1.., 0);
         self.x[STATES - 1] = x;
         s
