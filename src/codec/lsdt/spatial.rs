@@ -198,7 +198,9 @@ impl Spatial {
     }
 
     /// `out[3j + d] += Σ_r B_d[r][j] · q[d·J + r] · step` over the non-zero `q` only (after
-    /// thresholding most are zero, which makes this the decoder's fast path).
+    /// thresholding most are zero). Rows are summed in `scratch` (from [`Spatial::scratch`])
+    /// in ascending order and then interleaved into `out`; the order of the additions is
+    /// fixed, so the encoder's reconstruction and every decoder's are bit-identical.
     pub fn inverse_add(&self, q: &[i32], step: f32, scratch: &mut [f32x8], out: &mut [f32]) {
         let j = self.j;
         let mut rows = Vec::with_capacity(j);
@@ -206,38 +208,22 @@ impl Spatial {
             let qd = &q[d * j..(d + 1) * j];
             rows.clear();
             rows.extend((0..j as u16).filter(|&r| qd[usize::from(r)] != 0));
-            self.inverse_add_rows(d, &rows, qd, step, scratch, out);
-        }
-    }
-
-    /// [`Spatial::inverse_add`] for coordinate `d` given its non-zero rows (ascending), which
-    /// a decoder knows as it reads them — no branch per coefficient. `q` is the
-    /// coordinate's `J` coefficients. Rows are accumulated in `scratch` (from
-    /// [`Spatial::scratch`]) and then interleaved into `out`; the order of the additions is
-    /// fixed, so encoder and decoder reconstruct bit-identical frames.
-    pub fn inverse_add_rows(
-        &self,
-        d: usize,
-        rows: &[u16],
-        q: &[i32],
-        step: f32,
-        scratch: &mut [f32x8],
-        out: &mut [f32],
-    ) {
-        if rows.is_empty() {
-            return;
-        }
-        let acc = self.accumulate(d, rows, q, step, scratch);
-        let out = &mut out[d..];
-        for (g, v) in acc.iter().enumerate() {
-            let lanes = v.to_array();
-            for (k, &x) in lanes.iter().enumerate().take(self.j - g * 8) {
-                out[(g * 8 + k) * 3] += x;
+            if rows.is_empty() {
+                continue;
+            }
+            let acc = self.accumulate(d, &rows, qd, step, scratch);
+            let out = &mut out[d..];
+            for (g, v) in acc.iter().enumerate() {
+                for (k, &x) in v.as_array().iter().enumerate().take(j - g * 8) {
+                    out[(g * 8 + k) * 3] += x;
+                }
             }
         }
     }
 
-    /// [`Spatial::inverse_add_rows`] into a [`Planar`] frame: the same sums, added lane-wise.
+    /// [`Spatial::inverse_add`] for coordinate `d` into a [`Planar`] frame, given the
+    /// non-zero rows (ascending) that a decoder lists as it reads them — no branch per
+    /// coefficient; `q` is the coordinate's `J` coefficients. The same sums, added lane-wise.
     pub fn inverse_add_planar(
         &self,
         d: usize,
