@@ -1,6 +1,6 @@
 //! Concurrency and interrupted uploads, over HTTP, on every backend.
 
-mod common;
+use crate::common;
 
 use std::io::Write;
 use std::net::TcpStream;

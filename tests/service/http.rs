@@ -1,8 +1,8 @@
 //! The real server on 127.0.0.1:0, over HTTP, on SQLite and (with MOCAP_TEST_PG_URL) Postgres.
 
-mod common;
+use crate::common;
 
-use common::start;
+use crate::common::start;
 
 use mocapstore::corpus;
 use mocapstore::motion::formats::{self, Format, ReadOptions};

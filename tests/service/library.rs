@@ -1,6 +1,6 @@
 //! Listings, pagination, filters, statistics and edits over HTTP, on every backend.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeSet;
 

@@ -1,7 +1,7 @@
 //! Live streams over HTTP, on every backend: frames coded and committed chunk by chunk and
 //! fetchable while the take is still being recorded; finishing, re-encoding, abandoning.
 
-mod common;
+use crate::common;
 
 use mocapstore::motion::metrics;
 use mocapstore::motion::synthetic::walker;

@@ -1,7 +1,7 @@
 //! Shared bases over HTTP, on every backend: training as a background job, listing, coding
 //! takes with the basis, and the basis kept while takes reference it.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

@@ -1,7 +1,7 @@
 //! `openapi.yaml` is the contract: every route answers as it says, and live responses match
 //! the schemas it gives (a small validator for the JSON Schema subset the file uses).
 
-mod common;
+use crate::common;
 
 use mocapstore::motion::formats::{self, Format};
 use mocapstore::motion::synthetic::walker;

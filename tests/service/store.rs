@@ -1,6 +1,6 @@
 //! The store on both backends: atomic takes, checked chunks, nothing half-written.
 
-mod common;
+use crate::common;
 
 use mocapstore::store::{ChunkRow, Error, NewSequence, SequenceRow, Store};
 

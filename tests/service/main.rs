@@ -1,0 +1,15 @@
+//! The service's integration tests (store, HTTP API, streams, bases, CLI), as modules of one
+//! test binary: each integration test file is a crate of its own that links the server, the
+//! HTTP client and both database drivers again, and eight of them made up most of a clean
+//! build. Every test opens its own store (see `common`), so they also run in parallel here.
+
+mod common;
+
+mod bases;
+mod cli;
+mod http;
+mod library;
+mod openapi;
+mod robustness;
+mod store;
+mod streams;
