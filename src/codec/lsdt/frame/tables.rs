@@ -294,28 +294,41 @@ impl Recorder {
         self.finish_with(2, &SHAPES)
     }
 
+    /// The take's coded size in bits as [`Recorder::finish`] would make it, estimated with
+    /// one mid-grained shape only: a fraction of the cost, for ranking the settings a
+    /// rate control tries before coding the best of them.
+    pub(super) fn estimate_bits(&self) -> f64 {
+        self.fit(&self.chunks(), 2, SHAPES[1]).0
+    }
+
+    /// Fit the models of `shape`: the estimated size in bits (raw bits, tokens under the
+    /// fitted models, the models themselves) and the tables.
+    fn fit(&self, chunks: &[(usize, usize)], lag: usize, shape: Shape) -> (f64, Tables) {
+        let ctx = Contexts::new(shape, self.j);
+        let mut stats = Counter {
+            stats: vec![Stats::default(); shape.contexts()],
+            raw: 0,
+        };
+        for &(a, b) in chunks {
+            self.walk(&ctx, lag, a, b, &mut stats);
+        }
+        let fitted: Vec<Option<(Geometric, f64)>> = stats.stats.iter().map(Stats::fit).collect();
+        let models: Vec<Option<Geometric>> = fitted.iter().map(|f| f.map(|f| f.0)).collect();
+        let bits = stats.raw as f64
+            + fitted.iter().flatten().map(|f| f.1).sum::<f64>()
+            + 8.0 * write_models(&models).len() as f64;
+        (bits, Tables { shape, lag, models })
+    }
+
     /// [`Recorder::finish`] with the left context `lag` rows back (1: version 2), trying
     /// `shapes`.
     pub(super) fn finish_with(self, lag: usize, shapes: &[Shape]) -> (Tables, Vec<ChunkOut>) {
         let chunks = self.chunks();
         let mut best: Option<(f64, Tables)> = None;
         for &shape in shapes {
-            let ctx = Contexts::new(shape, self.j);
-            let mut stats = Counter {
-                stats: vec![Stats::default(); shape.contexts()],
-                raw: 0,
-            };
-            for &(a, b) in &chunks {
-                self.walk(&ctx, lag, a, b, &mut stats);
-            }
-            let fitted: Vec<Option<(Geometric, f64)>> =
-                stats.stats.iter().map(Stats::fit).collect();
-            let models: Vec<Option<Geometric>> = fitted.iter().map(|f| f.map(|f| f.0)).collect();
-            let bits = stats.raw as f64
-                + fitted.iter().flatten().map(|f| f.1).sum::<f64>()
-                + 8.0 * write_models(&models).len() as f64;
+            let (bits, tables) = self.fit(&chunks, lag, shape);
             if best.as_ref().is_none_or(|b| bits < b.0) {
-                best = Some((bits, Tables { shape, lag, models }));
+                best = Some((bits, tables));
             }
         }
         let (_, tables) = best.expect("at least one shape");
