@@ -439,6 +439,7 @@ fn check_chunk(p: &FrameParams, frames: usize) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::codec::entropy::{get_varint, rans};
     use crate::codec::lsdt::spatial::dct_basis;
 
     /// Smooth trajectories with a little noise: what mocap looks like to the codec.
@@ -555,6 +556,36 @@ mod tests {
                 assert_eq!(decode(params, chunks, &basis, points), out);
             }
         }
+    }
+
+    /// Fine steps give chunks that the decoder reads with branchless rANS refills, coarse
+    /// ones chunks it reads with a branch (`rans::refills_often`); both rebuild the
+    /// encoder's frames.
+    #[test]
+    fn both_refill_modes_decode_to_what_the_encoder_reconstructed() {
+        let (frames, points) = (120, 9);
+        let data = motion(frames, points);
+        let basis = dct_basis(points);
+        let spatial = Arc::new(Spatial::new(&basis).unwrap());
+        let input = take(&data, None, points, &basis);
+        let mut modes = Vec::new();
+        for step in [0.05, 20.0] {
+            let p = FrameParams {
+                step,
+                residual_t: 0.0,
+                intra_period: 60,
+                order: 2,
+            };
+            let (params, chunks, max, mean) = code(&input, &spatial, p);
+            for c in &chunks {
+                let mut pos = 0;
+                let coded = get_varint(&c.bytes, &mut pos).unwrap() as usize;
+                modes.push(rans::refills_often(coded, c.frames * points * 3));
+            }
+            let out = decode(&params, &chunks, &basis, points);
+            assert_eq!(max_mean(&data, &out, None), (max, mean));
+        }
+        assert_eq!(modes, [true, true, false, false]);
     }
 
     #[test]

@@ -495,9 +495,10 @@ impl Decoder {
     /// the next context (the raw bits of the few non-zero rows come after, in
     /// [`Decoder::values`]): fewer instructions per symbol let the processor overlap more
     /// symbols' table loads. Monomorphised for intra and predicted frames so that neither
-    /// pays for the other's context.
+    /// pays for the other's context, and for the two ways of refilling rANS states
+    /// ([`rans::Decoder::get_at`]).
     #[inline(always)]
-    fn tokens<const INTRA: bool, const LAG: usize>(
+    fn tokens<const INTRA: bool, const LAG: usize, const BRANCHLESS: bool>(
         &self,
         dec: &mut rans::Decoder<'_>,
         tokens: &mut [u8],
@@ -521,7 +522,7 @@ impl Decoder {
                 let left = if LAG == 1 { left } else { left2 };
                 self.prev_part[usize::from(prev) & (TOKENS - 1)] + part + left
             };
-            let t = dec.get_at(set, offset);
+            let t = dec.get_at::<BRANCHLESS>(set, offset);
             *token = t as u8;
             left2 = left;
             left = self.left_part[t];
@@ -546,24 +547,34 @@ impl Decoder {
 impl ChunkDecoder for Decoder {
     fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
         check_chunk(&self.p, frames)?;
-        if self.lag == 1 {
-            self.decode::<1>(bytes, frames, out)
-        } else {
-            self.decode::<2>(bytes, frames, out)
-        }
-    }
-}
-
-impl Decoder {
-    fn decode<const LAG: usize>(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
         let mut pos = 0;
         let split = get_varint(bytes, &mut pos)
             .and_then(|n| usize::try_from(n).ok())
             .and_then(|n| n.checked_add(pos))
             .filter(|&end| end <= bytes.len())
             .ok_or_else(|| malformed("lsdt-frame chunk header"))?;
-        let mut dec = rans::Decoder::new(&bytes[pos..split]);
-        let mut bits = BitReader::new(&bytes[split..]);
+        let (coded, raw) = (&bytes[pos..split], &bytes[split..]);
+        let symbols = frames * 3 * self.spatial.points();
+        match (self.lag, rans::refills_often(coded.len(), symbols)) {
+            (1, false) => self.decode::<1, false>(coded, raw, frames, out),
+            (1, true) => self.decode::<1, true>(coded, raw, frames, out),
+            (_, false) => self.decode::<2, false>(coded, raw, frames, out),
+            (_, true) => self.decode::<2, true>(coded, raw, frames, out),
+        }
+    }
+}
+
+impl Decoder {
+    /// One chunk from its rANS stream (`coded`) and its raw bits.
+    fn decode<const LAG: usize, const BRANCHLESS: bool>(
+        &self,
+        coded: &[u8],
+        raw: &[u8],
+        frames: usize,
+        out: &mut [f32],
+    ) -> Result<()> {
+        let mut dec = rans::Decoder::new(coded);
+        let mut bits = BitReader::new(raw);
         let (set, c) = (&self.tables, &self.ctx);
         let j = self.spatial.points();
         let w = j * 3;
@@ -594,9 +605,9 @@ impl Decoder {
                 let prev = &f.prev_tokens[d * j..(d + 1) * j];
                 let rows = &mut f.rows[d][..j];
                 let n = if intra {
-                    self.tokens::<true, LAG>(&mut dec, tokens, prev, rows)
+                    self.tokens::<true, LAG, BRANCHLESS>(&mut dec, tokens, prev, rows)
                 } else {
-                    self.tokens::<false, LAG>(&mut dec, tokens, prev, rows)
+                    self.tokens::<false, LAG, BRANCHLESS>(&mut dec, tokens, prev, rows)
                 };
                 Self::values(&mut bits, tokens, &rows[..n], q);
                 self.spatial
