@@ -133,6 +133,18 @@ impl Geometric {
     }
 }
 
+/// The rANS tables of per-context models. A context without one is never used by a valid
+/// stream; a one-symbol table keeps corrupt streams safe there.
+pub fn tables_of(models: &[Option<Geometric>]) -> Vec<Table> {
+    models
+        .iter()
+        .map(|m| match m {
+            Some(g) => g.table(),
+            None => Table::from_weights(&[1.0]),
+        })
+        .collect()
+}
+
 /// What an encoder gathers about one context before fitting its model.
 #[derive(Debug, Clone)]
 pub struct Stats {

@@ -14,6 +14,7 @@ pub mod geometric;
 pub mod ints;
 pub mod rangecoder;
 pub mod rans;
+pub mod tokens;
 pub mod zstd_varint;
 
 pub use ints::{magnitude_context, IntModel};

@@ -21,9 +21,10 @@
 
 use super::{check_chunk, FrameParams, TABLES_V2, TABLES_VERSION};
 use crate::codec::entropy::geometric::{
-    read_models, token, write_models, Geometric, Stats, TOKENS, TOKEN_BASE, TOKEN_BITS, TOKEN_EXTRA,
+    read_models, tables_of, token, write_models, Geometric, Stats, TOKENS, TOKEN_BITS,
 };
 use crate::codec::entropy::rans::{self, BitReader, BitWriter, Table, TableSet};
+use crate::codec::entropy::tokens::{get_signed, get_unsigned, signed, signed_token, SIGNED_RAW};
 use crate::codec::entropy::{get_varint, put_varint};
 use crate::codec::error::{malformed, Result};
 use crate::codec::lsdt::spatial::Spatial;
@@ -167,14 +168,7 @@ impl Tables {
     }
 
     fn rans_tables(&self) -> Vec<Table> {
-        self.models
-            .iter()
-            .map(|m| match m {
-                Some(g) => g.table(),
-                // Never used by a valid stream; a one-symbol table keeps corrupt ones safe.
-                None => Table::from_weights(&[1.0]),
-            })
-            .collect()
+        tables_of(&self.models)
     }
 }
 
@@ -186,13 +180,8 @@ trait Sink {
 
 #[inline]
 fn put_signed(sink: &mut impl Sink, ctx: usize, v: i32) {
-    let m = v.unsigned_abs();
-    let (t, bits, extra) = token(m);
-    if t == 0 {
-        sink.put(ctx, 0, 0, 0, 0);
-    } else {
-        sink.put(ctx, m, t, bits + 1, (extra << 1) | u32::from(v < 0));
-    }
+    let (m, t, bits, raw) = signed_token(v);
+    sink.put(ctx, m, t, bits, raw);
 }
 
 #[inline]
@@ -433,49 +422,6 @@ impl Decoder {
             lag: t.lag,
         })
     }
-}
-
-/// Raw bits after each token of a signed value: its low bits and the sign.
-const SIGNED_RAW: [u32; TOKENS] = {
-    let mut r = [0u32; TOKENS];
-    let mut t = 1;
-    while t < TOKENS {
-        r[t] = TOKEN_EXTRA[t] + 1;
-        t += 1;
-    }
-    r
-};
-
-/// The signed value of token `t` (< 64) and its raw bits, without a branch. Tokens cover
-/// `u32` exactly; corrupt streams that describe more than an `i32` holds wrap (they fail the
-/// chunk's end check) rather than panic.
-#[inline]
-fn signed(t: usize, raw: u32) -> i32 {
-    let m = TOKEN_BASE[t & (TOKENS - 1)].wrapping_add(raw >> 1) as i32;
-    let s = (raw & 1) as i32;
-    (m ^ s.wrapping_neg()).wrapping_add(s)
-}
-
-#[inline]
-fn get_signed(
-    dec: &mut rans::Decoder<'_>,
-    bits: &mut BitReader<'_>,
-    set: &TableSet,
-    ctx: usize,
-) -> i32 {
-    let t = dec.get_in(set, ctx);
-    signed(t, bits.get(SIGNED_RAW[t & (TOKENS - 1)]))
-}
-
-#[inline]
-fn get_unsigned(
-    dec: &mut rans::Decoder<'_>,
-    bits: &mut BitReader<'_>,
-    set: &TableSet,
-    ctx: usize,
-) -> u32 {
-    let t = dec.get_in(set, ctx) & (TOKENS - 1);
-    TOKEN_BASE[t].saturating_add(bits.get(TOKEN_EXTRA[t]))
 }
 
 /// One frame's coefficients as the decoder reads them.
