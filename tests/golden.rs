@@ -5,13 +5,27 @@
 
 use std::sync::Arc;
 
+use mocapstore::codec::basis::Basis;
 use mocapstore::codec::lsdt::spatial::dct_basis;
 use mocapstore::codec::lsdt::{clip, frame};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::{self, CodecId, ErrorBound};
 use mocapstore::motion::synthetic::walker;
+use mocapstore::motion::Motion;
 
 const TABLE: &str = "tests/golden/hashes.txt";
+
+/// `m`'s frames with gaps filled (`filled`) as codec input.
+fn input<'a>(m: &Motion, filled: &'a [f32], shared: Option<&'a Basis>) -> codec::Input<'a> {
+    codec::Input {
+        data: filled,
+        valid: None,
+        frames: m.frame_count(),
+        points: m.point_count(),
+        fps: m.fps,
+        shared,
+    }
+}
 
 fn cases() -> Vec<(String, String)> {
     let motions = [
@@ -39,15 +53,7 @@ fn cases() -> Vec<(String, String)> {
             let basis = Arc::new(if codec == CodecId::MdttShared {
                 // Two bases annealed from the take itself: deterministic (fixed seed).
                 let filled = codec::gaps::fill(m.positions(), m.point_count());
-                let input = codec::Input {
-                    data: &filled,
-                    valid: None,
-                    frames: m.frame_count(),
-                    points: m.point_count(),
-                    fps: m.fps,
-                    shared: None,
-                };
-                train_bases(&[input], 2, &SetOptions::default()).expect("trains")
+                train_bases(&[input(m, &filled, None)], 2, &SetOptions::default()).expect("trains")
             } else {
                 dct_basis(m.point_count())
             });
@@ -81,17 +87,9 @@ fn cases() -> Vec<(String, String)> {
         let p = clip::stream_params(0.5 / m.unit.to_mm(), m.fps);
         let basis = dct_basis(m.point_count());
         let filled = codec::gaps::fill(m.positions(), m.point_count());
-        let input = codec::Input {
-            data: &filled,
-            valid: None,
-            frames: m.frame_count(),
-            points: m.point_count(),
-            fps: m.fps,
-            shared: Some(&basis),
-        };
         let mut h = blake3::Hasher::new();
         h.update(&p.to_bytes());
-        for c in clip::encode_fixed(&input, p).expect("encodes") {
+        for c in clip::encode_fixed(&input(m, &filled, Some(&basis)), p).expect("encodes") {
             h.update(&c.bytes);
         }
         out.push((

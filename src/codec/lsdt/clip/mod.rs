@@ -536,6 +536,19 @@ mod tests {
     use super::*;
     use crate::codec::lsdt::spatial::dct_basis;
     use crate::motion::synthetic::walker;
+    use crate::motion::Motion;
+
+    /// A synthetic take as codec input, coded with `basis`.
+    fn take<'a>(m: &'a Motion, basis: &'a Basis) -> Input<'a> {
+        Input {
+            data: m.positions(),
+            valid: None,
+            frames: m.frame_count(),
+            points: m.point_count(),
+            fps: m.fps,
+            shared: Some(basis),
+        }
+    }
 
     /// Chunks of `params` decoded one by one into a take.
     fn decode(
@@ -561,14 +574,7 @@ mod tests {
         let points = m.point_count();
         let basis = dct_basis(points);
         let spatial = Spatial::new(&basis).unwrap();
-        let input = Input {
-            data: m.positions(),
-            valid: None,
-            frames: m.frame_count(),
-            points,
-            fps: m.fps,
-            shared: Some(&basis),
-        };
+        let input = take(&m, &basis);
         let a = Analysis::new(&input, &spatial, 60);
         for residual_t in [0.0, 0.3] {
             let p = ClipParams {
@@ -613,14 +619,7 @@ mod tests {
         for (frames, version) in [(600, TABLES_VERSION), (12, ADAPTIVE_VERSION)] {
             let m = walker(frames, 6, 60.0, 5, 0.0);
             let basis = dct_basis(m.point_count());
-            let input = Input {
-                data: m.positions(),
-                valid: None,
-                frames: m.frame_count(),
-                points: m.point_count(),
-                fps: m.fps,
-                shared: Some(&basis),
-            };
+            let input = take(&m, &basis);
             let out = encode_with_clip(&input, Target::Max(0.5), 60).unwrap();
             assert_eq!(out.params[0], version, "{frames} frames");
             let decoded = decode(&out.params, &out.chunks, &basis, m.point_count()).unwrap();
@@ -634,14 +633,7 @@ mod tests {
         let points = m.point_count();
         let basis = dct_basis(points);
         let spatial = Spatial::new(&basis).unwrap();
-        let input = Input {
-            data: m.positions(),
-            valid: None,
-            frames: m.frame_count(),
-            points,
-            fps: m.fps,
-            shared: Some(&basis),
-        };
+        let input = take(&m, &basis);
         let a = Analysis::new(&input, &spatial, 60);
         for residual_t in [0.0, 0.3] {
             let p = ClipParams {
