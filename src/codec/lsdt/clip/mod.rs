@@ -1,7 +1,7 @@
 //! `lsdt-clip` — the clip codec of Hou et al. 2016: a clip of `L` frames (the latency) is
 //! transformed by the DCT along each trajectory, then by the shared LSDT basis along the
 //! points of each coordinate; the coefficients are hard-thresholded, uniformly quantised and
-//! range coded. Each clip is one chunk, so any range decodes from the clips it overlaps.
+//! entropy coded. Each clip is one chunk, so any range decodes from the clips it overlaps.
 //!
 //! Nothing is stored per take but a few parameters: the spatial basis is the library's, the
 //! temporal one is the DCT. That is why it wins on short takes, where a per-take basis
