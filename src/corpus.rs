@@ -25,6 +25,45 @@ pub fn root() -> PathBuf {
     }
 }
 
+/// The corpus for a test or benchmark, with its manifest, checked whole: every file the
+/// manifest lists is there.
+///
+/// - `MOCAP_CORPUS` set: the corpus must be there, whole; if not, this panics (the test
+///   fails), so CI can never pass on a corpus it did not read.
+/// - not set, and nothing at the default `../shared/data`: `None`, after one loud line on
+///   stderr, so that a clone on its own (a newcomer's) passes the tests that need no
+///   corpus. `scripts/fetch-corpus` fetches the public files.
+pub fn for_tests() -> Option<(PathBuf, Vec<Entry>)> {
+    let explicit = std::env::var_os("MOCAP_CORPUS").is_some_and(|p| !p.is_empty());
+    let root = root();
+    let entries = match manifest(&root) {
+        Ok(m) => m,
+        Err(e) if explicit => panic!("MOCAP_CORPUS is set, but {e}"),
+        Err(_) => {
+            eprintln!(
+                "SKIPPED (no corpus): nothing at {}; set MOCAP_CORPUS or run scripts/fetch-corpus \
+                 to run the corpus tests",
+                root.display()
+            );
+            return None;
+        }
+    };
+    let missing: Vec<&str> = entries
+        .iter()
+        .filter(|e| !root.join(&e.path).is_file())
+        .map(|e| e.path.as_str())
+        .collect();
+    assert!(
+        !entries.is_empty() && missing.is_empty(),
+        "the corpus at {} is not whole: {} of {} manifest files missing (first: {:?})",
+        root.display(),
+        missing.len(),
+        entries.len(),
+        missing.first()
+    );
+    Some((root, entries))
+}
+
 /// Read and parse `manifest.csv` under `root`.
 pub fn manifest(root: &Path) -> Result<Vec<Entry>, String> {
     let path = root.join("manifest.csv");

@@ -16,13 +16,15 @@
 //!   error metrics and the file formats in [`motion::formats`] (BVH, C3D, TRC, JSON, NPY in;
 //!   BVH, TRC, JSON, NPY, CSV, raw f32 out). Pure: no I/O, no async, no database.
 //!
-//! Beside them, [`corpus`] says where the real-data corpus and its manifest are (tests and
-//! benchmarks).
+//! Beside them, [`limits`] holds every bound on untrusted input and server memory (one
+//! place, read by every layer), and [`corpus`] says where the real-data corpus and its
+//! manifest are (tests and benchmarks).
 
 pub mod cli;
 pub mod codec;
 pub mod corpus;
 pub mod http;
+pub mod limits;
 pub mod motion;
 pub mod service;
 pub mod store;

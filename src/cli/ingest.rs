@@ -39,6 +39,10 @@ pub struct IngestArgs {
     /// Uploads in flight at once.
     #[arg(long, default_value_t = 4)]
     concurrency: usize,
+    /// Store files whose data contradicts their header (cut short, values beyond any
+    /// physical scale) with a warning, instead of having them refused.
+    #[arg(long)]
+    lenient: bool,
 }
 
 struct Outcome {
@@ -119,6 +123,9 @@ async fn upload_all(args: &IngestArgs, files: Vec<PathBuf>) -> Vec<Outcome> {
     }
     if let Some(v) = args.mean_error_mm {
         fixed.push(("mean_error_mm", v.to_string()));
+    }
+    if args.lenient {
+        fixed.push(("lenient", "true".into()));
     }
     let url = format!("{}/v1/sequences", args.server.trim_end_matches('/'));
     let mut tasks = Vec::new();

@@ -85,8 +85,8 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
         Config {
             listen: "127.0.0.1:0".into(),
             database_url: url.clone(),
-            max_body_bytes: 2 << 30,
             decoded_cache_mib: args.decoded_cache_mib,
+            ..Config::default()
         },
     )
     .await?;

@@ -53,12 +53,63 @@ struct ServeArgs {
     /// Database: a SQLite file (created with its tables if missing) or a postgres:// URL.
     #[arg(long, env = "DATABASE_URL", default_value = "sqlite://mocapstore.db")]
     database_url: String,
-    /// Largest upload accepted, in MiB (larger ones get 413).
-    #[arg(long, env = "MOCAP_MAX_UPLOAD_MIB", default_value_t = 512)]
-    max_upload_mib: usize,
     /// Memory for decoded chunks kept between range requests, in MiB (0 turns it off).
     #[arg(long, env = "MOCAP_DECODED_CACHE_MIB", default_value_t = 256)]
     decoded_cache_mib: usize,
+    #[command(flatten)]
+    limits: LimitArgs,
+}
+
+/// The tunable limits (every limit is explained in `src/limits.rs` and the README).
+#[derive(Args)]
+#[command(next_help_heading = "Limits")]
+struct LimitArgs {
+    /// Largest upload (POST /v1/sequences body), MiB: a larger Content-Length gets 413
+    /// before the body is read.
+    #[arg(long, env = "MOCAP_MAX_UPLOAD_MIB", default_value_t = 512)]
+    max_upload_mib: u64,
+    /// Request bodies held at once across the server, MiB; past it requests get 503 with
+    /// Retry-After instead of memory.
+    #[arg(long, env = "MOCAP_MAX_INFLIGHT_MIB", default_value_t = 1024)]
+    max_inflight_mib: u64,
+    /// Largest frames append to a live stream, MiB.
+    #[arg(long, env = "MOCAP_MAX_APPEND_MIB", default_value_t = 64)]
+    max_append_mib: u64,
+    /// Points (markers, joints) in one take.
+    #[arg(long, env = "MOCAP_MAX_POINTS", default_value_t = 10_000)]
+    max_points: u64,
+    /// Frames in one take.
+    #[arg(long, env = "MOCAP_MAX_FRAMES", default_value_t = 20_000_000)]
+    max_frames: u64,
+    /// Frames × points in one take.
+    #[arg(long, env = "MOCAP_MAX_SAMPLES", default_value_t = 200_000_000)]
+    max_samples: u64,
+    /// Nesting depth of a BVH hierarchy.
+    #[arg(long, env = "MOCAP_MAX_DEPTH", default_value_t = 512)]
+    max_depth: u64,
+    /// Points in one live stream (each open stream holds 3 × points² basis values).
+    #[arg(long, env = "MOCAP_MAX_STREAM_POINTS", default_value_t = 1_000)]
+    max_stream_points: u64,
+    /// Live streams open at once; past it, opening one gets 503 with Retry-After.
+    #[arg(long, env = "MOCAP_MAX_OPEN_STREAMS", default_value_t = 32)]
+    max_open_streams: u64,
+}
+
+impl LimitArgs {
+    fn limits(&self) -> crate::limits::Limits {
+        crate::limits::Limits {
+            upload_bytes: self.max_upload_mib << 20,
+            inflight_bytes: self.max_inflight_mib << 20,
+            append_bytes: self.max_append_mib << 20,
+            points: self.max_points,
+            frames: self.max_frames,
+            samples: self.max_samples,
+            hierarchy_depth: self.max_depth,
+            stream_points: self.max_stream_points,
+            open_streams: self.max_open_streams,
+            ..crate::limits::Limits::default()
+        }
+    }
 }
 
 /// Options every command that reads takes accepts.
@@ -71,6 +122,10 @@ pub struct ReadArgs {
     /// Frame rate of the input (needed for NPY, which has none).
     #[arg(long)]
     pub fps: Option<f64>,
+    /// Read files whose data contradicts their header (cut short, values beyond any
+    /// physical scale), with a warning, instead of refusing them.
+    #[arg(long)]
+    pub lenient: bool,
 }
 
 impl ReadArgs {
@@ -82,6 +137,7 @@ impl ReadArgs {
         Ok(mocapstore_motion::ReadOptions {
             unit,
             fps: self.fps,
+            lenient: self.lenient,
             ..Default::default()
         })
     }
@@ -117,8 +173,9 @@ fn serve(args: ServeArgs) -> ExitCode {
     let config = crate::http::Config {
         listen: args.listen,
         database_url: args.database_url,
-        max_body_bytes: args.max_upload_mib << 20,
+        limits: args.limits.limits(),
         decoded_cache_mib: args.decoded_cache_mib,
+        ..crate::http::Config::default()
     };
     let runtime = match tokio::runtime::Runtime::new() {
         Ok(r) => r,

@@ -136,8 +136,8 @@ async fn test(args: &StreamArgs) -> Result<String, String> {
         Config {
             listen: "127.0.0.1:0".into(),
             database_url: url,
-            max_body_bytes: 256 << 20,
             decoded_cache_mib: 64,
+            ..Config::default()
         },
     )
     .await?;

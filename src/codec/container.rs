@@ -24,11 +24,13 @@ pub struct Limits {
 }
 
 impl Default for Limits {
+    /// Shapes as [`crate::limits`] sets them for takes; the byte bounds are the container's.
     fn default() -> Self {
+        let take = crate::limits::Limits::default();
         Limits {
-            max_frames: 20_000_000,
-            max_points: 10_000,
-            max_samples: 200_000_000,
+            max_frames: take.frames,
+            max_points: take.points,
+            max_samples: take.samples,
             max_params_bytes: 64 << 20,
             max_chunk_bytes: 256 << 20,
         }
@@ -57,6 +59,9 @@ pub struct ChunkMeta {
 }
 
 impl ChunkMeta {
+    /// Bytes one chunk takes in a header's index.
+    pub const INDEX_BYTES: usize = CHUNK_ENTRY;
+
     pub fn frame_range(&self) -> Range<usize> {
         self.first_frame as usize..(self.first_frame + self.frames) as usize
     }

@@ -106,7 +106,7 @@ pub trait Codec: Send + Sync {
     }
     /// Why this codec should not compete for a take of this shape, if it should not (per-take
     /// choice skips it and records the reason). Every codec can still be asked for by name.
-    fn unsuited(&self, _frames: usize, _fps: f64) -> Option<String> {
+    fn unsuited(&self, _frames: usize, _points: usize, _fps: f64) -> Option<String> {
         None
     }
 }

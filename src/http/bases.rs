@@ -9,10 +9,11 @@ use serde::Deserialize;
 
 use super::error::ApiError;
 use super::AppState;
+use crate::codec::BasisKind;
 use crate::service::bases::{self, TrainRequest};
 use crate::service::jobs::Job;
 use crate::service::Error;
-use crate::store::{BasisDeletion, BasisRow};
+use crate::store::BasisRow;
 
 /// `POST /v1/bases`: 202 with the training job (and its address in `Location`).
 pub async fn train(
@@ -30,9 +31,10 @@ pub async fn train(
 }
 
 #[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ListQuery {
     layout: Option<String>,
-    kind: Option<String>,
+    kind: Option<BasisKind>,
 }
 
 pub async fn list(
@@ -40,11 +42,7 @@ pub async fn list(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let Query(q) = query?;
-    let items = state
-        .store
-        .bases(q.layout.as_deref(), q.kind.as_deref())
-        .await
-        .map_err(Error::from)?;
+    let items = bases::list(&state.store, q.layout.as_deref(), q.kind).await?;
     Ok(Json(serde_json::json!({ "items": items })))
 }
 
@@ -52,13 +50,7 @@ pub async fn get(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<BasisRow>, ApiError> {
-    let row = state
-        .store
-        .basis(&id)
-        .await
-        .map_err(Error::from)?
-        .ok_or_else(|| Error::NotFound(format!("basis {id}")))?;
-    Ok(Json(row))
+    Ok(Json(bases::get(&state.store, &id).await?))
 }
 
 /// 204, 404, or 409 while takes still reference the basis.
@@ -66,14 +58,8 @@ pub async fn delete(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    match state.store.delete_basis(&id).await.map_err(Error::from)? {
-        BasisDeletion::Deleted => Ok(StatusCode::NO_CONTENT),
-        BasisDeletion::NotFound => Err(Error::NotFound(format!("basis {id}")).into()),
-        BasisDeletion::InUse(n) => Err(Error::Conflict(format!(
-            "basis {id} codes {n} stored take(s); delete them first"
-        ))
-        .into()),
-    }
+    bases::delete(&state.store, &id).await?;
+    Ok(StatusCode::NO_CONTENT)
 }
 
 pub async fn job(

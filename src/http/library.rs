@@ -107,9 +107,24 @@ pub async fn stats(
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Patch {
+    #[serde(default, deserialize_with = "present")]
     name: Option<String>,
+    #[serde(default, deserialize_with = "present")]
     library: Option<String>,
+    #[serde(default, deserialize_with = "present")]
     tags: Option<Vec<String>>,
+}
+
+/// A PATCH field is absent (kept as it is) or a value: `null` is refused rather than read
+/// as "absent", which would answer 200 to a request that changed nothing it named.
+fn present<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    Option::<T>::deserialize(d)?.map(Some).ok_or_else(|| {
+        serde::de::Error::custom("null is not a value here; leave the field out to keep it")
+    })
 }
 
 pub async fn patch(

@@ -113,9 +113,26 @@ pub async fn count_requests(State(m): State<Arc<Metrics>>, req: Request, next: N
 }
 
 pub async fn render(State(state): State<super::AppState>) -> Response {
-    (
-        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        state.metrics.render_text(),
-    )
-        .into_response()
+    let mut text = state.metrics.render_text();
+    // What the server holds now, against its limits (gauges).
+    for (name, help, value) in [
+        (
+            "mocapstore_request_body_bytes_held",
+            "request bodies held now, against the in-flight budget",
+            state.bodies.held_bytes(),
+        ),
+        (
+            "mocapstore_request_body_bytes_budget",
+            "the in-flight budget for request bodies",
+            state.bodies.total_bytes(),
+        ),
+        (
+            "mocapstore_streams_open",
+            "live streams open on this server",
+            state.streams.open_count() as u64,
+        ),
+    ] {
+        text += &format!("# HELP {name} {help}\n# TYPE {name} gauge\n{name} {value}\n");
+    }
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }

@@ -4,6 +4,7 @@
 //! tests start the real server on `127.0.0.1:0` and read the port back.
 
 mod bases;
+pub mod budget;
 mod error;
 mod library;
 mod metrics;
@@ -12,17 +13,21 @@ mod streams;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
+use std::time::Duration;
 
 use axum::extract::DefaultBodyLimit;
-use axum::routing::get;
+use axum::handler::Handler;
+use axum::http::StatusCode;
+use axum::routing::{get, post};
 use axum::Router;
 use tokio::net::TcpListener;
 use tower_http::trace::TraceLayer;
 
+use budget::{hold_body, BodyBudget, BodyGate};
 pub use error::ApiError;
 pub use metrics::Metrics;
 
-use crate::motion::formats::Limits;
+use crate::limits::Limits;
 use crate::service::jobs::Jobs;
 use crate::service::prepared::ReadCaches;
 use crate::service::streams::Streams;
@@ -33,19 +38,27 @@ use crate::store::Store;
 pub struct Config {
     pub listen: String,
     pub database_url: String,
-    /// Largest upload accepted; larger bodies get 413.
-    pub max_body_bytes: usize,
+    /// Every bound on what clients send and what the server holds.
+    pub limits: Limits,
     /// Memory for decoded chunks kept between range requests, MiB.
     pub decoded_cache_mib: usize,
+    /// How long a live take stays live when its server stops renewing it (see
+    /// [`Streams::lease`]); leases are renewed every [`MAINTENANCE_PERIOD`].
+    pub stream_lease: Duration,
 }
+
+/// How often the server renews its streams' leases, finishes idle streams and closes the
+/// takes of streams whose server died.
+pub const MAINTENANCE_PERIOD: Duration = Duration::from_secs(10);
 
 impl Default for Config {
     fn default() -> Self {
         Config {
             listen: "127.0.0.1:8080".into(),
             database_url: "sqlite://mocapstore.db".into(),
-            max_body_bytes: 512 << 20,
+            limits: Limits::default(),
             decoded_cache_mib: 256,
+            stream_lease: Duration::from_secs(60),
         }
     }
 }
@@ -55,42 +68,73 @@ impl Default for Config {
 pub struct AppState {
     pub store: Store,
     pub limits: Limits,
+    /// Request bodies held now, against [`Limits::inflight_bytes`].
+    pub bodies: Arc<BodyBudget>,
     pub metrics: Arc<Metrics>,
     pub caches: Arc<ReadCaches>,
     pub jobs: Arc<Jobs>,
     pub streams: Arc<Streams>,
 }
 
-pub fn router(state: AppState, max_body_bytes: usize) -> Router {
+pub fn router(state: AppState) -> Router {
+    let limits = state.limits;
+    // Each route with a body reads it through the server's budget, under its own limit.
+    let gate = |limit: u64| {
+        axum::middleware::from_fn_with_state(
+            BodyGate {
+                budget: state.bodies.clone(),
+                limit,
+            },
+            hold_body,
+        )
+    };
+    let upload = gate(limits.upload_bytes);
+    let append = gate(limits.append_bytes);
+    let json = gate(limits.json_body_bytes);
     Router::new()
         .route("/healthz", get(|| async { "ok" }))
         .route("/metrics", get(metrics::render))
         .route(
             "/v1/sequences",
-            axum::routing::post(sequences::create).get(library::list),
+            post(sequences::create.layer(upload)).get(library::list),
         )
         .route(
             "/v1/sequences/{id}",
             get(sequences::get)
                 .delete(sequences::delete)
-                .patch(library::patch),
+                .patch(library::patch.layer(json.clone())),
         )
         .route("/v1/stats", get(library::stats))
-        .route("/v1/bases", get(bases::list).post(bases::train))
+        .route(
+            "/v1/bases",
+            get(bases::list).post(bases::train.layer(json.clone())),
+        )
         .route("/v1/bases/{id}", get(bases::get).delete(bases::delete))
         .route("/v1/jobs/{id}", get(bases::job))
-        .route("/v1/streams", axum::routing::post(streams::open))
+        .route("/v1/streams", post(streams::open.layer(json.clone())))
         .route("/v1/streams/{id}", get(streams::get))
         .route(
             "/v1/streams/{id}/frames",
-            axum::routing::post(streams::append),
+            post(streams::append.layer(append)),
         )
-        .route(
-            "/v1/streams/{id}/finish",
-            axum::routing::post(streams::finish),
-        )
+        .route("/v1/streams/{id}/finish", post(streams::finish.layer(json)))
         .route("/v1/sequences/{id}/frames", get(sequences::frames))
-        .layer(DefaultBodyLimit::max(max_body_bytes))
+        .fallback(|| async {
+            ApiError::new(
+                StatusCode::NOT_FOUND,
+                "not_found",
+                "no such route; the API is described in openapi.yaml",
+            )
+        })
+        .method_not_allowed_fallback(|| async {
+            ApiError::new(
+                StatusCode::METHOD_NOT_ALLOWED,
+                "method_not_allowed",
+                "this route does not take that method; see openapi.yaml",
+            )
+        })
+        // The gates above have read and bounded every body already.
+        .layer(DefaultBodyLimit::max(limits.upload_bytes as usize))
         .layer(axum::middleware::from_fn_with_state(
             state.metrics.clone(),
             metrics::count_requests,
@@ -121,21 +165,25 @@ impl Application {
         let listener = TcpListener::bind(&config.listen)
             .await
             .map_err(|e| format!("cannot listen on {}: {e}", config.listen))?;
-        let limits = Limits {
-            max_bytes: config.max_body_bytes as u64,
-            ..Limits::default()
-        };
+        let limits = config.limits;
         let state = AppState {
             store: store.clone(),
             limits,
+            bodies: Arc::new(BodyBudget::new(limits.inflight_bytes)),
             metrics: Arc::new(Metrics::default()),
             caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
             jobs: Arc::new(Jobs::default()),
-            streams: Arc::new(Streams::default()),
+            streams: Arc::new(Streams::new(limits, config.stream_lease)),
         };
+        // Takes left live by a server that died mid-stream are closed before serving.
+        state
+            .streams
+            .close_orphans(&state.store, &state.caches)
+            .await
+            .map_err(|e| format!("closing interrupted streams: {e}"))?;
         Ok(Application {
             listener,
-            router: router(state.clone(), config.max_body_bytes),
+            router: router(state.clone()),
             store,
             state,
         })
@@ -152,13 +200,13 @@ impl Application {
         self,
         shutdown: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> std::io::Result<()> {
-        // Streams nobody writes to any more are finished in the background.
+        // Stream leases, idle streams and orphaned live takes, in the background.
         let state = self.state.clone();
         let reaper = tokio::spawn(async move {
-            let mut tick = tokio::time::interval(std::time::Duration::from_secs(30));
+            let mut tick = tokio::time::interval(MAINTENANCE_PERIOD);
             loop {
                 tick.tick().await;
-                state.streams.reap_idle(&state.store, &state.caches).await;
+                state.streams.maintain(&state.store, &state.caches).await;
             }
         });
         let served = axum::serve(self.listener, self.router)

@@ -30,6 +30,7 @@ pub struct IngestQuery {
     max_error_mm: Option<f64>,
     mean_error_mm: Option<f64>,
     latency: Option<String>,
+    lenient: Option<bool>,
 }
 
 /// Format named by `Content-Type` (e.g. `application/x-bvh`, `text/x-trc`), used only when
@@ -78,6 +79,18 @@ impl IngestQuery {
         if self.fps.is_none() {
             self.fps = num("fps")?;
         }
+        if self.lenient.is_none() {
+            self.lenient = match get("lenient").as_deref().map(str::trim) {
+                None => None,
+                Some("true") => Some(true),
+                Some("false") => Some(false),
+                Some(v) => {
+                    return Err(ApiError::bad_request(format!(
+                        "header x-mocap-lenient: {v:?} is not true or false"
+                    )))
+                }
+            };
+        }
         if self.max_error_mm.is_none() && self.mean_error_mm.is_none() {
             self.max_error_mm = num("max-error-mm")?;
             self.mean_error_mm = num("mean-error-mm")?;
@@ -111,9 +124,10 @@ impl IngestQuery {
             Some(u) => Some(parse_unit(u).map_err(|e| bad(&e))?),
         };
         if let Some(f) = self.fps {
-            if !(f.is_finite() && f > 0.0) {
+            let max = crate::limits::MAX_FPS;
+            if !(f.is_finite() && f > 0.0 && f <= max) {
                 return Err(ApiError::bad_request(format!(
-                    "fps must be positive, got {f}"
+                    "fps must be in (0, {max}], got {f}"
                 )));
             }
         }
@@ -135,8 +149,9 @@ impl IngestQuery {
             codec,
             bound,
             latency,
-            limits: state.limits,
+            limits: state.limits.reader(),
             format_hint: None,
+            lenient: self.lenient.unwrap_or(false),
         })
     }
 }
@@ -170,16 +185,8 @@ pub async fn delete(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    if state
-        .store
-        .delete(&id)
-        .await
-        .map_err(crate::service::Error::from)?
-    {
-        Ok(StatusCode::NO_CONTENT.into_response())
-    } else {
-        Err(crate::service::Error::NotFound(format!("sequence {id}")).into())
-    }
+    crate::service::library::delete(&state.store, &state.caches, &id).await?;
+    Ok(StatusCode::NO_CONTENT.into_response())
 }
 
 #[derive(Deserialize)]

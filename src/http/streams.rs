@@ -6,8 +6,8 @@ use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
+use serde::de::{DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::Deserialize;
-use serde_json::Value;
 
 use super::error::ApiError;
 use super::AppState;
@@ -61,40 +61,87 @@ fn parse_frames(headers: &HeaderMap, body: &[u8]) -> Result<Vec<f32>, ApiError> 
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect());
     }
-    let v: Value = serde_json::from_slice(body)
-        .map_err(|e| ApiError::bad_request(format!("frames JSON: {e}")))?;
-    let frames = match &v {
-        Value::Array(_) => &v,
-        Value::Object(o) => o
-            .get("frames")
-            .ok_or_else(|| ApiError::bad_request("frames JSON needs a \"frames\" array"))?,
-        _ => {
-            return Err(ApiError::bad_request(
-                "frames JSON must be an array or object",
-            ))
-        }
-    };
-    let frames = frames
-        .as_array()
-        .ok_or_else(|| ApiError::bad_request("\"frames\" must be an array of frames"))?;
     let mut out = Vec::new();
-    for (i, f) in frames.iter().enumerate() {
-        let f = f
-            .as_array()
-            .ok_or_else(|| ApiError::bad_request(format!("frame {i} is not an array")))?;
-        for x in f {
-            out.push(match x {
-                Value::Null => f32::NAN,
-                Value::Number(n) => n.as_f64().unwrap_or(f64::NAN) as f32,
-                other => {
-                    return Err(ApiError::bad_request(format!(
-                        "frame {i}: {other} is not a number or null"
-                    )))
-                }
-            });
-        }
-    }
+    let mut de = serde_json::Deserializer::from_slice(body);
+    FramesJson(&mut out)
+        .deserialize(&mut de)
+        .and_then(|()| de.end())
+        .map_err(|e| ApiError::bad_request(format!("frames JSON: {e}")))?;
     Ok(out)
+}
+
+/// Reads JSON frames straight into a flat `Vec<f32>` (NaN for `null`): no tree of JSON
+/// values, so an append costs at most four bytes of memory per coordinate it sends.
+struct FramesJson<'a>(&'a mut Vec<f32>);
+
+impl<'de> DeserializeSeed<'de> for FramesJson<'_> {
+    type Value = ();
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> Visitor<'de> for FramesJson<'_> {
+    type Value = ();
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("an array of frames, or an object with a \"frames\" array")
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut frames: A) -> Result<(), A::Error> {
+        while frames.next_element_seed(Frame(&mut *self.0))?.is_some() {}
+        Ok(())
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        let mut seen = false;
+        while let Some(key) = map.next_key::<std::borrow::Cow<'de, str>>()? {
+            if key != "frames" || seen {
+                return Err(serde::de::Error::custom(format!(
+                    "unexpected field {key:?}: the object holds one \"frames\" array"
+                )));
+            }
+            map.next_value_seed(FramesArray(&mut *self.0))?;
+            seen = true;
+        }
+        if !seen {
+            return Err(serde::de::Error::missing_field("frames"));
+        }
+        Ok(())
+    }
+}
+
+/// The `"frames"` value: an array only.
+struct FramesArray<'a>(&'a mut Vec<f32>);
+
+impl<'de> DeserializeSeed<'de> for FramesArray<'_> {
+    type Value = ();
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_seq(FramesJson(self.0))
+    }
+}
+
+/// One frame: an array of numbers or nulls.
+struct Frame<'a>(&'a mut Vec<f32>);
+
+impl<'de> DeserializeSeed<'de> for Frame<'_> {
+    type Value = ();
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_seq(self)
+    }
+}
+
+impl<'de> Visitor<'de> for Frame<'_> {
+    type Value = ();
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a frame: an array of numbers or nulls")
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut values: A) -> Result<(), A::Error> {
+        while let Some(v) = values.next_element::<Option<f64>>()? {
+            self.0.push(v.map_or(f32::NAN, |x| x as f32));
+        }
+        Ok(())
+    }
 }
 
 pub async fn append(

@@ -46,6 +46,9 @@ pub enum Error {
         actual: u64,
         limit: u64,
     },
+    /// The data contradicts the file's own header or physical sense (strict reading).
+    #[error("{0}")]
+    Contradiction(String),
     /// The request makes no sense for this take (e.g. BVH output without a skeleton).
     #[error("unsupported: {0}")]
     Unsupported(String),

@@ -33,9 +33,10 @@ impl Motion {
         positions: Vec<f32>,
         skeleton: Option<Skeleton>,
     ) -> Result<Self> {
-        if !(fps.is_finite() && fps > 0.0) {
+        let max_fps = crate::limits::MAX_FPS;
+        if !(fps.is_finite() && fps > 0.0 && fps <= max_fps) {
             return Err(Error::Invalid(format!(
-                "frame rate must be positive, got {fps}"
+                "frame rate must be in (0, {max_fps}] fps, got {fps}"
             )));
         }
         let n = point_names.len();
@@ -116,6 +117,18 @@ impl Motion {
         let i = (frame * self.point_count() + point) * 3;
         let p = &self.positions[i..i + 3];
         p[0].is_finite().then(|| [p[0], p[1], p[2]])
+    }
+
+    /// Turn every sample for which `bad` holds into a gap; how many were.
+    pub fn gap_where(&mut self, bad: impl Fn(&[f32]) -> bool) -> usize {
+        let mut n = 0;
+        for s in self.positions.chunks_exact_mut(3) {
+            if !s[0].is_nan() && bad(s) {
+                s.fill(f32::NAN);
+                n += 1;
+            }
+        }
+        n
     }
 
     /// Number of missing point samples.

@@ -46,10 +46,15 @@ pub struct Unit {
 }
 
 impl Unit {
+    /// A unit of `metres_per_unit` metres, within [`crate::limits::UNIT_METRES`] (a
+    /// micrometre to a kilometre): outside it, errors in millimetres overflow or vanish.
     pub fn new(metres_per_unit: f64, source: UnitSource) -> Result<Self> {
-        if !(metres_per_unit.is_finite() && metres_per_unit > 0.0) {
+        let range = crate::limits::UNIT_METRES;
+        if !range.contains(&metres_per_unit) {
             return Err(Error::Invalid(format!(
-                "unit must be a positive number of metres, got {metres_per_unit}"
+                "unit must be between {:e} and {:e} metres, got {metres_per_unit:e}",
+                range.start(),
+                range.end()
             )));
         }
         Ok(Unit {
@@ -139,7 +144,9 @@ pub fn parse_unit(text: &str) -> Result<f64> {
         return Ok(*m);
     }
     match name.parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        Ok(v) if v.is_finite() && v > 0.0 => {
+            Unit::new(v, UnitSource::Explicit).map(|u| u.metres_per_unit)
+        }
         _ => Err(Error::Invalid(format!(
             "unknown unit {text:?}: use mm, cm, m, in, ft, cmu or metres per unit as a number"
         ))),
@@ -149,6 +156,17 @@ pub fn parse_unit(text: &str) -> Result<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn units_beyond_physical_scale_are_refused() {
+        // unit=1e308 once reached the codecs, which decoded NaN (a 500).
+        for bad in ["1e308", "1e-300", "5000", "0", "-1", "inf", "nan"] {
+            assert!(parse_unit(bad).is_err(), "{bad}");
+        }
+        assert_eq!(parse_unit("0.001").unwrap(), 0.001);
+        assert_eq!(parse_unit("1000").unwrap(), 1000.0);
+        assert!(Unit::new(1e308, UnitSource::Declared).is_err());
+    }
 
     #[test]
     fn infers_corpus_units_from_height() {

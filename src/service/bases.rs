@@ -10,7 +10,7 @@ use super::{blocking, Error, Result};
 use crate::codec::lsdt::train::{train_basis_reporting, TrainOptions};
 use crate::codec::mdtt::database::{train_set, SetOptions};
 use crate::codec::{Basis, BasisKind, Input, Target};
-use crate::store::{BasisRow, Filter, SequenceRow, SortKey, Store};
+use crate::store::{BasisDeletion, BasisRow, Filter, SequenceRow, SortKey, Store};
 
 /// Parse a stored basis, checking that its bytes still hash to its id.
 fn parse(row: &BasisRow) -> Result<Basis> {
@@ -47,6 +47,34 @@ pub async fn latest_for(store: &Store, layout: &str) -> Result<Vec<Arc<Basis>>> 
     Ok(out)
 }
 
+/// Stored bases, newest first, optionally of one layout and/or kind (payloads not read).
+pub async fn list(
+    store: &Store,
+    layout: Option<&str>,
+    kind: Option<BasisKind>,
+) -> Result<Vec<BasisRow>> {
+    Ok(store.bases(layout, kind.map(BasisKind::name)).await?)
+}
+
+/// One stored basis.
+pub async fn get(store: &Store, id: &str) -> Result<BasisRow> {
+    store
+        .basis(id)
+        .await?
+        .ok_or_else(|| Error::NotFound(format!("basis {id}")))
+}
+
+/// Delete a basis no take references.
+pub async fn delete(store: &Store, id: &str) -> Result<()> {
+    match store.delete_basis(id).await? {
+        BasisDeletion::Deleted => Ok(()),
+        BasisDeletion::NotFound => Err(Error::NotFound(format!("basis {id}"))),
+        BasisDeletion::InUse(n) => Err(Error::Conflict(format!(
+            "basis {id} codes {n} stored take(s); delete them first"
+        ))),
+    }
+}
+
 /// What to train and on which takes.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -57,9 +85,8 @@ pub struct TrainRequest {
     pub tag: Option<String>,
     /// Layout signature; needed when the selection spans several layouts.
     pub layout: Option<String>,
-    /// Exactly these takes (instead of a library/tag/layout selection).
-    #[serde(default)]
-    pub ids: Vec<String>,
+    /// Exactly these takes (instead of a library/tag/layout selection); never empty.
+    pub ids: Option<Vec<String>>,
     /// Non-zeros per sample (the paper's P = 8).
     pub sparsity: Option<usize>,
     pub max_iterations: Option<usize>,
@@ -108,7 +135,32 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
         ));
     }
     let mut takes = Vec::new();
-    if req.ids.is_empty() {
+    if let Some(ids) = &req.ids {
+        if ids.is_empty() {
+            return Err(Error::InvalidRequest(
+                "ids is empty: name the takes, or leave ids out to select by library, tag and layout"
+                    .into(),
+            ));
+        }
+        if req.library.is_some() || req.tag.is_some() || req.layout.is_some() {
+            return Err(Error::InvalidRequest(
+                "give ids, or a library/tag/layout selection, not both".into(),
+            ));
+        }
+        let mut missing = Vec::new();
+        for id in ids {
+            match store.get(id).await? {
+                Some(t) => takes.push(t),
+                None => missing.push(id.as_str()),
+            }
+        }
+        if !missing.is_empty() {
+            return Err(Error::InvalidRequest(format!(
+                "ids names takes that are not stored: {}",
+                missing.join(", ")
+            )));
+        }
+    } else {
         let filter = Filter {
             library: req.library.clone(),
             tag: req.tag.clone(),
@@ -125,10 +177,6 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
                 Some(c) => cursor = Some(c),
                 None => break,
             }
-        }
-    } else {
-        for id in &req.ids {
-            takes.push(super::fetch::sequence(store, id).await?);
         }
     }
     if takes.is_empty() {
@@ -150,6 +198,16 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
             "a basis is for one layout and the selection spans {}: {}; choose one with layout",
             layouts.len(),
             list.join(", ")
+        )));
+    }
+    let points = takes[0].points as usize;
+    let most = match kind {
+        BasisKind::Lsdt => crate::limits::LSDT_MAX_POINTS,
+        BasisKind::MdttSet => crate::limits::MDTT_MAX_POINTS,
+    };
+    if points > most {
+        return Err(Error::InvalidRequest(format!(
+            "a {kind} basis is trained for layouts of at most {most} points; these takes have {points}"
         )));
     }
     Ok(Selection {

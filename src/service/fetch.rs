@@ -100,8 +100,7 @@ pub async fn frames(
         }
         None => {
             let row = sequence(store, id).await?;
-            let (header, _) = Header::parse(&row.header, &Limits::default())
-                .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?;
+            let (header, live) = header_of(store, &row).await?;
             let shared = match &header.basis {
                 Some(h) => Some(super::bases::load(store, &hex(h)).await?),
                 None => None,
@@ -111,7 +110,10 @@ pub async fn frames(
                     .await?
                     .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?,
             );
-            caches.decoders.insert(p.clone());
+            // A live take's index grows with every commit (here or on another server).
+            if !live {
+                caches.decoders.insert(p.clone());
+            }
             p
         }
     };
@@ -191,12 +193,23 @@ pub async fn frames(
     ))
 }
 
+/// A stored take's header, and whether the take is live. A live take's stored header has
+/// no chunk index (appends would otherwise rewrite it); its chunk rows are the index.
+pub async fn header_of(store: &Store, row: &SequenceRow) -> Result<(Header, bool)> {
+    if row.live_until.is_some() {
+        let index = store.chunk_index(&row.id).await?;
+        return Ok((super::streams::header_from_index(row, &index)?, true));
+    }
+    let (header, _) = Header::parse(&row.header, &Limits::default())
+        .map_err(|e| Error::Internal(format!("stored take {}: {e}", row.id)))?;
+    Ok((header, false))
+}
+
 /// Every frame of a stored take, decoded without touching the read caches (for bulk work
 /// such as training, which would otherwise evict what range requests keep hot).
 pub async fn whole_take(store: &Store, row: &SequenceRow) -> Result<Vec<f32>> {
     let id = &row.id;
-    let (header, _) = Header::parse(&row.header, &Limits::default())
-        .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?;
+    let (header, _) = header_of(store, row).await?;
     let shared = match &header.basis {
         Some(h) => Some(super::bases::load(store, &hex(h)).await?),
         None => None,

@@ -30,6 +30,8 @@ pub struct IngestRequest {
     pub limits: Limits,
     /// Format to assume when the content does not identify itself (from `Content-Type`).
     pub format_hint: Option<Format>,
+    /// Keep a file that contradicts its own header, with a warning (see [`ReadOptions`]).
+    pub lenient: bool,
 }
 
 /// What ingest reports back.
@@ -58,6 +60,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         limits: req.limits,
         unit: req.unit,
         fps: req.fps,
+        lenient: req.lenient,
     };
     let hint = req.format_hint;
     let loaded = blocking(move || match (formats::detect(&bytes), hint) {
@@ -131,6 +134,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         header: header.to_bytes(),
         meta,
         created_at: super::now_ms(),
+        live_until: None,
     };
     let basis = header.basis.as_ref().map(codec::basis::hex);
     store.insert(&NewSequence { row, chunks, basis }).await?;

@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use super::prepared::ReadCaches;
 use super::{Error, Result};
 use crate::store::{Cursor, Filter, SequenceRow, SortKey, Store, Totals};
 
@@ -90,6 +91,17 @@ pub async fn stats(store: &Store, filter: &Filter) -> Result<Stats> {
             })
             .collect(),
     })
+}
+
+/// Delete a take (its chunks and tags with it) and forget what this server kept of it.
+pub async fn delete(store: &Store, caches: &ReadCaches, id: &str) -> Result<()> {
+    let deleted = store.delete(id).await?;
+    caches.forget(id);
+    if deleted {
+        Ok(())
+    } else {
+        Err(Error::NotFound(format!("sequence {id}")))
+    }
 }
 
 /// Rename, move to another library and/or replace the tags of a take.

@@ -42,6 +42,9 @@ pub enum Error {
     /// The request clashes with what is stored (e.g. deleting a basis takes still use).
     #[error("{0}")]
     Conflict(String),
+    /// The server is at a capacity limit (open streams); the same request may succeed later.
+    #[error("{0}")]
+    Busy(String),
     #[error("codec: {0}")]
     Codec(#[from] codec::Error),
     #[error("store: {0}")]

@@ -5,8 +5,15 @@
 //!
 //! A stream's coder state lives in this server's memory. If a client goes away, what was
 //! committed stays; frames still pending in an unfinished chunk are committed when the
-//! stream is finished, or when it has been idle too long ([`Streams::reap_idle`]). A server
-//! restart loses only those pending frames.
+//! stream is finished, or when it has been idle too long ([`Streams::maintain`]). A server
+//! that dies loses only those pending frames; its takes stay readable, and whichever server
+//! next sees their lease run out closes them ([`Streams::close_orphans`]).
+//!
+//! Appends cost O(chunk), however long the stream: a commit adds one chunk row and updates
+//! the take's running totals. A live take's stored header carries no chunk index (its
+//! chunk rows are the index, [`crate::store::Store::chunk_index`]); the index is written
+//! into the header once, when the stream closes. Memory is bounded per stream (points,
+//! chunk length, the re-encoding copy) and per server (open streams), by [`Limits`].
 //!
 //! With no search possible frame by frame, a stream codes to its bound as a max bound (a
 //! mean bound is then met too) with the residual layer, and checks every chunk on its decoded
@@ -17,6 +24,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
 use super::choose::{CodecRequest, Decision};
 use super::prepared::ReadCaches;
@@ -28,10 +36,11 @@ use crate::codec::lsdt::spatial::dct_basis;
 use crate::codec::{
     self, Basis, BasisKind, ChunkDecoder, ChunkOut, CodecId, ErrorBound, Header, Input, Latency,
 };
+use crate::limits::{Limits, MAX_COORDINATE_M, MAX_FPS};
 use crate::motion::metrics::Accumulator;
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
-use crate::store::{BasisRow, ChunkRow, NewSequence, SequenceRow, Store};
+use crate::store::{BasisRow, ChunkEntry, ChunkRow, NewSequence, SequenceRow, Store};
 
 /// The points of a stream: their names, or just how many.
 #[derive(Debug, Clone, Deserialize)]
@@ -82,6 +91,8 @@ pub struct StreamInfo {
     pub live: bool,
     pub max_mm: f64,
     pub mean_mm: f64,
+    /// What the stream gave up to stay within its limits (e.g. re-encoding on finish).
+    pub warnings: Vec<String>,
 }
 
 enum Coder {
@@ -91,7 +102,13 @@ enum Coder {
 
 struct Live {
     row: SequenceRow,
+    /// The take's header without its chunk index (what is stored while it is live).
     header: Header,
+    /// The chunks committed so far; written into the header when the stream closes.
+    index: Vec<ChunkMeta>,
+    /// Stored bytes of the header without its index.
+    header_len: usize,
+    payload_bytes: usize,
     coder: Option<Coder>,
     basis: Arc<Basis>,
     decoder: Arc<dyn ChunkDecoder>,
@@ -107,6 +124,9 @@ struct Live {
     last_activity: Instant,
     /// Every frame as sent, for re-encoding on finish (if asked for).
     archive: Option<Vec<f32>>,
+    warnings: Vec<String>,
+    /// This stream's place among the server's open streams, given back when it closes.
+    _slot: OwnedSemaphorePermit,
 }
 
 impl Live {
@@ -119,11 +139,21 @@ impl Live {
             points: self.points,
             chunk_frames: self.chunk_frames,
             frames_received: self.received,
-            frames_committed: self.header.frames as usize,
-            chunks_committed: self.header.chunks.len(),
+            frames_committed: self.row.frames as usize,
+            chunks_committed: self.index.len(),
             live,
             max_mm: self.row.max_mm,
             mean_mm: self.row.mean_mm,
+            warnings: self.warnings.clone(),
+        }
+    }
+
+    /// The header with the committed chunks as its index: what the take is once closed.
+    fn closed_header(&self) -> Header {
+        Header {
+            frames: self.row.frames as u32,
+            chunks: self.index.clone(),
+            ..self.header.clone()
         }
     }
 }
@@ -133,16 +163,39 @@ type Entry = Arc<tokio::sync::Mutex<Live>>;
 /// The open streams of this server.
 pub struct Streams {
     open: Mutex<HashMap<String, Entry>>,
-    /// A stream with no request for this long is finished by [`Streams::reap_idle`].
+    /// One permit per stream that may be open at once.
+    slots: Arc<Semaphore>,
+    limits: Limits,
+    /// A stream with no request for this long is finished by [`Streams::maintain`].
     pub idle: Duration,
+    /// How long a live take stays live without its server renewing it. Servers renew the
+    /// leases of their open streams at every [`Streams::maintain`]; run that more often.
+    pub lease: Duration,
 }
 
-impl Default for Streams {
-    fn default() -> Self {
+impl Streams {
+    /// `limits.stream_points` is capped at [`crate::limits::LSDT_MAX_POINTS`]: a stream codes
+    /// with an LSDT basis of its layout.
+    pub fn new(mut limits: Limits, lease: Duration) -> Self {
+        limits.stream_points = limits
+            .stream_points
+            .min(crate::limits::LSDT_MAX_POINTS as u64);
         Streams {
             open: Mutex::new(HashMap::new()),
+            slots: Arc::new(Semaphore::new(limits.open_streams as usize)),
+            limits,
             idle: Duration::from_secs(300),
+            lease,
         }
+    }
+
+    /// Streams open on this server now.
+    pub fn open_count(&self) -> usize {
+        self.open.lock().expect("streams lock").len()
+    }
+
+    fn lease_end(&self) -> i64 {
+        super::now_ms() + self.lease.as_millis() as i64
     }
 }
 
@@ -156,7 +209,10 @@ async fn stream_basis(store: &Store, layout: &str, points: usize) -> Result<Arc<
     {
         return Ok(b);
     }
-    let b = dct_basis(points);
+    let b = super::blocking(move || dct_basis(points)).await?;
+    if store.basis_exists(&b.id()).await? {
+        return Ok(Arc::new(b));
+    }
     let m = &b.matrices()[0];
     store
         .insert_basis(&BasisRow {
@@ -185,18 +241,26 @@ impl Streams {
     /// Open a stream: the take exists (with no frames) from now on.
     pub async fn open(&self, store: &Store, req: OpenRequest) -> Result<StreamInfo> {
         let bad = |m: String| Err(Error::InvalidRequest(m));
-        if !(req.fps.is_finite() && req.fps > 0.0 && req.fps <= 100_000.0) {
-            return bad(format!("fps must be in (0, 100000], got {}", req.fps));
+        if !(req.fps.is_finite() && req.fps > 0.0 && req.fps <= MAX_FPS) {
+            return bad(format!("fps must be in (0, {MAX_FPS}], got {}", req.fps));
+        }
+        // The count is checked before anything is made from it: a client may ask for 2e10.
+        let count = match &req.points {
+            PointsSpec::Names(n) => n.len(),
+            PointsSpec::Count(n) => *n,
+        };
+        let max_points = self.limits.stream_points;
+        if count == 0 || count as u64 > max_points {
+            return bad(format!(
+                "a stream needs 1..={max_points} points, got {count}"
+            ));
         }
         let names: Vec<String> = match req.points {
             PointsSpec::Names(n) => n,
             PointsSpec::Count(n) => (0..n).map(|i| format!("p{i}")).collect(),
         };
-        if names.is_empty() || names.len() > 10_000 {
-            return bad(format!(
-                "a stream needs 1..=10000 points, got {}",
-                names.len()
-            ));
+        if let Some(i) = names.iter().position(|n| n.trim().is_empty()) {
+            return bad(format!("point {i} has an empty name"));
         }
         let metres = match &req.unit {
             Some(u) => parse_unit(u).map_err(|e| Error::InvalidRequest(e.to_string()))?,
@@ -224,6 +288,20 @@ impl Streams {
             None => codec::default_chunk_frames(req.fps),
         };
         let points = names.len();
+        if let Err(why) = crate::limits::check(
+            "frames × points of one chunk",
+            (chunk_frames * points) as u64,
+            self.limits.stream_chunk_samples,
+        ) {
+            return bad(format!("{why}: ask for shorter chunk_seconds"));
+        }
+        // A place among the open streams, held until the stream closes.
+        let slot = self.slots.clone().try_acquire_owned().map_err(|_| {
+            Error::Busy(format!(
+                "{} streams are open, the most this server takes at once; finish one or retry later",
+                self.limits.open_streams
+            ))
+        })?;
         let shape = Motion::new(req.fps, unit.clone(), names.clone(), Vec::new(), None)
             .map_err(|e| Error::InvalidRequest(e.to_string()))?;
         let layout = shape.layout_signature().to_hex();
@@ -308,6 +386,7 @@ impl Streams {
                 "live": true,
             }),
             created_at: super::now_ms(),
+            live_until: Some(self.lease_end()),
         };
         store
             .insert(&NewSequence {
@@ -316,9 +395,13 @@ impl Streams {
                 basis: Some(basis.id()),
             })
             .await?;
+        let header_len = row.header.len();
         let live = Live {
             row,
             header,
+            index: Vec::new(),
+            header_len,
+            payload_bytes: 0,
             coder: Some(coder),
             basis,
             decoder,
@@ -332,6 +415,8 @@ impl Streams {
             failed: None,
             last_activity: Instant::now(),
             archive: req.reencode_on_finish.then(Vec::new),
+            warnings: Vec::new(),
+            _slot: slot,
         };
         let info = live.info(true);
         self.open
@@ -349,11 +434,18 @@ impl Streams {
         }
     }
 
-    /// Why a stream id is not open: finished (409) or unknown (404).
+    /// Why a stream id is not open here: finished or coded elsewhere (409), or unknown (404).
     async fn not_open(store: &Store, id: &str) -> Error {
-        match store.exists(id).await {
-            Ok(true) => Error::Conflict(format!("stream {id} is finished")),
-            Ok(false) => Error::NotFound(format!("stream {id}")),
+        match store.get(id).await {
+            Ok(Some(row)) => match row.live_until {
+                None => Error::Conflict(format!("stream {id} is finished")),
+                Some(until) => Error::Conflict(format!(
+                    "stream {id} is not open on this server: another server codes it, or its \
+                     server stopped and the take is closed when its lease runs out \
+                     ({until} ms since the epoch)"
+                )),
+            },
+            Ok(None) => Error::NotFound(format!("stream {id}")),
             Err(e) => e.into(),
         }
     }
@@ -387,10 +479,30 @@ impl Streams {
                 live.points
             )));
         }
+        let to_m = live.row.metres_per_unit;
+        if let Some(i) = frames
+            .iter()
+            .position(|v| v.is_infinite() || (f64::from(v.abs()) * to_m) > MAX_COORDINATE_M)
+        {
+            return Err(Error::InvalidRequest(format!(
+                "value {i} ({}) is beyond any physical scale (|x| ≤ {MAX_COORDINATE_M} m); \
+                 send null (JSON) or NaN (f32) for a missing sample",
+                frames[i]
+            )));
+        }
         live.last_activity = Instant::now();
         live.received += frames.len() / w;
+        let limit = self.limits.stream_archive_bytes as usize;
         if let Some(a) = &mut live.archive {
-            a.extend_from_slice(&frames);
+            if (a.len() + frames.len()) * 4 > limit {
+                live.archive = None;
+                live.warnings.push(format!(
+                    "re-encoding on finish dropped: the frames passed {limit} bytes, the most \
+                     a stream keeps for it; the take stays as coded live"
+                ));
+            } else {
+                a.extend_from_slice(&frames);
+            }
         }
         let r = self.code_and_commit(store, &mut live, frames, flush).await;
         caches.forget(id);
@@ -472,7 +584,8 @@ impl Streams {
         Ok(())
     }
 
-    /// Check one coded chunk on its decoded output and commit it with the updated header.
+    /// Check one coded chunk on its decoded output and commit it: one chunk row and the
+    /// take's running totals, nothing that grows with the stream.
     async fn commit(&self, store: &Store, live: &mut Live, chunk: ChunkOut) -> Result<()> {
         let w = live.points * 3;
         let n = chunk.frames;
@@ -485,18 +598,24 @@ impl Streams {
         let valid: Vec<bool> = original.chunks_exact(3).map(|s| !s[0].is_nan()).collect();
         let payload = pack_chunk(Some(&valid), &chunk.bytes);
         let meta = ChunkMeta {
-            first_frame: live.header.frames,
+            first_frame: live.row.frames as u32,
             frames: n as u32,
             len: payload.len() as u32,
             crc32c: crc32c::crc32c(&payload),
         };
-        let mut header = live.header.clone();
-        header.chunks.push(meta);
-        header.frames += n as u32;
-        let index = header.chunks.len() - 1;
-        let (decoder, h2, p2) = (live.decoder.clone(), header.clone(), payload.clone());
+        // The chunk decodes on its own: check it with a header that holds only it.
+        let alone = Header {
+            frames: n as u32,
+            chunks: vec![ChunkMeta {
+                first_frame: 0,
+                ..meta
+            }],
+            ..live.header.clone()
+        };
+        let (decoder, p2) = (live.decoder.clone(), payload.clone());
         let decoded =
-            blocking(move || codec::decode_chunk(&h2, decoder.as_ref(), index, &p2)).await??;
+            blocking(move || codec::decode_chunk(&alone, decoder.as_ref(), 0, &p2)).await??;
+        let index = live.index.len();
         let mut stats = live.stats.clone();
         stats.add(&original, &decoded);
         let chunk_stats = {
@@ -511,14 +630,14 @@ impl Streams {
             )));
         }
         let s = stats.finish(live.to_mm);
-        let mut row = live.row.clone();
-        let frames = header.frames as i64;
+        let frames = live.row.frames + n as i64;
+        let payload_bytes = live.payload_bytes + payload.len();
+        let row = &mut live.row;
         row.frames = frames;
         row.duration_s = frames as f64 / row.fps;
         row.raw_bytes = frames * live.points as i64 * 12;
-        row.header = header.to_bytes();
         row.stored_bytes =
-            row.header.len() as i64 + header.chunks.iter().map(|c| i64::from(c.len)).sum::<i64>();
+            (live.header_len + (index + 1) * ChunkMeta::INDEX_BYTES + payload_bytes) as i64;
         row.ratio = row.raw_bytes as f64 / row.stored_bytes.max(1) as f64;
         row.mean_mm = s.mean_mm;
         row.rms_mm = s.rms_mm;
@@ -536,21 +655,25 @@ impl Streams {
             payload,
         };
         if !store
-            .update_encoding(&row, &[chunk_row], false, None)
+            .append_chunk(&live.row, &chunk_row, self.lease_end())
             .await?
         {
-            return Err(Error::NotFound(format!("sequence {}", row.id)));
+            return Err(Error::Conflict(format!(
+                "take {} is no longer live (deleted, or closed by another server after its \
+                 lease ran out)",
+                live.row.id
+            )));
         }
-        live.row = row;
-        live.header = header;
+        live.index.push(meta);
+        live.payload_bytes = payload_bytes;
         live.stats = stats;
         live.pending.drain(..n * w);
         Ok(())
     }
 
-    /// Close a stream: commit what is pending, mark the take finished, and if the stream
-    /// kept its frames, code the whole take again with per-take choice, keeping that if it
-    /// is smaller.
+    /// Close a stream: commit what is pending, write the chunk index into the take's header
+    /// and mark it finished, and if the stream kept its frames, code the whole take again
+    /// with per-take choice, keeping that if it is smaller.
     pub async fn finish(
         &self,
         store: &Store,
@@ -569,12 +692,28 @@ impl Streams {
                 .await
             {
                 tracing::warn!(stream = id, error = %e, "pending frames of a finished stream were lost");
+                live.warnings
+                    .push(format!("frames pending at finish were lost: {e}"));
             }
         }
-        let mut row = live.row.clone();
-        row.meta["live"] = serde_json::Value::Bool(false);
-        store.update_encoding(&row, &[], false, None).await?;
+        let mut meta = live.row.meta.clone();
+        meta["live"] = serde_json::Value::Bool(false);
+        if !live.warnings.is_empty() {
+            meta["warnings"] = serde_json::json!(live.warnings);
+        }
+        if !store
+            .close_live(id, &live.closed_header().to_bytes(), &meta)
+            .await?
+        {
+            // Closed from its chunk rows by another server after the lease ran out (or
+            // deleted): what it stored is what was committed, the same chunks.
+            tracing::warn!(
+                stream = id,
+                "stream was closed elsewhere before it finished"
+            );
+        }
         caches.forget(id);
+        let row = super::fetch::sequence(store, id).await?;
         if let Some(frames) = live.archive.take().filter(|_| row.frames > 0) {
             let committed = row.frames as usize * live.points * 3;
             if frames.len() >= committed {
@@ -585,28 +724,89 @@ impl Streams {
         super::fetch::sequence(store, id).await
     }
 
-    /// Finish every stream idle for longer than [`Streams::idle`].
-    pub async fn reap_idle(&self, store: &Store, caches: &ReadCaches) {
-        let ids: Vec<String> = self
+    /// Housekeeping, run every few seconds by the server: renew the leases of this server's
+    /// open streams, finish those idle longer than [`Streams::idle`], and close the takes of
+    /// streams whose server died ([`Streams::close_orphans`]).
+    pub async fn maintain(&self, store: &Store, caches: &ReadCaches) {
+        let entries: Vec<(String, Entry)> = self
             .open
             .lock()
             .expect("streams lock")
-            .keys()
-            .cloned()
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone()))
             .collect();
-        for id in ids {
-            let Some(e) = self.entry(&id) else { continue };
+        for (id, e) in entries {
+            // A stream busy with a request renews its lease by committing.
             let idle = match e.try_lock() {
                 Ok(l) => l.last_activity.elapsed() > self.idle,
-                Err(_) => false,
+                Err(_) => continue,
             };
             if idle {
                 if let Err(err) = self.finish(store, caches, &id).await {
                     tracing::warn!(stream = %id, error = %err, "finishing an idle stream failed");
                 }
+            } else if let Err(err) = store.renew_lease(&id, self.lease_end()).await {
+                tracing::warn!(stream = %id, error = %err, "renewing a stream's lease failed");
             }
         }
+        if let Err(err) = self.close_orphans(store, caches).await {
+            tracing::warn!(error = %err, "closing orphaned live takes failed");
+        }
     }
+
+    /// Close every live take whose lease has run out and that no stream here codes: its
+    /// server stopped mid-stream. What it committed stays, indexed from its chunk rows;
+    /// frames that were pending on that server are lost, and the take says so.
+    pub async fn close_orphans(&self, store: &Store, caches: &ReadCaches) -> Result<usize> {
+        let mut closed = 0;
+        for id in store.expired_live(super::now_ms()).await? {
+            if self.entry(&id).is_some() {
+                continue;
+            }
+            let Some(row) = store.get(&id).await? else {
+                continue;
+            };
+            let header = header_from_index(&row, &store.chunk_index(&id).await?)?;
+            let mut meta = row.meta.clone();
+            meta["live"] = serde_json::Value::Bool(false);
+            meta["interrupted"] = serde_json::Value::String(
+                "the server coding this stream stopped before it finished; the take keeps the \
+                 chunks it had committed"
+                    .into(),
+            );
+            if store.close_live(&id, &header.to_bytes(), &meta).await? {
+                tracing::warn!(stream = %id, frames = row.frames, "closed a stream whose server stopped");
+                caches.forget(&id);
+                closed += 1;
+            }
+        }
+        Ok(closed)
+    }
+}
+
+/// A live take's header with the chunk rows as its index (and frames), checked as any
+/// stored header is.
+pub(crate) fn header_from_index(row: &SequenceRow, index: &[ChunkEntry]) -> Result<Header> {
+    let id = &row.id;
+    let corrupt = |e: &dyn std::fmt::Display| Error::Internal(format!("stored take {id}: {e}"));
+    let (mut header, _) =
+        Header::parse(&row.header, &codec::Limits::default()).map_err(|e| corrupt(&e))?;
+    let mut chunks = Vec::with_capacity(index.len());
+    for c in index {
+        let as_u32 = |v: i64| u32::try_from(v).map_err(|_| corrupt(&format!("chunk {c:?}")));
+        chunks.push(ChunkMeta {
+            first_frame: as_u32(c.first_frame)?,
+            frames: as_u32(c.frames)?,
+            len: as_u32(c.len)?,
+            crc32c: c.crc32c,
+        });
+    }
+    header.frames = chunks.iter().map(|c| c.frames).sum();
+    header.chunks = chunks;
+    // Round-trip through the parser: the index must tile the frames in order.
+    Header::parse(&header.to_bytes(), &codec::Limits::default())
+        .map(|(h, _)| h)
+        .map_err(|e| corrupt(&e))
 }
 
 /// Code a finished stream's take again, from the frames as sent, with every candidate

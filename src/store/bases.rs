@@ -86,6 +86,17 @@ impl Store {
         })
     }
 
+    /// Whether a basis with this id is stored (its payload not read).
+    pub async fn basis_exists(&self, id: &str) -> Result<bool> {
+        dispatch!(self, pool => {
+            Ok(sqlx::query("SELECT 1 AS one FROM bases WHERE id = $1")
+                .bind(id)
+                .fetch_optional(pool)
+                .await?
+                .is_some())
+        })
+    }
+
     /// A basis with its payload.
     pub async fn basis(&self, id: &str) -> Result<Option<BasisRow>> {
         let sql = format!("SELECT {COLUMNS}, payload FROM bases WHERE id = $1");

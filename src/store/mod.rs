@@ -22,7 +22,7 @@ use sqlx::sqlite::{
 use sqlx::Row;
 
 pub use query::{Cursor, Filter, SortKey, StatRow, Totals};
-pub use rows::{ChunkRow, NewSequence, SequenceRow};
+pub use rows::{ChunkEntry, ChunkRow, NewSequence, SequenceRow};
 
 /// Errors of the store layer.
 #[derive(Debug, thiserror::Error)]
@@ -195,6 +195,120 @@ impl Store {
             }
             tx.commit().await?;
             Ok(true)
+        })
+    }
+
+    /// Add one chunk to a live take and update its running totals (frames, sizes,
+    /// statistics) and lease, in one transaction. Nothing else is rewritten: the cost of an
+    /// append does not grow with the take. False if the take is gone or no longer live.
+    pub async fn append_chunk(
+        &self,
+        row: &SequenceRow,
+        chunk: &ChunkRow,
+        live_until: i64,
+    ) -> Result<bool> {
+        dispatch!(self, pool => {
+            let mut tx = pool.begin().await?;
+            let r = sqlx::query(
+                "UPDATE sequences SET frames = $1, duration_s = $2, raw_bytes = $3, \
+                 stored_bytes = $4, ratio = $5, mean_mm = $6, rms_mm = $7, max_mm = $8, \
+                 kg_percent = $9, live_until = $10 WHERE id = $11 AND live_until IS NOT NULL",
+            )
+            .bind(row.frames)
+            .bind(row.duration_s)
+            .bind(row.raw_bytes)
+            .bind(row.stored_bytes)
+            .bind(row.ratio)
+            .bind(row.mean_mm)
+            .bind(row.rms_mm)
+            .bind(row.max_mm)
+            .bind(row.kg_percent)
+            .bind(live_until)
+            .bind(&row.id)
+            .execute(&mut *tx)
+            .await?;
+            if r.rows_affected() == 0 {
+                return Ok(false);
+            }
+            bind_chunk(sqlx::query(INSERT_CHUNK), &row.id, chunk).execute(&mut *tx).await?;
+            tx.commit().await?;
+            Ok(true)
+        })
+    }
+
+    /// Extend the lease of a live take; false if it is not live any more.
+    pub async fn renew_lease(&self, id: &str, live_until: i64) -> Result<bool> {
+        dispatch!(self, pool => {
+            let r = sqlx::query(
+                "UPDATE sequences SET live_until = $1 WHERE id = $2 AND live_until IS NOT NULL",
+            )
+            .bind(live_until)
+            .bind(id)
+            .execute(pool)
+            .await?;
+            Ok(r.rows_affected() > 0)
+        })
+    }
+
+    /// Live takes whose lease ran out before `now` (their server stopped mid-stream).
+    pub async fn expired_live(&self, now: i64) -> Result<Vec<String>> {
+        dispatch!(self, pool => {
+            sqlx::query("SELECT id FROM sequences WHERE live_until IS NOT NULL AND live_until < $1")
+                .bind(now)
+                .fetch_all(pool)
+                .await?
+                .iter()
+                .map(|r| Ok(r.try_get::<String, _>("id")?))
+                .collect()
+        })
+    }
+
+    /// Close a live take: its final header and meta, and no lease. False if it was not live
+    /// (another server closed it first).
+    pub async fn close_live(
+        &self,
+        id: &str,
+        header: &[u8],
+        meta: &serde_json::Value,
+    ) -> Result<bool> {
+        dispatch!(self, pool => {
+            let r = sqlx::query(
+                "UPDATE sequences SET header = $1, meta = $2, live_until = NULL \
+                 WHERE id = $3 AND live_until IS NOT NULL",
+            )
+            .bind(header)
+            .bind(meta.to_string())
+            .bind(id)
+            .execute(pool)
+            .await?;
+            Ok(r.rows_affected() > 0)
+        })
+    }
+
+    /// Where each chunk of a take sits, from the chunk rows (payloads not read): the index
+    /// of a live take, whose header carries none while it grows.
+    pub async fn chunk_index(&self, id: &str) -> Result<Vec<ChunkEntry>> {
+        dispatch!(self, pool => {
+            sqlx::query(
+                "SELECT idx, first_frame, frames, crc32c, length(payload) AS len FROM chunks \
+                 WHERE sequence_id = $1 ORDER BY idx",
+            )
+            .bind(id)
+            .fetch_all(pool)
+            .await?
+            .iter()
+            .map(|r| {
+                let crc: i64 = r.try_get("crc32c")?;
+                let len: i64 = r.try_get::<i64, _>("len").or_else(|_| r.try_get::<i32, _>("len").map(i64::from))?;
+                Ok(ChunkEntry {
+                    idx: r.try_get("idx")?,
+                    first_frame: r.try_get("first_frame")?,
+                    frames: r.try_get("frames")?,
+                    crc32c: u32::try_from(crc).map_err(|_| Error::Corrupt(format!("crc {crc}")))?,
+                    len,
+                })
+            })
+            .collect()
         })
     }
 

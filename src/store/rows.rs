@@ -15,6 +15,17 @@ pub struct ChunkRow {
     pub payload: Vec<u8>,
 }
 
+/// Where a chunk sits and how to check it, without its payload.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChunkEntry {
+    pub idx: i64,
+    pub first_frame: i64,
+    pub frames: i64,
+    pub crc32c: u32,
+    /// Payload bytes.
+    pub len: i64,
+}
+
 /// Everything stored about a take except its chunks.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SequenceRow {
@@ -46,6 +57,9 @@ pub struct SequenceRow {
     pub meta: serde_json::Value,
     /// Milliseconds since the Unix epoch.
     pub created_at: i64,
+    /// While a live stream codes the take: when its lease runs out (ms since the epoch).
+    #[serde(skip)]
+    pub live_until: Option<i64>,
 }
 
 /// A take to insert: its row and its chunks.
@@ -67,13 +81,13 @@ impl std::ops::Deref for NewSequence {
 
 pub const SEQUENCE_COLUMNS: &str = "id, name, library, fps, frames, points, duration_s, \
     metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, raw_bytes, \
-    stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at";
+    stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at, live_until";
 
 pub const INSERT_SEQUENCE: &str = "INSERT INTO sequences (id, name, library, fps, frames, \
     points, duration_s, metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, \
     raw_bytes, stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, \
-    created_at) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, \
-    $16, $17, $18, $19, $20, $21, $22, $23)";
+    created_at, live_until) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, \
+    $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24)";
 
 /// Bind a take's columns, in [`INSERT_SEQUENCE`] order, to a query of either backend.
 pub fn bind_sequence<'q, DB: sqlx::Database>(
@@ -84,6 +98,7 @@ where
     String: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     f64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    Option<i64>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     Vec<u8>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
 {
     q.bind(s.id.clone())
@@ -109,6 +124,7 @@ where
         .bind(s.header.clone())
         .bind(s.meta.to_string())
         .bind(s.created_at)
+        .bind(s.live_until)
 }
 
 /// Read a [`SequenceRow`] (tags left empty) from either backend's row.
@@ -118,6 +134,7 @@ where
     for<'a> String: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> f64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> i64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> Option<i64>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
 {
     let meta: String = r.try_get("meta")?;
@@ -146,6 +163,7 @@ where
         header: r.try_get("header")?,
         meta: serde_json::from_str(&meta).map_err(|e| Error::Corrupt(format!("meta JSON: {e}")))?,
         created_at: r.try_get("created_at")?,
+        live_until: r.try_get("live_until")?,
     })
 }
 

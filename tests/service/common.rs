@@ -8,6 +8,7 @@
 #![allow(dead_code)]
 
 use mocapstore::http::{Application, Config};
+use mocapstore::limits::Limits;
 use mocapstore::store::Store;
 use serde_json::Value;
 
@@ -105,6 +106,21 @@ pub struct Server {
 }
 
 pub async fn start(store: Store, max_body_bytes: usize) -> Server {
+    start_with(
+        store,
+        Config {
+            limits: Limits {
+                upload_bytes: max_body_bytes as u64,
+                ..Limits::default()
+            },
+            ..Config::default()
+        },
+    )
+    .await
+}
+
+/// The real server with `config` (its address and database are the test's).
+pub async fn start_with(store: Store, config: Config) -> Server {
     // Server-side errors (500s carry no detail) show in a failing test's output.
     let _ = tracing_subscriber::fmt()
         .with_env_filter("warn")
@@ -113,8 +129,8 @@ pub async fn start(store: Store, max_body_bytes: usize) -> Server {
     let config = Config {
         listen: "127.0.0.1:0".into(),
         database_url: String::new(),
-        max_body_bytes,
         decoded_cache_mib: 64,
+        ..config
     };
     let app = Application::with_store(store, config).await.unwrap();
     let base = format!("http://{}", app.local_addr());

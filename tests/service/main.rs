@@ -9,6 +9,7 @@ mod bases;
 mod cli;
 mod http;
 mod library;
+mod limits;
 mod openapi;
 mod robustness;
 mod store;

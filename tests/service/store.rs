@@ -43,6 +43,7 @@ fn take(id: &str, n: usize) -> NewSequence {
             header: vec![1, 2, 3, 255],
             meta: serde_json::json!({"points": ["a", "b"], "decision": {"winner": "quant"}}),
             created_at: 1_700_000_000_000,
+            live_until: None,
         },
         chunks,
         basis: None,

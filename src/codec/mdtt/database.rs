@@ -347,7 +347,10 @@ impl Codec for MdttShared {
     }
 
     /// As per-take `mdtt`, a clip DCT needs about a second of motion to be worth it.
-    fn unsuited(&self, frames: usize, fps: f64) -> Option<String> {
+    fn unsuited(&self, frames: usize, points: usize, fps: f64) -> Option<String> {
+        if let Err(e) = super::check_points(points) {
+            return Some(e.to_string());
+        }
         let seconds = frames as f64 / fps;
         (seconds < 0.5).then(|| format!("take is {seconds:.2} s; clips need at least 0.5 s"))
     }
@@ -485,6 +488,9 @@ fn bases_for(c: &Clips, k: usize, opts: &SetOptions) -> (Vec<DMatrix<f64>>, Vec<
 
 /// Train exactly `k` shared bases (no choice of `K`): for tests and callers that know it.
 pub fn train_bases(takes: &[Input<'_>], k: usize, opts: &SetOptions) -> Result<Basis> {
+    if let Some(t) = takes.first() {
+        super::check_points(t.points)?;
+    }
     let (c, points) = clips_of(takes)?;
     to_basis(points, &bases_for(&c, k, opts).0)
 }
@@ -492,6 +498,9 @@ pub fn train_bases(takes: &[Input<'_>], k: usize, opts: &SetOptions) -> Result<B
 /// Train `K` shared bases for takes of one layout (inputs gap-filled, in consistent units)
 /// and choose `K` by the total size of those takes coded at `targets`, bases included.
 pub fn train_set(takes: &[Input<'_>], targets: &[Target], opts: &SetOptions) -> Result<TrainedSet> {
+    if let Some(t) = takes.first() {
+        super::check_points(t.points)?;
+    }
     let (c, points) = clips_of(takes)?;
     let mut sizes = Vec::new();
     let mut best: Option<(usize, Basis, Vec<f64>)> = None;

@@ -274,6 +274,20 @@ fn rank_ladder(w: usize) -> Vec<usize> {
     ks
 }
 
+/// MDTT's bases are `3J × 3J`, found by an eigendecomposition of that size: refuse layouts
+/// past [`crate::limits::MDTT_MAX_POINTS`] before allocating anything of that size.
+pub fn check_points(points: usize) -> Result<()> {
+    let limit = crate::limits::MDTT_MAX_POINTS;
+    if points > limit {
+        return Err(Error::Limit {
+            what: "points for an MDTT basis",
+            actual: points as u64,
+            limit: limit as u64,
+        });
+    }
+    Ok(())
+}
+
 /// Encode with fixed parameters (the paper's setting): rank `k`, `l = r·k`, coefficient
 /// step `coef_step`, 16-bit basis.
 pub fn encode_with(
@@ -282,6 +296,7 @@ pub fn encode_with(
     coef_step: f64,
     target: Target,
 ) -> Result<CodecOutput> {
+    check_points(input.points)?;
     let w = input.width();
     let k = k.clamp(1, w);
     let clip = clip_len(input.fps).min(input.frames);
@@ -306,6 +321,7 @@ impl Codec for Mdtt {
     }
 
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput> {
+        check_points(input.points)?;
         let best = match target {
             Target::Max(t) => search(input, target, t),
             // A mean bound no transform setting meets alone (noise-like or tiny takes) is
@@ -329,7 +345,10 @@ impl Codec for Mdtt {
 
     /// A per-take basis costs more than it saves on takes under a second (measured on the
     /// Bandai takes, mean 6 s, where mdtt already loses at max bounds).
-    fn unsuited(&self, frames: usize, fps: f64) -> Option<String> {
+    fn unsuited(&self, frames: usize, points: usize, fps: f64) -> Option<String> {
+        if let Err(e) = check_points(points) {
+            return Some(e.to_string());
+        }
         let seconds = frames as f64 / fps;
         (seconds < 1.0).then(|| {
             format!("take is {seconds:.2} s; a per-take basis needs at least 1 s to pay for itself")

@@ -175,7 +175,14 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         limits.check_shape(rows, joints.len())?;
     }
     let mut warnings = Vec::new();
-    if rows != header_frames {
+    let mut contradictions = Vec::new();
+    if rows < header_frames {
+        // A file cut short: keeping what is there would archive part of a take as if whole.
+        contradictions.push(format!(
+            "header says {header_frames} frames but only {rows} rows are present (the file is cut short)"
+        ));
+    } else if rows > header_frames {
+        // Nothing is lost; some exporters count one frame short.
         warnings.push(format!(
             "header says {header_frames} frames but {rows} rows are present; loaded the {rows} rows"
         ));
@@ -189,11 +196,18 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
 
     let names = joints.iter().map(|j| j.name.clone()).collect();
     let skeleton = Skeleton::new(joints, values)?;
-    let positions = skeleton
+    let positions: Vec<f32> = skeleton
         .forward_kinematics()
         .into_iter()
         .map(|v| v as f32)
         .collect();
+    // BVH has no gaps: a position that is not finite came from values beyond any scale.
+    let bad = positions.iter().filter(|v| !v.is_finite()).count();
+    if bad > 0 {
+        contradictions.push(format!(
+            "{bad} joint coordinates are not finite (channel values beyond any physical scale)"
+        ));
+    }
     let motion = Motion::new(
         1.0 / frame_time,
         unsettled_unit(),
@@ -205,6 +219,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         motion,
         declared_unit: None,
         warnings,
+        contradictions,
     })
 }
 
@@ -218,7 +233,7 @@ fn parse_hierarchy(t: &mut Tokens<'_>, limits: &Limits) -> Result<Vec<Joint>> {
         return Err(err(line, format!("expected ROOT, found {root:?}")));
     }
     let mut joints = Vec::new();
-    parse_joint(t, line, None, false, &mut joints, limits)?;
+    parse_joints(t, line, &mut joints, limits)?;
     if let Some(&(line, extra)) = t.toks.get(t.pos) {
         return Err(err(
             line,
@@ -228,15 +243,91 @@ fn parse_hierarchy(t: &mut Tokens<'_>, limits: &Limits) -> Result<Vec<Joint>> {
     Ok(joints)
 }
 
-/// Parse one joint (its keyword already consumed) and, recursively, its children.
-fn parse_joint(
+/// A joint block being read: its index and where it opened.
+struct Open {
+    index: usize,
+    line: usize,
+    seen_offset: bool,
+}
+
+/// Parse the root joint (its keyword already consumed) and everything nested in it.
+///
+/// The nesting is walked with an explicit stack, never by recursion: a hostile file nests
+/// as deep as it likes, and the thread's stack is not the place to find out how deep.
+fn parse_joints(
+    t: &mut Tokens<'_>,
+    root_line: usize,
+    joints: &mut Vec<Joint>,
+    limits: &Limits,
+) -> Result<()> {
+    let mut open = vec![open_joint(t, root_line, None, false, joints, limits)?];
+    while let Some(top) = open.last_mut() {
+        let index = top.index;
+        let end_site = joints[index].end_site;
+        let (l, kw) = t.next()?;
+        match kw {
+            "}" => {
+                if !top.seen_offset {
+                    return Err(err(
+                        top.line,
+                        format!("joint {:?} has no OFFSET", joints[index].name),
+                    ));
+                }
+                open.pop();
+            }
+            "OFFSET" => {
+                let mut o = [0.0; 3];
+                for v in &mut o {
+                    *v = t.number("OFFSET")?;
+                }
+                joints[index].offset = o;
+                top.seen_offset = true;
+            }
+            "CHANNELS" if !end_site => {
+                let (cl, n) = t.next()?;
+                let n: usize = n
+                    .parse()
+                    .ok()
+                    .filter(|n| *n <= 6)
+                    .ok_or_else(|| err(cl, format!("channel count {n:?} is not 0..=6")))?;
+                let mut chans = Vec::with_capacity(n);
+                for _ in 0..n {
+                    let (cl, c) = t.next()?;
+                    let ch = Channel::parse(c)
+                        .ok_or_else(|| err(cl, format!("unknown channel {c:?}")))?;
+                    if chans.contains(&ch) {
+                        return Err(err(cl, format!("channel {c} listed twice")));
+                    }
+                    chans.push(ch);
+                }
+                joints[index].channels = chans;
+            }
+            "JOINT" | "End" if !end_site => {
+                if open.len() as u64 >= limits.max_depth {
+                    return Err(Error::Limit {
+                        what: "hierarchy depth",
+                        actual: open.len() as u64 + 1,
+                        limit: limits.max_depth,
+                    });
+                }
+                let child = open_joint(t, l, Some(index), kw == "End", joints, limits)?;
+                open.push(child);
+            }
+            other => return Err(err(l, format!("unexpected {other:?} in joint block"))),
+        }
+    }
+    Ok(())
+}
+
+/// Read a joint's name (or `End Site`) and its opening brace, and add it.
+fn open_joint(
     t: &mut Tokens<'_>,
     line: usize,
     parent: Option<usize>,
     end_site: bool,
     joints: &mut Vec<Joint>,
     limits: &Limits,
-) -> Result<()> {
+) -> Result<Open> {
     if joints.len() as u64 >= limits.max_points {
         return Err(Error::Limit {
             what: "joint count",
@@ -259,7 +350,6 @@ fn parse_joint(
         t.name_on(line)?
     };
     t.expect("{")?;
-    let index = joints.len();
     joints.push(Joint {
         name,
         parent,
@@ -267,50 +357,11 @@ fn parse_joint(
         channels: Vec::new(),
         end_site,
     });
-    let mut seen_offset = false;
-    loop {
-        let (l, kw) = t.next()?;
-        match kw {
-            "}" => break,
-            "OFFSET" => {
-                let mut o = [0.0; 3];
-                for v in &mut o {
-                    *v = t.number("OFFSET")?;
-                }
-                joints[index].offset = o;
-                seen_offset = true;
-            }
-            "CHANNELS" if !end_site => {
-                let (cl, n) = t.next()?;
-                let n: usize = n
-                    .parse()
-                    .ok()
-                    .filter(|n| *n <= 6)
-                    .ok_or_else(|| err(cl, format!("channel count {n:?} is not 0..=6")))?;
-                let mut chans = Vec::with_capacity(n);
-                for _ in 0..n {
-                    let (cl, c) = t.next()?;
-                    let ch = Channel::parse(c)
-                        .ok_or_else(|| err(cl, format!("unknown channel {c:?}")))?;
-                    if chans.contains(&ch) {
-                        return Err(err(cl, format!("channel {c} listed twice")));
-                    }
-                    chans.push(ch);
-                }
-                joints[index].channels = chans;
-            }
-            "JOINT" if !end_site => parse_joint(t, l, Some(index), false, joints, limits)?,
-            "End" if !end_site => parse_joint(t, l, Some(index), true, joints, limits)?,
-            other => return Err(err(l, format!("unexpected {other:?} in joint block"))),
-        }
-    }
-    if !seen_offset {
-        return Err(err(
-            line,
-            format!("joint {:?} has no OFFSET", joints[index].name),
-        ));
-    }
-    Ok(())
+    Ok(Open {
+        index: joints.len() - 1,
+        line,
+        seen_offset: false,
+    })
 }
 
 fn unique_name(joints: &[Joint], base: &str) -> String {
@@ -331,7 +382,7 @@ pub fn write(motion: &Motion) -> Result<Vec<u8>> {
     let mut out = String::with_capacity(64 * s.joints.len() + 12 * s.values.len());
     out.push_str("HIERARCHY\n");
     if !s.joints.is_empty() {
-        write_joint(s, 0, 0, &mut out);
+        write_hierarchy(s, &mut out);
     }
     let frames = s.frame_count();
     let _ = write!(out, "MOTION\nFrames: {frames}\nFrame Time: ");
@@ -356,32 +407,45 @@ fn format_frame_time(t: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
-fn write_joint(s: &Skeleton, i: usize, depth: usize, out: &mut String) {
-    let ind = "\t".repeat(depth);
-    let j = &s.joints[i];
-    if j.end_site {
-        let _ = writeln!(out, "{ind}End Site");
-    } else if j.parent.is_none() {
-        let _ = writeln!(out, "{ind}ROOT {}", j.name);
-    } else {
-        let _ = writeln!(out, "{ind}JOINT {}", j.name);
-    }
-    let _ = writeln!(out, "{ind}{{");
-    let [x, y, z] = j.offset;
-    let _ = writeln!(out, "{ind}\tOFFSET {x} {y} {z}");
-    if !j.end_site {
-        let _ = write!(out, "{ind}\tCHANNELS {}", j.channels.len());
-        for c in &j.channels {
-            let _ = write!(out, " {}", c.name());
-        }
-        out.push('\n');
-    }
-    for (k, child) in s.joints.iter().enumerate().skip(i + 1) {
-        if child.parent == Some(i) {
-            write_joint(s, k, depth + 1, out);
+/// Print the hierarchy: each joint's block opens before its children's and closes after
+/// them. Walked with an explicit stack (no recursion on depth), children found once.
+fn write_hierarchy(s: &Skeleton, out: &mut String) {
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); s.joints.len()];
+    for (k, j) in s.joints.iter().enumerate() {
+        if let Some(p) = j.parent {
+            children[p].push(k);
         }
     }
-    let _ = writeln!(out, "{ind}}}");
+    // (joint, depth, opened): a joint is pushed unopened, opened (header printed, then
+    // its children pushed after it), and closed when it comes back to the top.
+    let mut stack = vec![(0usize, 0usize, false)];
+    while let Some((i, depth, opened)) = stack.pop() {
+        let ind = "\t".repeat(depth);
+        if opened {
+            let _ = writeln!(out, "{ind}}}");
+            continue;
+        }
+        let j = &s.joints[i];
+        if j.end_site {
+            let _ = writeln!(out, "{ind}End Site");
+        } else if j.parent.is_none() {
+            let _ = writeln!(out, "{ind}ROOT {}", j.name);
+        } else {
+            let _ = writeln!(out, "{ind}JOINT {}", j.name);
+        }
+        let _ = writeln!(out, "{ind}{{");
+        let [x, y, z] = j.offset;
+        let _ = writeln!(out, "{ind}\tOFFSET {x} {y} {z}");
+        if !j.end_site {
+            let _ = write!(out, "{ind}\tCHANNELS {}", j.channels.len());
+            for c in &j.channels {
+                let _ = write!(out, " {}", c.name());
+            }
+            out.push('\n');
+        }
+        stack.push((i, depth, true));
+        stack.extend(children[i].iter().rev().map(|&k| (k, depth + 1, false)));
+    }
 }
 
 #[cfg(test)]
@@ -420,11 +484,22 @@ mod tests {
     }
 
     #[test]
-    fn header_count_mismatch_is_a_warning() {
+    fn more_rows_than_declared_is_a_warning_fewer_a_contradiction() {
         let more = TOY.replace("Frames:\t2", "Frames:\t1");
         let p = read(more.as_bytes(), &Limits::default()).unwrap();
         assert_eq!(p.motion.frame_count(), 2);
         assert_eq!(p.warnings.len(), 1);
+        assert!(p.contradictions.is_empty());
+        let fewer = TOY.replace("Frames:\t2", "Frames:\t3");
+        let p = read(fewer.as_bytes(), &Limits::default()).unwrap();
+        assert_eq!(p.contradictions.len(), 1, "{:?}", p.contradictions);
+    }
+
+    #[test]
+    fn values_beyond_any_scale_are_a_contradiction() {
+        let huge = TOY.replace("1 10 0 90 0 0 0 0 90", "1e308 10 0 90 0 0 0 0 90");
+        let p = read(huge.as_bytes(), &Limits::default()).unwrap();
+        assert_eq!(p.contradictions.len(), 1, "{:?}", p.contradictions);
     }
 
     #[test]
@@ -453,6 +528,49 @@ mod tests {
             &Limits::default()
         )
         .is_err());
+    }
+
+    /// A chain of `depth` joints, each one level below the last, and one frame.
+    fn chain(depth: usize) -> String {
+        let mut s = String::from(
+            "HIERARCHY\nROOT j0\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yposition Zposition\n",
+        );
+        for i in 1..depth {
+            s.push_str(&format!(
+                "JOINT j{i}\n{{\nOFFSET 0 1 0\nCHANNELS 1 Zrotation\n"
+            ));
+        }
+        s.push_str(&"}\n".repeat(depth));
+        s.push_str("MOTION\nFrames: 1\nFrame Time: 0.01\n0 0 0");
+        s.push_str(&" 1".repeat(depth - 1));
+        s.push('\n');
+        s
+    }
+
+    #[test]
+    fn deep_hierarchies_are_refused_by_the_limit_not_the_stack() {
+        // 6,000 levels overflowed the stack of the recursive parser (an abort, not an error).
+        let deep = chain(6_000);
+        assert!(matches!(
+            read(deep.as_bytes(), &Limits::default()),
+            Err(Error::Limit {
+                what: "hierarchy depth",
+                ..
+            })
+        ));
+        // Past the default depth limit, with the limit raised: parsed without recursion.
+        let limits = Limits {
+            max_depth: 100_000,
+            ..Limits::default()
+        };
+        let m = read(deep.as_bytes(), &limits).unwrap().motion;
+        assert_eq!(m.point_count(), 6_000);
+        // The writer walks it without recursion too, and it parses back the same.
+        let text = write(&m).unwrap();
+        let again = read(&text, &limits).unwrap().motion;
+        assert_eq!(again.skeleton, m.skeleton);
+        // Within the default limit it simply loads.
+        assert!(read(chain(400).as_bytes(), &Limits::default()).is_ok());
     }
 
     #[test]

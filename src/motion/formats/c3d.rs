@@ -282,6 +282,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     };
     let params = parse_params(bytes, pstart, params_end, proc)?;
     let mut warnings = Vec::new();
+    let mut contradictions = Vec::new();
 
     let points = params
         .u16s("POINT", "USED")
@@ -350,8 +351,8 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
                 format!("data section holds no whole frame ({frames} declared)"),
             ));
         }
-        warnings.push(format!(
-            "file is truncated: {frames} frames declared, {available} present; loaded {available}"
+        contradictions.push(format!(
+            "file is truncated: {frames} frames declared, {available} present"
         ));
         frames = available;
     }
@@ -378,6 +379,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     let names = point_names(&params, points);
     let abs_scale = scale.abs();
     let mut positions = vec![f32::NAN; frames * points * 3];
+    let mut not_finite = 0usize;
     for f in 0..frames {
         let frame = &bytes[data_start + f * frame_bytes..];
         for p in 0..points {
@@ -389,12 +391,23 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
                 let v = |k: usize| f32::from(proc.i16(&frame[at + k * 2..]));
                 ([v(0) * abs_scale, v(1) * abs_scale, v(2) * abs_scale], v(3))
             };
-            if residual >= 0.0 && xyz.iter().all(|c| c.is_finite()) {
-                positions[(f * points + p) * 3..(f * points + p) * 3 + 3].copy_from_slice(&xyz);
+            if residual >= 0.0 {
+                // A sample marked valid (residual ≥ 0) must be a number: C3D marks gaps by
+                // the residual, never by the coordinates.
+                if xyz.iter().all(|c| c.is_finite()) {
+                    positions[(f * points + p) * 3..(f * points + p) * 3 + 3].copy_from_slice(&xyz);
+                } else {
+                    not_finite += 1;
+                }
             }
         }
     }
 
+    if not_finite > 0 {
+        contradictions.push(format!(
+            "{not_finite} samples are marked valid but their coordinates are not finite"
+        ));
+    }
     let motion = if points == 0 {
         Motion::without_points(rate, unsettled_unit(), frames)?
     } else {
@@ -404,6 +417,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         motion,
         declared_unit: unit,
         warnings,
+        contradictions,
     })
 }
 
@@ -526,15 +540,16 @@ mod tests {
         b.param(2, "ACTUAL_END_FIELD", 2, &[2], &u16s(&[3, 0]));
         let p = read(&b.build(2, &rows), &Limits::default()).unwrap();
         assert_eq!(p.motion.frame_count(), 3);
-        // The high word counts 65536 frames: more than the file holds, so it is truncated
-        // to what is present, with a warning.
+        // The high word counts 65536 frames: more than the file holds, so it is cut to what
+        // is present, and the reader reports that the file contradicts its header (refused
+        // unless the read is lenient).
         let mut b = Builder::new();
         b.param(2, "ACTUAL_START_FIELD", 2, &[2], &u16s(&[1, 0]));
         b.param(2, "ACTUAL_END_FIELD", 2, &[2], &u16s(&[2, 1]));
         let p = read(&b.build(2, &rows), &Limits::default()).unwrap();
         assert_eq!(p.motion.frame_count(), 3);
         assert!(p
-            .warnings
+            .contradictions
             .iter()
             .any(|w| w.contains("65538 frames declared")));
     }

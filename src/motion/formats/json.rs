@@ -63,6 +63,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         Some(UnitField::Name(s)) => Some(parse_unit(&s)?),
         Some(UnitField::Metres(m)) => Some(parse_unit(&m.to_string())?),
     };
+    let contradictions = super::infinite_values(&positions).into_iter().collect();
     let motion = if n == 0 {
         Motion::without_points(doc.fps, unsettled_unit(), doc.frames.len())?
     } else {
@@ -72,6 +73,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         motion,
         declared_unit,
         warnings: Vec::new(),
+        contradictions,
     })
 }
 

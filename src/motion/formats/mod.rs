@@ -94,19 +94,14 @@ pub struct Limits {
     pub max_frames: u64,
     /// Points × frames: what memory really scales with.
     pub max_samples: u64,
+    /// Nesting depth of a skeleton hierarchy (root = 1).
+    pub max_depth: u64,
 }
 
 impl Default for Limits {
-    /// Generous for real capture (a 4-hour 200-marker session at 240 fps is ~690 M samples
-    /// over the default) yet small enough that a hostile header cannot make us allocate
-    /// tens of GiB.
+    /// The service's defaults ([`crate::limits`], where every limit is set and explained).
     fn default() -> Self {
-        Limits {
-            max_bytes: 2 << 30,
-            max_points: 10_000,
-            max_frames: 20_000_000,
-            max_samples: 200_000_000,
-        }
+        crate::limits::Limits::default().reader()
     }
 }
 
@@ -146,6 +141,11 @@ pub struct ReadOptions {
     pub unit: Option<f64>,
     /// Frames per second, stated by the user (overrides the file; NPY has none).
     pub fps: Option<f64>,
+    /// Keep a file whose data contradicts its header or physical sense (fewer frames than
+    /// declared, values that are not finite or lie beyond any physical scale), with a
+    /// warning, instead of refusing it. Off by default: an archive that silently keeps half
+    /// a take is worse than one that says no.
+    pub lenient: bool,
 }
 
 /// A take as read from a file, with what the reader noticed but could work around.
@@ -163,6 +163,16 @@ pub(crate) struct Parsed {
     /// Unit the file declared, if it declares one.
     pub declared_unit: Option<f64>,
     pub warnings: Vec<String>,
+    /// Where the data contradicts the file's own header or physical sense: refused unless
+    /// the reader is lenient, then kept as warnings (with the bad samples as gaps).
+    pub contradictions: Vec<String>,
+}
+
+/// Values a reader produced that are infinite (or overflowed f32): never a position, and
+/// not a gap marker in any format. Readers report them as a contradiction.
+pub(crate) fn infinite_values(positions: &[f32]) -> Option<String> {
+    let n = positions.iter().filter(|v| v.is_infinite()).count();
+    (n > 0).then(|| format!("{n} coordinates are infinite or overflow 32-bit floats"))
 }
 
 /// Guess the format from the first bytes.
@@ -231,8 +241,37 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         mut motion,
         declared_unit,
         mut warnings,
+        mut contradictions,
     } = parsed;
     motion.unit = settle_unit(&motion, declared_unit, options.unit, &mut warnings)?;
+    // Beyond-scale samples: finite, but farther from the origin than any capture volume.
+    let max_units = crate::limits::MAX_COORDINATE_M / motion.unit.metres_per_unit;
+    let beyond = |s: &[f32]| s.iter().any(|v| f64::from(v.abs()) > max_units);
+    let far = motion
+        .positions()
+        .chunks_exact(3)
+        .filter(|s| beyond(s))
+        .count();
+    if far > 0 {
+        contradictions.push(format!(
+            "{far} samples lie more than {} m from the origin, beyond any physical scale",
+            crate::limits::MAX_COORDINATE_M
+        ));
+    }
+    if !contradictions.is_empty() {
+        if !options.lenient {
+            return Err(Error::Contradiction(format!(
+                "{}; refused (state lenient to keep it, with the bad samples as gaps)",
+                contradictions.join("; ")
+            )));
+        }
+        motion.gap_where(beyond);
+        warnings.extend(
+            contradictions
+                .into_iter()
+                .map(|c| format!("{c}; kept because lenient was asked for")),
+        );
+    }
     match options.fps {
         Some(fps) if fps.is_finite() && fps > 0.0 => motion.fps = fps,
         Some(fps) => {
@@ -342,6 +381,7 @@ mod tests {
             max_points: 2,
             max_frames: 5,
             max_samples: 6,
+            max_depth: 4,
         };
         assert!(l.check_bytes(11).is_err());
         assert!(l.check_shape(5, 2).is_err()); // 10 samples

@@ -140,6 +140,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         }
     }
     let names = (1..=points).map(|i| format!("P{i}")).collect();
+    let contradictions = super::infinite_values(&positions).into_iter().collect();
     let motion = if points == 0 {
         Motion::without_points(DEFAULT_FPS, unsettled_unit(), frames)?
     } else {
@@ -149,6 +150,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         motion,
         declared_unit: None,
         warnings: Vec::new(),
+        contradictions,
     })
 }
 

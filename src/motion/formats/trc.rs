@@ -118,12 +118,17 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
             header_markers.unwrap_or(0)
         ));
     }
-    if header_frames.is_some_and(|h| h != rows.len()) {
-        warnings.push(format!(
-            "header says {} frames, {} rows are present",
-            header_frames.unwrap_or(0),
+    let mut contradictions = Vec::new();
+    match header_frames {
+        Some(h) if h > rows.len() => contradictions.push(format!(
+            "header says {h} frames but only {} rows are present (the file is cut short)",
             rows.len()
-        ));
+        )),
+        Some(h) if h < rows.len() => warnings.push(format!(
+            "header says {h} frames, {} rows are present; loaded every row",
+            rows.len()
+        )),
+        _ => {}
     }
 
     let mut positions = vec![f32::NAN; rows.len() * width * 3];
@@ -139,6 +144,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
             positions[f * width * 3 + k] = v;
         }
     }
+    contradictions.extend(super::infinite_values(&positions));
     let motion = if width == 0 {
         Motion::without_points(rate, unsettled_unit(), rows.len())?
     } else {
@@ -148,6 +154,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         motion,
         declared_unit: unit,
         warnings,
+        contradictions,
     })
 }
 

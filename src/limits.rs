@@ -1,0 +1,141 @@
+//! Every bound the service puts on what a client may send it or make it hold, in one place.
+//!
+//! A store's worst bug is a crash, and the cheapest way to crash a server is to make it
+//! allocate what a request only claims: a header's frame count, a stream's point count, a
+//! `Content-Length`. So every size a client declares is checked here before it is used, and
+//! memory is bounded per server, not only per request. The numbers are generous for real
+//! capture (the largest marker sets are a few hundred points; a four-hour session at 240 fps
+//! is 3.5 M frames) and small enough that no request can make the server hold gigabytes.
+//!
+//! [`Limits`] holds the tunable ones (`mocapstore serve --help` names their flags); the
+//! constants below are physical facts, not tuning. The layers take the parts they need:
+//! readers [`Limits::reader`], decoders [`Limits::decoder`], streams and uploads the fields.
+//! README ("Limits") and `openapi.yaml` quote the defaults; keep the three in step.
+
+use std::ops::RangeInclusive;
+
+/// Metres per stored unit that a take may declare or a client may state: from a micrometre
+/// to a kilometre. Beyond either end the unit is a mistake (or an attack): errors in
+/// millimetres would overflow or vanish.
+pub const UNIT_METRES: RangeInclusive<f64> = 1e-6..=1e3;
+
+/// The largest coordinate magnitude, in metres, that motion capture can mean: 10 km. A
+/// value beyond it is not a position but a corrupt or hostile number, and refused.
+pub const MAX_COORDINATE_M: f64 = 1e4;
+
+/// Frame rates a take or stream may have, frames per second.
+pub const MAX_FPS: f64 = 100_000.0;
+
+/// Points of a take that per-take `mdtt` and shared `mdtt-set` bases code: their bases are
+/// `3J × 3J` and found by an eigendecomposition of that size (cubic time, 72 MB of
+/// covariance at this bound). Past it those codecs sit out (and say why); the others code.
+pub const MDTT_MAX_POINTS: usize = 400;
+
+/// Points of a layout that an LSDT basis (`J × J` per coordinate) is trained or built for,
+/// streams included: 3 × 2000² f32 is 48 MB per basis.
+pub const LSDT_MAX_POINTS: usize = 2_000;
+
+/// Seconds a client is told to wait (`Retry-After`) when the server is at its memory budget.
+pub const RETRY_AFTER_S: u64 = 2;
+
+/// The tunable limits, with their defaults in [`Limits::default`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// Largest request body, bytes. A larger `Content-Length` is refused (413) before any
+    /// of the body is read; a body without one is cut off at this size.
+    pub upload_bytes: u64,
+    /// Largest body of a frames append to a live stream, bytes.
+    pub append_bytes: u64,
+    /// Largest JSON request body of the other routes (open a stream, train, edit), bytes.
+    pub json_body_bytes: u64,
+    /// Request bodies held at once across the whole server, bytes. A request that would go
+    /// over waits for nothing: it gets 503 with `Retry-After`.
+    pub inflight_bytes: u64,
+    /// Points (markers, joints and end sites) in one take.
+    pub points: u64,
+    /// Frames in one take.
+    pub frames: u64,
+    /// Frames × points of one take: what memory really scales with.
+    pub samples: u64,
+    /// Nesting depth of a BVH hierarchy (root = 1). Parsers never recurse on it; the bound
+    /// only keeps absurd files out.
+    pub hierarchy_depth: u64,
+    /// Points in one live stream. A stream holds a spatial basis of 3 × points² values and
+    /// an encoder state, so this bounds the memory of each open stream.
+    pub stream_points: u64,
+    /// Streams open at once on this server.
+    pub open_streams: u64,
+    /// Frames × points in one stream chunk (what a stream keeps pending before it codes).
+    pub stream_chunk_samples: u64,
+    /// Bytes of frames a stream keeps for re-encoding on finish; past it the stream drops
+    /// the copy (and says so) rather than grow without bound.
+    pub stream_archive_bytes: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            upload_bytes: 512 << 20,
+            append_bytes: 64 << 20,
+            json_body_bytes: 1 << 20,
+            inflight_bytes: 1 << 30,
+            points: 10_000,
+            frames: 20_000_000,
+            samples: 200_000_000,
+            hierarchy_depth: 512,
+            stream_points: 1_000,
+            open_streams: 32,
+            stream_chunk_samples: 2_000_000,
+            stream_archive_bytes: 256 << 20,
+        }
+    }
+}
+
+impl Limits {
+    /// What file readers may accept.
+    pub fn reader(&self) -> crate::motion::formats::Limits {
+        crate::motion::formats::Limits {
+            max_bytes: self.upload_bytes,
+            max_points: self.points,
+            max_frames: self.frames,
+            max_samples: self.samples,
+            max_depth: self.hierarchy_depth,
+        }
+    }
+
+    /// What a decoder of stored (or imported) bitstreams may allocate.
+    pub fn decoder(&self) -> crate::codec::Limits {
+        crate::codec::Limits {
+            max_frames: self.frames,
+            max_points: self.points,
+            max_samples: self.samples,
+            ..crate::codec::Limits::default()
+        }
+    }
+}
+
+/// Check a declared amount against its limit: the reason, naming both, when over.
+pub fn check(what: &str, actual: u64, limit: u64) -> Result<(), String> {
+    if actual > limit {
+        Err(format!("{what} is {actual}, over the limit of {limit}"))
+    } else {
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layers_get_the_same_numbers() {
+        let l = Limits::default();
+        assert_eq!(l.reader().max_points, l.points);
+        assert_eq!(l.decoder().max_samples, l.samples);
+        assert_eq!(crate::motion::formats::Limits::default(), l.reader());
+        assert!(check("points", 3, 2)
+            .unwrap_err()
+            .contains("over the limit of 2"));
+        assert!(check("points", 2, 2).is_ok());
+    }
+}
