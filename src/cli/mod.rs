@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 
+mod archive;
 mod bench;
 mod convert;
 mod ingest;
@@ -43,6 +44,14 @@ enum Command {
     TrainBases(train_bases::TrainArgs),
     /// Range-fetch latency and throughput over HTTP against raw SQLite BLOB reads.
     Loadtest(loadtest::LoadArgs),
+    /// Read every chunk, check its checksum, decode every take and compare it with what was
+    /// measured when it was stored; exits non-zero on anything wrong.
+    Verify(archive::VerifyArgs),
+    /// Write every take back to files: its frames in an open format and its exact bitstream,
+    /// with a manifest (import reads it back into any store).
+    Export(archive::ExportArgs),
+    /// Store the takes of an export again, byte for byte (into SQLite or Postgres).
+    Import(archive::ImportArgs),
 }
 
 #[derive(Args)]
@@ -160,6 +169,9 @@ pub fn main() -> ExitCode {
         Command::Loadtest(args) => loadtest::run(&args),
         Command::TrainBases(args) => train_bases::run(&args),
         Command::Streamtest(args) => streamtest::run(&args),
+        Command::Verify(args) => archive::verify(&args),
+        Command::Export(args) => archive::export(&args),
+        Command::Import(args) => archive::import(&args),
     }
 }
 

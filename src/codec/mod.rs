@@ -37,8 +37,8 @@ pub use container::{Container, Header, Limits};
 pub use error::{Error, Result};
 pub use id::{CodecId, ErrorBound, Latency};
 pub use pipeline::{
-    decode_all, decode_all_with, decode_chunk, decode_range, decode_range_with, decoder, encode,
-    encode_variant, encode_with, Encoded,
+    decode_all, decode_all_with, decode_chunk, decode_range, decode_range_with, decoded_digest,
+    decoder, digest_update, encode, encode_variant, encode_with, Encoded,
 };
 
 /// What an encoder sees: gap-filled positions (`frames × points × 3`, the take's units) and

@@ -21,6 +21,28 @@ pub struct Encoded {
     pub container: Container,
     pub stats: ErrorStats,
     pub stored_bytes: usize,
+    /// [`decoded_digest`] of the decoded take the statistics were measured on: a reader
+    /// that decodes to the same digest later reads exactly what was measured.
+    pub decoded_digest: String,
+}
+
+/// BLAKE3 (hex) of decoded frames as little-endian f32, gaps included: what `verify`
+/// compares a later decode against.
+pub fn decoded_digest(frames: &[f32]) -> String {
+    let mut h = blake3::Hasher::new();
+    digest_update(&mut h, frames);
+    h.finalize().to_hex().to_string()
+}
+
+/// Add decoded frames to a running [`decoded_digest`] (takes decoded chunk by chunk).
+pub fn digest_update(h: &mut blake3::Hasher, frames: &[f32]) {
+    let mut buf = [0u8; 4096];
+    for block in frames.chunks(buf.len() / 4) {
+        for (b, v) in buf.chunks_exact_mut(4).zip(block) {
+            b.copy_from_slice(&v.to_le_bytes());
+        }
+        h.update(&buf[..block.len() * 4]);
+    }
 }
 
 /// Encode `motion` with `codec_id` so that its decoded output meets `bound`.
@@ -137,6 +159,7 @@ pub fn encode_variant(
         container,
         stats,
         stored_bytes,
+        decoded_digest: decoded_digest(&decoded),
     })
 }
 

@@ -11,7 +11,7 @@ use super::error::ApiError;
 use super::AppState;
 use crate::codec::BasisKind;
 use crate::service::bases::{self, TrainRequest};
-use crate::service::jobs::Job;
+use crate::service::jobs::{Job, MAX_WAIT_S};
 use crate::service::Error;
 use crate::store::BasisRow;
 
@@ -62,13 +62,29 @@ pub async fn delete(
     Ok(StatusCode::NO_CONTENT)
 }
 
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobQuery {
+    /// Wait up to this many seconds for the job to finish before answering.
+    wait_s: Option<u64>,
+}
+
 pub async fn job(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    query: Result<Query<JobQuery>, QueryRejection>,
 ) -> Result<Json<Job>, ApiError> {
+    let Query(q) = query?;
+    let wait = q.wait_s.unwrap_or(0);
+    if wait > MAX_WAIT_S {
+        return Err(ApiError::bad_request(format!(
+            "wait_s must be at most {MAX_WAIT_S}, got {wait}"
+        )));
+    }
     state
         .jobs
-        .get(&id)
+        .wait(&id, std::time::Duration::from_secs(wait))
+        .await
         .map(Json)
         .ok_or_else(|| Error::NotFound(format!("job {id}")).into())
 }

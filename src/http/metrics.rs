@@ -14,6 +14,11 @@ const BUCKETS: [f64; 10] = [0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.5, 1.
 
 #[derive(Default)]
 pub struct Metrics {
+    /// Requests that reached the router (answered or not).
+    started: AtomicU64,
+    /// Requests being handled now: a request whose client went away stops counting when the
+    /// server drops it.
+    in_flight: AtomicU64,
     requests: AtomicU64,
     errors: AtomicU64,
     latency_us_sum: AtomicU64,
@@ -60,6 +65,16 @@ impl Metrics {
     pub fn render_text(&self) -> String {
         let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
         let mut s = String::new();
+        s += "# TYPE mocapstore_http_requests_started_total counter\n";
+        s += &format!(
+            "mocapstore_http_requests_started_total {}\n",
+            g(&self.started)
+        );
+        s += "# TYPE mocapstore_http_requests_in_flight gauge\n";
+        s += &format!(
+            "mocapstore_http_requests_in_flight {}\n",
+            g(&self.in_flight)
+        );
         s += "# TYPE mocapstore_http_requests_total counter\n";
         s += &format!("mocapstore_http_requests_total {}\n", g(&self.requests));
         s += "# TYPE mocapstore_http_errors_total counter\n";
@@ -105,8 +120,20 @@ impl Metrics {
     }
 }
 
+/// Counts a request in flight until it is answered or dropped.
+struct InFlight(Arc<Metrics>);
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        self.0.in_flight.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
 pub async fn count_requests(State(m): State<Arc<Metrics>>, req: Request, next: Next) -> Response {
     let t0 = Instant::now();
+    m.started.fetch_add(1, Ordering::Relaxed);
+    m.in_flight.fetch_add(1, Ordering::Relaxed);
+    let _guard = InFlight(m.clone());
     let resp = next.run(req).await;
     m.observe(t0.elapsed().as_secs_f64(), !resp.status().is_success());
     resp

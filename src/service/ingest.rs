@@ -102,6 +102,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         "skeleton": m.skeleton.as_ref().map(|s| &s.joints),
         "warnings": loaded.warnings,
         "decision": decision,
+        "decoded_blake3": enc.decoded_digest,
     });
     let (bound_kind, bound_mm) = match req.bound {
         ErrorBound::MaxMm(v) => ("max", v),

@@ -38,7 +38,12 @@ pub struct Job {
 #[derive(Default)]
 pub struct Jobs {
     inner: Mutex<(HashMap<String, Job>, VecDeque<String>)>,
+    /// Woken whenever a job finishes, for [`Jobs::wait`].
+    finished: tokio::sync::Notify,
 }
+
+/// The longest a client may ask [`Jobs::wait`] to wait, seconds.
+pub const MAX_WAIT_S: u64 = 600;
 
 impl Jobs {
     /// Register a running job and return the handle its worker reports through.
@@ -70,6 +75,25 @@ impl Jobs {
         self.inner.lock().expect("jobs lock").0.get(id).cloned()
     }
 
+    /// The job once it has finished, or as it is after `timeout` (a long poll: clients and
+    /// tests wait for a job without polling in a loop).
+    pub async fn wait(&self, id: &str, timeout: std::time::Duration) -> Option<Job> {
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            // Registered before the state is read, so a finish in between is not missed.
+            let woken = self.finished.notified();
+            tokio::pin!(woken);
+            woken.as_mut().enable();
+            let job = self.get(id)?;
+            if job.state != JobState::Running {
+                return Some(job);
+            }
+            if tokio::time::timeout_at(deadline, woken).await.is_err() {
+                return Some(job);
+            }
+        }
+    }
+
     fn update(&self, id: &str, f: impl FnOnce(&mut Job)) {
         let mut g = self.inner.lock().expect("jobs lock");
         let (map, finished) = &mut *g;
@@ -77,6 +101,7 @@ impl Jobs {
         f(job);
         if job.state != JobState::Running && job.finished_at.is_none() {
             job.finished_at = Some(super::now_ms());
+            self.finished.notify_waiters();
             finished.push_back(id.to_string());
             while finished.len() > KEEP_FINISHED {
                 if let Some(old) = finished.pop_front() {
@@ -146,5 +171,21 @@ mod tests {
         let q = jobs.start("train-bases");
         q.fail("no takes".into());
         assert_eq!(jobs.get(&q.id).unwrap().error.as_deref(), Some("no takes"));
+    }
+
+    #[tokio::test]
+    async fn waiting_returns_when_the_job_finishes_or_at_the_timeout() {
+        use std::time::Duration;
+        let jobs = Arc::new(Jobs::default());
+        let p = jobs.start("train-bases");
+        let running = jobs.wait(&p.id, Duration::from_millis(1)).await.unwrap();
+        assert_eq!(running.state, JobState::Running);
+        let (j2, id) = (jobs.clone(), p.id.clone());
+        let waiter = tokio::spawn(async move { j2.wait(&id, Duration::from_secs(600)).await });
+        tokio::task::yield_now().await;
+        p.succeed(serde_json::json!({}));
+        let done = waiter.await.unwrap().unwrap();
+        assert_eq!(done.state, JobState::Succeeded);
+        assert!(jobs.wait("nope", Duration::from_secs(1)).await.is_none());
     }
 }

@@ -2,6 +2,8 @@
 //! transactions (through the store) and moves codec work off the async executor.
 //!
 //! # Layout
+//! - [`archive`]: verify everything stored; export takes to open files and bitstreams,
+//!   import them back.
 //! - [`bases`]: shared bases — loading, the newest per layout, training jobs.
 //! - [`jobs`]: background jobs and their progress.
 //! - [`choose`]: which codecs compete for a take, and the decision record.
@@ -11,6 +13,7 @@
 //! - [`streams`]: live takes coded and committed chunk by chunk as frames arrive.
 //! - [`prepared`]: decoders kept ready per take for range requests.
 
+pub mod archive;
 pub mod bases;
 pub mod choose;
 pub mod fetch;

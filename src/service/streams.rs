@@ -109,6 +109,8 @@ struct Live {
     /// Stored bytes of the header without its index.
     header_len: usize,
     payload_bytes: usize,
+    /// Running digest of the committed chunks' decoded frames (see `codec::decoded_digest`).
+    digest: blake3::Hasher,
     coder: Option<Coder>,
     basis: Arc<Basis>,
     decoder: Arc<dyn ChunkDecoder>,
@@ -402,6 +404,7 @@ impl Streams {
             index: Vec::new(),
             header_len,
             payload_bytes: 0,
+            digest: blake3::Hasher::new(),
             coder: Some(coder),
             basis,
             decoder,
@@ -665,6 +668,7 @@ impl Streams {
             )));
         }
         live.index.push(meta);
+        codec::digest_update(&mut live.digest, &decoded);
         live.payload_bytes = payload_bytes;
         live.stats = stats;
         live.pending.drain(..n * w);
@@ -698,6 +702,7 @@ impl Streams {
         }
         let mut meta = live.row.meta.clone();
         meta["live"] = serde_json::Value::Bool(false);
+        meta["decoded_blake3"] = live.digest.finalize().to_hex().to_string().into();
         if !live.warnings.is_empty() {
             meta["warnings"] = serde_json::json!(live.warnings);
         }
@@ -846,6 +851,7 @@ async fn reencode_take(
     new.kg_percent = enc.stats.kg_percent;
     new.header = enc.container.header.to_bytes();
     new.meta["decision"] = serde_json::to_value(&decision).unwrap_or_default();
+    new.meta["decoded_blake3"] = enc.decoded_digest.clone().into();
     new.meta["reencoded_from"] = serde_json::Value::String(row.codec.clone());
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
     let chunks = super::ingest::chunk_rows(&enc.container);

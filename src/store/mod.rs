@@ -375,6 +375,18 @@ impl Store {
         })
     }
 
+    /// Takes and chunk rows stored, read in one statement (one consistent snapshot).
+    pub async fn counts(&self) -> Result<(i64, i64)> {
+        dispatch!(self, pool => {
+            let row = sqlx::query(
+                "SELECT (SELECT COUNT(*) FROM sequences) AS takes, (SELECT COUNT(*) FROM chunks) AS chunks",
+            )
+            .fetch_one(pool)
+            .await?;
+            Ok((row.try_get::<i64, _>("takes")?, row.try_get::<i64, _>("chunks")?))
+        })
+    }
+
     /// Number of chunk rows stored (tests check nothing is left behind).
     pub async fn chunk_count(&self) -> Result<i64> {
         dispatch!(self, pool => {

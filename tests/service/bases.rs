@@ -3,24 +3,12 @@
 
 use crate::common;
 
-use std::time::Duration;
-
 use mocapstore::motion::formats::{self, Format};
 use mocapstore::motion::metrics;
 use mocapstore::motion::synthetic::walker;
-use serde_json::{json, Value};
+use serde_json::json;
 
-async fn wait_for_job(srv: &common::Server, location: &str) -> Value {
-    for _ in 0..300 {
-        let (status, job) = srv.get_json(location).await;
-        assert_eq!(status, 200, "{job}");
-        if job["state"] != "running" {
-            return job;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    panic!("job {location} did not finish in 30 s");
-}
+use common::wait_for_job;
 
 #[tokio::test]
 async fn bases_train_in_the_background_code_takes_and_are_kept_while_used() {

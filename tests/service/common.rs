@@ -25,6 +25,11 @@ enum Cleanup {
 }
 
 impl TestStore {
+    /// The database URL (for the CLI, which opens the store itself).
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
     /// Open the store again (a stopped server closes its pool), as a restarted server would.
     pub async fn reopen(&mut self) {
         self.store = Store::open(&self.url).await.expect("reopen the store");
@@ -213,4 +218,49 @@ impl Server {
         let headers = r.headers().clone();
         (status, headers, r.bytes().await.unwrap().to_vec())
     }
+}
+
+/// Wait for a background job to finish: one long poll (the server answers when the job ends,
+/// within its 600 s cap), no sleeping loop and no deadline of the test's own.
+pub async fn wait_for_job(srv: &Server, location: &str) -> Value {
+    let (status, job) = srv.get_json(&format!("{location}?wait_s=600")).await;
+    assert_eq!(status, 200, "{job}");
+    assert_ne!(
+        job["state"], "running",
+        "job {location} still running after 600 s: {job}"
+    );
+    job
+}
+
+/// Metrics from one read of `/metrics`, by name.
+pub async fn metrics(srv: &Server) -> std::collections::HashMap<String, u64> {
+    let (_, _, body) = srv.get("/metrics").await;
+    String::from_utf8(body)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| {
+            let (k, v) = l.split_once(' ')?;
+            Some((k.to_string(), v.trim().parse::<f64>().ok()? as u64))
+        })
+        .collect()
+}
+
+/// Wait until the server has seen `requests` requests besides this wait's own reads of
+/// `/metrics`, answered or dropped every one, and holds none of their bodies. Polled, at most
+/// 30 s: a server that never settles fails the test rather than hang it.
+pub async fn settled(srv: &Server, requests: u64) {
+    for poll in 1..=600u64 {
+        let m = metrics(srv).await;
+        let get = |k: &str| *m.get(k).unwrap_or_else(|| panic!("no {k} in /metrics"));
+        // This read is counted as started and is the one request in flight.
+        if get("mocapstore_http_requests_started_total") >= requests + poll
+            && get("mocapstore_http_requests_in_flight") <= 1
+            && get("mocapstore_request_body_bytes_held") == 0
+        {
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    panic!("the server did not settle");
 }

@@ -53,14 +53,7 @@ async fn raw(base: &str, head: &str, body: &[u8]) -> (u16, String, TcpStream) {
 
 /// A gauge from `/metrics`.
 async fn gauge(srv: &common::Server, name: &str) -> u64 {
-    let (_, _, body) = srv.get("/metrics").await;
-    let text = String::from_utf8(body).unwrap();
-    text.lines()
-        .find_map(|l| l.strip_prefix(&format!("{name} ")))
-        .unwrap_or_else(|| panic!("no {name} in /metrics"))
-        .trim()
-        .parse()
-        .unwrap()
+    common::metrics(srv).await[name]
 }
 
 /// Poll `f` until it holds, at most `tries` times 50 ms apart.

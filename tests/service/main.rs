@@ -5,6 +5,7 @@
 
 mod common;
 
+mod archive;
 mod bases;
 mod cli;
 mod http;

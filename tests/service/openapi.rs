@@ -90,7 +90,10 @@ fn response_schema<'a>(spec: &'a Value, path: &str, method: &str, status: u16) -
     &resp["content"]["application/json"]["schema"]
 }
 
-fn conforms(spec: &Value, path: &str, method: &str, status: u16, body: &Value) {
+/// The answer has the status the test expects, and that status and its body are what the
+/// contract says for the operation.
+fn conforms(spec: &Value, path: &str, method: &str, (status, want): (u16, u16), body: &Value) {
+    assert_eq!(status, want, "{method} {path}: {body}");
     let schema = response_schema(spec, path, method, status);
     let mut errors = Vec::new();
     check(spec, schema, body, "$", &mut errors);
@@ -108,13 +111,13 @@ async fn live_responses_match_the_contract() {
     let srv = common::start(t.store.clone(), 8 << 20).await;
     let take = formats::write(&walker(300, 6, 120.0, 3, 0.2), Format::Json).unwrap();
     let (status, report) = srv.post("name=a&tags=x,y&max_error_mm=1", take).await;
-    conforms(&spec, "/v1/sequences", "post", status, &report);
+    conforms(&spec, "/v1/sequences", "post", (status, 201), &report);
     let id = report["id"].as_str().unwrap().to_string();
-    for (status, body) in [
-        srv.post("codec=zip", vec![1]).await,
-        srv.post("", b"junk".to_vec()).await,
+    for ((status, body), want) in [
+        (srv.post("codec=zip", vec![1]).await, 400),
+        (srv.post("", b"junk".to_vec()).await, 422),
     ] {
-        conforms(&spec, "/v1/sequences", "post", status, &body);
+        conforms(&spec, "/v1/sequences", "post", (status, want), &body);
     }
     let get = |p: String| {
         let srv = &srv;
@@ -126,27 +129,30 @@ async fn live_responses_match_the_contract() {
             )
         }
     };
-    for (route, path) in [
-        ("/v1/sequences", "/v1/sequences?limit=1".to_string()),
-        ("/v1/sequences", "/v1/sequences?limit=0".to_string()),
-        ("/v1/sequences/{id}", format!("/v1/sequences/{id}")),
-        ("/v1/sequences/{id}", "/v1/sequences/nope".to_string()),
+    for (route, path, want) in [
+        ("/v1/sequences", "/v1/sequences?limit=1".to_string(), 200),
+        ("/v1/sequences", "/v1/sequences?limit=0".to_string(), 400),
+        ("/v1/sequences/{id}", format!("/v1/sequences/{id}"), 200),
+        ("/v1/sequences/{id}", "/v1/sequences/nope".to_string(), 404),
         (
             "/v1/sequences/{id}/frames",
             format!("/v1/sequences/{id}/frames?start=3&end=9"),
+            200,
         ),
         (
             "/v1/sequences/{id}/frames",
             format!("/v1/sequences/{id}/frames?end=9999"),
+            416,
         ),
         (
             "/v1/sequences/{id}/frames",
             format!("/v1/sequences/{id}/frames?format=bvh"),
+            409,
         ),
-        ("/v1/stats", "/v1/stats".to_string()),
+        ("/v1/stats", "/v1/stats".to_string(), 200),
     ] {
         let (status, body) = get(path).await;
-        conforms(&spec, route, "get", status, &body);
+        conforms(&spec, route, "get", (status, want), &body);
     }
     let r = srv
         .client
@@ -160,35 +166,34 @@ async fn live_responses_match_the_contract() {
         &spec,
         "/v1/sequences/{id}",
         "patch",
-        status,
+        (status, 200),
         &r.json().await.unwrap(),
     );
     // Bases and jobs.
     let (status, _, job) = srv
         .post_json("/v1/bases", &serde_json::json!({"max_iterations": 5}))
         .await;
-    conforms(&spec, "/v1/bases", "post", status, &job);
+    conforms(&spec, "/v1/bases", "post", (status, 202), &job);
     let (status, _, bad) = srv
         .post_json("/v1/bases", &serde_json::json!({"library": "none"}))
         .await;
-    conforms(&spec, "/v1/bases", "post", status, &bad);
+    conforms(&spec, "/v1/bases", "post", (status, 400), &bad);
     let job_path = format!("/v1/jobs/{}", job["id"].as_str().unwrap());
-    let basis = loop {
-        let (status, j) = get(job_path.clone()).await;
-        conforms(&spec, "/v1/jobs/{id}", "get", status, &j);
-        if j["state"] != "running" {
-            break j["result"]["id"].as_str().unwrap().to_string();
-        }
-        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
-    };
-    for (route, path) in [
-        ("/v1/bases", "/v1/bases".to_string()),
-        ("/v1/bases/{id}", format!("/v1/bases/{basis}")),
-        ("/v1/bases/{id}", "/v1/bases/nope".to_string()),
-        ("/v1/jobs/{id}", "/v1/jobs/nope".to_string()),
+    let (status, j) = get(job_path.clone()).await;
+    conforms(&spec, "/v1/jobs/{id}", "get", (status, 200), &j);
+    let j = common::wait_for_job(&srv, &job_path).await;
+    conforms(&spec, "/v1/jobs/{id}", "get", (200, 200), &j);
+    let basis = j["result"]["id"].as_str().unwrap().to_string();
+    for (route, path, want) in [
+        ("/v1/bases", "/v1/bases".to_string(), 200),
+        ("/v1/bases", "/v1/bases?kind=nope".to_string(), 400),
+        ("/v1/bases/{id}", format!("/v1/bases/{basis}"), 200),
+        ("/v1/bases/{id}", "/v1/bases/nope".to_string(), 404),
+        ("/v1/jobs/{id}", "/v1/jobs/nope".to_string(), 404),
+        ("/v1/jobs/{id}", format!("{job_path}?wait_s=601"), 400),
     ] {
         let (status, body) = get(path).await;
-        conforms(&spec, route, "get", status, &body);
+        conforms(&spec, route, "get", (status, want), &body);
     }
     // Streams.
     let (status, _, stream) = srv
@@ -197,43 +202,41 @@ async fn live_responses_match_the_contract() {
             &serde_json::json!({"fps": 60.0, "points": ["a", "b"], "chunk_seconds": 0.1}),
         )
         .await;
-    conforms(&spec, "/v1/streams", "post", status, &stream);
+    conforms(&spec, "/v1/streams", "post", (status, 201), &stream);
     let (status, _, bad) = srv
         .post_json(
             "/v1/streams",
             &serde_json::json!({"fps": -1.0, "points": 2}),
         )
         .await;
-    conforms(&spec, "/v1/streams", "post", status, &bad);
+    conforms(&spec, "/v1/streams", "post", (status, 400), &bad);
     let sid = stream["id"].as_str().unwrap().to_string();
     let frames = serde_json::json!({"frames": vec![[0.0, 1.0, 2.0, 3.0, 4.0, 5.0]; 8]});
-    for body in [frames, serde_json::json!({"frames": [[1.0]]})] {
+    for (body, want) in [(frames, 200), (serde_json::json!({"frames": [[1.0]]}), 400)] {
         let (status, _, r) = srv
             .post_json(&format!("/v1/streams/{sid}/frames"), &body)
             .await;
-        conforms(&spec, "/v1/streams/{id}/frames", "post", status, &r);
+        conforms(&spec, "/v1/streams/{id}/frames", "post", (status, want), &r);
     }
     let (status, s) = get(format!("/v1/streams/{sid}")).await;
-    conforms(&spec, "/v1/streams/{id}", "get", status, &s);
-    for _ in 0..2 {
+    conforms(&spec, "/v1/streams/{id}", "get", (status, 200), &s);
+    for want in [200, 409] {
         let (status, _, r) = srv
             .post_json(&format!("/v1/streams/{sid}/finish"), &serde_json::json!({}))
             .await;
-        conforms(&spec, "/v1/streams/{id}/finish", "post", status, &r);
+        conforms(&spec, "/v1/streams/{id}/finish", "post", (status, want), &r);
     }
+    let documented = |path: &str, method: &str, status: u16| {
+        spec["paths"][path][method]["responses"][status.to_string()].is_object()
+    };
+    // The basis codes no take (the stream, of another layout, codes with the DCT).
     let status = srv.delete(&format!("/v1/bases/{basis}")).await;
-    assert!(spec["paths"]["/v1/bases/{id}"]["delete"]["responses"][status.to_string()].is_object());
-
+    assert!(status == 204 && documented("/v1/bases/{id}", "delete", status));
     let status = srv.delete(&format!("/v1/sequences/{id}")).await;
-    assert!(
-        spec["paths"]["/v1/sequences/{id}"]["delete"]["responses"][status.to_string()].is_object()
-    );
+    assert!(status == 204 && documented("/v1/sequences/{id}", "delete", status));
     for p in ["/healthz", "/metrics"] {
         let (status, _, _) = srv.get(p).await;
-        assert!(
-            spec["paths"][p]["get"]["responses"][status.to_string()].is_object(),
-            "{p}"
-        );
+        assert!(status == 200 && documented(p, "get", status), "{p}");
     }
     srv.stop().await;
     t.finish().await;

@@ -4,7 +4,6 @@ use crate::common;
 
 use std::io::Write;
 use std::net::TcpStream;
-use std::time::Duration;
 
 use mocapstore::motion::formats::{self, Format};
 use mocapstore::motion::synthetic::walker;
@@ -91,13 +90,13 @@ async fn interrupted_uploads_leave_nothing() {
             .await
             .unwrap();
         }
-        // Give the server time to finish (or abandon) whatever it started.
-        tokio::time::sleep(Duration::from_millis(1500)).await;
-        let full_upload_kept = t.store.count().await.unwrap();
+        // Wait, by what the server reports, until it has seen both requests and finished (or
+        // dropped) them and holds none of their bytes: from then on nothing more is stored.
+        common::settled(&srv, 2).await;
+        let (full_upload_kept, chunks) = t.store.counts().await.unwrap();
         // The half upload never stores; the complete one may have been committed before the
         // hang-up was noticed, but never in part.
         assert!(full_upload_kept <= 1, "{}", t.name);
-        let chunks = t.store.chunk_count().await.unwrap();
         if full_upload_kept == 0 {
             assert_eq!(chunks, 0, "{}: chunks without a take", t.name);
         } else {

@@ -1,0 +1,281 @@
+//! `mocapstore verify`, `export` and `import`: an archivist's tools, run against the
+//! database directly (the service need not be running).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::Args;
+
+use crate::service::archive::{self, Imported, ManifestLine};
+use crate::store::{BasisRow, Filter, Store};
+
+/// Which database, and which takes.
+#[derive(Args)]
+pub struct Selection {
+    /// Database: a SQLite file or a postgres:// URL.
+    #[arg(long, env = "DATABASE_URL", default_value = "sqlite://mocapstore.db")]
+    database_url: String,
+    /// Only takes of this library.
+    #[arg(long)]
+    library: Option<String>,
+    /// Only takes with this tag.
+    #[arg(long)]
+    tag: Option<String>,
+}
+
+impl Selection {
+    fn filter(&self) -> Filter {
+        Filter {
+            library: self.library.clone(),
+            tag: self.tag.clone(),
+            ..Filter::default()
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct VerifyArgs {
+    #[command(flatten)]
+    selection: Selection,
+}
+
+#[derive(Args)]
+pub struct ExportArgs {
+    /// Folder to write into (created; must not hold an export already).
+    dir: PathBuf,
+    #[command(flatten)]
+    selection: Selection,
+}
+
+#[derive(Args)]
+pub struct ImportArgs {
+    /// A folder written by `mocapstore export`.
+    dir: PathBuf,
+    /// Database to import into: a SQLite file (created if missing) or a postgres:// URL.
+    #[arg(long, env = "DATABASE_URL", default_value = "sqlite://mocapstore.db")]
+    database_url: String,
+}
+
+/// Open an existing store: verify and export never create an empty database by mistake.
+async fn open_existing(url: &str) -> Result<Store, String> {
+    if let Some(path) = url
+        .strip_prefix("sqlite://")
+        .or(url.strip_prefix("sqlite:"))
+    {
+        let file = path.split('?').next().unwrap_or(path);
+        if !Path::new(file).exists() {
+            return Err(format!("no database at {file}"));
+        }
+    }
+    Store::open(url).await.map_err(|e| format!("{url}: {e}"))
+}
+
+fn runtime(cmd: &str) -> Option<tokio::runtime::Runtime> {
+    match tokio::runtime::Runtime::new() {
+        Ok(r) => Some(r),
+        Err(e) => {
+            eprintln!("mocapstore {cmd}: cannot start the runtime: {e}");
+            None
+        }
+    }
+}
+
+pub fn verify(args: &VerifyArgs) -> ExitCode {
+    let Some(rt) = runtime("verify") else {
+        return ExitCode::FAILURE;
+    };
+    rt.block_on(async {
+        let store = match open_existing(&args.selection.database_url).await {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("mocapstore verify: {e}");
+                return ExitCode::from(2);
+            }
+        };
+        let r = archive::verify(&store, &args.selection.filter(), |_| {}).await;
+        store.close().await;
+        match r {
+            Err(e) => {
+                eprintln!("mocapstore verify: {e}");
+                ExitCode::from(2)
+            }
+            Ok(r) => {
+                for p in &r.problems {
+                    println!("BAD  {} ({}): {}", p.id, p.name, p.what);
+                }
+                println!(
+                    "{} takes, {} chunks, {} frames read and decoded; {} problems{}",
+                    r.takes,
+                    r.chunks,
+                    r.frames,
+                    r.problems.len(),
+                    if r.without_digest > 0 {
+                        format!(
+                            " ({} takes stored before decoded digests were kept: decoded, not \
+                             compared bit for bit)",
+                            r.without_digest
+                        )
+                    } else {
+                        String::new()
+                    }
+                );
+                if r.problems.is_empty() {
+                    ExitCode::SUCCESS
+                } else {
+                    ExitCode::FAILURE
+                }
+            }
+        }
+    })
+}
+
+/// A file-name-safe form of a take's name.
+fn safe(name: &str) -> String {
+    let s: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "._-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(80)
+        .collect();
+    if s.is_empty() || s.starts_with('.') {
+        format!("_{s}")
+    } else {
+        s
+    }
+}
+
+pub fn export(args: &ExportArgs) -> ExitCode {
+    let Some(rt) = runtime("export") else {
+        return ExitCode::FAILURE;
+    };
+    match rt.block_on(export_all(args)) {
+        Ok(n) => {
+            println!("exported {n} takes to {}", args.dir.display());
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("mocapstore export: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+async fn export_all(args: &ExportArgs) -> Result<usize, String> {
+    let dir = &args.dir;
+    let manifest = dir.join("manifest.jsonl");
+    if manifest.exists() {
+        return Err(format!("{} holds an export already", dir.display()));
+    }
+    let io = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
+    std::fs::create_dir_all(dir.join("bases")).map_err(|e| io(dir, e))?;
+    let store = open_existing(&args.selection.database_url).await?;
+    let rows = archive::takes(&store, &args.selection.filter())
+        .await
+        .map_err(|e| e.to_string())?;
+    let mut lines = String::new();
+    let n = rows.len();
+    for row in rows {
+        let id = row.id.clone();
+        let t = archive::export_take(&store, row)
+            .await
+            .map_err(|e| format!("take {id}: {e}"))?;
+        let folder = format!(
+            "takes/{}",
+            if t.row.library.is_empty() {
+                "_".to_string()
+            } else {
+                safe(&t.row.library)
+            }
+        );
+        std::fs::create_dir_all(dir.join(&folder)).map_err(|e| io(dir, e))?;
+        let stem = format!("{folder}/{}__{}", safe(&t.row.name), t.row.id);
+        let bitstream = format!("{stem}.mcst");
+        let file = format!("{stem}.{}", t.format.name());
+        for (rel, bytes) in [(&bitstream, t.container.to_bytes()), (&file, t.file)] {
+            let p = dir.join(rel);
+            std::fs::write(&p, bytes).map_err(|e| io(&p, e))?;
+        }
+        for b in &t.bases {
+            let p = dir.join("bases").join(format!("{}.mcsb", b.id));
+            if !p.exists() {
+                std::fs::write(&p, &b.payload).map_err(|e| io(&p, e))?;
+                let meta = serde_json::to_vec_pretty(b).map_err(|e| e.to_string())?;
+                let m = p.with_extension("json");
+                std::fs::write(&m, meta).map_err(|e| io(&m, e))?;
+            }
+        }
+        let line = ManifestLine {
+            bases: t.bases.iter().map(|b| b.id.clone()).collect(),
+            row: t.row,
+            bitstream,
+            file,
+        };
+        lines += &serde_json::to_string(&line).map_err(|e| e.to_string())?;
+        lines.push('\n');
+    }
+    store.close().await;
+    // The manifest last, whole: a folder with one holds a complete export.
+    let partial = dir.join("manifest.jsonl.partial");
+    std::fs::write(&partial, lines).map_err(|e| io(&partial, e))?;
+    std::fs::rename(&partial, &manifest).map_err(|e| io(&manifest, e))?;
+    Ok(n)
+}
+
+pub fn import(args: &ImportArgs) -> ExitCode {
+    let Some(rt) = runtime("import") else {
+        return ExitCode::FAILURE;
+    };
+    match rt.block_on(import_all(args)) {
+        Ok((stored, already)) => {
+            println!("imported {stored} takes ({already} were stored already)");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("mocapstore import: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+async fn import_all(args: &ImportArgs) -> Result<(usize, usize), String> {
+    let dir = &args.dir;
+    let read = |rel: &str| {
+        let p = dir.join(rel);
+        std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))
+    };
+    let manifest = String::from_utf8(read("manifest.jsonl")?)
+        .map_err(|_| "manifest.jsonl is not UTF-8".to_string())?;
+    let store = Store::open(&args.database_url)
+        .await
+        .map_err(|e| format!("{}: {e}", args.database_url))?;
+    let (mut stored, mut already) = (0, 0);
+    for (n, text) in manifest
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+    {
+        let line: ManifestLine = serde_json::from_str(text)
+            .map_err(|e| format!("manifest.jsonl line {}: {e}", n + 1))?;
+        let mut bases = Vec::new();
+        for id in &line.bases {
+            let meta = read(&format!("bases/{id}.json"))?;
+            let mut row: BasisRow =
+                serde_json::from_slice(&meta).map_err(|e| format!("bases/{id}.json: {e}"))?;
+            row.payload = read(&format!("bases/{id}.mcsb"))?;
+            bases.push(row);
+        }
+        let bitstream = read(&line.bitstream)?;
+        match archive::import_take(&store, &line, bitstream, bases).await {
+            Ok(Imported::Stored) => stored += 1,
+            Ok(Imported::AlreadyStored) => already += 1,
+            Err(e) => return Err(format!("{} (take {}): {e}", line.bitstream, line.row.id)),
+        }
+    }
+    store.close().await;
+    Ok((stored, already))
+}

@@ -1,0 +1,412 @@
+//! For archivists: check everything stored ([`verify`]), get everything out ([`export_take`],
+//! files anyone can read plus the exact bitstreams) and back into any store ([`import_take`]),
+//! so that no one is locked in and a library can move between SQLite and Postgres.
+//!
+//! The bitstream of a take is its container (`docs/FORMAT.md`: header with the chunk index,
+//! then the chunks) and the bases it names; with the take's row (metadata and statistics) it
+//! is everything the store holds of the take, so an import stores the very same bytes.
+
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use super::{blocking, Error, Result};
+use crate::codec::{self, basis::hex, Basis, Container, Header};
+use crate::motion::formats::Format;
+use crate::motion::{Motion, Unit, UnitSource};
+use crate::store::{BasisRow, ChunkRow, Filter, NewSequence, SequenceRow, SortKey, Store};
+
+/// One thing wrong with one stored take.
+#[derive(Debug, Clone, Serialize)]
+pub struct Problem {
+    pub id: String,
+    pub name: String,
+    pub what: String,
+}
+
+/// What [`verify`] found.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct VerifyReport {
+    pub takes: usize,
+    pub chunks: usize,
+    pub frames: u64,
+    /// Takes stored before decoded digests were kept: decoded and checked, but not compared
+    /// bit for bit with what was measured at ingest.
+    pub without_digest: usize,
+    pub problems: Vec<Problem>,
+}
+
+/// Every take matching `filter`, in pages, oldest first.
+async fn each_take(store: &Store, filter: &Filter) -> Result<Vec<SequenceRow>> {
+    let mut out = Vec::new();
+    let mut cursor = None;
+    loop {
+        let page = store
+            .list(filter, SortKey::Created, false, 200, cursor.as_ref())
+            .await?;
+        out.extend(page.items);
+        match page.next {
+            Some(c) => cursor = Some(c),
+            None => return Ok(out),
+        }
+    }
+}
+
+/// Read every chunk of every take matching `filter`, check it against its checksum and the
+/// header's index, decode every take and compare what it decodes to with what was measured
+/// when it was stored (the decoded digest), and the stored statistics with the take's bound
+/// and sizes. `progress` is told each take as it is done.
+pub async fn verify(
+    store: &Store,
+    filter: &Filter,
+    mut progress: impl FnMut(&SequenceRow),
+) -> Result<VerifyReport> {
+    let mut report = VerifyReport::default();
+    for row in each_take(store, filter).await? {
+        report.takes += 1;
+        report.frames += row.frames.max(0) as u64;
+        let mut problem = |what: String| {
+            report.problems.push(Problem {
+                id: row.id.clone(),
+                name: row.name.clone(),
+                what,
+            })
+        };
+        match check_take(store, &row).await {
+            Ok(checked) => {
+                report.chunks += checked.chunks;
+                for what in checked.problems {
+                    problem(what);
+                }
+                if !checked.had_digest {
+                    report.without_digest += 1;
+                }
+            }
+            Err(e) => problem(e.to_string()),
+        }
+        progress(&row);
+    }
+    Ok(report)
+}
+
+struct Checked {
+    chunks: usize,
+    had_digest: bool,
+    problems: Vec<String>,
+}
+
+async fn check_take(store: &Store, row: &SequenceRow) -> Result<Checked> {
+    let mut problems = Vec::new();
+    let (header, live) = super::fetch::header_of(store, row).await?;
+    let index = store.chunk_index(&row.id).await?;
+    if index.len() != header.chunks.len() {
+        problems.push(format!(
+            "the header indexes {} chunks, {} are stored",
+            header.chunks.len(),
+            index.len()
+        ));
+    }
+    for (i, (e, m)) in index.iter().zip(&header.chunks).enumerate() {
+        if (e.first_frame, e.frames, e.len, e.crc32c)
+            != (
+                i64::from(m.first_frame),
+                i64::from(m.frames),
+                i64::from(m.len),
+                m.crc32c,
+            )
+        {
+            problems.push(format!(
+                "chunk {i}: its row and the header's index disagree"
+            ));
+        }
+    }
+    if i64::from(header.frames) != row.frames || i64::from(header.points) != row.points {
+        problems.push(format!(
+            "the header says {} frames of {} points, the row {} of {}",
+            header.frames, header.points, row.frames, row.points
+        ));
+    }
+    if header.codec.to_string() != row.codec {
+        problems.push(format!(
+            "the header says codec {}, the row {}",
+            header.codec, row.codec
+        ));
+    }
+    // Statistics against the bound and the sizes they were computed from.
+    let slack = 1e-9 * row.bound_mm.max(1.0);
+    match row.bound_kind.as_str() {
+        "max" if row.max_mm > row.bound_mm + slack => problems.push(format!(
+            "stored max error {} mm is over its bound of {} mm",
+            row.max_mm, row.bound_mm
+        )),
+        "mean" if row.mean_mm > row.bound_mm + slack => problems.push(format!(
+            "stored mean error {} mm is over its bound of {} mm",
+            row.mean_mm, row.bound_mm
+        )),
+        "max" | "mean" => {}
+        other => problems.push(format!("unknown bound kind {other:?}")),
+    }
+    if row.raw_bytes != row.frames * row.points * 12 {
+        problems.push(format!(
+            "raw_bytes {} is not frames × points × 12",
+            row.raw_bytes
+        ));
+    }
+    let stored =
+        (header.to_bytes().len() + index.iter().map(|e| e.len as usize).sum::<usize>()) as i64;
+    if !live && stored != row.stored_bytes {
+        problems.push(format!(
+            "stored_bytes {} but the header and chunks take {stored}",
+            row.stored_bytes
+        ));
+    }
+    // Every chunk, checked against its checksum (one by one where the take's read fails, to
+    // name the chunk).
+    let rows = match store.chunks(&row.id, 0, index.len() as i64).await {
+        Ok(rows) => rows,
+        Err(_) => {
+            for i in 0..index.len() as i64 {
+                if let Err(e) = store.chunks(&row.id, i, i + 1).await {
+                    problems.push(format!("chunk {i}: {e}"));
+                }
+            }
+            return Ok(Checked {
+                chunks: index.len(),
+                had_digest: true,
+                problems,
+            });
+        }
+    };
+    let shared = match &header.basis {
+        Some(h) => match super::bases::load(store, &hex(h)).await {
+            Ok(b) => Some(b),
+            Err(e) => {
+                problems.push(format!("its basis: {e}"));
+                return Ok(Checked {
+                    chunks: rows.len(),
+                    had_digest: true,
+                    problems,
+                });
+            }
+        },
+        None => None,
+    };
+    let chunks = rows.len();
+    let frames = header.frames as usize;
+    let decoded = blocking(move || {
+        let payloads: Vec<&[u8]> = rows.iter().map(|r| r.payload.as_slice()).collect();
+        let d = codec::decoder(&header, shared)?;
+        codec::decode_range_with(&header, d.as_ref(), &payloads, 0, frames)
+    })
+    .await?;
+    let digest = row.meta.get("decoded_blake3").and_then(|v| v.as_str());
+    match decoded {
+        Err(e) => problems.push(format!("does not decode: {e}")),
+        Ok(frames) => {
+            if frames.iter().any(|v| v.is_infinite()) {
+                problems.push("decodes to infinite values".into());
+            }
+            if let Some(want) = digest {
+                let got = codec::decoded_digest(&frames);
+                if got != want {
+                    problems.push(format!(
+                        "decodes to other frames than were measured at ingest (digest {got}, \
+                         stored {want}): its statistics no longer describe what it serves"
+                    ));
+                }
+            }
+        }
+    }
+    Ok(Checked {
+        chunks,
+        had_digest: digest.is_some(),
+        problems,
+    })
+}
+
+/// A take as export writes it: its row, its bitstream, the bases that bitstream names, and
+/// its frames decoded into a file of an open format.
+pub struct ExportedTake {
+    pub row: SequenceRow,
+    pub container: Container,
+    pub bases: Vec<BasisRow>,
+    pub format: Format,
+    pub file: Vec<u8>,
+}
+
+/// The open format a take's frames are written back to: its own where we write it, else the
+/// closest that keeps names, units and gaps (C3D → TRC; BVH → JSON positions until joint
+/// rotations are stored).
+pub fn export_format(source_format: &str) -> Format {
+    match source_format {
+        "trc" | "c3d" => Format::Trc,
+        "npy" => Format::Npy,
+        _ => Format::Json,
+    }
+}
+
+/// The takes matching `filter`, oldest first (their rows; [`export_take`] reads the rest).
+pub async fn takes(store: &Store, filter: &Filter) -> Result<Vec<SequenceRow>> {
+    each_take(store, filter).await
+}
+
+/// Read one take whole: bitstream, bases, and its frames decoded into a file.
+pub async fn export_take(store: &Store, row: SequenceRow) -> Result<ExportedTake> {
+    let (header, _) = super::fetch::header_of(store, &row).await?;
+    let chunks = store
+        .chunks(&row.id, 0, header.chunks.len() as i64)
+        .await?
+        .into_iter()
+        .map(|c| c.payload)
+        .collect();
+    let container = Container { header, chunks };
+    let mut bases = Vec::new();
+    let mut shared = None;
+    if let Some(h) = &container.header.basis {
+        let id = hex(h);
+        let b = store
+            .basis(&id)
+            .await?
+            .ok_or_else(|| Error::NotFound(format!("basis {id}")))?;
+        shared = Some(super::bases::load(store, &id).await?);
+        bases.push(b);
+    }
+    let format = export_format(&row.source_format);
+    let names = super::fetch::point_names(&row);
+    let (fps, mpu) = (row.fps, row.metres_per_unit);
+    let (container, file) = blocking(move || -> Result<(Container, Vec<u8>)> {
+        let frames = codec::decode_all_with(&container, shared)?;
+        let unit = Unit::new(mpu, UnitSource::Declared).map_err(Error::BadInput)?;
+        let motion = Motion::new(fps, unit, names, frames, None).map_err(Error::BadInput)?;
+        let file = crate::motion::formats::write(&motion, format).map_err(Error::BadInput)?;
+        Ok((container, file))
+    })
+    .await??;
+    Ok(ExportedTake {
+        row,
+        container,
+        bases,
+        format,
+        file,
+    })
+}
+
+/// One line of an export's `manifest.jsonl`: the take's row (its header travels in the
+/// bitstream file) and where its files are.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ManifestLine {
+    #[serde(flatten)]
+    pub row: SequenceRow,
+    /// The bitstream (container) file, relative to the export folder.
+    pub bitstream: String,
+    /// The decoded frames in an open format, relative to the export folder.
+    pub file: String,
+    /// Ids of the bases the bitstream names (files `bases/<id>.mcsb`).
+    pub bases: Vec<String>,
+}
+
+/// What [`import_take`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Imported {
+    Stored,
+    /// A take with this id is stored already (imports can be repeated).
+    AlreadyStored,
+}
+
+/// Store an exported take again: its row as exported, its bitstream byte for byte (checked:
+/// the container parses, every chunk matches its checksum, and it decodes to the digest it
+/// was measured on), the bases it names first (`bases`: each basis's exported row, its
+/// payload filled in from its `.mcsb` file).
+pub async fn import_take(
+    store: &Store,
+    line: &ManifestLine,
+    bitstream: Vec<u8>,
+    bases: Vec<BasisRow>,
+) -> Result<Imported> {
+    if store.exists(&line.row.id).await? {
+        return Ok(Imported::AlreadyStored);
+    }
+    let mut loaded = Vec::new();
+    for row in bases {
+        let b = Basis::parse(&row.payload)
+            .map_err(|e| Error::InvalidRequest(format!("basis {}: {e}", row.id)))?;
+        if b.id() != row.id || !line.bases.contains(&row.id) {
+            return Err(Error::InvalidRequest(format!(
+                "basis file {} holds basis {}, which take {} does not name",
+                row.id,
+                b.id(),
+                line.row.id
+            )));
+        }
+        loaded.push((Arc::new(b), row));
+    }
+    let container = Container::parse(&bitstream, &crate::limits::Limits::default().decoder())
+        .map_err(|e| Error::InvalidRequest(format!("bitstream of {}: {e}", line.row.id)))?;
+    let header: &Header = &container.header;
+    if i64::from(header.frames) != line.row.frames || header.codec.to_string() != line.row.codec {
+        return Err(Error::InvalidRequest(format!(
+            "bitstream of {} does not match its manifest line",
+            line.row.id
+        )));
+    }
+    let shared = match &header.basis {
+        None => None,
+        Some(h) => Some(
+            loaded
+                .iter()
+                .find(|(b, _)| b.hash() == *h)
+                .map(|(b, _)| b.clone())
+                .ok_or_else(|| {
+                    Error::InvalidRequest(format!("basis {} is missing from the export", hex(h)))
+                })?,
+        ),
+    };
+    let want = line
+        .row
+        .meta
+        .get("decoded_blake3")
+        .and_then(|v| v.as_str())
+        .map(str::to_string);
+    let (container, shared) = blocking(move || -> Result<(Container, Option<Arc<Basis>>)> {
+        let frames = codec::decode_all_with(&container, shared.clone())?;
+        if let Some(want) = want {
+            if codec::decoded_digest(&frames) != want {
+                return Err(Error::InvalidRequest(
+                    "the bitstream decodes to other frames than were measured at ingest".into(),
+                ));
+            }
+        }
+        Ok((container, shared))
+    })
+    .await??;
+    if shared.is_some() {
+        for (_, row) in &loaded {
+            store.insert_basis(row).await?;
+        }
+    }
+    let chunks: Vec<ChunkRow> = container
+        .header
+        .chunks
+        .iter()
+        .zip(container.chunks)
+        .enumerate()
+        .map(|(i, (m, payload))| ChunkRow {
+            idx: i as i64,
+            first_frame: i64::from(m.first_frame),
+            frames: i64::from(m.frames),
+            crc32c: m.crc32c,
+            payload,
+        })
+        .collect();
+    let mut row = line.row.clone();
+    row.header = container.header.to_bytes();
+    row.live_until = None;
+    store
+        .insert(&NewSequence {
+            row,
+            chunks,
+            basis: container.header.basis.as_ref().map(hex),
+        })
+        .await?;
+    Ok(Imported::Stored)
+}
