@@ -23,6 +23,8 @@
 pub mod cli;
 pub mod codec;
 pub mod corpus;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod http;
 pub mod limits;
 pub mod motion;

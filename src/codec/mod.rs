@@ -139,6 +139,11 @@ pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
     }
 }
 
+/// The longest clip the clip codecs (`mdtt`, `mdtt-shared`, `lsdt-clip`) code. Their decoders
+/// tabulate a clip-long DCT (up to 4096 × 4096 values), so a header may ask for no longer
+/// clip: a hostile one once asked `lsdt-clip` for a 65,536² table (17 GB).
+pub const MAX_CLIP: usize = 4096;
+
 /// Frames per chunk for codecs free to choose: about one second, so a range request reads
 /// at most a second more than it needs.
 pub fn default_chunk_frames(fps: f64) -> usize {

@@ -238,3 +238,54 @@ pub async fn shutdown_signal() {
         () = term => {},
     }
 }
+
+/// Entry points for the fuzz targets (`fuzz/`): every parser of request input, on raw bytes,
+/// with no server, store or runtime. Not an API.
+#[doc(hidden)]
+pub mod fuzz {
+    use axum::body::Bytes;
+    use axum::extract::Query;
+    use axum::http::{header, HeaderMap, HeaderValue, Uri};
+
+    use crate::limits::Limits;
+
+    /// `data` is a query string, a NUL, then a body: each query parser reads the query,
+    /// each body parser the body (as JSON and as f32 frames), and the ingest request takes
+    /// both, with the query's values also offered as `x-mocap-*` headers.
+    pub fn requests(data: &[u8]) {
+        let split = data.iter().position(|b| *b == 0).unwrap_or(data.len());
+        let (query, body) = (&data[..split], data.get(split + 1..).unwrap_or(&[]));
+        let query = String::from_utf8_lossy(query);
+        let body = Bytes::copy_from_slice(body);
+        let Ok(uri) = format!("/?{query}").parse::<Uri>() else {
+            return;
+        };
+        let mut headers = HeaderMap::new();
+        for (k, v) in query.split('&').filter_map(|kv| kv.split_once('=')) {
+            if let (Ok(name), Ok(value)) = (
+                format!("x-mocap-{}", k.replace('_', "-")).parse::<header::HeaderName>(),
+                HeaderValue::from_str(v),
+            ) {
+                headers.insert(name, value);
+            }
+        }
+        if let Ok(Query(q)) = Query::<super::sequences::IngestQuery>::try_from_uri(&uri) {
+            let _ = super::sequences::ingest_request(q, &headers, body.clone(), &Limits::default());
+        }
+        if let Ok(Query(q)) = Query::<super::sequences::FramesQuery>::try_from_uri(&uri) {
+            let _ = super::sequences::frames_request(q);
+        }
+        let _ = Query::<super::library::ListQuery>::try_from_uri(&uri);
+        let _ = crate::store::Cursor::decode(&query);
+        let mut json = HeaderMap::new();
+        json.insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/json"),
+        );
+        let _ = super::streams::parse_frames(&json, &body);
+        let _ = super::streams::parse_frames(&HeaderMap::new(), &body);
+        let _ = serde_json::from_slice::<crate::service::streams::OpenRequest>(&body);
+        let _ = serde_json::from_slice::<crate::service::bases::TrainRequest>(&body);
+        let _ = serde_json::from_slice::<super::library::Patch>(&body);
+    }
+}

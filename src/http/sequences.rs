@@ -12,6 +12,7 @@ use serde::Deserialize;
 use super::error::ApiError;
 use super::AppState;
 use crate::codec::{CodecId, ErrorBound, Latency};
+use crate::limits::Limits;
 use crate::motion::formats::{self, Format};
 use crate::motion::units::parse_unit;
 use crate::motion::{Motion, Unit, UnitSource};
@@ -99,7 +100,7 @@ impl IngestQuery {
     }
 
     /// Parse, don't validate: the query becomes an [`IngestRequest`] or a 400.
-    fn into_request(self, body: Bytes, state: &AppState) -> Result<IngestRequest, ApiError> {
+    fn into_request(self, body: Bytes, limits: &Limits) -> Result<IngestRequest, ApiError> {
         let bad = |e: &dyn std::fmt::Display| ApiError::bad_request(e.to_string());
         let bound = match (self.max_error_mm, self.mean_error_mm) {
             (Some(_), Some(_)) => {
@@ -149,11 +150,23 @@ impl IngestQuery {
             codec,
             bound,
             latency,
-            limits: state.limits.reader(),
+            limits: limits.reader(),
             format_hint: None,
             lenient: self.lenient.unwrap_or(false),
         })
     }
+}
+
+/// An upload's query, `x-mocap-*` headers and body as the [`IngestRequest`] they make.
+pub fn ingest_request(
+    q: IngestQuery,
+    headers: &HeaderMap,
+    body: Bytes,
+    limits: &Limits,
+) -> Result<IngestRequest, ApiError> {
+    let mut req = q.with_headers(headers)?.into_request(body, limits)?;
+    req.format_hint = content_type_format(headers);
+    Ok(req)
 }
 
 pub async fn create(
@@ -163,8 +176,7 @@ pub async fn create(
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
-    let mut req = q.with_headers(&headers)?.into_request(body?, &state)?;
-    req.format_hint = content_type_format(&headers);
+    let req = ingest_request(q, &headers, body?, &state.limits)?;
     let uploaded = req.bytes.len();
     let report = ingest::ingest(&state.store, req).await?;
     state
@@ -199,12 +211,17 @@ pub struct FramesQuery {
     format: Option<String>,
 }
 
-pub async fn frames(
-    State(state): State<AppState>,
-    Path(id): Path<String>,
-    query: Result<Query<FramesQuery>, QueryRejection>,
-) -> Result<Response, ApiError> {
-    let Query(q) = query?;
+/// What a range request asks for.
+pub struct FramesRequest {
+    pub range: TimeRange,
+    /// `None`: JSON.
+    pub format: Option<Format>,
+    /// Point names, or every point.
+    pub points: Option<Vec<String>>,
+}
+
+/// A range request's query as the range, output format and points it asks for.
+pub fn frames_request(q: FramesQuery) -> Result<FramesRequest, ApiError> {
     let range = match (q.start, q.end, q.t0, q.t1) {
         (None, None, None, None) => TimeRange::All,
         (s, e, None, None) => TimeRange::Frames {
@@ -235,9 +252,27 @@ pub async fn frames(
         )
         .into());
     }
-    let subset: Option<Vec<String>> = q.points.map(|p| p.split(',').map(str::to_string).collect());
+    let points = q.points.map(|p| p.split(',').map(str::to_string).collect());
+    Ok(FramesRequest {
+        range,
+        format,
+        points,
+    })
+}
+
+pub async fn frames(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    query: Result<Query<FramesQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query?;
+    let FramesRequest {
+        range,
+        format,
+        points,
+    } = frames_request(q)?;
     let (row, frames) =
-        fetch::frames(&state.store, &state.caches, &id, range, subset.as_deref()).await?;
+        fetch::frames(&state.store, &state.caches, &id, range, points.as_deref()).await?;
     let served = frames.data.len() * 4;
     state.metrics.decoded(frames.end - frames.start, served);
     let mut headers = HeaderMap::new();

@@ -44,7 +44,7 @@ pub struct AppendQuery {
 
 /// Frames from the body: JSON (`{"frames": [[x, y, z, …], …]}` or a bare array of frames,
 /// `null` for a missing coordinate) or, for any other content type, little-endian f32.
-fn parse_frames(headers: &HeaderMap, body: &[u8]) -> Result<Vec<f32>, ApiError> {
+pub(super) fn parse_frames(headers: &HeaderMap, body: &[u8]) -> Result<Vec<f32>, ApiError> {
     let json = headers
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())

@@ -290,6 +290,12 @@ impl Streams {
             None => codec::default_chunk_frames(req.fps),
         };
         let points = names.len();
+        if codec == CodecId::LsdtClip && chunk_frames > codec::MAX_CLIP {
+            return bad(format!(
+                "lsdt-clip codes clips of at most {} frames; ask for shorter chunk_seconds",
+                codec::MAX_CLIP
+            ));
+        }
         if let Err(why) = crate::limits::check(
             "frames × points of one chunk",
             (chunk_frames * points) as u64,

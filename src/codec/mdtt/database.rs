@@ -66,7 +66,7 @@ impl SharedParams {
         }
         let (clip, k, l) = (r.u32()? as usize, r.u32()? as usize, r.u32()? as usize);
         let (coef_step, residual_t) = (r.f64()?, r.f64()?);
-        if clip == 0 || k == 0 || k > width || l == 0 || l > clip {
+        if clip == 0 || clip > crate::codec::MAX_CLIP || k == 0 || k > width || l == 0 || l > clip {
             return Err(malformed(format!(
                 "mdtt-shared shape L={clip} k={k} l={l} for {width} coordinates"
             )));

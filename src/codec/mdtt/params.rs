@@ -76,7 +76,7 @@ impl Params {
         let l = r.u32()? as usize;
         let coef_step = r.f64()?;
         let residual_t = r.f64()?;
-        if clip == 0 || k == 0 || k > width || l == 0 || l > clip {
+        if clip == 0 || clip > crate::codec::MAX_CLIP || k == 0 || k > width || l == 0 || l > clip {
             return Err(malformed(format!(
                 "mdtt shape L={clip} k={k} l={l} for {width} coordinates"
             )));

@@ -11,7 +11,7 @@ use crate::codec::{dct, Input};
 
 /// Clip length: the paper's 280 frames at 120 fps, scaled to the take's frame rate.
 pub fn clip_len(fps: f64) -> usize {
-    ((280.0 * fps / 120.0).round() as usize).clamp(8, 4096)
+    ((280.0 * fps / 120.0).round() as usize).clamp(8, crate::codec::MAX_CLIP)
 }
 
 /// The paper's ratio r = l/k = 0.1·⌈L/50⌉, with L in 120 fps frames.

@@ -380,7 +380,9 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     let abs_scale = scale.abs();
     let mut positions = vec![f32::NAN; frames * points * 3];
     let mut not_finite = 0usize;
-    for f in 0..frames {
+    // Frames with no point data (analog-only files) read nothing from the data section.
+    for f in (0..frames).filter(|_| points > 0) {
+        // `available` counted whole frames after data_start: each lies inside the file.
         let frame = &bytes[data_start + f * frame_bytes..];
         for p in 0..points {
             let at = p * 4 * value_size;

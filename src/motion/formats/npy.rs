@@ -57,7 +57,11 @@ fn parse_header(h: &str, at: usize) -> Result<Header> {
     let close = shape_text
         .find(')')
         .ok_or_else(|| err(at, "unterminated shape"))?;
-    let shape = shape_text[1..close]
+    let inner = shape_text
+        .get(1..close)
+        .filter(|_| shape_text.starts_with('('))
+        .ok_or_else(|| err(at, "shape is not a tuple"))?;
+    let shape = inner
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())

@@ -102,7 +102,7 @@ impl ClipParams {
         if !(p.step.is_finite() && p.step > 0.0 && p.residual_t.is_finite())
             || p.residual_t < 0.0
             || p.clip == 0
-            || p.clip > 1 << 16
+            || p.clip > crate::codec::MAX_CLIP
         {
             return Err(malformed(format!("lsdt-clip parameters {p:?}")));
         }
@@ -339,7 +339,9 @@ pub fn encode_fixed(input: &Input<'_>, p: ClipParams) -> Result<Vec<ChunkOut>> {
 /// `target`.
 pub fn encode_with_clip(input: &Input<'_>, target: Target, clip: usize) -> Result<CodecOutput> {
     let spatial = Spatial::for_take(input.shared, input.points, "lsdt-clip")?;
-    let clip = clip.clamp(1, input.frames.max(1));
+    let clip = clip
+        .clamp(1, input.frames.max(1))
+        .min(crate::codec::MAX_CLIP);
     let a = Analysis::new(input, &spatial, clip);
     let size = |params: &[u8], chunks: &[ChunkOut]| {
         params.len() + chunks.iter().map(|c| c.bytes.len() + 17).sum::<usize>()

@@ -1,0 +1,167 @@
+//! What the fuzz targets (`fuzz/fuzz_targets/`) run, kept in the crate so that the ordinary
+//! test suite runs every input that ever crashed one of them (`tests/fuzz_regressions.rs`)
+//! through exactly the same code. Each function takes untrusted bytes and may return
+//! anything but a panic, an abort, a hang or unbounded memory. Not an API.
+
+use std::sync::{Arc, OnceLock};
+
+use crate::codec::container::{ChunkMeta, Header};
+use crate::codec::lsdt::spatial::dct_basis;
+use crate::codec::{self, Basis, BasisKind, CodecId, Container};
+use crate::motion::formats::{self, Format, Limits, ReadOptions};
+
+/// Limits for fuzzing: small enough that a legitimate allocation never trips the fuzzer's
+/// memory limit, so that what it reports is a real failure to bound memory.
+fn limits() -> Limits {
+    Limits {
+        max_bytes: 1 << 20,
+        max_points: 1_000,
+        max_frames: 100_000,
+        max_samples: 1_000_000,
+        max_depth: 512,
+    }
+}
+
+/// A reader of one format, strict and lenient.
+pub fn read(format: Format, data: &[u8]) {
+    for lenient in [false, true] {
+        let opts = ReadOptions {
+            limits: limits(),
+            lenient,
+            ..ReadOptions::default()
+        };
+        if let Ok(l) = formats::read_as(format, data, &opts) {
+            // What was read can be written back.
+            let out = if l.motion.skeleton.is_some() {
+                Format::Bvh
+            } else {
+                Format::Trc
+            };
+            let _ = formats::write(&l.motion, out);
+        }
+    }
+}
+
+/// The bases the frozen bitstreams (`tests/frozen/`) were coded with, so that seeds made from
+/// them reach the decoders' inner loops: the DCT of 5 points (lsdt) and a two-basis
+/// mdtt-set of 5 points.
+fn frozen_bases() -> &'static [Arc<Basis>] {
+    static BASES: OnceLock<Vec<Arc<Basis>>> = OnceLock::new();
+    BASES.get_or_init(|| {
+        [
+            &include_bytes!(
+                "../tests/frozen/bases/4700ede04fb6c2fd0cb1d3b94eedafc7bc47ca372bd35336647f2ee60bcd0b2a.mcsb"
+            )[..],
+            &include_bytes!(
+                "../tests/frozen/bases/e92e07530c5e456efb979f265a2440352c26e631b0cbf69dd7fb6381b4df0546.mcsb"
+            )[..],
+        ]
+        .iter()
+        .map(|b| Arc::new(Basis::parse(b).expect("frozen bases parse")))
+        .collect()
+    })
+}
+
+/// A shared basis of `kind` for `points` points: a frozen one where there is one, else the
+/// DCT (lsdt); `None` if there is none (an mdtt-set of another size).
+fn basis_for(kind: BasisKind, points: usize) -> Option<Arc<Basis>> {
+    if let Some(b) = frozen_bases()
+        .iter()
+        .find(|b| b.kind() == kind && b.points() == points)
+    {
+        return Some(b.clone());
+    }
+    (kind == BasisKind::Lsdt).then(|| Arc::new(dct_basis(points)))
+}
+
+/// One codec's chunk decoder. `data`: points (byte 0, 1..=16), frames (byte 1, 1..=256),
+/// the parameter length (u16 LE), the parameters, then one chunk payload (gap mask and codec
+/// bytes). The header around them is made valid (checksums included) so that the fuzzer's
+/// mutations reach the parameter parser, the gap mask and the chunk decoder.
+pub fn decode(codec: CodecId, data: &[u8]) {
+    if data.len() < 4 {
+        return;
+    }
+    let points = usize::from(data[0] % 16) + 1;
+    let frames = usize::from(data[1]) + 1;
+    let plen = usize::from(u16::from_le_bytes([data[2], data[3]]));
+    let Some(params) = data.get(4..4 + plen) else {
+        return;
+    };
+    let payload = &data[4 + plen..];
+    let Ok(c) = codec::codec(codec) else {
+        return;
+    };
+    let shared = match c.basis_kind() {
+        None => None,
+        Some(kind) => match basis_for(kind, points) {
+            Some(b) => Some(b),
+            None => return,
+        },
+    };
+    let header = Header {
+        codec,
+        frames: frames as u32,
+        points: points as u32,
+        fps: 60.0,
+        metres_per_unit: 0.001,
+        params: params.to_vec(),
+        basis: shared.as_ref().map(|b| b.hash()),
+        chunks: vec![ChunkMeta {
+            first_frame: 0,
+            frames: frames as u32,
+            len: payload.len() as u32,
+            crc32c: crc32c::crc32c(payload),
+        }],
+    };
+    if let Ok(d) = codec::decoder(&header, shared) {
+        let _ = codec::decode_chunk(&header, d.as_ref(), 0, payload);
+    }
+}
+
+/// A whole stored bitstream (container): header, index, checksums, every chunk.
+pub fn container(data: &[u8]) {
+    let limits = crate::codec::Limits {
+        max_samples: 1_000_000,
+        ..crate::codec::Limits::default()
+    };
+    let Ok(c) = Container::parse(data, &limits) else {
+        return;
+    };
+    let shared = c.header.basis.and_then(|h| {
+        frozen_bases()
+            .iter()
+            .find(|b| b.hash() == h)
+            .cloned()
+            .or_else(|| {
+                // A DCT of a small layout (a large one would be the fuzzer's allocation).
+                let points = c.header.points as usize;
+                let b = (points <= 64).then(|| Arc::new(dct_basis(points)))?;
+                (b.hash() == h).then_some(b)
+            })
+    });
+    let _ = codec::decode_all_with(&c, shared);
+}
+
+/// Every parser of request input (queries, headers, JSON and f32 bodies).
+pub fn requests(data: &[u8]) {
+    crate::http::fuzz::requests(data);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_frozen_bases_load_and_short_inputs_are_harmless() {
+        assert_eq!(frozen_bases().len(), 2);
+        for c in CodecId::ALL {
+            decode(c, &[]);
+            decode(c, &[4, 9, 0, 0]);
+            decode(c, &[4, 9, 3, 0, 1, 2, 3, 0, 0]);
+        }
+        container(b"MCST");
+        requests(b"start=1&end=0\0{\"frames\":[[1,null]]}");
+        read(Format::Bvh, b"HIERARCHY\nROOT a\n{");
+    }
+}
