@@ -23,6 +23,10 @@ pub const UNIT_METRES: RangeInclusive<f64> = 1e-6..=1e3;
 /// value beyond it is not a position but a corrupt or hostile number, and refused.
 pub const MAX_COORDINATE_M: f64 = 1e4;
 
+/// The loosest error bound a client may state, mm (a kilometre): past any capture volume a
+/// bound means nothing, and a codec's step derived from 1e308 mm is not a number.
+pub const MAX_BOUND_MM: f64 = 1e6;
+
 /// Frame rates a take or stream may have, frames per second.
 pub const MAX_FPS: f64 = 100_000.0;
 

@@ -148,11 +148,12 @@ impl fmt::Display for ErrorBound {
 }
 
 fn check_mm(mm: f64) -> Result<f64> {
-    if mm.is_finite() && mm > 0.0 {
+    let most = crate::limits::MAX_BOUND_MM;
+    if mm.is_finite() && mm > 0.0 && mm <= most {
         Ok(mm)
     } else {
         Err(Error::Invalid(format!(
-            "an error bound must be a positive number of millimetres, got {mm}"
+            "an error bound must be a number of millimetres in (0, {most}], got {mm}"
         )))
     }
 }

@@ -120,12 +120,9 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
             "k must list numbers of bases in 1..=32".into(),
         ));
     }
-    let bound_mm = req.max_error_mm.unwrap_or(1.0);
-    if !(bound_mm.is_finite() && bound_mm > 0.0) {
-        return Err(Error::InvalidRequest(
-            "max_error_mm must be positive".into(),
-        ));
-    }
+    let bound_mm = crate::codec::ErrorBound::new_max(req.max_error_mm.unwrap_or(1.0))
+        .map_err(|e| Error::InvalidRequest(e.to_string()))?
+        .mm();
     let sparsity = req.sparsity.unwrap_or(8);
     let max_iterations = req.max_iterations.unwrap_or(50);
     let max_samples = req.max_samples.unwrap_or(50_000);

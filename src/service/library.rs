@@ -93,8 +93,16 @@ pub async fn stats(store: &Store, filter: &Filter) -> Result<Stats> {
     })
 }
 
-/// Delete a take (its chunks and tags with it) and forget what this server kept of it.
+/// Delete a take (its chunks and tags with it) and forget what this server kept of it. A
+/// take a live stream is still recording is not deleted (409): finish the stream first.
 pub async fn delete(store: &Store, caches: &ReadCaches, id: &str) -> Result<()> {
+    if let Some(row) = store.get(id).await? {
+        if row.live_until.is_some() {
+            return Err(Error::Conflict(format!(
+                "take {id} is being recorded by a live stream; finish the stream first"
+            )));
+        }
+    }
     let deleted = store.delete(id).await?;
     caches.forget(id);
     if deleted {

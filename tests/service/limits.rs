@@ -315,6 +315,8 @@ async fn a_live_take_header_is_not_rewritten_by_appends() {
             ))
             .await;
         assert_eq!((status, body.len()), (200, 90 * 12 * 4), "{}", t.name);
+        // A take being recorded is not deleted from under its stream.
+        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 409);
         let (status, _, done) = srv
             .post_json(&format!("/v1/streams/{id}/finish"), &json!({}))
             .await;
@@ -435,7 +437,17 @@ async fn data_that_contradicts_its_header_is_refused_unless_lenient() {
     }
     // A unit beyond any physical scale once reached the codecs, which decoded NaN (500).
     let take = formats::write(&walker(60, 4, 60.0, 1, 0.0), Format::Json).unwrap();
-    let (status, r) = srv.post("unit=1e308", take).await;
+    let (status, r) = srv.post("unit=1e308", take.clone()).await;
+    assert_eq!(status, 400, "{r}");
+    // So once did a bound of 1e308 mm (a stream's step was not a number: 500).
+    let (status, r) = srv.post("max_error_mm=1e308", take).await;
+    assert_eq!(status, 400, "{r}");
+    let (status, _, r) = srv
+        .post_json(
+            "/v1/streams",
+            &json!({"fps": 60, "points": 2, "mean_error_mm": 1.6e308}),
+        )
+        .await;
     assert_eq!(status, 400, "{r}");
     srv.stop().await;
     t.finish().await;
