@@ -13,7 +13,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use mocapstore::codec::container::{pack_chunk, ChunkMeta};
+use mocapstore::codec::container::pack_chunks;
 use mocapstore::codec::lsdt::spatial::dct_basis;
 use mocapstore::codec::lsdt::{clip, frame};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
@@ -99,27 +99,16 @@ fn stream_container(
     basis: &Basis,
     chunks: Vec<codec::ChunkOut>,
 ) -> Container {
-    let w = m.point_count() * 3;
-    let (mut metas, mut payloads, mut first) = (Vec::new(), Vec::new(), 0usize);
-    for c in chunks {
-        let valid: Vec<bool> = m.positions()[first * w..(first + c.frames) * w]
-            .chunks_exact(3)
-            .map(|s| !s[0].is_nan())
-            .collect();
-        let payload = pack_chunk(Some(&valid), &c.bytes);
-        metas.push(ChunkMeta {
-            first_frame: first as u32,
-            frames: c.frames as u32,
-            len: payload.len() as u32,
-            crc32c: crc32c::crc32c(&payload),
-        });
-        payloads.push(payload);
-        first += c.frames;
-    }
+    let valid: Vec<bool> = m
+        .positions()
+        .chunks_exact(3)
+        .map(|s| !s[0].is_nan())
+        .collect();
+    let (metas, payloads, frames) = pack_chunks(chunks, Some(&valid), m.point_count());
     Container {
         header: Header {
             codec,
-            frames: first as u32,
+            frames: frames as u32,
             points: m.point_count() as u32,
             fps: m.fps,
             metres_per_unit: m.unit.metres_per_unit,

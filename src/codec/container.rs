@@ -301,6 +301,32 @@ pub fn pack_chunk(valid: Option<&[bool]>, codec_bytes: &[u8]) -> Vec<u8> {
     out
 }
 
+/// Pack consecutive codec chunks into stored payloads (gap mask + codec bytes) and their
+/// index entries; `valid` is the take's per-sample validity (`frames × points`), if it has
+/// gaps. Returns the entries, the payloads and the frames they cover.
+pub fn pack_chunks(
+    chunks: Vec<super::ChunkOut>,
+    valid: Option<&[bool]>,
+    points: usize,
+) -> (Vec<ChunkMeta>, Vec<Vec<u8>>, usize) {
+    let mut metas = Vec::with_capacity(chunks.len());
+    let mut payloads = Vec::with_capacity(chunks.len());
+    let mut first = 0usize;
+    for ch in chunks {
+        let mask = valid.map(|v| &v[first * points..(first + ch.frames) * points]);
+        let payload = pack_chunk(mask, &ch.bytes);
+        metas.push(ChunkMeta {
+            first_frame: first as u32,
+            frames: ch.frames as u32,
+            len: payload.len() as u32,
+            crc32c: crc32c::crc32c(&payload),
+        });
+        payloads.push(payload);
+        first += ch.frames;
+    }
+    (metas, payloads, first)
+}
+
 /// Split a chunk payload into its gap mask (`None` when all present) and codec bytes.
 pub fn unpack_chunk(payload: &[u8], samples: usize) -> Result<(Option<Vec<bool>>, &[u8])> {
     let mut pos = 0;

@@ -3,7 +3,7 @@
 use std::sync::Arc;
 
 use super::basis::{hex, Basis};
-use super::container::{pack_chunk, unpack_chunk, verify_chunk, ChunkMeta, Container, Header};
+use super::container::{pack_chunks, unpack_chunk, verify_chunk, Container, Header};
 use super::error::{malformed, Error, Result};
 use super::id::{CodecId, ErrorBound};
 use super::{codec, gaps, ChunkDecoder, Codec, Input, Target};
@@ -107,23 +107,7 @@ pub fn encode_variant(
     };
     let out = encoder(&input, target)?;
 
-    let mut metas = Vec::with_capacity(out.chunks.len());
-    let mut payloads = Vec::with_capacity(out.chunks.len());
-    let mut first = 0usize;
-    for ch in out.chunks {
-        let mask = valid
-            .as_ref()
-            .map(|v| &v[first * points..(first + ch.frames) * points]);
-        let payload = pack_chunk(mask, &ch.bytes);
-        metas.push(ChunkMeta {
-            first_frame: first as u32,
-            frames: ch.frames as u32,
-            len: payload.len() as u32,
-            crc32c: crc32c::crc32c(&payload),
-        });
-        payloads.push(payload);
-        first += ch.frames;
-    }
+    let (metas, payloads, first) = pack_chunks(out.chunks, valid.as_deref(), points);
     if first != frames {
         return Err(Error::Invalid(format!(
             "codec {codec_id} produced chunks for {first} of {frames} frames"

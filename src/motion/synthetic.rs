@@ -72,6 +72,24 @@ pub fn walker(frames: usize, points: usize, fps: f64, seed: u64, gap_fraction: f
     Motion::new(fps, Unit::millimetres(), names, data, None).expect("consistent shape")
 }
 
+/// A BVH file whose hierarchy is a chain `depth` joints deep, with one frame: what a parser
+/// that recursed on depth could not survive (tests, and `scripts/hostile`'s case).
+pub fn chain_bvh(depth: usize) -> String {
+    let mut s = String::from(
+        "HIERARCHY\nROOT j0\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yposition Zposition\n",
+    );
+    for i in 1..depth {
+        s.push_str(&format!(
+            "JOINT j{i}\n{{\nOFFSET 0 1 0\nCHANNELS 1 Zrotation\n"
+        ));
+    }
+    s.push_str(&"}\n".repeat(depth));
+    s.push_str("MOTION\nFrames: 1\nFrame Time: 0.01\n0 0 0");
+    s.push_str(&" 1".repeat(depth.saturating_sub(1)));
+    s.push('\n');
+    s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

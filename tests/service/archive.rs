@@ -5,24 +5,13 @@
 use crate::common;
 
 use std::path::Path;
-use std::process::Command;
 
 use mocapstore::motion::formats::{self, Format, ReadOptions};
 use mocapstore::motion::synthetic::walker;
 use mocapstore::store::Store;
 use serde_json::{json, Value};
 
-fn mocapstore(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mocapstore"))
-        .args(args)
-        .output()
-        .expect("binary runs");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use common::mocapstore;
 
 const BVH: &str = "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition \
     Zposition Zrotation Xrotation Yrotation\nJOINT Leg\n{\nOFFSET 10 -40 0\nCHANNELS 3 Zrotation \

@@ -6,17 +6,7 @@ use std::process::Command;
 
 use mocapstore::corpus;
 
-fn mocapstore(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mocapstore"))
-        .args(args)
-        .output()
-        .expect("binary runs");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use common::mocapstore;
 
 fn corpus_file(rel: &str) -> String {
     corpus::root().join(rel).display().to_string()

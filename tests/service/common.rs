@@ -264,3 +264,16 @@ pub async fn settled(srv: &Server, requests: u64) {
     }
     panic!("the server did not settle");
 }
+
+/// Run the `mocapstore` binary: success, stdout, stderr.
+pub fn mocapstore(args: &[&str]) -> (bool, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mocapstore"))
+        .args(args)
+        .output()
+        .expect("binary runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}

@@ -101,29 +101,17 @@ async fn a_stream_of_twenty_billion_points_is_refused_before_anything_is_made() 
     t.finish().await;
 }
 
-/// A BVH hierarchy `depth` levels deep.
-fn deep_bvh(depth: usize) -> Vec<u8> {
-    let mut s = String::from(
-        "HIERARCHY\nROOT j0\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yposition Zposition\n",
-    );
-    for i in 1..depth {
-        s.push_str(&format!(
-            "JOINT j{i}\n{{\nOFFSET 0 1 0\nCHANNELS 1 Zrotation\n"
-        ));
-    }
-    s.push_str(&"}\n".repeat(depth));
-    s.push_str("MOTION\nFrames: 1\nFrame Time: 0.01\n0 0 0");
-    s.push_str(&" 1".repeat(depth - 1));
-    s.push('\n');
-    s.into_bytes()
-}
-
 #[tokio::test]
 async fn a_deeply_nested_bvh_is_refused_not_a_stack_overflow() {
     let t = common::sqlite().await;
     let srv = common::start(t.store.clone(), 8 << 20).await;
     // 6,000 levels (540 KB) overflowed the parser's stack and aborted the process.
-    let (status, body) = srv.post("name=deep", deep_bvh(6_000)).await;
+    let (status, body) = srv
+        .post(
+            "name=deep",
+            mocapstore::motion::synthetic::chain_bvh(6_000).into_bytes(),
+        )
+        .await;
     assert_eq!(status, 422, "{body}");
     assert!(
         body["error"]["message"]

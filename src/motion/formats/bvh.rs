@@ -530,27 +530,11 @@ mod tests {
         .is_err());
     }
 
-    /// A chain of `depth` joints, each one level below the last, and one frame.
-    fn chain(depth: usize) -> String {
-        let mut s = String::from(
-            "HIERARCHY\nROOT j0\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yposition Zposition\n",
-        );
-        for i in 1..depth {
-            s.push_str(&format!(
-                "JOINT j{i}\n{{\nOFFSET 0 1 0\nCHANNELS 1 Zrotation\n"
-            ));
-        }
-        s.push_str(&"}\n".repeat(depth));
-        s.push_str("MOTION\nFrames: 1\nFrame Time: 0.01\n0 0 0");
-        s.push_str(&" 1".repeat(depth - 1));
-        s.push('\n');
-        s
-    }
-
     #[test]
     fn deep_hierarchies_are_refused_by_the_limit_not_the_stack() {
         // 6,000 levels overflowed the stack of the recursive parser (an abort, not an error).
-        let deep = chain(6_000);
+        use crate::motion::synthetic::chain_bvh;
+        let deep = chain_bvh(6_000);
         assert!(matches!(
             read(deep.as_bytes(), &Limits::default()),
             Err(Error::Limit {
@@ -570,7 +554,7 @@ mod tests {
         let again = read(&text, &limits).unwrap().motion;
         assert_eq!(again.skeleton, m.skeleton);
         // Within the default limit it simply loads.
-        assert!(read(chain(400).as_bytes(), &Limits::default()).is_ok());
+        assert!(read(chain_bvh(400).as_bytes(), &Limits::default()).is_ok());
     }
 
     #[test]
