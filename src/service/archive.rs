@@ -272,7 +272,7 @@ pub async fn export_take(store: &Store, row: SequenceRow) -> Result<ExportedTake
         bases.push(b);
     }
     let format = export_format(&row.source_format);
-    let names = super::fetch::point_names(&row);
+    let names = super::fetch::point_names(&row)?;
     let (fps, mpu) = (row.fps, row.metres_per_unit);
     let (container, file) = blocking(move || -> Result<(Container, Vec<u8>)> {
         let frames = codec::decode_all_with(&container, shared)?;

@@ -71,12 +71,28 @@ pub async fn sequence(store: &Store, id: &str) -> Result<SequenceRow> {
         .ok_or_else(|| Error::NotFound(format!("sequence {id}")))
 }
 
-/// The point names stored with a take.
-pub fn point_names(row: &SequenceRow) -> Vec<String> {
-    row.meta
+/// The point names stored with a take: one per point, or the stored record is corrupt (an
+/// error, never a default that would serve frames under no names).
+pub fn point_names(row: &SequenceRow) -> Result<Vec<String>> {
+    let names: Vec<String> = row
+        .meta
         .get("point_names")
         .and_then(|v| serde_json::from_value(v.clone()).ok())
-        .unwrap_or_default()
+        .ok_or_else(|| {
+            Error::Internal(format!(
+                "stored take {}: meta has no point_names list",
+                row.id
+            ))
+        })?;
+    if names.len() as i64 != row.points {
+        return Err(Error::Internal(format!(
+            "stored take {}: {} point names for {} points",
+            row.id,
+            names.len(),
+            row.points
+        )));
+    }
+    Ok(names)
 }
 
 /// Decode `range` of take `id`, optionally only the named points. Chunks already decoded
@@ -105,11 +121,7 @@ pub async fn frames(
                 Some(h) => Some(super::bases::load(store, &hex(h)).await?),
                 None => None,
             };
-            let p = Arc::new(
-                blocking(move || Prepared::new(&row, header, shared))
-                    .await?
-                    .map_err(|e| Error::Internal(format!("stored take {id}: {e}")))?,
-            );
+            let p = Arc::new(blocking(move || Prepared::new(&row, header, shared)).await??);
             // A live take's index grows with every commit (here or on another server).
             if !live {
                 caches.decoders.insert(p.clone());

@@ -29,13 +29,14 @@ impl Prepared {
         row: &SequenceRow,
         header: Header,
         shared: Option<Arc<Basis>>,
-    ) -> Result<Prepared, codec::Error> {
-        let decoder = codec::decoder(&header, shared)?;
+    ) -> super::Result<Prepared> {
+        let decoder = codec::decoder(&header, shared)
+            .map_err(|e| super::Error::Internal(format!("stored take {}: {e}", row.id)))?;
         Ok(Prepared {
             id: row.id.clone(),
             header,
             decoder,
-            point_names: super::fetch::point_names(row),
+            point_names: super::fetch::point_names(row)?,
             fps: row.fps,
             metres_per_unit: row.metres_per_unit,
             frames: row.frames as usize,

@@ -828,7 +828,7 @@ async fn reencode_take(
     positions: Vec<f32>,
     bound: ErrorBound,
 ) -> Result<()> {
-    let names = super::fetch::point_names(row);
+    let names = super::fetch::point_names(row)?;
     let unit = Unit::new(row.metres_per_unit, UnitSource::Explicit)
         .map_err(|e| Error::Internal(e.to_string()))?;
     let motion = Arc::new(
