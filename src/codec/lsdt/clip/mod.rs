@@ -441,7 +441,7 @@ impl Codec for LsdtClip {
     ) -> Result<Box<dyn ChunkDecoder>> {
         let (p, coding) = ClipParams::parse(params)?;
         let spatial = Spatial::for_take(shared.as_deref(), points, "lsdt-clip")?;
-        let full = table(p.clip);
+        let full = std::sync::OnceLock::new();
         let tables = match coding {
             Coding::Adaptive => None,
             Coding::Tables(models) => Some(tables::ClipTables::new(&models)),
@@ -459,8 +459,9 @@ impl Codec for LsdtClip {
 struct ClipDecoder {
     p: ClipParams,
     spatial: Spatial,
-    /// DCT table of a full clip; the last, shorter clip computes its own.
-    full: Vec<f32>,
+    /// DCT table of a full clip, made when the first full clip is decoded (a decoder may
+    /// serve only a short take's one shorter clip, which computes its own).
+    full: std::sync::OnceLock<Vec<f32>>,
     points: usize,
     /// The take's tables (version 2); `None` for adaptive models (version 1).
     tables: Option<tables::ClipTables>,
@@ -477,7 +478,7 @@ impl ChunkDecoder for ClipDecoder {
         }
         let own;
         let t = if n == self.p.clip {
-            &self.full
+            self.full.get_or_init(|| table(n))
         } else {
             own = table(n);
             &own
