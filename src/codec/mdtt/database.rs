@@ -334,10 +334,7 @@ impl Codec for MdttShared {
         check_basis(&basis, points * 3)?;
         let p = SharedParams::parse(params, points * 3)?;
         let per = p.per_basis(basis.matrices());
-        let full = crate::codec::dct::basis(p.clip, p.l)
-            .into_iter()
-            .map(|v| v as f32)
-            .collect();
+        let full = super::FullClipTable::new(p.clip, p.l);
         Ok(Box::new(SharedDecoder {
             p,
             per,
@@ -360,7 +357,7 @@ struct SharedDecoder {
     p: SharedParams,
     per: Vec<Params>,
     points: usize,
-    full: Vec<f32>,
+    full: super::FullClipTable,
 }
 
 impl ChunkDecoder for SharedDecoder {

@@ -93,18 +93,46 @@ fn decode_coefs(dec: &mut Decoder<'_>, k: usize, lc: usize, step: f64) -> Vec<f3
     deq
 }
 
+/// The DCT table of a full clip (`clip × l`), kept by a decoder and made when it first
+/// decodes a full clip: a decoder that serves only a short take's one shorter clip (or reads
+/// a header claiming long clips) never tabulates it.
+struct FullClipTable {
+    clip: usize,
+    l: usize,
+    table: std::sync::OnceLock<Vec<f32>>,
+}
+
+impl FullClipTable {
+    fn new(clip: usize, l: usize) -> Self {
+        FullClipTable {
+            clip,
+            l,
+            table: std::sync::OnceLock::new(),
+        }
+    }
+
+    fn get(&self) -> &[f32] {
+        self.table.get_or_init(|| {
+            crate::codec::dct::basis(self.clip, self.l)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect()
+        })
+    }
+}
+
 /// Reconstruct a decoded clip of `frames` frames: the full clip's DCT table is kept by the
 /// decoder, a shorter last clip computes its own.
 fn synthesise_clip(
     p: &Params,
     deq: &[f32],
-    full: &[f32],
+    full: &FullClipTable,
     frames: usize,
     lc: usize,
     out: &mut [f32],
 ) {
     if frames == p.clip {
-        reconstruct(p, deq, full, frames, lc, out);
+        reconstruct(p, deq, full.get(), frames, lc, out);
     } else {
         let mut t = DctTables::default();
         reconstruct(p, deq, t.get(frames, lc), frames, lc, out);
@@ -362,10 +390,7 @@ impl Codec for Mdtt {
         _shared: Option<std::sync::Arc<super::Basis>>,
     ) -> Result<Box<dyn ChunkDecoder>> {
         let p = Params::parse(params, points)?;
-        let full = crate::codec::dct::basis(p.clip, p.l)
-            .into_iter()
-            .map(|v| v as f32)
-            .collect();
+        let full = FullClipTable::new(p.clip, p.l);
         Ok(Box::new(MdttDecoder { p, points, full }))
     }
 }
@@ -511,7 +536,7 @@ struct MdttDecoder {
     p: Params,
     points: usize,
     /// DCT table of a full clip; the last, shorter clip computes its own.
-    full: Vec<f32>,
+    full: FullClipTable,
 }
 
 impl ChunkDecoder for MdttDecoder {
