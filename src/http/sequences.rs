@@ -182,7 +182,13 @@ pub async fn create(
     state
         .metrics
         .ingested(report.frames, uploaded, report.stored_bytes);
-    Ok((StatusCode::CREATED, Json(report)).into_response())
+    let location = format!("/v1/sequences/{}", report.id);
+    Ok((
+        StatusCode::CREATED,
+        [(header::LOCATION, location)],
+        Json(report),
+    )
+        .into_response())
 }
 
 pub async fn get(
