@@ -40,11 +40,18 @@ pub fn for_tests() -> Option<(PathBuf, Vec<Entry>)> {
         Ok(m) => m,
         Err(e) if explicit => panic!("MOCAP_CORPUS is set, but {e}"),
         Err(_) => {
-            eprintln!(
-                "SKIPPED (no corpus): nothing at {}; set MOCAP_CORPUS or run scripts/fetch-corpus \
-                 to run the corpus tests",
-                root.display()
-            );
+            // Once per test binary, and past the test harness's capture of `eprintln!` (it
+            // hides a passing test's output): a skip must be seen.
+            static ONCE: std::sync::Once = std::sync::Once::new();
+            ONCE.call_once(|| {
+                use std::io::Write;
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "SKIPPED (no corpus): nothing at {}; set MOCAP_CORPUS or run \
+                     scripts/fetch-corpus to run the corpus tests",
+                    root.display()
+                );
+            });
             return None;
         }
     };
