@@ -34,24 +34,27 @@ pub fn root() -> PathBuf {
 ///   stderr, so that a clone on its own (a newcomer's) passes the tests that need no
 ///   corpus. `scripts/fetch-corpus` fetches the public files.
 pub fn for_tests() -> Option<(PathBuf, Vec<Entry>)> {
+    // Read and checked once per test binary: many tests ask.
+    static FOUND: std::sync::OnceLock<Option<(PathBuf, Vec<Entry>)>> = std::sync::OnceLock::new();
+    FOUND.get_or_init(find_for_tests).clone()
+}
+
+fn find_for_tests() -> Option<(PathBuf, Vec<Entry>)> {
     let explicit = std::env::var_os("MOCAP_CORPUS").is_some_and(|p| !p.is_empty());
     let root = root();
     let entries = match manifest(&root) {
         Ok(m) => m,
         Err(e) if explicit => panic!("MOCAP_CORPUS is set, but {e}"),
         Err(_) => {
-            // Once per test binary, and past the test harness's capture of `eprintln!` (it
-            // hides a passing test's output): a skip must be seen.
-            static ONCE: std::sync::Once = std::sync::Once::new();
-            ONCE.call_once(|| {
-                use std::io::Write;
-                let _ = writeln!(
-                    std::io::stderr(),
-                    "SKIPPED (no corpus): nothing at {}; set MOCAP_CORPUS or run \
-                     scripts/fetch-corpus to run the corpus tests",
-                    root.display()
-                );
-            });
+            // Past the test harness's capture of `eprintln!` (it hides a passing test's
+            // output): a skip must be seen.
+            use std::io::Write;
+            let _ = writeln!(
+                std::io::stderr(),
+                "SKIPPED (no corpus): nothing at {}; set MOCAP_CORPUS or run \
+                 scripts/fetch-corpus to run the corpus tests",
+                root.display()
+            );
             return None;
         }
     };

@@ -14,7 +14,7 @@ use super::{blocking, Error, Result};
 use crate::codec::{self, basis::hex, Basis, Container, Header};
 use crate::motion::formats::Format;
 use crate::motion::{Motion, Unit, UnitSource};
-use crate::store::{BasisRow, ChunkRow, Filter, NewSequence, SequenceRow, SortKey, Store};
+use crate::store::{BasisRow, Filter, NewSequence, SequenceRow, Store};
 
 /// One thing wrong with one stored take.
 #[derive(Debug, Clone, Serialize)]
@@ -36,22 +36,6 @@ pub struct VerifyReport {
     pub problems: Vec<Problem>,
 }
 
-/// Every take matching `filter`, in pages, oldest first.
-async fn each_take(store: &Store, filter: &Filter) -> Result<Vec<SequenceRow>> {
-    let mut out = Vec::new();
-    let mut cursor = None;
-    loop {
-        let page = store
-            .list(filter, SortKey::Created, false, 200, cursor.as_ref())
-            .await?;
-        out.extend(page.items);
-        match page.next {
-            Some(c) => cursor = Some(c),
-            None => return Ok(out),
-        }
-    }
-}
-
 /// Read every chunk of every take matching `filter`, check it against its checksum and the
 /// header's index, decode every take and compare what it decodes to with what was measured
 /// when it was stored (the decoded digest), and the stored statistics with the take's bound
@@ -62,7 +46,7 @@ pub async fn verify(
     mut progress: impl FnMut(&SequenceRow),
 ) -> Result<VerifyReport> {
     let mut report = VerifyReport::default();
-    for row in each_take(store, filter).await? {
+    for row in super::library::all_takes(store, filter).await? {
         report.takes += 1;
         report.frames += row.frames.max(0) as u64;
         let mut problem = |what: String| {
@@ -245,11 +229,6 @@ pub fn export_format(source_format: &str) -> Format {
     }
 }
 
-/// The takes matching `filter`, oldest first (their rows; [`export_take`] reads the rest).
-pub async fn takes(store: &Store, filter: &Filter) -> Result<Vec<SequenceRow>> {
-    each_take(store, filter).await
-}
-
 /// Read one take whole: bitstream, bases, and its frames decoded into a file.
 pub async fn export_take(store: &Store, row: SequenceRow) -> Result<ExportedTake> {
     let (header, _) = super::fetch::header_of(store, &row).await?;
@@ -268,7 +247,7 @@ pub async fn export_take(store: &Store, row: SequenceRow) -> Result<ExportedTake
             .basis(&id)
             .await?
             .ok_or_else(|| Error::NotFound(format!("basis {id}")))?;
-        shared = Some(super::bases::load(store, &id).await?);
+        shared = Some(Arc::new(super::bases::parse(&b)?));
         bases.push(b);
     }
     let format = export_format(&row.source_format);
@@ -384,20 +363,7 @@ pub async fn import_take(
             store.insert_basis(row).await?;
         }
     }
-    let chunks: Vec<ChunkRow> = container
-        .header
-        .chunks
-        .iter()
-        .zip(container.chunks)
-        .enumerate()
-        .map(|(i, (m, payload))| ChunkRow {
-            idx: i as i64,
-            first_frame: i64::from(m.first_frame),
-            frames: i64::from(m.frames),
-            crc32c: m.crc32c,
-            payload,
-        })
-        .collect();
+    let chunks = super::ingest::chunk_rows(&container);
     let mut row = line.row.clone();
     row.header = container.header.to_bytes();
     row.live_until = None;

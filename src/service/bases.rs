@@ -10,10 +10,10 @@ use super::{blocking, Error, Result};
 use crate::codec::lsdt::train::{train_basis_reporting, TrainOptions};
 use crate::codec::mdtt::database::{train_set, SetOptions};
 use crate::codec::{Basis, BasisKind, Input, Target};
-use crate::store::{BasisDeletion, BasisRow, Filter, SequenceRow, SortKey, Store};
+use crate::store::{BasisDeletion, BasisRow, Filter, SequenceRow, Store};
 
 /// Parse a stored basis, checking that its bytes still hash to its id.
-fn parse(row: &BasisRow) -> Result<Basis> {
+pub(super) fn parse(row: &BasisRow) -> Result<Basis> {
     let b = Basis::parse(&row.payload)
         .map_err(|e| Error::Internal(format!("stored basis {}: {e}", row.id)))?;
     if b.id() != row.id {
@@ -164,17 +164,7 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
             layout: req.layout.clone(),
             ..Filter::default()
         };
-        let mut cursor = None;
-        loop {
-            let page = store
-                .list(&filter, SortKey::Created, false, 500, cursor.as_ref())
-                .await?;
-            takes.extend(page.items);
-            match page.next {
-                Some(c) => cursor = Some(c),
-                None => break,
-            }
-        }
+        takes = super::library::all_takes(store, &filter).await?;
     }
     if takes.is_empty() {
         return Err(Error::InvalidRequest("the selection holds no takes".into()));

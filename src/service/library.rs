@@ -54,6 +54,23 @@ pub async fn list(
     })
 }
 
+/// Every take matching `filter`, oldest first, read a page at a time (training selections,
+/// verify, export).
+pub async fn all_takes(store: &Store, filter: &Filter) -> Result<Vec<SequenceRow>> {
+    let mut out = Vec::new();
+    let mut cursor = None;
+    loop {
+        let page = store
+            .list(filter, SortKey::Created, false, MAX_PAGE, cursor.as_ref())
+            .await?;
+        out.extend(page.items);
+        match page.next {
+            Some(c) => cursor = Some(c),
+            None => return Ok(out),
+        }
+    }
+}
+
 /// Library-wide statistics: totals, and the same per codec and per library.
 #[derive(Debug, Clone, Serialize)]
 pub struct Stats {
