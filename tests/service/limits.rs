@@ -488,3 +488,41 @@ async fn every_error_is_in_the_one_shape_and_the_contract_drift_is_closed() {
     srv.stop().await;
     t.finish().await;
 }
+
+#[tokio::test]
+async fn an_append_larger_than_its_limit_is_refused_before_it_is_read() {
+    let t = common::sqlite().await;
+    let srv = common::start_with(
+        t.store.clone(),
+        Config {
+            limits: Limits {
+                append_bytes: 1024,
+                ..Limits::default()
+            },
+            ..Config::default()
+        },
+    )
+    .await;
+    let (_, _, s) = srv
+        .post_json("/v1/streams", &json!({"fps": 60, "points": 2}))
+        .await;
+    let id = s["id"].as_str().unwrap().to_string();
+    // Frames per append are bounded by the append body limit (24 bytes a frame here).
+    let head = format!(
+        "POST /v1/streams/{id}/frames HTTP/1.1\r\nHost: x\r\nContent-Type: application/octet-stream\r\nContent-Length: {}\r\n\r\n",
+        100 * 24
+    );
+    let (status, text, _c) = raw(&srv.base, &head, b"").await;
+    assert_eq!(status, 413, "{text}");
+    let r = srv
+        .client
+        .post(format!("{}/v1/streams/{id}/frames", srv.base))
+        .header("content-type", "application/octet-stream")
+        .body(vec![0u8; 40 * 24])
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+    srv.stop().await;
+    t.finish().await;
+}
