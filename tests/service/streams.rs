@@ -174,3 +174,82 @@ async fn streams_commit_chunk_by_chunk_and_ranges_are_fetchable_while_live() {
         t.finish().await;
     }
 }
+
+/// The frames a stream sends in [`stored_stream_bytes`]: 2.5 s of 7 points at 100 fps with
+/// gaps, in uneven appends, one of them flushed mid-chunk.
+fn stream_script() -> (mocapstore::motion::Motion, Vec<(usize, usize, bool)>) {
+    let m = walker(250, 7, 100.0, 23, 0.04);
+    let appends = vec![
+        (0, 37, false),
+        (37, 130, false),
+        (130, 141, true),
+        (141, 250, false),
+    ];
+    (m, appends)
+}
+
+/// BLAKE3 (hex) of a stored take's closed header and its chunk payloads, in order.
+async fn stored_container_digest(store: &mocapstore::store::Store, id: &str) -> String {
+    let row = store.get(id).await.unwrap().unwrap();
+    let mut h = blake3::Hasher::new();
+    h.update(&row.header);
+    let chunks = store.chunks(id, 0, i64::MAX).await.unwrap();
+    assert!(!chunks.is_empty());
+    for c in &chunks {
+        h.update(&c.payload);
+    }
+    h.finalize().to_hex().to_string()
+}
+
+/// What the service stores for a scripted stream, per codec: the container the stream
+/// encoder of the codec layer must go on producing byte for byte (these digests were taken
+/// from the service before streams were moved onto that interface).
+async fn stored_stream_bytes(
+    srv: &common::Server,
+    store: &mocapstore::store::Store,
+    codec: &str,
+) -> String {
+    let (m, appends) = stream_script();
+    let w = m.point_count() * 3;
+    let all = m.positions();
+    let (status, _, info) = srv
+        .post_json(
+            "/v1/streams",
+            &json!({"fps": 100.0, "points": m.point_count(), "unit": "mm", "codec": codec,
+                    "max_error_mm": 0.5, "chunk_seconds": 0.4}),
+        )
+        .await;
+    assert_eq!(status, 201, "{info}");
+    let id = info["id"].as_str().unwrap().to_string();
+    for (a, b, flush) in appends {
+        let (status, info) = append(srv, &id, &all[a * w..b * w], flush).await;
+        assert_eq!(status, 200, "{info}");
+    }
+    let (status, _, row) = srv
+        .post_json(&format!("/v1/streams/{id}/finish"), &json!({}))
+        .await;
+    assert_eq!(status, 200, "{row}");
+    stored_container_digest(store, &id).await
+}
+
+#[tokio::test]
+async fn streams_store_the_same_bytes_as_before_streams_moved_to_the_codec_layer() {
+    for t in common::all().await {
+        let srv = common::start(t.store.clone(), 8 << 20).await;
+        for (codec, want) in [
+            (
+                "lsdt-frame",
+                "e702a8f2d1103063c6e06bb71b789dafa4677de426eef1b7c960ea75e25033d4",
+            ),
+            (
+                "lsdt-clip",
+                "1b3f57b448cac716398f00ab26a88866dc7d1802988ea631dd398a7d9734b3c1",
+            ),
+        ] {
+            let got = stored_stream_bytes(&srv, &t.store, codec).await;
+            assert_eq!(got, want, "{}: {codec}", t.name);
+        }
+        srv.stop().await;
+        t.finish().await;
+    }
+}
