@@ -6,6 +6,7 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use super::error::{Error, Result};
+use super::Target;
 
 /// Every codec the container format knows. The numeric value is written in bitstreams:
 /// never reuse one.
@@ -104,6 +105,13 @@ impl FromStr for Latency {
     }
 }
 
+/// Encoders aim a hair inside the bound so that converting their error to millimetres
+/// (a multiplication that can round up) never crosses it.
+pub const BOUND_MARGIN: f64 = 1.0 - 1e-6;
+
+/// The bound when a request states none: a max error of 1 mm.
+pub const DEFAULT_BOUND_MM: f64 = 1.0;
+
 /// The fidelity a user asks for, in millimetres, judged on decoded output.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -126,6 +134,53 @@ impl ErrorBound {
     pub fn mm(self) -> f64 {
         match self {
             ErrorBound::MaxMm(v) | ErrorBound::MeanMm(v) => v,
+        }
+    }
+
+    /// `max` or `mean`: how the bound is named where it is stored ([`ErrorBound::from_kind`]).
+    pub fn kind(self) -> &'static str {
+        match self {
+            ErrorBound::MaxMm(_) => "max",
+            ErrorBound::MeanMm(_) => "mean",
+        }
+    }
+
+    /// A bound from its stored [`kind`](ErrorBound::kind) and millimetres.
+    pub fn from_kind(kind: &str, mm: f64) -> Result<Self> {
+        match kind {
+            "max" => ErrorBound::new_max(mm),
+            "mean" => ErrorBound::new_mean(mm),
+            other => Err(Error::Invalid(format!(
+                "unknown bound kind {other:?}; use max or mean"
+            ))),
+        }
+    }
+
+    /// The bound a request states with its two optional fields (`max_error_mm`,
+    /// `mean_error_mm`): at most one of them, and a max of 1 mm when neither is given.
+    pub fn from_request(max_mm: Option<f64>, mean_mm: Option<f64>) -> Result<Self> {
+        match (max_mm, mean_mm) {
+            (Some(_), Some(_)) => Err(Error::Invalid(
+                "give max_error_mm or mean_error_mm, not both".into(),
+            )),
+            (Some(v), None) => ErrorBound::new_max(v),
+            (None, Some(v)) => ErrorBound::new_mean(v),
+            (None, None) => Ok(ErrorBound::MaxMm(DEFAULT_BOUND_MM)),
+        }
+    }
+
+    /// The bound in a take's units (`mm_per_unit` millimetres each), a hair inside
+    /// ([`BOUND_MARGIN`]): what encoders aim at.
+    pub fn in_units(self, mm_per_unit: f64) -> f64 {
+        self.mm() / mm_per_unit * BOUND_MARGIN
+    }
+
+    /// [`ErrorBound::in_units`] as an encoder's target of the same kind.
+    pub fn target(self, mm_per_unit: f64) -> Target {
+        let units = self.in_units(mm_per_unit);
+        match self {
+            ErrorBound::MaxMm(_) => Target::Max(units),
+            ErrorBound::MeanMm(_) => Target::Mean(units),
         }
     }
 

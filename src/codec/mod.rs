@@ -7,6 +7,7 @@
 //! - [`container`]: header + chunk index + per-chunk gap masks and checksums.
 //! - [`entropy`]: adaptive binary range coder and integer models (and the zstd alternative).
 //! - [`pipeline`]: encode a `Motion` with any codec to a bound, verify it, decode ranges.
+//! - [`stream`]: code a take frame by frame as it is recorded, with the codecs that can.
 //! - [`raw`], [`quant`]: the baselines. [`mdtt`]: Hou et al. 2015 with a residual layer.
 //! - [`lsdt`]: Hou et al. 2016's learned spatial transform, its training, `lsdt-clip` and
 //!   `lsdt-frame`.
@@ -28,6 +29,7 @@ pub mod pipeline;
 pub mod quant;
 pub mod raw;
 pub mod residual;
+pub mod stream;
 mod wire;
 
 use std::sync::Arc;
@@ -107,6 +109,10 @@ pub trait Codec: Send + Sync {
     /// Why this codec should not compete for a take of this shape, if it should not (per-take
     /// choice skips it and records the reason). Every codec can still be asked for by name.
     fn unsuited(&self, _frames: usize, _points: usize, _fps: f64) -> Option<String> {
+        None
+    }
+    /// How this codec codes a live stream, frame by frame, if it can ([`stream`]).
+    fn streaming(&self) -> Option<&dyn stream::Streaming> {
         None
     }
 }

@@ -10,10 +10,6 @@ use super::{codec, gaps, ChunkDecoder, Codec, Input, Target};
 use crate::motion::metrics::{self, ErrorStats};
 use crate::motion::Motion;
 
-/// Codecs aim a hair inside the bound so that converting their error to millimetres
-/// (a multiplication that can round up) never crosses it.
-const BOUND_MARGIN: f64 = 1.0 - 1e-6;
-
 /// A take encoded and checked: the container, the errors measured on its decoded output,
 /// and its stored size.
 #[derive(Debug, Clone)]
@@ -92,11 +88,7 @@ pub fn encode_variant(
     }
     let filled = gaps::fill(positions, points);
     let to_mm = motion.unit.to_mm();
-    let units = bound.mm() / to_mm * BOUND_MARGIN;
-    let target = match bound {
-        ErrorBound::MaxMm(_) => Target::Max(units),
-        ErrorBound::MeanMm(_) => Target::Mean(units),
-    };
+    let target = bound.target(to_mm);
     let input = Input {
         data: &filled,
         valid: valid.as_deref(),
@@ -148,7 +140,7 @@ pub fn encode_variant(
 }
 
 /// The basis codec `c` needs, checked against the take; `None` for codecs that use none.
-fn usable_basis<'a>(
+pub(crate) fn usable_basis<'a>(
     c: &dyn Codec,
     shared: Option<&'a Arc<Basis>>,
     points: usize,

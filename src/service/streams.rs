@@ -29,15 +29,11 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 use super::choose::{CodecRequest, Decision};
 use super::prepared::ReadCaches;
 use super::{blocking, Error, Result};
-use crate::codec::container::{pack_chunk, ChunkMeta};
-use crate::codec::lsdt::clip::{self, ClipParams};
-use crate::codec::lsdt::frame::{self, FrameEncoder};
+use crate::codec::container::ChunkMeta;
 use crate::codec::lsdt::spatial::dct_basis;
-use crate::codec::{
-    self, Basis, BasisKind, ChunkDecoder, ChunkOut, CodecId, ErrorBound, Header, Input, Latency,
-};
+use crate::codec::stream::{StreamChunk, StreamEncoder, StreamSpec};
+use crate::codec::{self, Basis, BasisKind, CodecId, ErrorBound, Header, Latency};
 use crate::limits::{Limits, MAX_COORDINATE_M, MAX_FPS};
-use crate::motion::metrics::Accumulator;
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
 use crate::store::{BasisRow, ChunkEntry, ChunkRow, NewSequence, SequenceRow, Store};
@@ -95,33 +91,19 @@ pub struct StreamInfo {
     pub warnings: Vec<String>,
 }
 
-enum Coder {
-    Frame(Box<FrameEncoder>),
-    Clip(ClipParams),
-}
-
 struct Live {
     row: SequenceRow,
-    /// The take's header without its chunk index (what is stored while it is live).
-    header: Header,
-    /// The chunks committed so far; written into the header when the stream closes.
-    index: Vec<ChunkMeta>,
-    /// Stored bytes of the header without its index.
-    header_len: usize,
-    payload_bytes: usize,
-    /// Running digest of the committed chunks' decoded frames (see `codec::decoded_digest`).
-    digest: blake3::Hasher,
-    coder: Option<Coder>,
-    basis: Arc<Basis>,
-    decoder: Arc<dyn ChunkDecoder>,
+    /// The codec layer's stream encoder: chunks, their checks, the take's index and totals.
+    /// Taken out while it codes on the blocking pool.
+    encoder: Option<StreamEncoder>,
+    basis_id: String,
+    codec: CodecId,
     points: usize,
-    to_mm: f64,
     bound: ErrorBound,
     chunk_frames: usize,
     received: usize,
-    /// Frames received and not yet committed, as sent (NaN for missing samples).
-    pending: Vec<f32>,
-    stats: Accumulator,
+    /// Chunks committed so far.
+    chunks: usize,
     failed: Option<String>,
     last_activity: Instant,
     /// Every frame as sent, for re-encoding on finish (if asked for).
@@ -135,14 +117,14 @@ impl Live {
     fn info(&self, live: bool) -> StreamInfo {
         StreamInfo {
             id: self.row.id.clone(),
-            codec: self.header.codec,
-            basis: self.basis.id(),
+            codec: self.codec,
+            basis: self.basis_id.clone(),
             fps: self.row.fps,
             points: self.points,
             chunk_frames: self.chunk_frames,
             frames_received: self.received,
             frames_committed: self.row.frames as usize,
-            chunks_committed: self.index.len(),
+            chunks_committed: self.chunks,
             live,
             max_mm: self.row.max_mm,
             mean_mm: self.row.mean_mm,
@@ -150,13 +132,10 @@ impl Live {
         }
     }
 
-    /// The header with the committed chunks as its index: what the take is once closed.
-    fn closed_header(&self) -> Header {
-        Header {
-            frames: self.row.frames as u32,
-            chunks: self.index.clone(),
-            ..self.header.clone()
-        }
+    fn encoder(&self) -> Result<&StreamEncoder> {
+        self.encoder
+            .as_ref()
+            .ok_or_else(|| Error::Internal("stream encoder missing".into()))
     }
 }
 
@@ -270,16 +249,15 @@ impl Streams {
         };
         let unit = Unit::new(metres, UnitSource::Explicit)
             .map_err(|e| Error::InvalidRequest(e.to_string()))?;
-        let bound = match (req.max_error_mm, req.mean_error_mm) {
-            (Some(_), Some(_)) => return bad("give max_error_mm or mean_error_mm, not both".into()),
-            (_, Some(v)) => ErrorBound::new_mean(v),
-            (m, None) => ErrorBound::new_max(m.unwrap_or(1.0)),
-        }
-        .map_err(|e| Error::InvalidRequest(e.to_string()))?;
+        let bound = ErrorBound::from_request(req.max_error_mm, req.mean_error_mm)
+            .map_err(|e| Error::InvalidRequest(e.to_string()))?;
         let codec = req.codec.unwrap_or(CodecId::LsdtFrame);
-        if !matches!(codec, CodecId::LsdtFrame | CodecId::LsdtClip) {
+        let streaming = codec::stream::streaming_codecs();
+        if !streaming.contains(&codec) {
+            let names: Vec<String> = streaming.iter().map(|c| c.to_string()).collect();
             return bad(format!(
-                "streams are coded with lsdt-frame or lsdt-clip, not {codec}"
+                "streams are coded with {}, not {codec}",
+                names.join(" or ")
             ));
         }
         let chunk_frames = match req.chunk_seconds {
@@ -290,12 +268,6 @@ impl Streams {
             None => codec::default_chunk_frames(req.fps),
         };
         let points = names.len();
-        if codec == CodecId::LsdtClip && chunk_frames > codec::MAX_CLIP {
-            return bad(format!(
-                "lsdt-clip codes clips of at most {} frames; ask for shorter chunk_seconds",
-                codec::MAX_CLIP
-            ));
-        }
         if let Err(why) = crate::limits::check(
             "frames × points of one chunk",
             (chunk_frames * points) as u64,
@@ -314,37 +286,21 @@ impl Streams {
             .map_err(|e| Error::InvalidRequest(e.to_string()))?;
         let layout = shape.layout_signature().to_hex();
         let basis = stream_basis(store, &layout, points).await?;
-        // A hair inside the bound, as batch encoding aims, so unit conversion cannot cross it.
-        let t = bound.mm() / unit.to_mm() * (1.0 - 1e-6);
-        let (coder, params) = match codec {
-            CodecId::LsdtFrame => {
-                let p = frame::FrameParams {
-                    intra_period: chunk_frames,
-                    ..frame::stream_params(t, req.fps)
-                };
-                let e = FrameEncoder::new(p, &basis)?;
-                (Coder::Frame(Box::new(e)), p.to_bytes())
-            }
-            _ => {
-                let p = ClipParams {
-                    clip: chunk_frames,
-                    ..clip::stream_params(t, req.fps)
-                };
-                (Coder::Clip(p), p.to_bytes())
-            }
-        };
-        let header = Header {
-            codec,
-            frames: 0,
-            points: points as u32,
+        let spec = StreamSpec {
+            points,
             fps: req.fps,
             metres_per_unit: unit.metres_per_unit,
-            params,
-            basis: Some(basis.hash()),
-            chunks: Vec::new(),
+            bound,
+            chunk_frames,
+            shared: Some(&basis),
         };
-        let decoder: Arc<dyn ChunkDecoder> =
-            Arc::from(codec::decoder(&header, Some(basis.clone()))?);
+        let encoder = match StreamEncoder::open(codec, &spec) {
+            Err(codec::Error::Invalid(why)) => {
+                return bad(format!("{why}; ask for shorter chunk_seconds"))
+            }
+            r => r?,
+        };
+        let header = encoder.live_header();
         let id = uuid::Uuid::now_v7().to_string();
         let decision = Decision {
             winner: codec,
@@ -353,10 +309,6 @@ impl Streams {
             ),
             tried: Vec::new(),
             skipped: Vec::new(),
-        };
-        let (bound_kind, bound_mm) = match bound {
-            ErrorBound::MaxMm(v) => ("max", v),
-            ErrorBound::MeanMm(v) => ("mean", v),
         };
         let row = SequenceRow {
             id: id.clone(),
@@ -375,8 +327,8 @@ impl Streams {
             layout,
             source_format: "stream".into(),
             codec: codec.to_string(),
-            bound_kind: bound_kind.into(),
-            bound_mm,
+            bound_kind: bound.kind().into(),
+            bound_mm: bound.mm(),
             raw_bytes: 0,
             stored_bytes: header.to_bytes().len() as i64,
             ratio: 0.0,
@@ -403,24 +355,16 @@ impl Streams {
                 basis: Some(basis.id()),
             })
             .await?;
-        let header_len = row.header.len();
         let live = Live {
             row,
-            header,
-            index: Vec::new(),
-            header_len,
-            payload_bytes: 0,
-            digest: blake3::Hasher::new(),
-            coder: Some(coder),
-            basis,
-            decoder,
+            encoder: Some(encoder),
+            basis_id: basis.id(),
+            codec,
             points,
-            to_mm: unit.to_mm(),
             bound,
             chunk_frames,
             received: 0,
-            pending: Vec::new(),
-            stats: Accumulator::new(points),
+            chunks: 0,
             failed: None,
             last_activity: Instant::now(),
             archive: req.reencode_on_finish.then(Vec::new),
@@ -522,6 +466,7 @@ impl Streams {
         Ok(live.info(true))
     }
 
+    /// Code `frames` on the blocking pool and commit every chunk they finish, in order.
     async fn code_and_commit(
         &self,
         store: &Store,
@@ -529,124 +474,32 @@ impl Streams {
         frames: Vec<f32>,
         flush: bool,
     ) -> Result<()> {
-        let coder = live
-            .coder
+        let mut encoder = live
+            .encoder
             .take()
-            .ok_or_else(|| Error::Internal("stream coder missing".into()))?;
-        let points = live.points;
-        let w = points * 3;
-        let basis = live.basis.clone();
-        let fps = live.row.fps;
-        // A clip is coded only when whole (or flushed), so every pending frame is uncoded:
-        // the clip coder sees them followed by the new ones.
-        let uncoded_clip: Vec<f32> = match &coder {
-            Coder::Clip(_) => live
-                .pending
-                .iter()
-                .copied()
-                .chain(frames.iter().copied())
-                .collect(),
-            Coder::Frame(_) => Vec::new(),
-        };
-        let new_frames = frames.clone();
-        let (coder, chunks) = blocking(move || -> Result<(Coder, Vec<ChunkOut>)> {
-            let mut out = Vec::new();
-            match coder {
-                Coder::Frame(mut e) => {
-                    for f in new_frames.chunks_exact(w) {
-                        let (_, c) = e.push(f, None);
-                        out.extend(c);
-                    }
-                    if flush {
-                        out.extend(e.flush());
-                    }
-                    Ok((Coder::Frame(e), out))
-                }
-                Coder::Clip(p) => {
-                    let n = uncoded_clip.len() / w;
-                    let whole = if flush { n } else { n / p.clip * p.clip };
-                    if whole > 0 {
-                        let data = &uncoded_clip[..whole * w];
-                        let valid: Vec<bool> =
-                            data.chunks_exact(3).map(|s| !s[0].is_nan()).collect();
-                        let filled = codec::gaps::fill(data, points);
-                        let input = Input {
-                            data: &filled,
-                            valid: Some(&valid),
-                            frames: whole,
-                            points,
-                            fps,
-                            shared: Some(&basis),
-                        };
-                        out = clip::encode_fixed(&input, p)?;
-                    }
-                    Ok((Coder::Clip(p), out))
-                }
-            }
+            .ok_or_else(|| Error::Internal("stream encoder missing".into()))?;
+        let (encoder, chunks) = blocking(move || {
+            let chunks = encoder.push(&frames, flush);
+            (encoder, chunks)
         })
-        .await??;
-        live.coder = Some(coder);
-        live.pending.extend_from_slice(&frames);
-        for chunk in chunks {
+        .await?;
+        live.encoder = Some(encoder);
+        for chunk in chunks? {
             self.commit(store, live, chunk).await?;
         }
         Ok(())
     }
 
-    /// Check one coded chunk on its decoded output and commit it: one chunk row and the
-    /// take's running totals, nothing that grows with the stream.
-    async fn commit(&self, store: &Store, live: &mut Live, chunk: ChunkOut) -> Result<()> {
-        let w = live.points * 3;
-        let n = chunk.frames;
-        if n * w > live.pending.len() {
-            return Err(Error::Internal(
-                "a chunk longer than the pending frames".into(),
-            ));
-        }
-        let original: Vec<f32> = live.pending[..n * w].to_vec();
-        let valid: Vec<bool> = original.chunks_exact(3).map(|s| !s[0].is_nan()).collect();
-        let payload = pack_chunk(Some(&valid), &chunk.bytes);
-        let meta = ChunkMeta {
-            first_frame: live.row.frames as u32,
-            frames: n as u32,
-            len: payload.len() as u32,
-            crc32c: crc32c::crc32c(&payload),
-        };
-        // The chunk decodes on its own: check it with a header that holds only it.
-        let alone = Header {
-            frames: n as u32,
-            chunks: vec![ChunkMeta {
-                first_frame: 0,
-                ..meta
-            }],
-            ..live.header.clone()
-        };
-        let (decoder, p2) = (live.decoder.clone(), payload.clone());
-        let decoded =
-            blocking(move || codec::decode_chunk(&alone, decoder.as_ref(), 0, &p2)).await??;
-        let index = live.index.len();
-        let mut stats = live.stats.clone();
-        stats.add(&original, &decoded);
-        let chunk_stats = {
-            let mut a = Accumulator::new(live.points);
-            a.add(&original, &decoded);
-            a.finish(live.to_mm)
-        };
-        if chunk_stats.max_mm > live.bound.mm() {
-            return Err(Error::Internal(format!(
-                "chunk {index} decodes {:.4} mm from its input, over the bound {}",
-                chunk_stats.max_mm, live.bound
-            )));
-        }
-        let s = stats.finish(live.to_mm);
-        let frames = live.row.frames + n as i64;
-        let payload_bytes = live.payload_bytes + payload.len();
-        let row = &mut live.row;
-        row.frames = frames;
-        row.duration_s = frames as f64 / row.fps;
-        row.raw_bytes = frames * live.points as i64 * 12;
-        row.stored_bytes =
-            (live.header_len + (index + 1) * ChunkMeta::INDEX_BYTES + payload_bytes) as i64;
+    /// Commit one coded and checked chunk: one chunk row and the take's running totals,
+    /// nothing that grows with the stream.
+    async fn commit(&self, store: &Store, live: &mut Live, chunk: StreamChunk) -> Result<()> {
+        let totals = live.encoder()?.totals_with(&chunk);
+        let mut row = live.row.clone();
+        let s = &totals.stats;
+        row.frames = totals.frames as i64;
+        row.duration_s = row.frames as f64 / row.fps;
+        row.raw_bytes = row.frames * live.points as i64 * 12;
+        row.stored_bytes = totals.stored_bytes as i64;
         row.ratio = row.raw_bytes as f64 / row.stored_bytes.max(1) as f64;
         row.mean_mm = s.mean_mm;
         row.rms_mm = s.rms_mm;
@@ -657,14 +510,14 @@ impl Streams {
             0.0
         };
         let chunk_row = ChunkRow {
-            idx: index as i64,
-            first_frame: i64::from(meta.first_frame),
-            frames: n as i64,
-            crc32c: meta.crc32c,
-            payload,
+            idx: chunk.index as i64,
+            first_frame: i64::from(chunk.meta.first_frame),
+            frames: i64::from(chunk.meta.frames),
+            crc32c: chunk.meta.crc32c,
+            payload: chunk.payload.clone(),
         };
         if !store
-            .append_chunk(&live.row, &chunk_row, self.lease_end())
+            .append_chunk(&row, &chunk_row, self.lease_end())
             .await?
         {
             return Err(Error::Conflict(format!(
@@ -673,11 +526,12 @@ impl Streams {
                 live.row.id
             )));
         }
-        live.index.push(meta);
-        codec::digest_update(&mut live.digest, &decoded);
-        live.payload_bytes = payload_bytes;
-        live.stats = stats;
-        live.pending.drain(..n * w);
+        live.row = row;
+        live.chunks += 1;
+        live.encoder
+            .as_mut()
+            .ok_or_else(|| Error::Internal("stream encoder missing".into()))?
+            .confirm(chunk)?;
         Ok(())
     }
 
@@ -706,16 +560,15 @@ impl Streams {
                     .push(format!("frames pending at finish were lost: {e}"));
             }
         }
+        let encoder = live.encoder()?;
+        let (closed, digest) = (encoder.closed_header(), encoder.decoded_digest());
         let mut meta = live.row.meta.clone();
         meta["live"] = serde_json::Value::Bool(false);
-        meta["decoded_blake3"] = live.digest.finalize().to_hex().to_string().into();
+        meta["decoded_blake3"] = digest.into();
         if !live.warnings.is_empty() {
             meta["warnings"] = serde_json::json!(live.warnings);
         }
-        if !store
-            .close_live(id, &live.closed_header().to_bytes(), &meta)
-            .await?
-        {
+        if !store.close_live(id, &closed.to_bytes(), &meta).await? {
             // Closed from its chunk rows by another server after the lease ran out (or
             // deleted): what it stored is what was committed, the same chunks.
             tracing::warn!(

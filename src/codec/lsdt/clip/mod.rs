@@ -26,6 +26,7 @@ use crate::codec::entropy::{magnitude_context, Decoder, Encoder, IntModel};
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::{max_mean, quantise};
 use crate::codec::residual;
+use crate::codec::stream::{StreamCoder, StreamSpec, Streaming};
 use crate::codec::wire::{Reader, Writer};
 use crate::codec::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target};
 
@@ -453,6 +454,75 @@ impl Codec for LsdtClip {
             points,
             tables,
         }))
+    }
+    fn streaming(&self) -> Option<&dyn Streaming> {
+        Some(self)
+    }
+}
+
+/// Live streams: [`stream_params`] with the stream's chunk length as the clip; each clip is
+/// coded once whole (or when flushed, as it stands).
+impl Streaming for LsdtClip {
+    fn open(&self, spec: &StreamSpec<'_>, t: f64) -> Result<(Vec<u8>, Box<dyn StreamCoder>)> {
+        let basis = spec
+            .shared
+            .ok_or_else(|| Error::Basis("lsdt-clip streams code with a shared basis".into()))?;
+        if spec.chunk_frames > crate::codec::MAX_CLIP {
+            return Err(Error::Invalid(format!(
+                "lsdt-clip codes clips of at most {} frames, asked for {}",
+                crate::codec::MAX_CLIP,
+                spec.chunk_frames
+            )));
+        }
+        let p = ClipParams {
+            clip: spec.chunk_frames,
+            ..stream_params(t, spec.fps)
+        };
+        let coder = ClipStream {
+            p,
+            basis: basis.clone(),
+            points: spec.points,
+            fps: spec.fps,
+            uncoded: Vec::new(),
+        };
+        Ok((p.to_bytes(), Box::new(coder)))
+    }
+}
+
+struct ClipStream {
+    p: ClipParams,
+    basis: Arc<Basis>,
+    points: usize,
+    fps: f64,
+    /// Frames not yet in a coded clip, as sent.
+    uncoded: Vec<f32>,
+}
+
+impl StreamCoder for ClipStream {
+    fn push(&mut self, frames: &[f32], flush: bool) -> Result<Vec<ChunkOut>> {
+        self.uncoded.extend_from_slice(frames);
+        let w = self.points * 3;
+        let n = self.uncoded.len() / w;
+        let whole = if flush {
+            n
+        } else {
+            n / self.p.clip * self.p.clip
+        };
+        if whole == 0 {
+            return Ok(Vec::new());
+        }
+        let data: Vec<f32> = self.uncoded.drain(..whole * w).collect();
+        let valid: Vec<bool> = data.chunks_exact(3).map(|s| !s[0].is_nan()).collect();
+        let filled = crate::codec::gaps::fill(&data, self.points);
+        let input = Input {
+            data: &filled,
+            valid: Some(&valid),
+            frames: whole,
+            points: self.points,
+            fps: self.fps,
+            shared: Some(&self.basis),
+        };
+        encode_fixed(&input, self.p)
     }
 }
 

@@ -32,6 +32,7 @@ use crate::codec::basis::{Basis, BasisKind};
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::{max_mean, quantise};
 use crate::codec::residual::FrameResidual;
+use crate::codec::stream::{StreamCoder, StreamSpec, Streaming};
 use crate::codec::wire::{Reader, Writer};
 use crate::codec::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target,
@@ -421,6 +422,47 @@ impl Codec for LsdtFrame {
             Coding::Adaptive => Box::new(adaptive::Decoder::new(p, spatial)),
             Coding::Tables(t) => Box::new(tables::Decoder::new(p, spatial, &t)?),
         })
+    }
+
+    fn streaming(&self) -> Option<&dyn Streaming> {
+        Some(self)
+    }
+}
+
+/// Live streams: [`stream_params`] with the stream's chunk length as the intra period, and
+/// the adaptive stage, coding each frame as it arrives.
+impl Streaming for LsdtFrame {
+    fn open(&self, spec: &StreamSpec<'_>, t: f64) -> Result<(Vec<u8>, Box<dyn StreamCoder>)> {
+        let basis = spec
+            .shared
+            .ok_or_else(|| Error::Basis("lsdt-frame streams code with a shared basis".into()))?;
+        let p = FrameParams {
+            intra_period: spec.chunk_frames,
+            ..stream_params(t, spec.fps)
+        };
+        let coder = FrameStream {
+            encoder: FrameEncoder::new(p, basis)?,
+            width: spec.points * 3,
+        };
+        Ok((p.to_bytes(), Box::new(coder)))
+    }
+}
+
+struct FrameStream {
+    encoder: FrameEncoder,
+    width: usize,
+}
+
+impl StreamCoder for FrameStream {
+    fn push(&mut self, frames: &[f32], flush: bool) -> Result<Vec<ChunkOut>> {
+        let mut out = Vec::new();
+        for f in frames.chunks_exact(self.width) {
+            out.extend(self.encoder.push(f, None).1);
+        }
+        if flush {
+            out.extend(self.encoder.flush());
+        }
+        Ok(out)
     }
 }
 

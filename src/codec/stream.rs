@@ -1,0 +1,371 @@
+//! Streaming encoders: a take coded while it is being recorded, frames in, finished chunks
+//! out, each packed (gap mask, checksum, index entry) and checked on its decoded output as
+//! batch encoding checks a whole take ([`super::pipeline`]).
+//!
+//! A codec that can code frames as they arrive says so through [`Codec::streaming`] and
+//! implements [`Streaming`] (start a stream: its header params and a [`StreamCoder`]). Every
+//! other step is here, the same for all of them: a service opens a [`StreamEncoder`] by codec
+//! id, pushes frames, stores the [`StreamChunk`]s it hands back and [`StreamEncoder::confirm`]s
+//! each once stored. A new streaming codec is one `impl Streaming` in its own module and one
+//! `streaming()` in its `impl Codec`; nothing above the codec layer changes.
+
+use std::sync::Arc;
+
+use super::container::{pack_chunk, ChunkMeta, Header};
+use super::error::{Error, Result};
+use super::id::{CodecId, ErrorBound};
+use super::{codec, pipeline, Basis, ChunkDecoder, ChunkOut, Codec};
+use crate::motion::metrics::{Accumulator, ErrorStats};
+
+/// What a stream is opened with, checked by [`StreamEncoder::open`].
+#[derive(Clone, Copy)]
+pub struct StreamSpec<'a> {
+    pub points: usize,
+    pub fps: f64,
+    /// The take's unit, in metres.
+    pub metres_per_unit: f64,
+    /// Every chunk is held to this bound's value as a max bound (with no search possible
+    /// frame by frame; a mean bound is then met too).
+    pub bound: ErrorBound,
+    /// Frames per chunk: an intra period, a clip.
+    pub chunk_frames: usize,
+    /// The shared basis, for codecs that code with one ([`Codec::basis_kind`]).
+    pub shared: Option<&'a Arc<Basis>>,
+}
+
+impl StreamSpec<'_> {
+    /// The bound in the take's units, a hair inside as batch encoding aims.
+    pub fn target(&self) -> f64 {
+        self.bound.in_units(self.metres_per_unit * 1000.0)
+    }
+}
+
+/// A codec's own part of a stream: codes frames, hands out codec chunks as they finish.
+pub trait StreamCoder: Send {
+    /// Code `frames` (whole frames of the stream's points; NaN marks a missing sample),
+    /// which follow every frame pushed before. With `flush`, end the current chunk after
+    /// them (if frames are pending). Returns the chunks finished, in order.
+    fn push(&mut self, frames: &[f32], flush: bool) -> Result<Vec<ChunkOut>>;
+}
+
+/// How a codec that can stream starts a stream.
+pub trait Streaming: Sync {
+    /// The header params of a stream of `spec` and the coder that writes its chunks.
+    /// `target` is the bound as a max in the take's units ([`StreamSpec::target`]).
+    fn open(&self, spec: &StreamSpec<'_>, target: f64) -> Result<(Vec<u8>, Box<dyn StreamCoder>)>;
+}
+
+/// The codecs that can code a live stream, in id order.
+pub fn streaming_codecs() -> Vec<CodecId> {
+    super::available()
+        .into_iter()
+        .filter(|&c| codec(c).is_ok_and(|c| c.streaming().is_some()))
+        .collect()
+}
+
+/// One finished chunk, checked, ready to store: its index entry (the frame it starts at in
+/// the take), its payload as stored, and what it decodes to.
+pub struct StreamChunk {
+    pub meta: ChunkMeta,
+    pub payload: Vec<u8>,
+    /// The chunk decoded (NaN where a sample is missing), as a reader will decode it.
+    pub decoded: Vec<f32>,
+    /// The frames as sent, for the take's running error statistics.
+    original: Vec<f32>,
+    /// Its position among the stream's chunks.
+    pub index: usize,
+}
+
+/// A stream's take so far: frames, chunks, stored bytes and measured errors.
+#[derive(Debug, Clone)]
+pub struct Totals {
+    pub frames: usize,
+    pub chunks: usize,
+    /// Header (with its index) plus payloads: what the take costs once closed.
+    pub stored_bytes: usize,
+    pub stats: ErrorStats,
+}
+
+/// A take coded frame by frame with one codec. Chunks are handed out by
+/// [`StreamEncoder::push`] and become part of the take when [`StreamEncoder::confirm`]ed
+/// (after the caller has stored them), so a chunk that could not be stored never enters
+/// the take's index, totals or digest.
+pub struct StreamEncoder {
+    /// The take's header without its chunk index (what a live take stores).
+    header: Header,
+    header_len: usize,
+    coder: Box<dyn StreamCoder>,
+    decoder: Arc<dyn ChunkDecoder>,
+    bound: ErrorBound,
+    mm_per_unit: f64,
+    points: usize,
+    /// Frames pushed that no chunk handed out holds yet, as sent.
+    pending: Vec<f32>,
+    /// Chunks handed out so far, and the frame the next one starts at.
+    handed_out: usize,
+    next_frame: usize,
+    index: Vec<ChunkMeta>,
+    payload_bytes: usize,
+    stats: Accumulator,
+    digest: blake3::Hasher,
+}
+
+impl StreamEncoder {
+    /// Start a stream of `spec` with `codec_id`; `Unsupported` if that codec cannot stream.
+    pub fn open(codec_id: CodecId, spec: &StreamSpec<'_>) -> Result<StreamEncoder> {
+        let c: &dyn Codec = codec(codec_id)?;
+        let streaming = c.streaming().ok_or_else(|| {
+            let names: Vec<String> = streaming_codecs().iter().map(|c| c.to_string()).collect();
+            Error::Unsupported(format!(
+                "{codec_id} codes whole takes only; streams are coded with {}",
+                names.join(" or ")
+            ))
+        })?;
+        if spec.points == 0 || spec.chunk_frames == 0 {
+            return Err(Error::Invalid(format!(
+                "a stream needs points and frames per chunk, got {} and {}",
+                spec.points, spec.chunk_frames
+            )));
+        }
+        let shared = pipeline::usable_basis(c, spec.shared, spec.points)?;
+        let spec = StreamSpec { shared, ..*spec };
+        let (params, coder) = streaming.open(&spec, spec.target())?;
+        let header = Header {
+            codec: codec_id,
+            frames: 0,
+            points: spec.points as u32,
+            fps: spec.fps,
+            metres_per_unit: spec.metres_per_unit,
+            params,
+            basis: shared.map(|b| b.hash()),
+            chunks: Vec::new(),
+        };
+        let decoder = Arc::from(pipeline::decoder(&header, shared.cloned())?);
+        Ok(StreamEncoder {
+            header_len: header.to_bytes().len(),
+            header,
+            coder,
+            decoder,
+            bound: spec.bound,
+            mm_per_unit: spec.metres_per_unit * 1000.0,
+            points: spec.points,
+            pending: Vec::new(),
+            handed_out: 0,
+            next_frame: 0,
+            index: Vec::new(),
+            payload_bytes: 0,
+            stats: Accumulator::new(spec.points),
+            digest: blake3::Hasher::new(),
+        })
+    }
+
+    /// The take's header as stored while it is live: no chunk index, no frames.
+    pub fn live_header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The take's header with the confirmed chunks as its index: what it is once closed.
+    pub fn closed_header(&self) -> Header {
+        Header {
+            frames: self.index.iter().map(|c| c.frames).sum(),
+            chunks: self.index.clone(),
+            ..self.header.clone()
+        }
+    }
+
+    /// Frames per sample row: the stream's points × 3.
+    pub fn width(&self) -> usize {
+        self.points * 3
+    }
+
+    /// Code `frames` (whole frames, NaN for a missing sample); with `flush`, end the current
+    /// chunk after them. Returns the chunks finished, packed and checked against the bound;
+    /// store each and [`confirm`](Self::confirm) it, in order.
+    pub fn push(&mut self, frames: &[f32], flush: bool) -> Result<Vec<StreamChunk>> {
+        let w = self.width();
+        if !frames.len().is_multiple_of(w) {
+            return Err(Error::Invalid(format!(
+                "{} values are not whole frames of {} points",
+                frames.len(),
+                self.points
+            )));
+        }
+        let out = self.coder.push(frames, flush)?;
+        self.pending.extend_from_slice(frames);
+        out.into_iter().map(|c| self.finish_chunk(c)).collect()
+    }
+
+    /// Pack a codec chunk with the frames it codes, decode it alone and hold it to the bound.
+    fn finish_chunk(&mut self, chunk: ChunkOut) -> Result<StreamChunk> {
+        let w = self.width();
+        let n = chunk.frames;
+        if n == 0 || n * w > self.pending.len() {
+            return Err(Error::Invalid(format!(
+                "codec {} finished a chunk of {n} frames with {} pending",
+                self.header.codec,
+                self.pending.len() / w
+            )));
+        }
+        let original: Vec<f32> = self.pending.drain(..n * w).collect();
+        let valid: Vec<bool> = original.chunks_exact(3).map(|s| !s[0].is_nan()).collect();
+        let payload = pack_chunk(Some(&valid), &chunk.bytes);
+        let meta = ChunkMeta {
+            first_frame: self.next_frame as u32,
+            frames: n as u32,
+            len: payload.len() as u32,
+            crc32c: crc32c::crc32c(&payload),
+        };
+        // The chunk decodes on its own: check it with a header that holds only it.
+        let alone = Header {
+            frames: n as u32,
+            chunks: vec![ChunkMeta {
+                first_frame: 0,
+                ..meta
+            }],
+            ..self.header.clone()
+        };
+        let decoded = pipeline::decode_chunk(&alone, self.decoder.as_ref(), 0, &payload)?;
+        let mut a = Accumulator::new(self.points);
+        a.add(&original, &decoded);
+        let max_mm = a.finish(self.mm_per_unit).max_mm;
+        let index = self.handed_out;
+        if max_mm > self.bound.mm() {
+            return Err(Error::BoundMissed {
+                codec: self.header.codec.to_string(),
+                detail: format!(
+                    "stream chunk {index} decodes {max_mm:.4} mm from its input, over {}",
+                    self.bound
+                ),
+            });
+        }
+        self.handed_out += 1;
+        self.next_frame += n;
+        Ok(StreamChunk {
+            meta,
+            payload,
+            decoded,
+            original,
+            index,
+        })
+    }
+
+    /// The take's totals if `chunk` (the next to confirm) were part of it: what to store
+    /// with it.
+    pub fn totals_with(&self, chunk: &StreamChunk) -> Totals {
+        let mut stats = self.stats.clone();
+        stats.add(&chunk.original, &chunk.decoded);
+        Totals {
+            frames: self.committed_frames() + chunk.meta.frames as usize,
+            chunks: self.index.len() + 1,
+            stored_bytes: self.stored_bytes(self.index.len() + 1)
+                + self.payload_bytes
+                + chunk.payload.len(),
+            stats: stats.finish(self.mm_per_unit),
+        }
+    }
+
+    /// The take as confirmed so far.
+    pub fn committed(&self) -> Totals {
+        Totals {
+            frames: self.committed_frames(),
+            chunks: self.index.len(),
+            stored_bytes: self.stored_bytes(self.index.len()) + self.payload_bytes,
+            stats: self.stats.finish(self.mm_per_unit),
+        }
+    }
+
+    /// Header and index bytes of a take of `chunks` chunks.
+    fn stored_bytes(&self, chunks: usize) -> usize {
+        self.header_len + chunks * ChunkMeta::INDEX_BYTES
+    }
+
+    fn committed_frames(&self) -> usize {
+        self.index
+            .last()
+            .map_or(0, |c| c.first_frame as usize + c.frames as usize)
+    }
+
+    /// Make a stored chunk part of the take. Chunks are confirmed in the order handed out.
+    pub fn confirm(&mut self, chunk: StreamChunk) -> Result<()> {
+        if chunk.index != self.index.len() {
+            return Err(Error::Invalid(format!(
+                "stream chunk {} confirmed after {} chunks",
+                chunk.index,
+                self.index.len()
+            )));
+        }
+        self.stats.add(&chunk.original, &chunk.decoded);
+        pipeline::digest_update(&mut self.digest, &chunk.decoded);
+        self.payload_bytes += chunk.payload.len();
+        self.index.push(chunk.meta);
+        Ok(())
+    }
+
+    /// [`pipeline::decoded_digest`] of the confirmed chunks' decoded frames.
+    pub fn decoded_digest(&self) -> String {
+        self.digest.finalize().to_hex().to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codec::lsdt::spatial::dct_basis;
+    use crate::motion::synthetic::walker;
+
+    fn spec(basis: &Arc<Basis>) -> StreamSpec<'_> {
+        StreamSpec {
+            points: 4,
+            fps: 60.0,
+            metres_per_unit: 0.001,
+            bound: ErrorBound::MaxMm(1.0),
+            chunk_frames: 30,
+            shared: Some(basis),
+        }
+    }
+
+    #[test]
+    fn only_streaming_codecs_open_and_chunks_join_the_take_when_confirmed() {
+        let basis = Arc::new(dct_basis(4));
+        assert_eq!(
+            streaming_codecs(),
+            vec![CodecId::LsdtClip, CodecId::LsdtFrame]
+        );
+        assert!(matches!(
+            StreamEncoder::open(CodecId::Quant, &spec(&basis)),
+            Err(Error::Unsupported(_))
+        ));
+        let m = walker(100, 4, 60.0, 3, 0.05);
+        let mut e = StreamEncoder::open(CodecId::LsdtFrame, &spec(&basis)).unwrap();
+        assert!(
+            e.push(&m.positions()[..5], false).is_err(),
+            "not whole frames"
+        );
+        let chunks = e.push(m.positions(), false).unwrap();
+        assert_eq!(chunks.len(), 3, "three whole chunks of 30 frames");
+        assert_eq!(
+            e.committed().frames,
+            0,
+            "nothing is part of the take until confirmed"
+        );
+        let mut chunks = chunks.into_iter();
+        let first = chunks.next().unwrap();
+        let second = chunks.next().unwrap();
+        assert!(e.confirm(second).is_err(), "confirmed out of order");
+        let t = e.totals_with(&first);
+        e.confirm(first).unwrap();
+        let c = e.committed();
+        assert_eq!(
+            (c.frames, c.chunks, c.stored_bytes),
+            (t.frames, 1, t.stored_bytes)
+        );
+        assert!(c.stats.max_mm <= 1.0);
+        let tail = e.push(&[], true).unwrap();
+        assert_eq!(tail.len(), 1);
+        assert_eq!(
+            tail[0].meta.first_frame, 90,
+            "frames are numbered as handed out"
+        );
+        assert_eq!(e.closed_header().chunks.len(), 1);
+    }
+}
