@@ -70,14 +70,10 @@ fn decode(c: &mut Criterion) {
         (CodecId::MdttShared, ErrorBound::MeanMm(3.0), &set),
     ] {
         let enc = codec::encode_with(&m, codec, bound, Some(basis)).expect("encodes");
-        let d = codec::decoder(&enc.container.header, Some(basis.clone())).unwrap();
-        let chunks: Vec<&[u8]> = enc.container.chunks.iter().map(Vec::as_slice).collect();
-        let frames = m.frame_count();
+        let reader = codec::Reader::new(enc.container.header.clone(), Some(basis.clone())).unwrap();
+        let chunks = codec::Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
         g.bench_function(format!("{codec} {bound}"), |b| {
-            b.iter(|| {
-                codec::decode_range_with(&enc.container.header, d.as_ref(), &chunks, 0, frames)
-                    .unwrap()
-            })
+            b.iter(|| reader.read_all(&chunks).unwrap())
         });
     }
     g.finish();

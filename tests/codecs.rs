@@ -116,9 +116,9 @@ fn check_with(
         let start = rng.below(frames);
         let end = start + 1 + rng.below(frames - start);
         let range = c.header.chunks_for(start, end);
-        let chunks: Vec<&[u8]> = c.chunks[range].iter().map(Vec::as_slice).collect();
-        let d = codec::decoder(&c.header, shared.cloned()).unwrap();
-        let part = codec::decode_range_with(&c.header, d.as_ref(), &chunks, start, end).unwrap();
+        let chunks = codec::Stored::new(range.start, c.chunks[range].iter().map(Vec::as_slice));
+        let reader = codec::Reader::new(c.header.clone(), shared.cloned()).unwrap();
+        let part = reader.read(start..end, None, &chunks).unwrap();
         assert_eq!(
             bits(&part),
             bits(&full[start * w..end * w]),
@@ -269,13 +269,11 @@ fn lsdt_frame_decodes_a_range_starting_between_intra_frames() {
     assert!(c.header.chunks.len() >= 5, "one intra frame per second");
     let full = codec::decode_all_with(c, Some(b.clone())).unwrap();
     let w = m.point_count() * 3;
-    let d = codec::decoder(&c.header, Some(b)).unwrap();
+    let reader = codec::Reader::new(c.header.clone(), Some(b)).unwrap();
     for (start, end) in [(130, 131), (177, 420), (599, 700)] {
-        let chunks: Vec<&[u8]> = c.chunks[c.header.chunks_for(start, end)]
-            .iter()
-            .map(Vec::as_slice)
-            .collect();
-        let part = codec::decode_range_with(&c.header, d.as_ref(), &chunks, start, end).unwrap();
+        let range = c.header.chunks_for(start, end);
+        let chunks = codec::Stored::new(range.start, c.chunks[range].iter().map(Vec::as_slice));
+        let part = reader.read(start..end, None, &chunks).unwrap();
         assert_eq!(
             bits(&part),
             bits(&full[start * w..end * w]),

@@ -187,18 +187,16 @@ pub fn measure(
     let repeats = repeats.max(1);
     let t1 = Instant::now();
     for _ in 0..repeats {
-        std::hint::black_box(codec::decoder(header, shared.cloned()).map_err(|e| e.to_string())?);
+        std::hint::black_box(
+            codec::Reader::new(header.clone(), shared.cloned()).map_err(|e| e.to_string())?,
+        );
     }
     let setup_s = t1.elapsed().as_secs_f64() / repeats as f64;
-    let decoder = codec::decoder(header, shared.cloned()).map_err(|e| e.to_string())?;
-    let chunks: Vec<&[u8]> = enc.container.chunks.iter().map(Vec::as_slice).collect();
-    let frames = header.frames as usize;
+    let reader = codec::Reader::new(header.clone(), shared.cloned()).map_err(|e| e.to_string())?;
+    let chunks = codec::Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
     let t2 = Instant::now();
     for _ in 0..repeats {
-        std::hint::black_box(
-            codec::decode_range_with(header, decoder.as_ref(), &chunks, 0, frames)
-                .map_err(|e| e.to_string())?,
-        );
+        std::hint::black_box(reader.read_all(&chunks).map_err(|e| e.to_string())?);
     }
     let decode_s = t2.elapsed().as_secs_f64() / repeats as f64;
     Ok(Row {

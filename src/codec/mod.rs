@@ -6,7 +6,8 @@
 //! - [`id`]: codec ids, latency classes, error bounds — the user's vocabulary.
 //! - [`container`]: header + chunk index + per-chunk gap masks and checksums.
 //! - [`entropy`]: adaptive binary range coder and integer models (and the zstd alternative).
-//! - [`pipeline`]: encode a `Motion` with any codec to a bound, verify it, decode ranges.
+//! - [`pipeline`]: encode a `Motion` with any codec to a bound and verify it.
+//! - [`read`]: the one read path: any frame range of a take, from any source of chunks.
 //! - [`stream`]: code a take frame by frame as it is recorded, with the codecs that can.
 //! - [`raw`], [`quant`]: the baselines. [`mdtt`]: Hou et al. 2015 with a residual layer.
 //! - [`lsdt`]: Hou et al. 2016's learned spatial transform, its training, `lsdt-clip` and
@@ -28,6 +29,7 @@ pub mod measure;
 pub mod pipeline;
 pub mod quant;
 pub mod raw;
+pub mod read;
 pub mod residual;
 pub mod stream;
 mod wire;
@@ -39,9 +41,10 @@ pub use container::{Container, Header, Limits};
 pub use error::{Error, Result};
 pub use id::{CodecId, ErrorBound, Latency};
 pub use pipeline::{
-    decode_all, decode_all_with, decode_chunk, decode_range, decode_range_with, decoded_digest,
-    decoder, digest_update, encode, encode_variant, encode_with, Encoded,
+    decode_all, decode_all_with, decode_chunk, decoded_digest, decoder, digest_update, encode,
+    encode_variant, encode_with, Encoded,
 };
+pub use read::{ChunkSource, Reader, Stored};
 
 /// What an encoder sees: gap-filled positions (`frames × points × 3`, the take's units) and
 /// which samples are real, so that errors are judged on those only.

@@ -6,6 +6,7 @@ use super::basis::{hex, Basis};
 use super::container::{pack_chunks, unpack_chunk, verify_chunk, Container, Header};
 use super::error::{malformed, Error, Result};
 use super::id::{CodecId, ErrorBound};
+use super::read::{Reader, Stored};
 use super::{codec, gaps, ChunkDecoder, Codec, Input, Target};
 use crate::motion::metrics::{self, ErrorStats};
 use crate::motion::Motion;
@@ -209,29 +210,8 @@ pub fn decode_all(container: &Container) -> Result<Vec<f32>> {
 
 /// Decode every frame of a take coded with a shared basis.
 pub fn decode_all_with(container: &Container, shared: Option<Arc<Basis>>) -> Result<Vec<f32>> {
-    let chunks: Vec<&[u8]> = container.chunks.iter().map(Vec::as_slice).collect();
-    let d = decoder(&container.header, shared)?;
-    decode_range_with(
-        &container.header,
-        d.as_ref(),
-        &chunks,
-        0,
-        container.header.frames as usize,
-    )
-}
-
-/// Decode frames `start..end`. `chunks` holds the payloads of exactly the chunks
-/// `header.chunks_for(start, end)` names, in order; nothing else is read.
-///
-/// Missing samples come back as NaN.
-pub fn decode_range(
-    header: &Header,
-    chunks: &[&[u8]],
-    start: usize,
-    end: usize,
-) -> Result<Vec<f32>> {
-    let decoder = decoder(header, None)?;
-    decode_range_with(header, decoder.as_ref(), chunks, start, end)
+    let reader = Reader::new(container.header.clone(), shared)?;
+    reader.read_all(&Stored::new(0, container.chunks.iter().map(Vec::as_slice)))
 }
 
 /// Decode chunk `index` (its payload as stored): all its frames, NaN where the take has
@@ -252,7 +232,7 @@ pub fn decode_chunk(
 }
 
 /// [`decode_chunk`] into `out` (exactly the chunk's frames).
-fn decode_chunk_into(
+pub(super) fn decode_chunk_into(
     header: &Header,
     decoder: &dyn ChunkDecoder,
     index: usize,
@@ -286,43 +266,4 @@ fn decode_chunk_into(
 fn any_infinite(v: &[f32]) -> bool {
     v.chunks(256)
         .any(|c| c.iter().fold(false, |any, x| any | x.is_infinite()))
-}
-
-/// As [`decode_range`], with a decoder prepared once from the header (parsing a shared or
-/// per-take basis costs more than decoding a second of frames, so servers keep it).
-pub fn decode_range_with(
-    header: &Header,
-    decoder: &dyn ChunkDecoder,
-    chunks: &[&[u8]],
-    start: usize,
-    end: usize,
-) -> Result<Vec<f32>> {
-    if start > end || end > header.frames as usize {
-        return Err(Error::Invalid(format!(
-            "frames {start}..{end} outside 0..{}",
-            header.frames
-        )));
-    }
-    let wanted = header.chunks_for(start, end);
-    if chunks.len() != wanted.len() {
-        return Err(Error::Invalid(format!(
-            "range {start}..{end} needs chunks {wanted:?}, got {}",
-            chunks.len()
-        )));
-    }
-    let w = header.width();
-    let mut out = vec![0f32; (end - start) * w];
-    for (i, payload) in wanted.zip(chunks) {
-        let r = header.chunks[i].frame_range();
-        let (lo, hi) = (r.start.max(start), r.end.min(end));
-        let dest = &mut out[(lo - start) * w..(hi - start) * w];
-        if (lo, hi) == (r.start, r.end) {
-            // The whole chunk is wanted: decode in place.
-            decode_chunk_into(header, decoder, i, payload, dest)?;
-        } else {
-            let decoded = decode_chunk(header, decoder, i, payload)?;
-            dest.copy_from_slice(&decoded[(lo - r.start) * w..(hi - r.start) * w]);
-        }
-    }
-    Ok(out)
 }

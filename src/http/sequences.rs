@@ -220,8 +220,7 @@ pub struct FramesQuery {
 /// What a range request asks for.
 pub struct FramesRequest {
     pub range: TimeRange,
-    /// `None`: JSON.
-    pub format: Option<Format>,
+    pub format: Format,
     /// Point names, or every point.
     pub points: Option<Vec<String>>,
 }
@@ -245,13 +244,12 @@ pub fn frames_request(q: FramesQuery) -> Result<FramesRequest, ApiError> {
         }
     };
     let format = match q.format.as_deref() {
-        None | Some("json") => None,
-        Some(f) => Some(
-            f.parse::<Format>()
-                .map_err(|e| ApiError::bad_request(e.to_string()))?,
-        ),
+        None => Format::Json,
+        Some(f) => f
+            .parse::<Format>()
+            .map_err(|e| ApiError::bad_request(e.to_string()))?,
     };
-    if format == Some(Format::Bvh) {
+    if format == Format::Bvh {
         return Err(crate::service::Error::Unsatisfiable(
             "BVH output needs joint rotations, and the stored codecs keep point positions only"
                 .into(),
@@ -277,50 +275,47 @@ pub async fn frames(
         format,
         points,
     } = frames_request(q)?;
-    let (row, frames) =
-        fetch::frames(&state.store, &state.caches, &id, range, points.as_deref()).await?;
-    let served = frames.data.len() * 4;
-    state.metrics.decoded(frames.end - frames.start, served);
+    let frames = fetch::frames(&state.store, &state.caches, &id, range, points.as_deref()).await?;
+    state
+        .metrics
+        .decoded(frames.end - frames.start, frames.data.len() * 4);
+    frames_response(frames, format)
+}
+
+/// Decoded frames in the format asked for, with their place in the take as headers. JSON
+/// is the JSON file format plus the take's id, the range and its unit in metres.
+fn frames_response(frames: fetch::Frames, format: Format) -> Result<Response, ApiError> {
     let mut headers = HeaderMap::new();
     let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
     headers.insert("x-frames", hv((frames.end - frames.start).to_string()));
     headers.insert("x-points", hv(frames.points.len().to_string()));
     headers.insert("x-start-frame", hv(frames.start.to_string()));
-    headers.insert("x-fps", hv(row.fps.to_string()));
-    headers.insert("x-metres-per-unit", hv(row.metres_per_unit.to_string()));
-    let Some(format) = format else {
-        let per = frames.points.len() * 3;
-        let data: Vec<Vec<Option<[f32; 3]>>> = frames
-            .data
-            .chunks_exact(per.max(1))
-            .map(|f| {
-                f.chunks_exact(3)
-                    .map(|p| p[0].is_finite().then(|| [p[0], p[1], p[2]]))
-                    .collect()
-            })
-            .collect();
-        let body = serde_json::json!({
-            "id": row.id,
-            "start": frames.start,
-            "end": frames.end,
-            "fps": row.fps,
-            "metres_per_unit": row.metres_per_unit,
-            "points": frames.points,
-            "frames": data,
-        });
-        return Ok((headers, Json(body)).into_response());
-    };
-    let unit = Unit::new(row.metres_per_unit, UnitSource::Declared)
-        .map_err(|e| ApiError::bad_request(e.to_string()))?;
-    let motion = Motion::new(row.fps, unit, frames.points, frames.data, None)
+    headers.insert("x-fps", hv(frames.fps.to_string()));
+    headers.insert("x-metres-per-unit", hv(frames.metres_per_unit.to_string()));
+    let unit = Unit::new(frames.metres_per_unit, UnitSource::Declared)
         .map_err(|e| crate::service::Error::Internal(e.to_string()))?;
-    let bytes = formats::write(&motion, format)
-        .map_err(|e| crate::service::Error::Unsatisfiable(e.to_string()))?;
-    let content_type = match format {
-        Format::Csv => "text/csv",
-        Format::Trc => "text/plain",
-        Format::Json => "application/json",
-        _ => "application/octet-stream",
+    let mut fields = serde_json::Map::new();
+    fields.insert("id".into(), frames.id.into());
+    fields.insert("start".into(), frames.start.into());
+    fields.insert("end".into(), frames.end.into());
+    fields.insert("metres_per_unit".into(), frames.metres_per_unit.into());
+    let motion = Motion::new(frames.fps, unit, frames.points, frames.data, None)
+        .map_err(|e| crate::service::Error::Internal(e.to_string()))?;
+    let (bytes, content_type) = match format {
+        Format::Json => (
+            formats::json::write_with(&motion, fields),
+            "application/json",
+        ),
+        _ => {
+            let bytes = formats::write(&motion, format)
+                .map_err(|e| crate::service::Error::Unsatisfiable(e.to_string()))?;
+            let ct = match format {
+                Format::Csv => "text/csv",
+                Format::Trc => "text/plain",
+                _ => "application/octet-stream",
+            };
+            (bytes, ct)
+        }
     };
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
     Ok((headers, bytes).into_response())

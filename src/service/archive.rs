@@ -176,11 +176,11 @@ async fn check_take(store: &Store, row: &SequenceRow) -> Result<Checked> {
         None => None,
     };
     let chunks = rows.len();
-    let frames = header.frames as usize;
     let decoded = blocking(move || {
-        let payloads: Vec<&[u8]> = rows.iter().map(|r| r.payload.as_slice()).collect();
-        let d = codec::decoder(&header, shared)?;
-        codec::decode_range_with(&header, d.as_ref(), &payloads, 0, frames)
+        codec::Reader::new(header, shared)?.read_all(&codec::Stored::new(
+            0,
+            rows.iter().map(|r| r.payload.as_slice()),
+        ))
     })
     .await?;
     let digest = row.meta.get("decoded_blake3").and_then(|v| v.as_str());

@@ -1,12 +1,13 @@
 //! Read side: a take's metadata, and any frame range decoded from only the chunks that
 //! overlap it.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use super::prepared::{Prepared, ReadCaches};
 use super::{blocking, Error, Result};
-use crate::codec::{self, basis::hex, Header, Limits};
-use crate::store::{SequenceRow, Store};
+use crate::codec::read::Chunk;
+use crate::codec::{self, basis::hex, Basis, ChunkSource, Header, Limits, Reader, Stored};
+use crate::store::{ChunkRow, SequenceRow, Store};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -56,8 +57,11 @@ impl TimeRange {
 /// Decoded frames of a take.
 #[derive(Debug, Clone)]
 pub struct Frames {
+    pub id: String,
     pub start: usize,
     pub end: usize,
+    pub fps: f64,
+    pub metres_per_unit: f64,
     /// The names of the returned points, in order.
     pub points: Vec<String>,
     /// `(end − start) × points × 3`, NaN where the take has a gap.
@@ -95,114 +99,147 @@ pub fn point_names(row: &SequenceRow) -> Result<Vec<String>> {
     Ok(names)
 }
 
-/// Decode `range` of take `id`, optionally only the named points. Chunks already decoded
-/// come from `caches`; of the rest, only those overlapping the range are read and decoded.
+/// Decode `range` of take `id`, optionally only the named points. The range and the
+/// points are checked before anything is decoded; chunks already decoded come from
+/// `caches`, and of the rest only those the range lies in are read.
 pub async fn frames(
     store: &Store,
     caches: &ReadCaches,
     id: &str,
     range: TimeRange,
     subset: Option<&[String]>,
-) -> Result<(Arc<Prepared>, Frames)> {
-    let prepared = match caches.decoders.get(id) {
-        // Cached state may outlive a delete made through another server sharing the
-        // database: one indexed lookup keeps every answer true.
-        Some(p) => {
-            if !store.exists(id).await? {
-                caches.forget(id);
-                return Err(Error::NotFound(format!("sequence {id}")));
-            }
-            p
-        }
-        None => {
-            let row = sequence(store, id).await?;
-            let (header, live) = header_of(store, &row).await?;
-            let shared = match &header.basis {
-                Some(h) => Some(super::bases::load(store, &hex(h)).await?),
-                None => None,
-            };
-            let p = Arc::new(blocking(move || Prepared::new(&row, header, shared)).await??);
-            // A live take's index grows with every commit (here or on another server).
-            if !live {
-                caches.decoders.insert(p.clone());
-            }
-            p
-        }
+) -> Result<Frames> {
+    let (prepared, (start, end)) = prepare(store, caches, id, range).await?;
+    let selected = match subset {
+        None => None,
+        Some(names) => Some(prepared.point_indices(names)?),
     };
-    let (start, end) = range.resolve(prepared.frames, prepared.fps)?;
-    let names = &prepared.point_names;
-    let selected: Vec<usize> = match subset {
-        None => (0..names.len()).collect(),
-        Some(wanted) => wanted
-            .iter()
-            .map(|w| {
-                names.iter().position(|n| n == w).ok_or_else(|| {
-                    Error::InvalidRequest(format!("no point named {w:?} in this take"))
-                })
-            })
-            .collect::<Result<_>>()?,
-    };
-    let wanted = prepared.header.chunks_for(start, end);
-    let mut decoded: Vec<Option<Arc<Vec<f32>>>> =
+    let reader = &prepared.reader;
+    let wanted = reader.chunks_for(start..end)?;
+    let cached: Vec<Option<Arc<Vec<f32>>>> =
         wanted.clone().map(|i| caches.chunks.get(id, i)).collect();
     let missing: Vec<usize> = wanted
         .clone()
-        .filter(|&i| decoded[i - wanted.start].is_none())
+        .zip(&cached)
+        .filter_map(|(i, c)| c.is_none().then_some(i))
         .collect();
-    if let (Some(&lo), Some(&hi)) = (missing.first(), missing.last()) {
-        let rows = store.chunks(id, lo as i64, hi as i64 + 1).await?;
-        if rows.len() != hi + 1 - lo {
-            // Deleted since its decoder was cached: forget it, and say so.
-            caches.forget(id);
-            sequence(store, id).await?;
-            return Err(Error::Internal(format!(
-                "take {id} is missing chunks {lo}..={hi}"
-            )));
-        }
-        let p = prepared.clone();
-        let wanted_missing = missing.clone();
-        let fresh = blocking(move || {
-            wanted_missing
-                .iter()
-                .map(|&i| {
-                    let payload = &rows[i - lo].payload;
-                    codec::decode_chunk(&p.header, p.decoder.as_ref(), i, payload).map(Arc::new)
-                })
-                .collect::<Result<Vec<_>, _>>()
-        })
-        .await??;
-        for (i, chunk) in missing.into_iter().zip(fresh) {
-            caches.chunks.insert(id, i, chunk.clone());
-            decoded[i - wanted.start] = Some(chunk);
-        }
-    }
-    // Copy the requested frames (and points) out of the decoded chunks.
-    let all = names.len();
-    let mut data = Vec::with_capacity((end - start) * selected.len() * 3);
-    for (i, chunk) in wanted.clone().zip(&decoded) {
-        let chunk = chunk.as_ref().expect("every wanted chunk is decoded");
-        let r = prepared.header.chunks[i].frame_range();
-        let (a, b) = (r.start.max(start) - r.start, r.end.min(end) - r.start);
-        for frame in chunk[a * all * 3..b * all * 3].chunks_exact(all * 3) {
-            if selected.len() == all {
-                data.extend_from_slice(frame);
-            } else {
-                for &p in &selected {
-                    data.extend_from_slice(&frame[p * 3..p * 3 + 3]);
-                }
+    let stored = match (missing.first().copied(), missing.last().copied()) {
+        (Some(lo), Some(hi)) => {
+            let rows = store.chunks(id, lo as i64, hi as i64 + 1).await?;
+            if rows.len() != hi + 1 - lo {
+                // Deleted since its reader was cached: forget it, and say so.
+                caches.forget(id);
+                sequence(store, id).await?;
+                return Err(Error::Internal(format!(
+                    "take {id} is missing chunks {lo}..={hi}"
+                )));
             }
+            (lo, rows)
+        }
+        _ => (0, Vec::new()),
+    };
+    let p = prepared.clone();
+    let (data, fresh) = blocking(move || {
+        let source = Gathered {
+            first: wanted.start,
+            cached,
+            stored,
+            fresh: Mutex::new(Vec::new()),
+        };
+        let data = p.reader.read(start..end, selected.as_deref(), &source);
+        (data, source.fresh.into_inner().unwrap_or_default())
+    })
+    .await?;
+    for (i, chunk) in fresh {
+        caches.chunks.insert(id, i, chunk);
+    }
+    let points = match subset {
+        Some(names) => names.to_vec(),
+        None => prepared.point_names.clone(),
+    };
+    Ok(Frames {
+        id: id.to_string(),
+        start,
+        end,
+        fps: prepared.fps,
+        metres_per_unit: prepared.metres_per_unit,
+        points,
+        data: data?,
+    })
+}
+
+/// The take's reader (cached, or built and cached unless the take is live) and `range`
+/// resolved against it; the range is checked before a reader is built.
+async fn prepare(
+    store: &Store,
+    caches: &ReadCaches,
+    id: &str,
+    range: TimeRange,
+) -> Result<(Arc<Prepared>, (usize, usize))> {
+    if let Some(p) = caches.decoders.get(id) {
+        // Cached state may outlive a delete made through another server sharing the
+        // database: one indexed lookup keeps every answer true.
+        if !store.exists(id).await? {
+            caches.forget(id);
+            return Err(Error::NotFound(format!("sequence {id}")));
+        }
+        let r = range.resolve(p.frames, p.fps)?;
+        return Ok((p, r));
+    }
+    let row = sequence(store, id).await?;
+    let r = range.resolve(row.frames as usize, row.fps)?;
+    let (header, live) = header_of(store, &row).await?;
+    let shared = shared_basis(store, &header).await?;
+    let p = Arc::new(blocking(move || Prepared::new(&row, header, shared)).await??);
+    // A live take's index grows with every commit (here or on another server).
+    if !live {
+        caches.decoders.insert(p.clone());
+    }
+    Ok((p, r))
+}
+
+/// The chunks of one range request: those decoded already (cached), the payloads of the
+/// rest (read from the store), and those decoded now, for the cache.
+struct Gathered {
+    first: usize,
+    cached: Vec<Option<Arc<Vec<f32>>>>,
+    stored: (usize, Vec<ChunkRow>),
+    fresh: Mutex<Vec<(usize, Arc<Vec<f32>>)>>,
+}
+
+impl ChunkSource for Gathered {
+    fn chunk(&self, index: usize) -> codec::Result<Chunk<'_>> {
+        let cached = index
+            .checked_sub(self.first)
+            .and_then(|i| self.cached.get(i).cloned().flatten());
+        if let Some(d) = cached {
+            return Ok(Chunk::Decoded(d));
+        }
+        let (lo, rows) = &self.stored;
+        index
+            .checked_sub(*lo)
+            .and_then(|i| rows.get(i))
+            .map(|r| Chunk::Stored(&r.payload))
+            .ok_or_else(|| codec::Error::Invalid(format!("chunk {index} was not read")))
+    }
+
+    fn keeps(&self) -> bool {
+        true
+    }
+
+    fn keep(&self, index: usize, decoded: Arc<Vec<f32>>) {
+        if let Ok(mut fresh) = self.fresh.lock() {
+            fresh.push((index, decoded));
         }
     }
-    let points = selected.iter().map(|&p| names[p].clone()).collect();
-    Ok((
-        prepared,
-        Frames {
-            start,
-            end,
-            points,
-            data,
-        },
-    ))
+}
+
+/// The shared basis a header names, loaded (and cached) by id; `None` if it names none.
+pub async fn shared_basis(store: &Store, header: &Header) -> Result<Option<Arc<Basis>>> {
+    match &header.basis {
+        Some(h) => Ok(Some(super::bases::load(store, &hex(h)).await?)),
+        None => Ok(None),
+    }
 }
 
 /// A stored take's header, and whether the take is live. A live take's stored header has
@@ -222,19 +259,13 @@ pub async fn header_of(store: &Store, row: &SequenceRow) -> Result<(Header, bool
 pub async fn whole_take(store: &Store, row: &SequenceRow) -> Result<Vec<f32>> {
     let id = &row.id;
     let (header, _) = header_of(store, row).await?;
-    let shared = match &header.basis {
-        Some(h) => Some(super::bases::load(store, &hex(h)).await?),
-        None => None,
-    };
+    let shared = shared_basis(store, &header).await?;
     let rows = store.chunks(id, 0, header.chunks.len() as i64).await?;
     if rows.len() != header.chunks.len() {
         return Err(Error::NotFound(format!("sequence {id}")));
     }
-    let frames = header.frames as usize;
     Ok(blocking(move || {
-        let payloads: Vec<&[u8]> = rows.iter().map(|r| r.payload.as_slice()).collect();
-        let d = codec::decoder(&header, shared)?;
-        codec::decode_range_with(&header, d.as_ref(), &payloads, 0, frames)
+        Reader::new(header, shared)?.read_all(&Stored::new(0, rows.iter().map(|r| &r.payload[..])))
     })
     .await??)
 }

@@ -9,14 +9,13 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
 
 use crate::codec::container::Header;
-use crate::codec::{self, Basis, ChunkDecoder};
+use crate::codec::{Basis, Reader};
 use crate::store::SequenceRow;
 
 /// What range requests of one take need, ready to use.
 pub struct Prepared {
     pub id: String,
-    pub header: Header,
-    pub decoder: Box<dyn ChunkDecoder>,
+    pub reader: Reader,
     pub point_names: Vec<String>,
     pub fps: f64,
     pub metres_per_unit: f64,
@@ -30,17 +29,28 @@ impl Prepared {
         header: Header,
         shared: Option<Arc<Basis>>,
     ) -> super::Result<Prepared> {
-        let decoder = codec::decoder(&header, shared)
+        let reader = Reader::new(header, shared)
             .map_err(|e| super::Error::Internal(format!("stored take {}: {e}", row.id)))?;
         Ok(Prepared {
             id: row.id.clone(),
-            header,
-            decoder,
+            reader,
             point_names: super::fetch::point_names(row)?,
             fps: row.fps,
             metres_per_unit: row.metres_per_unit,
             frames: row.frames as usize,
         })
+    }
+
+    /// The indices of the named points, or a 400 naming the first that is not in the take.
+    pub fn point_indices(&self, names: &[String]) -> super::Result<Vec<usize>> {
+        names
+            .iter()
+            .map(|w| {
+                self.point_names.iter().position(|n| n == w).ok_or_else(|| {
+                    super::Error::InvalidRequest(format!("no point named {w:?} in this take"))
+                })
+            })
+            .collect()
     }
 }
 
@@ -189,7 +199,7 @@ impl Default for DecoderCache {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::codec::{CodecId, ErrorBound};
+    use crate::codec::{self, CodecId, ErrorBound};
     use crate::motion::synthetic::walker;
 
     fn prepared(id: &str) -> Arc<Prepared> {
@@ -201,8 +211,7 @@ mod tests {
         .unwrap();
         Arc::new(Prepared {
             id: id.into(),
-            decoder: codec::decoder(&enc.container.header, None).unwrap(),
-            header: enc.container.header,
+            reader: Reader::new(enc.container.header, None).unwrap(),
             point_names: vec!["a".into(), "b".into()],
             fps: 30.0,
             metres_per_unit: 0.001,

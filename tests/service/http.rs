@@ -177,6 +177,26 @@ async fn ingest_fetch_and_errors_on_every_backend() {
             assert_eq!(status, 200, "{format}");
             assert!(body.starts_with(check), "{format}");
         }
+        // One JSON shape, however the format is spelled; it reads back as a take.
+        let json = |format: &'static str| {
+            let path = format!("/v1/sequences/{id}/frames?start=3&end=9{format}");
+            let srv = &srv;
+            async move {
+                let (status, _, body) = srv.get(&path).await;
+                assert_eq!(status, 200, "{format}");
+                body
+            }
+        };
+        let plain = json("").await;
+        assert_eq!(plain, json("&format=json").await);
+        assert_eq!(plain, json("&format=JSON").await);
+        let v: Value = serde_json::from_slice(&plain).unwrap();
+        assert_eq!(
+            (v["id"].as_str(), v["start"].as_u64(), v["end"].as_u64()),
+            (Some(id.as_str()), Some(3), Some(9))
+        );
+        let read = mocapstore::motion::formats::read(&plain, &Default::default()).unwrap();
+        assert_eq!(read.motion.frame_count(), 6);
         let (status, _, body) = srv
             .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
             .await;

@@ -79,6 +79,15 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
 
 /// Write as JSON; coordinates in the take's own unit, named in `unit`.
 pub fn write(motion: &Motion) -> Vec<u8> {
+    write_with(motion, serde_json::Map::new())
+}
+
+/// [`write`] with more top-level fields beside the document's own (a range response says
+/// which take and frames it holds); readers ignore them, so the result reads back as a take.
+pub fn write_with(
+    motion: &Motion,
+    mut fields: serde_json::Map<String, serde_json::Value>,
+) -> Vec<u8> {
     let m = motion.unit.metres_per_unit;
     let name = unit_name(m);
     // Named units as their name, anything else as a number of metres.
@@ -87,12 +96,16 @@ pub fn write(motion: &Motion) -> Vec<u8> {
     } else {
         serde_json::Value::from(m)
     };
-    let header = serde_json::to_string(&Header {
+    let own = serde_json::to_value(Header {
         fps: motion.fps,
         unit,
         points: &motion.point_names,
     })
     .expect("strings and numbers serialise");
+    if let serde_json::Value::Object(own) = own {
+        fields.extend(own);
+    }
+    let header = serde_json::Value::Object(fields).to_string();
     // Frames are written by hand: serde_json would print f32 through f64 with noise digits.
     let mut out = String::with_capacity(header.len() + motion.positions().len() * 10);
     out.push_str(&header[..header.len() - 1]);

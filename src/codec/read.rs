@@ -1,0 +1,170 @@
+//! The read path: frames `a..b` of a take, all its points or some, from its header, the
+//! shared basis the header names, and a source of its chunks. Every reader goes through
+//! [`Reader::read`]: whole-take decoding after encoding, range requests (with a server's
+//! cache of decoded chunks as the source), verification and export.
+
+use std::ops::Range;
+use std::sync::Arc;
+
+use super::basis::Basis;
+use super::container::Header;
+use super::error::{Error, Result};
+use super::pipeline::{decode_chunk, decode_chunk_into, decoder};
+use super::ChunkDecoder;
+
+/// One chunk as a source holds it.
+pub enum Chunk<'a> {
+    /// Decoded already (a cache): `frames × points × 3`, NaN at gaps.
+    Decoded(Arc<Vec<f32>>),
+    /// The payload as stored.
+    Stored(&'a [u8]),
+}
+
+/// Where a [`Reader`] gets the chunks a range needs.
+pub trait ChunkSource {
+    /// Chunk `index` of the take.
+    fn chunk(&self, index: usize) -> Result<Chunk<'_>>;
+    /// Whether chunks decoded from this source's payloads should be handed back to
+    /// [`ChunkSource::keep`] (a cache); when not, whole chunks decode straight into the
+    /// output.
+    fn keeps(&self) -> bool {
+        false
+    }
+    /// A chunk decoded from this source's payload.
+    fn keep(&self, _index: usize, _decoded: Arc<Vec<f32>>) {}
+}
+
+/// Payloads in memory, of consecutive chunks from `first` on.
+pub struct Stored<'a> {
+    pub first: usize,
+    pub payloads: Vec<&'a [u8]>,
+}
+
+impl<'a> Stored<'a> {
+    pub fn new(first: usize, payloads: impl IntoIterator<Item = &'a [u8]>) -> Self {
+        Stored {
+            first,
+            payloads: payloads.into_iter().collect(),
+        }
+    }
+}
+
+impl ChunkSource for Stored<'_> {
+    fn chunk(&self, index: usize) -> Result<Chunk<'_>> {
+        index
+            .checked_sub(self.first)
+            .and_then(|i| self.payloads.get(i))
+            .map(|p| Chunk::Stored(p))
+            .ok_or_else(|| Error::Invalid(format!("chunk {index} was not supplied")))
+    }
+}
+
+/// A take ready to read: its header and the decoder built from it (parsing a shared or
+/// per-take basis costs more than decoding a second of frames, so servers keep a reader per
+/// take).
+pub struct Reader {
+    header: Header,
+    decoder: Box<dyn ChunkDecoder>,
+}
+
+impl Reader {
+    /// `shared` is the basis the header names, if it names one; its hash must match.
+    pub fn new(header: Header, shared: Option<Arc<Basis>>) -> Result<Reader> {
+        let decoder = decoder(&header, shared)?;
+        Ok(Reader { header, decoder })
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The chunks frames `range` lie in, once the range is checked against the take: what a
+    /// caller fetches before [`Reader::read`].
+    pub fn chunks_for(&self, range: Range<usize>) -> Result<Range<usize>> {
+        check_range(&self.header, &range)?;
+        Ok(self.header.chunks_for(range.start, range.end))
+    }
+
+    /// Decode one chunk (its payload as stored): all its frames, NaN at gaps.
+    pub fn decode_chunk(&self, index: usize, payload: &[u8]) -> Result<Vec<f32>> {
+        decode_chunk(&self.header, self.decoder.as_ref(), index, payload)
+    }
+
+    /// Frames `range` of the take, of every point or of the point indices `points`
+    /// (`(end − start) × points × 3`, NaN at gaps). Only the chunks the range lies in are
+    /// asked of `source`.
+    pub fn read(
+        &self,
+        range: Range<usize>,
+        points: Option<&[usize]>,
+        source: &dyn ChunkSource,
+    ) -> Result<Vec<f32>> {
+        let wanted = self.chunks_for(range.clone())?;
+        let all = self.header.points as usize;
+        if let Some(bad) = points.and_then(|p| p.iter().find(|&&p| p >= all)) {
+            return Err(Error::Invalid(format!(
+                "point {bad} of a take of {all} points"
+            )));
+        }
+        let selected = points.map_or(all, <[usize]>::len);
+        let (w, out_w) = (all * 3, selected * 3);
+        let (start, end) = (range.start, range.end);
+        let mut out = vec![0f32; (end - start) * out_w];
+        for i in wanted {
+            let r = self.header.chunks[i].frame_range();
+            let (lo, hi) = (r.start.max(start), r.end.min(end));
+            let dest = &mut out[(lo - start) * out_w..(hi - start) * out_w];
+            let decoded = match source.chunk(i)? {
+                Chunk::Decoded(d) => d,
+                Chunk::Stored(payload) => {
+                    if points.is_none() && (lo, hi) == (r.start, r.end) && !source.keeps() {
+                        // The whole chunk is wanted and kept nowhere: decode in place.
+                        decode_chunk_into(&self.header, self.decoder.as_ref(), i, payload, dest)?;
+                        continue;
+                    }
+                    let d = Arc::new(self.decode_chunk(i, payload)?);
+                    if source.keeps() {
+                        source.keep(i, d.clone());
+                    }
+                    d
+                }
+            };
+            if decoded.len() != r.len() * w {
+                return Err(Error::Invalid(format!(
+                    "chunk {i} holds {} values, its {} frames need {}",
+                    decoded.len(),
+                    r.len(),
+                    r.len() * w
+                )));
+            }
+            let frames = decoded[(lo - r.start) * w..(hi - r.start) * w].chunks_exact(w);
+            match points {
+                None => dest.copy_from_slice(&decoded[(lo - r.start) * w..(hi - r.start) * w]),
+                Some(points) => {
+                    for (frame, to) in frames.zip(dest.chunks_exact_mut(out_w)) {
+                        for (&p, to) in points.iter().zip(to.chunks_exact_mut(3)) {
+                            to.copy_from_slice(&frame[p * 3..p * 3 + 3]);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Every frame of the take.
+    pub fn read_all(&self, source: &dyn ChunkSource) -> Result<Vec<f32>> {
+        self.read(0..self.header.frames as usize, None, source)
+    }
+}
+
+/// A range lies within the take, start at most end (an empty range reads nothing).
+fn check_range(header: &Header, range: &Range<usize>) -> Result<()> {
+    if range.start > range.end || range.end > header.frames as usize {
+        return Err(Error::Invalid(format!(
+            "frames {}..{} outside 0..{}",
+            range.start, range.end, header.frames
+        )));
+    }
+    Ok(())
+}
