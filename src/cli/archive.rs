@@ -186,14 +186,14 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
             .map_err(|e| format!("take {id}: {e}"))?;
         let folder = format!(
             "takes/{}",
-            if t.row.library.is_empty() {
+            if t.take.library.is_empty() {
                 "_".to_string()
             } else {
-                safe(&t.row.library)
+                safe(&t.take.library)
             }
         );
         std::fs::create_dir_all(dir.join(&folder)).map_err(|e| io(dir, e))?;
-        let stem = format!("{folder}/{}__{}", safe(&t.row.name), t.row.id);
+        let stem = format!("{folder}/{}__{}", safe(&t.take.name), t.take.id);
         let bitstream = format!("{stem}.mcst");
         let file = format!("{stem}.{}", t.format.name());
         for (rel, bytes) in [(&bitstream, t.container.to_bytes()), (&file, t.file)] {
@@ -211,7 +211,7 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
         }
         let line = ManifestLine {
             bases: t.bases.iter().map(|b| b.id.clone()).collect(),
-            row: t.row,
+            take: t.take,
             bitstream,
             file,
         };
@@ -273,7 +273,7 @@ async fn import_all(args: &ImportArgs) -> Result<(usize, usize), String> {
         match archive::import_take(&store, &line, bitstream, bases).await {
             Ok(Imported::Stored) => stored += 1,
             Ok(Imported::AlreadyStored) => already += 1,
-            Err(e) => return Err(format!("{} (take {}): {e}", line.bitstream, line.row.id)),
+            Err(e) => return Err(format!("{} (take {}): {e}", line.bitstream, line.take.id)),
         }
     }
     store.close().await;

@@ -65,7 +65,7 @@ impl From<service::Error> for ApiError {
             E::Busy(_) => return ApiError::busy(e.to_string()),
             E::Codec(crate::codec::Error::Invalid(_)) => (StatusCode::BAD_REQUEST, "bad_request"),
             E::Store(crate::store::Error::Conflict(_)) => (StatusCode::CONFLICT, "conflict"),
-            E::Codec(_) | E::Store(_) | E::Internal(_) => {
+            E::Codec(_) | E::Store(_) | E::Corrupt(_) | E::Internal(_) => {
                 tracing::error!(error = %e, "request failed");
                 return ApiError::new(
                     StatusCode::INTERNAL_SERVER_ERROR,

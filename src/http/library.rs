@@ -2,13 +2,15 @@
 
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
+use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::views::{ListingView, TakeView};
 use super::AppState;
-use crate::service::library::{self, Listing, Stats};
-use crate::store::{Filter, SequenceRow, SortKey};
+use crate::service::library::{self, Stats};
+use crate::store::{Filter, SortKey};
 
 /// Query of a listing: the filter fields, then sort, order, limit and cursor. Written out
 /// rather than flattened: urlencoded flattening cannot parse numbers.
@@ -58,7 +60,7 @@ impl ListQuery {
 pub async fn list(
     State(state): State<AppState>,
     query: Result<Query<ListQuery>, QueryRejection>,
-) -> Result<Json<Listing>, ApiError> {
+) -> Result<Response, ApiError> {
     let Query(q) = query?;
     let descending = match q.order.as_deref() {
         None => matches!(q.sort, None | Some(SortKey::Created)),
@@ -80,7 +82,7 @@ pub async fn list(
         q.cursor.as_deref(),
     )
     .await?;
-    Ok(Json(listing))
+    Ok(Json(ListingView::from(&listing)).into_response())
 }
 
 #[derive(Deserialize)]
@@ -131,7 +133,7 @@ pub async fn patch(
     State(state): State<AppState>,
     Path(id): Path<String>,
     body: Result<Json<Patch>, JsonRejection>,
-) -> Result<Json<SequenceRow>, ApiError> {
+) -> Result<Response, ApiError> {
     let Json(p) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
     let row = library::update(
         &state.store,
@@ -141,5 +143,5 @@ pub async fn patch(
         p.tags.as_deref(),
     )
     .await?;
-    Ok(Json(row))
+    Ok(Json(TakeView::from(&row)).into_response())
 }

@@ -10,6 +10,7 @@ mod library;
 mod metrics;
 mod sequences;
 mod streams;
+mod views;
 
 use std::net::SocketAddr;
 use std::sync::Arc;

@@ -10,6 +10,7 @@ use axum::Json;
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::views::TakeView;
 use super::AppState;
 use crate::codec::{CodecId, ErrorBound, Latency};
 use crate::limits::Limits;
@@ -195,8 +196,8 @@ pub async fn get(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    let row = fetch::sequence(&state.store, &id).await?;
-    Ok(Json(row).into_response())
+    let take = fetch::take(&state.store, &id).await?;
+    Ok(Json(TakeView::from(&take)).into_response())
 }
 
 pub async fn delete(

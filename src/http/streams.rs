@@ -4,15 +4,15 @@ use axum::body::Bytes;
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
-use axum::response::IntoResponse;
+use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde::de::{DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::views::TakeView;
 use super::AppState;
 use crate::service::streams::{OpenRequest, StreamInfo};
-use crate::store::SequenceRow;
 
 pub async fn open(
     State(state): State<AppState>,
@@ -163,11 +163,10 @@ pub async fn append(
 pub async fn finish(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<Json<SequenceRow>, ApiError> {
-    Ok(Json(
-        state
-            .streams
-            .finish(&state.store, &state.caches, &id)
-            .await?,
-    ))
+) -> Result<Response, ApiError> {
+    let take = state
+        .streams
+        .finish(&state.store, &state.caches, &id)
+        .await?;
+    Ok(Json(TakeView::from(&take)).into_response())
 }

@@ -10,11 +10,12 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::{self, basis::hex, Basis, Container, Header};
 use crate::motion::formats::Format;
 use crate::motion::{Motion, Unit, UnitSource};
-use crate::store::{BasisRow, Filter, NewSequence, SequenceRow, Store};
+use crate::store::{BasisRow, Filter, NewTake, Store};
 
 /// One thing wrong with one stored take.
 #[derive(Debug, Clone, Serialize)]
@@ -43,20 +44,26 @@ pub struct VerifyReport {
 pub async fn verify(
     store: &Store,
     filter: &Filter,
-    mut progress: impl FnMut(&SequenceRow),
+    mut progress: impl FnMut(&str),
 ) -> Result<VerifyReport> {
     let mut report = VerifyReport::default();
-    for row in super::library::all_takes(store, filter).await? {
+    for row in super::library::all_rows(store, filter).await? {
         report.takes += 1;
         report.frames += row.frames.max(0) as u64;
+        let (id, name) = (row.id.clone(), row.name.clone());
         let mut problem = |what: String| {
             report.problems.push(Problem {
-                id: row.id.clone(),
-                name: row.name.clone(),
+                id: id.clone(),
+                name: name.clone(),
                 what,
             })
         };
-        match check_take(store, &row).await {
+        // A record that does not parse is a problem to report, not a reason to stop.
+        let checked = match Take::from_row(row) {
+            Ok(take) => check_take(store, &take).await,
+            Err(e) => Err(e),
+        };
+        match checked {
             Ok(checked) => {
                 report.chunks += checked.chunks;
                 for what in checked.problems {
@@ -68,7 +75,7 @@ pub async fn verify(
             }
             Err(e) => problem(e.to_string()),
         }
-        progress(&row);
+        progress(&name);
     }
     Ok(report)
 }
@@ -79,7 +86,7 @@ struct Checked {
     problems: Vec<String>,
 }
 
-async fn check_take(store: &Store, row: &SequenceRow) -> Result<Checked> {
+async fn check_take(store: &Store, row: &Take) -> Result<Checked> {
     let mut problems = Vec::new();
     let (header, live) = super::fetch::header_of(store, row).await?;
     let index = store.chunk_index(&row.id).await?;
@@ -104,40 +111,34 @@ async fn check_take(store: &Store, row: &SequenceRow) -> Result<Checked> {
             ));
         }
     }
-    if i64::from(header.frames) != row.frames || i64::from(header.points) != row.points {
+    if header.frames as usize != row.frames || header.points as usize != row.points {
         problems.push(format!(
             "the header says {} frames of {} points, the row {} of {}",
             header.frames, header.points, row.frames, row.points
         ));
     }
-    if header.codec.to_string() != row.codec {
+    if header.codec != row.codec {
         problems.push(format!(
             "the header says codec {}, the row {}",
             header.codec, row.codec
         ));
     }
     // Statistics against the bound and the sizes they were computed from.
-    let slack = 1e-9 * row.bound_mm.max(1.0);
-    match row.bound_kind.as_str() {
-        "max" if row.max_mm > row.bound_mm + slack => problems.push(format!(
-            "stored max error {} mm is over its bound of {} mm",
-            row.max_mm, row.bound_mm
-        )),
-        "mean" if row.mean_mm > row.bound_mm + slack => problems.push(format!(
-            "stored mean error {} mm is over its bound of {} mm",
-            row.mean_mm, row.bound_mm
-        )),
-        "max" | "mean" => {}
-        other => problems.push(format!("unknown bound kind {other:?}")),
+    let slack = 1e-9 * row.bound.mm().max(1.0);
+    if !row.bound.holds(row.max_mm - slack, row.mean_mm - slack) {
+        problems.push(format!(
+            "stored errors (max {} mm, mean {} mm) are over its bound, {}",
+            row.max_mm, row.mean_mm, row.bound
+        ));
     }
-    if row.raw_bytes != row.frames * row.points * 12 {
+    if row.raw_bytes != (row.frames * row.points * 12) as u64 {
         problems.push(format!(
             "raw_bytes {} is not frames × points × 12",
             row.raw_bytes
         ));
     }
     let stored =
-        (header.to_bytes().len() + index.iter().map(|e| e.len as usize).sum::<usize>()) as i64;
+        (header.to_bytes().len() + index.iter().map(|e| e.len as usize).sum::<usize>()) as u64;
     if !live && stored != row.stored_bytes {
         problems.push(format!(
             "stored_bytes {} but the header and chunks take {stored}",
@@ -183,7 +184,7 @@ async fn check_take(store: &Store, row: &SequenceRow) -> Result<Checked> {
         ))
     })
     .await?;
-    let digest = row.meta.get("decoded_blake3").and_then(|v| v.as_str());
+    let digest = row.meta.decoded_blake3.as_deref();
     match decoded {
         Err(e) => problems.push(format!("does not decode: {e}")),
         Ok(frames) => {
@@ -211,7 +212,7 @@ async fn check_take(store: &Store, row: &SequenceRow) -> Result<Checked> {
 /// A take as export writes it: its row, its bitstream, the bases that bitstream names, and
 /// its frames decoded into a file of an open format.
 pub struct ExportedTake {
-    pub row: SequenceRow,
+    pub take: Take,
     pub container: Container,
     pub bases: Vec<BasisRow>,
     pub format: Format,
@@ -230,7 +231,7 @@ pub fn export_format(source_format: &str) -> Format {
 }
 
 /// Read one take whole: bitstream, bases, and its frames decoded into a file.
-pub async fn export_take(store: &Store, row: SequenceRow) -> Result<ExportedTake> {
+pub async fn export_take(store: &Store, row: Take) -> Result<ExportedTake> {
     let (header, _) = super::fetch::header_of(store, &row).await?;
     let chunks = store
         .chunks(&row.id, 0, header.chunks.len() as i64)
@@ -251,7 +252,7 @@ pub async fn export_take(store: &Store, row: SequenceRow) -> Result<ExportedTake
         bases.push(b);
     }
     let format = export_format(&row.source_format);
-    let names = super::fetch::point_names(&row)?;
+    let names = row.meta.point_names.clone();
     let (fps, mpu) = (row.fps, row.metres_per_unit);
     let (container, file) = blocking(move || -> Result<(Container, Vec<u8>)> {
         let frames = codec::decode_all_with(&container, shared)?;
@@ -262,7 +263,7 @@ pub async fn export_take(store: &Store, row: SequenceRow) -> Result<ExportedTake
     })
     .await??;
     Ok(ExportedTake {
-        row,
+        take: row,
         container,
         bases,
         format,
@@ -275,7 +276,7 @@ pub async fn export_take(store: &Store, row: SequenceRow) -> Result<ExportedTake
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ManifestLine {
     #[serde(flatten)]
-    pub row: SequenceRow,
+    pub take: Take,
     /// The bitstream (container) file, relative to the export folder.
     pub bitstream: String,
     /// The decoded frames in an open format, relative to the export folder.
@@ -302,7 +303,7 @@ pub async fn import_take(
     bitstream: Vec<u8>,
     bases: Vec<BasisRow>,
 ) -> Result<Imported> {
-    if store.exists(&line.row.id).await? {
+    if store.exists(&line.take.id).await? {
         return Ok(Imported::AlreadyStored);
     }
     let mut loaded = Vec::new();
@@ -314,18 +315,19 @@ pub async fn import_take(
                 "basis file {} holds basis {}, which take {} does not name",
                 row.id,
                 b.id(),
-                line.row.id
+                line.take.id
             )));
         }
         loaded.push((Arc::new(b), row));
     }
     let container = Container::parse(&bitstream, &crate::limits::Limits::default().decoder())
-        .map_err(|e| Error::InvalidRequest(format!("bitstream of {}: {e}", line.row.id)))?;
+        .map_err(|e| Error::InvalidRequest(format!("bitstream of {}: {e}", line.take.id)))?;
     let header: &Header = &container.header;
-    if i64::from(header.frames) != line.row.frames || header.codec.to_string() != line.row.codec {
+    line.take.check()?;
+    if header.frames as usize != line.take.frames || header.codec != line.take.codec {
         return Err(Error::InvalidRequest(format!(
             "bitstream of {} does not match its manifest line",
-            line.row.id
+            line.take.id
         )));
     }
     let shared = match &header.basis {
@@ -340,12 +342,7 @@ pub async fn import_take(
                 })?,
         ),
     };
-    let want = line
-        .row
-        .meta
-        .get("decoded_blake3")
-        .and_then(|v| v.as_str())
-        .map(str::to_string);
+    let want = line.take.meta.decoded_blake3.clone();
     let (container, shared) = blocking(move || -> Result<(Container, Option<Arc<Basis>>)> {
         let frames = codec::decode_all_with(&container, shared.clone())?;
         if let Some(want) = want {
@@ -364,12 +361,12 @@ pub async fn import_take(
         }
     }
     let chunks = super::ingest::chunk_rows(&container);
-    let mut row = line.row.clone();
-    row.header = container.header.to_bytes();
-    row.live_until = None;
+    let mut take = line.take.clone();
+    take.header = container.header.to_bytes();
+    take.live_until = None;
     store
-        .insert(&NewSequence {
-            row,
+        .insert(&NewTake {
+            row: take.to_row()?,
             chunks,
             basis: container.header.basis.as_ref().map(hex),
         })

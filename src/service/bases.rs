@@ -6,11 +6,12 @@ use std::sync::Arc;
 use serde::Deserialize;
 
 use super::jobs::{Jobs, Progress};
+use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::lsdt::train::{train_basis_reporting, TrainOptions};
 use crate::codec::mdtt::database::{train_set, SetOptions};
 use crate::codec::{Basis, BasisKind, Input, Target};
-use crate::store::{BasisDeletion, BasisRow, Filter, SequenceRow, Store};
+use crate::store::{BasisDeletion, BasisRow, Filter, Store};
 
 /// Parse a stored basis, checking that its bytes still hash to its id.
 pub(super) fn parse(row: &BasisRow) -> Result<Basis> {
@@ -103,7 +104,7 @@ pub struct Selection {
     pub kind: BasisKind,
     pub layout: String,
     pub points: usize,
-    pub takes: Vec<SequenceRow>,
+    pub takes: Vec<Take>,
     pub options: TrainOptions,
     pub max_samples: usize,
     pub set: SetOptions,
@@ -146,9 +147,10 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
         }
         let mut missing = Vec::new();
         for id in ids {
-            match store.get(id).await? {
-                Some(t) => takes.push(t),
-                None => missing.push(id.as_str()),
+            match super::fetch::take(store, id).await {
+                Ok(t) => takes.push(t),
+                Err(Error::NotFound(_)) => missing.push(id.as_str()),
+                Err(e) => return Err(e),
             }
         }
         if !missing.is_empty() {
@@ -187,7 +189,7 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
             list.join(", ")
         )));
     }
-    let points = takes[0].points as usize;
+    let points = takes[0].points;
     let most = match kind {
         BasisKind::Lsdt => crate::limits::LSDT_MAX_POINTS,
         BasisKind::MdttSet => crate::limits::MDTT_MAX_POINTS,
@@ -200,7 +202,7 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
     Ok(Selection {
         kind,
         layout: layouts.remove(0).0,
-        points: takes[0].points as usize,
+        points: takes[0].points,
         takes,
         options: TrainOptions {
             sparsity,
@@ -239,7 +241,7 @@ pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result
     };
     row.provenance["takes"] =
         serde_json::json!(sel.takes.iter().map(|t| &t.id).collect::<Vec<_>>());
-    row.provenance["frames"] = serde_json::json!(sel.takes.iter().map(|t| t.frames).sum::<i64>());
+    row.provenance["frames"] = serde_json::json!(sel.takes.iter().map(|t| t.frames).sum::<usize>());
     row.provenance["seconds"] = serde_json::json!(t0.elapsed().as_secs_f64());
     store.insert_basis(&row).await?;
     Ok(row)

@@ -4,10 +4,11 @@
 use std::sync::{Arc, Mutex};
 
 use super::prepared::{Prepared, ReadCaches};
+use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::read::Chunk;
 use crate::codec::{self, basis::hex, Basis, ChunkSource, Header, Limits, Reader, Stored};
-use crate::store::{ChunkRow, SequenceRow, Store};
+use crate::store::{ChunkRow, Store};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,35 +69,13 @@ pub struct Frames {
     pub data: Vec<f32>,
 }
 
-pub async fn sequence(store: &Store, id: &str) -> Result<SequenceRow> {
-    store
+/// The take stored under `id`, parsed.
+pub async fn take(store: &Store, id: &str) -> Result<Take> {
+    let row = store
         .get(id)
         .await?
-        .ok_or_else(|| Error::NotFound(format!("sequence {id}")))
-}
-
-/// The point names stored with a take: one per point, or the stored record is corrupt (an
-/// error, never a default that would serve frames under no names).
-pub fn point_names(row: &SequenceRow) -> Result<Vec<String>> {
-    let names: Vec<String> = row
-        .meta
-        .get("point_names")
-        .and_then(|v| serde_json::from_value(v.clone()).ok())
-        .ok_or_else(|| {
-            Error::Internal(format!(
-                "stored take {}: meta has no point_names list",
-                row.id
-            ))
-        })?;
-    if names.len() as i64 != row.points {
-        return Err(Error::Internal(format!(
-            "stored take {}: {} point names for {} points",
-            row.id,
-            names.len(),
-            row.points
-        )));
-    }
-    Ok(names)
+        .ok_or_else(|| Error::NotFound(format!("sequence {id}")))?;
+    Take::from_row(row)
 }
 
 /// Decode `range` of take `id`, optionally only the named points. The range and the
@@ -129,7 +108,7 @@ pub async fn frames(
             if rows.len() != hi + 1 - lo {
                 // Deleted since its reader was cached: forget it, and say so.
                 caches.forget(id);
-                sequence(store, id).await?;
+                take(store, id).await?;
                 return Err(Error::Internal(format!(
                     "take {id} is missing chunks {lo}..={hi}"
                 )));
@@ -186,7 +165,7 @@ async fn prepare(
         let r = range.resolve(p.frames, p.fps)?;
         return Ok((p, r));
     }
-    let row = sequence(store, id).await?;
+    let row = take(store, id).await?;
     let r = range.resolve(row.frames as usize, row.fps)?;
     let (header, live) = header_of(store, &row).await?;
     let shared = shared_basis(store, &header).await?;
@@ -244,21 +223,21 @@ pub async fn shared_basis(store: &Store, header: &Header) -> Result<Option<Arc<B
 
 /// A stored take's header, and whether the take is live. A live take's stored header has
 /// no chunk index (appends would otherwise rewrite it); its chunk rows are the index.
-pub async fn header_of(store: &Store, row: &SequenceRow) -> Result<(Header, bool)> {
-    if row.live_until.is_some() {
-        let index = store.chunk_index(&row.id).await?;
-        return Ok((super::streams::header_from_index(row, &index)?, true));
+pub async fn header_of(store: &Store, take: &Take) -> Result<(Header, bool)> {
+    if take.is_live() {
+        let index = store.chunk_index(&take.id).await?;
+        return Ok((super::streams::header_from_index(take, &index)?, true));
     }
-    let (header, _) = Header::parse(&row.header, &Limits::default())
-        .map_err(|e| Error::Internal(format!("stored take {}: {e}", row.id)))?;
+    let (header, _) = Header::parse(&take.header, &Limits::default())
+        .map_err(|e| Error::Corrupt(format!("stored take {}: header: {e}", take.id)))?;
     Ok((header, false))
 }
 
 /// Every frame of a stored take, decoded without touching the read caches (for bulk work
 /// such as training, which would otherwise evict what range requests keep hot).
-pub async fn whole_take(store: &Store, row: &SequenceRow) -> Result<Vec<f32>> {
-    let id = &row.id;
-    let (header, _) = header_of(store, row).await?;
+pub async fn whole_take(store: &Store, take: &Take) -> Result<Vec<f32>> {
+    let id = &take.id;
+    let (header, _) = header_of(store, take).await?;
     let shared = shared_basis(store, &header).await?;
     let rows = store.chunks(id, 0, header.chunks.len() as i64).await?;
     if rows.len() != header.chunks.len() {

@@ -7,11 +7,12 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::choose::{self, CodecRequest, Decision, Tried};
+use super::take::{Take, TakeMeta};
 use super::{blocking, Error, Result};
 use crate::codec::{self, CodecId, Encoded, ErrorBound, Latency};
 use crate::motion::formats::{self, Format, Limits, ReadOptions};
 use crate::motion::Motion;
-use crate::store::{ChunkRow, NewSequence, SequenceRow, Store};
+use crate::store::{ChunkRow, NewTake, Store};
 
 /// An upload and what the user asked of it.
 #[derive(Debug, Clone)]
@@ -94,51 +95,51 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         .filter(|n| !n.trim().is_empty())
         .unwrap_or_else(|| id.clone());
     let m = &motion;
-    let raw_bytes = m.frame_count() * m.point_count() * 12;
-    let ratio = raw_bytes as f64 / enc.stored_bytes as f64;
-    let meta = serde_json::json!({
-        "point_names": m.point_names,
-        "unit": m.unit,
-        "skeleton": m.skeleton.as_ref().map(|s| &s.joints),
-        "warnings": loaded.warnings,
-        "decision": decision,
-        "decoded_blake3": enc.decoded_digest,
-    });
-    let (bound_kind, bound_mm) = match req.bound {
-        ErrorBound::MaxMm(v) => ("max", v),
-        ErrorBound::MeanMm(v) => ("mean", v),
-    };
-    let header = &enc.container.header;
-    let chunks = chunk_rows(&enc.container);
-    let row = SequenceRow {
+    let mut take = Take {
         id: id.clone(),
         name: name.clone(),
         library: req.library.clone(),
         tags: super::normalise_tags(&req.tags),
         fps: m.fps,
-        frames: m.frame_count() as i64,
-        points: m.point_count() as i64,
+        frames: m.frame_count(),
+        points: m.point_count(),
         duration_s: m.duration_s(),
         metres_per_unit: m.unit.metres_per_unit,
         layout,
         source_format: loaded.format.name().to_string(),
-        codec: decision.winner.to_string(),
-        bound_kind: bound_kind.to_string(),
-        bound_mm,
-        raw_bytes: raw_bytes as i64,
-        stored_bytes: enc.stored_bytes as i64,
-        ratio,
-        mean_mm: enc.stats.mean_mm,
-        rms_mm: enc.stats.rms_mm,
-        max_mm: enc.stats.max_mm,
-        kg_percent: enc.stats.kg_percent,
-        header: header.to_bytes(),
-        meta,
+        codec: decision.winner,
+        bound: req.bound,
+        raw_bytes: 0,
+        stored_bytes: 0,
+        ratio: 0.0,
+        mean_mm: 0.0,
+        rms_mm: 0.0,
+        max_mm: 0.0,
+        kg_percent: 0.0,
+        meta: TakeMeta {
+            point_names: m.point_names.clone(),
+            unit: m.unit.clone(),
+            skeleton: m.skeleton.as_ref().map(|s| s.joints.clone()),
+            warnings: loaded.warnings.clone(),
+            decision: decision.clone(),
+            decoded_blake3: Some(enc.decoded_digest.clone()),
+            interrupted: None,
+            reencoded_from: None,
+        },
         created_at: super::now_ms(),
+        header: enc.container.header.to_bytes(),
         live_until: None,
     };
-    let basis = header.basis.as_ref().map(codec::basis::hex);
-    store.insert(&NewSequence { row, chunks, basis }).await?;
+    take.set_measured(enc.stored_bytes, &enc.stats);
+    let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
+    store
+        .insert(&NewTake {
+            row: take.to_row()?,
+            chunks: chunk_rows(&enc.container),
+            basis,
+        })
+        .await?;
+    let (raw_bytes, ratio) = (take.raw_bytes as usize, take.ratio);
     Ok(IngestReport {
         id,
         name,
@@ -152,7 +153,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         max_mm: enc.stats.max_mm,
         mean_mm: enc.stats.mean_mm,
         rms_mm: enc.stats.rms_mm,
-        kg_percent: enc.stats.kg_percent,
+        kg_percent: take.kg_percent,
         decision,
         warnings: loaded.warnings,
     })

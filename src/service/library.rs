@@ -5,15 +5,16 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use super::prepared::ReadCaches;
+use super::take::Take;
 use super::{Error, Result};
-use crate::store::{Cursor, Filter, SequenceRow, SortKey, Store, Totals};
+use crate::store::{Cursor, Filter, SortKey, Store, TakeRow, Totals};
 
 pub const MAX_PAGE: usize = 500;
 
 /// One page of takes and the cursor of the next.
 #[derive(Debug, Clone, Serialize)]
 pub struct Listing {
-    pub items: Vec<SequenceRow>,
+    pub items: Vec<Take>,
     pub next_cursor: Option<String>,
 }
 
@@ -49,14 +50,28 @@ pub async fn list(
         .list(filter, sort, descending, limit, cursor.as_ref())
         .await?;
     Ok(Listing {
-        items: page.items,
+        items: page
+            .items
+            .into_iter()
+            .map(Take::from_row)
+            .collect::<Result<_>>()?,
         next_cursor: page.next.map(|c| c.encode()),
     })
 }
 
-/// Every take matching `filter`, oldest first, read a page at a time (training selections,
-/// verify, export).
-pub async fn all_takes(store: &Store, filter: &Filter) -> Result<Vec<SequenceRow>> {
+/// Every take matching `filter`, oldest first (training selections, export): an error if
+/// any of their records does not parse.
+pub async fn all_takes(store: &Store, filter: &Filter) -> Result<Vec<Take>> {
+    all_rows(store, filter)
+        .await?
+        .into_iter()
+        .map(Take::from_row)
+        .collect()
+}
+
+/// The stored rows of every take matching `filter`, oldest first, read a page at a time
+/// (verify parses each itself, reporting those that do not parse).
+pub async fn all_rows(store: &Store, filter: &Filter) -> Result<Vec<TakeRow>> {
     let mut out = Vec::new();
     let mut cursor = None;
     loop {
@@ -114,6 +129,7 @@ pub async fn stats(store: &Store, filter: &Filter) -> Result<Stats> {
 /// take a live stream is still recording is not deleted (409): finish the stream first.
 pub async fn delete(store: &Store, caches: &ReadCaches, id: &str) -> Result<()> {
     if let Some(row) = store.get(id).await? {
+        // Read as stored: a take whose record does not parse can still be deleted.
         if row.live_until.is_some() {
             return Err(Error::Conflict(format!(
                 "take {id} is being recorded by a live stream; finish the stream first"
@@ -136,7 +152,7 @@ pub async fn update(
     name: Option<&str>,
     library: Option<&str>,
     tags: Option<&[String]>,
-) -> Result<SequenceRow> {
+) -> Result<Take> {
     if name.is_some_and(|n| n.trim().is_empty()) {
         return Err(Error::InvalidRequest("name must not be empty".into()));
     }
@@ -144,5 +160,5 @@ pub async fn update(
     if !store.update(id, name, library, tags.as_deref()).await? {
         return Err(Error::NotFound(format!("sequence {id}")));
     }
-    super::fetch::sequence(store, id).await
+    super::fetch::take(store, id).await
 }

@@ -11,7 +11,8 @@
 //! - [`fetch`]: metadata and decoded frame ranges.
 //! - [`library`]: listings, statistics, edits.
 //! - [`streams`]: live takes coded and committed chunk by chunk as frames arrive.
-//! - [`prepared`]: decoders kept ready per take for range requests.
+//! - [`prepared`]: readers kept ready per take for range requests.
+//! - [`take`]: a stored take as a typed record, parsed from its row once.
 
 pub mod archive;
 pub mod bases;
@@ -22,6 +23,7 @@ pub mod jobs;
 pub mod library;
 pub mod prepared;
 pub mod streams;
+pub mod take;
 
 use crate::{codec, motion, store};
 
@@ -52,6 +54,9 @@ pub enum Error {
     Codec(#[from] codec::Error),
     #[error("store: {0}")]
     Store(#[from] store::Error),
+    /// A stored record that does not parse: never read as a default.
+    #[error("corrupt: {0}")]
+    Corrupt(String),
     #[error("internal: {0}")]
     Internal(String),
 }

@@ -8,9 +8,9 @@
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
 
+use super::take::Take;
 use crate::codec::container::Header;
 use crate::codec::{Basis, Reader};
-use crate::store::SequenceRow;
 
 /// What range requests of one take need, ready to use.
 pub struct Prepared {
@@ -24,20 +24,16 @@ pub struct Prepared {
 
 impl Prepared {
     /// `shared` is the basis the header names, if it names one.
-    pub fn new(
-        row: &SequenceRow,
-        header: Header,
-        shared: Option<Arc<Basis>>,
-    ) -> super::Result<Prepared> {
+    pub fn new(take: &Take, header: Header, shared: Option<Arc<Basis>>) -> super::Result<Prepared> {
         let reader = Reader::new(header, shared)
-            .map_err(|e| super::Error::Internal(format!("stored take {}: {e}", row.id)))?;
+            .map_err(|e| super::Error::Corrupt(format!("stored take {}: {e}", take.id)))?;
         Ok(Prepared {
-            id: row.id.clone(),
+            id: take.id.clone(),
             reader,
-            point_names: super::fetch::point_names(row)?,
-            fps: row.fps,
-            metres_per_unit: row.metres_per_unit,
-            frames: row.frames as usize,
+            point_names: take.meta.point_names.clone(),
+            fps: take.fps,
+            metres_per_unit: take.metres_per_unit,
+            frames: take.frames,
         })
     }
 

@@ -28,6 +28,7 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
 use super::choose::{CodecRequest, Decision};
 use super::prepared::ReadCaches;
+use super::take::{Take, TakeMeta};
 use super::{blocking, Error, Result};
 use crate::codec::container::ChunkMeta;
 use crate::codec::lsdt::spatial::dct_basis;
@@ -36,7 +37,7 @@ use crate::codec::{self, Basis, BasisKind, CodecId, ErrorBound, Header, Latency}
 use crate::limits::{Limits, MAX_COORDINATE_M, MAX_FPS};
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
-use crate::store::{BasisRow, ChunkEntry, ChunkRow, NewSequence, SequenceRow, Store};
+use crate::store::{BasisRow, ChunkEntry, ChunkRow, NewTake, Store};
 
 /// The points of a stream: their names, or just how many.
 #[derive(Debug, Clone, Deserialize)]
@@ -92,14 +93,13 @@ pub struct StreamInfo {
 }
 
 struct Live {
-    row: SequenceRow,
+    take: Take,
     /// The codec layer's stream encoder: chunks, their checks, the take's index and totals.
     /// Taken out while it codes on the blocking pool.
     encoder: Option<StreamEncoder>,
     basis_id: String,
     codec: CodecId,
     points: usize,
-    bound: ErrorBound,
     chunk_frames: usize,
     received: usize,
     /// Chunks committed so far.
@@ -116,18 +116,18 @@ struct Live {
 impl Live {
     fn info(&self, live: bool) -> StreamInfo {
         StreamInfo {
-            id: self.row.id.clone(),
+            id: self.take.id.clone(),
             codec: self.codec,
             basis: self.basis_id.clone(),
-            fps: self.row.fps,
+            fps: self.take.fps,
             points: self.points,
             chunk_frames: self.chunk_frames,
             frames_received: self.received,
-            frames_committed: self.row.frames as usize,
+            frames_committed: self.take.frames,
             chunks_committed: self.chunks,
             live,
-            max_mm: self.row.max_mm,
-            mean_mm: self.row.mean_mm,
+            max_mm: self.take.max_mm,
+            mean_mm: self.take.mean_mm,
             warnings: self.warnings.clone(),
         }
     }
@@ -310,7 +310,7 @@ impl Streams {
             tried: Vec::new(),
             skipped: Vec::new(),
         };
-        let row = SequenceRow {
+        let take = Take {
             id: id.clone(),
             name: req
                 .name
@@ -321,47 +321,47 @@ impl Streams {
             tags: super::normalise_tags(&req.tags),
             fps: req.fps,
             frames: 0,
-            points: points as i64,
+            points,
             duration_s: 0.0,
             metres_per_unit: unit.metres_per_unit,
             layout,
             source_format: "stream".into(),
-            codec: codec.to_string(),
-            bound_kind: bound.kind().into(),
-            bound_mm: bound.mm(),
+            codec,
+            bound,
             raw_bytes: 0,
-            stored_bytes: header.to_bytes().len() as i64,
+            stored_bytes: header.to_bytes().len() as u64,
             ratio: 0.0,
             mean_mm: 0.0,
             rms_mm: 0.0,
             max_mm: 0.0,
             kg_percent: 0.0,
-            header: header.to_bytes(),
-            meta: serde_json::json!({
-                "point_names": names,
-                "unit": unit,
-                "skeleton": null,
-                "warnings": [],
-                "decision": decision,
-                "live": true,
-            }),
+            meta: TakeMeta {
+                point_names: names,
+                unit,
+                skeleton: None,
+                warnings: Vec::new(),
+                decision,
+                decoded_blake3: None,
+                interrupted: None,
+                reencoded_from: None,
+            },
             created_at: super::now_ms(),
+            header: header.to_bytes(),
             live_until: Some(self.lease_end()),
         };
         store
-            .insert(&NewSequence {
-                row: row.clone(),
+            .insert(&NewTake {
+                row: take.to_row()?,
                 chunks: Vec::new(),
                 basis: Some(basis.id()),
             })
             .await?;
         let live = Live {
-            row,
+            take,
             encoder: Some(encoder),
             basis_id: basis.id(),
             codec,
             points,
-            bound,
             chunk_frames,
             received: 0,
             chunks: 0,
@@ -432,7 +432,7 @@ impl Streams {
                 live.points
             )));
         }
-        let to_m = live.row.metres_per_unit;
+        let to_m = live.take.metres_per_unit;
         if let Some(i) = frames
             .iter()
             .position(|v| v.is_infinite() || (f64::from(v.abs()) * to_m) > MAX_COORDINATE_M)
@@ -494,21 +494,10 @@ impl Streams {
     /// nothing that grows with the stream.
     async fn commit(&self, store: &Store, live: &mut Live, chunk: StreamChunk) -> Result<()> {
         let totals = live.encoder()?.totals_with(&chunk);
-        let mut row = live.row.clone();
-        let s = &totals.stats;
-        row.frames = totals.frames as i64;
-        row.duration_s = row.frames as f64 / row.fps;
-        row.raw_bytes = row.frames * live.points as i64 * 12;
-        row.stored_bytes = totals.stored_bytes as i64;
-        row.ratio = row.raw_bytes as f64 / row.stored_bytes.max(1) as f64;
-        row.mean_mm = s.mean_mm;
-        row.rms_mm = s.rms_mm;
-        row.max_mm = s.max_mm;
-        row.kg_percent = if s.kg_percent.is_finite() {
-            s.kg_percent
-        } else {
-            0.0
-        };
+        let mut take = live.take.clone();
+        take.frames = totals.frames;
+        take.duration_s = take.frames as f64 / take.fps;
+        take.set_measured(totals.stored_bytes, &totals.stats);
         let chunk_row = ChunkRow {
             idx: chunk.index as i64,
             first_frame: i64::from(chunk.meta.first_frame),
@@ -517,16 +506,16 @@ impl Streams {
             payload: chunk.payload.clone(),
         };
         if !store
-            .append_chunk(&row, &chunk_row, self.lease_end())
+            .append_chunk(&take.to_row()?, &chunk_row, self.lease_end())
             .await?
         {
             return Err(Error::Conflict(format!(
                 "take {} is no longer live (deleted, or closed by another server after its \
                  lease ran out)",
-                live.row.id
+                live.take.id
             )));
         }
-        live.row = row;
+        live.take = take;
         live.chunks += 1;
         live.encoder
             .as_mut()
@@ -538,12 +527,7 @@ impl Streams {
     /// Close a stream: commit what is pending, write the chunk index into the take's header
     /// and mark it finished, and if the stream kept its frames, code the whole take again
     /// with per-take choice, keeping that if it is smaller.
-    pub async fn finish(
-        &self,
-        store: &Store,
-        caches: &ReadCaches,
-        id: &str,
-    ) -> Result<SequenceRow> {
+    pub async fn finish(&self, store: &Store, caches: &ReadCaches, id: &str) -> Result<Take> {
         let entry = match self.entry(id) {
             Some(e) => e,
             None => return Err(Self::not_open(store, id).await),
@@ -562,13 +546,13 @@ impl Streams {
         }
         let encoder = live.encoder()?;
         let (closed, digest) = (encoder.closed_header(), encoder.decoded_digest());
-        let mut meta = live.row.meta.clone();
-        meta["live"] = serde_json::Value::Bool(false);
-        meta["decoded_blake3"] = digest.into();
-        if !live.warnings.is_empty() {
-            meta["warnings"] = serde_json::json!(live.warnings);
-        }
-        if !store.close_live(id, &closed.to_bytes(), &meta).await? {
+        let mut meta = live.take.meta.clone();
+        meta.decoded_blake3 = Some(digest);
+        meta.warnings.extend(live.warnings.iter().cloned());
+        if !store
+            .close_live(id, &closed.to_bytes(), &meta_text(id, &meta)?)
+            .await?
+        {
             // Closed from its chunk rows by another server after the lease ran out (or
             // deleted): what it stored is what was committed, the same chunks.
             tracing::warn!(
@@ -577,15 +561,15 @@ impl Streams {
             );
         }
         caches.forget(id);
-        let row = super::fetch::sequence(store, id).await?;
-        if let Some(frames) = live.archive.take().filter(|_| row.frames > 0) {
-            let committed = row.frames as usize * live.points * 3;
+        let take = super::fetch::take(store, id).await?;
+        if let Some(frames) = live.archive.take().filter(|_| take.frames > 0) {
+            let committed = take.frames * live.points * 3;
             if frames.len() >= committed {
-                reencode_take(store, &row, frames[..committed].to_vec(), live.bound).await?;
+                reencode_take(store, &take, frames[..committed].to_vec()).await?;
                 caches.forget(id);
             }
         }
-        super::fetch::sequence(store, id).await
+        super::fetch::take(store, id).await
     }
 
     /// Housekeeping, run every few seconds by the server: renew the leases of this server's
@@ -627,19 +611,27 @@ impl Streams {
             if self.entry(&id).is_some() {
                 continue;
             }
-            let Some(row) = store.get(&id).await? else {
-                continue;
+            let take = match super::fetch::take(store, &id).await {
+                Ok(t) => t,
+                Err(Error::NotFound(_)) => continue,
+                Err(e) => {
+                    // One bad record must not keep the others open; `verify` reports it.
+                    tracing::error!(stream = %id, error = %e, "an orphaned live take does not parse");
+                    continue;
+                }
             };
-            let header = header_from_index(&row, &store.chunk_index(&id).await?)?;
-            let mut meta = row.meta.clone();
-            meta["live"] = serde_json::Value::Bool(false);
-            meta["interrupted"] = serde_json::Value::String(
+            let header = header_from_index(&take, &store.chunk_index(&id).await?)?;
+            let mut meta = take.meta.clone();
+            meta.interrupted = Some(
                 "the server coding this stream stopped before it finished; the take keeps the \
                  chunks it had committed"
                     .into(),
             );
-            if store.close_live(&id, &header.to_bytes(), &meta).await? {
-                tracing::warn!(stream = %id, frames = row.frames, "closed a stream whose server stopped");
+            if store
+                .close_live(&id, &header.to_bytes(), &meta_text(&id, &meta)?)
+                .await?
+            {
+                tracing::warn!(stream = %id, frames = take.frames, "closed a stream whose server stopped");
                 caches.forget(&id);
                 closed += 1;
             }
@@ -650,11 +642,11 @@ impl Streams {
 
 /// A live take's header with the chunk rows as its index (and frames), checked as any
 /// stored header is.
-pub(crate) fn header_from_index(row: &SequenceRow, index: &[ChunkEntry]) -> Result<Header> {
-    let id = &row.id;
-    let corrupt = |e: &dyn std::fmt::Display| Error::Internal(format!("stored take {id}: {e}"));
+pub(crate) fn header_from_index(take: &Take, index: &[ChunkEntry]) -> Result<Header> {
+    let id = &take.id;
+    let corrupt = |e: &dyn std::fmt::Display| Error::Corrupt(format!("stored take {id}: {e}"));
     let (mut header, _) =
-        Header::parse(&row.header, &codec::Limits::default()).map_err(|e| corrupt(&e))?;
+        Header::parse(&take.header, &codec::Limits::default()).map_err(|e| corrupt(&e))?;
     let mut chunks = Vec::with_capacity(index.len());
     for c in index {
         let as_u32 = |v: i64| u32::try_from(v).map_err(|_| corrupt(&format!("chunk {c:?}")));
@@ -673,49 +665,44 @@ pub(crate) fn header_from_index(row: &SequenceRow, index: &[ChunkEntry]) -> Resu
         .map_err(|e| corrupt(&e))
 }
 
+/// A take's metadata as stored.
+fn meta_text(id: &str, meta: &TakeMeta) -> Result<String> {
+    serde_json::to_string(meta).map_err(|e| Error::Internal(format!("take {id}: meta: {e}")))
+}
+
 /// Code a finished stream's take again, from the frames as sent, with every candidate
 /// codec; keep the result if it is smaller than the live coding.
-async fn reencode_take(
-    store: &Store,
-    row: &SequenceRow,
-    positions: Vec<f32>,
-    bound: ErrorBound,
-) -> Result<()> {
-    let names = super::fetch::point_names(row)?;
-    let unit = Unit::new(row.metres_per_unit, UnitSource::Explicit)
+async fn reencode_take(store: &Store, take: &Take, positions: Vec<f32>) -> Result<()> {
+    let unit = Unit::new(take.metres_per_unit, UnitSource::Explicit)
         .map_err(|e| Error::Internal(e.to_string()))?;
+    let names = take.meta.point_names.clone();
     let motion = Arc::new(
-        Motion::new(row.fps, unit, names, positions, None)
+        Motion::new(take.fps, unit, names, positions, None)
             .map_err(|e| Error::Internal(e.to_string()))?,
     );
     let (decision, enc) = super::ingest::encode_best(
         store,
         motion,
-        &row.layout,
+        &take.layout,
         CodecRequest::Auto,
-        bound,
+        take.bound,
         Latency::Sequence,
     )
     .await?;
-    if enc.stored_bytes as i64 >= row.stored_bytes {
+    if enc.stored_bytes as u64 >= take.stored_bytes {
         return Ok(());
     }
-    let mut new = row.clone();
-    new.codec = decision.winner.to_string();
-    new.stored_bytes = enc.stored_bytes as i64;
-    new.ratio = new.raw_bytes as f64 / new.stored_bytes.max(1) as f64;
-    new.mean_mm = enc.stats.mean_mm;
-    new.rms_mm = enc.stats.rms_mm;
-    new.max_mm = enc.stats.max_mm;
-    new.kg_percent = enc.stats.kg_percent;
+    let mut new = take.clone();
+    new.codec = decision.winner;
+    new.set_measured(enc.stored_bytes, &enc.stats);
     new.header = enc.container.header.to_bytes();
-    new.meta["decision"] = serde_json::to_value(&decision).unwrap_or_default();
-    new.meta["decoded_blake3"] = enc.decoded_digest.clone().into();
-    new.meta["reencoded_from"] = serde_json::Value::String(row.codec.clone());
+    new.meta.decision = decision;
+    new.meta.decoded_blake3 = Some(enc.decoded_digest.clone());
+    new.meta.reencoded_from = Some(take.codec);
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
     let chunks = super::ingest::chunk_rows(&enc.container);
     store
-        .update_encoding(&new, &chunks, true, basis.as_deref())
+        .update_encoding(&new.to_row()?, &chunks, true, basis.as_deref())
         .await?;
     Ok(())
 }

@@ -22,7 +22,7 @@ use sqlx::sqlite::{
 use sqlx::Row;
 
 pub use query::{Cursor, Filter, SortKey, StatRow, Totals};
-pub use rows::{ChunkEntry, ChunkRow, NewSequence, SequenceRow};
+pub use rows::{ChunkEntry, ChunkRow, NewTake, TakeRow};
 
 /// Errors of the store layer.
 #[derive(Debug, thiserror::Error)]
@@ -101,10 +101,10 @@ impl Store {
     }
 
     /// Insert a take, its tags and its chunks atomically.
-    pub async fn insert(&self, s: &NewSequence) -> Result<()> {
+    pub async fn insert(&self, s: &NewTake) -> Result<()> {
         dispatch!(self, pool => {
             let mut tx = pool.begin().await?;
-            let r = rows::bind_sequence(sqlx::query(rows::INSERT_SEQUENCE), s)
+            let r = rows::bind_take(sqlx::query(rows::INSERT_TAKE), s)
                 .execute(&mut *tx)
                 .await;
             if let Err(e) = r {
@@ -139,7 +139,7 @@ impl Store {
     /// False if there is no such take.
     pub async fn update_encoding(
         &self,
-        row: &SequenceRow,
+        row: &TakeRow,
         chunks: &[ChunkRow],
         replace: bool,
         basis: Option<&str>,
@@ -165,7 +165,7 @@ impl Store {
             .bind(row.max_mm)
             .bind(row.kg_percent)
             .bind(&row.header)
-            .bind(row.meta.to_string())
+            .bind(&row.meta)
             .bind(&row.id)
             .execute(&mut *tx)
             .await?;
@@ -203,7 +203,7 @@ impl Store {
     /// append does not grow with the take. False if the take is gone or no longer live.
     pub async fn append_chunk(
         &self,
-        row: &SequenceRow,
+        row: &TakeRow,
         chunk: &ChunkRow,
         live_until: i64,
     ) -> Result<bool> {
@@ -265,19 +265,14 @@ impl Store {
 
     /// Close a live take: its final header and meta, and no lease. False if it was not live
     /// (another server closed it first).
-    pub async fn close_live(
-        &self,
-        id: &str,
-        header: &[u8],
-        meta: &serde_json::Value,
-    ) -> Result<bool> {
+    pub async fn close_live(&self, id: &str, header: &[u8], meta: &str) -> Result<bool> {
         dispatch!(self, pool => {
             let r = sqlx::query(
                 "UPDATE sequences SET header = $1, meta = $2, live_until = NULL \
                  WHERE id = $3 AND live_until IS NOT NULL",
             )
             .bind(header)
-            .bind(meta.to_string())
+            .bind(meta)
             .bind(id)
             .execute(pool)
             .await?;
@@ -313,14 +308,14 @@ impl Store {
     }
 
     /// A take's metadata and tags, without chunks.
-    pub async fn get(&self, id: &str) -> Result<Option<SequenceRow>> {
+    pub async fn get(&self, id: &str) -> Result<Option<TakeRow>> {
         dispatch!(self, pool => {
-            let row = sqlx::query(&format!("SELECT {} FROM sequences WHERE id = $1", rows::SEQUENCE_COLUMNS))
+            let row = sqlx::query(&format!("SELECT {} FROM sequences WHERE id = $1", rows::TAKE_COLUMNS))
                 .bind(id)
                 .fetch_optional(pool)
                 .await?;
             let Some(row) = row else { return Ok(None) };
-            let mut s = rows::sequence_from_row(&row)?;
+            let mut s = rows::take_from_row(&row)?;
             s.tags = sqlx::query("SELECT tag FROM sequence_tags WHERE sequence_id = $1 ORDER BY tag")
                 .bind(id)
                 .fetch_all(pool)
@@ -439,7 +434,7 @@ pub use bases::{BasisDeletion, BasisRow};
 /// One page of a listing.
 #[derive(Debug, Clone)]
 pub struct Page {
-    pub items: Vec<SequenceRow>,
+    pub items: Vec<TakeRow>,
     /// Pass back to get the next page; `None` on the last.
     pub next: Option<Cursor>,
 }
@@ -457,14 +452,14 @@ impl Store {
         let w = query::where_clause(filter, cursor);
         let sql = format!(
             "SELECT {} FROM sequences {} {} LIMIT {}",
-            rows::SEQUENCE_COLUMNS,
+            rows::TAKE_COLUMNS,
             w.text,
             query::order_by(sort, descending),
             limit + 1
         );
-        let mut items: Vec<SequenceRow> = dispatch!(self, pool => {
+        let mut items: Vec<TakeRow> = dispatch!(self, pool => {
             let rows = bind_all!(sqlx::query(&sql), &w.values).fetch_all(pool).await?;
-            rows.iter().map(rows::sequence_from_row).collect::<Result<Vec<_>>>()?
+            rows.iter().map(rows::take_from_row).collect::<Result<Vec<_>>>()?
         });
         let more = items.len() > limit;
         items.truncate(limit);
@@ -481,7 +476,7 @@ impl Store {
         Ok(Page { items, next })
     }
 
-    async fn attach_tags(&self, items: &mut [SequenceRow]) -> Result<()> {
+    async fn attach_tags(&self, items: &mut [TakeRow]) -> Result<()> {
         if items.is_empty() {
             return Ok(());
         }

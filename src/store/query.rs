@@ -173,7 +173,7 @@ pub fn order_by(sort: SortKey, descending: bool) -> String {
 }
 
 /// The cursor value of a row for a sort key.
-pub fn sort_value(sort: SortKey, row: &super::SequenceRow) -> Value {
+pub fn sort_value(sort: SortKey, row: &super::TakeRow) -> Value {
     match sort {
         SortKey::Created => Value::Int(row.created_at),
         SortKey::Name => Value::Text(row.name.clone()),

@@ -1,6 +1,5 @@
 //! Row types and the mapping between them and SQL, shared by both backends.
 
-use serde::{Deserialize, Serialize};
 use sqlx::Row;
 
 use super::{Error, Result};
@@ -26,9 +25,10 @@ pub struct ChunkEntry {
     pub len: i64,
 }
 
-/// Everything stored about a take except its chunks.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SequenceRow {
+/// A take's row as stored: every column, and its tags. The store keeps rows and does not
+/// read them; the service parses one into its domain record (`service::take::Take`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TakeRow {
     pub id: String,
     pub name: String,
     pub library: String,
@@ -51,48 +51,46 @@ pub struct SequenceRow {
     pub max_mm: f64,
     pub kg_percent: f64,
     /// The codec container header (chunk index included).
-    #[serde(skip)]
     pub header: Vec<u8>,
-    /// Point names, unit provenance, skeleton, codec decision, warnings: JSON.
-    pub meta: serde_json::Value,
+    /// Point names, unit provenance, skeleton, codec decision, warnings: JSON text.
+    pub meta: String,
     /// Milliseconds since the Unix epoch.
     pub created_at: i64,
     /// While a live stream codes the take: when its lease runs out (ms since the epoch).
-    #[serde(skip)]
     pub live_until: Option<i64>,
 }
 
 /// A take to insert: its row and its chunks.
 #[derive(Debug, Clone)]
-pub struct NewSequence {
-    pub row: SequenceRow,
+pub struct NewTake {
+    pub row: TakeRow,
     pub chunks: Vec<ChunkRow>,
     /// The shared basis the take was coded with (its id), if any: the take then holds a
     /// reference that keeps the basis from being deleted.
     pub basis: Option<String>,
 }
 
-impl std::ops::Deref for NewSequence {
-    type Target = SequenceRow;
-    fn deref(&self) -> &SequenceRow {
+impl std::ops::Deref for NewTake {
+    type Target = TakeRow;
+    fn deref(&self) -> &TakeRow {
         &self.row
     }
 }
 
-pub const SEQUENCE_COLUMNS: &str = "id, name, library, fps, frames, points, duration_s, \
+pub const TAKE_COLUMNS: &str = "id, name, library, fps, frames, points, duration_s, \
     metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, raw_bytes, \
     stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at, live_until";
 
-pub const INSERT_SEQUENCE: &str = "INSERT INTO sequences (id, name, library, fps, frames, \
+pub const INSERT_TAKE: &str = "INSERT INTO sequences (id, name, library, fps, frames, \
     points, duration_s, metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, \
     raw_bytes, stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, \
     created_at, live_until) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, \
     $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24)";
 
-/// Bind a take's columns, in [`INSERT_SEQUENCE`] order, to a query of either backend.
-pub fn bind_sequence<'q, DB: sqlx::Database>(
+/// Bind a take's columns, in [`INSERT_TAKE`] order, to a query of either backend.
+pub fn bind_take<'q, DB: sqlx::Database>(
     q: sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>,
-    s: &'q SequenceRow,
+    s: &'q TakeRow,
 ) -> sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>
 where
     String: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
@@ -122,13 +120,13 @@ where
         .bind(s.max_mm)
         .bind(s.kg_percent)
         .bind(s.header.clone())
-        .bind(s.meta.to_string())
+        .bind(s.meta.clone())
         .bind(s.created_at)
         .bind(s.live_until)
 }
 
-/// Read a [`SequenceRow`] (tags left empty) from either backend's row.
-pub fn sequence_from_row<R: Row>(r: &R) -> Result<SequenceRow>
+/// Read a [`TakeRow`] (tags left empty) from either backend's row.
+pub fn take_from_row<R: Row>(r: &R) -> Result<TakeRow>
 where
     for<'a> &'a str: sqlx::ColumnIndex<R>,
     for<'a> String: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
@@ -137,8 +135,7 @@ where
     for<'a> Option<i64>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
 {
-    let meta: String = r.try_get("meta")?;
-    Ok(SequenceRow {
+    Ok(TakeRow {
         id: r.try_get("id")?,
         name: r.try_get("name")?,
         library: r.try_get("library")?,
@@ -161,7 +158,7 @@ where
         max_mm: r.try_get("max_mm")?,
         kg_percent: r.try_get("kg_percent")?,
         header: r.try_get("header")?,
-        meta: serde_json::from_str(&meta).map_err(|e| Error::Corrupt(format!("meta JSON: {e}")))?,
+        meta: r.try_get("meta")?,
         created_at: r.try_get("created_at")?,
         live_until: r.try_get("live_until")?,
     })

@@ -109,7 +109,8 @@ async fn stored(store: &Store, id: &str) -> (Value, Vec<u8>, Vec<Vec<u8>>) {
         .into_iter()
         .map(|c| c.payload)
         .collect();
-    let mut v = serde_json::to_value(&row).unwrap();
+    let take = mocapstore::service::take::Take::from_row(row).unwrap();
+    let mut v = serde_json::to_value(&take).unwrap();
     // The store's own bookkeeping, not the take.
     v.as_object_mut().unwrap().remove("created_at");
     (v, header, chunks)

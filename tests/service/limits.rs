@@ -309,7 +309,7 @@ async fn a_live_take_header_is_not_rewritten_by_appends() {
             .post_json(&format!("/v1/streams/{id}/finish"), &json!({}))
             .await;
         assert_eq!(status, 200, "{done}");
-        assert_eq!(done["meta"]["live"], false);
+        assert_eq!(done["live"], false);
         let row = t.store.get(&id).await.unwrap().unwrap();
         assert!(row.live_until.is_none());
         assert_ne!(
@@ -362,7 +362,7 @@ async fn a_stream_whose_server_died_is_closed_and_says_so_everywhere() {
         let b = common::start_with(t.store.clone(), config).await;
         let (status, row) = b.get_json(&format!("/v1/sequences/{id}")).await;
         assert_eq!(status, 200);
-        assert_eq!(row["meta"]["live"], false, "{}: {row}", t.name);
+        assert_eq!(row["live"], false, "{}: {row}", t.name);
         assert!(row["meta"]["interrupted"].is_string(), "{row}");
         assert_eq!(row["frames"], 60);
         let (status, s) = b.get_json(&format!("/v1/streams/{id}")).await;

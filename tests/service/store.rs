@@ -2,9 +2,9 @@
 
 use crate::common;
 
-use mocapstore::store::{ChunkRow, Error, NewSequence, SequenceRow, Store};
+use mocapstore::store::{ChunkRow, Error, NewTake, Store, TakeRow};
 
-fn take(id: &str, n: usize) -> NewSequence {
+fn take(id: &str, n: usize) -> NewTake {
     let chunks: Vec<ChunkRow> = (0..n)
         .map(|i| {
             let payload: Vec<u8> = (0..100 + i).map(|b| (b * 7 + i) as u8).collect();
@@ -17,8 +17,8 @@ fn take(id: &str, n: usize) -> NewSequence {
             }
         })
         .collect();
-    NewSequence {
-        row: SequenceRow {
+    NewTake {
+        row: TakeRow {
             id: id.to_string(),
             name: format!("take {id}"),
             library: "lib".into(),
@@ -41,7 +41,7 @@ fn take(id: &str, n: usize) -> NewSequence {
             max_mm: 0.99,
             kg_percent: 0.1,
             header: vec![1, 2, 3, 255],
-            meta: serde_json::json!({"points": ["a", "b"], "decision": {"winner": "quant"}}),
+            meta: r#"{"points": ["a", "b"], "decision": {"winner": "quant"}}"#.into(),
             created_at: 1_700_000_000_000,
             live_until: None,
         },
@@ -122,4 +122,60 @@ async fn altered_chunks_fail_their_checksum() {
 #[tokio::test]
 async fn bad_urls_are_refused() {
     assert!(matches!(Store::open("mysql://x").await, Err(Error::Url(_))));
+}
+
+/// A stored record whose metadata does not parse is an error wherever it is read (500, and
+/// a problem `verify` names), never a take with empty metadata; it can still be deleted.
+#[tokio::test]
+async fn a_corrupt_meta_row_is_an_error_not_an_empty_record() {
+    for t in common::all().await {
+        let srv = common::start(t.store.clone(), 8 << 20).await;
+        let m = mocapstore::motion::synthetic::walker(60, 3, 60.0, 2, 0.0);
+        let body = mocapstore::motion::formats::json::write(&m);
+        let (status, report) = srv.post("max_error_mm=1", body).await;
+        assert_eq!(status, 201, "{report}");
+        let id = report["id"].as_str().unwrap().to_string();
+        let (status, ok) = srv.get_json(&format!("/v1/sequences/{id}")).await;
+        assert_eq!(status, 200);
+        assert_eq!(ok["meta"]["point_names"].as_array().unwrap().len(), 3);
+
+        let q = "UPDATE sequences SET meta = $1 WHERE id = $2";
+        let corrupt = r#"{"point_names": "not a list"}"#;
+        match &t.store {
+            Store::Sqlite(p) => sqlx::query(q)
+                .bind(corrupt)
+                .bind(&id)
+                .execute(p)
+                .await
+                .map(|_| ()),
+            Store::Postgres(p) => sqlx::query(q)
+                .bind(corrupt)
+                .bind(&id)
+                .execute(p)
+                .await
+                .map(|_| ()),
+        }
+        .unwrap();
+        for path in [
+            format!("/v1/sequences/{id}"),
+            format!("/v1/sequences/{id}/frames?start=0&end=5"),
+            "/v1/sequences".to_string(),
+        ] {
+            let (status, body) = srv.get_json(&path).await;
+            assert_eq!(status, 500, "{}: {path}: {body}", t.name);
+            assert_eq!(body["error"]["code"], "internal", "{path}");
+        }
+        let report = mocapstore::service::archive::verify(&t.store, &Default::default(), |_| {})
+            .await
+            .unwrap();
+        assert_eq!(report.problems.len(), 1, "{:?}", report.problems);
+        assert!(
+            report.problems[0].id == id && report.problems[0].what.contains("meta"),
+            "{:?}",
+            report.problems
+        );
+        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 204);
+        srv.stop().await;
+        t.finish().await;
+    }
 }

@@ -88,7 +88,7 @@ async fn streams_commit_chunk_by_chunk_and_ranges_are_fetchable_while_live() {
         within(&all[97 * w..committed * w], &served, points, 1.0);
         let (_, row) = srv.get_json(&format!("/v1/sequences/{id}")).await;
         assert_eq!(row["frames"].as_u64().unwrap() as usize, committed);
-        assert_eq!(row["meta"]["live"], true);
+        assert_eq!(row["live"], true);
 
         // Flush: everything received is committed.
         let (status, info) = append(&srv, &id, &all[sent * w..450 * w], true).await;
@@ -123,7 +123,7 @@ async fn streams_commit_chunk_by_chunk_and_ranges_are_fetchable_while_live() {
             .await;
         assert_eq!(status, 200, "{row}");
         assert_eq!(row["frames"].as_u64(), Some(452));
-        assert_eq!(row["meta"]["live"], false);
+        assert_eq!(row["live"], false);
         assert!(row["max_mm"].as_f64().unwrap() <= 1.0);
         let served = fetch(&srv, &id, 0, 452).await;
         let mut want = all[..452 * w].to_vec();

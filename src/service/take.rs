@@ -1,0 +1,328 @@
+//! A stored take as the service knows it: every field typed, its metadata a struct. Parsed
+//! from its store row once, at the boundary ([`Take::from_row`]); a row that does not parse
+//! is an error naming the take and the field, never a default. Written back with
+//! [`Take::to_row`]. The HTTP layer shows takes through its own view; export manifests carry
+//! a take's serialised form (below), which reads back with the same checks.
+
+use serde::{Deserialize, Serialize};
+
+use super::choose::Decision;
+use super::{Error, Result};
+use crate::codec::{CodecId, ErrorBound};
+use crate::motion::skeleton::Joint;
+use crate::motion::Unit;
+use crate::store::TakeRow;
+
+/// One take: what it is, how it was coded, what that cost and what error it measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Take {
+    pub id: String,
+    pub name: String,
+    pub library: String,
+    pub tags: Vec<String>,
+    pub fps: f64,
+    pub frames: usize,
+    pub points: usize,
+    pub duration_s: f64,
+    pub metres_per_unit: f64,
+    /// Layout signature (hex): takes of one layout share bases.
+    pub layout: String,
+    pub source_format: String,
+    pub codec: CodecId,
+    /// Stored as `bound_kind` and `bound_mm`.
+    #[serde(flatten, with = "bound_fields")]
+    pub bound: ErrorBound,
+    pub raw_bytes: u64,
+    pub stored_bytes: u64,
+    pub ratio: f64,
+    pub mean_mm: f64,
+    pub rms_mm: f64,
+    pub max_mm: f64,
+    pub kg_percent: f64,
+    pub meta: TakeMeta,
+    /// Milliseconds since the Unix epoch.
+    pub created_at: i64,
+    /// The codec container header (its chunk index included once the take is closed).
+    #[serde(skip)]
+    pub header: Vec<u8>,
+    /// While a live stream codes the take: when its lease runs out (ms since the epoch).
+    #[serde(skip)]
+    pub live_until: Option<i64>,
+}
+
+/// What is kept with a take beside its numbers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TakeMeta {
+    /// One name per point, in stored order.
+    pub point_names: Vec<String>,
+    /// The unit and where it came from.
+    pub unit: Unit,
+    /// The hierarchy of a skeleton take (BVH), if it has one.
+    #[serde(default)]
+    pub skeleton: Option<Vec<Joint>>,
+    /// What reading or coding the take gave up or guessed.
+    #[serde(default)]
+    pub warnings: Vec<String>,
+    /// Which codec was chosen and why.
+    pub decision: Decision,
+    /// [`crate::codec::decoded_digest`] of the frames its statistics were measured on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decoded_blake3: Option<String>,
+    /// Why a live take was closed without finishing (its server stopped).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interrupted: Option<String>,
+    /// The codec a finished stream was coded with live, before it was re-encoded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reencoded_from: Option<CodecId>,
+}
+
+impl Take {
+    /// Parse a stored row; `Corrupt` names the take and what does not parse.
+    pub fn from_row(row: TakeRow) -> Result<Take> {
+        let id = row.id.clone();
+        let corrupt = |what: String| Error::Corrupt(format!("stored take {id}: {what}"));
+        let count =
+            |what: &str, v: i64| usize::try_from(v).map_err(|_| corrupt(format!("{what} is {v}")));
+        let bytes =
+            |what: &str, v: i64| u64::try_from(v).map_err(|_| corrupt(format!("{what} is {v}")));
+        let meta: TakeMeta =
+            serde_json::from_str(&row.meta).map_err(|e| corrupt(format!("meta: {e}")))?;
+        let take = Take {
+            frames: count("frames", row.frames)?,
+            points: count("points", row.points)?,
+            codec: row
+                .codec
+                .parse()
+                .map_err(|e| corrupt(format!("codec: {e}")))?,
+            bound: ErrorBound::from_kind(&row.bound_kind, row.bound_mm)
+                .map_err(|e| corrupt(format!("bound: {e}")))?,
+            raw_bytes: bytes("raw_bytes", row.raw_bytes)?,
+            stored_bytes: bytes("stored_bytes", row.stored_bytes)?,
+            id: row.id,
+            name: row.name,
+            library: row.library,
+            tags: row.tags,
+            fps: row.fps,
+            duration_s: row.duration_s,
+            metres_per_unit: row.metres_per_unit,
+            layout: row.layout,
+            source_format: row.source_format,
+            ratio: row.ratio,
+            mean_mm: row.mean_mm,
+            rms_mm: row.rms_mm,
+            max_mm: row.max_mm,
+            kg_percent: row.kg_percent,
+            meta,
+            created_at: row.created_at,
+            header: row.header,
+            live_until: row.live_until,
+        };
+        take.check()?;
+        Ok(take)
+    }
+
+    /// What holds between the fields of any take, stored or imported.
+    pub fn check(&self) -> Result<()> {
+        let corrupt = |what: String| Error::Corrupt(format!("stored take {}: {what}", self.id));
+        if self.meta.point_names.len() != self.points {
+            return Err(corrupt(format!(
+                "{} point names for {} points",
+                self.meta.point_names.len(),
+                self.points
+            )));
+        }
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            return Err(corrupt(format!("fps is {}", self.fps)));
+        }
+        if self.meta.unit.metres_per_unit != self.metres_per_unit {
+            return Err(corrupt(format!(
+                "meta says {} metres per unit, the row {}",
+                self.meta.unit.metres_per_unit, self.metres_per_unit
+            )));
+        }
+        Ok(())
+    }
+
+    /// The row to store.
+    pub fn to_row(&self) -> Result<TakeRow> {
+        let meta = serde_json::to_string(&self.meta)
+            .map_err(|e| Error::Internal(format!("take {}: meta: {e}", self.id)))?;
+        Ok(TakeRow {
+            id: self.id.clone(),
+            name: self.name.clone(),
+            library: self.library.clone(),
+            tags: self.tags.clone(),
+            fps: self.fps,
+            frames: self.frames as i64,
+            points: self.points as i64,
+            duration_s: self.duration_s,
+            metres_per_unit: self.metres_per_unit,
+            layout: self.layout.clone(),
+            source_format: self.source_format.clone(),
+            codec: self.codec.to_string(),
+            bound_kind: self.bound.kind().to_string(),
+            bound_mm: self.bound.mm(),
+            raw_bytes: self.raw_bytes as i64,
+            stored_bytes: self.stored_bytes as i64,
+            ratio: self.ratio,
+            mean_mm: self.mean_mm,
+            rms_mm: self.rms_mm,
+            max_mm: self.max_mm,
+            kg_percent: self.kg_percent,
+            header: self.header.clone(),
+            meta,
+            created_at: self.created_at,
+            live_until: self.live_until,
+        })
+    }
+
+    /// Whether a live stream is still coding the take.
+    pub fn is_live(&self) -> bool {
+        self.live_until.is_some()
+    }
+
+    /// Set what was measured on the stored coding: sizes, the ratio, the errors.
+    pub fn set_measured(
+        &mut self,
+        stored_bytes: usize,
+        stats: &crate::motion::metrics::ErrorStats,
+    ) {
+        self.raw_bytes = (self.frames * self.points * 12) as u64;
+        self.stored_bytes = stored_bytes as u64;
+        self.ratio = self.raw_bytes as f64 / self.stored_bytes.max(1) as f64;
+        self.mean_mm = stats.mean_mm;
+        self.rms_mm = stats.rms_mm;
+        self.max_mm = stats.max_mm;
+        self.kg_percent = if stats.kg_percent.is_finite() {
+            stats.kg_percent
+        } else {
+            0.0
+        };
+    }
+}
+
+/// An [`ErrorBound`] as two fields, `bound_kind` (`max`, `mean`) and `bound_mm`: the names
+/// of the stored columns and of the API.
+mod bound_fields {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    use crate::codec::ErrorBound;
+
+    #[derive(Serialize, Deserialize)]
+    struct Fields {
+        bound_kind: String,
+        bound_mm: f64,
+    }
+
+    pub fn serialize<S: Serializer>(b: &ErrorBound, s: S) -> Result<S::Ok, S::Error> {
+        Fields {
+            bound_kind: b.kind().to_string(),
+            bound_mm: b.mm(),
+        }
+        .serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<ErrorBound, D::Error> {
+        let f = Fields::deserialize(d)?;
+        ErrorBound::from_kind(&f.bound_kind, f.bound_mm).map_err(serde::de::Error::custom)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::UnitSource;
+
+    fn take() -> Take {
+        Take {
+            id: "t".into(),
+            name: "walk".into(),
+            library: "lib".into(),
+            tags: vec!["a".into()],
+            fps: 120.0,
+            frames: 10,
+            points: 2,
+            duration_s: 10.0 / 120.0,
+            metres_per_unit: 0.001,
+            layout: "ab".into(),
+            source_format: "trc".into(),
+            codec: CodecId::Quant,
+            bound: ErrorBound::MeanMm(0.5),
+            raw_bytes: 240,
+            stored_bytes: 100,
+            ratio: 2.4,
+            mean_mm: 0.2,
+            rms_mm: 0.25,
+            max_mm: 0.4,
+            kg_percent: 0.01,
+            meta: TakeMeta {
+                point_names: vec!["a".into(), "b".into()],
+                unit: Unit::new(0.001, UnitSource::Declared).unwrap(),
+                skeleton: None,
+                warnings: vec![],
+                decision: Decision {
+                    winner: CodecId::Quant,
+                    reason: "asked".into(),
+                    tried: vec![],
+                    skipped: vec![],
+                },
+                decoded_blake3: Some("00".into()),
+                interrupted: None,
+                reencoded_from: None,
+            },
+            created_at: 1,
+            header: vec![1, 2, 3],
+            live_until: None,
+        }
+    }
+
+    #[test]
+    fn a_take_round_trips_through_its_row() {
+        let t = take();
+        assert_eq!(Take::from_row(t.to_row().unwrap()).unwrap(), t);
+    }
+
+    #[test]
+    fn a_corrupt_meta_is_an_error_not_an_empty_record() {
+        for (meta, says) in [
+            ("{not json", "meta"),
+            ("{}", "meta: missing field `point_names`"),
+            (
+                r#"{"point_names": ["a"], "unit": {"metres_per_unit": 0.001, "source": {"kind": "declared"}}, "decision": {"winner": "quant", "reason": "", "tried": [], "skipped": []}}"#,
+                "1 point names for 2 points",
+            ),
+            (r#"{"point_names": "a,b"}"#, "meta: invalid type"),
+        ] {
+            let mut row = take().to_row().unwrap();
+            row.meta = meta.into();
+            let e = Take::from_row(row).unwrap_err();
+            assert!(matches!(e, Error::Corrupt(_)), "{meta}: {e}");
+            assert!(
+                e.to_string().contains("stored take t") && e.to_string().contains(says),
+                "{meta}: {e}"
+            );
+        }
+        let mut row = take().to_row().unwrap();
+        row.bound_kind = "median".into();
+        assert!(matches!(Take::from_row(row), Err(Error::Corrupt(_))));
+        let mut row = take().to_row().unwrap();
+        row.codec = "zip".into();
+        assert!(matches!(Take::from_row(row), Err(Error::Corrupt(_))));
+        let mut row = take().to_row().unwrap();
+        row.frames = -1;
+        assert!(matches!(Take::from_row(row), Err(Error::Corrupt(_))));
+    }
+
+    #[test]
+    fn the_serialised_take_names_its_bound_as_stored() {
+        let v = serde_json::to_value(take()).unwrap();
+        assert_eq!(
+            (v["bound_kind"].as_str(), v["bound_mm"].as_f64()),
+            (Some("mean"), Some(0.5))
+        );
+        assert_eq!(v["codec"], "quant");
+        assert!(v.get("header").is_none() && v.get("bound").is_none());
+        let back: Take = serde_json::from_value(v).unwrap();
+        assert_eq!(back.bound, ErrorBound::MeanMm(0.5));
+    }
+}
