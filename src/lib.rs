@@ -1,26 +1,39 @@
-//! mocapstore archives motion-capture libraries with error-bounded compression.
+//! mocapstore archives motion-capture libraries with error-bounded compression: it reads
+//! takes (BVH, C3D, TRC, JSON, NPY), codes each with the smallest codec that meets the user's
+//! error bound, stores independently decodable chunks in SQLite or Postgres, and serves any
+//! frame range of any take.
+//!
+//! This library is the product's core; the `mocapstore` command line (`src/main.rs`, the
+//! `cli` feature, on by default) is a binary on top of it: `serve`, `ingest`, `inspect`,
+//! `convert`, `bench`, `streamtest`, `loadtest`, `train-bases`, `verify`, `export`,
+//! `import`. Code that embeds the codecs or the store depends on this crate with
+//! `default-features = false` and compiles no HTTP client, plots or argument parser.
 //!
 //! # Layout
 //!
 //! Dependencies point one way, from the top of this list to the bottom:
 //!
-//! - [`cli`]: the `mocapstore` command line (`serve`, `inspect`, `convert`, `bench`); the only
-//!   place that touches files and the terminal.
-//! - [`http`]: the axum API under `/v1`, errors as JSON, metrics; no math, no SQL.
-//! - [`service`]: use-cases (ingest with per-take codec choice, range fetch); moves codec work
-//!   to the blocking pool.
-//! - [`store`]: SQLite (default) and Postgres via sqlx; takes are written in one transaction.
-//! - [`codec`]: codecs (`raw`, `quant`, `mdtt`), the chunked container, the entropy stage
-//!   and rate control to an error bound. Pure, like `motion`.
+//! - [`http`]: the axum API under `/v1` (`openapi.yaml`), errors as JSON, request budgets,
+//!   metrics. Parses requests into typed values, calls the service, writes responses; no
+//!   math, no SQL.
+//! - [`service`]: use-cases — ingest with per-take codec choice, range reads with caches,
+//!   live streams, library queries, shared-basis training, verify/export/import. Owns the
+//!   typed take record ([`service::take::Take`]) and moves codec work to the blocking pool.
+//! - [`store`]: SQLite (default) and Postgres via sqlx; keeps rows, in one transaction per
+//!   change.
+//! - [`codec`]: the codecs (`raw`, `quant`, `mdtt`, `mdtt-shared`, `lsdt-clip`,
+//!   `lsdt-frame`), found by id in one registry; the chunked container; the one encode path
+//!   ([`codec::encode_with`], [`codec::stream`] for live streams) and the one read path
+//!   ([`codec::Reader`]); shared bases; rate control to a bound. Pure.
 //! - [`motion`]: the `Motion` model (positions, units, gaps, skeletons), forward kinematics,
 //!   error metrics and the file formats in [`motion::formats`] (BVH, C3D, TRC, JSON, NPY in;
 //!   BVH, TRC, JSON, NPY, CSV, raw f32 out). Pure: no I/O, no async, no database.
 //!
-//! Beside them, [`limits`] holds every bound on untrusted input and server memory (one
-//! place, read by every layer), and [`corpus`] says where the real-data corpus and its
-//! manifest are (tests and benchmarks).
+//! Beside them, depending on nothing: [`limits`] holds every bound on untrusted input and
+//! server memory (one place; each layer converts it to its own), [`rng`] the deterministic
+//! generator trainers and test motions draw from, and [`corpus`] says where the real-data
+//! corpus and its manifest are (tests and benchmarks).
 
-pub mod cli;
 pub mod codec;
 pub mod corpus;
 #[doc(hidden)]
@@ -28,5 +41,6 @@ pub mod fuzzing;
 pub mod http;
 pub mod limits;
 pub mod motion;
+pub mod rng;
 pub mod service;
 pub mod store;

@@ -95,29 +95,6 @@ impl Default for Limits {
     }
 }
 
-impl Limits {
-    /// What file readers may accept.
-    pub fn reader(&self) -> crate::motion::formats::Limits {
-        crate::motion::formats::Limits {
-            max_bytes: self.upload_bytes,
-            max_points: self.points,
-            max_frames: self.frames,
-            max_samples: self.samples,
-            max_depth: self.hierarchy_depth,
-        }
-    }
-
-    /// What a decoder of stored (or imported) bitstreams may allocate.
-    pub fn decoder(&self) -> crate::codec::Limits {
-        crate::codec::Limits {
-            max_frames: self.frames,
-            max_points: self.points,
-            max_samples: self.samples,
-            ..crate::codec::Limits::default()
-        }
-    }
-}
-
 /// Check a declared amount against its limit: the reason, naming both, when over.
 pub fn check(what: &str, actual: u64, limit: u64) -> Result<(), String> {
     if actual > limit {
@@ -134,9 +111,10 @@ mod tests {
     #[test]
     fn layers_get_the_same_numbers() {
         let l = Limits::default();
-        assert_eq!(l.reader().max_points, l.points);
-        assert_eq!(l.decoder().max_samples, l.samples);
-        assert_eq!(crate::motion::formats::Limits::default(), l.reader());
+        let reader = crate::motion::formats::Limits::from(&l);
+        assert_eq!(reader.max_points, l.points);
+        assert_eq!(crate::codec::Limits::from(&l).max_samples, l.samples);
+        assert_eq!(crate::motion::formats::Limits::default(), reader);
         assert!(check("points", 3, 2)
             .unwrap_err()
             .contains("over the limit of 2"));

@@ -6,8 +6,8 @@ use std::process::ExitCode;
 
 use clap::Args;
 
-use crate::service::archive::{self, Imported, ManifestLine};
-use crate::store::{BasisRow, Filter, Store};
+use mocapstore::service::archive::{self, Imported, ManifestLine};
+use mocapstore::store::{BasisRow, Filter, Store};
 
 /// Which database, and which takes.
 #[derive(Args)]
@@ -174,7 +174,7 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
     let io = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
     std::fs::create_dir_all(dir.join("bases")).map_err(|e| io(dir, e))?;
     let store = open_existing(&args.selection.database_url).await?;
-    let rows = crate::service::library::all_takes(&store, &args.selection.filter())
+    let rows = mocapstore::service::library::all_takes(&store, &args.selection.filter())
         .await
         .map_err(|e| e.to_string())?;
     let mut lines = String::new();

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::Args;
 
 use super::ReadArgs;
-use crate::motion::formats::{self, Format};
+use mocapstore::motion::formats::{self, Format};
 
 #[derive(Args)]
 pub struct ConvertArgs {

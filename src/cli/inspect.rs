@@ -7,7 +7,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::ReadArgs;
-use crate::motion::formats::{self, Loaded};
+use mocapstore::motion::formats::{self, Loaded};
 
 #[derive(Args)]
 pub struct InspectArgs {

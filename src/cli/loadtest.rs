@@ -16,10 +16,10 @@ use clap::Args;
 use serde::Deserialize;
 use sqlx::SqlitePool;
 
-use crate::http::{Application, Config};
-use crate::motion::formats::{self, Format};
-use crate::motion::synthetic::{walker, Rng};
-use crate::store::Store;
+use mocapstore::http::{Application, Config};
+use mocapstore::motion::formats::{self, Format};
+use mocapstore::motion::synthetic::{walker, Rng};
+use mocapstore::store::Store;
 
 #[derive(Args)]
 pub struct LoadArgs {

@@ -11,7 +11,6 @@ mod convert;
 mod ingest;
 mod inspect;
 mod loadtest;
-mod plot;
 mod streamtest;
 mod train_bases;
 
@@ -105,8 +104,8 @@ struct LimitArgs {
 }
 
 impl LimitArgs {
-    fn limits(&self) -> crate::limits::Limits {
-        crate::limits::Limits {
+    fn limits(&self) -> mocapstore::limits::Limits {
+        mocapstore::limits::Limits {
             upload_bytes: self.max_upload_mib << 20,
             inflight_bytes: self.max_inflight_mib << 20,
             append_bytes: self.max_append_mib << 20,
@@ -116,7 +115,7 @@ impl LimitArgs {
             hierarchy_depth: self.max_depth,
             stream_points: self.max_stream_points,
             open_streams: self.max_open_streams,
-            ..crate::limits::Limits::default()
+            ..mocapstore::limits::Limits::default()
         }
     }
 }
@@ -154,8 +153,8 @@ impl ReadArgs {
 
 /// Short paths to the motion layer for the subcommands.
 mod mocapstore_motion {
-    pub use crate::motion::formats::ReadOptions;
-    pub use crate::motion::units::parse_unit;
+    pub use mocapstore::motion::formats::ReadOptions;
+    pub use mocapstore::motion::units::parse_unit;
 }
 
 pub fn main() -> ExitCode {
@@ -182,12 +181,12 @@ fn serve(args: ServeArgs) -> ExitCode {
                 .unwrap_or_else(|_| "info,tower_http=info,sqlx=warn".into()),
         )
         .init();
-    let config = crate::http::Config {
+    let config = mocapstore::http::Config {
         listen: args.listen,
         database_url: args.database_url,
         limits: args.limits.limits(),
         decoded_cache_mib: args.decoded_cache_mib,
-        ..crate::http::Config::default()
+        ..mocapstore::http::Config::default()
     };
     let runtime = match tokio::runtime::Runtime::new() {
         Ok(r) => r,
@@ -198,7 +197,7 @@ fn serve(args: ServeArgs) -> ExitCode {
     };
     runtime.block_on(async move {
         let database = config.database_url.clone();
-        let app = match crate::http::Application::build(config).await {
+        let app = match mocapstore::http::Application::build(config).await {
             Ok(a) => a,
             Err(e) => {
                 eprintln!("mocapstore serve: {e}");
@@ -206,7 +205,7 @@ fn serve(args: ServeArgs) -> ExitCode {
             }
         };
         tracing::info!(address = %app.local_addr(), %database, "mocapstore listening");
-        match app.run_until(crate::http::shutdown_signal()).await {
+        match app.run_until(mocapstore::http::shutdown_signal()).await {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("mocapstore serve: {e}");

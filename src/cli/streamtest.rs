@@ -15,10 +15,10 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use serde_json::{json, Value};
 
-use crate::http::{Application, Config};
-use crate::motion::formats::{self, Format};
-use crate::motion::synthetic::walker;
-use crate::store::Store;
+use mocapstore::http::{Application, Config};
+use mocapstore::motion::formats::{self, Format};
+use mocapstore::motion::synthetic::walker;
+use mocapstore::store::Store;
 
 #[derive(Args)]
 pub struct StreamArgs {

@@ -26,7 +26,14 @@ pub struct Limits {
 impl Default for Limits {
     /// Shapes as [`crate::limits`] sets them for takes; the byte bounds are the container's.
     fn default() -> Self {
-        let take = crate::limits::Limits::default();
+        Limits::from(&crate::limits::Limits::default())
+    }
+}
+
+impl From<&crate::limits::Limits> for Limits {
+    /// What a decoder of stored (or imported) bitstreams may allocate under the service's
+    /// policy: the shapes it allows a take; the byte bounds are the container's own.
+    fn from(take: &crate::limits::Limits) -> Self {
         Limits {
             max_frames: take.frames,
             max_points: take.points,

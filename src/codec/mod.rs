@@ -41,10 +41,10 @@ pub use container::{Container, Header, Limits};
 pub use error::{Error, Result};
 pub use id::{CodecId, ErrorBound, Latency};
 pub use pipeline::{
-    decode_all, decode_all_with, decode_chunk, decoded_digest, decoder, digest_update, encode,
-    encode_variant, encode_with, Encoded,
+    decode_all, decode_all_with, decoded_digest, digest_update, encode, encode_variant,
+    encode_with, Encoded,
 };
-pub use read::{ChunkSource, Reader, Stored};
+pub use read::{decode_chunk, decoder, ChunkSource, Reader, Stored};
 
 /// What an encoder sees: gap-filled positions (`frames × points × 3`, the take's units) and
 /// which samples are real, so that errors are judged on those only.

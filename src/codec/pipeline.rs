@@ -2,12 +2,12 @@
 
 use std::sync::Arc;
 
-use super::basis::{hex, Basis};
-use super::container::{pack_chunks, unpack_chunk, verify_chunk, Container, Header};
-use super::error::{malformed, Error, Result};
+use super::basis::Basis;
+use super::container::{pack_chunks, Container, Header};
+use super::error::{Error, Result};
 use super::id::{CodecId, ErrorBound};
 use super::read::{Reader, Stored};
-use super::{codec, gaps, ChunkDecoder, Codec, Input, Target};
+use super::{codec, gaps, Codec, Input, Target};
 use crate::motion::metrics::{self, ErrorStats};
 use crate::motion::Motion;
 
@@ -173,36 +173,6 @@ pub(crate) fn usable_basis<'a>(
     Ok(Some(b))
 }
 
-/// The chunk decoder for a header, given the shared basis it names (if it names one): the
-/// basis's hash must be the header's, so a take is never decoded with the wrong basis.
-pub fn decoder(header: &Header, shared: Option<Arc<Basis>>) -> Result<Box<dyn ChunkDecoder>> {
-    let c = codec(header.codec)?;
-    let shared = match (&header.basis, shared) {
-        (None, _) => None,
-        (Some(want), None) => {
-            return Err(Error::Basis(format!(
-                "the take was coded with basis {} and it was not supplied",
-                hex(want)
-            )))
-        }
-        (Some(want), Some(b)) if b.hash() != *want => {
-            return Err(Error::Basis(format!(
-                "the take was coded with basis {}, got {}",
-                hex(want),
-                b.id()
-            )))
-        }
-        (Some(_), Some(b)) => Some(b),
-    };
-    if c.basis_kind().is_some() && shared.is_none() {
-        return Err(malformed(format!(
-            "codec {} needs a shared basis and the header names none",
-            header.codec
-        )));
-    }
-    c.decoder(&header.params, header.points as usize, shared)
-}
-
 /// Decode every frame.
 pub fn decode_all(container: &Container) -> Result<Vec<f32>> {
     decode_all_with(container, None)
@@ -212,58 +182,4 @@ pub fn decode_all(container: &Container) -> Result<Vec<f32>> {
 pub fn decode_all_with(container: &Container, shared: Option<Arc<Basis>>) -> Result<Vec<f32>> {
     let reader = Reader::new(container.header.clone(), shared)?;
     reader.read_all(&Stored::new(0, container.chunks.iter().map(Vec::as_slice)))
-}
-
-/// Decode chunk `index` (its payload as stored): all its frames, NaN where the take has
-/// gaps. The unit a server caches.
-pub fn decode_chunk(
-    header: &Header,
-    decoder: &dyn ChunkDecoder,
-    index: usize,
-    payload: &[u8],
-) -> Result<Vec<f32>> {
-    let meta = header
-        .chunks
-        .get(index)
-        .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
-    let mut out = vec![0f32; meta.frames as usize * header.width()];
-    decode_chunk_into(header, decoder, index, payload, &mut out)?;
-    Ok(out)
-}
-
-/// [`decode_chunk`] into `out` (exactly the chunk's frames).
-pub(super) fn decode_chunk_into(
-    header: &Header,
-    decoder: &dyn ChunkDecoder,
-    index: usize,
-    payload: &[u8],
-    out: &mut [f32],
-) -> Result<()> {
-    let meta = header
-        .chunks
-        .get(index)
-        .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
-    verify_chunk(meta, payload, index)?;
-    let n = meta.frames as usize;
-    let (mask, codec_bytes) = unpack_chunk(payload, n * header.points as usize)?;
-    decoder.decode_chunk(codec_bytes, n, out)?;
-    if let Some(mask) = mask {
-        for (s, ok) in out.chunks_exact_mut(3).zip(mask) {
-            if !ok {
-                s.fill(f32::NAN);
-            }
-        }
-    }
-    if any_infinite(out) {
-        return Err(malformed("decoded values are not finite"));
-    }
-    Ok(())
-}
-
-/// Whether any value is ±∞ (a corrupt stream). Blocks are folded without an early exit so
-/// that the compiler vectorises the scan: on fast decoders a per-value branch cost several
-/// per cent of the decode.
-fn any_infinite(v: &[f32]) -> bool {
-    v.chunks(256)
-        .any(|c| c.iter().fold(false, |any, x| any | x.is_infinite()))
 }

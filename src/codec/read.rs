@@ -6,11 +6,10 @@
 use std::ops::Range;
 use std::sync::Arc;
 
-use super::basis::Basis;
-use super::container::Header;
-use super::error::{Error, Result};
-use super::pipeline::{decode_chunk, decode_chunk_into, decoder};
-use super::ChunkDecoder;
+use super::basis::{hex, Basis};
+use super::container::{unpack_chunk, verify_chunk, Header};
+use super::error::{malformed, Error, Result};
+use super::{codec, ChunkDecoder};
 
 /// One chunk as a source holds it.
 pub enum Chunk<'a> {
@@ -156,6 +155,90 @@ impl Reader {
     pub fn read_all(&self, source: &dyn ChunkSource) -> Result<Vec<f32>> {
         self.read(0..self.header.frames as usize, None, source)
     }
+}
+
+/// The chunk decoder for a header, given the shared basis it names (if it names one): the
+/// basis's hash must be the header's, so a take is never decoded with the wrong basis.
+pub fn decoder(header: &Header, shared: Option<Arc<Basis>>) -> Result<Box<dyn ChunkDecoder>> {
+    let c = codec(header.codec)?;
+    let shared = match (&header.basis, shared) {
+        (None, _) => None,
+        (Some(want), None) => {
+            return Err(Error::Basis(format!(
+                "the take was coded with basis {} and it was not supplied",
+                hex(want)
+            )))
+        }
+        (Some(want), Some(b)) if b.hash() != *want => {
+            return Err(Error::Basis(format!(
+                "the take was coded with basis {}, got {}",
+                hex(want),
+                b.id()
+            )))
+        }
+        (Some(_), Some(b)) => Some(b),
+    };
+    if c.basis_kind().is_some() && shared.is_none() {
+        return Err(malformed(format!(
+            "codec {} needs a shared basis and the header names none",
+            header.codec
+        )));
+    }
+    c.decoder(&header.params, header.points as usize, shared)
+}
+
+/// Decode chunk `index` (its payload as stored): all its frames, NaN where the take has
+/// gaps. The unit a server caches.
+pub fn decode_chunk(
+    header: &Header,
+    decoder: &dyn ChunkDecoder,
+    index: usize,
+    payload: &[u8],
+) -> Result<Vec<f32>> {
+    let meta = header
+        .chunks
+        .get(index)
+        .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
+    let mut out = vec![0f32; meta.frames as usize * header.width()];
+    decode_chunk_into(header, decoder, index, payload, &mut out)?;
+    Ok(out)
+}
+
+/// [`decode_chunk`] into `out` (exactly the chunk's frames).
+fn decode_chunk_into(
+    header: &Header,
+    decoder: &dyn ChunkDecoder,
+    index: usize,
+    payload: &[u8],
+    out: &mut [f32],
+) -> Result<()> {
+    let meta = header
+        .chunks
+        .get(index)
+        .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
+    verify_chunk(meta, payload, index)?;
+    let n = meta.frames as usize;
+    let (mask, codec_bytes) = unpack_chunk(payload, n * header.points as usize)?;
+    decoder.decode_chunk(codec_bytes, n, out)?;
+    if let Some(mask) = mask {
+        for (s, ok) in out.chunks_exact_mut(3).zip(mask) {
+            if !ok {
+                s.fill(f32::NAN);
+            }
+        }
+    }
+    if any_infinite(out) {
+        return Err(malformed("decoded values are not finite"));
+    }
+    Ok(())
+}
+
+/// Whether any value is ±∞ (a corrupt stream). Blocks are folded without an early exit so
+/// that the compiler vectorises the scan: on fast decoders a per-value branch cost several
+/// per cent of the decode.
+fn any_infinite(v: &[f32]) -> bool {
+    v.chunks(256)
+        .any(|c| c.iter().fold(false, |any, x| any | x.is_infinite()))
 }
 
 /// A range lies within the take, start at most end (an empty range reads nothing).

@@ -130,12 +130,6 @@ impl FrameResidual {
         (&self.flags, &self.q)
     }
 
-    /// Apply a correction of `q` steps to coordinate `i` of `recon`, exactly as the encoder did.
-    #[inline]
-    pub fn apply(&self, recon: &mut [f32], i: usize, q: i32) {
-        recon[i] += self.correction(q);
-    }
-
     /// What a correction of `q` steps adds to its sample.
     #[inline]
     pub fn correction(&self, q: i32) -> f32 {

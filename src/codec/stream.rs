@@ -14,7 +14,7 @@ use std::sync::Arc;
 use super::container::{pack_chunk, ChunkMeta, Header};
 use super::error::{Error, Result};
 use super::id::{CodecId, ErrorBound};
-use super::{codec, pipeline, Basis, ChunkDecoder, ChunkOut, Codec};
+use super::{codec, pipeline, read, Basis, ChunkDecoder, ChunkOut, Codec};
 use crate::motion::metrics::{Accumulator, ErrorStats};
 
 /// What a stream is opened with, checked by [`StreamEncoder::open`].
@@ -140,7 +140,7 @@ impl StreamEncoder {
             basis: shared.map(|b| b.hash()),
             chunks: Vec::new(),
         };
-        let decoder = Arc::from(pipeline::decoder(&header, shared.cloned())?);
+        let decoder = Arc::from(read::decoder(&header, shared.cloned())?);
         Ok(StreamEncoder {
             header_len: header.to_bytes().len(),
             header,
@@ -224,7 +224,7 @@ impl StreamEncoder {
             }],
             ..self.header.clone()
         };
-        let decoded = pipeline::decode_chunk(&alone, self.decoder.as_ref(), 0, &payload)?;
+        let decoded = read::decode_chunk(&alone, self.decoder.as_ref(), 0, &payload)?;
         let mut a = Accumulator::new(self.points);
         a.add(&original, &decoded);
         let max_mm = a.finish(self.mm_per_unit).max_mm;

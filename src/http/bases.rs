@@ -10,8 +10,9 @@ use serde::Deserialize;
 use super::error::ApiError;
 use super::AppState;
 use crate::codec::BasisKind;
-use crate::service::bases::{self, TrainRequest};
+use crate::service::bases;
 use crate::service::jobs::{Job, MAX_WAIT_S};
+use crate::service::training::{self, TrainRequest};
 use crate::service::Error;
 use crate::store::BasisRow;
 
@@ -21,7 +22,7 @@ pub async fn train(
     body: Result<Json<TrainRequest>, JsonRejection>,
 ) -> Result<impl IntoResponse, ApiError> {
     let Json(req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
-    let job = bases::start_training(&state.store, &state.jobs, req).await?;
+    let job = training::start_training(&state.store, &state.jobs, req).await?;
     let location = format!("/v1/jobs/{}", job.id);
     Ok((
         StatusCode::ACCEPTED,

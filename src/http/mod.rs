@@ -286,7 +286,7 @@ pub mod fuzz {
         let _ = super::streams::parse_frames(&json, &body);
         let _ = super::streams::parse_frames(&HeaderMap::new(), &body);
         let _ = serde_json::from_slice::<crate::service::streams::OpenRequest>(&body);
-        let _ = serde_json::from_slice::<crate::service::bases::TrainRequest>(&body);
+        let _ = serde_json::from_slice::<crate::service::training::TrainRequest>(&body);
         let _ = serde_json::from_slice::<super::library::Patch>(&body);
     }
 }

@@ -20,6 +20,7 @@ use crate::motion::{Motion, Unit, UnitSource};
 use crate::service::choose::CodecRequest;
 use crate::service::fetch::{self, TimeRange};
 use crate::service::ingest::{self, IngestRequest};
+use crate::service::take::Label;
 
 #[derive(Deserialize)]
 pub struct IngestQuery {
@@ -103,16 +104,8 @@ impl IngestQuery {
     /// Parse, don't validate: the query becomes an [`IngestRequest`] or a 400.
     fn into_request(self, body: Bytes, limits: &Limits) -> Result<IngestRequest, ApiError> {
         let bad = |e: &dyn std::fmt::Display| ApiError::bad_request(e.to_string());
-        let bound = match (self.max_error_mm, self.mean_error_mm) {
-            (Some(_), Some(_)) => {
-                return Err(ApiError::bad_request(
-                    "give max_error_mm or mean_error_mm, not both",
-                ))
-            }
-            (Some(m), None) => ErrorBound::new_max(m).map_err(|e| bad(&e))?,
-            (None, Some(m)) => ErrorBound::new_mean(m).map_err(|e| bad(&e))?,
-            (None, None) => ErrorBound::MaxMm(1.0),
-        };
+        let bound =
+            ErrorBound::from_request(self.max_error_mm, self.mean_error_mm).map_err(|e| bad(&e))?;
         let codec = match self.codec.as_deref().map(str::trim) {
             None | Some("") | Some("auto") => CodecRequest::Auto,
             Some(c) => CodecRequest::Only(c.parse::<CodecId>().map_err(|e| bad(&e))?),
@@ -140,18 +133,20 @@ impl IngestQuery {
         }
         Ok(IngestRequest {
             bytes: body,
-            name: self.name,
-            library: self.library.unwrap_or_default(),
-            tags: self
-                .tags
-                .map(|t| t.split(',').map(str::to_string).collect())
-                .unwrap_or_default(),
+            label: Label {
+                name: self.name,
+                library: self.library.unwrap_or_default(),
+                tags: self
+                    .tags
+                    .map(|t| t.split(',').map(str::to_string).collect())
+                    .unwrap_or_default(),
+            },
             unit,
             fps: self.fps,
             codec,
             bound,
             latency,
-            limits: limits.reader(),
+            limits: formats::Limits::from(limits),
             format_hint: None,
             lenient: self.lenient.unwrap_or(false),
         })

@@ -3,7 +3,7 @@
 
 use std::fmt;
 
-use super::formats::Format;
+use super::format::{Format, UnknownFormat};
 
 /// Where in the input a problem was found, so that a user can open the file and look.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -55,6 +55,12 @@ pub enum Error {
     /// Arguments that break the model's invariants (mismatched shapes, bad fps, ...).
     #[error("invalid: {0}")]
     Invalid(String),
+}
+
+impl From<UnknownFormat> for Error {
+    fn from(e: UnknownFormat) -> Self {
+        Error::Unsupported(e.to_string())
+    }
 }
 
 impl Error {

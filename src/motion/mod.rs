@@ -2,6 +2,7 @@
 //! numbers in, bytes and numbers out; no files, no async, no database.
 
 pub mod error;
+pub mod format;
 pub mod formats;
 pub mod layout;
 pub mod metrics;

@@ -103,10 +103,6 @@ impl Motion {
         &self.positions
     }
 
-    pub fn into_positions(self) -> Vec<f32> {
-        self.positions
-    }
-
     /// One frame, `points × 3`.
     pub fn frame(&self, f: usize) -> &[f32] {
         let w = self.point_count() * 3;
@@ -149,10 +145,6 @@ impl Motion {
         }
     }
 
-    pub fn has_gaps(&self) -> bool {
-        self.positions.iter().any(|v| v.is_nan())
-    }
-
     pub fn layout_signature(&self) -> LayoutSignature {
         LayoutSignature::of(&self.point_names, self.skeleton.as_ref())
     }
@@ -174,25 +166,6 @@ impl Motion {
             frames: end - start,
             skeleton: self.skeleton.as_ref().map(|s| s.slice_frames(start, end)),
         })
-    }
-
-    /// Replace the coordinates (same shape), e.g. with a codec's reconstruction. The skeleton
-    /// is dropped: its channel values no longer describe the new positions.
-    pub fn with_positions(&self, positions: Vec<f32>) -> Result<Motion> {
-        if positions.len() != self.positions.len() {
-            return Err(Error::Invalid(format!(
-                "replacement has {} coordinates, take has {}",
-                positions.len(),
-                self.positions.len()
-            )));
-        }
-        Motion::new(
-            self.fps,
-            self.unit.clone(),
-            self.point_names.clone(),
-            positions,
-            None,
-        )
     }
 
     /// Height of the figure in stored units: the largest vertical extent (Y or Z, whichever

@@ -2,31 +2,7 @@
 
 use super::model::Motion;
 use super::units::Unit;
-
-/// Deterministic xorshift64: the same seed gives the same motion on every machine.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed.max(1))
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n.max(1) as u64) as usize
-    }
-}
+pub use crate::rng::Rng;
 
 /// `points` markers in mm on a figure walking forward: a shared root drift, limb-like
 /// oscillations at gait frequencies, a little per-marker jitter, and optionally gaps (runs

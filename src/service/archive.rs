@@ -15,7 +15,7 @@ use super::{blocking, Error, Result};
 use crate::codec::{self, basis::hex, Basis, Container, Header};
 use crate::motion::formats::Format;
 use crate::motion::{Motion, Unit, UnitSource};
-use crate::store::{BasisRow, Filter, NewTake, Store};
+use crate::store::{BasisRow, ChunkEntry, Filter, NewTake, Store};
 
 /// One thing wrong with one stored take.
 #[derive(Debug, Clone, Serialize)]
@@ -86,10 +86,25 @@ struct Checked {
     problems: Vec<String>,
 }
 
+/// Check one take: its record against its header and chunk index, then its chunks and
+/// what they decode to.
 async fn check_take(store: &Store, row: &Take) -> Result<Checked> {
-    let mut problems = Vec::new();
     let (header, live) = super::fetch::header_of(store, row).await?;
     let index = store.chunk_index(&row.id).await?;
+    let mut problems = check_record(row, &header, &index, live);
+    let had_digest = row.meta.decoded_blake3.is_some();
+    problems.extend(check_chunks(store, row, header, index.len()).await?);
+    Ok(Checked {
+        chunks: index.len(),
+        had_digest,
+        problems,
+    })
+}
+
+/// What a take's record, header and chunk index must agree on, and its statistics with its
+/// bound and sizes.
+fn check_record(row: &Take, header: &Header, index: &[ChunkEntry], live: bool) -> Vec<String> {
+    let mut problems = Vec::new();
     if index.len() != header.chunks.len() {
         problems.push(format!(
             "the header indexes {} chunks, {} are stored",
@@ -145,38 +160,36 @@ async fn check_take(store: &Store, row: &Take) -> Result<Checked> {
             row.stored_bytes
         ));
     }
-    // Every chunk, checked against its checksum (one by one where the take's read fails, to
-    // name the chunk).
-    let rows = match store.chunks(&row.id, 0, index.len() as i64).await {
+    problems
+}
+
+/// Every chunk of a take against its checksum (one by one where the take's read fails, to
+/// name the chunk), then the take decoded and compared with the digest it was measured on.
+async fn check_chunks(
+    store: &Store,
+    row: &Take,
+    header: Header,
+    chunks: usize,
+) -> Result<Vec<String>> {
+    let mut problems = Vec::new();
+    let rows = match store.chunks(&row.id, 0, chunks as i64).await {
         Ok(rows) => rows,
         Err(_) => {
-            for i in 0..index.len() as i64 {
+            for i in 0..chunks as i64 {
                 if let Err(e) = store.chunks(&row.id, i, i + 1).await {
                     problems.push(format!("chunk {i}: {e}"));
                 }
             }
-            return Ok(Checked {
-                chunks: index.len(),
-                had_digest: true,
-                problems,
-            });
+            return Ok(problems);
         }
     };
-    let shared = match &header.basis {
-        Some(h) => match super::bases::load(store, &hex(h)).await {
-            Ok(b) => Some(b),
-            Err(e) => {
-                problems.push(format!("its basis: {e}"));
-                return Ok(Checked {
-                    chunks: rows.len(),
-                    had_digest: true,
-                    problems,
-                });
-            }
-        },
-        None => None,
+    let shared = match super::fetch::shared_basis(store, &header).await {
+        Ok(b) => b,
+        Err(e) => {
+            problems.push(format!("its basis: {e}"));
+            return Ok(problems);
+        }
     };
-    let chunks = rows.len();
     let decoded = blocking(move || {
         codec::Reader::new(header, shared)?.read_all(&codec::Stored::new(
             0,
@@ -202,11 +215,7 @@ async fn check_take(store: &Store, row: &Take) -> Result<Checked> {
             }
         }
     }
-    Ok(Checked {
-        chunks,
-        had_digest: digest.is_some(),
-        problems,
-    })
+    Ok(problems)
 }
 
 /// A take as export writes it: its row, its bitstream, the bases that bitstream names, and
@@ -320,7 +329,7 @@ pub async fn import_take(
         }
         loaded.push((Arc::new(b), row));
     }
-    let container = Container::parse(&bitstream, &crate::limits::Limits::default().decoder())
+    let container = Container::parse(&bitstream, &codec::Limits::default())
         .map_err(|e| Error::InvalidRequest(format!("bitstream of {}: {e}", line.take.id)))?;
     let header: &Header = &container.header;
     line.take.check()?;

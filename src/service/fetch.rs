@@ -6,9 +6,10 @@ use std::sync::{Arc, Mutex};
 use super::prepared::{Prepared, ReadCaches};
 use super::take::Take;
 use super::{blocking, Error, Result};
+use crate::codec::container::ChunkMeta;
 use crate::codec::read::Chunk;
 use crate::codec::{self, basis::hex, Basis, ChunkSource, Header, Limits, Reader, Stored};
-use crate::store::{ChunkRow, Store};
+use crate::store::{ChunkEntry, ChunkRow, Store};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -226,11 +227,36 @@ pub async fn shared_basis(store: &Store, header: &Header) -> Result<Option<Arc<B
 pub async fn header_of(store: &Store, take: &Take) -> Result<(Header, bool)> {
     if take.is_live() {
         let index = store.chunk_index(&take.id).await?;
-        return Ok((super::streams::header_from_index(take, &index)?, true));
+        return Ok((header_from_index(take, &index)?, true));
     }
     let (header, _) = Header::parse(&take.header, &Limits::default())
         .map_err(|e| Error::Corrupt(format!("stored take {}: header: {e}", take.id)))?;
     Ok((header, false))
+}
+
+/// A live take's header with the chunk rows as its index (and frames), checked as any
+/// stored header is.
+pub(crate) fn header_from_index(take: &Take, index: &[ChunkEntry]) -> Result<Header> {
+    let id = &take.id;
+    let corrupt = |e: &dyn std::fmt::Display| Error::Corrupt(format!("stored take {id}: {e}"));
+    let (mut header, _) =
+        Header::parse(&take.header, &codec::Limits::default()).map_err(|e| corrupt(&e))?;
+    let mut chunks = Vec::with_capacity(index.len());
+    for c in index {
+        let as_u32 = |v: i64| u32::try_from(v).map_err(|_| corrupt(&format!("chunk {c:?}")));
+        chunks.push(ChunkMeta {
+            first_frame: as_u32(c.first_frame)?,
+            frames: as_u32(c.frames)?,
+            len: as_u32(c.len)?,
+            crc32c: c.crc32c,
+        });
+    }
+    header.frames = chunks.iter().map(|c| c.frames).sum();
+    header.chunks = chunks;
+    // Round-trip through the parser: the index must tile the frames in order.
+    Header::parse(&header.to_bytes(), &codec::Limits::default())
+        .map(|(h, _)| h)
+        .map_err(|e| corrupt(&e))
 }
 
 /// Every frame of a stored take, decoded without touching the read caches (for bulk work

@@ -7,7 +7,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::choose::{self, CodecRequest, Decision, Tried};
-use super::take::{Take, TakeMeta};
+use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
 use crate::codec::{self, CodecId, Encoded, ErrorBound, Latency};
 use crate::motion::formats::{self, Format, Limits, ReadOptions};
@@ -19,9 +19,8 @@ use crate::store::{ChunkRow, NewTake, Store};
 pub struct IngestRequest {
     /// The upload, received once and shared (not copied) with the parser.
     pub bytes: bytes::Bytes,
-    pub name: Option<String>,
-    pub library: String,
-    pub tags: Vec<String>,
+    /// Name, library, tags.
+    pub label: Label,
     /// Metres per unit of the upload, overriding the file's own.
     pub unit: Option<f64>,
     pub fps: Option<f64>,
@@ -88,48 +87,29 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
     )
     .await?;
 
-    let id = uuid::Uuid::now_v7().to_string();
-    let name = req
-        .name
-        .clone()
-        .filter(|n| !n.trim().is_empty())
-        .unwrap_or_else(|| id.clone());
     let m = &motion;
-    let mut take = Take {
-        id: id.clone(),
-        name: name.clone(),
-        library: req.library.clone(),
-        tags: super::normalise_tags(&req.tags),
-        fps: m.fps,
-        frames: m.frame_count(),
-        points: m.point_count(),
-        duration_s: m.duration_s(),
-        metres_per_unit: m.unit.metres_per_unit,
-        layout,
-        source_format: loaded.format.name().to_string(),
-        codec: decision.winner,
-        bound: req.bound,
-        raw_bytes: 0,
-        stored_bytes: 0,
-        ratio: 0.0,
-        mean_mm: 0.0,
-        rms_mm: 0.0,
-        max_mm: 0.0,
-        kg_percent: 0.0,
-        meta: TakeMeta {
-            point_names: m.point_names.clone(),
-            unit: m.unit.clone(),
-            skeleton: m.skeleton.as_ref().map(|s| s.joints.clone()),
-            warnings: loaded.warnings.clone(),
-            decision: decision.clone(),
-            decoded_blake3: Some(enc.decoded_digest.clone()),
-            interrupted: None,
-            reencoded_from: None,
-        },
-        created_at: super::now_ms(),
-        header: enc.container.header.to_bytes(),
-        live_until: None,
+    let meta = TakeMeta {
+        point_names: m.point_names.clone(),
+        unit: m.unit.clone(),
+        skeleton: m.skeleton.as_ref().map(|s| s.joints.clone()),
+        warnings: loaded.warnings.clone(),
+        decision: decision.clone(),
+        decoded_blake3: Some(enc.decoded_digest.clone()),
+        interrupted: None,
+        reencoded_from: None,
     };
+    let format = loaded.format.name();
+    let mut take = Take::new(
+        &req.label,
+        format,
+        m.fps,
+        layout,
+        decision.winner,
+        req.bound,
+        meta,
+    );
+    take.set_frames(m.frame_count());
+    take.header = enc.container.header.to_bytes();
     take.set_measured(enc.stored_bytes, &enc.stats);
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
     store
@@ -141,8 +121,8 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         .await?;
     let (raw_bytes, ratio) = (take.raw_bytes as usize, take.ratio);
     Ok(IngestReport {
-        id,
-        name,
+        id: take.id.clone(),
+        name: take.name.clone(),
         codec: decision.winner,
         frames: m.frame_count(),
         points: m.point_count(),

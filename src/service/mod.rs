@@ -4,7 +4,8 @@
 //! # Layout
 //! - [`archive`]: verify everything stored; export takes to open files and bitstreams,
 //!   import them back.
-//! - [`bases`]: shared bases — loading, the newest per layout, training jobs.
+//! - [`bases`]: shared bases as stored objects — loading, the newest per layout, deleting.
+//! - [`training`]: training shared bases from a selection of takes, as a background job.
 //! - [`jobs`]: background jobs and their progress.
 //! - [`choose`]: which codecs compete for a take, and the decision record.
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
@@ -24,6 +25,7 @@ pub mod library;
 pub mod prepared;
 pub mod streams;
 pub mod take;
+pub mod training;
 
 use crate::{codec, motion, store};
 

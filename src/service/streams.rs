@@ -28,16 +28,15 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
 use super::choose::{CodecRequest, Decision};
 use super::prepared::ReadCaches;
-use super::take::{Take, TakeMeta};
+use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
-use crate::codec::container::ChunkMeta;
 use crate::codec::lsdt::spatial::dct_basis;
 use crate::codec::stream::{StreamChunk, StreamEncoder, StreamSpec};
-use crate::codec::{self, Basis, BasisKind, CodecId, ErrorBound, Header, Latency};
+use crate::codec::{self, Basis, BasisKind, CodecId, ErrorBound, Latency};
 use crate::limits::{Limits, MAX_COORDINATE_M, MAX_FPS};
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
-use crate::store::{BasisRow, ChunkEntry, ChunkRow, NewTake, Store};
+use crate::store::{BasisRow, ChunkRow, NewTake, Store};
 
 /// The points of a stream: their names, or just how many.
 #[derive(Debug, Clone, Deserialize)]
@@ -71,6 +70,90 @@ pub struct OpenRequest {
     /// server memory while the stream is open.
     #[serde(default)]
     pub reencode_on_finish: bool,
+}
+
+/// An [`OpenRequest`] checked: every count within its limit before anything is made from it.
+struct Plan {
+    label: Label,
+    fps: f64,
+    names: Vec<String>,
+    unit: Unit,
+    bound: ErrorBound,
+    codec: CodecId,
+    chunk_frames: usize,
+    reencode_on_finish: bool,
+}
+
+impl Plan {
+    fn of(req: OpenRequest, limits: &Limits) -> Result<Plan> {
+        let bad = |m: String| Err(Error::InvalidRequest(m));
+        if !(req.fps.is_finite() && req.fps > 0.0 && req.fps <= MAX_FPS) {
+            return bad(format!("fps must be in (0, {MAX_FPS}], got {}", req.fps));
+        }
+        // The count is checked before anything is made from it: a client may ask for 2e10.
+        let count = match &req.points {
+            PointsSpec::Names(n) => n.len(),
+            PointsSpec::Count(n) => *n,
+        };
+        let max_points = limits.stream_points;
+        if count == 0 || count as u64 > max_points {
+            return bad(format!(
+                "a stream needs 1..={max_points} points, got {count}"
+            ));
+        }
+        let names: Vec<String> = match req.points {
+            PointsSpec::Names(n) => n,
+            PointsSpec::Count(n) => (0..n).map(|i| format!("p{i}")).collect(),
+        };
+        if let Some(i) = names.iter().position(|n| n.trim().is_empty()) {
+            return bad(format!("point {i} has an empty name"));
+        }
+        let invalid = |e: &dyn std::fmt::Display| Error::InvalidRequest(e.to_string());
+        let metres = match &req.unit {
+            Some(u) => parse_unit(u).map_err(|e| invalid(&e))?,
+            None => 0.001,
+        };
+        let unit = Unit::new(metres, UnitSource::Explicit).map_err(|e| invalid(&e))?;
+        let bound = ErrorBound::from_request(req.max_error_mm, req.mean_error_mm)
+            .map_err(|e| invalid(&e))?;
+        let codec = req.codec.unwrap_or(CodecId::LsdtFrame);
+        let streaming = codec::stream::streaming_codecs();
+        if !streaming.contains(&codec) {
+            let names: Vec<String> = streaming.iter().map(|c| c.to_string()).collect();
+            return bad(format!(
+                "streams are coded with {}, not {codec}",
+                names.join(" or ")
+            ));
+        }
+        let chunk_frames = match req.chunk_seconds {
+            Some(s) if !(s.is_finite() && s > 0.0 && s <= 60.0) => {
+                return bad(format!("chunk_seconds must be in (0, 60], got {s}"))
+            }
+            Some(s) => ((s * req.fps).round() as usize).max(1),
+            None => codec::default_chunk_frames(req.fps),
+        };
+        if let Err(why) = crate::limits::check(
+            "frames × points of one chunk",
+            (chunk_frames * names.len()) as u64,
+            limits.stream_chunk_samples,
+        ) {
+            return bad(format!("{why}: ask for shorter chunk_seconds"));
+        }
+        Ok(Plan {
+            label: Label {
+                name: req.name,
+                library: req.library,
+                tags: req.tags,
+            },
+            fps: req.fps,
+            names,
+            unit,
+            bound,
+            codec,
+            chunk_frames,
+            reencode_on_finish: req.reencode_on_finish,
+        })
+    }
 }
 
 /// What a stream reports after each call.
@@ -221,60 +304,7 @@ impl Streams {
 
     /// Open a stream: the take exists (with no frames) from now on.
     pub async fn open(&self, store: &Store, req: OpenRequest) -> Result<StreamInfo> {
-        let bad = |m: String| Err(Error::InvalidRequest(m));
-        if !(req.fps.is_finite() && req.fps > 0.0 && req.fps <= MAX_FPS) {
-            return bad(format!("fps must be in (0, {MAX_FPS}], got {}", req.fps));
-        }
-        // The count is checked before anything is made from it: a client may ask for 2e10.
-        let count = match &req.points {
-            PointsSpec::Names(n) => n.len(),
-            PointsSpec::Count(n) => *n,
-        };
-        let max_points = self.limits.stream_points;
-        if count == 0 || count as u64 > max_points {
-            return bad(format!(
-                "a stream needs 1..={max_points} points, got {count}"
-            ));
-        }
-        let names: Vec<String> = match req.points {
-            PointsSpec::Names(n) => n,
-            PointsSpec::Count(n) => (0..n).map(|i| format!("p{i}")).collect(),
-        };
-        if let Some(i) = names.iter().position(|n| n.trim().is_empty()) {
-            return bad(format!("point {i} has an empty name"));
-        }
-        let metres = match &req.unit {
-            Some(u) => parse_unit(u).map_err(|e| Error::InvalidRequest(e.to_string()))?,
-            None => 0.001,
-        };
-        let unit = Unit::new(metres, UnitSource::Explicit)
-            .map_err(|e| Error::InvalidRequest(e.to_string()))?;
-        let bound = ErrorBound::from_request(req.max_error_mm, req.mean_error_mm)
-            .map_err(|e| Error::InvalidRequest(e.to_string()))?;
-        let codec = req.codec.unwrap_or(CodecId::LsdtFrame);
-        let streaming = codec::stream::streaming_codecs();
-        if !streaming.contains(&codec) {
-            let names: Vec<String> = streaming.iter().map(|c| c.to_string()).collect();
-            return bad(format!(
-                "streams are coded with {}, not {codec}",
-                names.join(" or ")
-            ));
-        }
-        let chunk_frames = match req.chunk_seconds {
-            Some(s) if !(s.is_finite() && s > 0.0 && s <= 60.0) => {
-                return bad(format!("chunk_seconds must be in (0, 60], got {s}"))
-            }
-            Some(s) => ((s * req.fps).round() as usize).max(1),
-            None => codec::default_chunk_frames(req.fps),
-        };
-        let points = names.len();
-        if let Err(why) = crate::limits::check(
-            "frames × points of one chunk",
-            (chunk_frames * points) as u64,
-            self.limits.stream_chunk_samples,
-        ) {
-            return bad(format!("{why}: ask for shorter chunk_seconds"));
-        }
+        let plan = Plan::of(req, &self.limits)?;
         // A place among the open streams, held until the stream closes.
         let slot = self.slots.clone().try_acquire_owned().map_err(|_| {
             Error::Busy(format!(
@@ -282,26 +312,34 @@ impl Streams {
                 self.limits.open_streams
             ))
         })?;
-        let shape = Motion::new(req.fps, unit.clone(), names.clone(), Vec::new(), None)
-            .map_err(|e| Error::InvalidRequest(e.to_string()))?;
+        let points = plan.names.len();
+        let shape = Motion::new(
+            plan.fps,
+            plan.unit.clone(),
+            plan.names.clone(),
+            Vec::new(),
+            None,
+        )
+        .map_err(|e| Error::InvalidRequest(e.to_string()))?;
         let layout = shape.layout_signature().to_hex();
         let basis = stream_basis(store, &layout, points).await?;
         let spec = StreamSpec {
             points,
-            fps: req.fps,
-            metres_per_unit: unit.metres_per_unit,
-            bound,
-            chunk_frames,
+            fps: plan.fps,
+            metres_per_unit: plan.unit.metres_per_unit,
+            bound: plan.bound,
+            chunk_frames: plan.chunk_frames,
             shared: Some(&basis),
         };
-        let encoder = match StreamEncoder::open(codec, &spec) {
+        let encoder = match StreamEncoder::open(plan.codec, &spec) {
             Err(codec::Error::Invalid(why)) => {
-                return bad(format!("{why}; ask for shorter chunk_seconds"))
+                return Err(Error::InvalidRequest(format!(
+                    "{why}; ask for shorter chunk_seconds"
+                )))
             }
             r => r?,
         };
-        let header = encoder.live_header();
-        let id = uuid::Uuid::now_v7().to_string();
+        let (codec, chunk_frames) = (plan.codec, plan.chunk_frames);
         let decision = Decision {
             winner: codec,
             reason: format!(
@@ -310,45 +348,28 @@ impl Streams {
             tried: Vec::new(),
             skipped: Vec::new(),
         };
-        let take = Take {
-            id: id.clone(),
-            name: req
-                .name
-                .clone()
-                .filter(|n| !n.trim().is_empty())
-                .unwrap_or_else(|| id.clone()),
-            library: req.library.clone(),
-            tags: super::normalise_tags(&req.tags),
-            fps: req.fps,
-            frames: 0,
-            points,
-            duration_s: 0.0,
-            metres_per_unit: unit.metres_per_unit,
-            layout,
-            source_format: "stream".into(),
-            codec,
-            bound,
-            raw_bytes: 0,
-            stored_bytes: header.to_bytes().len() as u64,
-            ratio: 0.0,
-            mean_mm: 0.0,
-            rms_mm: 0.0,
-            max_mm: 0.0,
-            kg_percent: 0.0,
-            meta: TakeMeta {
-                point_names: names,
-                unit,
-                skeleton: None,
-                warnings: Vec::new(),
-                decision,
-                decoded_blake3: None,
-                interrupted: None,
-                reencoded_from: None,
-            },
-            created_at: super::now_ms(),
-            header: header.to_bytes(),
-            live_until: Some(self.lease_end()),
+        let meta = TakeMeta {
+            point_names: plan.names,
+            unit: plan.unit,
+            skeleton: None,
+            warnings: Vec::new(),
+            decision,
+            decoded_blake3: None,
+            interrupted: None,
+            reencoded_from: None,
         };
+        let mut take = Take::new(
+            &plan.label,
+            "stream",
+            plan.fps,
+            layout,
+            codec,
+            plan.bound,
+            meta,
+        );
+        take.header = encoder.live_header().to_bytes();
+        take.stored_bytes = take.header.len() as u64;
+        take.live_until = Some(self.lease_end());
         store
             .insert(&NewTake {
                 row: take.to_row()?,
@@ -367,11 +388,12 @@ impl Streams {
             chunks: 0,
             failed: None,
             last_activity: Instant::now(),
-            archive: req.reencode_on_finish.then(Vec::new),
+            archive: plan.reencode_on_finish.then(Vec::new),
             warnings: Vec::new(),
             _slot: slot,
         };
         let info = live.info(true);
+        let id = live.take.id.clone();
         self.open
             .lock()
             .expect("streams lock")
@@ -495,8 +517,7 @@ impl Streams {
     async fn commit(&self, store: &Store, live: &mut Live, chunk: StreamChunk) -> Result<()> {
         let totals = live.encoder()?.totals_with(&chunk);
         let mut take = live.take.clone();
-        take.frames = totals.frames;
-        take.duration_s = take.frames as f64 / take.fps;
+        take.set_frames(totals.frames);
         take.set_measured(totals.stored_bytes, &totals.stats);
         let chunk_row = ChunkRow {
             idx: chunk.index as i64,
@@ -620,7 +641,7 @@ impl Streams {
                     continue;
                 }
             };
-            let header = header_from_index(&take, &store.chunk_index(&id).await?)?;
+            let header = super::fetch::header_from_index(&take, &store.chunk_index(&id).await?)?;
             let mut meta = take.meta.clone();
             meta.interrupted = Some(
                 "the server coding this stream stopped before it finished; the take keeps the \
@@ -638,31 +659,6 @@ impl Streams {
         }
         Ok(closed)
     }
-}
-
-/// A live take's header with the chunk rows as its index (and frames), checked as any
-/// stored header is.
-pub(crate) fn header_from_index(take: &Take, index: &[ChunkEntry]) -> Result<Header> {
-    let id = &take.id;
-    let corrupt = |e: &dyn std::fmt::Display| Error::Corrupt(format!("stored take {id}: {e}"));
-    let (mut header, _) =
-        Header::parse(&take.header, &codec::Limits::default()).map_err(|e| corrupt(&e))?;
-    let mut chunks = Vec::with_capacity(index.len());
-    for c in index {
-        let as_u32 = |v: i64| u32::try_from(v).map_err(|_| corrupt(&format!("chunk {c:?}")));
-        chunks.push(ChunkMeta {
-            first_frame: as_u32(c.first_frame)?,
-            frames: as_u32(c.frames)?,
-            len: as_u32(c.len)?,
-            crc32c: c.crc32c,
-        });
-    }
-    header.frames = chunks.iter().map(|c| c.frames).sum();
-    header.chunks = chunks;
-    // Round-trip through the parser: the index must tile the frames in order.
-    Header::parse(&header.to_bytes(), &codec::Limits::default())
-        .map(|(h, _)| h)
-        .map_err(|e| corrupt(&e))
 }
 
 /// A take's metadata as stored.

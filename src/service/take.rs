@@ -76,7 +76,60 @@ pub struct TakeMeta {
     pub reencoded_from: Option<CodecId>,
 }
 
+/// Who a new take is and where it goes: what a client names.
+#[derive(Debug, Clone, Default)]
+pub struct Label {
+    /// Defaults to the take's id.
+    pub name: Option<String>,
+    pub library: String,
+    pub tags: Vec<String>,
+}
+
 impl Take {
+    /// A new take of no frames yet, coded with `codec` to `bound` (its shape and unit from
+    /// `meta`); ingest and streams fill in frames, sizes and errors as they code it.
+    pub fn new(
+        label: &Label,
+        source_format: &str,
+        fps: f64,
+        layout: String,
+        codec: CodecId,
+        bound: ErrorBound,
+        meta: TakeMeta,
+    ) -> Take {
+        let id = uuid::Uuid::now_v7().to_string();
+        Take {
+            name: label
+                .name
+                .clone()
+                .filter(|n| !n.trim().is_empty())
+                .unwrap_or_else(|| id.clone()),
+            id,
+            library: label.library.clone(),
+            tags: super::normalise_tags(&label.tags),
+            fps,
+            frames: 0,
+            points: meta.point_names.len(),
+            duration_s: 0.0,
+            metres_per_unit: meta.unit.metres_per_unit,
+            layout,
+            source_format: source_format.to_string(),
+            codec,
+            bound,
+            raw_bytes: 0,
+            stored_bytes: 0,
+            ratio: 0.0,
+            mean_mm: 0.0,
+            rms_mm: 0.0,
+            max_mm: 0.0,
+            kg_percent: 0.0,
+            meta,
+            created_at: super::now_ms(),
+            header: Vec::new(),
+            live_until: None,
+        }
+    }
+
     /// Parse a stored row; `Corrupt` names the take and what does not parse.
     pub fn from_row(row: TakeRow) -> Result<Take> {
         let id = row.id.clone();
@@ -179,6 +232,12 @@ impl Take {
     /// Whether a live stream is still coding the take.
     pub fn is_live(&self) -> bool {
         self.live_until.is_some()
+    }
+
+    /// Set the frames coded so far (and the duration they make).
+    pub fn set_frames(&mut self, frames: usize) {
+        self.frames = frames;
+        self.duration_s = frames as f64 / self.fps;
     }
 
     /// Set what was measured on the stored coding: sizes, the ratio, the errors.

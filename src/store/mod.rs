@@ -89,13 +89,6 @@ impl Store {
         Ok(store)
     }
 
-    pub fn backend(&self) -> &'static str {
-        match self {
-            Store::Sqlite(_) => "sqlite",
-            Store::Postgres(_) => "postgres",
-        }
-    }
-
     pub async fn close(&self) {
         dispatch!(self, pool => pool.close().await)
     }

@@ -8,7 +8,7 @@
 use nalgebra::DMatrix;
 
 use crate::codec::dct;
-use crate::motion::synthetic::Rng;
+use crate::rng::Rng;
 
 /// Where the iteration starts.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -26,7 +26,7 @@ use crate::codec::measure::max_mean;
 use crate::codec::residual;
 use crate::codec::wire::{Reader, Writer};
 use crate::codec::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target};
-use crate::motion::synthetic::Rng;
+use crate::rng::Rng;
 
 const PARAMS_VERSION: u8 = 1;
 

@@ -4,12 +4,8 @@
 //! Readers take bytes, not paths, so the HTTP layer can hand them a request body and tests
 //! can hand them mutations.
 
-use std::fmt;
-use std::str::FromStr;
-
-use serde::{Deserialize, Serialize};
-
 use super::error::{Error, Location, Result};
+pub use super::format::Format;
 use super::model::Motion;
 use super::units::{Unit, UnitSource};
 
@@ -21,70 +17,6 @@ pub mod npy;
 pub mod rawf32;
 mod text;
 pub mod trc;
-
-/// A file format we read and/or write.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Format {
-    Bvh,
-    C3d,
-    Trc,
-    Json,
-    Npy,
-    Csv,
-    /// Bare little-endian f32, `frames × points × 3`; write only (it has no header).
-    F32,
-}
-
-impl Format {
-    pub fn name(self) -> &'static str {
-        match self {
-            Format::Bvh => "bvh",
-            Format::C3d => "c3d",
-            Format::Trc => "trc",
-            Format::Json => "json",
-            Format::Npy => "npy",
-            Format::Csv => "csv",
-            Format::F32 => "f32",
-        }
-    }
-
-    /// From a file name's extension (for writing; reading detects from content).
-    pub fn from_extension(path: &str) -> Option<Format> {
-        let ext = path.rsplit_once('.')?.1;
-        ext.parse().ok()
-    }
-
-    pub fn can_read(self) -> bool {
-        !matches!(self, Format::Csv | Format::F32)
-    }
-}
-
-impl fmt::Display for Format {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.name().to_ascii_uppercase())
-    }
-}
-
-impl FromStr for Format {
-    type Err = Error;
-    fn from_str(s: &str) -> Result<Self> {
-        Ok(match s.to_ascii_lowercase().as_str() {
-            "bvh" => Format::Bvh,
-            "c3d" => Format::C3d,
-            "trc" => Format::Trc,
-            "json" => Format::Json,
-            "npy" => Format::Npy,
-            "csv" => Format::Csv,
-            "f32" | "bin" | "raw" => Format::F32,
-            other => {
-                return Err(Error::Unsupported(format!(
-                    "unknown format {other:?} (bvh, c3d, trc, json, npy, csv, f32)"
-                )))
-            }
-        })
-    }
-}
 
 /// Bounds on untrusted input, checked before anything proportional to them is allocated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -101,7 +33,20 @@ pub struct Limits {
 impl Default for Limits {
     /// The service's defaults ([`crate::limits`], where every limit is set and explained).
     fn default() -> Self {
-        crate::limits::Limits::default().reader()
+        Limits::from(&crate::limits::Limits::default())
+    }
+}
+
+impl From<&crate::limits::Limits> for Limits {
+    /// What file readers may accept under the service's policy.
+    fn from(l: &crate::limits::Limits) -> Self {
+        Limits {
+            max_bytes: l.upload_bytes,
+            max_points: l.points,
+            max_frames: l.frames,
+            max_samples: l.samples,
+            max_depth: l.hierarchy_depth,
+        }
     }
 }
 

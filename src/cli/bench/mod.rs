@@ -1,5 +1,7 @@
 //! `mocapstore bench`: compression ratio, errors and speed of codecs on real files.
 
+mod plot;
+
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -9,10 +11,10 @@ use std::time::Instant;
 
 use clap::Args;
 
-use crate::codec::{self, Basis, BasisKind, CodecId, ErrorBound};
-use crate::corpus;
-use crate::motion::formats::{self, ReadOptions};
-use crate::motion::Motion;
+use mocapstore::codec::{self, Basis, BasisKind, CodecId, ErrorBound};
+use mocapstore::corpus;
+use mocapstore::motion::formats::{self, ReadOptions};
+use mocapstore::motion::Motion;
 
 #[derive(Args)]
 pub struct BenchArgs {
@@ -145,7 +147,7 @@ impl Variant {
         bound: ErrorBound,
         shared: Option<&Arc<Basis>>,
     ) -> codec::Result<codec::Encoded> {
-        use crate::codec::lsdt::{clip, frame};
+        use mocapstore::codec::lsdt::{clip, frame};
         let frames_of = |s: f64| {
             if s.is_infinite() {
                 motion.frame_count()
@@ -336,7 +338,7 @@ pub fn run(args: &BenchArgs) -> ExitCode {
         return ExitCode::FAILURE;
     }
     let unit = match &args.unit {
-        Some(u) => match crate::motion::units::parse_unit(u) {
+        Some(u) => match mocapstore::motion::units::parse_unit(u) {
             Ok(m) => Some(m),
             Err(e) => {
                 eprintln!("mocapstore bench: {e}");
@@ -424,7 +426,7 @@ pub fn run(args: &BenchArgs) -> ExitCode {
         for &variant in &variants {
             let shared = bases
                 .get(&layout)
-                .and_then(|bs| crate::service::choose::basis_for(variant.codec(), bs));
+                .and_then(|bs| mocapstore::service::choose::basis_for(variant.codec(), bs));
             let shared = shared.as_ref();
             for &bound in &bounds {
                 if variant.codec() == CodecId::Raw && bound != bounds[0] {
@@ -455,7 +457,7 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     let table = markdown(&all);
     println!("{table}");
     if let Err(e) = write_outputs(&args.out, &table, &csv(&all))
-        .and_then(|()| super::plot::rate_distortion(&sums, &args.out.join("rd.png")))
+        .and_then(|()| plot::rate_distortion(&sums, &args.out.join("rd.png")))
     {
         eprintln!("mocapstore bench: {e}");
         return ExitCode::FAILURE;
@@ -477,7 +479,7 @@ fn split_and_train(
     every: usize,
     kinds: &[BasisKind],
 ) -> Result<(Vec<(String, Motion)>, HashMap<String, Vec<Arc<Basis>>>), String> {
-    use crate::codec::lsdt::train::{train_basis, TrainOptions};
+    use mocapstore::codec::lsdt::train::{train_basis, TrainOptions};
     let every = every.max(2);
     let mut groups: HashMap<String, Vec<(String, Motion)>> = HashMap::new();
     for t in takes {
@@ -532,7 +534,7 @@ fn split_and_train(
             trained.push(Arc::new(t.basis));
         }
         if kinds.contains(&BasisKind::MdttSet) {
-            use crate::codec::mdtt::database::{train_set, SetOptions};
+            use mocapstore::codec::mdtt::database::{train_set, SetOptions};
             let t1 = Instant::now();
             let filled: Vec<(Vec<f32>, Vec<bool>)> = train
                 .iter()
@@ -615,8 +617,8 @@ fn entropy_comparison(
     opts: &ReadOptions,
     out: &Path,
 ) -> ExitCode {
-    use crate::codec::entropy::zstd_varint;
-    use crate::codec::{default_chunk_frames, quant, Target};
+    use mocapstore::codec::entropy::zstd_varint;
+    use mocapstore::codec::{default_chunk_frames, quant, Target};
     let names = [
         "range coder (per chunk)",
         "zstd-3 (per chunk)",
@@ -638,14 +640,14 @@ fn entropy_comparison(
             if m.point_count() == 0 || m.frame_count() == 0 || m.gap_fraction() >= 1.0 {
                 continue;
             }
-            let filled = crate::codec::gaps::fill(m.positions(), m.point_count());
+            let filled = mocapstore::codec::gaps::fill(m.positions(), m.point_count());
             let target = Target::Max(b / m.unit.to_mm());
             let Ok(step) = quant::step_for(&filled, None, target) else {
                 continue;
             };
             let q: Vec<i32> = filled
                 .iter()
-                .map(|&x| crate::codec::measure::quantise(f64::from(x) / step))
+                .map(|&x| mocapstore::codec::measure::quantise(f64::from(x) / step))
                 .collect();
             let w = m.point_count() * 3;
             let per = default_chunk_frames(m.fps);

@@ -5,8 +5,8 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::bench::Row;
-use crate::codec::ErrorBound;
+use super::Row;
+use mocapstore::codec::ErrorBound;
 
 const COLOURS: [RGBColor; 7] = [
     RGBColor(31, 119, 180),

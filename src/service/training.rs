@@ -1,0 +1,309 @@
+//! Training shared bases: select takes of one layout, decode them, train an LSDT basis or
+//! an MDTT basis set, store it with its provenance — as a background job ([`start_training`]).
+
+use std::sync::Arc;
+
+use serde::Deserialize;
+
+use super::jobs::{Jobs, Progress};
+use super::take::Take;
+use super::{blocking, Error, Result};
+use crate::codec::lsdt::train::{train_basis_reporting, TrainOptions};
+use crate::codec::mdtt::database::{train_set, SetOptions};
+use crate::codec::{Basis, BasisKind, Input, Target};
+use crate::store::{BasisRow, Filter, Store};
+
+/// What to train and on which takes.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainRequest {
+    /// `lsdt` (the default).
+    pub kind: Option<BasisKind>,
+    pub library: Option<String>,
+    pub tag: Option<String>,
+    /// Layout signature; needed when the selection spans several layouts.
+    pub layout: Option<String>,
+    /// Exactly these takes (instead of a library/tag/layout selection); never empty.
+    pub ids: Option<Vec<String>>,
+    /// Non-zeros per sample (the paper's P = 8).
+    pub sparsity: Option<usize>,
+    pub max_iterations: Option<usize>,
+    /// Frames sampled (evenly) from the selection (lsdt).
+    pub max_samples: Option<usize>,
+    /// Candidate numbers of bases (mdtt-set); the smallest total size wins.
+    pub k: Option<Vec<usize>>,
+    /// The bound at which candidate sets are compared (mdtt-set), mm; default 1.
+    pub max_error_mm: Option<f64>,
+}
+
+/// A validated training request: the takes, all of one layout.
+pub struct Selection {
+    pub kind: BasisKind,
+    pub layout: String,
+    pub points: usize,
+    pub takes: Vec<Take>,
+    pub options: TrainOptions,
+    pub max_samples: usize,
+    pub set: SetOptions,
+    pub bound_mm: f64,
+}
+
+/// Resolve a request to its takes, refusing what cannot be trained (nothing selected,
+/// several layouts, a kind not trainable) before any job starts.
+pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
+    let kind = req.kind.unwrap_or(BasisKind::Lsdt);
+    let ks = req.k.clone().unwrap_or_else(|| SetOptions::default().ks);
+    if ks.is_empty() || ks.iter().any(|&k| !(1..=32).contains(&k)) {
+        return Err(Error::InvalidRequest(
+            "k must list numbers of bases in 1..=32".into(),
+        ));
+    }
+    let bound_mm = crate::codec::ErrorBound::new_max(req.max_error_mm.unwrap_or(1.0))
+        .map_err(|e| Error::InvalidRequest(e.to_string()))?
+        .mm();
+    let sparsity = req.sparsity.unwrap_or(8);
+    let max_iterations = req.max_iterations.unwrap_or(50);
+    let max_samples = req.max_samples.unwrap_or(50_000);
+    if sparsity == 0 || !(1..=1000).contains(&max_iterations) || max_samples < 16 {
+        return Err(Error::InvalidRequest(
+            "sparsity must be ≥ 1, max_iterations 1..=1000, max_samples ≥ 16".into(),
+        ));
+    }
+    let takes = selected_takes(store, req).await?;
+    if takes.is_empty() {
+        return Err(Error::InvalidRequest("the selection holds no takes".into()));
+    }
+    let mut layouts: Vec<(String, usize)> = Vec::new();
+    for t in &takes {
+        match layouts.iter_mut().find(|(l, _)| *l == t.layout) {
+            Some((_, n)) => *n += 1,
+            None => layouts.push((t.layout.clone(), 1)),
+        }
+    }
+    if layouts.len() > 1 {
+        let list: Vec<String> = layouts
+            .iter()
+            .map(|(l, n)| format!("{l} ({n} takes)"))
+            .collect();
+        return Err(Error::InvalidRequest(format!(
+            "a basis is for one layout and the selection spans {}: {}; choose one with layout",
+            layouts.len(),
+            list.join(", ")
+        )));
+    }
+    let points = takes[0].points;
+    let most = match kind {
+        BasisKind::Lsdt => crate::limits::LSDT_MAX_POINTS,
+        BasisKind::MdttSet => crate::limits::MDTT_MAX_POINTS,
+    };
+    if points > most {
+        return Err(Error::InvalidRequest(format!(
+            "a {kind} basis is trained for layouts of at most {most} points; these takes have {points}"
+        )));
+    }
+    Ok(Selection {
+        kind,
+        layout: layouts.remove(0).0,
+        points: takes[0].points,
+        takes,
+        options: TrainOptions {
+            sparsity,
+            max_iterations,
+            ..TrainOptions::default()
+        },
+        max_samples,
+        set: SetOptions {
+            ks,
+            ..SetOptions::default()
+        },
+        bound_mm,
+    })
+}
+
+/// The takes a request names: by id (each must exist), or by library, tag and layout.
+async fn selected_takes(store: &Store, req: &TrainRequest) -> Result<Vec<Take>> {
+    let mut takes = Vec::new();
+    if let Some(ids) = &req.ids {
+        if ids.is_empty() {
+            return Err(Error::InvalidRequest(
+                "ids is empty: name the takes, or leave ids out to select by library, tag and layout"
+                    .into(),
+            ));
+        }
+        if req.library.is_some() || req.tag.is_some() || req.layout.is_some() {
+            return Err(Error::InvalidRequest(
+                "give ids, or a library/tag/layout selection, not both".into(),
+            ));
+        }
+        let mut missing = Vec::new();
+        for id in ids {
+            match super::fetch::take(store, id).await {
+                Ok(t) => takes.push(t),
+                Err(Error::NotFound(_)) => missing.push(id.as_str()),
+                Err(e) => return Err(e),
+            }
+        }
+        if !missing.is_empty() {
+            return Err(Error::InvalidRequest(format!(
+                "ids names takes that are not stored: {}",
+                missing.join(", ")
+            )));
+        }
+    } else {
+        let filter = Filter {
+            library: req.library.clone(),
+            tag: req.tag.clone(),
+            layout: req.layout.clone(),
+            ..Filter::default()
+        };
+        takes = super::library::all_takes(store, &filter).await?;
+    }
+    Ok(takes)
+}
+
+/// Decode the selected takes, train, store the basis; reports progress as it goes.
+pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result<BasisRow> {
+    let t0 = std::time::Instant::now();
+    let n = sel.takes.len();
+    let mut frames_mm: Vec<Vec<f32>> = Vec::with_capacity(n);
+    for (i, t) in sel.takes.iter().enumerate() {
+        progress.report(
+            0.5 * i as f64 / n as f64,
+            format!("decoding take {} of {n}", i + 1),
+        );
+        // Train in millimetres, so takes stored in other units weigh alike.
+        let k = (t.metres_per_unit * 1000.0) as f32;
+        let mut f = super::fetch::whole_take(store, t).await?;
+        f.iter_mut().for_each(|v| *v *= k);
+        frames_mm.push(f);
+    }
+    progress.report(0.5, format!("training {}", sel.kind));
+    let mut row = match sel.kind {
+        BasisKind::Lsdt => train_lsdt(&sel, frames_mm, progress).await?,
+        BasisKind::MdttSet => train_mdtt_set(&sel, frames_mm).await?,
+    };
+    row.provenance["takes"] =
+        serde_json::json!(sel.takes.iter().map(|t| &t.id).collect::<Vec<_>>());
+    row.provenance["frames"] = serde_json::json!(sel.takes.iter().map(|t| t.frames).sum::<usize>());
+    row.provenance["seconds"] = serde_json::json!(t0.elapsed().as_secs_f64());
+    store.insert_basis(&row).await?;
+    Ok(row)
+}
+
+fn basis_row(sel: &Selection, basis: &Basis, provenance: serde_json::Value) -> BasisRow {
+    let m = &basis.matrices()[0];
+    BasisRow {
+        id: basis.id(),
+        kind: sel.kind.name().to_string(),
+        layout: sel.layout.clone(),
+        points: sel.points as i64,
+        dims: format!("{}×{}×{}", basis.matrices().len(), m.rows, m.cols),
+        payload: basis.bytes().to_vec(),
+        provenance,
+        created_at: super::now_ms(),
+        used_by: 0,
+    }
+}
+
+async fn train_lsdt(
+    sel: &Selection,
+    frames_mm: Vec<Vec<f32>>,
+    progress: &Progress,
+) -> Result<BasisRow> {
+    let (points, options, max_samples) = (sel.points, sel.options, sel.max_samples);
+    let p2 = progress.clone();
+    let trained = blocking(move || {
+        let slices: Vec<&[f32]> = frames_mm.iter().map(Vec::as_slice).collect();
+        train_basis_reporting(&slices, points, &options, max_samples, &mut |d| {
+            p2.report(
+                0.5 + 0.5 * (d + 1) as f64 / 3.0,
+                format!("trained coordinate {} of 3", d + 1),
+            );
+        })
+    })
+    .await??;
+    let objective: Vec<&Vec<f64>> = trained.runs.iter().map(|r| &r.objective).collect();
+    Ok(basis_row(
+        sel,
+        &trained.basis,
+        serde_json::json!({
+            "samples": trained.samples,
+            "algorithm": "LSDT (Hou et al. 2016, Algorithm 1), DCT start, rows by energy",
+            "sparsity": options.sparsity,
+            "max_iterations": options.max_iterations,
+            "tolerance": options.tolerance,
+            "objective": { "x": objective[0], "y": objective[1], "z": objective[2] },
+        }),
+    ))
+}
+
+async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<BasisRow> {
+    let points = sel.points;
+    let fps: Vec<f64> = sel.takes.iter().map(|t| t.fps).collect();
+    let (set, bound_mm) = (sel.set.clone(), sel.bound_mm);
+    let trained = blocking(move || {
+        let filled: Vec<(Vec<f32>, Vec<bool>)> = frames_mm
+            .iter()
+            .map(|f| {
+                (
+                    crate::codec::gaps::fill(f, points),
+                    f.chunks_exact(3).map(|s| !s[0].is_nan()).collect(),
+                )
+            })
+            .collect();
+        let inputs: Vec<Input<'_>> = filled
+            .iter()
+            .zip(&fps)
+            .map(|((data, valid), &fps)| Input {
+                data,
+                valid: Some(valid),
+                frames: data.len() / (points * 3),
+                points,
+                fps,
+                shared: None,
+            })
+            .collect();
+        // Frames are in millimetres here, so the bound is too.
+        let targets = vec![Target::Max(bound_mm); inputs.len()];
+        train_set(&inputs, &targets, &set)
+    })
+    .await??;
+    let sizes: Vec<serde_json::Value> = trained
+        .sizes
+        .iter()
+        .map(|(k, takes, basis)| serde_json::json!({"k": k, "takes_bytes": takes, "basis_bytes": basis}))
+        .collect();
+    Ok(basis_row(
+        sel,
+        &trained.basis,
+        serde_json::json!({
+            "algorithm": "MDTT database mode (Hou et al. 2015): deterministic annealing, k-means++ seeds",
+            "clips": trained.clips,
+            "rank": trained.rank,
+            "k_candidates": sizes,
+            "k": trained.basis.matrices().len(),
+            "bound_mm": sel.bound_mm,
+            "objective": trained.distortion,
+        }),
+    ))
+}
+
+/// Start training in the background; obvious mistakes are refused before a job exists.
+pub async fn start_training(
+    store: &Store,
+    jobs: &Arc<Jobs>,
+    req: TrainRequest,
+) -> Result<crate::service::jobs::Job> {
+    let sel = select(store, &req).await?;
+    let progress = jobs.start("train-bases");
+    let (store, p) = (store.clone(), progress.clone());
+    tokio::spawn(async move {
+        match train(&store, sel, &p).await {
+            Ok(row) => p.succeed(serde_json::to_value(&row).unwrap_or_default()),
+            Err(e) => p.fail(e.to_string()),
+        }
+    });
+    progress
+        .job()
+        .ok_or_else(|| Error::Internal("job vanished".into()))
+}
