@@ -53,6 +53,21 @@ pub trait Streaming: Sync {
     /// The header params of a stream of `spec` and the coder that writes its chunks.
     /// `target` is the bound as a max in the take's units ([`StreamSpec::target`]).
     fn open(&self, spec: &StreamSpec<'_>, target: f64) -> Result<(Vec<u8>, Box<dyn StreamCoder>)>;
+
+    /// For a codec that codes with a shared basis: the basis a stream of `points` points
+    /// codes with when none has been trained for its layout (a stream cannot wait for
+    /// training), and how it was made (its provenance). `None`: such a stream is refused.
+    fn untrained_basis(&self, _points: usize) -> Option<(Basis, &'static str)> {
+        None
+    }
+}
+
+/// The codec live streams use when a client names none.
+pub const DEFAULT_CODEC: CodecId = CodecId::LsdtFrame;
+
+/// [`Streaming::untrained_basis`] of the codec `codec_id`, if it streams and has one.
+pub fn untrained_basis(codec_id: CodecId, points: usize) -> Option<(Basis, &'static str)> {
+    codec(codec_id).ok()?.streaming()?.untrained_basis(points)
 }
 
 /// The codecs that can code a live stream, in id order.

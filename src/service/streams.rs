@@ -1,5 +1,6 @@
 //! Live streams: a take stored while it is being recorded. Frames are coded as they arrive
-//! (`lsdt-frame`, or `lsdt-clip` clip by clip) and committed chunk by chunk, each commit one
+//! by the codec layer's stream encoder ([`crate::codec::stream`]: `lsdt-frame`, or
+//! `lsdt-clip` clip by clip) and committed chunk by chunk, each commit one
 //! transaction that adds the chunk and updates the take's header and statistics, so a range
 //! of a take still being recorded can be fetched as soon as its chunk is in.
 //!
@@ -30,9 +31,8 @@ use super::choose::{CodecRequest, Decision};
 use super::prepared::ReadCaches;
 use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
-use crate::codec::lsdt::spatial::dct_basis;
 use crate::codec::stream::{StreamChunk, StreamEncoder, StreamSpec};
-use crate::codec::{self, Basis, BasisKind, CodecId, ErrorBound, Latency};
+use crate::codec::{self, Basis, CodecId, ErrorBound, Latency};
 use crate::limits::{Limits, MAX_COORDINATE_M, MAX_FPS};
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
@@ -61,9 +61,10 @@ pub struct OpenRequest {
     pub unit: Option<String>,
     pub max_error_mm: Option<f64>,
     pub mean_error_mm: Option<f64>,
-    /// `lsdt-frame` (default) or `lsdt-clip`.
+    /// A codec that can stream ([`codec::stream::streaming_codecs`]); default
+    /// [`codec::stream::DEFAULT_CODEC`].
     pub codec: Option<CodecId>,
-    /// Seconds per chunk: the intra period of `lsdt-frame`, the clip of `lsdt-clip`.
+    /// Seconds per chunk (an intra period, a clip).
     pub chunk_seconds: Option<f64>,
     /// Keep the frames as sent until the stream finishes, then code the whole take with
     /// per-take choice and keep that if smaller. Costs 12 bytes per point per frame of
@@ -116,7 +117,7 @@ impl Plan {
         let unit = Unit::new(metres, UnitSource::Explicit).map_err(|e| invalid(&e))?;
         let bound = ErrorBound::from_request(req.max_error_mm, req.mean_error_mm)
             .map_err(|e| invalid(&e))?;
-        let codec = req.codec.unwrap_or(CodecId::LsdtFrame);
+        let codec = req.codec.unwrap_or(codec::stream::DEFAULT_CODEC);
         let streaming = codec::stream::streaming_codecs();
         if !streaming.contains(&codec) {
             let names: Vec<String> = streaming.iter().map(|c| c.to_string()).collect();
@@ -161,7 +162,8 @@ impl Plan {
 pub struct StreamInfo {
     pub id: String,
     pub codec: CodecId,
-    pub basis: String,
+    /// The shared basis the stream codes with, if its codec uses one.
+    pub basis: Option<String>,
     pub fps: f64,
     pub points: usize,
     pub chunk_frames: usize,
@@ -180,7 +182,7 @@ struct Live {
     /// The codec layer's stream encoder: chunks, their checks, the take's index and totals.
     /// Taken out while it codes on the blocking pool.
     encoder: Option<StreamEncoder>,
-    basis_id: String,
+    basis_id: Option<String>,
     codec: CodecId,
     points: usize,
     chunk_frames: usize,
@@ -263,38 +265,51 @@ impl Streams {
     }
 }
 
-/// The basis a stream of this layout codes with: the newest trained one, or else the DCT
-/// (stored as a basis too, so the take references what decodes it).
-async fn stream_basis(store: &Store, layout: &str, points: usize) -> Result<Arc<Basis>> {
+/// The shared basis a stream coded with `codec` codes with, if the codec uses one: the
+/// newest of its kind trained for the layout, or else the codec's untrained basis (stored as
+/// a basis too, so the take references what decodes it).
+async fn stream_basis(
+    store: &Store,
+    codec: CodecId,
+    layout: &str,
+    points: usize,
+) -> Result<Option<Arc<Basis>>> {
+    let Some(kind) = codec::codec(codec)?.basis_kind() else {
+        return Ok(None);
+    };
     if let Some(b) = super::bases::latest_for(store, layout)
         .await?
         .into_iter()
-        .find(|b| b.kind() == BasisKind::Lsdt)
+        .find(|b| b.kind() == kind)
     {
-        return Ok(b);
+        return Ok(Some(b));
     }
-    let b = super::blocking(move || dct_basis(points)).await?;
-    if store.basis_exists(&b.id()).await? {
-        return Ok(Arc::new(b));
+    let (b, provenance) = super::blocking(move || codec::stream::untrained_basis(codec, points))
+        .await?
+        .ok_or_else(|| {
+            Error::Unsatisfiable(format!(
+                "{codec} streams code with a trained {kind} basis and none is trained for \
+                     this layout; train one first"
+            ))
+        })?;
+    if !store.basis_exists(&b.id()).await? {
+        let m = &b.matrices()[0];
+        store
+            .insert_basis(&BasisRow {
+                id: b.id(),
+                kind: kind.name().into(),
+                layout: layout.to_string(),
+                points: points as i64,
+                dims: format!("{}×{}×{}", b.matrices().len(), m.rows, m.cols),
+                payload: b.bytes().to_vec(),
+                provenance: serde_json::json!({ "algorithm": provenance }),
+                // Dated at the epoch, so that any basis trained later is the layout's newest.
+                created_at: 0,
+                used_by: 0,
+            })
+            .await?;
     }
-    let m = &b.matrices()[0];
-    store
-        .insert_basis(&BasisRow {
-            id: b.id(),
-            kind: BasisKind::Lsdt.name().into(),
-            layout: layout.to_string(),
-            points: points as i64,
-            dims: format!("3×{}×{}", m.rows, m.cols),
-            payload: b.bytes().to_vec(),
-            provenance: serde_json::json!({
-                "algorithm": "DCT-II, untrained: no lsdt basis was trained for this layout",
-            }),
-            // Dated at the epoch, so that any basis trained later is the layout's newest.
-            created_at: 0,
-            used_by: 0,
-        })
-        .await?;
-    Ok(Arc::new(b))
+    Ok(Some(Arc::new(b)))
 }
 
 impl Streams {
@@ -322,14 +337,14 @@ impl Streams {
         )
         .map_err(|e| Error::InvalidRequest(e.to_string()))?;
         let layout = shape.layout_signature().to_hex();
-        let basis = stream_basis(store, &layout, points).await?;
+        let basis = stream_basis(store, plan.codec, &layout, points).await?;
         let spec = StreamSpec {
             points,
             fps: plan.fps,
             metres_per_unit: plan.unit.metres_per_unit,
             bound: plan.bound,
             chunk_frames: plan.chunk_frames,
-            shared: Some(&basis),
+            shared: basis.as_ref(),
         };
         let encoder = match StreamEncoder::open(plan.codec, &spec) {
             Err(codec::Error::Invalid(why)) => {
@@ -374,13 +389,13 @@ impl Streams {
             .insert(&NewTake {
                 row: take.to_row()?,
                 chunks: Vec::new(),
-                basis: Some(basis.id()),
+                basis: basis.as_ref().map(|b| b.id()),
             })
             .await?;
         let live = Live {
             take,
             encoder: Some(encoder),
-            basis_id: basis.id(),
+            basis_id: basis.map(|b| b.id()),
             codec,
             points,
             chunk_frames,

@@ -299,10 +299,7 @@ pub fn markdown(rows: &[Row]) -> String {
 fn csv(rows: &[Row]) -> String {
     let mut s = String::from("file,codec,bound_kind,bound_mm,frames,points,raw_bytes,stored_bytes,ratio,bits_per_frame,mean_mm,rms_mm,max_mm,kg_percent,encode_fps,decode_fps,decode_setup_us\n");
     for r in rows {
-        let (kind, v) = match r.bound {
-            ErrorBound::MaxMm(v) => ("max", v),
-            ErrorBound::MeanMm(v) => ("mean", v),
-        };
+        let (kind, v) = (r.bound.kind(), r.bound.mm());
         let _ = writeln!(
             s,
             "{},{},{kind},{v},{},{},{},{},{:.4},{:.2},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{:.1}",

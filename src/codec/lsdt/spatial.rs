@@ -318,8 +318,11 @@ pub fn basis_from(trained: [&DMatrix<f64>; 3]) -> Result<Basis> {
     Basis::new(BasisKind::Lsdt, j, matrices)
 }
 
-/// The DCT as an LSDT basis: what the codecs fall back to in tests, and the paper's
-/// starting point.
+/// How [`dct_basis`] was made, as a stored basis records it.
+pub const DCT_PROVENANCE: &str = "DCT-II, untrained: no lsdt basis was trained for this layout";
+
+/// The DCT as an LSDT basis: what live streams code with before a basis is trained for
+/// their layout, and the paper's starting point.
 pub fn dct_basis(j: usize) -> Basis {
     let d = crate::codec::dct::basis(j, j);
     let b = DMatrix::from_fn(j, j, |r, c| d[c * j + r]);

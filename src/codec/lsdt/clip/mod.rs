@@ -487,6 +487,13 @@ impl Streaming for LsdtClip {
         };
         Ok((p.to_bytes(), Box::new(coder)))
     }
+
+    fn untrained_basis(&self, points: usize) -> Option<(Basis, &'static str)> {
+        Some((
+            super::spatial::dct_basis(points),
+            super::spatial::DCT_PROVENANCE,
+        ))
+    }
 }
 
 struct ClipStream {

@@ -446,6 +446,13 @@ impl Streaming for LsdtFrame {
         };
         Ok((p.to_bytes(), Box::new(coder)))
     }
+
+    fn untrained_basis(&self, points: usize) -> Option<(Basis, &'static str)> {
+        Some((
+            super::spatial::dct_basis(points),
+            super::spatial::DCT_PROVENANCE,
+        ))
+    }
 }
 
 struct FrameStream {
