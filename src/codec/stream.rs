@@ -85,8 +85,8 @@ pub struct StreamChunk {
     pub payload: Vec<u8>,
     /// The chunk decoded (NaN where a sample is missing), as a reader will decode it.
     pub decoded: Vec<f32>,
-    /// The frames as sent, for the take's running error statistics.
-    original: Vec<f32>,
+    /// The take's error sums up to and with this chunk.
+    running: Accumulator,
     /// Its position among the stream's chunks.
     pub index: usize,
 }
@@ -121,7 +121,9 @@ pub struct StreamEncoder {
     next_frame: usize,
     index: Vec<ChunkMeta>,
     payload_bytes: usize,
+    /// Error sums over the confirmed chunks, and over every chunk handed out.
     stats: Accumulator,
+    handed_stats: Accumulator,
     digest: blake3::Hasher,
 }
 
@@ -170,6 +172,7 @@ impl StreamEncoder {
             index: Vec::new(),
             payload_bytes: 0,
             stats: Accumulator::new(spec.points),
+            handed_stats: Accumulator::new(spec.points),
             digest: blake3::Hasher::new(),
         })
     }
@@ -255,11 +258,12 @@ impl StreamEncoder {
         }
         self.handed_out += 1;
         self.next_frame += n;
+        self.handed_stats.add(&original, &decoded);
         Ok(StreamChunk {
             meta,
             payload,
             decoded,
-            original,
+            running: self.handed_stats.clone(),
             index,
         })
     }
@@ -267,15 +271,13 @@ impl StreamEncoder {
     /// The take's totals if `chunk` (the next to confirm) were part of it: what to store
     /// with it.
     pub fn totals_with(&self, chunk: &StreamChunk) -> Totals {
-        let mut stats = self.stats.clone();
-        stats.add(&chunk.original, &chunk.decoded);
         Totals {
             frames: self.committed_frames() + chunk.meta.frames as usize,
             chunks: self.index.len() + 1,
             stored_bytes: self.stored_bytes(self.index.len() + 1)
                 + self.payload_bytes
                 + chunk.payload.len(),
-            stats: stats.finish(self.mm_per_unit),
+            stats: chunk.running.finish(self.mm_per_unit),
         }
     }
 
@@ -309,7 +311,7 @@ impl StreamEncoder {
                 self.index.len()
             )));
         }
-        self.stats.add(&chunk.original, &chunk.decoded);
+        self.stats = chunk.running;
         pipeline::digest_update(&mut self.digest, &chunk.decoded);
         self.payload_bytes += chunk.payload.len();
         self.index.push(chunk.meta);

@@ -118,18 +118,24 @@ pub async fn frames(
         }
         _ => (0, Vec::new()),
     };
-    let p = prepared.clone();
-    let (data, fresh) = blocking(move || {
-        let source = Gathered {
-            first: wanted.start,
-            cached,
-            stored,
-            fresh: Mutex::new(Vec::new()),
-        };
+    let source = Gathered {
+        first: wanted.start,
+        cached,
+        stored,
+        fresh: Mutex::new(Vec::new()),
+    };
+    let read = move |p: &Prepared, source: Gathered| {
         let data = p.reader.read(start..end, selected.as_deref(), &source);
         (data, source.fresh.into_inner().unwrap_or_default())
-    })
-    .await?;
+    };
+    let (data, fresh) = if source.stored.1.is_empty() {
+        // Every chunk is decoded already: copying the range out costs less than a trip to
+        // the blocking pool.
+        read(&prepared, source)
+    } else {
+        let p = prepared.clone();
+        blocking(move || read(&p, source)).await?
+    };
     for (i, chunk) in fresh {
         caches.chunks.insert(id, i, chunk);
     }
