@@ -235,9 +235,14 @@ pub async fn header_of(store: &Store, take: &Take) -> Result<(Header, bool)> {
         let index = store.chunk_index(&take.id).await?;
         return Ok((header_from_index(take, &index)?, true));
     }
-    let (header, _) = Header::parse(&take.header, &Limits::default())
-        .map_err(|e| Error::Corrupt(format!("stored take {}: header: {e}", take.id)))?;
-    Ok((header, false))
+    Ok((stored_header(take)?, false))
+}
+
+/// The header stored with a closed take (chunk index included).
+pub fn stored_header(take: &Take) -> Result<Header> {
+    Header::parse(&take.header, &Limits::default())
+        .map(|(h, _)| h)
+        .map_err(|e| Error::Corrupt(format!("stored take {}: header: {e}", take.id)))
 }
 
 /// A live take's header with the chunk rows as its index (and frames), checked as any
