@@ -191,7 +191,7 @@ impl StreamEncoder {
         }
     }
 
-    /// Frames per sample row: the stream's points × 3.
+    /// Values per frame: the stream's points × 3.
     pub fn width(&self) -> usize {
         self.points * 3
     }
