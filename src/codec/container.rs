@@ -321,17 +321,28 @@ pub fn pack_chunks(
     let mut first = 0usize;
     for ch in chunks {
         let mask = valid.map(|v| &v[first * points..(first + ch.frames) * points]);
-        let payload = pack_chunk(mask, &ch.bytes);
-        metas.push(ChunkMeta {
-            first_frame: first as u32,
-            frames: ch.frames as u32,
-            len: payload.len() as u32,
-            crc32c: crc32c::crc32c(&payload),
-        });
+        let (meta, payload) = pack_indexed(first, &ch, mask);
+        metas.push(meta);
         payloads.push(payload);
         first += ch.frames;
     }
     (metas, payloads, first)
+}
+
+/// One codec chunk starting at frame `first`, packed with its gap mask, and its index entry.
+pub fn pack_indexed(
+    first: usize,
+    chunk: &super::ChunkOut,
+    valid: Option<&[bool]>,
+) -> (ChunkMeta, Vec<u8>) {
+    let payload = pack_chunk(valid, &chunk.bytes);
+    let meta = ChunkMeta {
+        first_frame: first as u32,
+        frames: chunk.frames as u32,
+        len: payload.len() as u32,
+        crc32c: crc32c::crc32c(&payload),
+    };
+    (meta, payload)
 }
 
 /// Split a chunk payload into its gap mask (`None` when all present) and codec bytes.

@@ -1,9 +1,14 @@
 //! Gaps in, full matrices out: transforms need every sample, so missing samples are filled
 //! before coding (and masked again after decoding).
 
-/// Per-sample validity of `frames × points × 3` data (NaN = missing); `None` if complete.
+/// Per-sample validity of `frames × points × 3` data (NaN = missing).
+pub fn mask(data: &[f32]) -> Vec<bool> {
+    data.chunks_exact(3).map(|p| !p[0].is_nan()).collect()
+}
+
+/// [`mask`], or `None` if every sample is present.
 pub fn validity(data: &[f32]) -> Option<Vec<bool>> {
-    let v: Vec<bool> = data.chunks_exact(3).map(|p| !p[0].is_nan()).collect();
+    let v = mask(data);
     v.iter().any(|x| !x).then_some(v)
 }
 

@@ -136,11 +136,11 @@ impl Reader {
                     r.len() * w
                 )));
             }
-            let frames = decoded[(lo - r.start) * w..(hi - r.start) * w].chunks_exact(w);
+            let rows = &decoded[(lo - r.start) * w..(hi - r.start) * w];
             match points {
-                None => dest.copy_from_slice(&decoded[(lo - r.start) * w..(hi - r.start) * w]),
+                None => dest.copy_from_slice(rows),
                 Some(points) => {
-                    for (frame, to) in frames.zip(dest.chunks_exact_mut(out_w)) {
+                    for (frame, to) in rows.chunks_exact(w).zip(dest.chunks_exact_mut(out_w)) {
                         for (&p, to) in points.iter().zip(to.chunks_exact_mut(3)) {
                             to.copy_from_slice(&frame[p * 3..p * 3 + 3]);
                         }

@@ -11,7 +11,7 @@
 
 use std::sync::Arc;
 
-use super::container::{pack_chunk, ChunkMeta, Header};
+use super::container::{pack_indexed, ChunkMeta, Header};
 use super::error::{Error, Result};
 use super::id::{CodecId, ErrorBound};
 use super::{codec, pipeline, read, Basis, ChunkDecoder, ChunkOut, Codec};
@@ -33,7 +33,14 @@ pub struct StreamSpec<'a> {
     pub shared: Option<&'a Arc<Basis>>,
 }
 
-impl StreamSpec<'_> {
+impl<'a> StreamSpec<'a> {
+    /// The shared basis, for codecs that code with one ([`StreamEncoder::open`] has checked
+    /// it is of their kind and shape).
+    pub fn basis(&self) -> Result<&'a Arc<Basis>> {
+        self.shared
+            .ok_or_else(|| Error::Basis("this codec streams with a shared basis".into()))
+    }
+
     /// The bound in the take's units, a hair inside as batch encoding aims.
     pub fn target(&self) -> f64 {
         self.bound.in_units(self.metres_per_unit * 1000.0)
@@ -185,7 +192,7 @@ impl StreamEncoder {
     /// The take's header with the confirmed chunks as its index: what it is once closed.
     pub fn closed_header(&self) -> Header {
         Header {
-            frames: self.index.iter().map(|c| c.frames).sum(),
+            frames: self.committed_frames() as u32,
             chunks: self.index.clone(),
             ..self.header.clone()
         }
@@ -225,14 +232,8 @@ impl StreamEncoder {
             )));
         }
         let original: Vec<f32> = self.pending.drain(..n * w).collect();
-        let valid: Vec<bool> = original.chunks_exact(3).map(|s| !s[0].is_nan()).collect();
-        let payload = pack_chunk(Some(&valid), &chunk.bytes);
-        let meta = ChunkMeta {
-            first_frame: self.next_frame as u32,
-            frames: n as u32,
-            len: payload.len() as u32,
-            crc32c: crc32c::crc32c(&payload),
-        };
+        let (meta, payload) =
+            pack_indexed(self.next_frame, &chunk, Some(&super::gaps::mask(&original)));
         // The chunk decodes on its own: check it with a header that holds only it.
         let alone = Header {
             frames: n as u32,
@@ -279,6 +280,11 @@ impl StreamEncoder {
                 + chunk.payload.len(),
             stats: chunk.running.finish(self.mm_per_unit),
         }
+    }
+
+    /// Chunks confirmed so far.
+    pub fn chunks(&self) -> usize {
+        self.index.len()
     }
 
     /// The take as confirmed so far.

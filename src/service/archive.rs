@@ -14,7 +14,7 @@ use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::{self, basis::hex, Basis, Container, Header};
 use crate::motion::formats::Format;
-use crate::motion::{Motion, Unit, UnitSource};
+use crate::motion::Motion;
 use crate::store::{BasisRow, ChunkEntry, Filter, NewTake, Store};
 
 /// One thing wrong with one stored take.
@@ -88,18 +88,18 @@ struct Checked {
 
 /// Check one take: its record against its header and chunk index, then its chunks and
 /// what they decode to.
-async fn check_take(store: &Store, row: &Take) -> Result<Checked> {
+async fn check_take(store: &Store, take: &Take) -> Result<Checked> {
     // The chunk rows are read once: a live take's header is made from them.
-    let index = store.chunk_index(&row.id).await?;
-    let live = row.is_live();
+    let index = store.chunk_index(&take.id).await?;
+    let live = take.is_live();
     let header = if live {
-        super::fetch::header_from_index(row, &index)?
+        super::fetch::header_from_index(take, &index)?
     } else {
-        super::fetch::stored_header(row)?
+        super::fetch::stored_header(take)?
     };
-    let mut problems = check_record(row, &header, &index, live);
-    let had_digest = row.meta.decoded_blake3.is_some();
-    problems.extend(check_chunks(store, row, header, index.len()).await?);
+    let mut problems = check_record(take, &header, &index, live);
+    let had_digest = take.meta.decoded_blake3.is_some();
+    problems.extend(check_chunks(store, take, header, index.len()).await?);
     Ok(Checked {
         chunks: index.len(),
         had_digest,
@@ -109,7 +109,7 @@ async fn check_take(store: &Store, row: &Take) -> Result<Checked> {
 
 /// What a take's record, header and chunk index must agree on, and its statistics with its
 /// bound and sizes.
-fn check_record(row: &Take, header: &Header, index: &[ChunkEntry], live: bool) -> Vec<String> {
+fn check_record(take: &Take, header: &Header, index: &[ChunkEntry], live: bool) -> Vec<String> {
     let mut problems = Vec::new();
     if index.len() != header.chunks.len() {
         problems.push(format!(
@@ -128,42 +128,42 @@ fn check_record(row: &Take, header: &Header, index: &[ChunkEntry], live: bool) -
             )
         {
             problems.push(format!(
-                "chunk {i}: its row and the header's index disagree"
+                "chunk {i}: its take and the header's index disagree"
             ));
         }
     }
-    if header.frames as usize != row.frames || header.points as usize != row.points {
+    if header.frames as usize != take.frames || header.points as usize != take.points {
         problems.push(format!(
-            "the header says {} frames of {} points, the row {} of {}",
-            header.frames, header.points, row.frames, row.points
+            "the header says {} frames of {} points, the take {} of {}",
+            header.frames, header.points, take.frames, take.points
         ));
     }
-    if header.codec != row.codec {
+    if header.codec != take.codec {
         problems.push(format!(
-            "the header says codec {}, the row {}",
-            header.codec, row.codec
+            "the header says codec {}, the take {}",
+            header.codec, take.codec
         ));
     }
     // Statistics against the bound and the sizes they were computed from.
-    let slack = 1e-9 * row.bound.mm().max(1.0);
-    if !row.bound.holds(row.max_mm - slack, row.mean_mm - slack) {
+    let slack = 1e-9 * take.bound.mm().max(1.0);
+    if !take.bound.holds(take.max_mm - slack, take.mean_mm - slack) {
         problems.push(format!(
             "stored errors (max {} mm, mean {} mm) are over its bound, {}",
-            row.max_mm, row.mean_mm, row.bound
+            take.max_mm, take.mean_mm, take.bound
         ));
     }
-    if row.raw_bytes != (row.frames * row.points * 12) as u64 {
+    if take.raw_bytes != (take.frames * take.points * 12) as u64 {
         problems.push(format!(
             "raw_bytes {} is not frames × points × 12",
-            row.raw_bytes
+            take.raw_bytes
         ));
     }
     let stored =
         (header.to_bytes().len() + index.iter().map(|e| e.len as usize).sum::<usize>()) as u64;
-    if !live && stored != row.stored_bytes {
+    if !live && stored != take.stored_bytes {
         problems.push(format!(
             "stored_bytes {} but the header and chunks take {stored}",
-            row.stored_bytes
+            take.stored_bytes
         ));
     }
     problems
@@ -173,16 +173,16 @@ fn check_record(row: &Take, header: &Header, index: &[ChunkEntry], live: bool) -
 /// name the chunk), then the take decoded and compared with the digest it was measured on.
 async fn check_chunks(
     store: &Store,
-    row: &Take,
+    take: &Take,
     header: Header,
     chunks: usize,
 ) -> Result<Vec<String>> {
     let mut problems = Vec::new();
-    let rows = match store.chunks(&row.id, 0, chunks as i64).await {
+    let rows = match store.chunks(&take.id, 0, chunks as i64).await {
         Ok(rows) => rows,
         Err(_) => {
             for i in 0..chunks as i64 {
-                if let Err(e) = store.chunks(&row.id, i, i + 1).await {
+                if let Err(e) = store.chunks(&take.id, i, i + 1).await {
                     problems.push(format!("chunk {i}: {e}"));
                 }
             }
@@ -203,7 +203,7 @@ async fn check_chunks(
         ))
     })
     .await?;
-    let digest = row.meta.decoded_blake3.as_deref();
+    let digest = take.meta.decoded_blake3.as_deref();
     match decoded {
         Err(e) => problems.push(format!("does not decode: {e}")),
         Ok(frames) => {
@@ -246,10 +246,10 @@ pub fn export_format(source_format: &str) -> Format {
 }
 
 /// Read one take whole: bitstream, bases, and its frames decoded into a file.
-pub async fn export_take(store: &Store, row: Take) -> Result<ExportedTake> {
-    let (header, _) = super::fetch::header_of(store, &row).await?;
+pub async fn export_take(store: &Store, take: Take) -> Result<ExportedTake> {
+    let (header, _) = super::fetch::header_of(store, &take).await?;
     let chunks = store
-        .chunks(&row.id, 0, header.chunks.len() as i64)
+        .chunks(&take.id, 0, header.chunks.len() as i64)
         .await?
         .into_iter()
         .map(|c| c.payload)
@@ -266,19 +266,21 @@ pub async fn export_take(store: &Store, row: Take) -> Result<ExportedTake> {
         shared = Some(Arc::new(super::bases::parse(&b)?));
         bases.push(b);
     }
-    let format = export_format(&row.source_format);
-    let names = row.meta.point_names.clone();
-    let (fps, mpu) = (row.fps, row.metres_per_unit);
+    let format = export_format(&take.source_format);
+    let (names, unit, fps) = (
+        take.meta.point_names.clone(),
+        take.meta.unit.clone(),
+        take.fps,
+    );
     let (container, file) = blocking(move || -> Result<(Container, Vec<u8>)> {
         let frames = codec::decode_all_with(&container, shared)?;
-        let unit = Unit::new(mpu, UnitSource::Declared).map_err(Error::BadInput)?;
         let motion = Motion::new(fps, unit, names, frames, None).map_err(Error::BadInput)?;
         let file = crate::motion::formats::write(&motion, format).map_err(Error::BadInput)?;
         Ok((container, file))
     })
     .await??;
     Ok(ExportedTake {
-        take: row,
+        take,
         container,
         bases,
         format,

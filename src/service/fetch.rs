@@ -98,12 +98,11 @@ pub async fn frames(
     let wanted = reader.chunks_for(start..end)?;
     let cached: Vec<Option<Arc<Vec<f32>>>> =
         wanted.clone().map(|i| caches.chunks.get(id, i)).collect();
-    let missing: Vec<usize> = wanted
-        .clone()
-        .zip(&cached)
-        .filter_map(|(i, c)| c.is_none().then_some(i))
-        .collect();
-    let stored = match (missing.first().copied(), missing.last().copied()) {
+    // The chunks not cached lie in lo..=hi: read those rows in one query.
+    let missing = |k: Option<usize>| k.map(|k| wanted.start + k);
+    let lo = missing(cached.iter().position(Option::is_none));
+    let hi = missing(cached.iter().rposition(Option::is_none));
+    let stored = match (lo, hi) {
         (Some(lo), Some(hi)) => {
             let rows = store.chunks(id, lo as i64, hi as i64 + 1).await?;
             if rows.len() != hi + 1 - lo {
@@ -220,7 +219,7 @@ impl ChunkSource for Gathered {
     }
 }
 
-/// The shared basis a header names, loaded (and cached) by id; `None` if it names none.
+/// The shared basis a header names, loaded by id; `None` if it names none.
 pub async fn shared_basis(store: &Store, header: &Header) -> Result<Option<Arc<Basis>>> {
     match &header.basis {
         Some(h) => Ok(Some(super::bases::load(store, &hex(h)).await?)),

@@ -183,12 +183,8 @@ struct Live {
     /// Taken out while it codes on the blocking pool.
     encoder: Option<StreamEncoder>,
     basis_id: Option<String>,
-    codec: CodecId,
-    points: usize,
     chunk_frames: usize,
     received: usize,
-    /// Chunks committed so far.
-    chunks: usize,
     failed: Option<String>,
     last_activity: Instant,
     /// Every frame as sent, for re-encoding on finish (if asked for).
@@ -199,18 +195,18 @@ struct Live {
 }
 
 impl Live {
-    fn info(&self, live: bool) -> StreamInfo {
+    fn info(&self) -> StreamInfo {
         StreamInfo {
             id: self.take.id.clone(),
-            codec: self.codec,
+            codec: self.take.codec,
             basis: self.basis_id.clone(),
             fps: self.take.fps,
-            points: self.points,
+            points: self.take.points,
             chunk_frames: self.chunk_frames,
             frames_received: self.received,
             frames_committed: self.take.frames,
-            chunks_committed: self.chunks,
-            live,
+            chunks_committed: self.encoder.as_ref().map_or(0, StreamEncoder::chunks),
+            live: true,
             max_mm: self.take.max_mm,
             mean_mm: self.take.mean_mm,
             warnings: self.warnings.clone(),
@@ -396,18 +392,15 @@ impl Streams {
             take,
             encoder: Some(encoder),
             basis_id: basis.map(|b| b.id()),
-            codec,
-            points,
             chunk_frames,
             received: 0,
-            chunks: 0,
             failed: None,
             last_activity: Instant::now(),
             archive: plan.reencode_on_finish.then(Vec::new),
             warnings: Vec::new(),
             _slot: slot,
         };
-        let info = live.info(true);
+        let info = live.info();
         let id = live.take.id.clone();
         self.open
             .lock()
@@ -419,7 +412,7 @@ impl Streams {
     /// The state of an open stream.
     pub async fn info(&self, store: &Store, id: &str) -> Result<StreamInfo> {
         match self.entry(id) {
-            Some(e) => Ok(e.lock().await.info(true)),
+            Some(e) => Ok(e.lock().await.info()),
             None => Err(Self::not_open(store, id).await),
         }
     }
@@ -461,12 +454,12 @@ impl Streams {
                 "stream {id} failed ({why}); what was committed is kept: finish it"
             )));
         }
-        let w = live.points * 3;
+        let w = live.take.points * 3;
         if !frames.len().is_multiple_of(w) {
             return Err(Error::InvalidRequest(format!(
                 "{} values are not whole frames of {} points",
                 frames.len(),
-                live.points
+                live.take.points
             )));
         }
         let to_m = live.take.metres_per_unit;
@@ -500,7 +493,7 @@ impl Streams {
             live.failed = Some(e.to_string());
         }
         r?;
-        Ok(live.info(true))
+        Ok(live.info())
     }
 
     /// Code `frames` on the blocking pool and commit every chunk they finish, in order.
@@ -542,7 +535,7 @@ impl Streams {
             payload: chunk.payload.clone(),
         };
         if !store
-            .append_chunk(&take.to_row()?, &chunk_row, self.lease_end())
+            .append_chunk(&take.id, &take.totals(), &chunk_row, self.lease_end())
             .await?
         {
             return Err(Error::Conflict(format!(
@@ -552,7 +545,6 @@ impl Streams {
             )));
         }
         live.take = take;
-        live.chunks += 1;
         live.encoder
             .as_mut()
             .ok_or_else(|| Error::Internal("stream encoder missing".into()))?
@@ -582,11 +574,15 @@ impl Streams {
         }
         let encoder = live.encoder()?;
         let (closed, digest) = (encoder.closed_header(), encoder.decoded_digest());
-        let mut meta = live.take.meta.clone();
-        meta.decoded_blake3 = Some(digest);
-        meta.warnings.extend(live.warnings.iter().cloned());
+        // The take as this stream closes it (what the store holds unless another server
+        // closed it first, from the same committed chunks).
+        let mut take = live.take.clone();
+        take.meta.decoded_blake3 = Some(digest);
+        take.meta.warnings.extend(live.warnings.iter().cloned());
+        take.header = closed.to_bytes();
+        take.live_until = None;
         if !store
-            .close_live(id, &closed.to_bytes(), &meta_text(id, &meta)?)
+            .close_live(id, &take.header, &meta_text(id, &take.meta)?)
             .await?
         {
             // Closed from its chunk rows by another server after the lease ran out (or
@@ -597,9 +593,8 @@ impl Streams {
             );
         }
         caches.forget(id);
-        let take = super::fetch::take(store, id).await?;
         if let Some(frames) = live.archive.take().filter(|_| take.frames > 0) {
-            let committed = take.frames * live.points * 3;
+            let committed = take.frames * take.points * 3;
             if frames.len() >= committed {
                 reencode_take(store, &take, frames[..committed].to_vec()).await?;
                 caches.forget(id);
@@ -684,9 +679,7 @@ fn meta_text(id: &str, meta: &TakeMeta) -> Result<String> {
 /// Code a finished stream's take again, from the frames as sent, with every candidate
 /// codec; keep the result if it is smaller than the live coding.
 async fn reencode_take(store: &Store, take: &Take, positions: Vec<f32>) -> Result<()> {
-    let unit = Unit::new(take.metres_per_unit, UnitSource::Explicit)
-        .map_err(|e| Error::Internal(e.to_string()))?;
-    let names = take.meta.point_names.clone();
+    let (unit, names) = (take.meta.unit.clone(), take.meta.point_names.clone());
     let motion = Arc::new(
         Motion::new(take.fps, unit, names, positions, None)
             .map_err(|e| Error::Internal(e.to_string()))?,

@@ -11,7 +11,7 @@ use super::{Error, Result};
 use crate::codec::{CodecId, ErrorBound};
 use crate::motion::skeleton::Joint;
 use crate::motion::Unit;
-use crate::store::TakeRow;
+use crate::store::{TakeRow, TakeTotals};
 
 /// One take: what it is, how it was coded, what that cost and what error it measured.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -227,6 +227,21 @@ impl Take {
             created_at: self.created_at,
             live_until: self.live_until,
         })
+    }
+
+    /// The running totals a live take's commits store.
+    pub fn totals(&self) -> TakeTotals {
+        TakeTotals {
+            frames: self.frames as i64,
+            duration_s: self.duration_s,
+            raw_bytes: self.raw_bytes as i64,
+            stored_bytes: self.stored_bytes as i64,
+            ratio: self.ratio,
+            mean_mm: self.mean_mm,
+            rms_mm: self.rms_mm,
+            max_mm: self.max_mm,
+            kg_percent: self.kg_percent,
+        }
     }
 
     /// Whether a live stream is still coding the take.

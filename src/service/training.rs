@@ -247,7 +247,7 @@ async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<Bas
             .map(|f| {
                 (
                     crate::codec::gaps::fill(f, points),
-                    f.chunks_exact(3).map(|s| !s[0].is_nan()).collect(),
+                    crate::codec::gaps::mask(f),
                 )
             })
             .collect();

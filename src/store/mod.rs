@@ -22,7 +22,7 @@ use sqlx::sqlite::{
 use sqlx::Row;
 
 pub use query::{Cursor, Filter, SortKey, StatRow, Totals};
-pub use rows::{ChunkEntry, ChunkRow, NewTake, TakeRow};
+pub use rows::{ChunkEntry, ChunkRow, NewTake, TakeRow, TakeTotals};
 
 /// Errors of the store layer.
 #[derive(Debug, thiserror::Error)]
@@ -196,7 +196,8 @@ impl Store {
     /// append does not grow with the take. False if the take is gone or no longer live.
     pub async fn append_chunk(
         &self,
-        row: &TakeRow,
+        id: &str,
+        row: &TakeTotals,
         chunk: &ChunkRow,
         live_until: i64,
     ) -> Result<bool> {
@@ -217,13 +218,13 @@ impl Store {
             .bind(row.max_mm)
             .bind(row.kg_percent)
             .bind(live_until)
-            .bind(&row.id)
+            .bind(id)
             .execute(&mut *tx)
             .await?;
             if r.rows_affected() == 0 {
                 return Ok(false);
             }
-            bind_chunk(sqlx::query(INSERT_CHUNK), &row.id, chunk).execute(&mut *tx).await?;
+            bind_chunk(sqlx::query(INSERT_CHUNK), id, chunk).execute(&mut *tx).await?;
             tx.commit().await?;
             Ok(true)
         })

@@ -60,6 +60,20 @@ pub struct TakeRow {
     pub live_until: Option<i64>,
 }
 
+/// The columns a live take's commits update: its running totals.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TakeTotals {
+    pub frames: i64,
+    pub duration_s: f64,
+    pub raw_bytes: i64,
+    pub stored_bytes: i64,
+    pub ratio: f64,
+    pub mean_mm: f64,
+    pub rms_mm: f64,
+    pub max_mm: f64,
+    pub kg_percent: f64,
+}
+
 /// A take to insert: its row and its chunks.
 #[derive(Debug, Clone)]
 pub struct NewTake {

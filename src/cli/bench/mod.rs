@@ -537,10 +537,7 @@ fn split_and_train(
                 .iter()
                 .map(|(_, (_, m))| {
                     let p = m.positions();
-                    (
-                        codec::gaps::fill(p, m.point_count()),
-                        p.chunks_exact(3).map(|s| !s[0].is_nan()).collect(),
-                    )
+                    (codec::gaps::fill(p, m.point_count()), codec::gaps::mask(p))
                 })
                 .collect();
             let inputs: Vec<codec::Input<'_>> = train

@@ -321,6 +321,12 @@ pub fn basis_from(trained: [&DMatrix<f64>; 3]) -> Result<Basis> {
 /// How [`dct_basis`] was made, as a stored basis records it.
 pub const DCT_PROVENANCE: &str = "DCT-II, untrained: no lsdt basis was trained for this layout";
 
+/// [`dct_basis`] and its provenance: what the LSDT codecs stream with before a basis is
+/// trained for the layout ([`crate::codec::stream::Streaming::untrained_basis`]).
+pub fn untrained(points: usize) -> (Basis, &'static str) {
+    (dct_basis(points), DCT_PROVENANCE)
+}
+
 /// The DCT as an LSDT basis: what live streams code with before a basis is trained for
 /// their layout, and the paper's starting point.
 pub fn dct_basis(j: usize) -> Basis {

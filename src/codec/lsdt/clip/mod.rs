@@ -464,9 +464,7 @@ impl Codec for LsdtClip {
 /// coded once whole (or when flushed, as it stands).
 impl Streaming for LsdtClip {
     fn open(&self, spec: &StreamSpec<'_>, t: f64) -> Result<(Vec<u8>, Box<dyn StreamCoder>)> {
-        let basis = spec
-            .shared
-            .ok_or_else(|| Error::Basis("lsdt-clip streams code with a shared basis".into()))?;
+        let basis = spec.basis()?;
         if spec.chunk_frames > crate::codec::MAX_CLIP {
             return Err(Error::Invalid(format!(
                 "lsdt-clip codes clips of at most {} frames, asked for {}",
@@ -489,10 +487,7 @@ impl Streaming for LsdtClip {
     }
 
     fn untrained_basis(&self, points: usize) -> Option<(Basis, &'static str)> {
-        Some((
-            super::spatial::dct_basis(points),
-            super::spatial::DCT_PROVENANCE,
-        ))
+        Some(super::spatial::untrained(points))
     }
 }
 
@@ -519,7 +514,7 @@ impl StreamCoder for ClipStream {
             return Ok(Vec::new());
         }
         let data: Vec<f32> = self.uncoded.drain(..whole * w).collect();
-        let valid: Vec<bool> = data.chunks_exact(3).map(|s| !s[0].is_nan()).collect();
+        let valid = crate::codec::gaps::mask(&data);
         let filled = crate::codec::gaps::fill(&data, self.points);
         let input = Input {
             data: &filled,

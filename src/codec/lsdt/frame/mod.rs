@@ -433,9 +433,7 @@ impl Codec for LsdtFrame {
 /// the adaptive stage, coding each frame as it arrives.
 impl Streaming for LsdtFrame {
     fn open(&self, spec: &StreamSpec<'_>, t: f64) -> Result<(Vec<u8>, Box<dyn StreamCoder>)> {
-        let basis = spec
-            .shared
-            .ok_or_else(|| Error::Basis("lsdt-frame streams code with a shared basis".into()))?;
+        let basis = spec.basis()?;
         let p = FrameParams {
             intra_period: spec.chunk_frames,
             ..stream_params(t, spec.fps)
@@ -448,10 +446,7 @@ impl Streaming for LsdtFrame {
     }
 
     fn untrained_basis(&self, points: usize) -> Option<(Basis, &'static str)> {
-        Some((
-            super::spatial::dct_basis(points),
-            super::spatial::DCT_PROVENANCE,
-        ))
+        Some(super::spatial::untrained(points))
     }
 }
 
