@@ -49,7 +49,7 @@ pub async fn verify(
     let mut report = VerifyReport::default();
     for row in super::library::all_rows(store, filter).await? {
         report.takes += 1;
-        report.frames += row.frames.max(0) as u64;
+        report.frames += row.totals.frames.max(0) as u64;
         let (id, name) = (row.id.clone(), row.name.clone());
         let mut problem = |what: String| {
             report.problems.push(Problem {

@@ -141,7 +141,7 @@ impl Take {
         let meta: TakeMeta =
             serde_json::from_str(&row.meta).map_err(|e| corrupt(format!("meta: {e}")))?;
         let take = Take {
-            frames: count("frames", row.frames)?,
+            frames: count("frames", row.totals.frames)?,
             points: count("points", row.points)?,
             codec: row
                 .codec
@@ -149,22 +149,22 @@ impl Take {
                 .map_err(|e| corrupt(format!("codec: {e}")))?,
             bound: ErrorBound::from_kind(&row.bound_kind, row.bound_mm)
                 .map_err(|e| corrupt(format!("bound: {e}")))?,
-            raw_bytes: bytes("raw_bytes", row.raw_bytes)?,
-            stored_bytes: bytes("stored_bytes", row.stored_bytes)?,
+            raw_bytes: bytes("raw_bytes", row.totals.raw_bytes)?,
+            stored_bytes: bytes("stored_bytes", row.totals.stored_bytes)?,
             id: row.id,
             name: row.name,
             library: row.library,
             tags: row.tags,
             fps: row.fps,
-            duration_s: row.duration_s,
+            duration_s: row.totals.duration_s,
             metres_per_unit: row.metres_per_unit,
             layout: row.layout,
             source_format: row.source_format,
-            ratio: row.ratio,
-            mean_mm: row.mean_mm,
-            rms_mm: row.rms_mm,
-            max_mm: row.max_mm,
-            kg_percent: row.kg_percent,
+            ratio: row.totals.ratio,
+            mean_mm: row.totals.mean_mm,
+            rms_mm: row.totals.rms_mm,
+            max_mm: row.totals.max_mm,
+            kg_percent: row.totals.kg_percent,
             meta,
             created_at: row.created_at,
             header: row.header,
@@ -206,22 +206,14 @@ impl Take {
             library: self.library.clone(),
             tags: self.tags.clone(),
             fps: self.fps,
-            frames: self.frames as i64,
+            totals: self.totals(),
             points: self.points as i64,
-            duration_s: self.duration_s,
             metres_per_unit: self.metres_per_unit,
             layout: self.layout.clone(),
             source_format: self.source_format.clone(),
             codec: self.codec.to_string(),
             bound_kind: self.bound.kind().to_string(),
             bound_mm: self.bound.mm(),
-            raw_bytes: self.raw_bytes as i64,
-            stored_bytes: self.stored_bytes as i64,
-            ratio: self.ratio,
-            mean_mm: self.mean_mm,
-            rms_mm: self.rms_mm,
-            max_mm: self.max_mm,
-            kg_percent: self.kg_percent,
             header: self.header.clone(),
             meta,
             created_at: self.created_at,
@@ -383,7 +375,7 @@ mod tests {
         row.codec = "zip".into();
         assert!(matches!(Take::from_row(row), Err(Error::Corrupt(_))));
         let mut row = take().to_row().unwrap();
-        row.frames = -1;
+        row.totals.frames = -1;
         assert!(matches!(Take::from_row(row), Err(Error::Corrupt(_))));
     }
 

@@ -139,24 +139,15 @@ impl Store {
     ) -> Result<bool> {
         dispatch!(self, pool => {
             let mut tx = pool.begin().await?;
-            let r = sqlx::query(
-                "UPDATE sequences SET frames = $1, duration_s = $2, codec = $3, bound_kind = $4, \
-                 bound_mm = $5, raw_bytes = $6, stored_bytes = $7, ratio = $8, mean_mm = $9, \
-                 rms_mm = $10, max_mm = $11, kg_percent = $12, header = $13, meta = $14 \
-                 WHERE id = $15",
-            )
-            .bind(row.frames)
-            .bind(row.duration_s)
+            let sql = format!(
+                "UPDATE sequences SET {}, codec = $10, bound_kind = $11, bound_mm = $12, \
+                 header = $13, meta = $14 WHERE id = $15",
+                rows::SET_TOTALS
+            );
+            let r = rows::bind_totals(sqlx::query(&sql), &row.totals)
             .bind(&row.codec)
             .bind(&row.bound_kind)
             .bind(row.bound_mm)
-            .bind(row.raw_bytes)
-            .bind(row.stored_bytes)
-            .bind(row.ratio)
-            .bind(row.mean_mm)
-            .bind(row.rms_mm)
-            .bind(row.max_mm)
-            .bind(row.kg_percent)
             .bind(&row.header)
             .bind(&row.meta)
             .bind(&row.id)
@@ -197,26 +188,17 @@ impl Store {
     pub async fn append_chunk(
         &self,
         id: &str,
-        row: &TakeTotals,
+        totals: &TakeTotals,
         chunk: &ChunkRow,
         live_until: i64,
     ) -> Result<bool> {
         dispatch!(self, pool => {
             let mut tx = pool.begin().await?;
-            let r = sqlx::query(
-                "UPDATE sequences SET frames = $1, duration_s = $2, raw_bytes = $3, \
-                 stored_bytes = $4, ratio = $5, mean_mm = $6, rms_mm = $7, max_mm = $8, \
-                 kg_percent = $9, live_until = $10 WHERE id = $11 AND live_until IS NOT NULL",
-            )
-            .bind(row.frames)
-            .bind(row.duration_s)
-            .bind(row.raw_bytes)
-            .bind(row.stored_bytes)
-            .bind(row.ratio)
-            .bind(row.mean_mm)
-            .bind(row.rms_mm)
-            .bind(row.max_mm)
-            .bind(row.kg_percent)
+            let sql = format!(
+                "UPDATE sequences SET {}, live_until = $10 WHERE id = $11 AND live_until IS NOT NULL",
+                rows::SET_TOTALS
+            );
+            let r = rows::bind_totals(sqlx::query(&sql), totals)
             .bind(live_until)
             .bind(id)
             .execute(&mut *tx)

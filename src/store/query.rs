@@ -177,9 +177,9 @@ pub fn sort_value(sort: SortKey, row: &super::TakeRow) -> Value {
     match sort {
         SortKey::Created => Value::Int(row.created_at),
         SortKey::Name => Value::Text(row.name.clone()),
-        SortKey::Duration => Value::Real(row.duration_s),
-        SortKey::Frames => Value::Int(row.frames),
-        SortKey::Ratio => Value::Real(row.ratio),
+        SortKey::Duration => Value::Real(row.totals.duration_s),
+        SortKey::Frames => Value::Int(row.totals.frames),
+        SortKey::Ratio => Value::Real(row.totals.ratio),
     }
 }
 

@@ -34,22 +34,15 @@ pub struct TakeRow {
     pub library: String,
     pub tags: Vec<String>,
     pub fps: f64,
-    pub frames: i64,
+    /// Frames, sizes and errors: what a live take's commits update.
+    pub totals: TakeTotals,
     pub points: i64,
-    pub duration_s: f64,
     pub metres_per_unit: f64,
     pub layout: String,
     pub source_format: String,
     pub codec: String,
     pub bound_kind: String,
     pub bound_mm: f64,
-    pub raw_bytes: i64,
-    pub stored_bytes: i64,
-    pub ratio: f64,
-    pub mean_mm: f64,
-    pub rms_mm: f64,
-    pub max_mm: f64,
-    pub kg_percent: f64,
     /// The codec container header (chunk index included).
     pub header: Vec<u8>,
     /// Point names, unit provenance, skeleton, codec decision, warnings: JSON text.
@@ -95,11 +88,36 @@ pub const TAKE_COLUMNS: &str = "id, name, library, fps, frames, points, duration
     metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, raw_bytes, \
     stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at, live_until";
 
-pub const INSERT_TAKE: &str = "INSERT INTO sequences (id, name, library, fps, frames, \
-    points, duration_s, metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, \
-    raw_bytes, stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, \
+/// The running totals' columns as `$1..$9`, in the order [`bind_totals`] binds them: every
+/// statement that writes them starts with them.
+pub const SET_TOTALS: &str = "frames = $1, duration_s = $2, raw_bytes = $3, stored_bytes = $4, \
+    ratio = $5, mean_mm = $6, rms_mm = $7, max_mm = $8, kg_percent = $9";
+
+pub const INSERT_TAKE: &str = "INSERT INTO sequences (frames, duration_s, raw_bytes, \
+    stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, id, name, library, fps, points, \
+    metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, header, meta, \
     created_at, live_until) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, \
     $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24)";
+
+/// Bind a take's running totals, in [`SET_TOTALS`] order, to a query of either backend.
+pub fn bind_totals<'q, DB: sqlx::Database>(
+    q: sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>,
+    t: &TakeTotals,
+) -> sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>
+where
+    f64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+{
+    q.bind(t.frames)
+        .bind(t.duration_s)
+        .bind(t.raw_bytes)
+        .bind(t.stored_bytes)
+        .bind(t.ratio)
+        .bind(t.mean_mm)
+        .bind(t.rms_mm)
+        .bind(t.max_mm)
+        .bind(t.kg_percent)
+}
 
 /// Bind a take's columns, in [`INSERT_TAKE`] order, to a query of either backend.
 pub fn bind_take<'q, DB: sqlx::Database>(
@@ -113,26 +131,18 @@ where
     Option<i64>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     Vec<u8>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
 {
-    q.bind(s.id.clone())
+    bind_totals(q, &s.totals)
+        .bind(s.id.clone())
         .bind(s.name.clone())
         .bind(s.library.clone())
         .bind(s.fps)
-        .bind(s.frames)
         .bind(s.points)
-        .bind(s.duration_s)
         .bind(s.metres_per_unit)
         .bind(s.layout.clone())
         .bind(s.source_format.clone())
         .bind(s.codec.clone())
         .bind(s.bound_kind.clone())
         .bind(s.bound_mm)
-        .bind(s.raw_bytes)
-        .bind(s.stored_bytes)
-        .bind(s.ratio)
-        .bind(s.mean_mm)
-        .bind(s.rms_mm)
-        .bind(s.max_mm)
-        .bind(s.kg_percent)
         .bind(s.header.clone())
         .bind(s.meta.clone())
         .bind(s.created_at)
@@ -155,22 +165,24 @@ where
         library: r.try_get("library")?,
         tags: Vec::new(),
         fps: r.try_get("fps")?,
-        frames: r.try_get("frames")?,
+        totals: TakeTotals {
+            frames: r.try_get("frames")?,
+            duration_s: r.try_get("duration_s")?,
+            raw_bytes: r.try_get("raw_bytes")?,
+            stored_bytes: r.try_get("stored_bytes")?,
+            ratio: r.try_get("ratio")?,
+            mean_mm: r.try_get("mean_mm")?,
+            rms_mm: r.try_get("rms_mm")?,
+            max_mm: r.try_get("max_mm")?,
+            kg_percent: r.try_get("kg_percent")?,
+        },
         points: r.try_get("points")?,
-        duration_s: r.try_get("duration_s")?,
         metres_per_unit: r.try_get("metres_per_unit")?,
         layout: r.try_get("layout")?,
         source_format: r.try_get("source_format")?,
         codec: r.try_get("codec")?,
         bound_kind: r.try_get("bound_kind")?,
         bound_mm: r.try_get("bound_mm")?,
-        raw_bytes: r.try_get("raw_bytes")?,
-        stored_bytes: r.try_get("stored_bytes")?,
-        ratio: r.try_get("ratio")?,
-        mean_mm: r.try_get("mean_mm")?,
-        rms_mm: r.try_get("rms_mm")?,
-        max_mm: r.try_get("max_mm")?,
-        kg_percent: r.try_get("kg_percent")?,
         header: r.try_get("header")?,
         meta: r.try_get("meta")?,
         created_at: r.try_get("created_at")?,

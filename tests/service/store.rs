@@ -2,7 +2,7 @@
 
 use crate::common;
 
-use mocapstore::store::{ChunkRow, Error, NewTake, Store, TakeRow};
+use mocapstore::store::{ChunkRow, Error, NewTake, Store, TakeRow, TakeTotals};
 
 fn take(id: &str, n: usize) -> NewTake {
     let chunks: Vec<ChunkRow> = (0..n)
@@ -24,22 +24,24 @@ fn take(id: &str, n: usize) -> NewTake {
             library: "lib".into(),
             tags: vec!["walk".into(), "test".into()],
             fps: 120.0,
-            frames: 120 * n as i64,
+            totals: TakeTotals {
+                frames: 120 * n as i64,
+                duration_s: n as f64,
+                raw_bytes: 1000,
+                stored_bytes: 100,
+                ratio: 10.0,
+                mean_mm: 0.5,
+                rms_mm: 0.55,
+                max_mm: 0.99,
+                kg_percent: 0.1,
+            },
             points: 31,
-            duration_s: n as f64,
             metres_per_unit: 0.001,
             layout: "abc".into(),
             source_format: "bvh".into(),
             codec: "quant".into(),
             bound_kind: "max".into(),
             bound_mm: 1.0,
-            raw_bytes: 1000,
-            stored_bytes: 100,
-            ratio: 10.0,
-            mean_mm: 0.5,
-            rms_mm: 0.55,
-            max_mm: 0.99,
-            kg_percent: 0.1,
             header: vec![1, 2, 3, 255],
             meta: r#"{"points": ["a", "b"], "decision": {"winner": "quant"}}"#.into(),
             created_at: 1_700_000_000_000,
