@@ -229,4 +229,26 @@ mod tests {
         assert!(ErrorBound::new_mean(f64::NAN).is_err());
         assert!(Latency::Frame < Latency::Sequence);
     }
+
+    #[test]
+    fn a_bound_is_named_parsed_and_aimed_at_in_one_place() {
+        for b in [ErrorBound::MaxMm(0.5), ErrorBound::MeanMm(2.0)] {
+            assert_eq!(ErrorBound::from_kind(b.kind(), b.mm()).unwrap(), b);
+        }
+        assert!(ErrorBound::from_kind("median", 1.0).is_err());
+        assert_eq!(
+            ErrorBound::from_request(None, None).unwrap(),
+            ErrorBound::MaxMm(1.0)
+        );
+        assert_eq!(
+            ErrorBound::from_request(None, Some(3.0)).unwrap(),
+            ErrorBound::MeanMm(3.0)
+        );
+        assert!(ErrorBound::from_request(Some(1.0), Some(1.0)).is_err());
+        assert!(ErrorBound::from_request(Some(-1.0), None).is_err());
+        // Encoders aim a hair inside: 1 mm in a take stored in cm is just under 0.1 units.
+        let t = ErrorBound::MaxMm(1.0).in_units(10.0);
+        assert!(t < 0.1 && t > 0.1 * (1.0 - 1e-5), "{t}");
+        assert_eq!(ErrorBound::MeanMm(1.0).target(10.0), Target::Mean(t));
+    }
 }
