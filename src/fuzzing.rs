@@ -107,6 +107,7 @@ pub fn decode(codec: CodecId, data: &[u8]) {
         metres_per_unit: 0.001,
         params: params.to_vec(),
         basis: shared.as_ref().map(|b| b.hash()),
+        rig: None,
         chunks: vec![ChunkMeta {
             first_frame: 0,
             frames: frames as u32,
@@ -114,7 +115,7 @@ pub fn decode(codec: CodecId, data: &[u8]) {
             crc32c: crc32c::crc32c(payload),
         }],
     };
-    if let Ok(d) = codec::decoder(&header, shared) {
+    if let Ok(d) = codec::decoder(&header, &shared.into()) {
         let _ = codec::decode_chunk(&header, d.as_ref(), 0, payload);
     }
 }

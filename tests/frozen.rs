@@ -114,6 +114,7 @@ fn stream_container(
             metres_per_unit: m.unit.metres_per_unit,
             params,
             basis: Some(basis.hash()),
+            rig: None,
             chunks: metas,
         },
         chunks: payloads,

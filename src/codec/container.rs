@@ -86,6 +86,9 @@ pub struct Header {
     pub params: Vec<u8>,
     /// Content hash of a shared basis the chunks were coded with, if any.
     pub basis: Option<[u8; 32]>,
+    /// Content hash of the skeleton ([`super::Rig`]) a codec that keeps channel values
+    /// decodes with, if the codec is one.
+    pub rig: Option<[u8; 32]>,
     pub chunks: Vec<ChunkMeta>,
 }
 
@@ -96,7 +99,7 @@ impl Header {
         b.extend_from_slice(MAGIC);
         b.extend_from_slice(&VERSION.to_le_bytes());
         b.push(self.codec as u8);
-        b.push(u8::from(self.basis.is_some()));
+        b.push(u8::from(self.basis.is_some()) | (u8::from(self.rig.is_some()) << 1));
         b.extend_from_slice(&self.frames.to_le_bytes());
         b.extend_from_slice(&self.points.to_le_bytes());
         b.extend_from_slice(&self.fps.to_le_bytes());
@@ -104,6 +107,9 @@ impl Header {
         b.extend_from_slice(&(self.params.len() as u32).to_le_bytes());
         b.extend_from_slice(&self.params);
         if let Some(h) = &self.basis {
+            b.extend_from_slice(h);
+        }
+        if let Some(h) = &self.rig {
             b.extend_from_slice(h);
         }
         b.extend_from_slice(&(self.chunks.len() as u32).to_le_bytes());
@@ -131,7 +137,7 @@ impl Header {
         let codec = CodecId::from_byte(codec_byte)
             .ok_or_else(|| Error::Unsupported(format!("codec id {codec_byte}")))?;
         let flags = r.u8()?;
-        if flags > 1 {
+        if flags > 3 {
             return Err(Error::Unsupported(format!("header flags {flags:#x}")));
         }
         let frames = r.u32()?;
@@ -155,11 +161,15 @@ impl Header {
             limits.max_params_bytes,
         )?;
         let params = r.take(params_len as usize)?.to_vec();
-        let basis = if flags & 1 == 1 {
-            Some(r.take(32)?.try_into().expect("32 bytes"))
-        } else {
-            None
+        let mut hash = |bit: u8| -> Result<Option<[u8; 32]>> {
+            Ok(if flags & bit != 0 {
+                Some(r.take(32)?.try_into().expect("32 bytes"))
+            } else {
+                None
+            })
         };
+        let basis = hash(1)?;
+        let rig = hash(2)?;
         let count = r.u32()? as usize;
         if count > frames.max(1) as usize {
             return Err(malformed(format!("{count} chunks for {frames} frames")));
@@ -203,6 +213,7 @@ impl Header {
                 metres_per_unit,
                 params,
                 basis,
+                rig,
                 chunks,
             },
             r.position(),
@@ -405,6 +416,7 @@ mod tests {
                 metres_per_unit: 0.001,
                 params: vec![9, 9],
                 basis: Some([7; 32]),
+                rig: Some([8; 32]),
                 chunks: metas,
             },
             chunks,

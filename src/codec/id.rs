@@ -22,10 +22,12 @@ pub enum CodecId {
     Pga = 7,
     /// MDTT's database mode: `K` spatial bases shared by a library.
     MdttShared = 8,
+    /// A skeleton's channel values exactly as the file printed them.
+    BvhLossless = 9,
 }
 
 impl CodecId {
-    pub const ALL: [CodecId; 8] = [
+    pub const ALL: [CodecId; 9] = [
         CodecId::Raw,
         CodecId::Quant,
         CodecId::Mdtt,
@@ -34,6 +36,7 @@ impl CodecId {
         CodecId::Spca,
         CodecId::Pga,
         CodecId::MdttShared,
+        CodecId::BvhLossless,
     ];
 
     pub fn name(self) -> &'static str {
@@ -46,6 +49,7 @@ impl CodecId {
             CodecId::Spca => "spca",
             CodecId::Pga => "pga",
             CodecId::MdttShared => "mdtt-shared",
+            CodecId::BvhLossless => "bvh-lossless",
         }
     }
 
@@ -56,7 +60,9 @@ impl CodecId {
     /// How many frames a decoder must see before it can emit the first one.
     pub fn latency(self) -> Latency {
         match self {
-            CodecId::Raw | CodecId::Quant | CodecId::LsdtFrame => Latency::Frame,
+            CodecId::Raw | CodecId::Quant | CodecId::LsdtFrame | CodecId::BvhLossless => {
+                Latency::Frame
+            }
             CodecId::LsdtClip => Latency::Clip,
             CodecId::Mdtt | CodecId::MdttShared | CodecId::Spca | CodecId::Pga => Latency::Sequence,
         }

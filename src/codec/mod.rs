@@ -12,10 +12,14 @@
 //! - [`raw`], [`quant`]: the baselines. [`mdtt`]: Hou et al. 2015 with a residual layer.
 //! - [`lsdt`]: Hou et al. 2016's learned spatial transform, its training, `lsdt-clip` and
 //!   `lsdt-frame`.
+//! - [`bvh_lossless`]: a skeleton's channel values exactly as printed.
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
+//! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
+//!   that code channel values.
 //! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`]: shared pieces of the above.
 
 pub mod basis;
+pub mod bvh_lossless;
 pub mod container;
 pub mod dct;
 pub mod entropy;
@@ -31,10 +35,11 @@ pub mod quant;
 pub mod raw;
 pub mod read;
 pub mod residual;
+pub mod rig;
 pub mod stream;
 mod wire;
 
-use std::sync::Arc;
+use crate::motion::{Motion, Skeleton};
 
 pub use basis::{Basis, BasisKind};
 pub use container::{Container, Header, Limits};
@@ -44,7 +49,8 @@ pub use pipeline::{
     decode_all, decode_all_with, decoded_digest, digest_update, encode, encode_variant,
     encode_with, Encoded,
 };
-pub use read::{decode_chunk, decoder, ChunkSource, Reader, Stored};
+pub use read::{decode_chunk, decoder, ChunkSource, Reader, Shared, Stored};
+pub use rig::{Channels, Rig};
 
 /// What an encoder sees: gap-filled positions (`frames × points × 3`, the take's units) and
 /// which samples are real, so that errors are judged on those only.
@@ -56,6 +62,9 @@ pub struct Input<'a> {
     pub fps: f64,
     /// The shared basis to code with, for codecs that use one ([`Codec::basis_kind`]).
     pub shared: Option<&'a Basis>,
+    /// The take's skeleton and channel values, for codecs that code them
+    /// ([`Codec::codes_channels`]); its rig is the one the header names.
+    pub skeleton: Option<(&'a Rig, &'a Skeleton)>,
 }
 
 impl Input<'_> {
@@ -98,20 +107,23 @@ pub trait Codec: Send + Sync {
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput>;
     /// Parse the header params once; the decoder then decodes any chunk. `shared` is the
     /// basis the header names (the pipeline checks its hash), for codecs that use one.
-    fn decoder(
-        &self,
-        params: &[u8],
-        points: usize,
-        shared: Option<Arc<Basis>>,
-    ) -> Result<Box<dyn ChunkDecoder>>;
+    fn decoder(&self, params: &[u8], points: usize, shared: &Shared)
+        -> Result<Box<dyn ChunkDecoder>>;
     /// The kind of shared basis this codec codes with, if it uses one: it then competes only
     /// for takes whose layout has such a basis.
     fn basis_kind(&self) -> Option<BasisKind> {
         None
     }
-    /// Why this codec should not compete for a take of this shape, if it should not (per-take
-    /// choice skips it and records the reason). Every codec can still be asked for by name.
-    fn unsuited(&self, _frames: usize, _points: usize, _fps: f64) -> Option<String> {
+    /// Whether it codes a skeleton's channel values (rotations kept: the take can be served
+    /// as BVH) rather than point positions. Such a codec needs a skeleton take, names the
+    /// take's [`Rig`] in its header, decodes with it, and implements
+    /// [`ChunkDecoder::decode_channels`]; the bound still holds on the FK positions.
+    fn codes_channels(&self) -> bool {
+        false
+    }
+    /// Why this codec should not compete for this take, if it should not (per-take choice
+    /// skips it and records the reason). Every codec can still be asked for by name.
+    fn unsuited(&self, _motion: &Motion) -> Option<String> {
         None
     }
     /// How this codec codes a live stream, frame by frame, if it can ([`stream`]).
@@ -131,6 +143,13 @@ pub fn available() -> Vec<CodecId> {
 pub trait ChunkDecoder: Send + Sync {
     /// Decode one chunk of `frames` frames into `out` (`frames × points × 3`).
     fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()>;
+    /// Decode one chunk's channel values, for codecs that code them
+    /// ([`Codec::codes_channels`]).
+    fn decode_channels(&self, _bytes: &[u8], _frames: usize) -> Result<Channels> {
+        Err(Error::Unsupported(
+            "this codec keeps positions, not channel values".into(),
+        ))
+    }
 }
 
 /// The codec for an id, or `Unsupported` for ids whose codec has not landed yet.
@@ -142,6 +161,7 @@ pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
         CodecId::LsdtClip => Ok(&lsdt::clip::LsdtClip),
         CodecId::LsdtFrame => Ok(&lsdt::frame::LsdtFrame),
         CodecId::MdttShared => Ok(&mdtt::database::MdttShared),
+        CodecId::BvhLossless => Ok(&bvh_lossless::BvhLossless),
         other => Err(Error::Unsupported(format!(
             "codec {other} is not implemented yet"
         ))),

@@ -6,7 +6,8 @@ use super::basis::Basis;
 use super::container::{pack_chunks, Container, Header};
 use super::error::{Error, Result};
 use super::id::{CodecId, ErrorBound};
-use super::read::{Reader, Stored};
+use super::read::{Reader, Shared, Stored};
+use super::rig::Rig;
 use super::{codec, gaps, Codec, Input, Target};
 use crate::motion::metrics::{self, ErrorStats};
 use crate::motion::Motion;
@@ -82,6 +83,7 @@ pub fn encode_variant(
     }
     let c = codec(codec_id)?;
     let shared = usable_basis(c, shared, points)?;
+    let rig = rig_for(c, motion)?;
     let positions = motion.positions();
     let valid = gaps::validity(positions);
     if valid.as_ref().is_some_and(|v| !v.iter().any(|x| *x)) {
@@ -97,6 +99,7 @@ pub fn encode_variant(
         points,
         fps: motion.fps,
         shared: shared.map(|b| b.as_ref()),
+        skeleton: rig.as_ref().zip(motion.skeleton.as_ref()).map(|(r, s)| (r.as_ref(), s)),
     };
     let out = encoder(&input, target)?;
 
@@ -115,11 +118,18 @@ pub fn encode_variant(
             metres_per_unit: motion.unit.metres_per_unit,
             params: out.params,
             basis: shared.map(|b| b.hash()),
+            rig: rig.as_ref().map(|r| r.hash()),
             chunks: metas,
         },
         chunks: payloads,
     };
-    let decoded = decode_all_with(&container, shared.cloned())?;
+    let decoded = decode_all_with(
+        &container,
+        Shared {
+            basis: shared.cloned(),
+            rig,
+        },
+    )?;
     let stats = metrics::compare(positions, &decoded, points, to_mm)
         .map_err(|e| Error::Invalid(e.to_string()))?;
     if !bound.holds(stats.max_mm, stats.mean_mm) {
@@ -173,13 +183,27 @@ pub(crate) fn usable_basis<'a>(
     Ok(Some(b))
 }
 
+/// The skeleton codec `c` codes with, if it codes channel values: the take must have one.
+fn rig_for(c: &dyn Codec, motion: &Motion) -> Result<Option<Arc<Rig>>> {
+    if !c.codes_channels() {
+        return Ok(None);
+    }
+    let s = motion.skeleton.as_ref().ok_or_else(|| {
+        Error::Invalid(format!(
+            "codec {} codes a skeleton's channel values and this take is point data only",
+            c.id()
+        ))
+    })?;
+    Ok(Some(Arc::new(Rig::new(s.joints.clone())?)))
+}
+
 /// Decode every frame.
 pub fn decode_all(container: &Container) -> Result<Vec<f32>> {
     decode_all_with(container, None)
 }
 
-/// Decode every frame of a take coded with a shared basis.
-pub fn decode_all_with(container: &Container, shared: Option<Arc<Basis>>) -> Result<Vec<f32>> {
+/// Decode every frame of a take coded with what its header names (a basis, a rig).
+pub fn decode_all_with(container: &Container, shared: impl Into<Shared>) -> Result<Vec<f32>> {
     let reader = Reader::new(container.header.clone(), shared)?;
     reader.read_all(&Stored::new(0, container.chunks.iter().map(Vec::as_slice)))
 }

@@ -117,7 +117,7 @@ impl Codec for Quant {
         &self,
         params: &[u8],
         _points: usize,
-        _shared: Option<std::sync::Arc<super::Basis>>,
+        _shared: &super::Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
         let mut r = Reader::new(params);
         let step = r.f64()?;

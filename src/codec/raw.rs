@@ -40,7 +40,7 @@ impl Codec for Raw {
         &self,
         params: &[u8],
         _points: usize,
-        _shared: Option<std::sync::Arc<super::Basis>>,
+        _shared: &super::Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
         if !params.is_empty() {
             return Err(malformed("raw takes no parameters"));

@@ -9,7 +9,23 @@ use std::sync::Arc;
 use super::basis::{hex, Basis};
 use super::container::{unpack_chunk, verify_chunk, Header};
 use super::error::{malformed, Error, Result};
+use super::rig::{Channels, Rig};
 use super::{codec, ChunkDecoder};
+
+/// What a header may name beyond its own bytes — objects stored once and referenced by many
+/// takes: a shared basis, and the skeleton of a codec that keeps channel values. A decoder
+/// is built only when each one the header names is supplied with that hash.
+#[derive(Debug, Clone, Default)]
+pub struct Shared {
+    pub basis: Option<Arc<Basis>>,
+    pub rig: Option<Arc<Rig>>,
+}
+
+impl From<Option<Arc<Basis>>> for Shared {
+    fn from(basis: Option<Arc<Basis>>) -> Shared {
+        Shared { basis, rig: None }
+    }
+}
 
 /// One chunk as a source holds it.
 pub enum Chunk<'a> {
@@ -67,9 +83,10 @@ pub struct Reader {
 }
 
 impl Reader {
-    /// `shared` is the basis the header names, if it names one; its hash must match.
-    pub fn new(header: Header, shared: Option<Arc<Basis>>) -> Result<Reader> {
-        let decoder = decoder(&header, shared)?;
+    /// `shared` holds what the header names (a basis, a rig), if it names any; their hashes
+    /// must match.
+    pub fn new(header: Header, shared: impl Into<Shared>) -> Result<Reader> {
+        let decoder = decoder(&header, &shared.into())?;
         Ok(Reader { header, decoder })
     }
 
@@ -155,13 +172,99 @@ impl Reader {
     pub fn read_all(&self, source: &dyn ChunkSource) -> Result<Vec<f32>> {
         self.read(0..self.header.frames as usize, None, source)
     }
+
+    /// The channel values of frames `range`, for a take coded with a codec that keeps them
+    /// ([`super::Codec::codes_channels`]); `channels` values per frame. Decoded from the
+    /// stored payloads (a cache of decoded positions cannot give channels back).
+    pub fn read_channels(
+        &self,
+        range: Range<usize>,
+        channels: usize,
+        source: &dyn ChunkSource,
+    ) -> Result<Channels> {
+        let wanted = self.chunks_for(range.clone())?;
+        let (start, end) = (range.start, range.end);
+        let mut out = Channels {
+            values: Vec::with_capacity((end - start) * channels),
+            printed: None,
+        };
+        for i in wanted {
+            let Chunk::Stored(payload) = source.chunk(i)? else {
+                return Err(Error::Invalid(format!(
+                    "chunk {i}: channel values need the stored payload"
+                )));
+            };
+            let meta = self.header.chunks[i];
+            verify_chunk(&meta, payload, i)?;
+            let r = meta.frame_range();
+            let (_, codec_bytes) = unpack_chunk(payload, r.len() * self.header.points as usize)?;
+            let got = self.decoder.decode_channels(codec_bytes, r.len())?;
+            if got.values.len() != r.len() * channels
+                || got.printed.as_ref().is_some_and(|p| p.values.len() != got.values.len())
+            {
+                return Err(malformed(format!(
+                    "chunk {i} holds {} channel values, its {} frames need {}",
+                    got.values.len(),
+                    r.len(),
+                    r.len() * channels
+                )));
+            }
+            let (lo, hi) = ((r.start.max(start) - r.start) * channels, (r.end.min(end) - r.start) * channels);
+            out.values.extend_from_slice(&got.values[lo..hi]);
+            match (got.printed, &mut out.printed) {
+                (Some(p), Some(acc)) => {
+                    let base = acc.verbatim.len() as i64;
+                    acc.verbatim.extend(p.verbatim);
+                    acc.values.extend(p.values[lo..hi].iter().map(|v| match v.notation {
+                        crate::motion::decimal::Notation::Verbatim => crate::motion::decimal::Printed {
+                            digits: v.digits + base,
+                            ..*v
+                        },
+                        _ => *v,
+                    }));
+                }
+                (Some(p), none @ None) if out.values.len() == hi - lo => {
+                    *none = Some(crate::motion::decimal::PrintedValues {
+                        values: p.values[lo..hi].to_vec(),
+                        verbatim: p.verbatim,
+                    });
+                }
+                (None, None) => {}
+                _ => return Err(malformed(format!("chunk {i}: printed values in some chunks only"))),
+            }
+        }
+        Ok(out)
+    }
 }
 
-/// The chunk decoder for a header, given the shared basis it names (if it names one): the
-/// basis's hash must be the header's, so a take is never decoded with the wrong basis.
-pub fn decoder(header: &Header, shared: Option<Arc<Basis>>) -> Result<Box<dyn ChunkDecoder>> {
+/// The chunk decoder for a header, given what it names (a basis, a rig): each hash must be
+/// the header's, so a take is never decoded with the wrong basis or skeleton.
+pub fn decoder(header: &Header, shared: &Shared) -> Result<Box<dyn ChunkDecoder>> {
     let c = codec(header.codec)?;
-    let shared = match (&header.basis, shared) {
+    let rig = match (&header.rig, &shared.rig) {
+        (None, _) => None,
+        (Some(want), None) => {
+            return Err(Error::Basis(format!(
+                "the take was coded with skeleton {} and it was not supplied",
+                hex(want)
+            )))
+        }
+        (Some(want), Some(r)) if r.hash() != *want => {
+            return Err(Error::Basis(format!(
+                "the take was coded with skeleton {}, got {}",
+                hex(want),
+                r.id()
+            )))
+        }
+        (Some(_), Some(r)) => Some(r.clone()),
+    };
+    if c.codes_channels() && rig.is_none() {
+        return Err(malformed(format!(
+            "codec {} decodes with a skeleton and the header names none",
+            header.codec
+        )));
+    }
+    let basis = match (&header.basis, shared.basis.clone()) {
         (None, _) => None,
         (Some(want), None) => {
             return Err(Error::Basis(format!(
@@ -178,13 +281,13 @@ pub fn decoder(header: &Header, shared: Option<Arc<Basis>>) -> Result<Box<dyn Ch
         }
         (Some(_), Some(b)) => Some(b),
     };
-    if c.basis_kind().is_some() && shared.is_none() {
+    if c.basis_kind().is_some() && basis.is_none() {
         return Err(malformed(format!(
             "codec {} needs a shared basis and the header names none",
             header.codec
         )));
     }
-    c.decoder(&header.params, header.points as usize, shared)
+    c.decoder(&header.params, header.points as usize, &Shared { basis, rig })
 }
 
 /// Decode chunk `index` (its payload as stored): all its frames, NaN where the take has

@@ -162,9 +162,10 @@ impl StreamEncoder {
             metres_per_unit: spec.metres_per_unit,
             params,
             basis: shared.map(|b| b.hash()),
+            rig: None,
             chunks: Vec::new(),
         };
-        let decoder = Arc::from(read::decoder(&header, shared.cloned())?);
+        let decoder = Arc::from(read::decoder(&header, &shared.cloned().into())?);
         Ok(StreamEncoder {
             header_len: header.to_bytes().len(),
             header,

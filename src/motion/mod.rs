@@ -1,6 +1,7 @@
 //! The motion model and everything that reads, writes or measures it. Pure: bytes and
 //! numbers in, bytes and numbers out; no files, no async, no database.
 
+pub mod decimal;
 pub mod error;
 pub mod format;
 pub mod formats;

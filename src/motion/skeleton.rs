@@ -8,6 +8,7 @@
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::decimal::PrintedValues;
 use super::error::{Error, Result};
 
 /// One animated degree of freedom, in the order the file lists them.
@@ -78,6 +79,10 @@ pub struct Skeleton {
     /// `frames × channel_count()` values in file order: degrees for rotations, file units
     /// for positions.
     pub values: Vec<f64>,
+    /// The same values as the file printed them, when read from text: what a lossless
+    /// archive gives back character for character.
+    #[serde(skip)]
+    pub printed: Option<PrintedValues>,
 }
 
 impl Skeleton {
@@ -109,7 +114,11 @@ impl Skeleton {
                 )));
             }
         }
-        let s = Skeleton { joints, values };
+        let s = Skeleton {
+            joints,
+            values,
+            printed: None,
+        };
         let cc = s.channel_count();
         if cc == 0 && !s.values.is_empty() || cc > 0 && !s.values.len().is_multiple_of(cc) {
             return Err(Error::Invalid(format!(
@@ -147,7 +156,21 @@ impl Skeleton {
         Skeleton {
             joints: self.joints.clone(),
             values: self.values[start * cc..end * cc].to_vec(),
+            printed: self.printed.as_ref().map(|p| p.slice(start, end, cc)),
         }
+    }
+
+    /// Keep the values as printed (`printed.values` one per value, in file order).
+    pub fn with_printed(mut self, printed: PrintedValues) -> Result<Skeleton> {
+        if printed.values.len() != self.values.len() {
+            return Err(Error::Invalid(format!(
+                "{} printed values for {} channel values",
+                printed.values.len(),
+                self.values.len()
+            )));
+        }
+        self.printed = Some(printed);
+        Ok(self)
     }
 
     /// The translation of each joint relative to its parent in one frame: the offset, with
@@ -155,20 +178,7 @@ impl Skeleton {
     /// write position channels on every joint whose values repeat the offset, so replacing
     /// — not adding — is the reading that keeps bones rigid.)
     pub fn local_translations(&self, frame: usize, out: &mut Vec<[f64; 3]>) {
-        out.clear();
-        let vals = self.frame_values(frame);
-        let mut k = 0;
-        for j in &self.joints {
-            let mut t = j.offset;
-            for &c in &j.channels {
-                let (axis, rot) = c.axis();
-                if !rot {
-                    t[axis] = vals[k];
-                }
-                k += 1;
-            }
-            out.push(t);
-        }
+        local_translations(&self.joints, self.frame_values(frame), out);
     }
 
     /// Joint positions (file units) of every frame, `frames × joints × 3`, in f64.
@@ -176,9 +186,13 @@ impl Skeleton {
         let n = self.joints.len();
         let frames = self.frame_count();
         let mut out = vec![0.0; frames * n * 3];
-        let mut fk = Fk::new(self);
+        let mut fk = Fk::new(&self.joints);
         for f in 0..frames {
-            fk.frame(self, f, &mut out[f * n * 3..(f + 1) * n * 3]);
+            fk.frame(
+                &self.joints,
+                self.frame_values(f),
+                &mut out[f * n * 3..(f + 1) * n * 3],
+            );
         }
         out
     }
@@ -210,26 +224,44 @@ impl Skeleton {
     }
 }
 
-/// Reusable FK state: global rotations per joint and the channel layout, computed once.
+/// The translation of each joint relative to its parent in one frame (`vals`, that frame's
+/// channel values): see [`Skeleton::local_translations`].
+pub fn local_translations(joints: &[Joint], vals: &[f64], out: &mut Vec<[f64; 3]>) {
+    out.clear();
+    let mut k = 0;
+    for j in joints {
+        let mut t = j.offset;
+        for &c in &j.channels {
+            let (axis, rot) = c.axis();
+            if !rot {
+                t[axis] = vals[k];
+            }
+            k += 1;
+        }
+        out.push(t);
+    }
+}
+
+/// Reusable FK state: global rotations and local translations per joint, allocated once
+/// (decoders run FK chunk by chunk, frame by frame).
 pub struct Fk {
     rotations: Vec<Matrix3<f64>>,
     translations: Vec<[f64; 3]>,
 }
 
 impl Fk {
-    pub fn new(skeleton: &Skeleton) -> Self {
+    pub fn new(joints: &[Joint]) -> Self {
         Fk {
-            rotations: vec![Matrix3::identity(); skeleton.joints.len()],
-            translations: Vec::with_capacity(skeleton.joints.len()),
+            rotations: vec![Matrix3::identity(); joints.len()],
+            translations: Vec::with_capacity(joints.len()),
         }
     }
 
-    /// Positions of one frame into `out` (`joints × 3`).
-    pub fn frame(&mut self, skeleton: &Skeleton, frame: usize, out: &mut [f64]) {
-        skeleton.local_translations(frame, &mut self.translations);
-        let vals = skeleton.frame_values(frame);
+    /// Positions of one frame (`vals`, its channel values) into `out` (`joints × 3`).
+    pub fn frame(&mut self, joints: &[Joint], vals: &[f64], out: &mut [f64]) {
+        local_translations(joints, vals, &mut self.translations);
         let mut k = 0;
-        for (i, j) in skeleton.joints.iter().enumerate() {
+        for (i, j) in joints.iter().enumerate() {
             let mut local = Matrix3::identity();
             for &c in &j.channels {
                 let (axis, rot) = c.axis();

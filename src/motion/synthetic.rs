@@ -66,6 +66,94 @@ pub fn chain_bvh(depth: usize) -> String {
     s
 }
 
+/// A BVH take of a humanoid (19 joints, 5 End Sites, centimetres) dancing in place for
+/// `frames` frames: root translation and Z-X-Y rotations as CMU prints them, every joint
+/// rotating smoothly in all three axes with a little jitter, values printed with `decimals`
+/// decimals. For tests and benchmarks of the codecs that keep channels.
+pub fn dancer_bvh(frames: usize, fps: f64, seed: u64, decimals: usize) -> String {
+    // (name, parent, offset); parents first. End Sites are named "End".
+    const BONES: [(&str, usize, [f64; 3]); 24] = [
+        ("Hips", usize::MAX, [0.0, 0.0, 0.0]),
+        ("LeftUpLeg", 0, [9.0, -4.0, 0.0]),
+        ("LeftLeg", 1, [0.0, -42.0, 0.0]),
+        ("LeftFoot", 2, [0.0, -40.0, 0.0]),
+        ("End", 3, [0.0, -4.0, 14.0]),
+        ("RightUpLeg", 0, [-9.0, -4.0, 0.0]),
+        ("RightLeg", 5, [0.0, -42.0, 0.0]),
+        ("RightFoot", 6, [0.0, -40.0, 0.0]),
+        ("End", 7, [0.0, -4.0, 14.0]),
+        ("Spine", 0, [0.0, 10.0, 0.0]),
+        ("Chest", 9, [0.0, 18.0, 0.0]),
+        ("Neck", 10, [0.0, 20.0, 0.0]),
+        ("Head", 11, [0.0, 9.0, 0.0]),
+        ("End", 12, [0.0, 18.0, 0.0]),
+        ("LeftShoulder", 10, [4.0, 16.0, 0.0]),
+        ("LeftArm", 14, [14.0, 0.0, 0.0]),
+        ("LeftForeArm", 15, [28.0, 0.0, 0.0]),
+        ("LeftHand", 16, [25.0, 0.0, 0.0]),
+        ("End", 17, [12.0, 0.0, 0.0]),
+        ("RightShoulder", 10, [-4.0, 16.0, 0.0]),
+        ("RightArm", 19, [-14.0, 0.0, 0.0]),
+        ("RightForeArm", 20, [-28.0, 0.0, 0.0]),
+        ("RightHand", 21, [-25.0, 0.0, 0.0]),
+        ("End", 22, [-12.0, 0.0, 0.0]),
+    ];
+    let mut children = vec![Vec::new(); BONES.len()];
+    for (i, b) in BONES.iter().enumerate().skip(1) {
+        children[b.1].push(i);
+    }
+    let mut s = String::from("HIERARCHY\n");
+    // (bone, depth, closing)
+    let mut stack = vec![(0usize, 0usize, false)];
+    let mut order = Vec::new();
+    while let Some((i, d, closing)) = stack.pop() {
+        let ind = "  ".repeat(d);
+        if closing {
+            s.push_str(&format!("{ind}}}\n"));
+            continue;
+        }
+        let (name, parent, o) = BONES[i];
+        let head = match (parent, name) {
+            (usize::MAX, _) => format!("ROOT {name}"),
+            (_, "End") => "End Site".to_string(),
+            _ => format!("JOINT {name}"),
+        };
+        s.push_str(&format!("{ind}{head}\n{ind}{{\n{ind}  OFFSET {:.5} {:.5} {:.5}\n", o[0], o[1], o[2]));
+        if parent == usize::MAX {
+            s.push_str(&format!("{ind}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"));
+            order.push(6);
+        } else if name != "End" {
+            s.push_str(&format!("{ind}  CHANNELS 3 Zrotation Xrotation Yrotation\n"));
+            order.push(3);
+        }
+        stack.push((i, d, true));
+        stack.extend(children[i].iter().rev().map(|&k| (k, d + 1, false)));
+    }
+    let channels: usize = order.iter().sum();
+    s.push_str(&format!("MOTION\nFrames: {frames}\nFrame Time: {:.6}\n", 1.0 / fps));
+    let mut rng = Rng::new(seed);
+    let waves: Vec<[f64; 3]> = (0..channels)
+        .map(|_| [5.0 + 40.0 * rng.unit(), 0.3 + 1.5 * rng.unit(), std::f64::consts::TAU * rng.unit()])
+        .collect();
+    for f in 0..frames {
+        let t = f as f64 / fps;
+        for (c, w) in waves.iter().enumerate() {
+            let mut v = w[0] * (std::f64::consts::TAU * w[1] * t + w[2]).sin() + 0.05 * rng.unit();
+            match c {
+                0 => v += 60.0 * t,
+                1 => v = 90.0 + v * 0.1,
+                _ => {}
+            }
+            if c > 0 {
+                s.push(' ');
+            }
+            s.push_str(&format!("{v:.decimals$}"));
+        }
+        s.push('\n');
+    }
+    s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

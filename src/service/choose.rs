@@ -41,7 +41,7 @@ pub fn candidates(
                 Some(kind) if !bases.contains(&kind) => Some(format!(
                     "no shared {kind} basis is trained for this layout (POST /v1/bases)"
                 )),
-                _ => k.unsuited(m.frame_count(), m.point_count(), m.fps),
+                _ => k.unsuited(m),
             })
         };
         match why {

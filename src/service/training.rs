@@ -261,6 +261,7 @@ async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<Bas
                 points,
                 fps,
                 shared: None,
+                skeleton: None,
             })
             .collect();
         // Frames are in millimetres here, so the bound is too.

@@ -49,6 +49,7 @@ fn take(id: &str, n: usize) -> NewTake {
         },
         chunks,
         basis: None,
+        rig: None,
     }
 }
 

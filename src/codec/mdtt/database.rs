@@ -13,7 +13,6 @@
 //! (all `3J` columns, f32) so that each take picks its own rank; the residual layer holds max
 //! bounds.
 
-use std::sync::Arc;
 
 use nalgebra::DMatrix;
 
@@ -328,9 +327,9 @@ impl Codec for MdttShared {
         &self,
         params: &[u8],
         points: usize,
-        shared: Option<Arc<Basis>>,
+        shared: &crate::codec::Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
-        let basis = shared.ok_or_else(|| Error::Basis("mdtt-shared needs its basis".into()))?;
+        let basis = shared.basis.clone().ok_or_else(|| Error::Basis("mdtt-shared needs its basis".into()))?;
         check_basis(&basis, points * 3)?;
         let p = SharedParams::parse(params, points * 3)?;
         let per = p.per_basis(basis.matrices());
@@ -344,7 +343,8 @@ impl Codec for MdttShared {
     }
 
     /// As per-take `mdtt`, a clip DCT needs about a second of motion to be worth it.
-    fn unsuited(&self, frames: usize, points: usize, fps: f64) -> Option<String> {
+    fn unsuited(&self, motion: &crate::motion::Motion) -> Option<String> {
+        let (frames, points, fps) = (motion.frame_count(), motion.point_count(), motion.fps);
         if let Err(e) = super::check_points(points) {
             return Some(e.to_string());
         }
@@ -760,6 +760,7 @@ mod tests {
                 points,
                 fps: 120.0,
                 shared: None,
+                skeleton: None,
             })
             .collect();
         let t = train_set(

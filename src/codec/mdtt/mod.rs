@@ -373,7 +373,8 @@ impl Codec for Mdtt {
 
     /// A per-take basis costs more than it saves on takes under a second (measured on the
     /// Bandai takes, mean 6 s, where mdtt already loses at max bounds).
-    fn unsuited(&self, frames: usize, points: usize, fps: f64) -> Option<String> {
+    fn unsuited(&self, motion: &crate::motion::Motion) -> Option<String> {
+        let (frames, points, fps) = (motion.frame_count(), motion.point_count(), motion.fps);
         if let Err(e) = check_points(points) {
             return Some(e.to_string());
         }
@@ -387,7 +388,7 @@ impl Codec for Mdtt {
         &self,
         params: &[u8],
         points: usize,
-        _shared: Option<std::sync::Arc<super::Basis>>,
+        _shared: &super::Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
         let p = Params::parse(params, points)?;
         let full = FullClipTable::new(p.clip, p.l);
@@ -608,6 +609,7 @@ mod tests {
             points,
             fps: 120.0,
             shared: None,
+            skeleton: None,
         };
         let (k, l) = (5, 3);
         let mut a = Analysis::new(&input, clip_len(120.0), l);

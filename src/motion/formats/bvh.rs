@@ -4,13 +4,15 @@
 //! Read: any rotation order per joint, 3 or 6 (or any subset of the six) channels on any
 //! joint, End Sites as points, tabs/CRLF, scientific notation, names with spaces. A header
 //! frame count that disagrees with the rows present is a warning, not an error: the rows are
-//! the data. Write: the same hierarchy and channel values, printed in the shortest form that
-//! parses back to the same f64.
+//! the data. Write: the same hierarchy, and the channel values with the characters the file
+//! printed them with when they were read from one ([`crate::motion::decimal`]), else in the
+//! shortest form that parses back to the same f64.
 
 use std::fmt::Write as _;
 
 use super::text::{as_text, numbered_lines};
 use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use crate::motion::decimal::PrintedValues;
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
 use crate::motion::skeleton::{Channel, Joint, Skeleton};
@@ -149,7 +151,12 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     let cc: usize = joints.iter().map(|j| j.channels.len()).sum();
     // Trust the header for the reservation only as far as the input could back it up (every
     // value takes at least two bytes), so a forged frame count cannot make us allocate.
-    let mut values: Vec<f64> = Vec::with_capacity((header_frames * cc).min(bytes.len() / 2));
+    let reserve = (header_frames * cc).min(bytes.len() / 2);
+    let mut values: Vec<f64> = Vec::with_capacity(reserve);
+    let mut printed = PrintedValues {
+        values: Vec::with_capacity(reserve),
+        verbatim: Vec::new(),
+    };
     let mut rows = 0usize;
     for (n, line) in lines {
         let mut count = 0;
@@ -157,6 +164,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
             let v = parse_f64(t)
                 .ok_or_else(|| err(n, format!("channel value {t:?} is not a number")))?;
             values.push(v);
+            printed.push_token(t);
             count += 1;
         }
         if count == 0 {
@@ -195,7 +203,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     }
 
     let names = joints.iter().map(|j| j.name.clone()).collect();
-    let skeleton = Skeleton::new(joints, values)?;
+    let skeleton = Skeleton::new(joints, values)?.with_printed(printed)?;
     let positions: Vec<f32> = skeleton
         .forward_kinematics()
         .into_iter()
@@ -390,11 +398,16 @@ pub fn write(motion: &Motion) -> Result<Vec<u8>> {
     out.push('\n');
     let cc = s.channel_count();
     for f in 0..frames {
-        for (i, v) in s.values[f * cc..(f + 1) * cc].iter().enumerate() {
-            if i > 0 {
+        for i in f * cc..(f + 1) * cc {
+            if i > f * cc {
                 out.push(' ');
             }
-            let _ = write!(out, "{v}");
+            match &s.printed {
+                Some(p) => p.write(i, &mut out),
+                None => {
+                    let _ = write!(out, "{}", s.values[i]);
+                }
+            }
         }
         out.push('\n');
     }

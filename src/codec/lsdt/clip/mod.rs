@@ -438,10 +438,10 @@ impl Codec for LsdtClip {
         &self,
         params: &[u8],
         points: usize,
-        shared: Option<Arc<Basis>>,
+        shared: &crate::codec::Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
         let (p, coding) = ClipParams::parse(params)?;
-        let spatial = Spatial::for_take(shared.as_deref(), points, "lsdt-clip")?;
+        let spatial = Spatial::for_take(shared.basis.as_deref(), points, "lsdt-clip")?;
         let full = std::sync::OnceLock::new();
         let tables = match coding {
             Coding::Adaptive => None,
@@ -523,6 +523,7 @@ impl StreamCoder for ClipStream {
             points: self.points,
             fps: self.fps,
             shared: Some(&self.basis),
+            skeleton: None,
         };
         encode_fixed(&input, self.p)
     }
@@ -622,6 +623,7 @@ mod tests {
             points: m.point_count(),
             fps: m.fps,
             shared: Some(basis),
+            skeleton: None,
         }
     }
 
@@ -632,7 +634,7 @@ mod tests {
         basis: &Basis,
         points: usize,
     ) -> Result<Vec<f32>> {
-        let d = LsdtClip.decoder(params, points, Some(Arc::new(basis.clone())))?;
+        let d = LsdtClip.decoder(params, points, &Some(Arc::new(basis.clone())).into())?;
         let mut out = Vec::new();
         for c in chunks {
             let mut frames = vec![0f32; c.frames * points * 3];

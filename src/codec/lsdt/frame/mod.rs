@@ -414,10 +414,10 @@ impl Codec for LsdtFrame {
         &self,
         params: &[u8],
         points: usize,
-        shared: Option<Arc<Basis>>,
+        shared: &crate::codec::Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
         let (p, coding) = FrameParams::parse(params)?;
-        let spatial = Spatial::for_take(shared.as_deref(), points, "lsdt-frame")?;
+        let spatial = Spatial::for_take(shared.basis.as_deref(), points, "lsdt-frame")?;
         Ok(match coding {
             Coding::Adaptive => Box::new(adaptive::Decoder::new(p, spatial)),
             Coding::Tables(t) => Box::new(tables::Decoder::new(p, spatial, &t)?),
@@ -514,6 +514,7 @@ mod tests {
             points,
             fps: 120.0,
             shared: Some(basis),
+            skeleton: None,
         }
     }
 
@@ -530,7 +531,7 @@ mod tests {
 
     fn decode(params: &[u8], chunks: &[ChunkOut], basis: &Basis, points: usize) -> Vec<f32> {
         let d = LsdtFrame
-            .decoder(params, points, Some(Arc::new(basis.clone())))
+            .decoder(params, points, &Some(Arc::new(basis.clone())).into())
             .unwrap();
         let mut out = Vec::new();
         for c in chunks {
@@ -681,7 +682,7 @@ mod tests {
         // Half a second of nine points: the models must not cost more than the frames.
         assert!(params.len() < 120, "{} bytes of side data", params.len());
         let d = LsdtFrame
-            .decoder(&params, points, Some(Arc::new(basis.clone())))
+            .decoder(&params, points, &Some(Arc::new(basis.clone())).into())
             .unwrap();
         let chunk = &chunks[0].bytes;
         let mut out = vec![0f32; frames * points * 3];

@@ -1,0 +1,225 @@
+//! Skeletons stored once: a joint hierarchy (names, parents, offsets, channel lists in their
+//! rotation orders, End Sites), content addressed like a shared basis and referenced by every
+//! take of it.
+//!
+//! Why a stored object and not per-take metadata: a take of 130 frames coded at 1 mm takes
+//! ~3 KB, and the hierarchy of a 50-joint rig as JSON took as much again in every row. Codecs
+//! that keep channel values ([`super::Codec::codes_channels`]) need the hierarchy to turn
+//! decoded channels into positions (FK), so their headers name the rig by hash and a decoder
+//! is built only with the rig of that hash.
+//!
+//! # Format
+//! `"MCSK"`, version u16, joint count u32; per joint, parents first: name length u16 and
+//! UTF-8 bytes, parent index u32 (`u32::MAX` for the root), flags u8 (bit 0: End Site),
+//! offset 3 × f64, channel count u8, one byte per channel (0–2: X/Y/Z position, 3–5: X/Y/Z
+//! rotation). All little-endian. The id is the BLAKE3 hash of these bytes (hex).
+
+use super::basis::hex;
+use super::error::{malformed, Error, Result};
+use super::wire::{Reader, Writer};
+use crate::motion::skeleton::{Channel, Fk, Joint, Skeleton};
+use crate::motion::decimal::PrintedValues;
+
+const MAGIC: &[u8; 4] = b"MCSK";
+const VERSION: u16 = 1;
+const CHANNELS: [Channel; 6] = [
+    Channel::Xposition,
+    Channel::Yposition,
+    Channel::Zposition,
+    Channel::Xrotation,
+    Channel::Yrotation,
+    Channel::Zrotation,
+];
+
+/// A joint hierarchy with its canonical bytes and content hash.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rig {
+    joints: Vec<Joint>,
+    channels: usize,
+    bytes: Vec<u8>,
+    hash: [u8; 32],
+}
+
+impl Rig {
+    /// The rig of these joints, checked as a skeleton is (parents first, one root, no
+    /// channels on End Sites).
+    pub fn new(joints: Vec<Joint>) -> Result<Rig> {
+        let joints = Skeleton::new(joints, Vec::new())
+            .map_err(|e| Error::Invalid(format!("skeleton: {e}")))?
+            .joints;
+        if joints.is_empty() {
+            return Err(Error::Invalid("a skeleton without joints".into()));
+        }
+        let mut w = Writer::new();
+        w.bytes(MAGIC).bytes(&VERSION.to_le_bytes());
+        w.u32(joints.len() as u32);
+        for j in &joints {
+            let name = j.name.as_bytes();
+            let len = u16::try_from(name.len())
+                .map_err(|_| Error::Invalid(format!("joint name of {} bytes", name.len())))?;
+            w.bytes(&len.to_le_bytes()).bytes(name);
+            w.u32(j.parent.map_or(u32::MAX, |p| p as u32));
+            w.bytes(&[u8::from(j.end_site)]);
+            for v in j.offset {
+                w.f64(v);
+            }
+            w.bytes(&[j.channels.len() as u8]);
+            for c in &j.channels {
+                let code = CHANNELS.iter().position(|k| k == c).expect("every channel");
+                w.bytes(&[code as u8]);
+            }
+        }
+        let bytes = w.0;
+        let hash = *blake3::hash(&bytes).as_bytes();
+        let channels = joints.iter().map(|j| j.channels.len()).sum();
+        Ok(Rig {
+            joints,
+            channels,
+            bytes,
+            hash,
+        })
+    }
+
+    /// Parse stored bytes; at most `max_joints` joints are allocated.
+    pub fn parse(bytes: &[u8], max_joints: u64) -> Result<Rig> {
+        let mut r = Reader::named(bytes, "skeleton");
+        if r.take(4)? != MAGIC {
+            return Err(malformed("not a mocapstore skeleton (bad magic)"));
+        }
+        let version = r.u16()?;
+        if version != VERSION {
+            return Err(Error::Unsupported(format!("skeleton version {version}")));
+        }
+        let n = r.u32()?;
+        if u64::from(n) > max_joints {
+            return Err(Error::Limit {
+                what: "joint count",
+                actual: n.into(),
+                limit: max_joints,
+            });
+        }
+        // Each joint takes at least 32 bytes, so a forged count cannot make us allocate.
+        let mut joints = Vec::with_capacity((n as usize).min(bytes.len() / 32));
+        for _ in 0..n {
+            let len = r.u16()?;
+            let name = std::str::from_utf8(r.take(len.into())?)
+                .map_err(|_| malformed("a joint name is not UTF-8"))?
+                .to_string();
+            let parent = match r.u32()? {
+                u32::MAX => None,
+                p => Some(p as usize),
+            };
+            let end_site = match r.u8()? {
+                0 => false,
+                1 => true,
+                f => return Err(malformed(format!("joint flags {f:#x}"))),
+            };
+            let offset = [r.f64()?, r.f64()?, r.f64()?];
+            if offset.iter().any(|v| !v.is_finite()) {
+                return Err(malformed("a joint offset is not finite"));
+            }
+            let count = r.u8()?;
+            let mut channels = Vec::with_capacity(usize::from(count.min(6)));
+            for _ in 0..count {
+                let c = r.u8()?;
+                channels.push(
+                    *CHANNELS
+                        .get(usize::from(c))
+                        .ok_or_else(|| malformed(format!("channel code {c}")))?,
+                );
+            }
+            joints.push(Joint {
+                name,
+                parent,
+                offset,
+                channels,
+                end_site,
+            });
+        }
+        r.finish()?;
+        let rig = Rig::new(joints).map_err(|e| malformed(e.to_string()))?;
+        if rig.bytes != bytes {
+            return Err(malformed("skeleton bytes are not in canonical form"));
+        }
+        Ok(rig)
+    }
+
+    pub fn joints(&self) -> &[Joint] {
+        &self.joints
+    }
+
+    /// Channel values per frame.
+    pub fn channel_count(&self) -> usize {
+        self.channels
+    }
+
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
+    pub fn hash(&self) -> [u8; 32] {
+        self.hash
+    }
+
+    /// The id under which it is stored: the hash in hex.
+    pub fn id(&self) -> String {
+        hex(&self.hash)
+    }
+
+    /// Joint positions (`frames × joints × 3`, f32) of channel values
+    /// (`frames × channel_count()`), by the same FK as reading the file: a decoder that
+    /// gives back the values ingest read gives back the positions ingest measured.
+    pub fn positions(&self, values: &[f64], out: &mut [f32]) {
+        let (cc, w) = (self.channels, self.joints.len() * 3);
+        let mut fk = Fk::new(&self.joints);
+        let mut frame = vec![0f64; w];
+        for (vals, to) in values.chunks_exact(cc.max(1)).zip(out.chunks_exact_mut(w)) {
+            fk.frame(&self.joints, vals, &mut frame);
+            for (t, v) in to.iter_mut().zip(&frame) {
+                *t = *v as f32;
+            }
+        }
+    }
+}
+
+/// Channel values of some frames, as a codec that keeps them decodes them: values in file
+/// order (`frames × channels`), and for a lossless codec the characters they were printed
+/// with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channels {
+    pub values: Vec<f64>,
+    pub printed: Option<PrintedValues>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::synthetic::chain_bvh;
+
+    fn rig() -> Rig {
+        let m = crate::motion::formats::read(chain_bvh(5).as_bytes(), &Default::default())
+            .unwrap()
+            .motion;
+        Rig::new(m.skeleton.unwrap().joints).unwrap()
+    }
+
+    #[test]
+    fn parses_back_to_the_same_rig_and_refuses_damage() {
+        let r = rig();
+        let again = Rig::parse(r.bytes(), 100).unwrap();
+        assert_eq!(again, r);
+        assert_eq!(r.id().len(), 64);
+        assert!(matches!(Rig::parse(r.bytes(), 2), Err(Error::Limit { .. })));
+        for cut in 0..r.bytes().len() {
+            assert!(Rig::parse(&r.bytes()[..cut], 100).is_err());
+        }
+        for i in 0..r.bytes().len() {
+            let mut b = r.bytes().to_vec();
+            b[i] ^= 0x5a;
+            // Either refused, or a different rig (a changed name or offset).
+            if let Ok(other) = Rig::parse(&b, 100) {
+                assert_ne!(other.hash(), r.hash());
+            }
+        }
+    }
+}
