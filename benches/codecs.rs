@@ -59,6 +59,7 @@ fn decode(c: &mut Criterion) {
         points: other.point_count(),
         fps: other.fps,
         shared: None,
+        skeleton: None,
     };
     let set = Arc::new(train_bases(&[input], 4, &SetOptions::default()).expect("trains"));
     for (codec, bound, basis) in [
@@ -90,6 +91,7 @@ fn encode(c: &mut Criterion) {
         points: m.point_count(),
         fps: m.fps,
         shared: None,
+        skeleton: None,
     };
     let mut g = c.benchmark_group("encode_cmu_01_03");
     g.sample_size(10);

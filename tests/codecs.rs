@@ -46,6 +46,7 @@ fn bases_for(ms: &[&Motion]) -> Vec<Arc<Basis>> {
             points,
             fps: m.fps,
             shared: None,
+            skeleton: None,
         })
         .collect();
     let set = train_bases(&inputs, 2, &SetOptions::default()).expect("mdtt set");

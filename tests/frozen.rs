@@ -144,6 +144,7 @@ fn freeze_current_bitstreams() {
         points: m.point_count(),
         fps: m.fps,
         shared,
+        skeleton: None,
     };
     let set = Arc::new(train_bases(&[input(None)], 2, &SetOptions::default()).unwrap());
     let bound = ErrorBound::MaxMm(1.0);

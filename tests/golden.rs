@@ -26,6 +26,7 @@ fn input<'a>(m: &Motion, filled: &'a [f32], shared: Option<&'a Basis>) -> codec:
         points: m.point_count(),
         fps: m.fps,
         shared,
+        skeleton: None,
     }
 }
 

@@ -173,6 +173,7 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
     }
     let io = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
     std::fs::create_dir_all(dir.join("bases")).map_err(|e| io(dir, e))?;
+    std::fs::create_dir_all(dir.join("skeletons")).map_err(|e| io(dir, e))?;
     let store = open_existing(&args.selection.database_url).await?;
     let rows = mocapstore::service::library::all_takes(&store, &args.selection.filter())
         .await
@@ -207,6 +208,12 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
                 let meta = serde_json::to_vec_pretty(b).map_err(|e| e.to_string())?;
                 let m = p.with_extension("json");
                 std::fs::write(&m, meta).map_err(|e| io(&m, e))?;
+            }
+        }
+        if let Some(rig) = &t.skeleton {
+            let p = dir.join("skeletons").join(format!("{}.mcsk", rig.id()));
+            if !p.exists() {
+                std::fs::write(&p, rig.bytes()).map_err(|e| io(&p, e))?;
             }
         }
         let line = ManifestLine {
@@ -269,8 +276,12 @@ async fn import_all(args: &ImportArgs) -> Result<(usize, usize), String> {
             row.payload = read(&format!("bases/{id}.mcsb"))?;
             bases.push(row);
         }
+        let skeleton = match &line.take.skeleton {
+            Some(id) => Some(read(&format!("skeletons/{id}.mcsk"))?),
+            None => None,
+        };
         let bitstream = read(&line.bitstream)?;
-        match archive::import_take(&store, &line, bitstream, bases).await {
+        match archive::import_take(&store, &line, bitstream, bases, skeleton).await {
             Ok(Imported::Stored) => stored += 1,
             Ok(Imported::AlreadyStored) => already += 1,
             Err(e) => return Err(format!("{} (take {}): {e}", line.bitstream, line.take.id)),

@@ -33,6 +33,10 @@ pub struct IngestArgs {
     /// frame, clip, sequence or any.
     #[arg(long)]
     latency: Option<String>,
+    /// For skeleton takes: animation (the default: only codecs that keep the channel values,
+    /// so the take comes back as BVH) or positions (position codecs compete too).
+    #[arg(long)]
+    keep: Option<String>,
     /// Unit of the files (mm, cm, m, in, cmu or metres per unit).
     #[arg(long)]
     unit: Option<String>,
@@ -112,6 +116,7 @@ async fn upload_all(args: &IngestArgs, files: Vec<PathBuf>) -> Vec<Outcome> {
         ("tags", &args.tags),
         ("codec", &args.codec),
         ("latency", &args.latency),
+        ("keep", &args.keep),
         ("unit", &args.unit),
     ] {
         if let Some(v) = v {

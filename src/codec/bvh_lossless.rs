@@ -156,7 +156,9 @@ impl ChunkDecoder for LosslessDecoder {
         if dec.overran() {
             return Err(malformed("bvh-lossless chunk is truncated"));
         }
-        let values = (0..printed.values.len()).map(|i| printed.value(i)).collect();
+        let values = (0..printed.values.len())
+            .map(|i| printed.value(i))
+            .collect();
         Ok(Channels {
             values,
             printed: Some(printed),
@@ -464,7 +466,7 @@ impl Chunk {
         } else {
             Notation::Fixed
         };
-        if n == Notation::Fixed && e > 0 || n == Notation::Fixed && e < -18 {
+        if n == Notation::Fixed && !(-18..=0).contains(&e) {
             return Err(malformed(format!("fixed notation with exponent {e}")));
         }
         t.notation = n as u8;
@@ -531,9 +533,9 @@ fn choose_prediction(p: &PrintedValues, first: usize, stride: usize, frames: usi
 mod tests {
     use super::*;
     use crate::codec::{decode_all_with, encode, ErrorBound, Reader, Stored};
+    use crate::motion::format::Format;
     use crate::motion::formats::{read_as, ReadOptions};
     use crate::motion::synthetic::dancer_bvh;
-    use crate::motion::format::Format;
 
     fn load(text: &str) -> crate::motion::Motion {
         read_as(Format::Bvh, text.as_bytes(), &ReadOptions::default())
@@ -543,7 +545,11 @@ mod tests {
 
     fn motion_rows(text: &str) -> Vec<&str> {
         let at = text.find("Frame Time").unwrap();
-        text[at..].lines().skip(1).filter(|l| !l.trim().is_empty()).collect()
+        text[at..]
+            .lines()
+            .skip(1)
+            .filter(|l| !l.trim().is_empty())
+            .collect()
     }
 
     #[test]
@@ -575,7 +581,9 @@ mod tests {
         let source = Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
         // Whole take and a range across a chunk boundary, character for character.
         for (a, b) in [(0, 400), (100, 333)] {
-            let ch = reader.read_channels(a..b, rig.channel_count(), &source).unwrap();
+            let ch = reader
+                .read_channels(a..b, rig.channel_count(), &source)
+                .unwrap();
             let p = ch.printed.unwrap();
             let cc = rig.channel_count();
             for (f, row) in rows[a..b].iter().enumerate() {
@@ -590,7 +598,10 @@ mod tests {
             }
         }
         assert!(decode_all_with(&enc.container, Shared::default()).is_err());
-        assert_eq!(decode_all_with(&enc.container, shared).unwrap(), m.positions());
+        assert_eq!(
+            decode_all_with(&enc.container, shared).unwrap(),
+            m.positions()
+        );
     }
 
     #[test]
@@ -603,7 +614,12 @@ mod tests {
         // The jitter alone (0.05 wide at 4 decimals) is ~9 bits of noise per value, ~11 after a
         // quadratic predictor amplifies it.
         assert!(bits < 12.5, "{bits:.2} bits per value");
-        assert!(enc.stored_bytes * 3 < text.len(), "{} of {}", enc.stored_bytes, text.len());
+        assert!(
+            enc.stored_bytes * 3 < text.len(),
+            "{} of {}",
+            enc.stored_bytes,
+            text.len()
+        );
     }
 
     #[test]
@@ -612,7 +628,14 @@ mod tests {
         let enc = encode(&m, CodecId::BvhLossless, ErrorBound::MaxMm(0.0)).unwrap();
         let rig = Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
         let d = BvhLossless
-            .decoder(&[VERSION], m.point_count(), &Shared { basis: None, rig: Some(rig) })
+            .decoder(
+                &[VERSION],
+                m.point_count(),
+                &Shared {
+                    basis: None,
+                    rig: Some(rig),
+                },
+            )
             .unwrap();
         let chunk = &enc.container.chunks[0];
         let frames = enc.container.header.chunks[0].frames as usize;

@@ -107,8 +107,12 @@ pub trait Codec: Send + Sync {
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput>;
     /// Parse the header params once; the decoder then decodes any chunk. `shared` is the
     /// basis the header names (the pipeline checks its hash), for codecs that use one.
-    fn decoder(&self, params: &[u8], points: usize, shared: &Shared)
-        -> Result<Box<dyn ChunkDecoder>>;
+    fn decoder(
+        &self,
+        params: &[u8],
+        points: usize,
+        shared: &Shared,
+    ) -> Result<Box<dyn ChunkDecoder>>;
     /// The kind of shared basis this codec codes with, if it uses one: it then competes only
     /// for takes whose layout has such a basis.
     fn basis_kind(&self) -> Option<BasisKind> {

@@ -99,7 +99,10 @@ pub fn encode_variant(
         points,
         fps: motion.fps,
         shared: shared.map(|b| b.as_ref()),
-        skeleton: rig.as_ref().zip(motion.skeleton.as_ref()).map(|(r, s)| (r.as_ref(), s)),
+        skeleton: rig
+            .as_ref()
+            .zip(motion.skeleton.as_ref())
+            .map(|(r, s)| (r.as_ref(), s)),
     };
     let out = encoder(&input, target)?;
 

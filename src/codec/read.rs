@@ -200,7 +200,10 @@ impl Reader {
             let (_, codec_bytes) = unpack_chunk(payload, r.len() * self.header.points as usize)?;
             let got = self.decoder.decode_channels(codec_bytes, r.len())?;
             if got.values.len() != r.len() * channels
-                || got.printed.as_ref().is_some_and(|p| p.values.len() != got.values.len())
+                || got
+                    .printed
+                    .as_ref()
+                    .is_some_and(|p| p.values.len() != got.values.len())
             {
                 return Err(malformed(format!(
                     "chunk {i} holds {} channel values, its {} frames need {}",
@@ -209,19 +212,25 @@ impl Reader {
                     r.len() * channels
                 )));
             }
-            let (lo, hi) = ((r.start.max(start) - r.start) * channels, (r.end.min(end) - r.start) * channels);
+            let (lo, hi) = (
+                (r.start.max(start) - r.start) * channels,
+                (r.end.min(end) - r.start) * channels,
+            );
             out.values.extend_from_slice(&got.values[lo..hi]);
             match (got.printed, &mut out.printed) {
                 (Some(p), Some(acc)) => {
                     let base = acc.verbatim.len() as i64;
                     acc.verbatim.extend(p.verbatim);
-                    acc.values.extend(p.values[lo..hi].iter().map(|v| match v.notation {
-                        crate::motion::decimal::Notation::Verbatim => crate::motion::decimal::Printed {
-                            digits: v.digits + base,
-                            ..*v
-                        },
-                        _ => *v,
-                    }));
+                    acc.values
+                        .extend(p.values[lo..hi].iter().map(|v| match v.notation {
+                            crate::motion::decimal::Notation::Verbatim => {
+                                crate::motion::decimal::Printed {
+                                    digits: v.digits + base,
+                                    ..*v
+                                }
+                            }
+                            _ => *v,
+                        }));
                 }
                 (Some(p), none @ None) if out.values.len() == hi - lo => {
                     *none = Some(crate::motion::decimal::PrintedValues {
@@ -230,7 +239,11 @@ impl Reader {
                     });
                 }
                 (None, None) => {}
-                _ => return Err(malformed(format!("chunk {i}: printed values in some chunks only"))),
+                _ => {
+                    return Err(malformed(format!(
+                        "chunk {i}: printed values in some chunks only"
+                    )))
+                }
             }
         }
         Ok(out)
@@ -287,7 +300,11 @@ pub fn decoder(header: &Header, shared: &Shared) -> Result<Box<dyn ChunkDecoder>
             header.codec
         )));
     }
-    c.decoder(&header.params, header.points as usize, &Shared { basis, rig })
+    c.decoder(
+        &header.params,
+        header.points as usize,
+        &Shared { basis, rig },
+    )
 }
 
 /// Decode chunk `index` (its payload as stored): all its frames, NaN where the take has

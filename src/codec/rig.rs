@@ -17,8 +17,8 @@
 use super::basis::hex;
 use super::error::{malformed, Error, Result};
 use super::wire::{Reader, Writer};
-use crate::motion::skeleton::{Channel, Fk, Joint, Skeleton};
 use crate::motion::decimal::PrintedValues;
+use crate::motion::skeleton::{Channel, Fk, Joint, Skeleton};
 
 const MAGIC: &[u8; 4] = b"MCSK";
 const VERSION: u16 = 1;

@@ -9,6 +9,7 @@ mod error;
 mod library;
 mod metrics;
 mod sequences;
+mod skeletons;
 mod streams;
 mod views;
 
@@ -112,6 +113,11 @@ pub fn router(state: AppState) -> Router {
         )
         .route("/v1/bases/{id}", get(bases::get).delete(bases::delete))
         .route("/v1/jobs/{id}", get(bases::job))
+        .route("/v1/skeletons", get(skeletons::list))
+        .route(
+            "/v1/skeletons/{id}",
+            get(skeletons::get).delete(skeletons::delete),
+        )
         .route("/v1/streams", post(streams::open.layer(json.clone())))
         .route("/v1/streams/{id}", get(streams::get))
         .route(

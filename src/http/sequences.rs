@@ -17,7 +17,7 @@ use crate::limits::Limits;
 use crate::motion::formats::{self, Format};
 use crate::motion::units::parse_unit;
 use crate::motion::{Motion, Unit, UnitSource};
-use crate::service::choose::CodecRequest;
+use crate::service::choose::{CodecRequest, Keep};
 use crate::service::fetch::{self, TimeRange};
 use crate::service::ingest::{self, IngestRequest};
 use crate::service::take::Label;
@@ -33,6 +33,7 @@ pub struct IngestQuery {
     max_error_mm: Option<f64>,
     mean_error_mm: Option<f64>,
     latency: Option<String>,
+    keep: Option<String>,
     lenient: Option<bool>,
 }
 
@@ -79,6 +80,7 @@ impl IngestQuery {
         self.unit = self.unit.or_else(|| get("unit"));
         self.codec = self.codec.or_else(|| get("codec"));
         self.latency = self.latency.or_else(|| get("latency"));
+        self.keep = self.keep.or_else(|| get("keep"));
         if self.fps.is_none() {
             self.fps = num("fps")?;
         }
@@ -114,6 +116,10 @@ impl IngestQuery {
             None => Latency::Sequence,
             Some(l) => l.parse::<Latency>().map_err(|e| bad(&e))?,
         };
+        let keep = match self.keep.as_deref() {
+            None => Keep::default(),
+            Some(k) => k.parse::<Keep>().map_err(|e| bad(&e))?,
+        };
         let unit = match self.unit.as_deref() {
             None => None,
             Some(u) => Some(parse_unit(u).map_err(|e| bad(&e))?),
@@ -146,6 +152,7 @@ impl IngestQuery {
             codec,
             bound,
             latency,
+            keep,
             limits: formats::Limits::from(limits),
             format_hint: None,
             lenient: self.lenient.unwrap_or(false),
@@ -245,14 +252,12 @@ pub fn frames_request(q: FramesQuery) -> Result<FramesRequest, ApiError> {
             .parse::<Format>()
             .map_err(|e| ApiError::bad_request(e.to_string()))?,
     };
-    if format == Format::Bvh {
-        return Err(crate::service::Error::Unsatisfiable(
-            "BVH output needs joint rotations, and the stored codecs keep point positions only"
-                .into(),
-        )
-        .into());
-    }
     let points = q.points.map(|p| p.split(',').map(str::to_string).collect());
+    if format == Format::Bvh && points.is_some() {
+        return Err(ApiError::bad_request(
+            "BVH output is the whole skeleton: leave out points",
+        ));
+    }
     Ok(FramesRequest {
         range,
         format,
@@ -271,6 +276,17 @@ pub async fn frames(
         format,
         points,
     } = frames_request(q)?;
+    if format == Format::Bvh {
+        let b = fetch::bvh(&state.store, &id, range).await?;
+        state.metrics.decoded(b.end - b.start, b.bytes.len());
+        let mut headers = HeaderMap::new();
+        let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
+        headers.insert("x-frames", hv((b.end - b.start).to_string()));
+        headers.insert("x-start-frame", hv(b.start.to_string()));
+        headers.insert("x-fps", hv(b.fps.to_string()));
+        headers.insert(header::CONTENT_TYPE, HeaderValue::from_static("text/plain"));
+        return Ok((headers, b.bytes).into_response());
+    }
     let frames = fetch::frames(&state.store, &state.caches, &id, range, points.as_deref()).await?;
     state
         .metrics

@@ -244,18 +244,40 @@ mod tests {
     #[test]
     fn the_three_notations_print_back_the_same_characters() {
         for t in [
-            "0", "-0", "12", "0.0000", "-0.0000", "-12.3456", "0.0012", "180.000000", "1500",
-            "5.1072e-06", "-1e-05", "1.50000e+20", "3e-120", "1e-5", "-2.5e7", "1e0", "7e-10",
+            "0",
+            "-0",
+            "12",
+            "0.0000",
+            "-0.0000",
+            "-12.3456",
+            "0.0012",
+            "180.000000",
+            "1500",
+            "5.1072e-06",
+            "-1e-05",
+            "1.50000e+20",
+            "3e-120",
+            "1e-5",
+            "-2.5e7",
+            "1e0",
+            "7e-10",
         ] {
             let p = Printed::read(t).unwrap_or_else(|| panic!("{t} not read"));
             assert_ne!(p.notation, Notation::Verbatim);
             let mut s = String::new();
             p.write(&mut s);
             assert_eq!(s, t);
-            assert_eq!(p.to_f64().to_bits(), t.parse::<f64>().unwrap().to_bits(), "{t}");
+            assert_eq!(
+                p.to_f64().to_bits(),
+                t.parse::<f64>().unwrap().to_bits(),
+                "{t}"
+            );
         }
         let p = Printed::read("-12.3456").unwrap();
-        assert_eq!((p.digits, p.exp, p.notation), (-123456, -4, Notation::Fixed));
+        assert_eq!(
+            (p.digits, p.exp, p.notation),
+            (-123456, -4, Notation::Fixed)
+        );
         let p = Printed::read("5.1072e-06").unwrap();
         assert_eq!((p.digits, p.exp, p.notation), (51072, -10, Notation::ExpC));
     }
@@ -263,8 +285,19 @@ mod tests {
     #[test]
     fn other_spellings_are_kept_verbatim() {
         for t in [
-            "+1", ".5", "5.", "007", "1E5", "1e+5", "0.0e+00", "0.5e-3", "1e05", "1234567890123456789",
-            "1.0e", "nan", "1e",
+            "+1",
+            ".5",
+            "5.",
+            "007",
+            "1E5",
+            "1e+5",
+            "0.0e+00",
+            "0.5e-3",
+            "1e05",
+            "1234567890123456789",
+            "1.0e",
+            "nan",
+            "1e",
         ] {
             assert_eq!(Printed::read(t), None, "{t}");
         }
@@ -284,7 +317,11 @@ mod tests {
 
     #[test]
     fn values_beyond_the_exact_fast_path_still_parse_exactly() {
-        for t in ["123456789012345678", "1.23456789012345e-300", "9.007199254740993e+30"] {
+        for t in [
+            "123456789012345678",
+            "1.23456789012345e-300",
+            "9.007199254740993e+30",
+        ] {
             let p = Printed::read(t).unwrap();
             assert_eq!(p.to_f64(), t.parse::<f64>().unwrap(), "{t}");
         }

@@ -118,22 +118,38 @@ pub fn dancer_bvh(frames: usize, fps: f64, seed: u64, decimals: usize) -> String
             (_, "End") => "End Site".to_string(),
             _ => format!("JOINT {name}"),
         };
-        s.push_str(&format!("{ind}{head}\n{ind}{{\n{ind}  OFFSET {:.5} {:.5} {:.5}\n", o[0], o[1], o[2]));
+        s.push_str(&format!(
+            "{ind}{head}\n{ind}{{\n{ind}  OFFSET {:.5} {:.5} {:.5}\n",
+            o[0], o[1], o[2]
+        ));
         if parent == usize::MAX {
-            s.push_str(&format!("{ind}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"));
+            s.push_str(&format!(
+                "{ind}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+            ));
             order.push(6);
         } else if name != "End" {
-            s.push_str(&format!("{ind}  CHANNELS 3 Zrotation Xrotation Yrotation\n"));
+            s.push_str(&format!(
+                "{ind}  CHANNELS 3 Zrotation Xrotation Yrotation\n"
+            ));
             order.push(3);
         }
         stack.push((i, d, true));
         stack.extend(children[i].iter().rev().map(|&k| (k, d + 1, false)));
     }
     let channels: usize = order.iter().sum();
-    s.push_str(&format!("MOTION\nFrames: {frames}\nFrame Time: {:.6}\n", 1.0 / fps));
+    s.push_str(&format!(
+        "MOTION\nFrames: {frames}\nFrame Time: {:.6}\n",
+        1.0 / fps
+    ));
     let mut rng = Rng::new(seed);
     let waves: Vec<[f64; 3]> = (0..channels)
-        .map(|_| [5.0 + 40.0 * rng.unit(), 0.3 + 1.5 * rng.unit(), std::f64::consts::TAU * rng.unit()])
+        .map(|_| {
+            [
+                5.0 + 40.0 * rng.unit(),
+                0.3 + 1.5 * rng.unit(),
+                std::f64::consts::TAU * rng.unit(),
+            ]
+        })
         .collect();
     for f in 0..frames {
         let t = f as f64 / fps;

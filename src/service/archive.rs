@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::take::Take;
 use super::{blocking, Error, Result};
-use crate::codec::{self, basis::hex, Basis, Container, Header};
+use crate::codec::{self, basis::hex, Basis, CodecId, Container, Header, Rig, Shared};
 use crate::motion::formats::Format;
 use crate::motion::Motion;
 use crate::store::{BasisRow, ChunkEntry, Filter, NewTake, Store};
@@ -59,7 +59,7 @@ pub async fn verify(
             })
         };
         // A record that does not parse is a problem to report, not a reason to stop.
-        let checked = match Take::from_row(row) {
+        let checked = match super::fetch::parse(store, row).await {
             Ok(take) => check_take(store, &take).await,
             Err(e) => Err(e),
         };
@@ -189,10 +189,10 @@ async fn check_chunks(
             return Ok(problems);
         }
     };
-    let shared = match super::fetch::shared_basis(store, &header).await {
+    let shared = match super::fetch::shared(store, &header).await {
         Ok(b) => b,
         Err(e) => {
-            problems.push(format!("its basis: {e}"));
+            problems.push(format!("its basis or skeleton: {e}"));
             return Ok(problems);
         }
     };
@@ -230,15 +230,19 @@ pub struct ExportedTake {
     pub take: Take,
     pub container: Container,
     pub bases: Vec<BasisRow>,
+    /// The take's skeleton, if it is a skeleton take.
+    pub skeleton: Option<Arc<Rig>>,
     pub format: Format,
     pub file: Vec<u8>,
 }
 
 /// The open format a take's frames are written back to: its own where we write it, else the
-/// closest that keeps names, units and gaps (C3D → TRC; BVH → JSON positions until joint
-/// rotations are stored).
-pub fn export_format(source_format: &str) -> Format {
+/// closest that keeps names, units and gaps (C3D → TRC; BVH → BVH when its codec kept the
+/// channel values, else JSON positions).
+pub fn export_format(source_format: &str, codec: CodecId) -> Format {
+    let keeps_channels = codec::codec(codec).is_ok_and(|c| c.codes_channels());
     match source_format {
+        "bvh" if keeps_channels => Format::Bvh,
         "trc" | "c3d" => Format::Trc,
         "npy" => Format::Npy,
         _ => Format::Json,
@@ -256,26 +260,35 @@ pub async fn export_take(store: &Store, take: Take) -> Result<ExportedTake> {
         .collect();
     let container = Container { header, chunks };
     let mut bases = Vec::new();
-    let mut shared = None;
     if let Some(h) = &container.header.basis {
         let id = hex(h);
         let b = store
             .basis(&id)
             .await?
             .ok_or_else(|| Error::NotFound(format!("basis {id}")))?;
-        shared = Some(Arc::new(super::bases::parse(&b)?));
         bases.push(b);
     }
-    let format = export_format(&take.source_format);
+    let shared = super::fetch::shared(store, &container.header).await?;
+    let skeleton = match &take.skeleton {
+        Some(id) => Some(super::skeletons::load(store, id).await?),
+        None => None,
+    };
+    let format = export_format(&take.source_format, take.codec);
     let (names, unit, fps) = (
         take.meta.point_names.clone(),
         take.meta.unit.clone(),
         take.fps,
     );
     let (container, file) = blocking(move || -> Result<(Container, Vec<u8>)> {
-        let frames = codec::decode_all_with(&container, shared)?;
-        let motion = Motion::new(fps, unit, names, frames, None).map_err(Error::BadInput)?;
-        let file = crate::motion::formats::write(&motion, format).map_err(Error::BadInput)?;
+        let file = if format == Format::Bvh {
+            let frames = container.header.frames as usize;
+            let source = codec::Stored::new(0, container.chunks.iter().map(Vec::as_slice));
+            super::fetch::bvh_of(&container.header, shared, &source, 0..frames)?
+        } else {
+            let frames = codec::decode_all_with(&container, shared)?;
+            let motion = Motion::new(fps, unit, names, frames, None).map_err(Error::BadInput)?;
+            crate::motion::formats::write(&motion, format).map_err(Error::BadInput)?
+        };
         Ok((container, file))
     })
     .await??;
@@ -283,6 +296,7 @@ pub async fn export_take(store: &Store, take: Take) -> Result<ExportedTake> {
         take,
         container,
         bases,
+        skeleton,
         format,
         file,
     })
@@ -319,6 +333,7 @@ pub async fn import_take(
     line: &ManifestLine,
     bitstream: Vec<u8>,
     bases: Vec<BasisRow>,
+    skeleton: Option<Vec<u8>>,
 ) -> Result<Imported> {
     if store.exists(&line.take.id).await? {
         return Ok(Imported::AlreadyStored);
@@ -347,6 +362,41 @@ pub async fn import_take(
             line.take.id
         )));
     }
+    let skeleton = match (&line.take.skeleton, skeleton) {
+        (None, None) => None,
+        (Some(id), Some(bytes)) => {
+            let rig = Rig::parse(&bytes, crate::limits::Limits::default().points)
+                .map_err(|e| Error::InvalidRequest(format!("skeleton {id}: {e}")))?;
+            if rig.id() != *id {
+                return Err(Error::InvalidRequest(format!(
+                    "skeleton file {id} holds skeleton {}",
+                    rig.id()
+                )));
+            }
+            Some(super::skeletons::row_of(
+                &rig,
+                &line.take.layout,
+                line.take.created_at,
+            ))
+            .map(|row| (Arc::new(rig), row))
+        }
+        _ => {
+            return Err(Error::InvalidRequest(format!(
+                "take {} names a skeleton the export does not hold, or the reverse",
+                line.take.id
+            )))
+        }
+    };
+    let rig = match (&header.rig, &skeleton) {
+        (None, _) => None,
+        (Some(h), Some((r, _))) if r.hash() == *h => Some(r.clone()),
+        (Some(h), _) => {
+            return Err(Error::InvalidRequest(format!(
+                "the bitstream decodes with skeleton {}, which the take does not name",
+                hex(h)
+            )))
+        }
+    };
     let shared = match &header.basis {
         None => None,
         Some(h) => Some(
@@ -361,7 +411,11 @@ pub async fn import_take(
     };
     let want = line.take.meta.decoded_blake3.clone();
     let (container, shared) = blocking(move || -> Result<(Container, Option<Arc<Basis>>)> {
-        let frames = codec::decode_all_with(&container, shared.clone())?;
+        let both = Shared {
+            basis: shared.clone(),
+            rig,
+        };
+        let frames = codec::decode_all_with(&container, both)?;
         if let Some(want) = want {
             if codec::decoded_digest(&frames) != want {
                 return Err(Error::InvalidRequest(
@@ -386,6 +440,7 @@ pub async fn import_take(
             row: take.to_row()?,
             chunks,
             basis: container.header.basis.as_ref().map(hex),
+            skeleton: skeleton.map(|(_, row)| row),
         })
         .await?;
     Ok(Imported::Stored)

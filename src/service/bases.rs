@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use super::{blocking, Error, Result};
 use crate::codec::{Basis, BasisKind};
-use crate::store::{BasisDeletion, BasisRow, Store};
+use crate::store::{BasisRow, Deletion, Store};
 
 /// Parse a stored basis, checking that its bytes still hash to its id.
 pub(super) fn parse(row: &BasisRow) -> Result<Basis> {
@@ -62,9 +62,9 @@ pub async fn get(store: &Store, id: &str) -> Result<BasisRow> {
 /// Delete a basis no take references.
 pub async fn delete(store: &Store, id: &str) -> Result<()> {
     match store.delete_basis(id).await? {
-        BasisDeletion::Deleted => Ok(()),
-        BasisDeletion::NotFound => Err(Error::NotFound(format!("basis {id}"))),
-        BasisDeletion::InUse(n) => Err(Error::Conflict(format!(
+        Deletion::Deleted => Ok(()),
+        Deletion::NotFound => Err(Error::NotFound(format!("basis {id}"))),
+        Deletion::InUse(n) => Err(Error::Conflict(format!(
             "basis {id} codes {n} stored take(s); delete them first"
         ))),
     }

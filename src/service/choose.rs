@@ -15,11 +15,39 @@ pub enum CodecRequest {
     Only(CodecId),
 }
 
+/// What of a skeleton take must survive coding: its animation (the channel values, so that
+/// it can be served as BVH and loaded into an animation tool), or only its joint positions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Keep {
+    /// Only codecs that keep the channel values compete (the default: for a BVH library the
+    /// animation is the data).
+    #[default]
+    Animation,
+    /// Position codecs compete too; the smallest wins, and may keep positions only.
+    Positions,
+}
+
+impl std::str::FromStr for Keep {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Keep, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "animation" => Ok(Keep::Animation),
+            "positions" => Ok(Keep::Positions),
+            other => Err(format!(
+                "unknown keep {other:?}; use animation or positions"
+            )),
+        }
+    }
+}
+
 /// The codecs to run, and those left out with the reason. `bases` are the kinds of shared
-/// basis trained for the take's layout: codecs that need another kind sit out.
+/// basis trained for the take's layout: codecs that need another kind sit out. For a
+/// skeleton take, `keep` says whether codecs that keep positions only may compete.
 pub fn candidates(
     request: CodecRequest,
     latency: Latency,
+    keep: Keep,
     m: &Motion,
     bases: &[BasisKind],
 ) -> (Vec<CodecId>, Vec<Skipped>) {
@@ -28,9 +56,16 @@ pub fn candidates(
     }
     let mut run = Vec::new();
     let mut skipped = Vec::new();
+    let animation = keep == Keep::Animation && m.skeleton.is_some();
     // New codecs take part by being implemented in `codec`: nothing here names one.
     for c in codec::available() {
-        let why = if c.latency() > latency {
+        let channels = codec::codec(c).is_ok_and(|k| k.codes_channels());
+        let why = if animation && !channels {
+            Some(
+                "keeps joint positions only, and keep=animation (the default for skeleton takes)"
+                    .into(),
+            )
+        } else if c.latency() > latency {
             Some(format!(
                 "latency class {:?} exceeds the requested {:?}",
                 c.latency(),
@@ -83,6 +118,9 @@ pub struct Decision {
     pub reason: String,
     pub tried: Vec<Tried>,
     pub skipped: Vec<Skipped>,
+    /// For a skeleton take chosen automatically: which rule chose the candidates.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub keep: Option<Keep>,
 }
 
 /// Pick the smallest successful candidate; `None` if every one failed.
@@ -107,6 +145,7 @@ pub fn decide(tried: Vec<Tried>, skipped: Vec<Skipped>, bound: &str) -> Option<D
         reason,
         tried,
         skipped,
+        keep: None,
     })
 }
 
@@ -129,17 +168,30 @@ mod tests {
     #[test]
     fn latency_and_length_filter_candidates() {
         let long = walker(600, 4, 120.0, 1, 0.0);
-        let (run, skipped) = candidates(CodecRequest::Auto, Latency::Sequence, &long, &[]);
+        let (run, skipped) = candidates(
+            CodecRequest::Auto,
+            Latency::Sequence,
+            Keep::default(),
+            &long,
+            &[],
+        );
         assert_eq!(run, vec![CodecId::Raw, CodecId::Quant, CodecId::Mdtt]);
         // Without a trained basis the shared-basis codecs sit out, and say why.
         assert_eq!(
             skipped.iter().map(|s| s.codec).collect::<Vec<_>>(),
-            vec![CodecId::LsdtClip, CodecId::LsdtFrame, CodecId::MdttShared]
+            vec![
+                CodecId::LsdtClip,
+                CodecId::LsdtFrame,
+                CodecId::MdttShared,
+                CodecId::BvhLossless
+            ]
         );
+        assert!(skipped[3].reason.contains("no skeleton"));
         assert!(skipped[0].reason.contains("no shared lsdt basis"));
         let (run, skipped) = candidates(
             CodecRequest::Auto,
             Latency::Sequence,
+            Keep::default(),
             &long,
             &[BasisKind::Lsdt],
         );
@@ -153,25 +205,73 @@ mod tests {
                 CodecId::LsdtFrame
             ]
         );
-        assert_eq!(skipped.len(), 1, "mdtt-shared: no mdtt-set basis");
+        assert_eq!(
+            skipped.len(),
+            2,
+            "mdtt-shared: no mdtt-set basis; bvh-lossless"
+        );
         let (run, skipped) = candidates(
             CodecRequest::Auto,
             Latency::Frame,
+            Keep::default(),
             &long,
             &[BasisKind::Lsdt],
         );
         assert_eq!(run, vec![CodecId::Raw, CodecId::Quant, CodecId::LsdtFrame]);
         assert_eq!(skipped[0].codec, CodecId::Mdtt);
         let short = walker(60, 4, 120.0, 1, 0.0);
-        let (run, _) = candidates(CodecRequest::Auto, Latency::Sequence, &short, &[]);
+        let (run, _) = candidates(
+            CodecRequest::Auto,
+            Latency::Sequence,
+            Keep::default(),
+            &short,
+            &[],
+        );
         assert!(!run.contains(&CodecId::Mdtt));
         let (run, _) = candidates(
             CodecRequest::Only(CodecId::Mdtt),
             Latency::Frame,
+            Keep::default(),
             &short,
             &[],
         );
         assert_eq!(run, vec![CodecId::Mdtt]);
+    }
+
+    #[test]
+    fn skeleton_takes_keep_their_animation_unless_asked_for_positions() {
+        let text = crate::motion::synthetic::dancer_bvh(300, 60.0, 1, 4);
+        let m = crate::motion::formats::read(text.as_bytes(), &Default::default())
+            .unwrap()
+            .motion;
+        let (run, skipped) = candidates(
+            CodecRequest::Auto,
+            Latency::Sequence,
+            Keep::Animation,
+            &m,
+            &[],
+        );
+        assert_eq!(run, vec![CodecId::BvhLossless]);
+        let raw = skipped.iter().find(|s| s.codec == CodecId::Raw).unwrap();
+        assert!(raw.reason.contains("keep=animation"), "{}", raw.reason);
+        let (run, _) = candidates(
+            CodecRequest::Auto,
+            Latency::Sequence,
+            Keep::Positions,
+            &m,
+            &[],
+        );
+        assert_eq!(
+            run,
+            vec![
+                CodecId::Raw,
+                CodecId::Quant,
+                CodecId::Mdtt,
+                CodecId::BvhLossless
+            ]
+        );
+        assert_eq!("positions".parse::<Keep>(), Ok(Keep::Positions));
+        assert!("bones".parse::<Keep>().is_err());
     }
 
     #[test]

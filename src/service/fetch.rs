@@ -8,8 +8,9 @@ use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::container::ChunkMeta;
 use crate::codec::read::Chunk;
-use crate::codec::{self, basis::hex, Basis, ChunkSource, Header, Limits, Reader, Stored};
-use crate::store::{ChunkEntry, ChunkRow, Store};
+use crate::codec::{self, basis::hex, ChunkSource, Header, Limits, Reader, Shared, Stored};
+use crate::motion::Skeleton;
+use crate::store::{ChunkEntry, ChunkRow, Store, TakeRow};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -76,7 +77,16 @@ pub async fn take(store: &Store, id: &str) -> Result<Take> {
         .get(id)
         .await?
         .ok_or_else(|| Error::NotFound(format!("sequence {id}")))?;
-    Take::from_row(row)
+    parse(store, row).await
+}
+
+/// A stored row parsed, with the skeleton it names (which names its points).
+pub async fn parse(store: &Store, row: TakeRow) -> Result<Take> {
+    let rig = match &row.skeleton_id {
+        Some(id) => Some(super::skeletons::load(store, id).await?),
+        None => None,
+    };
+    Take::from_row(row, rig.as_deref())
 }
 
 /// Decode `range` of take `id`, optionally only the named points. The range and the
@@ -153,6 +163,89 @@ pub async fn frames(
     })
 }
 
+/// A range of a take as BVH: its skeleton, `Frames:` the range's length, and the channel
+/// values of those frames (with the characters they were uploaded with, for `bvh-lossless`).
+#[derive(Debug, Clone)]
+pub struct Bvh {
+    pub start: usize,
+    pub end: usize,
+    pub fps: f64,
+    pub bytes: Vec<u8>,
+}
+
+/// Frames `range` of take `id` as BVH, for takes whose codec keeps the channel values; a
+/// take coded as positions is `Unsatisfiable`, saying why and which codecs would keep them.
+pub async fn bvh(store: &Store, id: &str, range: TimeRange) -> Result<Bvh> {
+    let take = take(store, id).await?;
+    let (start, end) = range.resolve(take.frames, take.fps)?;
+    let keeps = codec::codec(take.codec).is_ok_and(|c| c.codes_channels());
+    if !keeps {
+        let keepers: Vec<String> = codec::available()
+            .into_iter()
+            .filter(|&c| codec::codec(c).is_ok_and(|k| k.codes_channels()))
+            .map(|c| c.to_string())
+            .collect();
+        let why = if take.skeleton.is_none() {
+            "the take is point data (it has no skeleton)".to_string()
+        } else {
+            format!(
+                "the take was coded with {}, which keeps joint positions only; codecs that \
+                 keep the animation: {} (ingest with keep=animation, the default for skeleton takes)",
+                take.codec,
+                keepers.join(", ")
+            )
+        };
+        return Err(Error::Unsatisfiable(format!("no BVH for take {id}: {why}")));
+    }
+    let (header, _) = header_of(store, &take).await?;
+    let shared = shared(store, &header).await?;
+    let chunks = header.chunks_for(start, end);
+    let rows = store
+        .chunks(id, chunks.start as i64, chunks.end as i64)
+        .await?;
+    if rows.len() != chunks.len() {
+        return Err(Error::NotFound(format!("sequence {id}")));
+    }
+    let fps = take.fps;
+    let bytes = blocking(move || {
+        let payloads: Vec<&[u8]> = rows.iter().map(|r| &r.payload[..]).collect();
+        bvh_of(
+            &header,
+            shared,
+            &Stored::new(chunks.start, payloads),
+            start..end,
+        )
+    })
+    .await??;
+    Ok(Bvh {
+        start,
+        end,
+        fps,
+        bytes,
+    })
+}
+
+/// Frames `range` of a take coded with a codec that keeps channel values, as BVH, from its
+/// header, what the header names, and a source of the chunks the range lies in.
+pub fn bvh_of(
+    header: &Header,
+    shared: Shared,
+    source: &dyn ChunkSource,
+    range: std::ops::Range<usize>,
+) -> Result<Vec<u8>> {
+    let rig = shared
+        .rig
+        .clone()
+        .ok_or_else(|| Error::Corrupt("a take that keeps channels names no skeleton".into()))?;
+    let reader = Reader::new(header.clone(), shared)?;
+    let ch = reader.read_channels(range, rig.channel_count(), source)?;
+    let mut s = Skeleton::new(rig.joints().to_vec(), ch.values).map_err(Error::BadInput)?;
+    if let Some(p) = ch.printed {
+        s = s.with_printed(p).map_err(Error::BadInput)?;
+    }
+    Ok(crate::motion::formats::bvh::write_skeleton(&s, header.fps))
+}
+
 /// The take's reader (cached, or built and cached unless the take is live) and `range`
 /// resolved against it; the range is checked before a reader is built.
 async fn prepare(
@@ -174,7 +267,7 @@ async fn prepare(
     let row = take(store, id).await?;
     let r = range.resolve(row.frames as usize, row.fps)?;
     let (header, live) = header_of(store, &row).await?;
-    let shared = shared_basis(store, &header).await?;
+    let shared = shared(store, &header).await?;
     let p = Arc::new(blocking(move || Prepared::new(&row, header, shared)).await??);
     // A live take's index grows with every commit (here or on another server).
     if !live {
@@ -219,12 +312,17 @@ impl ChunkSource for Gathered {
     }
 }
 
-/// The shared basis a header names, loaded by id; `None` if it names none.
-pub async fn shared_basis(store: &Store, header: &Header) -> Result<Option<Arc<Basis>>> {
-    match &header.basis {
-        Some(h) => Ok(Some(super::bases::load(store, &hex(h)).await?)),
-        None => Ok(None),
-    }
+/// What a header names (a shared basis, a skeleton), loaded by id.
+pub async fn shared(store: &Store, header: &Header) -> Result<Shared> {
+    let basis = match &header.basis {
+        Some(h) => Some(super::bases::load(store, &hex(h)).await?),
+        None => None,
+    };
+    let rig = match &header.rig {
+        Some(h) => Some(super::skeletons::load(store, &hex(h)).await?),
+        None => None,
+    };
+    Ok(Shared { basis, rig })
 }
 
 /// A stored take's header, and whether the take is live. A live take's stored header has
@@ -274,7 +372,7 @@ pub(crate) fn header_from_index(take: &Take, index: &[ChunkEntry]) -> Result<Hea
 pub async fn whole_take(store: &Store, take: &Take) -> Result<Vec<f32>> {
     let id = &take.id;
     let (header, _) = header_of(store, take).await?;
-    let shared = shared_basis(store, &header).await?;
+    let shared = shared(store, &header).await?;
     let rows = store.chunks(id, 0, header.chunks.len() as i64).await?;
     if rows.len() != header.chunks.len() {
         return Err(Error::NotFound(format!("sequence {id}")));

@@ -6,7 +6,8 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::choose::{self, CodecRequest, Decision, Tried};
+use super::choose::{self, CodecRequest, Decision, Keep, Tried};
+use super::skeletons;
 use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
 use crate::codec::{self, CodecId, Encoded, ErrorBound, Latency};
@@ -27,6 +28,8 @@ pub struct IngestRequest {
     pub codec: CodecRequest,
     pub bound: ErrorBound,
     pub latency: Latency,
+    /// For skeleton takes: keep the animation (default) or let position codecs compete.
+    pub keep: Keep,
     pub limits: Limits,
     /// Format to assume when the content does not identify itself (from `Content-Type`).
     pub format_hint: Option<Format>,
@@ -84,6 +87,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         req.codec,
         req.bound,
         req.latency,
+        req.keep,
     )
     .await?;
 
@@ -91,7 +95,6 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
     let meta = TakeMeta {
         point_names: m.point_names.clone(),
         unit: m.unit.clone(),
-        skeleton: m.skeleton.as_ref().map(|s| s.joints.clone()),
         warnings: loaded.warnings.clone(),
         decision: decision.clone(),
         decoded_blake3: Some(enc.decoded_digest.clone()),
@@ -112,11 +115,17 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
     take.header = enc.container.header.to_bytes();
     take.set_measured(enc.stored_bytes, &enc.stats);
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
+    let skeleton = match &m.skeleton {
+        Some(s) => Some(skeletons::of(s, &take.layout, take.created_at)?.1),
+        None => None,
+    };
+    take.skeleton = skeleton.as_ref().map(|k| k.id.clone());
     store
         .insert(&NewTake {
             row: take.to_row()?,
             chunks: chunk_rows(&enc.container),
             basis,
+            skeleton,
         })
         .await?;
     let (raw_bytes, ratio) = (take.raw_bytes as usize, take.ratio);
@@ -148,10 +157,12 @@ pub async fn encode_best(
     request: CodecRequest,
     bound: ErrorBound,
     latency: Latency,
+    keep: Keep,
 ) -> Result<(Decision, Encoded)> {
     let bases = super::bases::latest_for(store, layout).await?;
     let kinds: Vec<_> = bases.iter().map(|b| b.kind()).collect();
-    let (run, skipped) = choose::candidates(request, latency, &motion, &kinds);
+    let (run, skipped) = choose::candidates(request, latency, keep, &motion, &kinds);
+    let rule = (request == CodecRequest::Auto && motion.skeleton.is_some()).then_some(keep);
     let mut jobs = Vec::with_capacity(run.len());
     for codec in run {
         let m = motion.clone();
@@ -192,7 +203,7 @@ pub async fn encode_best(
         }
     }
     let errors: Vec<String> = tried.iter().filter_map(|t| t.error.clone()).collect();
-    let decision = choose::decide(tried, skipped, &bound.to_string()).ok_or_else(|| {
+    let mut decision = choose::decide(tried, skipped, &bound.to_string()).ok_or_else(|| {
         if let CodecRequest::Only(c) = request {
             Error::Unsatisfiable(format!(
                 "{c} cannot encode this take: {}",
@@ -205,6 +216,10 @@ pub async fn encode_best(
             ))
         }
     })?;
+    if rule == Some(Keep::Animation) {
+        decision.reason += " (keep=animation: only codecs that keep the channel values competed)";
+    }
+    decision.keep = rule;
     let (_, enc) = encodings
         .into_iter()
         .find(|(c, _)| *c == decision.winner)

@@ -49,12 +49,12 @@ pub async fn list(
     let page = store
         .list(filter, sort, descending, limit, cursor.as_ref())
         .await?;
+    let mut items = Vec::with_capacity(page.items.len());
+    for row in page.items {
+        items.push(super::fetch::parse(store, row).await?);
+    }
     Ok(Listing {
-        items: page
-            .items
-            .into_iter()
-            .map(Take::from_row)
-            .collect::<Result<_>>()?,
+        items,
         next_cursor: page.next.map(|c| c.encode()),
     })
 }
@@ -62,11 +62,11 @@ pub async fn list(
 /// Every take matching `filter`, oldest first (training selections, export): an error if
 /// any of their records does not parse.
 pub async fn all_takes(store: &Store, filter: &Filter) -> Result<Vec<Take>> {
-    all_rows(store, filter)
-        .await?
-        .into_iter()
-        .map(Take::from_row)
-        .collect()
+    let mut out = Vec::new();
+    for row in all_rows(store, filter).await? {
+        out.push(super::fetch::parse(store, row).await?);
+    }
+    Ok(out)
 }
 
 /// The stored rows of every take matching `filter`, oldest first, read a page at a time

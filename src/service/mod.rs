@@ -23,6 +23,7 @@ pub mod ingest;
 pub mod jobs;
 pub mod library;
 pub mod prepared;
+pub mod skeletons;
 pub mod streams;
 pub mod take;
 pub mod training;

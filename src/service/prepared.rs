@@ -10,7 +10,7 @@ use std::sync::{Arc, Mutex};
 
 use super::take::Take;
 use crate::codec::container::Header;
-use crate::codec::{Basis, Reader};
+use crate::codec::{Reader, Shared};
 
 /// What range requests of one take need, ready to use.
 pub struct Prepared {
@@ -23,8 +23,8 @@ pub struct Prepared {
 }
 
 impl Prepared {
-    /// `shared` is the basis the header names, if it names one.
-    pub fn new(take: &Take, header: Header, shared: Option<Arc<Basis>>) -> super::Result<Prepared> {
+    /// `shared` holds what the header names (a basis, a skeleton).
+    pub fn new(take: &Take, header: Header, shared: Shared) -> super::Result<Prepared> {
         let reader = Reader::new(header, shared)
             .map_err(|e| super::Error::Corrupt(format!("stored take {}: {e}", take.id)))?;
         Ok(Prepared {

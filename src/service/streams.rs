@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
-use super::choose::{CodecRequest, Decision};
+use super::choose::{CodecRequest, Decision, Keep};
 use super::prepared::ReadCaches;
 use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
@@ -358,11 +358,11 @@ impl Streams {
             ),
             tried: Vec::new(),
             skipped: Vec::new(),
+            keep: None,
         };
         let meta = TakeMeta {
             point_names: plan.names,
             unit: plan.unit,
-            skeleton: None,
             warnings: Vec::new(),
             decision,
             decoded_blake3: None,
@@ -386,6 +386,7 @@ impl Streams {
                 row: take.to_row()?,
                 chunks: Vec::new(),
                 basis: basis.as_ref().map(|b| b.id()),
+                skeleton: None,
             })
             .await?;
         let live = Live {
@@ -691,6 +692,7 @@ async fn reencode_take(store: &Store, take: &Take, positions: Vec<f32>) -> Resul
         CodecRequest::Auto,
         take.bound,
         Latency::Sequence,
+        Keep::default(),
     )
     .await?;
     if enc.stored_bytes as u64 >= take.stored_bytes {

@@ -8,8 +8,8 @@ use serde::{Deserialize, Serialize};
 
 use super::choose::Decision;
 use super::{Error, Result};
+use crate::codec::Rig;
 use crate::codec::{CodecId, ErrorBound};
-use crate::motion::skeleton::Joint;
 use crate::motion::Unit;
 use crate::store::{TakeRow, TakeTotals};
 
@@ -48,18 +48,20 @@ pub struct Take {
     /// While a live stream codes the take: when its lease runs out (ms since the epoch).
     #[serde(skip)]
     pub live_until: Option<i64>,
+    /// The stored skeleton of a skeleton take (its id): its hierarchy, and the point names.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skeleton: Option<String>,
 }
 
 /// What is kept with a take beside its numbers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TakeMeta {
-    /// One name per point, in stored order.
+    /// One name per point, in stored order. Not stored for a skeleton take: its skeleton
+    /// names them.
+    #[serde(default)]
     pub point_names: Vec<String>,
     /// The unit and where it came from.
     pub unit: Unit,
-    /// The hierarchy of a skeleton take (BVH), if it has one.
-    #[serde(default)]
-    pub skeleton: Option<Vec<Joint>>,
     /// What reading or coding the take gave up or guessed.
     #[serde(default)]
     pub warnings: Vec<String>,
@@ -127,19 +129,32 @@ impl Take {
             created_at: super::now_ms(),
             header: Vec::new(),
             live_until: None,
+            skeleton: None,
         }
     }
 
-    /// Parse a stored row; `Corrupt` names the take and what does not parse.
-    pub fn from_row(row: TakeRow) -> Result<Take> {
+    /// Parse a stored row; `Corrupt` names the take and what does not parse. `rig` is the
+    /// skeleton the row names (`row.skeleton_id`), which names its points.
+    pub fn from_row(row: TakeRow, rig: Option<&Rig>) -> Result<Take> {
         let id = row.id.clone();
         let corrupt = |what: String| Error::Corrupt(format!("stored take {id}: {what}"));
+        let mut meta: TakeMeta =
+            serde_json::from_str(&row.meta).map_err(|e| corrupt(format!("meta: {e}")))?;
+        match (&row.skeleton_id, rig) {
+            (None, _) => {}
+            (Some(want), Some(r)) if r.id() == *want && meta.point_names.is_empty() => {
+                meta.point_names = r.joints().iter().map(|j| j.name.clone()).collect();
+            }
+            (Some(want), _) => {
+                return Err(corrupt(format!(
+                    "its skeleton {want} was not supplied, or it also stores point names"
+                )))
+            }
+        }
         let count =
             |what: &str, v: i64| usize::try_from(v).map_err(|_| corrupt(format!("{what} is {v}")));
         let bytes =
             |what: &str, v: i64| u64::try_from(v).map_err(|_| corrupt(format!("{what} is {v}")));
-        let meta: TakeMeta =
-            serde_json::from_str(&row.meta).map_err(|e| corrupt(format!("meta: {e}")))?;
         let take = Take {
             frames: count("frames", row.totals.frames)?,
             points: count("points", row.points)?,
@@ -169,6 +184,7 @@ impl Take {
             created_at: row.created_at,
             header: row.header,
             live_until: row.live_until,
+            skeleton: row.skeleton_id,
         };
         take.check()?;
         Ok(take)
@@ -198,8 +214,16 @@ impl Take {
 
     /// The row to store.
     pub fn to_row(&self) -> Result<TakeRow> {
-        let meta = serde_json::to_string(&self.meta)
-            .map_err(|e| Error::Internal(format!("take {}: meta: {e}", self.id)))?;
+        let meta = if self.skeleton.is_some() {
+            // The skeleton names the points; a row need not repeat them.
+            serde_json::to_string(&TakeMeta {
+                point_names: Vec::new(),
+                ..self.meta.clone()
+            })
+        } else {
+            serde_json::to_string(&self.meta)
+        }
+        .map_err(|e| Error::Internal(format!("take {}: meta: {e}", self.id)))?;
         Ok(TakeRow {
             id: self.id.clone(),
             name: self.name.clone(),
@@ -218,6 +242,7 @@ impl Take {
             meta,
             created_at: self.created_at,
             live_until: self.live_until,
+            skeleton_id: self.skeleton.clone(),
         })
     }
 
@@ -324,13 +349,13 @@ mod tests {
             meta: TakeMeta {
                 point_names: vec!["a".into(), "b".into()],
                 unit: Unit::new(0.001, UnitSource::Declared).unwrap(),
-                skeleton: None,
                 warnings: vec![],
                 decision: Decision {
                     winner: CodecId::Quant,
                     reason: "asked".into(),
                     tried: vec![],
                     skipped: vec![],
+                    keep: None,
                 },
                 decoded_blake3: Some("00".into()),
                 interrupted: None,
@@ -339,20 +364,21 @@ mod tests {
             created_at: 1,
             header: vec![1, 2, 3],
             live_until: None,
+            skeleton: None,
         }
     }
 
     #[test]
     fn a_take_round_trips_through_its_row() {
         let t = take();
-        assert_eq!(Take::from_row(t.to_row().unwrap()).unwrap(), t);
+        assert_eq!(Take::from_row(t.to_row().unwrap(), None).unwrap(), t);
     }
 
     #[test]
     fn a_corrupt_meta_is_an_error_not_an_empty_record() {
         for (meta, says) in [
             ("{not json", "meta"),
-            ("{}", "meta: missing field `point_names`"),
+            ("{}", "meta: missing field `unit`"),
             (
                 r#"{"point_names": ["a"], "unit": {"metres_per_unit": 0.001, "source": {"kind": "declared"}}, "decision": {"winner": "quant", "reason": "", "tried": [], "skipped": []}}"#,
                 "1 point names for 2 points",
@@ -361,7 +387,7 @@ mod tests {
         ] {
             let mut row = take().to_row().unwrap();
             row.meta = meta.into();
-            let e = Take::from_row(row).unwrap_err();
+            let e = Take::from_row(row, None).unwrap_err();
             assert!(matches!(e, Error::Corrupt(_)), "{meta}: {e}");
             assert!(
                 e.to_string().contains("stored take t") && e.to_string().contains(says),
@@ -370,13 +396,13 @@ mod tests {
         }
         let mut row = take().to_row().unwrap();
         row.bound_kind = "median".into();
-        assert!(matches!(Take::from_row(row), Err(Error::Corrupt(_))));
+        assert!(matches!(Take::from_row(row, None), Err(Error::Corrupt(_))));
         let mut row = take().to_row().unwrap();
         row.codec = "zip".into();
-        assert!(matches!(Take::from_row(row), Err(Error::Corrupt(_))));
+        assert!(matches!(Take::from_row(row, None), Err(Error::Corrupt(_))));
         let mut row = take().to_row().unwrap();
         row.totals.frames = -1;
-        assert!(matches!(Take::from_row(row), Err(Error::Corrupt(_))));
+        assert!(matches!(Take::from_row(row, None), Err(Error::Corrupt(_))));
     }
 
     #[test]

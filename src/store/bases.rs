@@ -25,9 +25,9 @@ pub struct BasisRow {
     pub used_by: i64,
 }
 
-/// What deleting a basis did.
+/// What deleting a stored object (a basis, a skeleton) did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BasisDeletion {
+pub enum Deletion {
     Deleted,
     NotFound,
     /// Takes still reference it; nothing was deleted.
@@ -151,7 +151,7 @@ impl Store {
 
     /// Delete a basis unless a take references it (checked and deleted in one transaction;
     /// the foreign key refuses it too, should another writer race us).
-    pub async fn delete_basis(&self, id: &str) -> Result<BasisDeletion> {
+    pub async fn delete_basis(&self, id: &str) -> Result<Deletion> {
         dispatch!(self, pool => {
             let mut tx = pool.begin().await?;
             let used: i64 = sqlx::query("SELECT COUNT(*) AS n FROM sequence_bases WHERE basis_id = $1")
@@ -160,17 +160,17 @@ impl Store {
                 .await?
                 .try_get("n")?;
             if used > 0 {
-                return Ok(BasisDeletion::InUse(used));
+                return Ok(Deletion::InUse(used));
             }
             let r = sqlx::query("DELETE FROM bases WHERE id = $1").bind(id).execute(&mut *tx).await;
             match r {
-                Ok(r) if r.rows_affected() == 0 => Ok(BasisDeletion::NotFound),
+                Ok(r) if r.rows_affected() == 0 => Ok(Deletion::NotFound),
                 Ok(_) => {
                     tx.commit().await?;
-                    Ok(BasisDeletion::Deleted)
+                    Ok(Deletion::Deleted)
                 }
                 Err(sqlx::Error::Database(d)) if d.is_foreign_key_violation() => {
-                    Ok(BasisDeletion::InUse(1))
+                    Ok(Deletion::InUse(1))
                 }
                 Err(e) => Err(e.into()),
             }

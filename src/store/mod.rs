@@ -93,10 +93,21 @@ impl Store {
         dispatch!(self, pool => pool.close().await)
     }
 
-    /// Insert a take, its tags and its chunks atomically.
+    /// Insert a take, its tags, its chunks and its skeleton (unless stored already)
+    /// atomically.
     pub async fn insert(&self, s: &NewTake) -> Result<()> {
         dispatch!(self, pool => {
             let mut tx = pool.begin().await?;
+            if let Some(k) = &s.skeleton {
+                sqlx::query(skeletons::INSERT)
+                    .bind(&k.id)
+                    .bind(&k.layout)
+                    .bind(k.joints)
+                    .bind(&k.payload)
+                    .bind(k.created_at)
+                    .execute(&mut *tx)
+                    .await?;
+            }
             let r = rows::bind_take(sqlx::query(rows::INSERT_TAKE), s)
                 .execute(&mut *tx)
                 .await;
@@ -405,7 +416,9 @@ macro_rules! bind_all {
 }
 
 mod bases;
-pub use bases::{BasisDeletion, BasisRow};
+pub use bases::{BasisRow, Deletion};
+mod skeletons;
+pub use skeletons::SkeletonRow;
 
 /// One page of a listing.
 #[derive(Debug, Clone)]

@@ -51,6 +51,8 @@ pub struct TakeRow {
     pub created_at: i64,
     /// While a live stream codes the take: when its lease runs out (ms since the epoch).
     pub live_until: Option<i64>,
+    /// The stored skeleton of a skeleton take (its id).
+    pub skeleton_id: Option<String>,
 }
 
 /// The columns a live take's commits update: its running totals.
@@ -75,6 +77,8 @@ pub struct NewTake {
     /// The shared basis the take was coded with (its id), if any: the take then holds a
     /// reference that keeps the basis from being deleted.
     pub basis: Option<String>,
+    /// The skeleton `row.skeleton_id` names, stored with the take unless it is already.
+    pub skeleton: Option<super::SkeletonRow>,
 }
 
 impl std::ops::Deref for NewTake {
@@ -86,7 +90,7 @@ impl std::ops::Deref for NewTake {
 
 pub const TAKE_COLUMNS: &str = "id, name, library, fps, frames, points, duration_s, \
     metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, raw_bytes, \
-    stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at, live_until";
+    stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at, live_until, skeleton_id";
 
 /// The running totals' columns as `$1..$9`, in the order [`bind_totals`] binds them: every
 /// statement that writes them starts with them.
@@ -96,8 +100,8 @@ pub const SET_TOTALS: &str = "frames = $1, duration_s = $2, raw_bytes = $3, stor
 pub const INSERT_TAKE: &str = "INSERT INTO sequences (frames, duration_s, raw_bytes, \
     stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, id, name, library, fps, points, \
     metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, header, meta, \
-    created_at, live_until) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, \
-    $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24)";
+    created_at, live_until, skeleton_id) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, \
+    $12, $13, $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24, $25)";
 
 /// Bind a take's running totals, in [`SET_TOTALS`] order, to a query of either backend.
 pub fn bind_totals<'q, DB: sqlx::Database>(
@@ -129,6 +133,7 @@ where
     f64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     Option<i64>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    Option<String>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     Vec<u8>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
 {
     bind_totals(q, &s.totals)
@@ -147,6 +152,7 @@ where
         .bind(s.meta.clone())
         .bind(s.created_at)
         .bind(s.live_until)
+        .bind(s.skeleton_id.clone())
 }
 
 /// Read a [`TakeRow`] (tags left empty) from either backend's row.
@@ -157,6 +163,7 @@ where
     for<'a> f64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> i64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> Option<i64>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> Option<String>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
 {
     Ok(TakeRow {
@@ -187,6 +194,7 @@ where
         meta: r.try_get("meta")?,
         created_at: r.try_get("created_at")?,
         live_until: r.try_get("live_until")?,
+        skeleton_id: r.try_get("skeleton_id")?,
     })
 }
 

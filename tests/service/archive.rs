@@ -109,7 +109,9 @@ async fn stored(store: &Store, id: &str) -> (Value, Vec<u8>, Vec<Vec<u8>>) {
         .into_iter()
         .map(|c| c.payload)
         .collect();
-    let take = mocapstore::service::take::Take::from_row(row).unwrap();
+    let take = mocapstore::service::fetch::parse(store, row)
+        .await
+        .unwrap();
     let mut v = serde_json::to_value(&take).unwrap();
     // The store's own bookkeeping, not the take.
     v.as_object_mut().unwrap().remove("created_at");
@@ -217,5 +219,11 @@ fn check_files(dir: &Path) {
             "{line}"
         );
         assert!(dir.join(v["bitstream"].as_str().unwrap()).is_file());
+        if let Some(sk) = v["skeleton"].as_str() {
+            // A skeleton take: its animation as BVH, its skeleton stored once beside it.
+            assert!(v["file"].as_str().unwrap().ends_with(".bvh"), "{line}");
+            assert!(m.skeleton.is_some());
+            assert!(dir.join(format!("skeletons/{sk}.mcsk")).is_file());
+        }
     }
 }

@@ -197,20 +197,65 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         );
         let read = mocapstore::motion::formats::read(&plain, &Default::default()).unwrap();
         assert_eq!(read.motion.frame_count(), 6);
-        let (status, _, body) = srv
-            .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
+        // A skeleton take keeps its animation by default: any range comes back as BVH, the
+        // MOTION rows as uploaded; a point-data take cannot, and says why.
+        let (status, h, body) = srv
+            .get(&format!(
+                "/v1/sequences/{id}/frames?start=3&end=9&format=bvh"
+            ))
             .await;
-        assert_error(status, &serde_json::from_slice(&body).unwrap(), 409);
+        assert_eq!(status, 200);
+        assert_eq!(h["x-frames"], "6");
+        let served = load(&body, &ReadOptions::default());
+        assert_eq!(served.frame_count(), 6);
+        let uploaded = String::from_utf8(uploads[0].1.clone()).unwrap();
+        let rows = |text: &str| -> Vec<String> {
+            let at = text.find("Frame Time").unwrap();
+            text[at..]
+                .lines()
+                .skip(1)
+                .filter(|l| !l.trim().is_empty())
+                .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+                .collect()
+        };
+        assert_eq!(
+            rows(std::str::from_utf8(&body).unwrap()),
+            rows(&uploaded)[3..9]
+        );
+        assert_eq!(
+            served.skeleton.unwrap().joints,
+            original.skeleton.clone().unwrap().joints
+        );
+        let (_, c3d_id, _) = &ids[1];
+        let (status, _, body) = srv
+            .get(&format!("/v1/sequences/{c3d_id}/frames?format=bvh"))
+            .await;
+        let e: Value = serde_json::from_slice(&body).unwrap();
+        assert_error(status, &e, 409);
+        assert!(
+            e["error"]["message"]
+                .as_str()
+                .unwrap()
+                .contains("no skeleton"),
+            "{e}"
+        );
 
         // Metadata, with the decision record.
         let (status, _, body) = srv.get(&format!("/v1/sequences/{id}")).await;
         assert_eq!(status, 200);
         let meta: Value = serde_json::from_slice(&body).unwrap();
         assert_eq!(meta["tags"], serde_json::json!(["a", "b"]));
-        assert!(meta["meta"]["decision"]["reason"]
-            .as_str()
-            .unwrap()
-            .contains("meets max 1 mm"));
+        let reason = meta["meta"]["decision"]["reason"].as_str().unwrap();
+        assert!(
+            reason.contains("max 1 mm") && reason.contains("keep=animation"),
+            "{reason}"
+        );
+        assert_eq!(meta["meta"]["decision"]["keep"], "animation");
+        assert_eq!(meta["codec"], "bvh-lossless");
+        assert_eq!(
+            meta["meta"]["point_names"][0], "Hips",
+            "named by the skeleton"
+        );
 
         // Bad requests: each a 4xx JSON error, and nothing stored.
         let before = (

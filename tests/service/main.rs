@@ -13,5 +13,6 @@ mod library;
 mod limits;
 mod openapi;
 mod robustness;
+mod skeletons;
 mod store;
 mod streams;

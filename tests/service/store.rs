@@ -46,10 +46,11 @@ fn take(id: &str, n: usize) -> NewTake {
             meta: r#"{"points": ["a", "b"], "decision": {"winner": "quant"}}"#.into(),
             created_at: 1_700_000_000_000,
             live_until: None,
+            skeleton_id: None,
         },
         chunks,
         basis: None,
-        rig: None,
+        skeleton: None,
     }
 }
 

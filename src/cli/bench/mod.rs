@@ -550,6 +550,7 @@ fn split_and_train(
                     points,
                     fps: m.fps,
                     shared: None,
+                    skeleton: None,
                 })
                 .collect();
             let targets: Vec<codec::Target> = train

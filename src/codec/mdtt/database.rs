@@ -13,7 +13,6 @@
 //! (all `3J` columns, f32) so that each take picks its own rank; the residual layer holds max
 //! bounds.
 
-
 use nalgebra::DMatrix;
 
 use super::transform::{clip_len, coefs_for, ratio, reconstruct, Analysis};
@@ -329,7 +328,10 @@ impl Codec for MdttShared {
         points: usize,
         shared: &crate::codec::Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
-        let basis = shared.basis.clone().ok_or_else(|| Error::Basis("mdtt-shared needs its basis".into()))?;
+        let basis = shared
+            .basis
+            .clone()
+            .ok_or_else(|| Error::Basis("mdtt-shared needs its basis".into()))?;
         check_basis(&basis, points * 3)?;
         let p = SharedParams::parse(params, points * 3)?;
         let per = p.per_basis(basis.matrices());

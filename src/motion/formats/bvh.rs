@@ -387,6 +387,11 @@ pub fn write(motion: &Motion) -> Result<Vec<u8>> {
     let s = motion.skeleton.as_ref().ok_or_else(|| {
         Error::Unsupported("BVH output needs a skeleton; this take is point data only".into())
     })?;
+    Ok(write_skeleton(s, motion.fps))
+}
+
+/// Write a skeleton and its channel values at `fps` as BVH.
+pub fn write_skeleton(s: &Skeleton, fps: f64) -> Vec<u8> {
     let mut out = String::with_capacity(64 * s.joints.len() + 12 * s.values.len());
     out.push_str("HIERARCHY\n");
     if !s.joints.is_empty() {
@@ -394,7 +399,7 @@ pub fn write(motion: &Motion) -> Result<Vec<u8>> {
     }
     let frames = s.frame_count();
     let _ = write!(out, "MOTION\nFrames: {frames}\nFrame Time: ");
-    out.push_str(&format_frame_time(1.0 / motion.fps));
+    out.push_str(&format_frame_time(1.0 / fps));
     out.push('\n');
     let cc = s.channel_count();
     for f in 0..frames {
@@ -411,7 +416,7 @@ pub fn write(motion: &Motion) -> Result<Vec<u8>> {
         }
         out.push('\n');
     }
-    Ok(out.into_bytes())
+    out.into_bytes()
 }
 
 fn format_frame_time(t: f64) -> String {

@@ -1,0 +1,102 @@
+//! Skeletons as stored objects: one per distinct joint hierarchy, referenced by every take
+//! of it ([`crate::codec::Rig`]). Ingest stores a take's with the take; reads load the one a
+//! take or header names, through a small cache (a skeleton never changes: its id is the hash
+//! of its bytes).
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use super::{blocking, Error, Result};
+use crate::codec::Rig;
+use crate::limits;
+use crate::motion::Skeleton;
+use crate::store::{Deletion, SkeletonRow, Store};
+
+/// Skeletons kept parsed; past this many the cache starts over.
+const CACHED: usize = 256;
+
+fn cache() -> &'static Mutex<HashMap<String, Arc<Rig>>> {
+    static CACHE: OnceLock<Mutex<HashMap<String, Arc<Rig>>>> = OnceLock::new();
+    CACHE.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// Parse a stored skeleton, checking that its bytes still hash to its id.
+pub(super) fn parse(row: &SkeletonRow) -> Result<Rig> {
+    let corrupt = |what: String| Error::Corrupt(format!("stored skeleton {}: {what}", row.id));
+    let rig = Rig::parse(&row.payload, limits::Limits::default().points)
+        .map_err(|e| corrupt(e.to_string()))?;
+    if rig.id() != row.id {
+        return Err(corrupt(format!("its bytes hash to {}", rig.id())));
+    }
+    Ok(rig)
+}
+
+/// The skeleton with this id (a take or a header names it).
+pub async fn load(store: &Store, id: &str) -> Result<Arc<Rig>> {
+    if let Some(r) = cache().lock().ok().and_then(|c| c.get(id).cloned()) {
+        return Ok(r);
+    }
+    let row = store
+        .skeleton(id)
+        .await?
+        .ok_or_else(|| Error::Corrupt(format!("skeleton {id} is referenced but not stored")))?;
+    let rig = Arc::new(blocking(move || parse(&row)).await??);
+    if let Ok(mut c) = cache().lock() {
+        if c.len() >= CACHED {
+            c.clear();
+        }
+        c.insert(id.to_string(), rig.clone());
+    }
+    Ok(rig)
+}
+
+/// The rig of a take's skeleton and the row that stores it.
+pub fn of(skeleton: &Skeleton, layout: &str, now_ms: i64) -> Result<(Rig, SkeletonRow)> {
+    let rig = Rig::new(skeleton.joints.clone())
+        .map_err(|e| Error::InvalidRequest(format!("skeleton: {e}")))?;
+    let row = row_of(&rig, layout, now_ms);
+    Ok((rig, row))
+}
+
+/// The row that stores a rig (of takes of `layout`).
+pub fn row_of(rig: &Rig, layout: &str, now_ms: i64) -> SkeletonRow {
+    SkeletonRow {
+        id: rig.id(),
+        layout: layout.to_string(),
+        joints: rig.joints().len() as i64,
+        payload: rig.bytes().to_vec(),
+        created_at: now_ms,
+        used_by: 0,
+    }
+}
+
+/// Stored skeletons, newest first, optionally of one layout (payloads not read).
+pub async fn list(store: &Store, layout: Option<&str>) -> Result<Vec<SkeletonRow>> {
+    Ok(store.skeletons(layout).await?)
+}
+
+/// One stored skeleton, parsed.
+pub async fn get(store: &Store, id: &str) -> Result<(SkeletonRow, Arc<Rig>)> {
+    let row = store
+        .skeleton(id)
+        .await?
+        .ok_or_else(|| Error::NotFound(format!("skeleton {id}")))?;
+    let rig = load(store, id).await?;
+    Ok((row, rig))
+}
+
+/// Delete a skeleton no take references.
+pub async fn delete(store: &Store, id: &str) -> Result<()> {
+    match store.delete_skeleton(id).await? {
+        Deletion::Deleted => {
+            if let Ok(mut c) = cache().lock() {
+                c.remove(id);
+            }
+            Ok(())
+        }
+        Deletion::NotFound => Err(Error::NotFound(format!("skeleton {id}"))),
+        Deletion::InUse(n) => Err(Error::Conflict(format!(
+            "skeleton {id} is the skeleton of {n} stored take(s); delete them first"
+        ))),
+    }
+}

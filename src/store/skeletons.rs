@@ -1,0 +1,113 @@
+//! Skeletons: content-addressed rows, and the references takes hold on them (a take's
+//! `skeleton_id` column, a foreign key that refuses deleting one still in use).
+
+use serde::Serialize;
+use sqlx::Row;
+
+use super::{Deletion, Result, Store};
+
+/// A stored skeleton. `payload` (the `codec::Rig` bytes) is empty in listings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SkeletonRow {
+    /// BLAKE3 of the payload, hex.
+    pub id: String,
+    /// Layout signature of the takes of this skeleton.
+    pub layout: String,
+    /// Joints, End Sites included.
+    pub joints: i64,
+    #[serde(skip)]
+    pub payload: Vec<u8>,
+    /// Milliseconds since the Unix epoch.
+    pub created_at: i64,
+    /// How many takes reference it.
+    pub used_by: i64,
+}
+
+const COLUMNS: &str = "id, layout, joints, created_at, \
+    (SELECT COUNT(*) FROM sequences s WHERE s.skeleton_id = skeletons.id) AS used_by";
+
+pub(super) const INSERT: &str = "INSERT INTO skeletons (id, layout, joints, payload, created_at) \
+    VALUES ($1, $2, $3, $4, $5) ON CONFLICT (id) DO NOTHING";
+
+fn skeleton_from_row<R: Row>(r: &R, with_payload: bool) -> Result<SkeletonRow>
+where
+    for<'a> &'a str: sqlx::ColumnIndex<R>,
+    for<'a> String: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> i64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+{
+    Ok(SkeletonRow {
+        id: r.try_get("id")?,
+        layout: r.try_get("layout")?,
+        joints: r.try_get("joints")?,
+        payload: if with_payload {
+            r.try_get("payload")?
+        } else {
+            Vec::new()
+        },
+        created_at: r.try_get("created_at")?,
+        used_by: r.try_get("used_by")?,
+    })
+}
+
+impl Store {
+    /// A skeleton with its payload.
+    pub async fn skeleton(&self, id: &str) -> Result<Option<SkeletonRow>> {
+        let sql = format!("SELECT {COLUMNS}, payload FROM skeletons WHERE id = $1");
+        dispatch!(self, pool => {
+            sqlx::query(&sql)
+                .bind(id)
+                .fetch_optional(pool)
+                .await?
+                .map(|r| skeleton_from_row(&r, true))
+                .transpose()
+        })
+    }
+
+    /// Skeletons (without payloads), newest first, optionally of one layout.
+    pub async fn skeletons(&self, layout: Option<&str>) -> Result<Vec<SkeletonRow>> {
+        let sql = format!(
+            "SELECT {COLUMNS} FROM skeletons WHERE ($1 = '' OR layout = $2) \
+             ORDER BY created_at DESC, id"
+        );
+        let l = layout.unwrap_or("");
+        dispatch!(self, pool => {
+            sqlx::query(&sql)
+                .bind(l)
+                .bind(l)
+                .fetch_all(pool)
+                .await?
+                .iter()
+                .map(|r| skeleton_from_row(r, false))
+                .collect()
+        })
+    }
+
+    /// Delete a skeleton unless a take references it (checked and deleted in one
+    /// transaction; the foreign key refuses it too, should another writer race us).
+    pub async fn delete_skeleton(&self, id: &str) -> Result<Deletion> {
+        dispatch!(self, pool => {
+            let mut tx = pool.begin().await?;
+            let used: i64 = sqlx::query("SELECT COUNT(*) AS n FROM sequences WHERE skeleton_id = $1")
+                .bind(id)
+                .fetch_one(&mut *tx)
+                .await?
+                .try_get("n")?;
+            if used > 0 {
+                return Ok(Deletion::InUse(used));
+            }
+            let r = sqlx::query("DELETE FROM skeletons WHERE id = $1").bind(id).execute(&mut *tx).await;
+            match r {
+                Ok(r) if r.rows_affected() == 0 => Ok(Deletion::NotFound),
+                Ok(_) => {
+                    tx.commit().await?;
+                    Ok(Deletion::Deleted)
+                }
+                Err(sqlx::Error::Database(d)) if d.is_foreign_key_violation() => {
+                    Ok(Deletion::InUse(1))
+                }
+                Err(e) => Err(e.into()),
+            }
+        })
+    }
+}

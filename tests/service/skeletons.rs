@@ -1,0 +1,103 @@
+//! Skeleton takes: the hierarchy stored once and referenced, BVH served for any range, the
+//! skeleton protected while referenced, and the same on both backends.
+
+use mocapstore::motion::formats::{self, ReadOptions};
+use mocapstore::motion::synthetic::dancer_bvh;
+
+use crate::common::{self, start};
+
+fn motion_rows(text: &str) -> Vec<String> {
+    let at = text.find("Frame Time").unwrap();
+    text[at..]
+        .lines()
+        .skip(1)
+        .filter(|l| !l.trim().is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+#[tokio::test]
+async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
+    for t in common::all().await {
+        let srv = start(t.store.clone(), 8 << 20).await;
+        let a = dancer_bvh(500, 120.0, 1, 4);
+        let b = dancer_bvh(300, 120.0, 2, 4);
+        let mut ids = Vec::new();
+        for (name, text) in [("a", &a), ("b", &b)] {
+            let (status, report) = srv
+                .post(&format!("name={name}"), text.as_bytes().to_vec())
+                .await;
+            assert_eq!(status, 201, "{} {report}", t.name);
+            assert_eq!(report["codec"], "bvh-lossless");
+            assert_eq!(report["max_mm"], 0.0);
+            ids.push(report["id"].as_str().unwrap().to_string());
+        }
+        // One skeleton, referenced by both takes.
+        let (status, list) = srv.get_json("/v1/skeletons").await;
+        assert_eq!(status, 200);
+        let items = list["items"].as_array().unwrap();
+        assert_eq!(items.len(), 1, "{list}");
+        assert_eq!(items[0]["used_by"], 2);
+        assert_eq!(items[0]["joints"], 24);
+        let sk = items[0]["id"].as_str().unwrap().to_string();
+        let (status, one) = srv.get_json(&format!("/v1/skeletons/{sk}")).await;
+        assert_eq!(status, 200);
+        assert_eq!(one["hierarchy"][1]["name"], "LeftUpLeg");
+        let (status, take) = srv.get_json(&format!("/v1/sequences/{}", ids[0])).await;
+        assert_eq!(status, 200);
+        assert_eq!(take["skeleton"], sk.as_str());
+        assert_eq!(take["meta"]["point_names"].as_array().unwrap().len(), 24);
+
+        // Any range as BVH: the uploaded rows, character for character; a range equals the
+        // same rows of the whole take.
+        let rows = motion_rows(&a);
+        for (start, end) in [(0, 500), (0, 1), (17, 260), (499, 500)] {
+            let (status, _, body) = srv
+                .get(&format!(
+                    "/v1/sequences/{}/frames?start={start}&end={end}&format=bvh",
+                    ids[0]
+                ))
+                .await;
+            assert_eq!(status, 200);
+            let text = String::from_utf8(body.clone()).unwrap();
+            assert_eq!(motion_rows(&text), rows[start..end]);
+            let served = formats::read(&body, &ReadOptions::default())
+                .unwrap()
+                .motion;
+            assert_eq!(served.frame_count(), end - start);
+        }
+        let (status, _, _) = srv
+            .get(&format!(
+                "/v1/sequences/{}/frames?format=bvh&points=Hips",
+                ids[0]
+            ))
+            .await;
+        assert_eq!(status, 400);
+
+        // Protected while referenced; deletable once no take uses it.
+        assert_eq!(srv.delete(&format!("/v1/skeletons/{sk}")).await, 409);
+        for id in &ids {
+            assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 204);
+        }
+        assert_eq!(srv.delete(&format!("/v1/skeletons/{sk}")).await, 204);
+        assert_eq!(srv.delete(&format!("/v1/skeletons/{sk}")).await, 404);
+
+        // keep=positions lets position codecs compete; such a take says why it has no BVH.
+        let (status, report) = srv
+            .post("keep=positions&max_error_mm=5", a.as_bytes().to_vec())
+            .await;
+        assert_eq!(status, 201, "{report}");
+        let id = report["id"].as_str().unwrap();
+        if report["codec"] != "bvh-lossless" {
+            let (status, _, body) = srv
+                .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
+                .await;
+            assert_eq!(status, 409);
+            let msg = String::from_utf8_lossy(&body);
+            assert!(msg.contains("bvh-lossless"), "{msg}");
+        }
+        assert_eq!(report["decision"]["keep"], "positions");
+        srv.stop().await;
+        t.finish().await;
+    }
+}
