@@ -17,6 +17,7 @@
 use std::sync::Arc;
 
 use super::entropy::ints::IntModel;
+use super::entropy::io::{code_residual, Io};
 use super::entropy::rangecoder::{Bit, Decoder, Encoder};
 use super::error::{malformed, Error, Result};
 use super::rig::{Channels, Rig};
@@ -27,8 +28,6 @@ const VERSION: u8 = 1;
 /// Longest verbatim token a decoder accepts (the reader keeps any; longer ones would need a
 /// file of absurd numbers, and are refused at encode).
 const MAX_TOKEN: usize = 256;
-/// Residuals at least this large are escaped and written as 64 raw bits.
-const BIG: i64 = 1 << 30;
 /// The largest exponent a decoder accepts; f64 spans 10^±324.
 const MAX_EXP: i32 = 400;
 /// Contexts for residual sizes (the bit length of their running mean).
@@ -163,49 +162,6 @@ impl ChunkDecoder for LosslessDecoder {
             values,
             printed: Some(printed),
         })
-    }
-}
-
-/// One direction of the range coder: the encoder codes what it is given and returns it, the
-/// decoder ignores it and returns what it decodes. Coding is written once, over this, so the
-/// two sides cannot disagree on the order of decisions or on their contexts.
-trait Io {
-    fn bit(&mut self, p: &mut Bit, b: bool) -> bool;
-    fn int(&mut self, m: &mut IntModel, v: i32) -> i32;
-    fn raw(&mut self, v: u32, bits: u32) -> u32;
-    fn encoding(&self) -> bool;
-}
-
-impl Io for Encoder {
-    fn bit(&mut self, p: &mut Bit, b: bool) -> bool {
-        self.encode(p, b);
-        b
-    }
-    fn int(&mut self, m: &mut IntModel, v: i32) -> i32 {
-        m.encode(self, v);
-        v
-    }
-    fn raw(&mut self, v: u32, bits: u32) -> u32 {
-        self.encode_direct(v, bits);
-        v
-    }
-    fn encoding(&self) -> bool {
-        true
-    }
-}
-
-impl Io for Decoder<'_> {
-    fn bit(&mut self, p: &mut Bit, _: bool) -> bool {
-        self.decode(p)
-    }
-    fn int(&mut self, m: &mut IntModel, _: i32) -> i32 {
-        m.decode(self)
-    }
-    fn raw(&mut self, _: u32, bits: u32) -> u32 {
-        self.decode_direct(bits)
-    }
-    fn encoding(&self) -> bool {
-        false
     }
 }
 
@@ -477,20 +433,6 @@ impl Chunk {
             negative_zero,
         })
     }
-}
-
-/// A residual: small ones through the adaptive model, the rare huge one escaped to 64 raw
-/// bits.
-fn code_residual<I: Io>(io: &mut I, model: &mut IntModel, r: i64) -> Result<i64> {
-    let small = r.abs() < BIG;
-    let v = io.int(model, if small { r as i32 } else { i32::MAX });
-    if v != i32::MAX {
-        return Ok(i64::from(v));
-    }
-    let u = r as u64;
-    let hi = io.raw((u >> 32) as u32, 32);
-    let lo = io.raw(u as u32, 32);
-    Ok(((u64::from(hi) << 32) | u64::from(lo)) as i64)
 }
 
 /// The predictor order and exponent rule that code channel `first` (then every `stride`-th

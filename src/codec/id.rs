@@ -24,10 +24,12 @@ pub enum CodecId {
     MdttShared = 8,
     /// A skeleton's channel values exactly as the file printed them.
     BvhLossless = 9,
+    /// A skeleton's rotations, error-bounded on the FK positions.
+    Rot = 10,
 }
 
 impl CodecId {
-    pub const ALL: [CodecId; 9] = [
+    pub const ALL: [CodecId; 10] = [
         CodecId::Raw,
         CodecId::Quant,
         CodecId::Mdtt,
@@ -37,6 +39,7 @@ impl CodecId {
         CodecId::Pga,
         CodecId::MdttShared,
         CodecId::BvhLossless,
+        CodecId::Rot,
     ];
 
     pub fn name(self) -> &'static str {
@@ -50,6 +53,7 @@ impl CodecId {
             CodecId::Pga => "pga",
             CodecId::MdttShared => "mdtt-shared",
             CodecId::BvhLossless => "bvh-lossless",
+            CodecId::Rot => "rot",
         }
     }
 
@@ -60,9 +64,11 @@ impl CodecId {
     /// How many frames a decoder must see before it can emit the first one.
     pub fn latency(self) -> Latency {
         match self {
-            CodecId::Raw | CodecId::Quant | CodecId::LsdtFrame | CodecId::BvhLossless => {
-                Latency::Frame
-            }
+            CodecId::Raw
+            | CodecId::Quant
+            | CodecId::LsdtFrame
+            | CodecId::BvhLossless
+            | CodecId::Rot => Latency::Frame,
             CodecId::LsdtClip => Latency::Clip,
             CodecId::Mdtt | CodecId::MdttShared | CodecId::Spca | CodecId::Pga => Latency::Sequence,
         }

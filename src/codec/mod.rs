@@ -12,7 +12,8 @@
 //! - [`raw`], [`quant`]: the baselines. [`mdtt`]: Hou et al. 2015 with a residual layer.
 //! - [`lsdt`]: Hou et al. 2016's learned spatial transform, its training, `lsdt-clip` and
 //!   `lsdt-frame`.
-//! - [`bvh_lossless`]: a skeleton's channel values exactly as printed.
+//! - [`bvh_lossless`]: a skeleton's channel values exactly as printed. [`rot`]: its
+//!   rotations, error-bounded on the FK positions.
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
 //! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
 //!   that code channel values.
@@ -36,6 +37,7 @@ pub mod raw;
 pub mod read;
 pub mod residual;
 pub mod rig;
+pub mod rot;
 pub mod stream;
 mod wire;
 
@@ -166,6 +168,7 @@ pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
         CodecId::LsdtFrame => Ok(&lsdt::frame::LsdtFrame),
         CodecId::MdttShared => Ok(&mdtt::database::MdttShared),
         CodecId::BvhLossless => Ok(&bvh_lossless::BvhLossless),
+        CodecId::Rot => Ok(&rot::Rot),
         other => Err(Error::Unsupported(format!(
             "codec {other} is not implemented yet"
         ))),

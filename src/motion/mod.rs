@@ -8,6 +8,7 @@ pub mod formats;
 pub mod layout;
 pub mod metrics;
 pub mod model;
+pub mod rotation;
 pub mod skeleton;
 pub mod synthetic;
 pub mod units;

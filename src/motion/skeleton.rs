@@ -46,6 +46,12 @@ impl Channel {
         }
     }
 
+    /// The axis (0 = x, 1 = y, 2 = z) of a rotation channel.
+    pub fn rotation_axis(self) -> Option<usize> {
+        let (axis, rot) = self.axis();
+        rot.then_some(axis)
+    }
+
     /// The axis (0 = x, 1 = y, 2 = z) and whether it is a rotation.
     fn axis(self) -> (usize, bool) {
         match self {

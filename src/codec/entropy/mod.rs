@@ -12,6 +12,7 @@
 
 pub mod geometric;
 pub mod ints;
+pub mod io;
 pub mod rangecoder;
 pub mod rans;
 pub mod tokens;
