@@ -109,9 +109,7 @@ async fn stored(store: &Store, id: &str) -> (Value, Vec<u8>, Vec<Vec<u8>>) {
         .into_iter()
         .map(|c| c.payload)
         .collect();
-    let take = mocapstore::service::fetch::parse(store, row)
-        .await
-        .unwrap();
+    let take = mocapstore::service::fetch::parse(store, row).await.unwrap();
     let mut v = serde_json::to_value(&take).unwrap();
     // The store's own bookkeeping, not the take.
     v.as_object_mut().unwrap().remove("created_at");

@@ -18,10 +18,10 @@
 
 use std::sync::Arc;
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 
 use super::entropy::ints::IntModel;
-use super::entropy::io::{code_residual, Io};
+use super::entropy::io::Io;
 use super::entropy::rangecoder::{Bit, Decoder, Encoder};
 use super::error::{malformed, Error, Result};
 use super::rig::{Channels, Rig};
@@ -29,12 +29,15 @@ use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared,
     Target,
 };
-use crate::motion::rotation::{self, euler_order};
+use crate::motion::rotation::euler_order;
+
+mod delta;
+mod transform;
 
 const VERSION: u8 = 1;
 /// Decoded channel values are rounded to this (degrees, file units).
 const PRINTED: f64 = 1e6;
-const SIZE_CONTEXTS: usize = 20;
+pub(super) const SIZE_CONTEXTS: usize = 20;
 /// Rate control's search: this many halvings of the interval of `log α`.
 const SEARCH_STEPS: usize = 18;
 
@@ -42,7 +45,7 @@ pub struct Rot;
 
 /// How each part of a frame is coded.
 #[derive(Debug, Clone)]
-enum Part {
+pub(super) enum Part {
     /// Three Euler channels (`idx`, in channel order about `order`'s axes) as a quaternion,
     /// with a step in radians.
     Quat {
@@ -55,9 +58,9 @@ enum Part {
 }
 
 /// The parts of a frame for a rig at a given `α`.
-struct Plan {
-    parts: Vec<Part>,
-    channels: usize,
+pub(super) struct Plan {
+    pub(super) parts: Vec<Part>,
+    pub(super) channels: usize,
 }
 
 impl Plan {
@@ -133,9 +136,6 @@ impl Codec for Rot {
         let (rig, skeleton) = input
             .skeleton
             .ok_or_else(|| Error::Invalid("rot needs a skeleton take".into()))?;
-        let values = &skeleton.values;
-        let per = default_chunk_frames(input.fps);
-        let frames = skeleton.frame_count();
         let t = match target {
             Target::Max(t) | Target::Mean(t) => t,
         };
@@ -144,52 +144,23 @@ impl Codec for Rot {
                 "rot needs a positive bound, got {t}"
             )));
         }
-        // Search log α: the largest whose decoded positions meet the target.
-        let meets = |alpha: f64| -> Result<bool> {
-            let decoded = run(rig, alpha, values, frames, per)?;
-            let mut positions = vec![0f32; frames * rig.joints().len() * 3];
-            rig.positions(&decoded, &mut positions);
-            let (max, mean) = errors(input, &positions);
-            Ok(target.holds(max, mean))
-        };
-        let (mut lo, mut hi) = ((t * 1e-4).ln(), (t * 8.0).ln());
-        if !meets(lo.exp())? {
-            return Err(Error::BoundMissed {
-                codec: "rot".into(),
-                detail: format!("even a step of {:.3e} misses the bound", lo.exp()),
-            });
-        }
-        for _ in 0..SEARCH_STEPS {
-            let mid = 0.5 * (lo + hi);
-            if meets(mid.exp())? {
-                lo = mid;
-            } else {
-                hi = mid;
+        let take = Take::new(rig, skeleton, default_chunk_frames(input.fps));
+        // Each mode at the largest step that meets the bound; the smaller wins.
+        let mut best: Option<CodecOutput> = None;
+        for mode in [Mode::Delta, Mode::Transform] {
+            let alpha = take.search(mode, t, |decoded| {
+                let mut positions = vec![0f32; take.frames * rig.joints().len() * 3];
+                rig.positions(decoded, &mut positions);
+                let (max, mean) = errors(input, &positions);
+                target.holds(max, mean)
+            })?;
+            let out = take.encode(mode, alpha)?;
+            let size = |o: &CodecOutput| o.chunks.iter().map(|c| c.bytes.len()).sum::<usize>();
+            if best.as_ref().is_none_or(|b| size(&out) < size(b)) {
+                best = Some(out);
             }
         }
-        let alpha = lo.exp();
-        let plan = Plan::new(rig, alpha);
-        let mut chunks = Vec::with_capacity(frames.div_ceil(per));
-        for f0 in (0..frames).step_by(per) {
-            let n = per.min(frames - f0);
-            let cc = plan.channels;
-            let mut enc = Encoder::new();
-            let mut out = Vec::with_capacity(n * cc);
-            code_chunk(
-                &mut enc,
-                &plan,
-                n,
-                Some(&values[f0 * cc..(f0 + n) * cc]),
-                &mut out,
-            )?;
-            chunks.push(ChunkOut {
-                frames: n,
-                bytes: enc.finish(),
-            });
-        }
-        let mut params = vec![VERSION];
-        params.extend_from_slice(&alpha.to_le_bytes());
-        Ok(CodecOutput { params, chunks })
+        best.ok_or_else(|| Error::Invalid("no mode".into()))
     }
 
     fn decoder(
@@ -198,8 +169,11 @@ impl Codec for Rot {
         _points: usize,
         shared: &Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
-        let alpha = match params {
-            [VERSION, a @ ..] if a.len() == 8 => f64::from_le_bytes(a.try_into().expect("8 bytes")),
+        let (mode, alpha) = match params {
+            [VERSION, m, a @ ..] if a.len() == 8 => (
+                Mode::from_byte(*m).ok_or_else(|| malformed(format!("rot mode {m}")))?,
+                f64::from_le_bytes(a.try_into().expect("8 bytes")),
+            ),
             _ => return Err(malformed("rot parameters")),
         };
         if !(alpha.is_finite() && alpha > 0.0) {
@@ -210,7 +184,7 @@ impl Codec for Rot {
             .clone()
             .ok_or_else(|| Error::Basis("rot decodes with the take's skeleton".into()))?;
         let plan = Plan::new(&rig, alpha);
-        Ok(Box::new(RotDecoder { rig, plan }))
+        Ok(Box::new(RotDecoder { rig, plan, mode }))
     }
 
     fn codes_channels(&self) -> bool {
@@ -225,22 +199,136 @@ impl Codec for Rot {
     }
 }
 
-/// Code every chunk at `alpha` without writing bytes: the decoded channel values.
-fn run(rig: &Rig, alpha: f64, values: &[f64], frames: usize, per: usize) -> Result<Vec<f64>> {
-    let plan = Plan::new(rig, alpha);
-    let cc = plan.channels;
-    let mut out = Vec::with_capacity(values.len());
-    for f0 in (0..frames).step_by(per) {
-        let n = per.min(frames - f0);
-        code_chunk(
-            &mut Dry,
-            &plan,
-            n,
-            Some(&values[f0 * cc..(f0 + n) * cc]),
-            &mut out,
-        )?;
+/// How a take's chunks are coded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+enum Mode {
+    /// Closed-loop prediction frame by frame ([`delta`]).
+    Delta = 0,
+    /// DCT coefficients of each part's series per chunk ([`transform`]).
+    Transform = 1,
+}
+
+impl Mode {
+    fn from_byte(b: u8) -> Option<Mode> {
+        [Mode::Delta, Mode::Transform]
+            .into_iter()
+            .find(|m| *m as u8 == b)
     }
-    Ok(out)
+}
+
+/// One chunk of a take as one mode codes it.
+fn code<I: Io>(
+    mode: Mode,
+    io: &mut I,
+    plan: &Plan,
+    frames: usize,
+    input: Option<(&[f64], &transform::Coeffs)>,
+    out: &mut Vec<f64>,
+) -> Result<()> {
+    match mode {
+        Mode::Delta => delta::code_chunk(io, plan, frames, input.map(|i| i.0), out),
+        Mode::Transform => transform::code_chunk(io, plan, frames, input.map(|i| i.1), out),
+    }
+}
+
+/// A take being encoded: its rig, channel values, chunks and (step-independent) analysis.
+struct Take<'a> {
+    rig: &'a Rig,
+    values: &'a [f64],
+    frames: usize,
+    /// Each chunk's first frame, frame count and DCT coefficients.
+    chunks: Vec<(usize, usize, transform::Coeffs)>,
+}
+
+impl<'a> Take<'a> {
+    fn new(rig: &'a Rig, skeleton: &'a crate::motion::Skeleton, per: usize) -> Take<'a> {
+        let frames = skeleton.frame_count();
+        let values = &skeleton.values[..];
+        let layout = Plan::new(rig, 1.0);
+        let cc = layout.channels;
+        let chunks = (0..frames)
+            .step_by(per)
+            .map(|f0| {
+                let n = per.min(frames - f0);
+                let c = transform::analyse(&layout, &values[f0 * cc..(f0 + n) * cc], n);
+                (f0, n, c)
+            })
+            .collect();
+        Take {
+            rig,
+            values,
+            frames,
+            chunks,
+        }
+    }
+
+    /// Every chunk through `io` at `alpha`: the decoded channel values.
+    fn run<I: Io>(
+        &self,
+        mode: Mode,
+        alpha: f64,
+        io: &mut impl FnMut() -> I,
+        sink: &mut impl FnMut(I),
+    ) -> Result<Vec<f64>> {
+        let plan = Plan::new(self.rig, alpha);
+        let cc = plan.channels;
+        let mut out = Vec::with_capacity(self.values.len());
+        for (f0, n, coeffs) in &self.chunks {
+            let mut coder = io();
+            let values = &self.values[f0 * cc..(f0 + n) * cc];
+            code(
+                mode,
+                &mut coder,
+                &plan,
+                *n,
+                Some((values, coeffs)),
+                &mut out,
+            )?;
+            sink(coder);
+        }
+        Ok(out)
+    }
+
+    /// The largest `α` (searched on a log scale below `8 t`) whose decoded values `meets`.
+    fn search(&self, mode: Mode, t: f64, meets: impl Fn(&[f64]) -> bool) -> Result<f64> {
+        let ok = |alpha: f64| -> Result<bool> {
+            Ok(meets(&self.run(mode, alpha, &mut || Dry, &mut |_| {})?))
+        };
+        let (mut lo, mut hi) = ((t * 1e-4).ln(), (t * 8.0).ln());
+        if !ok(lo.exp())? {
+            return Err(Error::BoundMissed {
+                codec: "rot".into(),
+                detail: format!("even a step of {:.3e} misses the bound", lo.exp()),
+            });
+        }
+        for _ in 0..SEARCH_STEPS {
+            let mid = 0.5 * (lo + hi);
+            if ok(mid.exp())? {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Ok(lo.exp())
+    }
+
+    /// The bitstream at `alpha`.
+    fn encode(&self, mode: Mode, alpha: f64) -> Result<CodecOutput> {
+        let mut bytes = Vec::with_capacity(self.chunks.len());
+        self.run(mode, alpha, &mut Encoder::new, &mut |e: Encoder| {
+            bytes.push(e.finish())
+        })?;
+        let chunks = self
+            .chunks
+            .iter()
+            .zip(bytes)
+            .map(|((_, n, _), bytes)| ChunkOut { frames: *n, bytes })
+            .collect();
+        let mut params = vec![VERSION, mode as u8];
+        params.extend_from_slice(&alpha.to_le_bytes());
+        Ok(CodecOutput { params, chunks })
+    }
 }
 
 /// Max and mean error (take units) of decoded positions against the input's real samples.
@@ -284,110 +372,20 @@ impl Io for Dry {
     }
 }
 
-/// What one part has decoded so far in the chunk.
-#[derive(Clone, Default)]
-struct History {
-    quats: [Option<UnitQuaternion<f64>>; 2],
-    euler: Option<[f64; 3]>,
-    scalars: [Option<f64>; 2],
-    /// Running mean of residual magnitudes, × 16, per component.
-    size: [u32; 3],
-}
-
-fn size_context(size: u32) -> usize {
-    ((32 - (size >> 4).leading_zeros()) as usize).min(SIZE_CONTEXTS - 1)
-}
-
-fn seen(size: &mut u32, r: i64) {
-    let r = r.unsigned_abs().min(1 << 24) as u32;
-    *size = (3 * *size + 16 * r) / 4;
-}
-
-fn printed(v: f64) -> f64 {
+/// A decoded value as a file prints it (what the bound is verified on).
+pub(super) fn printed(v: f64) -> f64 {
     (v * PRINTED).round() / PRINTED
 }
 
-/// Code `frames` frames of one chunk (closed loop), appending the decoded channel values to
-/// `out`: from `input` (this chunk's channel values) when encoding.
-fn code_chunk<I: Io>(
-    io: &mut I,
-    plan: &Plan,
-    frames: usize,
-    input: Option<&[f64]>,
-    out: &mut Vec<f64>,
-) -> Result<()> {
-    let cc = plan.channels;
-    let mut models = vec![IntModel::default(); 3 * SIZE_CONTEXTS];
-    let mut hist = vec![History::default(); plan.parts.len()];
-    let base = out.len();
-    out.resize(base + frames * cc, 0.0);
-    for f in 0..frames {
-        let row = input.map(|v| &v[f * cc..(f + 1) * cc]);
-        let dest = &mut out[base + f * cc..base + (f + 1) * cc];
-        for (part, h) in plan.parts.iter().zip(&mut hist) {
-            match *part {
-                Part::Scalar { idx, step, kind } => {
-                    let pred = match h.scalars {
-                        [Some(a), Some(b)] => 2.0 * a - b,
-                        [Some(a), None] => a,
-                        _ => 0.0,
-                    };
-                    let q = row.map_or(0, |r| quantise((r[idx] - pred) / step));
-                    let m = &mut models[kind * SIZE_CONTEXTS + size_context(h.size[0])];
-                    let q = code_residual(io, m, q)?;
-                    seen(&mut h.size[0], q);
-                    let v = printed(pred + q as f64 * step);
-                    if !v.is_finite() {
-                        return Err(malformed("a decoded channel value is not finite"));
-                    }
-                    h.scalars = [Some(v), h.scalars[0]];
-                    dest[idx] = v;
-                }
-                Part::Quat { order, idx, step } => {
-                    let pred = match h.quats {
-                        [Some(a), Some(b)] => a * (b.inverse() * a),
-                        [Some(a), None] => a,
-                        _ => UnitQuaternion::identity(),
-                    };
-                    let residual = row.map(|r| {
-                        let q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
-                        rotation::log(&(pred.inverse() * q))
-                    });
-                    let mut v = Vector3::zeros();
-                    for c in 0..3 {
-                        let q = residual.map_or(0, |r| quantise(r[c] / step));
-                        let m = &mut models[2 * SIZE_CONTEXTS + size_context(h.size[c])];
-                        let q = code_residual(io, m, q)?;
-                        seen(&mut h.size[c], q);
-                        v[c] = q as f64 * step;
-                    }
-                    if !v.iter().all(|x| x.is_finite()) {
-                        return Err(malformed("a decoded rotation is not finite"));
-                    }
-                    // Renormalised: extrapolation multiplies small departures from unit norm
-                    // frame after frame.
-                    let q = UnitQuaternion::new_normalize((pred * rotation::exp(&v)).into_inner());
-                    let e = rotation::to_euler(&q, order, h.euler);
-                    h.euler = Some(e);
-                    h.quats = [Some(q), h.quats[0]];
-                    for k in 0..3 {
-                        dest[idx[k]] = printed(e[k]);
-                    }
-                }
-            }
-        }
-    }
-    Ok(())
-}
-
 /// The nearest integer, saturating (a residual past ±2^62 steps is no motion).
-fn quantise(x: f64) -> i64 {
+pub(super) fn quantise(x: f64) -> i64 {
     x.round().clamp(-(2f64.powi(62)), 2f64.powi(62)) as i64
 }
 
 struct RotDecoder {
     rig: Arc<Rig>,
     plan: Plan,
+    mode: Mode,
 }
 
 impl ChunkDecoder for RotDecoder {
@@ -400,7 +398,7 @@ impl ChunkDecoder for RotDecoder {
     fn decode_channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
         let mut dec = Decoder::new(bytes);
         let mut values = Vec::new();
-        code_chunk(&mut dec, &self.plan, frames, None, &mut values)?;
+        code(self.mode, &mut dec, &self.plan, frames, None, &mut values)?;
         if dec.overran() {
             return Err(malformed("rot chunk is truncated"));
         }
@@ -472,6 +470,9 @@ mod tests {
             .decoder(&enc.container.header.params, m.point_count(), &shared)
             .unwrap();
         assert!(Rot.decoder(&[VERSION], 1, &shared).is_err());
+        assert!(Rot
+            .decoder(&[VERSION, 7, 0, 0, 0, 0, 0, 0, 240, 63], 1, &shared)
+            .is_err());
         let frames = enc.container.header.chunks[0].frames as usize;
         let (_, bytes) = crate::codec::container::unpack_chunk(
             &enc.container.chunks[0],

@@ -1,0 +1,104 @@
+//! `rot`'s delta mode: each frame predicted from the two decoded before it (constant
+//! angular velocity for rotations, linear extrapolation for scalars) and the residual
+//! quantised — closed loop, so errors never accumulate. Best at tight bounds, where the
+//! residuals are small against the step.
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use super::{printed, quantise, Part, Plan, SIZE_CONTEXTS};
+use crate::codec::entropy::ints::IntModel;
+use crate::codec::entropy::io::{code_residual, Io};
+use crate::codec::error::{malformed, Result};
+use crate::motion::rotation;
+
+/// What one part has decoded so far in the chunk.
+#[derive(Clone, Default)]
+struct History {
+    quats: [Option<UnitQuaternion<f64>>; 2],
+    euler: Option<[f64; 3]>,
+    scalars: [Option<f64>; 2],
+    /// Running mean of residual magnitudes, × 16, per component.
+    size: [u32; 3],
+}
+
+fn size_context(size: u32) -> usize {
+    ((32 - (size >> 4).leading_zeros()) as usize).min(SIZE_CONTEXTS - 1)
+}
+
+fn seen(size: &mut u32, r: i64) {
+    let r = r.unsigned_abs().min(1 << 24) as u32;
+    *size = (3 * *size + 16 * r) / 4;
+}
+
+/// Code `frames` frames of one chunk (closed loop), appending the decoded channel values to
+/// `out`: from `input` (this chunk's channel values) when encoding.
+pub(super) fn code_chunk<I: Io>(
+    io: &mut I,
+    plan: &Plan,
+    frames: usize,
+    input: Option<&[f64]>,
+    out: &mut Vec<f64>,
+) -> Result<()> {
+    let cc = plan.channels;
+    let mut models = vec![IntModel::default(); 3 * SIZE_CONTEXTS];
+    let mut hist = vec![History::default(); plan.parts.len()];
+    let base = out.len();
+    out.resize(base + frames * cc, 0.0);
+    for f in 0..frames {
+        let row = input.map(|v| &v[f * cc..(f + 1) * cc]);
+        let dest = &mut out[base + f * cc..base + (f + 1) * cc];
+        for (part, h) in plan.parts.iter().zip(&mut hist) {
+            match *part {
+                Part::Scalar { idx, step, kind } => {
+                    let pred = match h.scalars {
+                        [Some(a), Some(b)] => 2.0 * a - b,
+                        [Some(a), None] => a,
+                        _ => 0.0,
+                    };
+                    let q = row.map_or(0, |r| quantise((r[idx] - pred) / step));
+                    let m = &mut models[kind * SIZE_CONTEXTS + size_context(h.size[0])];
+                    let q = code_residual(io, m, q)?;
+                    seen(&mut h.size[0], q);
+                    let v = printed(pred + q as f64 * step);
+                    if !v.is_finite() {
+                        return Err(malformed("a decoded channel value is not finite"));
+                    }
+                    h.scalars = [Some(v), h.scalars[0]];
+                    dest[idx] = v;
+                }
+                Part::Quat { order, idx, step } => {
+                    let pred = match h.quats {
+                        [Some(a), Some(b)] => a * (b.inverse() * a),
+                        [Some(a), None] => a,
+                        _ => UnitQuaternion::identity(),
+                    };
+                    let residual = row.map(|r| {
+                        let q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
+                        rotation::log(&(pred.inverse() * q))
+                    });
+                    let mut v = Vector3::zeros();
+                    for c in 0..3 {
+                        let q = residual.map_or(0, |r| quantise(r[c] / step));
+                        let m = &mut models[2 * SIZE_CONTEXTS + size_context(h.size[c])];
+                        let q = code_residual(io, m, q)?;
+                        seen(&mut h.size[c], q);
+                        v[c] = q as f64 * step;
+                    }
+                    if !v.iter().all(|x| x.is_finite()) {
+                        return Err(malformed("a decoded rotation is not finite"));
+                    }
+                    // Renormalised: extrapolation multiplies small departures from unit norm
+                    // frame after frame.
+                    let q = UnitQuaternion::new_normalize((pred * rotation::exp(&v)).into_inner());
+                    let e = rotation::to_euler(&q, order, h.euler);
+                    h.euler = Some(e);
+                    h.quats = [Some(q), h.quats[0]];
+                    for k in 0..3 {
+                        dest[idx[k]] = printed(e[k]);
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,168 @@
+//! `rot`'s transform mode: per chunk, each rotation as its rotation vector (the log map,
+//! kept continuous from frame to frame) and each scalar channel as a series along time,
+//! each series turned into DCT coefficients, quantised with the part's step, and coded up to
+//! its last non-zero coefficient. Best at loose bounds, where a second of a joint's motion
+//! takes a handful of coefficients (the MDTT observation, on rotations).
+
+use nalgebra::Vector3;
+
+use super::{printed, quantise, Part, Plan};
+use crate::codec::dct;
+use crate::codec::entropy::ints::IntModel;
+use crate::codec::entropy::io::{code_residual, Io};
+use crate::codec::error::{malformed, Result};
+use crate::motion::rotation;
+
+/// Frequency bands with their own statistics: 0, 1, 2, 3–4, 5–8, 9–16, 17+.
+const BANDS: usize = 7;
+/// Contexts from the previous coefficient's size: 0, 1, 2, 3+.
+const PREVIOUS: usize = 4;
+
+fn band(k: usize) -> usize {
+    match k {
+        0..=2 => k,
+        3..=4 => 3,
+        5..=8 => 4,
+        9..=16 => 5,
+        _ => 6,
+    }
+}
+
+/// The DCT coefficients of one chunk: a series per rotation-vector component and per
+/// scalar channel, in the plan's part order. They do not depend on the step, so rate
+/// control computes them once.
+pub(super) struct Coeffs {
+    series: Vec<Vec<f64>>,
+}
+
+/// The series of a chunk's `frames` frames of channel values, as DCT coefficients.
+pub(super) fn analyse(plan: &Plan, values: &[f64], frames: usize) -> Coeffs {
+    let cc = plan.channels;
+    let d = dct::basis(frames, frames);
+    let transform = |x: &[f64]| -> Vec<f64> {
+        (0..frames)
+            .map(|j| (0..frames).map(|t| x[t] * d[t * frames + j]).sum())
+            .collect()
+    };
+    let mut series = Vec::new();
+    for part in &plan.parts {
+        match *part {
+            Part::Scalar { idx, .. } => {
+                let x: Vec<f64> = (0..frames).map(|t| values[t * cc + idx]).collect();
+                series.push(transform(&x));
+            }
+            Part::Quat { order, idx, .. } => {
+                let mut comps = [vec![0.0; frames], vec![0.0; frames], vec![0.0; frames]];
+                let mut prev: Option<Vector3<f64>> = None;
+                for t in 0..frames {
+                    let r = &values[t * cc..];
+                    let q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
+                    let v = continuous(rotation::log(&q), prev);
+                    prev = Some(v);
+                    for c in 0..3 {
+                        comps[c][t] = v[c];
+                    }
+                }
+                series.extend(comps.iter().map(|x| transform(x)));
+            }
+        }
+    }
+    Coeffs { series }
+}
+
+/// Of the rotation vectors of one rotation (`v` turned by whole turns along its axis), the
+/// one nearest `prev`: a rotation turning past 180° keeps a smooth series.
+fn continuous(v: Vector3<f64>, prev: Option<Vector3<f64>>) -> Vector3<f64> {
+    let (Some(p), theta) = (prev, v.norm()) else {
+        return v;
+    };
+    if theta < 1e-12 {
+        return v;
+    }
+    let tau = std::f64::consts::TAU;
+    [-1.0, 0.0, 1.0]
+        .into_iter()
+        .map(|k: f64| v * ((theta + k * tau) / theta))
+        .min_by(|a, b| (a - p).norm().total_cmp(&(b - p).norm()))
+        .unwrap_or(v)
+}
+
+/// Code one chunk of `frames` frames (from `coeffs` when encoding), appending the decoded
+/// channel values to `out`.
+pub(super) fn code_chunk<I: Io>(
+    io: &mut I,
+    plan: &Plan,
+    frames: usize,
+    coeffs: Option<&Coeffs>,
+    out: &mut Vec<f64>,
+) -> Result<()> {
+    let cc = plan.channels;
+    let d = dct::basis(frames, frames);
+    let mut eob_models = vec![IntModel::default(); 3];
+    let mut models = vec![IntModel::default(); 3 * BANDS * PREVIOUS];
+    // Decoded series, in part order.
+    let mut decoded: Vec<Vec<f64>> = Vec::new();
+    let mut s = 0;
+    for part in &plan.parts {
+        let (n, step, kind) = match *part {
+            Part::Scalar { step, kind, .. } => (1, step, kind),
+            Part::Quat { step, .. } => (3, step, 2),
+        };
+        for _ in 0..n {
+            let given = coeffs.map(|c| &c.series[s]);
+            s += 1;
+            let q: Vec<i64> =
+                given.map_or_else(Vec::new, |c| c.iter().map(|v| quantise(v / step)).collect());
+            let last = q.iter().rposition(|&v| v != 0).map_or(0, |i| i + 1);
+            let eob = io.int(&mut eob_models[kind], last as i32);
+            let eob = usize::try_from(eob)
+                .ok()
+                .filter(|&e| e <= frames)
+                .ok_or_else(|| malformed(format!("{eob} coefficients for {frames} frames")))?;
+            let mut x = vec![0.0; frames];
+            let mut previous = 0i64;
+            for k in 0..eob {
+                let ctx = (kind * BANDS + band(k)) * PREVIOUS
+                    + (previous.unsigned_abs().min(PREVIOUS as u64 - 1) as usize);
+                let v = code_residual(io, &mut models[ctx], q.get(k).copied().unwrap_or(0))?;
+                previous = v;
+                if v != 0 {
+                    let c = v as f64 * step;
+                    for (t, x) in x.iter_mut().enumerate() {
+                        *x += c * d[t * frames + k];
+                    }
+                }
+            }
+            if !x.iter().all(|v| v.is_finite()) {
+                return Err(malformed("a decoded series is not finite"));
+            }
+            decoded.push(x);
+        }
+    }
+    let base = out.len();
+    out.resize(base + frames * cc, 0.0);
+    let mut s = 0;
+    for part in &plan.parts {
+        match *part {
+            Part::Scalar { idx, .. } => {
+                for t in 0..frames {
+                    out[base + t * cc + idx] = printed(decoded[s][t]);
+                }
+                s += 1;
+            }
+            Part::Quat { order, idx, .. } => {
+                let mut near = None;
+                for t in 0..frames {
+                    let v = Vector3::new(decoded[s][t], decoded[s + 1][t], decoded[s + 2][t]);
+                    let e = rotation::to_euler(&rotation::exp(&v), order, near);
+                    near = Some(e);
+                    for k in 0..3 {
+                        out[base + t * cc + idx[k]] = printed(e[k]);
+                    }
+                }
+                s += 3;
+            }
+        }
+    }
+    Ok(())
+}
