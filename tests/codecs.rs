@@ -19,6 +19,8 @@ use proptest::prelude::*;
 const CODECS: [CodecId; 3] = [CodecId::Raw, CodecId::Quant, CodecId::Mdtt];
 /// The codecs that code with a shared basis.
 const SHARED: [CodecId; 3] = [CodecId::LsdtClip, CodecId::LsdtFrame, CodecId::MdttShared];
+/// The codecs that keep a skeleton's channel values.
+const SKELETON: [CodecId; 2] = [CodecId::BvhLossless, CodecId::Rot];
 
 /// Bases of both kinds for the takes of one layout: LSDT on their frames (the DCT if none
 /// is complete), two MDTT bases by annealing.
@@ -326,73 +328,101 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
         } else {
             bases[0].clone()
         };
-        let shared = Some(&basis);
-        let enc = codec::encode_with(&m, codec, ErrorBound::MaxMm(1.0), shared).unwrap();
-        let good = enc.container.to_bytes();
-        let header_len = enc.container.header.to_bytes().len();
-        for case in 0..1500 {
-            let mut b = good.clone();
-            match case % 3 {
-                0 => b.truncate(rng.below(b.len())),
-                1 => {
-                    for _ in 0..1 + rng.below(4) {
-                        let i = rng.below(b.len());
-                        b[i] ^= 1 << rng.below(8);
-                    }
-                }
-                _ => {
-                    let i = rng.below(b.len());
-                    b[i] = rng.next_u64() as u8;
-                }
-            }
-            let r = catch_unwind(AssertUnwindSafe(|| {
-                Container::parse(&b, &Limits::default())
-                    .and_then(|c| codec::decode_all_with(&c, shared.cloned()))
-            }));
-            match r {
-                Ok(Ok(_)) => outcomes[0] += 1,
-                Ok(Err(
-                    Error::Malformed(_)
-                    | Error::Checksum(_)
-                    | Error::Unsupported(_)
-                    | Error::Limit { .. }
-                    | Error::Basis(_),
-                )) => outcomes[1] += 1,
-                Ok(Err(e)) => panic!("{codec} case {case}: untyped error {e:?}"),
-                Err(_) => panic!("{codec} case {case}: decoder panicked"),
-            }
-        }
-        // Garbage behind valid checksums: corrupt chunk payloads, then re-seal them.
-        for case in 0..1500 {
-            let mut c = enc.container.clone();
-            let i = rng.below(c.chunks.len());
-            let chunk = &mut c.chunks[i];
-            if chunk.is_empty() {
-                continue;
-            }
-            for _ in 0..1 + rng.below(6) {
-                let j = rng.below(chunk.len());
-                chunk[j] = rng.next_u64() as u8;
-            }
-            if case % 5 == 0 {
-                let cut = rng.below(chunk.len());
-                chunk.truncate(cut);
-            }
-            c.header.chunks[i].len = c.chunks[i].len() as u32;
-            c.header.chunks[i].crc32c = crc32c::crc32c(&c.chunks[i]);
-            let r = catch_unwind(AssertUnwindSafe(|| {
-                codec::decode_all_with(&c, shared.cloned())
-            }));
-            match r {
-                Ok(Ok(_)) => outcomes[2] += 1,
-                Ok(Err(_)) => outcomes[1] += 1,
-                Err(_) => panic!("{codec} resealed case {case}: decoder panicked"),
-            }
-        }
-        assert!(header_len > 0);
+        let enc = codec::encode_with(&m, codec, ErrorBound::MaxMm(1.0), Some(&basis)).unwrap();
+        mutate(&enc.container, &Some(basis).into(), &mut rng, &mut outcomes);
+    }
+    // The codecs that keep a skeleton's channels, read as positions and as channels.
+    let text = mocapstore::motion::synthetic::dancer_bvh(300, 120.0, 5, 4);
+    let m = formats::read(text.as_bytes(), &ReadOptions::default())
+        .unwrap()
+        .motion;
+    let rig = Arc::new(codec::Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
+    let shared = codec::Shared {
+        basis: None,
+        rig: Some(rig),
+    };
+    for codec in SKELETON {
+        let enc = codec::encode(&m, codec, ErrorBound::MaxMm(1.0)).unwrap();
+        mutate(&enc.container, &shared, &mut rng, &mut outcomes);
     }
     println!(
         "mutations: {} decoded, {} typed errors, {} resealed garbage decoded to numbers",
         outcomes[0], outcomes[1], outcomes[2]
     );
+}
+
+/// Decode a take both ways its codec can be read: positions, and channel values for the
+/// codecs that keep them.
+fn decode_both(c: &Container, shared: &codec::Shared) -> Result<(), Error> {
+    codec::decode_all_with(c, shared.clone())?;
+    if codec::codec(c.header.codec)?.codes_channels() {
+        let reader = codec::Reader::new(c.header.clone(), shared.clone())?;
+        let cc = shared.rig.as_ref().map_or(0, |r| r.channel_count());
+        let source = codec::Stored::new(0, c.chunks.iter().map(Vec::as_slice));
+        reader.read_channels(0..c.header.frames as usize, cc, &source)?;
+    }
+    Ok(())
+}
+
+/// 1,500 damaged copies of `container` with checksums intact and 1,500 with chunk payloads
+/// garbled and re-sealed: each decodes or gives a typed error, never a panic.
+fn mutate(container: &Container, shared: &codec::Shared, rng: &mut Rng, outcomes: &mut [usize; 3]) {
+    let codec = container.header.codec;
+    let good = container.to_bytes();
+    for case in 0..1500 {
+        let mut b = good.clone();
+        match case % 3 {
+            0 => b.truncate(rng.below(b.len())),
+            1 => {
+                for _ in 0..1 + rng.below(4) {
+                    let i = rng.below(b.len());
+                    b[i] ^= 1 << rng.below(8);
+                }
+            }
+            _ => {
+                let i = rng.below(b.len());
+                b[i] = rng.next_u64() as u8;
+            }
+        }
+        let r = catch_unwind(AssertUnwindSafe(|| {
+            Container::parse(&b, &Limits::default()).and_then(|c| decode_both(&c, shared))
+        }));
+        match r {
+            Ok(Ok(_)) => outcomes[0] += 1,
+            Ok(Err(
+                Error::Malformed(_)
+                | Error::Checksum(_)
+                | Error::Unsupported(_)
+                | Error::Limit { .. }
+                | Error::Basis(_),
+            )) => outcomes[1] += 1,
+            Ok(Err(e)) => panic!("{codec} case {case}: untyped error {e:?}"),
+            Err(_) => panic!("{codec} case {case}: decoder panicked"),
+        }
+    }
+    // Garbage behind valid checksums: corrupt chunk payloads, then re-seal them.
+    for case in 0..1500 {
+        let mut c = container.clone();
+        let i = rng.below(c.chunks.len());
+        let chunk = &mut c.chunks[i];
+        if chunk.is_empty() {
+            continue;
+        }
+        for _ in 0..1 + rng.below(6) {
+            let j = rng.below(chunk.len());
+            chunk[j] = rng.next_u64() as u8;
+        }
+        if case % 5 == 0 {
+            let cut = rng.below(chunk.len());
+            chunk.truncate(cut);
+        }
+        c.header.chunks[i].len = c.chunks[i].len() as u32;
+        c.header.chunks[i].crc32c = crc32c::crc32c(&c.chunks[i]);
+        let r = catch_unwind(AssertUnwindSafe(|| decode_both(&c, shared)));
+        match r {
+            Ok(Ok(_)) => outcomes[2] += 1,
+            Ok(Err(_)) => outcomes[1] += 1,
+            Err(_) => panic!("{codec} resealed case {case}: decoder panicked"),
+        }
+    }
 }

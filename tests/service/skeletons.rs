@@ -25,7 +25,10 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         let mut ids = Vec::new();
         for (name, text) in [("a", &a), ("b", &b)] {
             let (status, report) = srv
-                .post(&format!("name={name}"), text.as_bytes().to_vec())
+                .post(
+                    &format!("name={name}&codec=bvh-lossless"),
+                    text.as_bytes().to_vec(),
+                )
                 .await;
             assert_eq!(status, 201, "{} {report}", t.name);
             assert_eq!(report["codec"], "bvh-lossless");
@@ -100,4 +103,103 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         srv.stop().await;
         t.finish().await;
     }
+}
+
+/// The BVH rows of a file, whitespace normalised.
+fn rows_of(text: &str) -> Vec<String> {
+    motion_rows(text)
+        .iter()
+        .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+        .collect()
+}
+
+/// Every BVH file of the corpus, ingested with defaults, comes back as BVH: the same
+/// hierarchy and frame count read by this project's reader and by an independent one
+/// (`bvh_anim`), the values as uploaded (`bvh-lossless`) or FK positions within the bound
+/// (`rot`), and a range equal to the same rows of the whole take.
+#[tokio::test]
+async fn every_corpus_bvh_comes_back_as_bvh() {
+    let Some((root, entries)) = mocapstore::corpus::for_tests() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = start(t.store.clone(), 64 << 20).await;
+    let (mut checked, mut codecs) = (0, std::collections::BTreeMap::new());
+    for e in entries.iter().filter(|e| e.path.ends_with(".bvh")) {
+        let bytes = std::fs::read(root.join(&e.path)).unwrap();
+        let Ok(original) = formats::read(&bytes, &ReadOptions::default()) else {
+            continue; // refused files are the manifest test's business
+        };
+        let original = original.motion;
+        // With defaults (the smallest codec that keeps the animation), and lossless.
+        for query in ["name=corpus", "name=corpus&codec=bvh-lossless"] {
+            let (status, report) = srv.post(query, bytes.clone()).await;
+            assert_eq!(status, 201, "{}: {report}", e.path);
+            let id = report["id"].as_str().unwrap();
+            let codec = report["codec"].as_str().unwrap().to_string();
+            let (status, _, body) = srv
+                .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
+                .await;
+            assert_eq!(status, 200, "{}", e.path);
+            let served = formats::read(&body, &ReadOptions::default())
+                .unwrap_or_else(|err| panic!("{}: served BVH: {err}", e.path))
+                .motion;
+            let (a, b) = (
+                original.skeleton.as_ref().unwrap(),
+                served.skeleton.as_ref().unwrap(),
+            );
+            assert_eq!(a.joints, b.joints, "{}: hierarchy", e.path);
+            assert_eq!(original.frame_count(), served.frame_count(), "{}", e.path);
+            // The independent reader agrees on the served file's joints and frames.
+            let other = bvh_anim::from_bytes(&body)
+                .unwrap_or_else(|err| panic!("{}: bvh_anim: {err}", e.path));
+            assert_eq!(other.joints().count(), a.joint_count(), "{}", e.path);
+            assert_eq!(other.frames().count(), original.frame_count(), "{}", e.path);
+            let text = String::from_utf8_lossy(&body).to_string();
+            let uploaded = String::from_utf8_lossy(&bytes).to_string();
+            match codec.as_str() {
+                "bvh-lossless" => {
+                    assert_eq!(rows_of(&text), rows_of(&uploaded), "{}", e.path);
+                    if let Ok(theirs) = bvh_anim::from_bytes(&bytes) {
+                        let values = |b: &bvh_anim::Bvh| -> Vec<f32> {
+                            b.frames().flat_map(|f| f.as_slice().to_vec()).collect()
+                        };
+                        assert_eq!(values(&other), values(&theirs), "{}", e.path);
+                    }
+                }
+                "rot" => {
+                    let s = mocapstore::motion::metrics::compare(
+                        original.positions(),
+                        served.positions(),
+                        original.point_count(),
+                        original.unit.to_mm(),
+                    )
+                    .unwrap();
+                    assert!(s.max_mm <= 1.0, "{}: max {} mm", e.path, s.max_mm);
+                }
+                other => panic!("{}: {other} does not keep the animation", e.path),
+            }
+            // A range: the same rows as the whole.
+            let n = original.frame_count();
+            let (lo, hi) = (n / 3, (n / 3 + 50).min(n));
+            let (status, _, part) = srv
+                .get(&format!(
+                    "/v1/sequences/{id}/frames?format=bvh&start={lo}&end={hi}"
+                ))
+                .await;
+            assert_eq!(status, 200);
+            assert_eq!(
+                rows_of(&String::from_utf8_lossy(&part)),
+                rows_of(&text)[lo..hi],
+                "{}",
+                e.path
+            );
+            *codecs.entry(codec).or_insert(0) += 1;
+        }
+        checked += 1;
+    }
+    assert!(checked >= 180, "{checked} BVH files checked");
+    println!("{checked} corpus BVH files served as BVH: {codecs:?}");
+    srv.stop().await;
+    t.finish().await;
 }
