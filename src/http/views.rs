@@ -13,6 +13,9 @@ pub struct TakeView<'a> {
     #[serde(flatten)]
     take: &'a Take,
     live: bool,
+    /// What the take costs on disk (container, metadata row and keys), beside
+    /// `stored_bytes` (the container alone).
+    disk_bytes: u64,
 }
 
 impl<'a> From<&'a Take> for TakeView<'a> {
@@ -20,6 +23,7 @@ impl<'a> From<&'a Take> for TakeView<'a> {
         TakeView {
             take,
             live: take.is_live(),
+            disk_bytes: take.disk_bytes().unwrap_or(take.stored_bytes),
         }
     }
 }

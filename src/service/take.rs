@@ -246,6 +246,18 @@ impl Take {
         })
     }
 
+    /// What the take costs on disk: its container and its row's metadata and keys
+    /// ([`crate::store::disk_bytes`]).
+    pub fn disk_bytes(&self) -> Result<u64> {
+        let row = self.to_row()?;
+        let chunks = crate::codec::Header::parse(&self.header, &Default::default())
+            .map_or(0, |(h, _)| h.chunks.len());
+        Ok(
+            crate::store::disk_bytes(row.totals.stored_bytes, row.text_bytes(), chunks as i64)
+                as u64,
+        )
+    }
+
     /// The running totals a live take's commits store.
     pub fn totals(&self) -> TakeTotals {
         TakeTotals {

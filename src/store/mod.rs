@@ -22,7 +22,7 @@ use sqlx::sqlite::{
 use sqlx::Row;
 
 pub use query::{Cursor, Filter, SortKey, StatRow, Totals};
-pub use rows::{ChunkEntry, ChunkRow, NewTake, TakeRow, TakeTotals};
+pub use rows::{disk_bytes, ChunkEntry, ChunkRow, NewTake, TakeRow, TakeTotals};
 
 /// Errors of the store layer.
 #[derive(Debug, thiserror::Error)]
@@ -498,21 +498,44 @@ impl Store {
     pub async fn stat_rows(&self, filter: &Filter) -> Result<Vec<StatRow>> {
         let w = query::where_clause(filter, None);
         let sql = format!(
-            "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, max_mm              FROM sequences {}",
+            "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, \
+             max_mm, id, name, layout, source_format, bound_kind, meta, skeleton_id, \
+             (SELECT COUNT(*) FROM chunks c WHERE c.sequence_id = sequences.id) AS chunk_rows, \
+             (SELECT COALESCE(SUM(LENGTH(t.tag) + LENGTH(t.sequence_id)), 0) \
+              FROM sequence_tags t WHERE t.sequence_id = sequences.id) AS tag_bytes \
+             FROM sequences {}",
             w.text
         );
         dispatch!(self, pool => {
             let rows = bind_all!(sqlx::query(&sql), &w.values).fetch_all(pool).await?;
             rows.iter()
                 .map(|r| {
+                    let text = |c: &str| -> Result<i64> {
+                        Ok(r.try_get::<Option<String>, _>(c)?.map_or(0, |v| v.len() as i64))
+                    };
+                    let library: String = r.try_get("library")?;
+                    let codec: String = r.try_get("codec")?;
+                    let id_len = text("id")?;
+                    let text_bytes = id_len
+                        + library.len() as i64
+                        + codec.len() as i64
+                        + text("name")?
+                        + text("layout")?
+                        + text("source_format")?
+                        + text("bound_kind")?
+                        + text("meta")?
+                        + text("skeleton_id")?
+                        + r.try_get::<i64, _>("tag_bytes")?;
+                    let stored_bytes: i64 = r.try_get("stored_bytes")?;
                     Ok(StatRow {
-                        library: r.try_get("library")?,
-                        codec: r.try_get("codec")?,
+                        disk_bytes: rows::disk_bytes(stored_bytes, text_bytes, r.try_get("chunk_rows")?),
+                        library,
+                        codec,
                         frames: r.try_get("frames")?,
                         points: r.try_get("points")?,
                         duration_s: r.try_get("duration_s")?,
                         raw_bytes: r.try_get("raw_bytes")?,
-                        stored_bytes: r.try_get("stored_bytes")?,
+                        stored_bytes,
                         mean_mm: r.try_get("mean_mm")?,
                         max_mm: r.try_get("max_mm")?,
                     })

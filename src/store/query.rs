@@ -193,6 +193,11 @@ pub struct Totals {
     pub stored_bytes: i64,
     /// raw_bytes / stored_bytes over the set (not the mean of per-take ratios).
     pub ratio: f64,
+    /// What the takes cost on disk: `stored_bytes` plus their rows' metadata and keys
+    /// ([`super::rows::disk_bytes`]); shared skeletons and bases are counted apart.
+    pub disk_bytes: i64,
+    /// raw_bytes / disk_bytes: the ratio the disk pays.
+    pub disk_ratio: f64,
     pub mean_mm: f64,
     pub max_mm: f64,
     /// Percentiles of the per-take max error.
@@ -210,6 +215,7 @@ pub struct StatRow {
     pub duration_s: f64,
     pub raw_bytes: i64,
     pub stored_bytes: i64,
+    pub disk_bytes: i64,
     pub mean_mm: f64,
     pub max_mm: f64,
 }
@@ -227,6 +233,7 @@ pub fn totals<'a>(rows: impl Iterator<Item = &'a StatRow>) -> Totals {
         t.hours += r.duration_s / 3600.0;
         t.raw_bytes += r.raw_bytes;
         t.stored_bytes += r.stored_bytes;
+        t.disk_bytes += r.disk_bytes;
         let n = (r.frames * r.points) as f64;
         t.mean_mm += r.mean_mm * n;
         samples += n;
@@ -235,6 +242,9 @@ pub fn totals<'a>(rows: impl Iterator<Item = &'a StatRow>) -> Totals {
     }
     if samples > 0.0 {
         t.mean_mm /= samples;
+    }
+    if t.disk_bytes > 0 {
+        t.disk_ratio = t.raw_bytes as f64 / t.disk_bytes as f64;
     }
     if t.stored_bytes > 0 {
         t.ratio = t.raw_bytes as f64 / t.stored_bytes as f64;

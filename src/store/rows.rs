@@ -55,6 +55,36 @@ pub struct TakeRow {
     pub skeleton_id: Option<String>,
 }
 
+/// Numeric columns of a take's row (8 bytes each on disk).
+const NUMERIC_COLUMNS: i64 = 19;
+/// A chunk row beside its payload: the take's id (36 characters) and four integers.
+const CHUNK_ROW: i64 = 36 + 4 * 8;
+
+/// What a take costs on disk, beside the database's own page and index overhead: its
+/// container (header and chunk payloads, `stored_bytes`), its row's text columns
+/// (`text_bytes`: metadata JSON, names, ids) and numbers, and its chunk rows' keys. A
+/// skeleton or basis it shares with other takes is stored once and not counted here.
+pub fn disk_bytes(stored_bytes: i64, text_bytes: i64, chunk_rows: i64) -> i64 {
+    stored_bytes + text_bytes + NUMERIC_COLUMNS * 8 + chunk_rows * CHUNK_ROW
+}
+
+impl TakeRow {
+    /// Bytes of the row's text columns (and tags).
+    pub fn text_bytes(&self) -> i64 {
+        let tags: usize = self.tags.iter().map(|t| t.len() + self.id.len()).sum();
+        (self.id.len()
+            + self.name.len()
+            + self.library.len()
+            + self.layout.len()
+            + self.source_format.len()
+            + self.codec.len()
+            + self.bound_kind.len()
+            + self.meta.len()
+            + self.skeleton_id.as_ref().map_or(0, String::len)
+            + tags) as i64
+    }
+}
+
 /// The columns a live take's commits update: its running totals.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TakeTotals {

@@ -1,5 +1,6 @@
 //! `mocapstore bench`: compression ratio, errors and speed of codecs on real files.
 
+mod lossless;
 mod plot;
 
 use std::collections::HashMap;
@@ -54,6 +55,10 @@ pub struct BenchArgs {
     /// varints + zstd) on the integer streams `quant` produces at each max bound.
     #[arg(long)]
     entropy: bool,
+    /// Instead of codecs, compare `bvh-lossless` with xz -9e, zstd -19 and gzip -9 on the
+    /// BVH files, file by file.
+    #[arg(long)]
+    lossless: bool,
 }
 
 /// One (file, codec, bound) measurement.
@@ -364,6 +369,9 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     };
     if args.entropy {
         return entropy_comparison(&files, &args.max_error, &opts, &args.out);
+    }
+    if args.lossless {
+        return lossless::run(&files, &args.out);
     }
     let mut takes = Vec::new();
     for path in &files {
