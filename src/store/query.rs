@@ -310,6 +310,7 @@ mod tests {
             duration_s: frames as f64 / 100.0,
             raw_bytes: frames * 120,
             stored_bytes: frames * 12,
+            disk_bytes: frames * 15,
             mean_mm: mean,
             max_mm: max,
         };
@@ -317,6 +318,6 @@ mod tests {
         let t = totals(rows.iter());
         assert_eq!((t.takes, t.frames), (2, 400));
         assert!((t.mean_mm - 1.75).abs() < 1e-12);
-        assert_eq!((t.max_mm, t.ratio), (4.0, 10.0));
+        assert_eq!((t.max_mm, t.ratio, t.disk_ratio), (4.0, 10.0, 8.0));
     }
 }
