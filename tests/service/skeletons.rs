@@ -50,6 +50,21 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         assert_eq!(status, 200);
         assert_eq!(take["skeleton"], sk.as_str());
         assert_eq!(take["meta"]["point_names"].as_array().unwrap().len(), 24);
+        // What the disk pays: the container plus the row, reported beside it.
+        let (stored, disk) = (
+            take["stored_bytes"].as_u64().unwrap(),
+            take["disk_bytes"].as_u64().unwrap(),
+        );
+        assert!(disk > stored && disk < stored + 2000, "{stored} {disk}");
+        let (_, stats) = srv.get_json("/v1/stats").await;
+        assert!(
+            stats["total"]["disk_bytes"].as_u64().unwrap()
+                > stats["total"]["stored_bytes"].as_u64().unwrap()
+        );
+        assert!(
+            stats["total"]["disk_ratio"].as_f64().unwrap()
+                < stats["total"]["ratio"].as_f64().unwrap()
+        );
 
         // Any range as BVH: the uploaded rows, character for character; a range equals the
         // same rows of the whole take.
