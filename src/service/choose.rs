@@ -108,7 +108,37 @@ pub struct Tried {
     pub max_mm: Option<f64>,
     pub mean_mm: Option<f64>,
     pub encode_ms: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+}
+
+impl Tried {
+    /// A candidate's outcome, its numbers rounded to what a reader of the record can use
+    /// (0.01 ms, 10⁻⁶ mm): the record is kept with every take.
+    pub fn new(
+        codec: CodecId,
+        outcome: std::result::Result<(usize, f64, f64), String>,
+        encode_ms: f64,
+    ) -> Tried {
+        let round = |v: f64, k: f64| (v * k).round() / k;
+        let (stored_bytes, max_mm, mean_mm, error) = match outcome {
+            Ok((bytes, max, mean)) => (
+                Some(bytes),
+                Some(round(max, 1e6)),
+                Some(round(mean, 1e6)),
+                None,
+            ),
+            Err(e) => (None, None, None, Some(e)),
+        };
+        Tried {
+            codec,
+            stored_bytes,
+            max_mm,
+            mean_mm,
+            encode_ms: round(encode_ms, 100.0),
+            error,
+        }
+    }
 }
 
 /// The decision kept with the take.

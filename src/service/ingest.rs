@@ -182,24 +182,11 @@ pub async fn encode_best(
             .map_err(|e| Error::Internal(format!("encoder failed: {e}")))?;
         match r {
             Ok(e) => {
-                tried.push(Tried {
-                    codec,
-                    stored_bytes: Some(e.stored_bytes),
-                    max_mm: Some(e.stats.max_mm),
-                    mean_mm: Some(e.stats.mean_mm),
-                    encode_ms: ms,
-                    error: None,
-                });
+                let measured = (e.stored_bytes, e.stats.max_mm, e.stats.mean_mm);
+                tried.push(Tried::new(codec, Ok(measured), ms));
                 encodings.push((codec, e));
             }
-            Err(e) => tried.push(Tried {
-                codec,
-                stored_bytes: None,
-                max_mm: None,
-                mean_mm: None,
-                encode_ms: ms,
-                error: Some(e.to_string()),
-            }),
+            Err(e) => tried.push(Tried::new(codec, Err(e.to_string()), ms)),
         }
     }
     let errors: Vec<String> = tried.iter().filter_map(|t| t.error.clone()).collect();

@@ -58,7 +58,7 @@ pub struct Take {
 pub struct TakeMeta {
     /// One name per point, in stored order. Not stored for a skeleton take: its skeleton
     /// names them.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub point_names: Vec<String>,
     /// The unit and where it came from.
     pub unit: Unit,
