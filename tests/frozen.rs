@@ -8,7 +8,8 @@
 //! never replaced or deleted, since a database somewhere holds takes coded that way.
 //!
 //! `index.txt`: one line per file: `<file> <hash of the decoded f32 bytes> <what it is>`.
-//! Bases a bitstream names sit in `tests/frozen/bases/<id>.mcsb`.
+//! Bases a bitstream names sit in `tests/frozen/bases/<id>.mcsb`, skeletons in
+//! `tests/frozen/skeletons/<id>.mcsk`.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -41,7 +42,14 @@ fn decode_file(path: &Path) -> Vec<f32> {
             .unwrap_or_else(|e| panic!("{}: basis {id}: {e}", path.display()));
         Arc::new(Basis::parse(&b).unwrap())
     });
-    codec::decode_all_with(&c, basis).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    let rig = c.header.rig.map(|h| {
+        let id = codec::basis::hex(&h);
+        let b = std::fs::read(dir().join("skeletons").join(format!("{id}.mcsk")))
+            .unwrap_or_else(|e| panic!("{}: skeleton {id}: {e}", path.display()));
+        Arc::new(codec::Rig::parse(&b, 10_000).unwrap())
+    });
+    codec::decode_all_with(&c, codec::Shared { basis, rig })
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 /// (file, hash, description) of every line of the index.
@@ -69,6 +77,8 @@ const REQUIRED: &[&str] = &[
     "lsdt-frame-v1",
     "lsdt-frame-v2",
     "lsdt-frame-v3",
+    "bvh-lossless-v1",
+    "rot-v1",
 ];
 
 #[test]
@@ -197,6 +207,29 @@ fn freeze_current_bitstreams() {
         "lsdt-clip live stream, max 1 mm".into(),
     ));
 
+    // The codecs that keep a skeleton's channels, on a small BVH take.
+    let text = mocapstore::motion::synthetic::dancer_bvh(150, 60.0, 11, 4);
+    let bvh = mocapstore::motion::formats::read(text.as_bytes(), &Default::default())
+        .unwrap()
+        .motion;
+    let rig = Arc::new(codec::Rig::new(bvh.skeleton.clone().unwrap().joints).unwrap());
+    std::fs::create_dir_all(dir().join("skeletons")).unwrap();
+    std::fs::write(
+        dir().join("skeletons").join(format!("{}.mcsk", rig.id())),
+        rig.bytes(),
+    )
+    .unwrap();
+    let mut skeletal = Vec::new();
+    for codec in [CodecId::BvhLossless, CodecId::Rot] {
+        let c = codec::encode(&bvh, codec, bound).unwrap().container;
+        let name = format!("{codec}-v{}", c.header.params[0]);
+        skeletal.push((
+            name,
+            c,
+            format!("{codec} batch, {bound}, a dancer BVH take"),
+        ));
+    }
+
     let mut index = std::fs::read_to_string(dir().join("index.txt")).unwrap_or_else(|_| {
         "# file, BLAKE3 (first 32 hex) of the decoded frames as little-endian f32, what it is\n"
             .into()
@@ -216,6 +249,20 @@ fn freeze_current_bitstreams() {
         }
         std::fs::write(dir().join(&file), c.to_bytes()).unwrap();
         let decoded = codec::decode_all_with(&c, basis).unwrap();
+        index.push_str(&format!("{file} {} {what}\n", digest(&decoded)));
+        eprintln!("froze {file}");
+    }
+    for (name, c, what) in skeletal {
+        let file = format!("{name}.mcst");
+        if index.lines().any(|l| l.starts_with(&format!("{file} "))) {
+            continue;
+        }
+        std::fs::write(dir().join(&file), c.to_bytes()).unwrap();
+        let shared = codec::Shared {
+            basis: None,
+            rig: Some(rig.clone()),
+        };
+        let decoded = codec::decode_all_with(&c, shared).unwrap();
         index.push_str(&format!("{file} {} {what}\n", digest(&decoded)));
         eprintln!("froze {file}");
     }

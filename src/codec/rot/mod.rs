@@ -38,8 +38,6 @@ const VERSION: u8 = 1;
 /// Decoded channel values are rounded to this (degrees, file units).
 const PRINTED: f64 = 1e6;
 pub(super) const SIZE_CONTEXTS: usize = 20;
-/// Rate control's search: this many halvings of the interval of `log α`.
-const SEARCH_STEPS: usize = 18;
 
 pub struct Rot;
 
@@ -64,8 +62,7 @@ pub(super) struct Plan {
 }
 
 impl Plan {
-    fn new(rig: &Rig, alpha: f64) -> Plan {
-        let reach = reaches(rig);
+    fn new(rig: &Rig, reach: &[f64], alpha: f64) -> Plan {
         let mut parts = Vec::new();
         let mut k = 0;
         for (j, joint) in rig.joints().iter().enumerate() {
@@ -144,23 +141,8 @@ impl Codec for Rot {
                 "rot needs a positive bound, got {t}"
             )));
         }
-        let take = Take::new(rig, skeleton, default_chunk_frames(input.fps));
-        // Each mode at the largest step that meets the bound; the smaller wins.
-        let mut best: Option<CodecOutput> = None;
-        for mode in [Mode::Delta, Mode::Transform] {
-            let alpha = take.search(mode, t, |decoded| {
-                let mut positions = vec![0f32; take.frames * rig.joints().len() * 3];
-                rig.positions(decoded, &mut positions);
-                let (max, mean) = errors(input, &positions);
-                target.holds(max, mean)
-            })?;
-            let out = take.encode(mode, alpha)?;
-            let size = |o: &CodecOutput| o.chunks.iter().map(|c| c.bytes.len()).sum::<usize>();
-            if best.as_ref().is_none_or(|b| size(&out) < size(b)) {
-                best = Some(out);
-            }
-        }
-        best.ok_or_else(|| Error::Invalid("no mode".into()))
+        let take = Take::new(rig, skeleton, input, t, default_chunk_frames(input.fps));
+        take.encode(target)
     }
 
     fn decoder(
@@ -169,22 +151,19 @@ impl Codec for Rot {
         _points: usize,
         shared: &Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
-        let (mode, alpha) = match params {
-            [VERSION, m, a @ ..] if a.len() == 8 => (
-                Mode::from_byte(*m).ok_or_else(|| malformed(format!("rot mode {m}")))?,
-                f64::from_le_bytes(a.try_into().expect("8 bytes")),
-            ),
+        let base = match params {
+            [VERSION, a @ ..] if a.len() == 8 => f64::from_le_bytes(a.try_into().expect("8 bytes")),
             _ => return Err(malformed("rot parameters")),
         };
-        if !(alpha.is_finite() && alpha > 0.0) {
-            return Err(malformed(format!("rot step {alpha}")));
+        if !(base.is_finite() && base > 0.0) {
+            return Err(malformed(format!("rot step {base}")));
         }
         let rig = shared
             .rig
             .clone()
             .ok_or_else(|| Error::Basis("rot decodes with the take's skeleton".into()))?;
-        let plan = Plan::new(&rig, alpha);
-        Ok(Box::new(RotDecoder { rig, plan, mode }))
+        let steps = Steps::new(&rig, base);
+        Ok(Box::new(RotDecoder { rig, steps }))
     }
 
     fn codes_channels(&self) -> bool {
@@ -199,7 +178,7 @@ impl Codec for Rot {
     }
 }
 
-/// How a take's chunks are coded.
+/// How a chunk is coded (each chunk the smaller of the two).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
 enum Mode {
@@ -209,43 +188,74 @@ enum Mode {
     Transform = 1,
 }
 
-impl Mode {
-    fn from_byte(b: u8) -> Option<Mode> {
-        [Mode::Delta, Mode::Transform]
-            .into_iter()
-            .find(|m| *m as u8 == b)
+/// Step sizes: a chunk's `α` is `base · 2^((k − 224)/8)` for the index `k` (one byte) the
+/// chunk starts with, so that each chunk is coded at the largest step its own motion allows.
+struct Steps {
+    reach: Vec<f64>,
+    base: f64,
+}
+
+impl Steps {
+    fn new(rig: &Rig, base: f64) -> Steps {
+        Steps {
+            reach: reaches(rig),
+            base,
+        }
+    }
+
+    fn plan(&self, rig: &Rig, k: u32) -> Plan {
+        let alpha = self.base * 2f64.powf((f64::from(k) - 224.0) / 8.0);
+        Plan::new(rig, &self.reach, alpha)
     }
 }
 
-/// One chunk of a take as one mode codes it.
+/// One chunk, after its step index and mode (`k` and `mode` when encoding).
+#[allow(clippy::too_many_arguments)]
 fn code<I: Io>(
     mode: Mode,
     io: &mut I,
-    plan: &Plan,
+    rig: &Rig,
+    steps: &Steps,
+    k: u32,
     frames: usize,
     input: Option<(&[f64], &transform::Coeffs)>,
     out: &mut Vec<f64>,
 ) -> Result<()> {
+    let k = io.raw(k, 8);
+    let plan = steps.plan(rig, k);
+    let mode = match io.raw(mode as u32, 1) {
+        0 => Mode::Delta,
+        _ => Mode::Transform,
+    };
     match mode {
-        Mode::Delta => delta::code_chunk(io, plan, frames, input.map(|i| i.0), out),
-        Mode::Transform => transform::code_chunk(io, plan, frames, input.map(|i| i.1), out),
+        Mode::Delta => delta::code_chunk(io, &plan, frames, input.map(|i| i.0), out),
+        Mode::Transform => transform::code_chunk(io, &plan, frames, input.map(|i| i.1), out),
     }
 }
 
-/// A take being encoded: its rig, channel values, chunks and (step-independent) analysis.
+/// A take being encoded: its rig, channel values, the input positions the bound is judged
+/// on, and its chunks with their (step-independent) analysis.
 struct Take<'a> {
     rig: &'a Rig,
     values: &'a [f64],
-    frames: usize,
+    input: &'a Input<'a>,
+    steps: Steps,
     /// Each chunk's first frame, frame count and DCT coefficients.
     chunks: Vec<(usize, usize, transform::Coeffs)>,
 }
 
 impl<'a> Take<'a> {
-    fn new(rig: &'a Rig, skeleton: &'a crate::motion::Skeleton, per: usize) -> Take<'a> {
+    fn new(
+        rig: &'a Rig,
+        skeleton: &'a crate::motion::Skeleton,
+        input: &'a Input<'a>,
+        base: f64,
+        per: usize,
+    ) -> Take<'a> {
         let frames = skeleton.frame_count();
         let values = &skeleton.values[..];
-        let layout = Plan::new(rig, 1.0);
+        let steps = Steps::new(rig, base);
+        let layout = steps.plan(rig, 224);
         let cc = layout.channels;
         let chunks = (0..frames)
             .step_by(per)
@@ -258,89 +268,100 @@ impl<'a> Take<'a> {
         Take {
             rig,
             values,
-            frames,
+            input,
+            steps,
             chunks,
         }
     }
 
-    /// Every chunk through `io` at `alpha`: the decoded channel values.
-    fn run<I: Io>(
-        &self,
-        mode: Mode,
-        alpha: f64,
-        io: &mut impl FnMut() -> I,
-        sink: &mut impl FnMut(I),
-    ) -> Result<Vec<f64>> {
-        let plan = Plan::new(self.rig, alpha);
-        let cc = plan.channels;
-        let mut out = Vec::with_capacity(self.values.len());
-        for (f0, n, coeffs) in &self.chunks {
-            let mut coder = io();
-            let values = &self.values[f0 * cc..(f0 + n) * cc];
-            code(
-                mode,
-                &mut coder,
-                &plan,
-                *n,
-                Some((values, coeffs)),
-                &mut out,
-            )?;
-            sink(coder);
-        }
+    /// Chunk `i` at step index `k` through `io`: its decoded channel values.
+    fn chunk<I: Io>(&self, mode: Mode, i: usize, k: u32, io: &mut I) -> Result<Vec<f64>> {
+        let (f0, n, coeffs) = &self.chunks[i];
+        let cc = self.rig.channel_count();
+        let values = &self.values[f0 * cc..(f0 + n) * cc];
+        let mut out = Vec::with_capacity(values.len());
+        code(
+            mode,
+            io,
+            self.rig,
+            &self.steps,
+            k,
+            *n,
+            Some((values, coeffs)),
+            &mut out,
+        )?;
         Ok(out)
     }
 
-    /// The largest `α` (searched on a log scale below `8 t`) whose decoded values `meets`.
-    fn search(&self, mode: Mode, t: f64, meets: impl Fn(&[f64]) -> bool) -> Result<f64> {
-        let ok = |alpha: f64| -> Result<bool> {
-            Ok(meets(&self.run(mode, alpha, &mut || Dry, &mut |_| {})?))
-        };
-        let (mut lo, mut hi) = ((t * 1e-4).ln(), (t * 8.0).ln());
-        if !ok(lo.exp())? {
+    /// Whether chunk `i` at step index `k` meets `target` on its FK positions.
+    fn meets(&self, mode: Mode, i: usize, k: u32, target: Target) -> Result<bool> {
+        let decoded = self.chunk(mode, i, k, &mut Dry)?;
+        let (f0, n, _) = self.chunks[i];
+        let w = self.rig.joints().len() * 3;
+        let mut positions = vec![0f32; n * w];
+        self.rig.positions(&decoded, &mut positions);
+        let valid = self.input.valid.map(|v| &v[f0 * w / 3..(f0 + n) * w / 3]);
+        let (max, mean) = errors(&self.input.data[f0 * w..(f0 + n) * w], valid, &positions);
+        Ok(target.holds(max, mean))
+    }
+
+    /// The largest step index at which chunk `i` in `mode` meets `target` (a binary
+    /// search over the 256 indices).
+    fn step_for(&self, mode: Mode, i: usize, target: Target) -> Result<u32> {
+        if !self.meets(mode, i, 0, target)? {
             return Err(Error::BoundMissed {
                 codec: "rot".into(),
-                detail: format!("even a step of {:.3e} misses the bound", lo.exp()),
+                detail: format!("chunk {i} misses the bound even at the finest step"),
             });
         }
-        for _ in 0..SEARCH_STEPS {
-            let mid = 0.5 * (lo + hi);
-            if ok(mid.exp())? {
+        let (mut lo, mut hi) = (0u32, 256u32);
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            if self.meets(mode, i, mid, target)? {
                 lo = mid;
             } else {
                 hi = mid;
             }
         }
-        Ok(lo.exp())
+        Ok(lo)
     }
 
-    /// The bitstream at `alpha`.
-    fn encode(&self, mode: Mode, alpha: f64) -> Result<CodecOutput> {
-        let mut bytes = Vec::with_capacity(self.chunks.len());
-        self.run(mode, alpha, &mut Encoder::new, &mut |e: Encoder| {
-            bytes.push(e.finish())
-        })?;
-        let chunks = self
-            .chunks
-            .iter()
-            .zip(bytes)
-            .map(|((_, n, _), bytes)| ChunkOut { frames: *n, bytes })
-            .collect();
-        let mut params = vec![VERSION, mode as u8];
-        params.extend_from_slice(&alpha.to_le_bytes());
+    /// The bitstream: every chunk in the mode that codes it smaller, each at the largest
+    /// step that meets `target`.
+    fn encode(&self, target: Target) -> Result<CodecOutput> {
+        let mut chunks = Vec::with_capacity(self.chunks.len());
+        for i in 0..self.chunks.len() {
+            let mut best: Option<Vec<u8>> = None;
+            for mode in [Mode::Delta, Mode::Transform] {
+                let k = self.step_for(mode, i, target)?;
+                let mut enc = Encoder::new();
+                self.chunk(mode, i, k, &mut enc)?;
+                let bytes = enc.finish();
+                if best.as_ref().is_none_or(|b| bytes.len() < b.len()) {
+                    best = Some(bytes);
+                }
+            }
+            chunks.push(ChunkOut {
+                frames: self.chunks[i].1,
+                bytes: best.expect("two modes tried"),
+            });
+        }
+        let mut params = vec![VERSION];
+        params.extend_from_slice(&self.steps.base.to_le_bytes());
         Ok(CodecOutput { params, chunks })
     }
 }
 
-/// Max and mean error (take units) of decoded positions against the input's real samples.
-fn errors(input: &Input<'_>, decoded: &[f32]) -> (f64, f64) {
+/// Max and mean error (take units) of decoded positions against the original's real
+/// samples (`valid`, if some are gaps).
+fn errors(original: &[f32], valid: Option<&[bool]>, decoded: &[f32]) -> (f64, f64) {
     let (mut max, mut sum, mut n) = (0f64, 0f64, 0usize);
-    for (s, (a, b)) in input
-        .data
+    for (s, (a, b)) in original
         .chunks_exact(3)
         .zip(decoded.chunks_exact(3))
         .enumerate()
     {
-        if input.valid.is_some_and(|v| !v[s]) {
+        if valid.is_some_and(|v| !v[s]) {
             continue;
         }
         let d = ((f64::from(a[0]) - f64::from(b[0])).powi(2)
@@ -384,8 +405,7 @@ pub(super) fn quantise(x: f64) -> i64 {
 
 struct RotDecoder {
     rig: Arc<Rig>,
-    plan: Plan,
-    mode: Mode,
+    steps: Steps,
 }
 
 impl ChunkDecoder for RotDecoder {
@@ -398,7 +418,16 @@ impl ChunkDecoder for RotDecoder {
     fn decode_channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
         let mut dec = Decoder::new(bytes);
         let mut values = Vec::new();
-        code(self.mode, &mut dec, &self.plan, frames, None, &mut values)?;
+        code(
+            Mode::Delta,
+            &mut dec,
+            &self.rig,
+            &self.steps,
+            0,
+            frames,
+            None,
+            &mut values,
+        )?;
         if dec.overran() {
             return Err(malformed("rot chunk is truncated"));
         }
@@ -471,7 +500,7 @@ mod tests {
             .unwrap();
         assert!(Rot.decoder(&[VERSION], 1, &shared).is_err());
         assert!(Rot
-            .decoder(&[VERSION, 7, 0, 0, 0, 0, 0, 0, 240, 63], 1, &shared)
+            .decoder(&[VERSION, 0, 0, 0, 0, 0, 0, 240, 255], 1, &shared)
             .is_err());
         let frames = enc.container.header.chunks[0].frames as usize;
         let (_, bytes) = crate::codec::container::unpack_chunk(
