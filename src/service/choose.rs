@@ -213,10 +213,12 @@ mod tests {
                 CodecId::LsdtClip,
                 CodecId::LsdtFrame,
                 CodecId::MdttShared,
-                CodecId::BvhLossless
+                CodecId::BvhLossless,
+                CodecId::Rot
             ]
         );
         assert!(skipped[3].reason.contains("no skeleton"));
+        assert!(skipped[4].reason.contains("no skeleton"));
         assert!(skipped[0].reason.contains("no shared lsdt basis"));
         let (run, skipped) = candidates(
             CodecRequest::Auto,
@@ -237,8 +239,8 @@ mod tests {
         );
         assert_eq!(
             skipped.len(),
-            2,
-            "mdtt-shared: no mdtt-set basis; bvh-lossless"
+            3,
+            "mdtt-shared: no mdtt-set basis; bvh-lossless, rot: no skeleton"
         );
         let (run, skipped) = candidates(
             CodecRequest::Auto,
@@ -281,7 +283,7 @@ mod tests {
             &m,
             &[],
         );
-        assert_eq!(run, vec![CodecId::BvhLossless]);
+        assert_eq!(run, vec![CodecId::BvhLossless, CodecId::Rot]);
         let raw = skipped.iter().find(|s| s.codec == CodecId::Raw).unwrap();
         assert!(raw.reason.contains("keep=animation"), "{}", raw.reason);
         let (run, _) = candidates(
@@ -297,7 +299,8 @@ mod tests {
                 CodecId::Raw,
                 CodecId::Quant,
                 CodecId::Mdtt,
-                CodecId::BvhLossless
+                CodecId::BvhLossless,
+                CodecId::Rot
             ]
         );
         assert_eq!("positions".parse::<Keep>(), Ok(Keep::Positions));
