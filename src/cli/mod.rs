@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand};
 mod archive;
 mod bench;
 mod convert;
+mod fetch;
 mod ingest;
 mod inspect;
 mod loadtest;
@@ -37,6 +38,8 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Upload files or whole folders to a running service.
     Ingest(ingest::IngestArgs),
+    /// Write any range of a stored take to a file (BVH for takes that keep their animation).
+    Fetch(fetch::FetchArgs),
     /// Live-stream ingest over HTTP: frames/s sustained, capture-to-fetchable delay.
     Streamtest(streamtest::StreamArgs),
     /// Train a shared basis on a running service's takes (library, tag, layout or ids).
@@ -165,6 +168,7 @@ pub fn main() -> ExitCode {
         Command::Convert(args) => convert::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Ingest(args) => ingest::run(&args),
+        Command::Fetch(args) => fetch::run(&args),
         Command::Loadtest(args) => loadtest::run(&args),
         Command::TrainBases(args) => train_bases::run(&args),
         Command::Streamtest(args) => streamtest::run(&args),

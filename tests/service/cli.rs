@@ -112,3 +112,68 @@ async fn ingest_uploads_a_folder_and_lists_failures() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// `mocapstore fetch` writes a range of a take to a file in its extension's format: a BVH
+/// take's rows as uploaded; a take without its animation is refused, naming the reason.
+#[tokio::test]
+async fn fetch_writes_a_range_as_bvh_and_explains_a_refusal() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let text = mocapstore::motion::synthetic::dancer_bvh(300, 120.0, 4, 4);
+    let (status, report) = srv
+        .post("codec=bvh-lossless", text.as_bytes().to_vec())
+        .await;
+    assert_eq!(status, 201, "{report}");
+    let id = report["id"].as_str().unwrap().to_string();
+    let (status, report) = srv.post("codec=quant", text.as_bytes().to_vec()).await;
+    assert_eq!(status, 201, "{report}");
+    let quant = report["id"].as_str().unwrap().to_string();
+    let dir = std::env::temp_dir().join(format!("mocapstore-fetch-{}", uuid::Uuid::now_v7()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (base, out) = (srv.base.clone(), dir.join("part.bvh"));
+    let run = |args: Vec<String>| {
+        tokio::task::spawn_blocking(move || {
+            Command::new(env!("CARGO_BIN_EXE_mocapstore"))
+                .args(&args)
+                .output()
+                .expect("binary runs")
+        })
+    };
+    let o = run(vec![
+        "fetch".into(),
+        id.clone(),
+        out.display().to_string(),
+        "--server".into(),
+        base.clone(),
+        "--start".into(),
+        "100".into(),
+        "--end".into(),
+        "160".into(),
+    ])
+    .await
+    .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = |s: &str| -> Vec<String> {
+        let at = s.find("Frame Time").unwrap();
+        s[at..].lines().skip(1).map(str::to_string).collect()
+    };
+    let written = std::fs::read_to_string(&out).unwrap();
+    assert_eq!(rows(&written), rows(&text)[100..160]);
+    let o = run(vec![
+        "fetch".into(),
+        quant,
+        dir.join("q.bvh").display().to_string(),
+        "--server".into(),
+        base,
+    ])
+    .await
+    .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("keeps joint positions only"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    srv.stop().await;
+    t.finish().await;
+}
