@@ -332,10 +332,7 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
         mutate(&enc.container, &Some(basis).into(), &mut rng, &mut outcomes);
     }
     // The codecs that keep a skeleton's channels, read as positions and as channels.
-    let text = mocapstore::motion::synthetic::dancer_bvh(300, 120.0, 5, 4);
-    let m = formats::read(text.as_bytes(), &ReadOptions::default())
-        .unwrap()
-        .motion;
+    let m = mocapstore::motion::synthetic::dancer(300, 120.0, 5);
     let rig = Arc::new(codec::Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
     let shared = codec::Shared {
         basis: None,

@@ -208,10 +208,7 @@ fn freeze_current_bitstreams() {
     ));
 
     // The codecs that keep a skeleton's channels, on a small BVH take.
-    let text = mocapstore::motion::synthetic::dancer_bvh(150, 60.0, 11, 4);
-    let bvh = mocapstore::motion::formats::read(text.as_bytes(), &Default::default())
-        .unwrap()
-        .motion;
+    let bvh = mocapstore::motion::synthetic::dancer(150, 60.0, 11);
     let rig = Arc::new(codec::Rig::new(bvh.skeleton.clone().unwrap().joints).unwrap());
     std::fs::create_dir_all(dir().join("skeletons")).unwrap();
     std::fs::write(

@@ -477,7 +477,7 @@ mod tests {
     use crate::codec::{decode_all_with, encode, ErrorBound, Reader, Stored};
     use crate::motion::format::Format;
     use crate::motion::formats::{read_as, ReadOptions};
-    use crate::motion::synthetic::dancer_bvh;
+    use crate::motion::synthetic::{dancer, dancer_bvh};
 
     fn load(text: &str) -> crate::motion::Motion {
         read_as(Format::Bvh, text.as_bytes(), &ReadOptions::default())
@@ -566,7 +566,7 @@ mod tests {
 
     #[test]
     fn damaged_chunks_fail_cleanly() {
-        let m = load(&dancer_bvh(300, 60.0, 9, 4));
+        let m = dancer(300, 60.0, 9);
         let enc = encode(&m, CodecId::BvhLossless, ErrorBound::MaxMm(0.0)).unwrap();
         let rig = Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
         let d = BvhLossless

@@ -11,6 +11,7 @@ use super::container::{unpack_chunk, verify_chunk, Header};
 use super::error::{malformed, Error, Result};
 use super::rig::{Channels, Rig};
 use super::{codec, ChunkDecoder};
+use crate::motion::decimal::PrintedValues;
 
 /// What a header may name beyond its own bytes — objects stored once and referenced by many
 /// takes: a shared basis, and the skeleton of a codec that keeps channel values. A decoder
@@ -218,25 +219,11 @@ impl Reader {
             );
             out.values.extend_from_slice(&got.values[lo..hi]);
             match (got.printed, &mut out.printed) {
-                (Some(p), Some(acc)) => {
-                    let base = acc.verbatim.len() as i64;
-                    acc.verbatim.extend(p.verbatim);
-                    acc.values
-                        .extend(p.values[lo..hi].iter().map(|v| match v.notation {
-                            crate::motion::decimal::Notation::Verbatim => {
-                                crate::motion::decimal::Printed {
-                                    digits: v.digits + base,
-                                    ..*v
-                                }
-                            }
-                            _ => *v,
-                        }));
-                }
+                (Some(p), Some(acc)) => acc.append(p, lo..hi),
                 (Some(p), none @ None) if out.values.len() == hi - lo => {
-                    *none = Some(crate::motion::decimal::PrintedValues {
-                        values: p.values[lo..hi].to_vec(),
-                        verbatim: p.verbatim,
-                    });
+                    let mut first = PrintedValues::default();
+                    first.append(p, lo..hi);
+                    *none = Some(first);
                 }
                 (None, None) => {}
                 _ => {
@@ -254,46 +241,18 @@ impl Reader {
 /// the header's, so a take is never decoded with the wrong basis or skeleton.
 pub fn decoder(header: &Header, shared: &Shared) -> Result<Box<dyn ChunkDecoder>> {
     let c = codec(header.codec)?;
-    let rig = match (&header.rig, &shared.rig) {
-        (None, _) => None,
-        (Some(want), None) => {
-            return Err(Error::Basis(format!(
-                "the take was coded with skeleton {} and it was not supplied",
-                hex(want)
-            )))
-        }
-        (Some(want), Some(r)) if r.hash() != *want => {
-            return Err(Error::Basis(format!(
-                "the take was coded with skeleton {}, got {}",
-                hex(want),
-                r.id()
-            )))
-        }
-        (Some(_), Some(r)) => Some(r.clone()),
-    };
+    let rig = named("skeleton", header.rig, shared.rig.clone(), |r| {
+        (r.hash(), r.id())
+    })?;
     if c.codes_channels() && rig.is_none() {
         return Err(malformed(format!(
             "codec {} decodes with a skeleton and the header names none",
             header.codec
         )));
     }
-    let basis = match (&header.basis, shared.basis.clone()) {
-        (None, _) => None,
-        (Some(want), None) => {
-            return Err(Error::Basis(format!(
-                "the take was coded with basis {} and it was not supplied",
-                hex(want)
-            )))
-        }
-        (Some(want), Some(b)) if b.hash() != *want => {
-            return Err(Error::Basis(format!(
-                "the take was coded with basis {}, got {}",
-                hex(want),
-                b.id()
-            )))
-        }
-        (Some(_), Some(b)) => Some(b),
-    };
+    let basis = named("basis", header.basis, shared.basis.clone(), |b| {
+        (b.hash(), b.id())
+    })?;
     if c.basis_kind().is_some() && basis.is_none() {
         return Err(malformed(format!(
             "codec {} needs a shared basis and the header names none",
@@ -305,6 +264,33 @@ pub fn decoder(header: &Header, shared: &Shared) -> Result<Box<dyn ChunkDecoder>
         header.points as usize,
         &Shared { basis, rig },
     )
+}
+
+/// The stored object (`what`: a basis, a skeleton) a header names by hash, if it names one:
+/// the one supplied, if its hash (`hash_of` gives hash and id) is the header's.
+fn named<T>(
+    what: &str,
+    want: Option<[u8; 32]>,
+    got: Option<Arc<T>>,
+    hash_of: impl Fn(&T) -> ([u8; 32], String),
+) -> Result<Option<Arc<T>>> {
+    let Some(want) = want else {
+        return Ok(None);
+    };
+    let got = got.ok_or_else(|| {
+        Error::Basis(format!(
+            "the take was coded with {what} {} and it was not supplied",
+            hex(&want)
+        ))
+    })?;
+    let (hash, id) = hash_of(&got);
+    if hash != want {
+        return Err(Error::Basis(format!(
+            "the take was coded with {what} {}, got {id}",
+            hex(&want)
+        )));
+    }
+    Ok(Some(got))
 }
 
 /// Decode chunk `index` (its payload as stored): all its frames, NaN where the take has

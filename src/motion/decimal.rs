@@ -96,6 +96,21 @@ impl PrintedValues {
         }
     }
 
+    /// Append values `range` of `other`, its verbatim tokens with them (a range read
+    /// gathers chunks decoded one by one).
+    pub fn append(&mut self, other: PrintedValues, range: std::ops::Range<usize>) {
+        let base = self.verbatim.len() as i64;
+        self.verbatim.extend(other.verbatim);
+        self.values
+            .extend(other.values[range].iter().map(|v| match v.notation {
+                Notation::Verbatim => Printed {
+                    digits: v.digits + base,
+                    ..*v
+                },
+                _ => *v,
+            }));
+    }
+
     /// Frames `start..end` of `channels`-wide rows.
     pub fn slice(&self, start: usize, end: usize, channels: usize) -> PrintedValues {
         PrintedValues {

@@ -170,6 +170,18 @@ pub fn dancer_bvh(frames: usize, fps: f64, seed: u64, decimals: usize) -> String
     s
 }
 
+/// [`dancer_bvh`] (4 decimals) read as a take, as ingest reads it.
+pub fn dancer(frames: usize, fps: f64, seed: u64) -> Motion {
+    let text = dancer_bvh(frames, fps, seed, 4);
+    super::formats::read_as(
+        super::format::Format::Bvh,
+        text.as_bytes(),
+        &Default::default(),
+    )
+    .expect("a generated BVH reads")
+    .motion
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -272,10 +272,7 @@ mod tests {
 
     #[test]
     fn skeleton_takes_keep_their_animation_unless_asked_for_positions() {
-        let text = crate::motion::synthetic::dancer_bvh(300, 60.0, 1, 4);
-        let m = crate::motion::formats::read(text.as_bytes(), &Default::default())
-            .unwrap()
-            .motion;
+        let m = crate::motion::synthetic::dancer(300, 60.0, 1);
         let (run, skipped) = candidates(
             CodecRequest::Auto,
             Latency::Sequence,

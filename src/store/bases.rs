@@ -149,12 +149,28 @@ impl Store {
         })
     }
 
-    /// Delete a basis unless a take references it (checked and deleted in one transaction;
-    /// the foreign key refuses it too, should another writer race us).
+    /// Delete a basis unless a take references it.
     pub async fn delete_basis(&self, id: &str) -> Result<Deletion> {
+        self.delete_unreferenced(
+            "SELECT COUNT(*) AS n FROM sequence_bases WHERE basis_id = $1",
+            "DELETE FROM bases WHERE id = $1",
+            id,
+        )
+        .await
+    }
+
+    /// Delete a shared object (`delete`, by id) unless `count` finds takes referencing it:
+    /// checked and deleted in one transaction, and the foreign key refuses it too, should
+    /// another writer race us.
+    pub(super) async fn delete_unreferenced(
+        &self,
+        count: &str,
+        delete: &str,
+        id: &str,
+    ) -> Result<Deletion> {
         dispatch!(self, pool => {
             let mut tx = pool.begin().await?;
-            let used: i64 = sqlx::query("SELECT COUNT(*) AS n FROM sequence_bases WHERE basis_id = $1")
+            let used: i64 = sqlx::query(count)
                 .bind(id)
                 .fetch_one(&mut *tx)
                 .await?
@@ -162,7 +178,7 @@ impl Store {
             if used > 0 {
                 return Ok(Deletion::InUse(used));
             }
-            let r = sqlx::query("DELETE FROM bases WHERE id = $1").bind(id).execute(&mut *tx).await;
+            let r = sqlx::query(delete).bind(id).execute(&mut *tx).await;
             match r {
                 Ok(r) if r.rows_affected() == 0 => Ok(Deletion::NotFound),
                 Ok(_) => {

@@ -83,31 +83,13 @@ impl Store {
         })
     }
 
-    /// Delete a skeleton unless a take references it (checked and deleted in one
-    /// transaction; the foreign key refuses it too, should another writer race us).
+    /// Delete a skeleton unless a take references it.
     pub async fn delete_skeleton(&self, id: &str) -> Result<Deletion> {
-        dispatch!(self, pool => {
-            let mut tx = pool.begin().await?;
-            let used: i64 = sqlx::query("SELECT COUNT(*) AS n FROM sequences WHERE skeleton_id = $1")
-                .bind(id)
-                .fetch_one(&mut *tx)
-                .await?
-                .try_get("n")?;
-            if used > 0 {
-                return Ok(Deletion::InUse(used));
-            }
-            let r = sqlx::query("DELETE FROM skeletons WHERE id = $1").bind(id).execute(&mut *tx).await;
-            match r {
-                Ok(r) if r.rows_affected() == 0 => Ok(Deletion::NotFound),
-                Ok(_) => {
-                    tx.commit().await?;
-                    Ok(Deletion::Deleted)
-                }
-                Err(sqlx::Error::Database(d)) if d.is_foreign_key_violation() => {
-                    Ok(Deletion::InUse(1))
-                }
-                Err(e) => Err(e.into()),
-            }
-        })
+        self.delete_unreferenced(
+            "SELECT COUNT(*) AS n FROM sequences WHERE skeleton_id = $1",
+            "DELETE FROM skeletons WHERE id = $1",
+            id,
+        )
+        .await
     }
 }

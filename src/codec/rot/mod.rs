@@ -24,6 +24,7 @@ use super::entropy::ints::IntModel;
 use super::entropy::io::Io;
 use super::entropy::rangecoder::{Bit, Decoder, Encoder};
 use super::error::{malformed, Error, Result};
+use super::measure::max_mean;
 use super::rig::{Channels, Rig};
 use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared,
@@ -301,7 +302,7 @@ impl<'a> Take<'a> {
         let mut positions = vec![0f32; n * w];
         self.rig.positions(&decoded, &mut positions);
         let valid = self.input.valid.map(|v| &v[f0 * w / 3..(f0 + n) * w / 3]);
-        let (max, mean) = errors(&self.input.data[f0 * w..(f0 + n) * w], valid, &positions);
+        let (max, mean) = max_mean(&self.input.data[f0 * w..(f0 + n) * w], &positions, valid);
         Ok(target.holds(max, mean))
     }
 
@@ -350,29 +351,6 @@ impl<'a> Take<'a> {
         params.extend_from_slice(&self.steps.base.to_le_bytes());
         Ok(CodecOutput { params, chunks })
     }
-}
-
-/// Max and mean error (take units) of decoded positions against the original's real
-/// samples (`valid`, if some are gaps).
-fn errors(original: &[f32], valid: Option<&[bool]>, decoded: &[f32]) -> (f64, f64) {
-    let (mut max, mut sum, mut n) = (0f64, 0f64, 0usize);
-    for (s, (a, b)) in original
-        .chunks_exact(3)
-        .zip(decoded.chunks_exact(3))
-        .enumerate()
-    {
-        if valid.is_some_and(|v| !v[s]) {
-            continue;
-        }
-        let d = ((f64::from(a[0]) - f64::from(b[0])).powi(2)
-            + (f64::from(a[1]) - f64::from(b[1])).powi(2)
-            + (f64::from(a[2]) - f64::from(b[2])).powi(2))
-        .sqrt();
-        max = max.max(d);
-        sum += d;
-        n += 1;
-    }
-    (max, if n > 0 { sum / n as f64 } else { 0.0 })
 }
 
 /// The encoder's side of [`Io`] without a range coder: rate control's trial runs.
@@ -444,17 +422,11 @@ mod tests {
     use crate::codec::{encode, ErrorBound};
     use crate::motion::format::Format;
     use crate::motion::formats::{read_as, ReadOptions};
-    use crate::motion::synthetic::dancer_bvh;
-
-    fn load(text: &str) -> crate::motion::Motion {
-        read_as(Format::Bvh, text.as_bytes(), &ReadOptions::default())
-            .unwrap()
-            .motion
-    }
+    use crate::motion::synthetic::dancer;
 
     #[test]
     fn meets_max_and_mean_bounds_on_fk_positions_and_shrinks_as_they_loosen() {
-        let m = load(&dancer_bvh(600, 120.0, 7, 4));
+        let m = dancer(600, 120.0, 7);
         let mut last = usize::MAX;
         for mm in [0.1, 1.0, 10.0] {
             let enc = encode(&m, CodecId::Rot, ErrorBound::MaxMm(mm)).unwrap();
@@ -481,14 +453,16 @@ mod tests {
             }
             t.push('\n');
         }
-        let m = load(&t);
+        let m = read_as(Format::Bvh, t.as_bytes(), &ReadOptions::default())
+            .unwrap()
+            .motion;
         let enc = encode(&m, CodecId::Rot, ErrorBound::MaxMm(0.5)).unwrap();
         assert!(enc.stats.max_mm <= 0.5);
     }
 
     #[test]
     fn damaged_chunks_fail_cleanly() {
-        let m = load(&dancer_bvh(200, 60.0, 3, 4));
+        let m = dancer(200, 60.0, 3);
         let enc = encode(&m, CodecId::Rot, ErrorBound::MaxMm(1.0)).unwrap();
         let rig = Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
         let shared = Shared {
