@@ -79,6 +79,7 @@ const REQUIRED: &[&str] = &[
     "lsdt-frame-v3",
     "bvh-lossless-v1",
     "rot-v1",
+    "rot-v2",
 ];
 
 #[test]

@@ -22,6 +22,9 @@ pub struct Encoded {
     /// [`decoded_digest`] of the decoded take the statistics were measured on: a reader
     /// that decodes to the same digest later reads exactly what was measured.
     pub decoded_digest: String,
+    /// The skeleton the header names (codecs that code channel values): with the basis,
+    /// what a reader of this container needs.
+    pub rig: Option<Arc<Rig>>,
 }
 
 /// BLAKE3 (hex) of decoded frames as little-endian f32, gaps included: what `verify`
@@ -130,7 +133,7 @@ pub fn encode_variant(
         &container,
         Shared {
             basis: shared.cloned(),
-            rig,
+            rig: rig.clone(),
         },
     )?;
     let stats = metrics::compare(positions, &decoded, points, to_mm)
@@ -150,6 +153,7 @@ pub fn encode_variant(
         stats,
         stored_bytes,
         decoded_digest: decoded_digest(&decoded),
+        rig,
     })
 }
 

@@ -53,7 +53,7 @@ impl Channel {
     }
 
     /// The axis (0 = x, 1 = y, 2 = z) and whether it is a rotation.
-    fn axis(self) -> (usize, bool) {
+    pub(crate) fn axis(self) -> (usize, bool) {
         match self {
             Channel::Xposition => (0, false),
             Channel::Yposition => (1, false),

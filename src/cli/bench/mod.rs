@@ -191,15 +191,19 @@ pub fn measure(
         .map_err(|e| e.to_string())?;
     let encode_s = t0.elapsed().as_secs_f64();
     let header = &enc.container.header;
+    let shared = codec::Shared {
+        basis: shared.cloned(),
+        rig: enc.rig.clone(),
+    };
     let repeats = repeats.max(1);
     let t1 = Instant::now();
     for _ in 0..repeats {
         std::hint::black_box(
-            codec::Reader::new(header.clone(), shared.cloned()).map_err(|e| e.to_string())?,
+            codec::Reader::new(header.clone(), shared.clone()).map_err(|e| e.to_string())?,
         );
     }
     let setup_s = t1.elapsed().as_secs_f64() / repeats as f64;
-    let reader = codec::Reader::new(header.clone(), shared.cloned()).map_err(|e| e.to_string())?;
+    let reader = codec::Reader::new(header.clone(), shared.clone()).map_err(|e| e.to_string())?;
     let chunks = codec::Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
     let t2 = Instant::now();
     for _ in 0..repeats {

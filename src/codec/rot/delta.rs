@@ -5,7 +5,8 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 
-use super::{printed, quantise, Part, Plan, SIZE_CONTEXTS};
+use super::aim::{self, Pose};
+use super::{printed, quantise, Given, Part, Plan, SIZE_CONTEXTS};
 use crate::codec::entropy::ints::IntModel;
 use crate::codec::entropy::io::{code_residual, Io};
 use crate::codec::error::{malformed, Result};
@@ -36,16 +37,22 @@ pub(super) fn code_chunk<I: Io>(
     io: &mut I,
     plan: &Plan,
     frames: usize,
-    input: Option<&[f64]>,
+    given: Option<&Given>,
     out: &mut Vec<f64>,
 ) -> Result<()> {
     let cc = plan.channels;
+    let aim = given.and_then(|g| g.aim.as_ref());
+    let mut pose = aim.map(|a| Pose::new(a.bones));
     let mut models = vec![IntModel::default(); 3 * SIZE_CONTEXTS];
     let mut hist = vec![History::default(); plan.parts.len()];
     let base = out.len();
     out.resize(base + frames * cc, 0.0);
     for f in 0..frames {
-        let row = input.map(|v| &v[f * cc..(f + 1) * cc]);
+        let row = given.map(|g| &g.values[f * cc..(f + 1) * cc]);
+        let mut aim = aim.zip(pose.as_mut()).map(|(a, p)| {
+            p.clear();
+            (a, p)
+        });
         let dest = &mut out[base + f * cc..base + (f + 1) * cc];
         for (part, h) in plan.parts.iter().zip(&mut hist) {
             match *part {
@@ -66,14 +73,22 @@ pub(super) fn code_chunk<I: Io>(
                     h.scalars = [Some(v), h.scalars[0]];
                     dest[idx] = v;
                 }
-                Part::Quat { order, idx, step } => {
+                Part::Quat {
+                    joint,
+                    order,
+                    idx,
+                    step,
+                } => {
                     let pred = match h.quats {
                         [Some(a), Some(b)] => a * (b.inverse() * a),
                         [Some(a), None] => a,
                         _ => UnitQuaternion::identity(),
                     };
                     let residual = row.map(|r| {
-                        let q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
+                        let mut q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
+                        if let Some((a, pose)) = aim.as_mut() {
+                            q = aim::aim(a.bones, pose, joint, q, dest, r, a.frame(f));
+                        }
                         rotation::log(&(pred.inverse() * q))
                     });
                     let mut v = Vector3::zeros();

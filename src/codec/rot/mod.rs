@@ -6,9 +6,11 @@
 //! frames: closed loop, so quantisation errors never accumulate), and the residual rotation
 //! is sent as a rotation vector quantised per component. Every other channel (the root's
 //! translation, position channels, odd rotation channel sets) is predicted linearly and
-//! quantised as a scalar. A joint's step is the take's one parameter `α` divided by its
-//! reach (the farthest joint or End Site it moves, in the rest pose), so that every joint
-//! moves the points below it by about the same amount; translations step by `α` itself.
+//! quantised as a scalar. The encoder codes each joint's rotation *aimed* from its decoded
+//! parent ([`aim`]: the spatial closed loop, so errors do not add up along a chain either),
+//! and so a joint's step is the take's one parameter `α` divided by its longest bone
+//! (version 1, which did not aim, divided by the reach below the joint); translations step
+//! by `α` itself.
 //! Rate control searches `α` for the largest that keeps the decoded FK positions within the
 //! bound. Residuals go to the adaptive range coder with contexts from their running size.
 //!
@@ -32,10 +34,12 @@ use super::{
 };
 use crate::motion::rotation::euler_order;
 
+mod aim;
 mod delta;
 mod transform;
 
-const VERSION: u8 = 1;
+/// What the encoder writes; the decoder reads every version up to it.
+const VERSION: u8 = 2;
 /// Decoded channel values are rounded to this (degrees, file units).
 const PRINTED: f64 = 1e6;
 pub(super) const SIZE_CONTEXTS: usize = 20;
@@ -43,11 +47,12 @@ pub(super) const SIZE_CONTEXTS: usize = 20;
 pub struct Rot;
 
 /// How each part of a frame is coded.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 pub(super) enum Part {
     /// Three Euler channels (`idx`, in channel order about `order`'s axes) as a quaternion,
     /// with a step in radians.
     Quat {
+        joint: usize,
         order: [usize; 3],
         idx: [usize; 3],
         step: f64,
@@ -89,6 +94,7 @@ impl Plan {
             }
             if let Some(order) = order {
                 parts.push(Part::Quat {
+                    joint: j,
                     order,
                     idx: [rot_idx[0], rot_idx[1], rot_idx[2]],
                     step: rot_step,
@@ -102,27 +108,51 @@ impl Plan {
     }
 }
 
-/// Each joint's reach in the rest pose: how far the farthest joint or End Site below it
-/// is; at least 5 % of the largest, so that joints that move nothing still keep their
-/// rotations to a sensible precision (the BVH served is the animation, not only its FK).
-fn reaches(rig: &Rig) -> Vec<f64> {
+/// What a joint's rotation step is scaled by: the distance at which its error shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Scale {
+    /// Version 1: the farthest joint or End Site below it (its errors add up along the
+    /// chain).
+    Reach,
+    /// Version 2: its longest bone (the encoder aims each joint from its decoded parent,
+    /// [`aim`], so an error moves the joint's own children only).
+    Bone,
+}
+
+impl Scale {
+    fn of_version(v: u8) -> Option<Scale> {
+        match v {
+            1 => Some(Scale::Reach),
+            2 => Some(Scale::Bone),
+            _ => None,
+        }
+    }
+}
+
+/// Each joint's distance for `scale` in the rest pose; at least 5 % of the largest, so that
+/// joints that move nothing still keep their rotations to a sensible precision (the BVH
+/// served is the animation, not only its FK).
+fn distances(rig: &Rig, scale: Scale) -> Vec<f64> {
     let joints = rig.joints();
     let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(joints.len());
     for j in joints {
         let base = j.parent.map_or(Vector3::zeros(), |p| pos[p]);
         pos.push(base + Vector3::from(j.offset));
     }
-    let mut reach = vec![0f64; joints.len()];
+    let mut dist = vec![0f64; joints.len()];
     for (d, j) in joints.iter().enumerate() {
         let mut a = j.parent;
         while let Some(p) = a {
-            reach[p] = reach[p].max((pos[d] - pos[p]).norm());
-            a = joints[p].parent;
+            dist[p] = dist[p].max((pos[d] - pos[p]).norm());
+            a = match scale {
+                Scale::Reach => joints[p].parent,
+                Scale::Bone => None,
+            };
         }
     }
-    let top = reach.iter().cloned().fold(0.0, f64::max);
+    let top = dist.iter().cloned().fold(0.0, f64::max);
     let floor = if top > 0.0 { 0.05 * top } else { 1.0 };
-    reach.iter().map(|r| r.max(floor)).collect()
+    dist.iter().map(|r| r.max(floor)).collect()
 }
 
 impl Codec for Rot {
@@ -152,8 +182,11 @@ impl Codec for Rot {
         _points: usize,
         shared: &Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
-        let base = match params {
-            [VERSION, a @ ..] if a.len() == 8 => f64::from_le_bytes(a.try_into().expect("8 bytes")),
+        let (scale, base) = match params {
+            [v, a @ ..] if a.len() == 8 => (
+                Scale::of_version(*v).ok_or_else(|| malformed(format!("rot version {v}")))?,
+                f64::from_le_bytes(a.try_into().expect("8 bytes")),
+            ),
             _ => return Err(malformed("rot parameters")),
         };
         if !(base.is_finite() && base > 0.0) {
@@ -163,7 +196,7 @@ impl Codec for Rot {
             .rig
             .clone()
             .ok_or_else(|| Error::Basis("rot decodes with the take's skeleton".into()))?;
-        let steps = Steps::new(&rig, base);
+        let steps = Steps::new(&rig, scale, base);
         Ok(Box::new(RotDecoder { rig, steps }))
     }
 
@@ -197,9 +230,9 @@ struct Steps {
 }
 
 impl Steps {
-    fn new(rig: &Rig, base: f64) -> Steps {
+    fn new(rig: &Rig, scale: Scale, base: f64) -> Steps {
         Steps {
-            reach: reaches(rig),
+            reach: distances(rig, scale),
             base,
         }
     }
@@ -208,6 +241,14 @@ impl Steps {
         let alpha = self.base * 2f64.powf((f64::from(k) - 224.0) / 8.0);
         Plan::new(rig, &self.reach, alpha)
     }
+}
+
+/// What the encoder codes a chunk from: its channel values, their DCT coefficients, and
+/// what aiming needs (when the chunk is aimed).
+pub(super) struct Given<'a> {
+    values: &'a [f64],
+    coeffs: &'a transform::Coeffs,
+    aim: Option<aim::Aim<'a>>,
 }
 
 /// One chunk, after its step index and mode (`k` and `mode` when encoding).
@@ -219,7 +260,7 @@ fn code<I: Io>(
     steps: &Steps,
     k: u32,
     frames: usize,
-    input: Option<(&[f64], &transform::Coeffs)>,
+    given: Option<&Given>,
     out: &mut Vec<f64>,
 ) -> Result<()> {
     let k = io.raw(k, 8);
@@ -229,9 +270,17 @@ fn code<I: Io>(
         _ => Mode::Transform,
     };
     match mode {
-        Mode::Delta => delta::code_chunk(io, &plan, frames, input.map(|i| i.0), out),
-        Mode::Transform => transform::code_chunk(io, &plan, frames, input.map(|i| i.1), out),
+        Mode::Delta => delta::code_chunk(io, &plan, frames, given, out),
+        Mode::Transform => transform::code_chunk(io, &plan, frames, given, out),
     }
+}
+
+/// How the encoder codes a chunk: the mode (written in the chunk) and whether rotations
+/// are aimed from the decoded parents (the encoder's choice; the decoder need not know).
+#[derive(Debug, Clone, Copy)]
+struct How {
+    mode: Mode,
+    aim: bool,
 }
 
 /// A take being encoded: its rig, channel values, the input positions the bound is judged
@@ -241,6 +290,8 @@ struct Take<'a> {
     values: &'a [f64],
     input: &'a Input<'a>,
     steps: Steps,
+    /// The rig for aiming joints from their decoded parents ([`aim`]).
+    bones: aim::Bones,
     /// Each chunk's first frame, frame count and DCT coefficients.
     chunks: Vec<(usize, usize, transform::Coeffs)>,
 }
@@ -255,7 +306,7 @@ impl<'a> Take<'a> {
     ) -> Take<'a> {
         let frames = skeleton.frame_count();
         let values = &skeleton.values[..];
-        let steps = Steps::new(rig, base);
+        let steps = Steps::new(rig, Scale::Bone, base);
         let layout = steps.plan(rig, 224);
         let cc = layout.channels;
         let chunks = (0..frames)
@@ -271,32 +322,43 @@ impl<'a> Take<'a> {
             values,
             input,
             steps,
+            bones: aim::Bones::new(rig),
             chunks,
         }
     }
 
     /// Chunk `i` at step index `k` through `io`: its decoded channel values.
-    fn chunk<I: Io>(&self, mode: Mode, i: usize, k: u32, io: &mut I) -> Result<Vec<f64>> {
+    fn chunk<I: Io>(&self, how: How, i: usize, k: u32, io: &mut I) -> Result<Vec<f64>> {
         let (f0, n, coeffs) = &self.chunks[i];
         let cc = self.rig.channel_count();
         let values = &self.values[f0 * cc..(f0 + n) * cc];
+        let points = self.rig.joints().len();
+        let aim = how.aim.then(|| aim::Aim {
+            bones: &self.bones,
+            positions: &self.input.data[f0 * points * 3..(f0 + n) * points * 3],
+            points,
+        });
         let mut out = Vec::with_capacity(values.len());
         code(
-            mode,
+            how.mode,
             io,
             self.rig,
             &self.steps,
             k,
             *n,
-            Some((values, coeffs)),
+            Some(&Given {
+                values,
+                coeffs,
+                aim,
+            }),
             &mut out,
         )?;
         Ok(out)
     }
 
     /// Whether chunk `i` at step index `k` meets `target` on its FK positions.
-    fn meets(&self, mode: Mode, i: usize, k: u32, target: Target) -> Result<bool> {
-        let decoded = self.chunk(mode, i, k, &mut Dry)?;
+    fn meets(&self, how: How, i: usize, k: u32, target: Target) -> Result<bool> {
+        let decoded = self.chunk(how, i, k, &mut Dry)?;
         let (f0, n, _) = self.chunks[i];
         let w = self.rig.joints().len() * 3;
         let mut positions = vec![0f32; n * w];
@@ -306,45 +368,54 @@ impl<'a> Take<'a> {
         Ok(target.holds(max, mean))
     }
 
-    /// The largest step index at which chunk `i` in `mode` meets `target` (a binary
-    /// search over the 256 indices).
-    fn step_for(&self, mode: Mode, i: usize, target: Target) -> Result<u32> {
-        if !self.meets(mode, i, 0, target)? {
-            return Err(Error::BoundMissed {
-                codec: "rot".into(),
-                detail: format!("chunk {i} misses the bound even at the finest step"),
-            });
+    /// The largest step index at which chunk `i` coded `how` meets `target` (a binary
+    /// search over the 256 indices); `None` if not even the finest does.
+    fn step_for(&self, how: How, i: usize, target: Target) -> Result<Option<u32>> {
+        if !self.meets(how, i, 0, target)? {
+            return Ok(None);
         }
         let (mut lo, mut hi) = (0u32, 256u32);
         while hi - lo > 1 {
             let mid = (lo + hi) / 2;
-            if self.meets(mode, i, mid, target)? {
+            if self.meets(how, i, mid, target)? {
                 lo = mid;
             } else {
                 hi = mid;
             }
         }
-        Ok(lo)
+        Ok(Some(lo))
     }
 
     /// The bitstream: every chunk in the mode that codes it smaller, each at the largest
-    /// step that meets `target`.
+    /// step that meets `target`. Chunks are aimed ([`aim`]) unless aiming cannot meet the
+    /// bound (a rig whose position channels move children away from where their parent's
+    /// rotation puts them): then the file's rotations are coded as they are.
     fn encode(&self, target: Target) -> Result<CodecOutput> {
         let mut chunks = Vec::with_capacity(self.chunks.len());
         for i in 0..self.chunks.len() {
             let mut best: Option<Vec<u8>> = None;
             for mode in [Mode::Delta, Mode::Transform] {
-                let k = self.step_for(mode, i, target)?;
-                let mut enc = Encoder::new();
-                self.chunk(mode, i, k, &mut enc)?;
-                let bytes = enc.finish();
-                if best.as_ref().is_none_or(|b| bytes.len() < b.len()) {
-                    best = Some(bytes);
+                for aim in [true, false] {
+                    let how = How { mode, aim };
+                    let Some(k) = self.step_for(how, i, target)? else {
+                        continue;
+                    };
+                    let mut enc = Encoder::new();
+                    self.chunk(how, i, k, &mut enc)?;
+                    let bytes = enc.finish();
+                    if best.as_ref().is_none_or(|b| bytes.len() < b.len()) {
+                        best = Some(bytes);
+                    }
+                    break;
                 }
             }
+            let bytes = best.ok_or_else(|| Error::BoundMissed {
+                codec: "rot".into(),
+                detail: format!("chunk {i} misses the bound even at the finest step"),
+            })?;
             chunks.push(ChunkOut {
                 frames: self.chunks[i].1,
-                bytes: best.expect("two modes tried"),
+                bytes,
             });
         }
         let mut params = vec![VERSION];

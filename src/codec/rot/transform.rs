@@ -6,7 +6,8 @@
 
 use nalgebra::Vector3;
 
-use super::{printed, quantise, Part, Plan};
+use super::aim::{self, Aim, Pose};
+use super::{printed, quantise, Given, Part, Plan};
 use crate::codec::dct;
 use crate::codec::entropy::ints::IntModel;
 use crate::codec::entropy::io::{code_residual, Io};
@@ -88,81 +89,169 @@ fn continuous(v: Vector3<f64>, prev: Option<Vector3<f64>>) -> Vector3<f64> {
 }
 
 /// Code one chunk of `frames` frames (from `coeffs` when encoding), appending the decoded
-/// channel values to `out`.
+/// channel values to `out`. Parts are coded one after the other over the whole chunk, so
+/// when encoding with `aim` each rotation is aimed from its parents as decoded.
 pub(super) fn code_chunk<I: Io>(
     io: &mut I,
     plan: &Plan,
     frames: usize,
-    coeffs: Option<&Coeffs>,
+    given: Option<&Given>,
     out: &mut Vec<f64>,
 ) -> Result<()> {
     let cc = plan.channels;
     let d = dct::basis(frames, frames);
     let mut eob_models = vec![IntModel::default(); 3];
     let mut models = vec![IntModel::default(); 3 * BANDS * PREVIOUS];
-    // Decoded series, in part order.
-    let mut decoded: Vec<Vec<f64>> = Vec::new();
+    let base = out.len();
+    out.resize(base + frames * cc, 0.0);
+    let mut aim = given.and_then(|g| g.aim.as_ref().map(|a| (g.values, a, Pose::new(a.bones))));
     let mut s = 0;
     for part in &plan.parts {
         let (n, step, kind) = match *part {
             Part::Scalar { step, kind, .. } => (1, step, kind),
             Part::Quat { step, .. } => (3, step, 2),
         };
-        for _ in 0..n {
-            let given = coeffs.map(|c| &c.series[s]);
+        // The series to code: as analysed, or aimed from the decoded parents.
+        let aimed = match (*part, aim.as_mut()) {
+            (
+                Part::Quat {
+                    joint, order, idx, ..
+                },
+                Some((values, a, pose)),
+            ) => Some(aimed_series(
+                joint,
+                order,
+                idx,
+                frames,
+                values,
+                a,
+                pose,
+                &out[base..],
+                cc,
+                &d,
+            )),
+            _ => None,
+        };
+        let mut decoded: [Vec<f64>; 3] = Default::default();
+        for (k, x) in decoded.iter_mut().enumerate().take(n) {
+            let given = match &aimed {
+                Some(a) => Some(&a[k]),
+                None => given.map(|g| &g.coeffs.series[s]),
+            };
             s += 1;
-            let q: Vec<i64> =
-                given.map_or_else(Vec::new, |c| c.iter().map(|v| quantise(v / step)).collect());
-            let last = q.iter().rposition(|&v| v != 0).map_or(0, |i| i + 1);
-            let eob = io.int(&mut eob_models[kind], last as i32);
-            let eob = usize::try_from(eob)
-                .ok()
-                .filter(|&e| e <= frames)
-                .ok_or_else(|| malformed(format!("{eob} coefficients for {frames} frames")))?;
-            let mut x = vec![0.0; frames];
-            let mut previous = 0i64;
-            for k in 0..eob {
-                let ctx = (kind * BANDS + band(k)) * PREVIOUS
-                    + (previous.unsigned_abs().min(PREVIOUS as u64 - 1) as usize);
-                let v = code_residual(io, &mut models[ctx], q.get(k).copied().unwrap_or(0))?;
-                previous = v;
-                if v != 0 {
-                    let c = v as f64 * step;
-                    for (t, x) in x.iter_mut().enumerate() {
-                        *x += c * d[t * frames + k];
-                    }
-                }
-            }
-            if !x.iter().all(|v| v.is_finite()) {
-                return Err(malformed("a decoded series is not finite"));
-            }
-            decoded.push(x);
+            *x = code_series(
+                io,
+                &mut eob_models,
+                &mut models,
+                kind,
+                step,
+                frames,
+                given,
+                &d,
+            )?;
         }
-    }
-    let base = out.len();
-    out.resize(base + frames * cc, 0.0);
-    let mut s = 0;
-    for part in &plan.parts {
         match *part {
             Part::Scalar { idx, .. } => {
                 for t in 0..frames {
-                    out[base + t * cc + idx] = printed(decoded[s][t]);
+                    out[base + t * cc + idx] = printed(decoded[0][t]);
                 }
-                s += 1;
             }
             Part::Quat { order, idx, .. } => {
                 let mut near = None;
                 for t in 0..frames {
-                    let v = Vector3::new(decoded[s][t], decoded[s + 1][t], decoded[s + 2][t]);
+                    let v = Vector3::new(decoded[0][t], decoded[1][t], decoded[2][t]);
                     let e = rotation::to_euler(&rotation::exp(&v), order, near);
                     near = Some(e);
                     for k in 0..3 {
                         out[base + t * cc + idx[k]] = printed(e[k]);
                     }
                 }
-                s += 3;
             }
         }
     }
     Ok(())
+}
+
+/// One series' coefficients (from `given` when encoding) through `io`: the decoded series.
+#[allow(clippy::too_many_arguments)]
+fn code_series<I: Io>(
+    io: &mut I,
+    eob_models: &mut [IntModel],
+    models: &mut [IntModel],
+    kind: usize,
+    step: f64,
+    frames: usize,
+    given: Option<&Vec<f64>>,
+    d: &[f64],
+) -> Result<Vec<f64>> {
+    let q: Vec<i64> =
+        given.map_or_else(Vec::new, |c| c.iter().map(|v| quantise(v / step)).collect());
+    let last = q.iter().rposition(|&v| v != 0).map_or(0, |i| i + 1);
+    let eob = io.int(&mut eob_models[kind], last as i32);
+    let eob = usize::try_from(eob)
+        .ok()
+        .filter(|&e| e <= frames)
+        .ok_or_else(|| malformed(format!("{eob} coefficients for {frames} frames")))?;
+    let mut x = vec![0.0; frames];
+    let mut previous = 0i64;
+    for k in 0..eob {
+        let ctx = (kind * BANDS + band(k)) * PREVIOUS
+            + (previous.unsigned_abs().min(PREVIOUS as u64 - 1) as usize);
+        let v = code_residual(io, &mut models[ctx], q.get(k).copied().unwrap_or(0))?;
+        previous = v;
+        if v != 0 {
+            let c = v as f64 * step;
+            for (t, x) in x.iter_mut().enumerate() {
+                *x += c * d[t * frames + k];
+            }
+        }
+    }
+    if !x.iter().all(|v| v.is_finite()) {
+        return Err(malformed("a decoded series is not finite"));
+    }
+    Ok(x)
+}
+
+/// The DCT coefficients of joint `joint`'s rotation vectors over the chunk, each frame's
+/// rotation aimed ([`super::aim`]) from the parents decoded so far (`decoded`, the chunk's
+/// rows).
+#[allow(clippy::too_many_arguments)]
+fn aimed_series(
+    joint: usize,
+    order: [usize; 3],
+    idx: [usize; 3],
+    frames: usize,
+    values: &[f64],
+    a: &Aim,
+    pose: &mut Pose,
+    decoded: &[f64],
+    cc: usize,
+    d: &[f64],
+) -> [Vec<f64>; 3] {
+    let mut comps = [vec![0.0; frames], vec![0.0; frames], vec![0.0; frames]];
+    let mut prev: Option<Vector3<f64>> = None;
+    for t in 0..frames {
+        let r = &values[t * cc..(t + 1) * cc];
+        let q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
+        pose.clear();
+        let q = aim::aim(
+            a.bones,
+            pose,
+            joint,
+            q,
+            &decoded[t * cc..(t + 1) * cc],
+            r,
+            a.frame(t),
+        );
+        let v = continuous(rotation::log(&q), prev);
+        prev = Some(v);
+        for c in 0..3 {
+            comps[c][t] = v[c];
+        }
+    }
+    comps.map(|x| {
+        (0..frames)
+            .map(|j| (0..frames).map(|t| x[t] * d[t * frames + j]).sum())
+            .collect()
+    })
 }
