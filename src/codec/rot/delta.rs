@@ -6,9 +6,10 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use super::aim::{self, Pose};
-use super::{printed, quantise, Given, Part, Plan, SIZE_CONTEXTS};
+use super::{printed, quantise, Given, Part, Plan, Version, SIZE_CONTEXTS};
 use crate::codec::entropy::ints::IntModel;
 use crate::codec::entropy::io::{code_residual, Io};
+use crate::codec::entropy::rangecoder::Bit;
 use crate::codec::error::{malformed, Result};
 use crate::motion::rotation;
 
@@ -20,6 +21,8 @@ struct History {
     scalars: [Option<f64>; 2],
     /// Running mean of residual magnitudes, × 16, per component.
     size: [u32; 3],
+    /// The part's predictor: constant velocity, or the last value.
+    extrapolate: bool,
 }
 
 fn size_context(size: u32) -> usize {
@@ -45,6 +48,19 @@ pub(super) fn code_chunk<I: Io>(
     let mut pose = aim.map(|a| Pose::new(a.bones));
     let mut models = vec![IntModel::default(); 3 * SIZE_CONTEXTS];
     let mut hist = vec![History::default(); plan.parts.len()];
+    // Each part's predictor: extrapolate (constant velocity) or hold the last value, which
+    // wins where the motion is slow against the capture's noise (extrapolation doubles the
+    // noise it predicts from).
+    let mut extrapolate_model = Bit::default();
+    for (part, h) in plan.parts.iter().zip(&mut hist) {
+        h.extrapolate = match plan.version {
+            Version::V1 => true,
+            Version::V2 => {
+                let want = given.is_some_and(|g| extrapolates(part, g.values, cc, frames));
+                io.bit(&mut extrapolate_model, want)
+            }
+        };
+    }
     let base = out.len();
     out.resize(base + frames * cc, 0.0);
     for f in 0..frames {
@@ -58,8 +74,8 @@ pub(super) fn code_chunk<I: Io>(
             match *part {
                 Part::Scalar { idx, step, kind } => {
                     let pred = match h.scalars {
-                        [Some(a), Some(b)] => 2.0 * a - b,
-                        [Some(a), None] => a,
+                        [Some(a), Some(b)] if h.extrapolate => 2.0 * a - b,
+                        [Some(a), _] => a,
                         _ => 0.0,
                     };
                     let q = row.map_or(0, |r| quantise((r[idx] - pred) / step));
@@ -80,8 +96,8 @@ pub(super) fn code_chunk<I: Io>(
                     step,
                 } => {
                     let pred = match h.quats {
-                        [Some(a), Some(b)] => a * (b.inverse() * a),
-                        [Some(a), None] => a,
+                        [Some(a), Some(b)] if h.extrapolate => a * (b.inverse() * a),
+                        [Some(a), _] => a,
                         _ => UnitQuaternion::identity(),
                     };
                     let residual = row.map(|r| {
@@ -116,4 +132,41 @@ pub(super) fn code_chunk<I: Io>(
         }
     }
     Ok(())
+}
+
+/// Whether `part` of a chunk (`values`, `frames` rows of `cc`) costs fewer bits predicted at
+/// constant velocity than by its last value, by an open-loop estimate on the values as given
+/// (the bit lengths of the residuals in steps).
+fn extrapolates(part: &Part, values: &[f64], cc: usize, frames: usize) -> bool {
+    let bits = |x: f64| (1.0 + x.abs()).log2();
+    let (mut hold, mut extrapolate) = (0.0, 0.0);
+    match *part {
+        Part::Scalar { idx, step, .. } => {
+            let v = |t: usize| values[t * cc + idx] / step;
+            for t in 2..frames {
+                hold += bits(v(t) - v(t - 1));
+                extrapolate += bits(v(t) - 2.0 * v(t - 1) + v(t - 2));
+            }
+        }
+        Part::Quat {
+            order, idx, step, ..
+        } => {
+            let q = |t: usize| {
+                let r = &values[t * cc..];
+                rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]])
+            };
+            let cost = |pred: UnitQuaternion<f64>, q: UnitQuaternion<f64>| {
+                rotation::log(&(pred.inverse() * q))
+                    .iter()
+                    .map(|c| bits(c / step))
+                    .sum::<f64>()
+            };
+            for t in 2..frames {
+                let (a, b, c) = (q(t - 1), q(t - 2), q(t));
+                hold += cost(a, c);
+                extrapolate += cost(a * (b.inverse() * a), c);
+            }
+        }
+    }
+    extrapolate < hold
 }

@@ -38,7 +38,7 @@ mod aim;
 mod delta;
 mod transform;
 
-/// What the encoder writes; the decoder reads every version up to it.
+/// What the encoder writes ([`Version::V2`]); the decoder reads every [`Version`].
 const VERSION: u8 = 2;
 /// Decoded channel values are rounded to this (degrees, file units).
 const PRINTED: f64 = 1e6;
@@ -65,10 +65,11 @@ pub(super) enum Part {
 pub(super) struct Plan {
     pub(super) parts: Vec<Part>,
     pub(super) channels: usize,
+    pub(super) version: Version,
 }
 
 impl Plan {
-    fn new(rig: &Rig, reach: &[f64], alpha: f64) -> Plan {
+    fn new(rig: &Rig, version: Version, reach: &[f64], alpha: f64) -> Plan {
         let mut parts = Vec::new();
         let mut k = 0;
         for (j, joint) in rig.joints().iter().enumerate() {
@@ -104,35 +105,37 @@ impl Plan {
         Plan {
             parts,
             channels: rig.channel_count(),
+            version,
         }
     }
 }
 
-/// What a joint's rotation step is scaled by: the distance at which its error shows.
+/// The bitstream versions a decoder reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Scale {
-    /// Version 1: the farthest joint or End Site below it (its errors add up along the
-    /// chain).
-    Reach,
-    /// Version 2: its longest bone (the encoder aims each joint from its decoded parent,
-    /// [`aim`], so an error moves the joint's own children only).
-    Bone,
+pub(super) enum Version {
+    /// A joint's step scales with its reach (the farthest joint or End Site below it: its
+    /// errors add up along the chain); delta mode always extrapolates.
+    V1,
+    /// A joint's step scales with its longest bone (the encoder aims each joint from its
+    /// decoded parent, [`aim`], so an error moves the joint's own children only); delta mode
+    /// chooses each part's predictor.
+    V2,
 }
 
-impl Scale {
-    fn of_version(v: u8) -> Option<Scale> {
+impl Version {
+    fn parse(v: u8) -> Option<Version> {
         match v {
-            1 => Some(Scale::Reach),
-            2 => Some(Scale::Bone),
+            1 => Some(Version::V1),
+            2 => Some(Version::V2),
             _ => None,
         }
     }
 }
 
-/// Each joint's distance for `scale` in the rest pose; at least 5 % of the largest, so that
+/// Each joint's distance for `version`'s step rule in the rest pose; at least 5 % of the largest, so that
 /// joints that move nothing still keep their rotations to a sensible precision (the BVH
 /// served is the animation, not only its FK).
-fn distances(rig: &Rig, scale: Scale) -> Vec<f64> {
+fn distances(rig: &Rig, version: Version) -> Vec<f64> {
     let joints = rig.joints();
     let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(joints.len());
     for j in joints {
@@ -144,9 +147,9 @@ fn distances(rig: &Rig, scale: Scale) -> Vec<f64> {
         let mut a = j.parent;
         while let Some(p) = a {
             dist[p] = dist[p].max((pos[d] - pos[p]).norm());
-            a = match scale {
-                Scale::Reach => joints[p].parent,
-                Scale::Bone => None,
+            a = match version {
+                Version::V1 => joints[p].parent,
+                Version::V2 => None,
             };
         }
     }
@@ -182,9 +185,9 @@ impl Codec for Rot {
         _points: usize,
         shared: &Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
-        let (scale, base) = match params {
+        let (version, base) = match params {
             [v, a @ ..] if a.len() == 8 => (
-                Scale::of_version(*v).ok_or_else(|| malformed(format!("rot version {v}")))?,
+                Version::parse(*v).ok_or_else(|| malformed(format!("rot version {v}")))?,
                 f64::from_le_bytes(a.try_into().expect("8 bytes")),
             ),
             _ => return Err(malformed("rot parameters")),
@@ -196,7 +199,7 @@ impl Codec for Rot {
             .rig
             .clone()
             .ok_or_else(|| Error::Basis("rot decodes with the take's skeleton".into()))?;
-        let steps = Steps::new(&rig, scale, base);
+        let steps = Steps::new(&rig, version, base);
         Ok(Box::new(RotDecoder { rig, steps }))
     }
 
@@ -225,21 +228,23 @@ enum Mode {
 /// Step sizes: a chunk's `α` is `base · 2^((k − 224)/8)` for the index `k` (one byte) the
 /// chunk starts with, so that each chunk is coded at the largest step its own motion allows.
 struct Steps {
+    version: Version,
     reach: Vec<f64>,
     base: f64,
 }
 
 impl Steps {
-    fn new(rig: &Rig, scale: Scale, base: f64) -> Steps {
+    fn new(rig: &Rig, version: Version, base: f64) -> Steps {
         Steps {
-            reach: distances(rig, scale),
+            version,
+            reach: distances(rig, version),
             base,
         }
     }
 
     fn plan(&self, rig: &Rig, k: u32) -> Plan {
         let alpha = self.base * 2f64.powf((f64::from(k) - 224.0) / 8.0);
-        Plan::new(rig, &self.reach, alpha)
+        Plan::new(rig, self.version, &self.reach, alpha)
     }
 }
 
@@ -306,7 +311,7 @@ impl<'a> Take<'a> {
     ) -> Take<'a> {
         let frames = skeleton.frame_count();
         let values = &skeleton.values[..];
-        let steps = Steps::new(rig, Scale::Bone, base);
+        let steps = Steps::new(rig, Version::V2, base);
         let layout = steps.plan(rig, 224);
         let cc = layout.channels;
         let chunks = (0..frames)
