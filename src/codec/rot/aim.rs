@@ -106,6 +106,9 @@ impl Aim<'_> {
 /// One frame's decoded pose as far as it has been decoded: global rotations and positions,
 /// computed on demand from the channel values decoded so far.
 pub(super) struct Pose {
+    /// Local rotations the caller has decoded already (saves rebuilding them from Euler
+    /// angles).
+    local: Vec<Option<UnitQuaternion<f64>>>,
     rotation: Vec<UnitQuaternion<f64>>,
     position: Vec<Vector3<f64>>,
     /// Which joints' global rotation (`.0`) and position (`.1`) are known this frame.
@@ -116,6 +119,7 @@ impl Pose {
     pub(super) fn new(bones: &Bones) -> Pose {
         let n = bones.joints.len();
         Pose {
+            local: vec![None; n],
             rotation: vec![UnitQuaternion::identity(); n],
             position: vec![Vector3::zeros(); n],
             known: vec![(false, false); n],
@@ -125,6 +129,12 @@ impl Pose {
     /// Start a new frame.
     pub(super) fn clear(&mut self) {
         self.known.iter_mut().for_each(|k| *k = (false, false));
+        self.local.iter_mut().for_each(|l| *l = None);
+    }
+
+    /// Joint `j`'s local rotation as decoded.
+    pub(super) fn decoded(&mut self, j: usize, q: UnitQuaternion<f64>) {
+        self.local[j] = Some(q);
     }
 
     /// Global position of joint `j`: needs its ancestors' channels and its own position
@@ -144,7 +154,7 @@ impl Pose {
     /// Global rotation of joint `j`: needs its and its ancestors' channels decoded.
     fn rotation(&mut self, bones: &Bones, j: usize, decoded: &[f64]) -> UnitQuaternion<f64> {
         if !self.known[j].0 {
-            let local = bones.rotation(j, decoded);
+            let local = self.local[j].unwrap_or_else(|| bones.rotation(j, decoded));
             self.rotation[j] = match bones.joints[j].parent {
                 Some(p) => self.rotation(bones, p, decoded) * local,
                 None => local,

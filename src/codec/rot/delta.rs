@@ -52,11 +52,13 @@ pub(super) fn code_chunk<I: Io>(
     // wins where the motion is slow against the capture's noise (extrapolation doubles the
     // noise it predicts from).
     let mut extrapolate_model = Bit::default();
-    for (part, h) in plan.parts.iter().zip(&mut hist) {
+    for (p, (part, h)) in plan.parts.iter().zip(&mut hist).enumerate() {
         h.extrapolate = match plan.version {
             Version::V1 => true,
             Version::V2 => {
-                let want = given.is_some_and(|g| extrapolates(part, g.values, cc, frames));
+                let want = given.is_some_and(|g| {
+                    extrapolates(part, &g.coeffs.rotations[p], g.values, cc, frames)
+                });
                 io.bit(&mut extrapolate_model, want)
             }
         };
@@ -70,7 +72,7 @@ pub(super) fn code_chunk<I: Io>(
             (a, p)
         });
         let dest = &mut out[base + f * cc..base + (f + 1) * cc];
-        for (part, h) in plan.parts.iter().zip(&mut hist) {
+        for (p, (part, h)) in plan.parts.iter().zip(&mut hist).enumerate() {
             match *part {
                 Part::Scalar { idx, step, kind } => {
                     let pred = match h.scalars {
@@ -100,8 +102,8 @@ pub(super) fn code_chunk<I: Io>(
                         [Some(a), _] => a,
                         _ => UnitQuaternion::identity(),
                     };
-                    let residual = row.map(|r| {
-                        let mut q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
+                    let residual = given.zip(row).map(|(g, r)| {
+                        let mut q = g.coeffs.rotations[p][f];
                         if let Some((a, pose)) = aim.as_mut() {
                             q = aim::aim(a.bones, pose, joint, q, dest, r, a.frame(f));
                         }
@@ -124,6 +126,9 @@ pub(super) fn code_chunk<I: Io>(
                     let e = rotation::to_euler(&q, order, h.euler);
                     h.euler = Some(e);
                     h.quats = [Some(q), h.quats[0]];
+                    if let Some((_, pose)) = aim.as_mut() {
+                        pose.decoded(joint, q);
+                    }
                     for k in 0..3 {
                         dest[idx[k]] = printed(e[k]);
                     }
@@ -137,7 +142,13 @@ pub(super) fn code_chunk<I: Io>(
 /// Whether `part` of a chunk (`values`, `frames` rows of `cc`) costs fewer bits predicted at
 /// constant velocity than by its last value, by an open-loop estimate on the values as given
 /// (the bit lengths of the residuals in steps).
-fn extrapolates(part: &Part, values: &[f64], cc: usize, frames: usize) -> bool {
+fn extrapolates(
+    part: &Part,
+    rotations: &[UnitQuaternion<f64>],
+    values: &[f64],
+    cc: usize,
+    frames: usize,
+) -> bool {
     let bits = |x: f64| (1.0 + x.abs()).log2();
     let (mut hold, mut extrapolate) = (0.0, 0.0);
     match *part {
@@ -148,13 +159,8 @@ fn extrapolates(part: &Part, values: &[f64], cc: usize, frames: usize) -> bool {
                 extrapolate += bits(v(t) - 2.0 * v(t - 1) + v(t - 2));
             }
         }
-        Part::Quat {
-            order, idx, step, ..
-        } => {
-            let q = |t: usize| {
-                let r = &values[t * cc..];
-                rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]])
-            };
+        Part::Quat { step, .. } => {
+            let q = |t: usize| rotations[t];
             let cost = |pred: UnitQuaternion<f64>, q: UnitQuaternion<f64>| {
                 rotation::log(&(pred.inverse() * q))
                     .iter()

@@ -373,16 +373,52 @@ impl<'a> Take<'a> {
         Ok(target.holds(max, mean))
     }
 
-    /// The largest step index at which chunk `i` coded `how` meets `target` (a binary
-    /// search over the 256 indices); `None` if not even the finest does.
-    fn step_for(&self, how: How, i: usize, target: Target) -> Result<Option<u32>> {
-        if !self.meets(how, i, 0, target)? {
-            return Ok(None);
-        }
-        let (mut lo, mut hi) = (0u32, 256u32);
+    /// The largest step index at which chunk `i` coded `how` meets `target`; `None` if not
+    /// even the finest does. A search over the 256 indices that starts at `hint` (the
+    /// previous chunk's, when there is one) and gallops away from it, since neighbouring
+    /// chunks usually need about the same step.
+    fn step_for(
+        &self,
+        how: How,
+        i: usize,
+        target: Target,
+        hint: Option<u32>,
+    ) -> Result<Option<u32>> {
+        let meets = |k: u32| self.meets(how, i, k, target);
+        // `lo` meets the bound, `hi` does not (256: past the coarsest).
+        let (mut lo, mut hi) = match hint {
+            Some(h) if meets(h)? => {
+                let (mut lo, mut d) = (h, 1);
+                loop {
+                    let k = lo + d;
+                    if k >= 256 {
+                        break (lo, 256);
+                    }
+                    if !meets(k)? {
+                        break (lo, k);
+                    }
+                    lo = k;
+                    d *= 2;
+                }
+            }
+            _ => {
+                let (mut hi, mut d) = (hint.unwrap_or(256), 1);
+                loop {
+                    let k = hi.saturating_sub(d);
+                    if meets(k)? {
+                        break (k, hi);
+                    }
+                    if k == 0 {
+                        return Ok(None);
+                    }
+                    hi = k;
+                    d *= 2;
+                }
+            }
+        };
         while hi - lo > 1 {
             let mid = (lo + hi) / 2;
-            if self.meets(how, i, mid, target)? {
+            if meets(mid)? {
                 lo = mid;
             } else {
                 hi = mid;
@@ -397,14 +433,18 @@ impl<'a> Take<'a> {
     /// rotation puts them): then the file's rotations are coded as they are.
     fn encode(&self, target: Target) -> Result<CodecOutput> {
         let mut chunks = Vec::with_capacity(self.chunks.len());
+        // The last step index found per mode and aiming: where the next chunk's search starts.
+        let mut hints = [[None; 2]; 2];
         for i in 0..self.chunks.len() {
             let mut best: Option<Vec<u8>> = None;
             for mode in [Mode::Delta, Mode::Transform] {
                 for aim in [true, false] {
                     let how = How { mode, aim };
-                    let Some(k) = self.step_for(how, i, target)? else {
+                    let hint = &mut hints[mode as usize][usize::from(aim)];
+                    let Some(k) = self.step_for(how, i, target, *hint)? else {
                         continue;
                     };
+                    *hint = Some(k);
                     let mut enc = Encoder::new();
                     self.chunk(how, i, k, &mut enc)?;
                     let bytes = enc.finish();

@@ -4,7 +4,7 @@
 //! its last non-zero coefficient. Best at loose bounds, where a second of a joint's motion
 //! takes a handful of coefficients (the MDTT observation, on rotations).
 
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 
 use super::aim::{self, Aim, Pose};
 use super::{printed, quantise, Given, Part, Plan};
@@ -34,6 +34,9 @@ fn band(k: usize) -> usize {
 /// control computes them once.
 pub(super) struct Coeffs {
     series: Vec<Vec<f64>>,
+    /// The file's rotation of each quaternion part in each frame (empty for scalar parts),
+    /// in the plan's part order: every trial aims from these.
+    pub(super) rotations: Vec<Vec<UnitQuaternion<f64>>>,
 }
 
 /// The series of a chunk's `frames` frames of channel values, as DCT coefficients.
@@ -46,29 +49,36 @@ pub(super) fn analyse(plan: &Plan, values: &[f64], frames: usize) -> Coeffs {
             .collect()
     };
     let mut series = Vec::new();
+    let mut rotations = Vec::new();
     for part in &plan.parts {
         match *part {
             Part::Scalar { idx, .. } => {
                 let x: Vec<f64> = (0..frames).map(|t| values[t * cc + idx]).collect();
                 series.push(transform(&x));
+                rotations.push(Vec::new());
             }
             Part::Quat { order, idx, .. } => {
                 let mut comps = [vec![0.0; frames], vec![0.0; frames], vec![0.0; frames]];
                 let mut prev: Option<Vector3<f64>> = None;
-                for t in 0..frames {
-                    let r = &values[t * cc..];
-                    let q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
-                    let v = continuous(rotation::log(&q), prev);
+                let qs: Vec<_> = (0..frames)
+                    .map(|t| {
+                        let r = &values[t * cc..];
+                        rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]])
+                    })
+                    .collect();
+                for (t, q) in qs.iter().enumerate() {
+                    let v = continuous(rotation::log(q), prev);
                     prev = Some(v);
                     for c in 0..3 {
                         comps[c][t] = v[c];
                     }
                 }
                 series.extend(comps.iter().map(|x| transform(x)));
+                rotations.push(qs);
             }
         }
     }
-    Coeffs { series }
+    Coeffs { series, rotations }
 }
 
 /// Of the rotation vectors of one rotation (`v` turned by whole turns along its axis), the
@@ -104,28 +114,31 @@ pub(super) fn code_chunk<I: Io>(
     let mut models = vec![IntModel::default(); 3 * BANDS * PREVIOUS];
     let base = out.len();
     out.resize(base + frames * cc, 0.0);
-    let mut aim = given.and_then(|g| g.aim.as_ref().map(|a| (g.values, a, Pose::new(a.bones))));
+    // When aiming, each frame's pose as far as decoded (parts are decoded joint by joint,
+    // so what a pose has computed stays right as the chunk goes on).
+    let mut aim = given.and_then(|g| {
+        g.aim.as_ref().map(|a| {
+            (
+                g,
+                a,
+                (0..frames).map(|_| Pose::new(a.bones)).collect::<Vec<_>>(),
+            )
+        })
+    });
     let mut s = 0;
-    for part in &plan.parts {
+    for (p, part) in plan.parts.iter().enumerate() {
         let (n, step, kind) = match *part {
             Part::Scalar { step, kind, .. } => (1, step, kind),
             Part::Quat { step, .. } => (3, step, 2),
         };
         // The series to code: as analysed, or aimed from the decoded parents.
         let aimed = match (*part, aim.as_mut()) {
-            (
-                Part::Quat {
-                    joint, order, idx, ..
-                },
-                Some((values, a, pose)),
-            ) => Some(aimed_series(
+            (Part::Quat { joint, .. }, Some((g, a, poses))) => Some(aimed_series(
                 joint,
-                order,
-                idx,
-                frames,
-                values,
+                &g.coeffs.rotations[p],
+                g.values,
                 a,
-                pose,
+                poses,
                 &out[base..],
                 cc,
                 &d,
@@ -156,11 +169,17 @@ pub(super) fn code_chunk<I: Io>(
                     out[base + t * cc + idx] = printed(decoded[0][t]);
                 }
             }
-            Part::Quat { order, idx, .. } => {
+            Part::Quat {
+                joint, order, idx, ..
+            } => {
                 let mut near = None;
                 for t in 0..frames {
                     let v = Vector3::new(decoded[0][t], decoded[1][t], decoded[2][t]);
-                    let e = rotation::to_euler(&rotation::exp(&v), order, near);
+                    let q = rotation::exp(&v);
+                    if let Some((_, _, poses)) = aim.as_mut() {
+                        poses[t].decoded(joint, q);
+                    }
+                    let e = rotation::to_euler(&q, order, near);
                     near = Some(e);
                     for k in 0..3 {
                         out[base + t * cc + idx[k]] = printed(e[k]);
@@ -213,34 +232,30 @@ fn code_series<I: Io>(
 }
 
 /// The DCT coefficients of joint `joint`'s rotation vectors over the chunk, each frame's
-/// rotation aimed ([`super::aim`]) from the parents decoded so far (`decoded`, the chunk's
-/// rows).
+/// rotation (`rotations`, the file's) aimed ([`super::aim`]) from the parents decoded so far
+/// (`decoded`, the chunk's rows; `poses`, each frame's pose as far as decoded).
 #[allow(clippy::too_many_arguments)]
 fn aimed_series(
     joint: usize,
-    order: [usize; 3],
-    idx: [usize; 3],
-    frames: usize,
+    rotations: &[UnitQuaternion<f64>],
     values: &[f64],
     a: &Aim,
-    pose: &mut Pose,
+    poses: &mut [Pose],
     decoded: &[f64],
     cc: usize,
     d: &[f64],
 ) -> [Vec<f64>; 3] {
+    let frames = rotations.len();
     let mut comps = [vec![0.0; frames], vec![0.0; frames], vec![0.0; frames]];
     let mut prev: Option<Vector3<f64>> = None;
-    for t in 0..frames {
-        let r = &values[t * cc..(t + 1) * cc];
-        let q = rotation::from_euler(order, [r[idx[0]], r[idx[1]], r[idx[2]]]);
-        pose.clear();
+    for (t, pose) in poses.iter_mut().enumerate() {
         let q = aim::aim(
             a.bones,
             pose,
             joint,
-            q,
+            rotations[t],
             &decoded[t * cc..(t + 1) * cc],
-            r,
+            &values[t * cc..(t + 1) * cc],
             a.frame(t),
         );
         let v = continuous(rotation::log(&q), prev);
