@@ -80,6 +80,35 @@ impl LeastSquares {
     }
 }
 
+/// The `k` leading eigenvectors of a symmetric matrix, as columns, largest first; signs
+/// fixed (largest entry positive) so that the result does not depend on the solver.
+pub fn leading_eigenvectors(c: &DMatrix<f64>, k: usize) -> DMatrix<f64> {
+    leading_eigen(c, k).0
+}
+
+/// The `k` leading eigenvectors (as columns, largest first, signs fixed as above) and their
+/// eigenvalues (clamped at 0).
+pub fn leading_eigen(c: &DMatrix<f64>, k: usize) -> (DMatrix<f64>, Vec<f64>) {
+    let eig = nalgebra::SymmetricEigen::new(c.clone());
+    let mut order: Vec<usize> = (0..eig.eigenvalues.len()).collect();
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let values = order
+        .iter()
+        .take(k)
+        .map(|&i| eig.eigenvalues[i].max(0.0))
+        .collect();
+    let mut b = DMatrix::<f64>::zeros(c.nrows(), k);
+    for (dst, &src) in order.iter().take(k).enumerate() {
+        let mut v = eig.eigenvectors.column(src).clone_owned();
+        let imax = v.iamax();
+        if v[imax] < 0.0 {
+            v = -v;
+        }
+        b.set_column(dst, &v);
+    }
+    (b, values)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,6 +14,7 @@
 //!   `lsdt-frame`.
 //! - [`bvh_lossless`]: a skeleton's channel values exactly as printed. [`rot`]: its
 //!   rotations, error-bounded on the FK positions.
+//! - [`pga`]: principal geodesics of rotations with IK (Tournier et al. 2009) — its math so far.
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
 //! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
 //!   that code channel values.
@@ -31,6 +32,7 @@ pub mod linalg;
 pub mod lsdt;
 pub mod mdtt;
 pub mod measure;
+pub mod pga;
 pub mod pipeline;
 pub mod quant;
 pub mod raw;

@@ -94,6 +94,34 @@ pub fn exp(v: &Vector3<f64>) -> UnitQuaternion<f64> {
     UnitQuaternion::from_scaled_axis(*v)
 }
 
+/// The intrinsic (Karcher) mean of rotations: the rotation `μ` at which the rotation vectors
+/// `log(μ⁻¹ q)` of the samples average to zero, found by the usual fixed-point iteration
+/// `μ ← μ · exp(mean log(μ⁻¹ q))` from the first sample. Stops when the update turns less than
+/// `1e-12` rad or after `iterations`. `None` for no samples.
+///
+/// The mean of a product of rotation groups (a pose: one rotation per joint) is the mean of
+/// each factor, so this is also the Karcher mean of SO(3)ⁿ joint by joint.
+pub fn karcher_mean(
+    samples: &[UnitQuaternion<f64>],
+    iterations: usize,
+) -> Option<UnitQuaternion<f64>> {
+    let mut mu = *samples.first()?;
+    let n = samples.len() as f64;
+    for _ in 0..iterations {
+        let inv = mu.inverse();
+        let step: Vector3<f64> = samples
+            .iter()
+            .map(|q| log(&(inv * q)))
+            .sum::<Vector3<f64>>()
+            / n;
+        mu *= exp(&step);
+        if step.norm() < 1e-12 {
+            break;
+        }
+    }
+    Some(mu)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -144,6 +172,26 @@ mod tests {
         for (a, b) in back.iter().zip(e) {
             assert!((a - b).abs() < 1e-7, "{back:?}");
         }
+    }
+
+    #[test]
+    fn the_karcher_mean_of_rotations_spread_around_one_is_that_one() {
+        let mut rng = Rng::new(11);
+        let centre = from_euler([2, 0, 1], [40.0, -25.0, 130.0]);
+        // Symmetric pairs about the centre (exact mean), then random spread (mean within
+        // the sampling error).
+        let mut samples = Vec::new();
+        for _ in 0..50 {
+            let v = Vector3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 1.2;
+            samples.push(centre * exp(&v));
+            samples.push(centre * exp(&-v));
+        }
+        let mean = karcher_mean(&samples, 50).unwrap();
+        assert!(mean.angle_to(&centre) < 1e-9, "{}", mean.angle_to(&centre));
+        // Starting far from the centre changes nothing.
+        samples.rotate_left(37);
+        assert!(karcher_mean(&samples, 50).unwrap().angle_to(&centre) < 1e-9);
+        assert!(karcher_mean(&[], 10).is_none());
     }
 
     #[test]

@@ -565,8 +565,9 @@ impl ChunkDecoder for MdttDecoder {
 
 #[cfg(test)]
 mod tests {
-    use super::transform::{clips, leading_eigenvectors};
+    use super::transform::clips;
     use super::*;
+    use crate::codec::linalg::leading_eigenvectors;
 
     /// A smooth synthetic motion of full spatial rank: every coordinate mixes eight
     /// sinusoids with its own (pseudo-random) weights.

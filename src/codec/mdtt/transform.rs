@@ -3,7 +3,9 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{DMatrix, SymmetricEigen};
+use nalgebra::DMatrix;
+
+use crate::codec::linalg::leading_eigen;
 
 use super::params::Params;
 use crate::codec::linalg::add_outer_products;
@@ -198,31 +200,4 @@ impl Analysis {
     pub fn coefficient_count(&self, l: usize) -> usize {
         self.clips.iter().map(|&(_, len)| self.lc(len, l)).sum()
     }
-}
-
-/// The `k` leading eigenvectors of a symmetric matrix, as columns, largest first; signs
-/// fixed (largest entry positive) so that the result does not depend on the solver.
-pub fn leading_eigenvectors(c: &DMatrix<f64>, k: usize) -> DMatrix<f64> {
-    leading_eigen(c, k).0
-}
-
-fn leading_eigen(c: &DMatrix<f64>, k: usize) -> (DMatrix<f64>, Vec<f64>) {
-    let eig = SymmetricEigen::new(c.clone());
-    let mut order: Vec<usize> = (0..eig.eigenvalues.len()).collect();
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let values = order
-        .iter()
-        .take(k)
-        .map(|&i| eig.eigenvalues[i].max(0.0))
-        .collect();
-    let mut b = DMatrix::<f64>::zeros(c.nrows(), k);
-    for (dst, &src) in order.iter().take(k).enumerate() {
-        let mut v = eig.eigenvectors.column(src).clone_owned();
-        let imax = v.iamax();
-        if v[imax] < 0.0 {
-            v = -v;
-        }
-        b.set_column(dst, &v);
-    }
-    (b, values)
 }
