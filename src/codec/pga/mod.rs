@@ -7,5 +7,6 @@
 //! [`ik`] (Levenberg–Marquardt in geodesic coordinates to reach the decoded end points).
 
 pub mod ik;
+pub mod layout;
 pub mod lifting;
 pub mod model;
