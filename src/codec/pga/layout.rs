@@ -181,7 +181,7 @@ impl Layout {
                 out[*i] = root.0[axis];
             }
         }
-        let mut euler = |t: &Turning, q: &UnitQuaternion<f64>, out: &mut [f64]| {
+        let euler = |t: &Turning, q: &UnitQuaternion<f64>, out: &mut [f64]| {
             let near = previous.map(|p| [p[t.idx[0]], p[t.idx[1]], p[t.idx[2]]]);
             let e = to_euler(q, t.order, near);
             for k in 0..3 {
