@@ -69,13 +69,13 @@ pub(super) struct Plan {
 }
 
 impl Plan {
-    fn new(rig: &Rig, version: Version, reach: &[f64], alpha: f64) -> Plan {
+    fn new(rig: &Rig, version: Version, distance: &[f64], alpha: f64) -> Plan {
         let mut parts = Vec::new();
         let mut k = 0;
         for (j, joint) in rig.joints().iter().enumerate() {
             let first = k;
             k += joint.channels.len();
-            let rot_step = alpha / reach[j];
+            let rot_step = alpha / distance[j];
             let order = euler_order(&joint.channels);
             let mut rot_idx = Vec::new();
             for (c, ch) in joint.channels.iter().enumerate() {
@@ -132,9 +132,9 @@ impl Version {
     }
 }
 
-/// Each joint's distance for `version`'s step rule in the rest pose; at least 5 % of the largest, so that
-/// joints that move nothing still keep their rotations to a sensible precision (the BVH
-/// served is the animation, not only its FK).
+/// Each joint's distance for `version`'s step rule, in the rest pose; at least 5 % of the
+/// largest, so that joints that move nothing still keep their rotations to a sensible
+/// precision (the BVH served is the animation, not only its FK).
 fn distances(rig: &Rig, version: Version) -> Vec<f64> {
     let joints = rig.joints();
     let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(joints.len());
@@ -229,7 +229,8 @@ enum Mode {
 /// chunk starts with, so that each chunk is coded at the largest step its own motion allows.
 struct Steps {
     version: Version,
-    reach: Vec<f64>,
+    /// Each joint's rotation step is `α` over this ([`distances`]).
+    distance: Vec<f64>,
     base: f64,
 }
 
@@ -237,14 +238,14 @@ impl Steps {
     fn new(rig: &Rig, version: Version, base: f64) -> Steps {
         Steps {
             version,
-            reach: distances(rig, version),
+            distance: distances(rig, version),
             base,
         }
     }
 
     fn plan(&self, rig: &Rig, k: u32) -> Plan {
         let alpha = self.base * 2f64.powf((f64::from(k) - 224.0) / 8.0);
-        Plan::new(rig, self.version, &self.reach, alpha)
+        Plan::new(rig, self.version, &self.distance, alpha)
     }
 }
 
