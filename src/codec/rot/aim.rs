@@ -12,7 +12,7 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
-use super::super::rig::Rig;
+use crate::codec::rig::Rig;
 use crate::motion::skeleton::Channel;
 
 /// What aiming needs of the rig, once per take.
@@ -26,7 +26,8 @@ struct Bone {
     first: usize,
     channels: Vec<Channel>,
     offset: [f64; 3],
-    /// Joints and End Sites this joint's rotation moves directly (non-zero offsets).
+    /// Joints and End Sites this joint's rotation moves directly (aiming skips those at a
+    /// zero offset: the joint's rotation does not move them).
     children: Vec<usize>,
 }
 
