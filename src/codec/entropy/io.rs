@@ -54,6 +54,25 @@ impl Io for Decoder<'_> {
     }
 }
 
+/// The encoder's side of [`Io`] without a range coder: what rate control's trial runs code
+/// through when only the decoded result matters.
+pub struct Dry;
+
+impl Io for Dry {
+    fn bit(&mut self, _: &mut Bit, b: bool) -> bool {
+        b
+    }
+    fn int(&mut self, _: &mut IntModel, v: i32) -> i32 {
+        v
+    }
+    fn raw(&mut self, v: u32, _: u32) -> u32 {
+        v
+    }
+    fn encoding(&self) -> bool {
+        true
+    }
+}
+
 /// A residual: small ones through the adaptive model, the rare huge one escaped to 64 raw
 /// bits.
 pub fn code_residual<I: Io>(io: &mut I, model: &mut IntModel, r: i64) -> Result<i64> {

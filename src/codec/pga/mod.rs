@@ -6,6 +6,7 @@
 //! geodesics), [`lifting`] (the multiscale lifting of root and end-point trajectories) and
 //! [`ik`] (Levenberg–Marquardt in geodesic coordinates to reach the decoded end points).
 
+pub mod chunk;
 pub mod ik;
 pub mod layout;
 pub mod lifting;

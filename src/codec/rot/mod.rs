@@ -22,9 +22,8 @@ use std::sync::Arc;
 
 use nalgebra::Vector3;
 
-use super::entropy::ints::IntModel;
-use super::entropy::io::Io;
-use super::entropy::rangecoder::{Bit, Decoder, Encoder};
+use super::entropy::io::{Dry, Io};
+use super::entropy::rangecoder::{Decoder, Encoder};
 use super::error::{malformed, Error, Result};
 use super::measure::max_mean;
 use super::rig::{Channels, Rig};
@@ -467,24 +466,6 @@ impl<'a> Take<'a> {
         let mut params = vec![VERSION];
         params.extend_from_slice(&self.steps.base.to_le_bytes());
         Ok(CodecOutput { params, chunks })
-    }
-}
-
-/// The encoder's side of [`Io`] without a range coder: rate control's trial runs.
-struct Dry;
-
-impl Io for Dry {
-    fn bit(&mut self, _: &mut Bit, b: bool) -> bool {
-        b
-    }
-    fn int(&mut self, _: &mut IntModel, v: i32) -> i32 {
-        v
-    }
-    fn raw(&mut self, v: u32, _: u32) -> u32 {
-        v
-    }
-    fn encoding(&self) -> bool {
-        true
     }
 }
 
