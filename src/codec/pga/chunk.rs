@@ -58,7 +58,7 @@ pub fn code<I: Io>(
                       t: usize,
                       failed: &mut Option<Error>|
      -> Vector3<f64> {
-        let level = if t % stride == 0 {
+        let level = if t.is_multiple_of(stride) {
             LEVELS - 1
         } else {
             (t.trailing_zeros() as usize).min(LEVELS - 2)
