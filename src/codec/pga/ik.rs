@@ -95,21 +95,26 @@ impl Solver {
 
     /// Global rotations and positions of every link at `x` (root at the origin, unturned).
     pub fn pose(&mut self, chain: &Chain, g: &Geodesics, x: &[f64]) {
+        self.pose_with(chain, |j| {
+            g.mean[j] * crate::motion::rotation::exp(&g.tangent_of(j, x))
+        });
+    }
+
+    /// Global rotations and positions of every link with inner joint `j` turned by
+    /// `local(j)` (root at the origin, unturned).
+    pub fn pose_with(&mut self, chain: &Chain, local: impl Fn(usize) -> UnitQuaternion<f64>) {
         for (i, l) in chain.links.iter().enumerate() {
-            let local = match l.inner {
-                Some(j) => g.mean[j] * crate::motion::rotation::exp(&g.tangent_of(j, x)),
-                None => UnitQuaternion::identity(),
-            };
-            let (pr, pp) = match l.parent {
-                Some(p) => (self.rotation[p], self.position[p]),
-                None => (UnitQuaternion::identity(), Vector3::zeros()),
-            };
-            self.position[i] = if l.parent.is_some() {
-                pp + pr * l.translation
-            } else {
-                Vector3::zeros()
-            };
-            self.rotation[i] = pr * local;
+            let turn = l.inner.map_or(UnitQuaternion::identity(), &local);
+            match l.parent {
+                Some(p) => {
+                    self.position[i] = self.position[p] + self.rotation[p] * l.translation;
+                    self.rotation[i] = self.rotation[p] * turn;
+                }
+                None => {
+                    self.position[i] = Vector3::zeros();
+                    self.rotation[i] = turn;
+                }
+            }
         }
     }
 
@@ -157,8 +162,9 @@ impl Solver {
     }
 
     /// The coordinates whose end points best reach `targets` (one per end, root frame),
-    /// held near `reference` with weight `lambda`, starting from `start`: Levenberg–Marquardt
-    /// for at most `iterations` steps.
+    /// held near `reference` with weight `lambda`, starting from `start`: damped Gauss–Newton
+    /// (Levenberg–Marquardt) for at most `iterations` steps. Each step computes the pose
+    /// once, for its cost and its Jacobian.
     #[allow(clippy::too_many_arguments)]
     pub fn solve(
         &mut self,
@@ -174,25 +180,24 @@ impl Solver {
         let m = 3 * chain.ends.len();
         let mut x = start.to_vec();
         let mut jac = DMatrix::zeros(m, k);
-        let mut damping = 1e-3;
-        let mut cost = self.cost(chain, g, targets, &x, reference, lambda);
+        let mut r = DVector::zeros(m);
+        let mut damping = 1e-6;
+        self.pose(chain, g, &x);
+        let mut cost = self.cost(chain, targets, &x, reference, lambda);
         for _ in 0..iterations {
-            self.pose(chain, g, &x);
+            // The pose at `x` is current here.
             self.jacobian(chain, g, &x, &mut jac);
-            let mut r = DVector::zeros(m);
             for (n, &e) in chain.ends.iter().enumerate() {
                 r.fixed_rows_mut::<3>(3 * n)
                     .copy_from(&(self.position[e] - targets[n]));
             }
-            let mut h = jac.transpose() * &jac;
-            let mut grad = jac.transpose() * r;
+            let mut h = jac.tr_mul(&jac);
+            let mut grad = jac.tr_mul(&r);
             for c in 0..k {
                 h[(c, c)] += lambda;
                 grad[c] += lambda * (x[c] - reference[c]);
             }
-            // Damped steps until one lowers the cost (or the damping says the minimum is
-            // here).
-            let mut improved = false;
+            let mut accepted = false;
             while damping < 1e12 {
                 let mut a = h.clone();
                 for c in 0..k {
@@ -204,35 +209,36 @@ impl Solver {
                 };
                 let step = chol.solve(&(-&grad));
                 let trial: Vec<f64> = x.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-                let c = self.cost(chain, g, targets, &trial, reference, lambda);
+                self.pose(chain, g, &trial);
+                let c = self.cost(chain, targets, &trial, reference, lambda);
                 if c < cost {
-                    let small =
-                        step.norm() < 1e-10 * (1.0 + x.iter().map(|v| v * v).sum::<f64>().sqrt());
+                    let size = step.norm();
                     x = trial;
                     cost = c;
-                    damping = (damping / 3.0).max(1e-9);
-                    improved = !small;
+                    damping = (damping / 10.0).max(1e-12);
+                    accepted = size > 1e-9 * (1.0 + x.iter().map(|v| v * v).sum::<f64>().sqrt());
                     break;
                 }
-                damping *= 4.0;
+                damping *= 10.0;
             }
-            if !improved {
+            if !accepted {
                 break;
             }
         }
+        // Leave the pose of the answer behind for the caller.
+        self.pose(chain, g, &x);
         x
     }
 
+    /// The objective at the pose last computed (at `x`).
     fn cost(
-        &mut self,
+        &self,
         chain: &Chain,
-        g: &Geodesics,
         targets: &[Vector3<f64>],
         x: &[f64],
         reference: &[f64],
         lambda: f64,
     ) -> f64 {
-        self.pose(chain, g, x);
         let reach: f64 = chain
             .ends
             .iter()

@@ -7,6 +7,7 @@
 //! [`ik`] (Levenberg–Marquardt in geodesic coordinates to reach the decoded end points).
 
 pub mod chunk;
+pub mod frames;
 pub mod ik;
 pub mod layout;
 pub mod lifting;
