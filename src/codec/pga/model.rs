@@ -8,7 +8,9 @@
 
 use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
 
+use crate::codec::error::{malformed, Result};
 use crate::codec::linalg::leading_eigen;
+use crate::codec::wire::{Reader, Writer};
 use crate::motion::rotation::{exp, karcher_mean, log};
 
 /// Fixed-point iterations of the Karcher mean (it converges in a handful for poses).
@@ -73,6 +75,64 @@ impl Geodesics {
             directions: self.directions.columns(0, k).clone_owned(),
             variances: self.variances[..k].to_vec(),
         }
+    }
+
+    /// The model as stored: `n` and `k` (u32 each), then per joint its mean as a unit
+    /// quaternion (w, x, y, z; f32), then the `3n × k` directions column by column (f32).
+    /// Variances are not stored (a decoder does not need them).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut w = Writer::new();
+        w.u32(self.joints() as u32).u32(self.dims() as u32);
+        for q in &self.mean {
+            let c = q.quaternion().coords;
+            w.f32(c.w as f32)
+                .f32(c.x as f32)
+                .f32(c.y as f32)
+                .f32(c.z as f32);
+        }
+        for v in self.directions.iter() {
+            w.f32(*v as f32);
+        }
+        w.0
+    }
+
+    /// The model of [`Geodesics::to_bytes`] for `joints` inner joints and at most
+    /// `max_dims` directions; malformed unless it has exactly that many joints, finite
+    /// numbers and quaternions of unit norm (to f32 precision). The encoder codes with the
+    /// parsed model, so both sides use the same numbers.
+    pub fn parse(bytes: &[u8], joints: usize, max_dims: usize) -> Result<Geodesics> {
+        let mut r = Reader::named(bytes, "pga model");
+        let n = r.u32()? as usize;
+        let k = r.u32()? as usize;
+        if n != joints || k == 0 || k > max_dims.min(3 * n) {
+            return Err(malformed(format!(
+                "pga model of {n} joints and {k} directions (the skeleton has {joints} inner joints)"
+            )));
+        }
+        let mut mean = Vec::with_capacity(n);
+        for _ in 0..n {
+            let (w, x, y, z) = (r.f32()?, r.f32()?, r.f32()?, r.f32()?);
+            let q =
+                nalgebra::Quaternion::new(f64::from(w), f64::from(x), f64::from(y), f64::from(z));
+            if !q.coords.iter().all(|v| v.is_finite()) || (q.norm() - 1.0).abs() > 1e-5 {
+                return Err(malformed("a pga mean rotation is not a unit quaternion"));
+            }
+            mean.push(UnitQuaternion::new_normalize(q));
+        }
+        let mut directions = DMatrix::zeros(3 * n, k);
+        for v in directions.iter_mut() {
+            let x = f64::from(r.f32()?);
+            if !x.is_finite() || x.abs() > 1.0 + 1e-5 {
+                return Err(malformed("a pga direction is not part of a unit vector"));
+            }
+            *v = x;
+        }
+        r.finish()?;
+        Ok(Geodesics {
+            mean,
+            directions,
+            variances: vec![0.0; k],
+        })
     }
 
     /// A pose's coordinates along the directions: the projection of its tangent vector.
@@ -155,6 +215,39 @@ mod tests {
         let gram = g.directions.transpose() * &g.directions;
         assert!((gram - DMatrix::identity(3 * n, 3 * n)).amax() < 1e-9);
         assert!(g.variances.windows(2).all(|w| w[0] >= w[1]));
+    }
+
+    #[test]
+    fn the_stored_model_parses_back_and_bad_ones_are_refused() {
+        let (poses, n) = dancer_poses(60);
+        let g = Geodesics::fit(&poses, n, 12).unwrap();
+        let bytes = g.to_bytes();
+        assert_eq!(bytes.len(), 8 + 16 * n + 4 * 3 * n * 12);
+        let back = Geodesics::parse(&bytes, n, 64).unwrap();
+        assert_eq!(back.dims(), 12);
+        assert!((back.directions.clone() - &g.directions).amax() < 1e-6);
+        assert!(back
+            .mean
+            .iter()
+            .zip(&g.mean)
+            .all(|(a, b)| a.angle_to(b) < 1e-6));
+        // Stored once, parsed twice: the same numbers.
+        assert_eq!(
+            Geodesics::parse(&back.to_bytes(), n, 64)
+                .unwrap()
+                .to_bytes(),
+            back.to_bytes()
+        );
+        assert!(Geodesics::parse(&bytes, n + 1, 64).is_err());
+        assert!(Geodesics::parse(&bytes, n, 11).is_err());
+        assert!(Geodesics::parse(&bytes[..bytes.len() - 1], n, 64).is_err());
+        let mut bad = bytes.clone();
+        bad[8..12].copy_from_slice(&7f32.to_le_bytes());
+        assert!(Geodesics::parse(&bad, n, 64).is_err());
+        let mut bad = bytes;
+        let at = 8 + 16 * n;
+        bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(Geodesics::parse(&bad, n, 64).is_err());
     }
 
     #[test]
