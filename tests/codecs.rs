@@ -93,9 +93,14 @@ fn check_with(
 ) {
     let enc = codec::encode_with(m, codec, bound, shared)
         .unwrap_or_else(|e| panic!("{name} {codec} {bound}: {e}"));
+    // What a reader needs: the basis, and the skeleton for codecs that keep channels.
+    let shared = codec::Shared {
+        basis: shared.cloned(),
+        rig: enc.rig.clone(),
+    };
     let bytes = enc.container.to_bytes();
     let c = Container::parse(&bytes, &Limits::default()).unwrap();
-    let full = codec::decode_all_with(&c, shared.cloned()).unwrap();
+    let full = codec::decode_all_with(&c, shared.clone()).unwrap();
     let s = metrics::compare(m.positions(), &full, m.point_count(), m.unit.to_mm()).unwrap();
     let ok = match bound {
         ErrorBound::MaxMm(b) => s.max_mm <= b,
@@ -120,7 +125,7 @@ fn check_with(
         let end = start + 1 + rng.below(frames - start);
         let range = c.header.chunks_for(start, end);
         let chunks = codec::Stored::new(range.start, c.chunks[range].iter().map(Vec::as_slice));
-        let reader = codec::Reader::new(c.header.clone(), shared.cloned()).unwrap();
+        let reader = codec::Reader::new(c.header.clone(), shared.clone()).unwrap();
         let part = reader.read(start..end, None, &chunks).unwrap();
         assert_eq!(
             bits(&part),
@@ -210,6 +215,40 @@ fn every_corpus_take_meets_max_and_mean_bounds_with_every_codec() {
                     }
                     for codec in [CodecId::Quant, CodecId::Mdtt] {
                         check(name, m, codec, ErrorBound::MeanMm(3.0), &mut rng);
+                    }
+                }
+            });
+        }
+    });
+}
+
+/// Every skeleton take of the corpus with `rot`, at a tight and a loose max bound and at a
+/// mean bound: the bound holds on the decoded FK positions of every joint and End Site, and
+/// ranges read alone equal the whole decode (`check`).
+#[test]
+fn every_corpus_skeleton_take_meets_bounds_with_rot() {
+    let takes: Vec<_> = corpus_takes()
+        .into_iter()
+        .filter(|(_, m)| m.skeleton.is_some())
+        .collect();
+    if corpus::for_tests().is_some() {
+        assert!(takes.len() >= 180, "{} skeleton takes", takes.len());
+    }
+    let threads = std::thread::available_parallelism()
+        .map_or(2, |n| n.get())
+        .min(4);
+    std::thread::scope(|s| {
+        for t in 0..threads {
+            let takes = &takes;
+            s.spawn(move || {
+                let mut rng = Rng::new(t as u64 + 7);
+                for (name, m) in takes.iter().skip(t).step_by(threads) {
+                    for bound in [
+                        ErrorBound::MaxMm(1.0),
+                        ErrorBound::MaxMm(12.5),
+                        ErrorBound::MeanMm(3.0),
+                    ] {
+                        check(name, m, CodecId::Rot, bound, &mut rng);
                     }
                 }
             });
