@@ -198,26 +198,37 @@ fn corpus_takes() -> Vec<(String, Motion)> {
     takes
 }
 
-#[test]
-fn every_corpus_take_meets_max_and_mean_bounds_with_every_codec() {
-    let takes = corpus_takes();
+/// `f` on every take (with its index), the takes shared among up to four threads; thread `t`
+/// draws from `Rng::new(seed + t)`.
+fn on_every_take(
+    takes: &[(String, Motion)],
+    seed: u64,
+    f: impl Fn(usize, &str, &Motion, &mut Rng) + Sync,
+) {
     let threads = std::thread::available_parallelism()
         .map_or(2, |n| n.get())
         .min(4);
     std::thread::scope(|s| {
         for t in 0..threads {
-            let takes = &takes;
+            let f = &f;
             s.spawn(move || {
-                let mut rng = Rng::new(t as u64 + 1);
-                for (name, m) in takes.iter().skip(t).step_by(threads) {
-                    for codec in CODECS {
-                        check(name, m, codec, ErrorBound::MaxMm(1.0), &mut rng);
-                    }
-                    for codec in [CodecId::Quant, CodecId::Mdtt] {
-                        check(name, m, codec, ErrorBound::MeanMm(3.0), &mut rng);
-                    }
+                let mut rng = Rng::new(seed + t as u64);
+                for (i, (name, m)) in takes.iter().enumerate().skip(t).step_by(threads) {
+                    f(i, name, m, &mut rng);
                 }
             });
+        }
+    });
+}
+
+#[test]
+fn every_corpus_take_meets_max_and_mean_bounds_with_every_codec() {
+    on_every_take(&corpus_takes(), 1, |_, name, m, rng| {
+        for codec in CODECS {
+            check(name, m, codec, ErrorBound::MaxMm(1.0), rng);
+        }
+        for codec in [CodecId::Quant, CodecId::Mdtt] {
+            check(name, m, codec, ErrorBound::MeanMm(3.0), rng);
         }
     });
 }
@@ -234,24 +245,13 @@ fn every_corpus_skeleton_take_meets_bounds_with_rot() {
     if corpus::for_tests().is_some() {
         assert!(takes.len() >= 180, "{} skeleton takes", takes.len());
     }
-    let threads = std::thread::available_parallelism()
-        .map_or(2, |n| n.get())
-        .min(4);
-    std::thread::scope(|s| {
-        for t in 0..threads {
-            let takes = &takes;
-            s.spawn(move || {
-                let mut rng = Rng::new(t as u64 + 7);
-                for (name, m) in takes.iter().skip(t).step_by(threads) {
-                    for bound in [
-                        ErrorBound::MaxMm(1.0),
-                        ErrorBound::MaxMm(12.5),
-                        ErrorBound::MeanMm(3.0),
-                    ] {
-                        check(name, m, CodecId::Rot, bound, &mut rng);
-                    }
-                }
-            });
+    on_every_take(&takes, 7, |_, name, m, rng| {
+        for bound in [
+            ErrorBound::MaxMm(1.0),
+            ErrorBound::MaxMm(12.5),
+            ErrorBound::MeanMm(3.0),
+        ] {
+            check(name, m, CodecId::Rot, bound, rng);
         }
     });
 }
@@ -273,29 +273,18 @@ fn every_corpus_take_meets_bounds_with_the_shared_basis_codecs() {
         .iter()
         .map(|(layout, ms)| (layout.clone(), bases_for(ms)))
         .collect();
-    let threads = std::thread::available_parallelism()
-        .map_or(2, |n| n.get())
-        .min(4);
-    std::thread::scope(|s| {
-        for t in 0..threads {
-            let (takes, bases) = (&takes, &bases);
-            s.spawn(move || {
-                let mut rng = Rng::new(t as u64 + 7);
-                for (i, (name, m)) in takes.iter().enumerate().skip(t).step_by(threads) {
-                    let bs = &bases[&m.layout_signature().to_hex()];
-                    for codec in SHARED {
-                        // mdtt-shared runs mdtt's full search: every fourth take keeps the
-                        // suite's time in bounds (the LSDT codecs run on all of them).
-                        if codec == CodecId::MdttShared && i % 4 != 0 {
-                            continue;
-                        }
-                        let b = pick(codec, bs);
-                        for bound in [ErrorBound::MaxMm(1.0), ErrorBound::MeanMm(3.0)] {
-                            check_with(name, m, codec, bound, Some(&b), &mut rng);
-                        }
-                    }
-                }
-            });
+    on_every_take(&takes, 7, |i, name, m, rng| {
+        let bs = &bases[&m.layout_signature().to_hex()];
+        for codec in SHARED {
+            // mdtt-shared runs mdtt's full search: every fourth take keeps the suite's time
+            // in bounds (the LSDT codecs run on all of them).
+            if codec == CodecId::MdttShared && i % 4 != 0 {
+                continue;
+            }
+            let b = pick(codec, bs);
+            for bound in [ErrorBound::MaxMm(1.0), ErrorBound::MeanMm(3.0)] {
+                check_with(name, m, codec, bound, Some(&b), rng);
+            }
         }
     });
 }

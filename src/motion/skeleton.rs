@@ -236,16 +236,22 @@ pub fn local_translations(joints: &[Joint], vals: &[f64], out: &mut Vec<[f64; 3]
     out.clear();
     let mut k = 0;
     for j in joints {
-        let mut t = j.offset;
-        for &c in &j.channels {
-            let (axis, rot) = c.axis();
-            if !rot {
-                t[axis] = vals[k];
-            }
-            k += 1;
-        }
-        out.push(t);
+        out.push(translation(j, &vals[k..k + j.channels.len()]));
+        k += j.channels.len();
     }
+}
+
+/// One joint's translation from its parent: its offset, with any position channel (from
+/// `vals`, the joint's own channel values) replacing its component.
+pub fn translation(joint: &Joint, vals: &[f64]) -> [f64; 3] {
+    let mut t = joint.offset;
+    for (&c, &v) in joint.channels.iter().zip(vals) {
+        let (axis, rot) = c.axis();
+        if !rot {
+            t[axis] = v;
+        }
+    }
+    t
 }
 
 /// Reusable FK state: global rotations and local translations per joint, allocated once

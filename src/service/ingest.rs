@@ -115,9 +115,11 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
     take.header = enc.container.header.to_bytes();
     take.set_measured(enc.stored_bytes, &enc.stats);
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
-    let skeleton = match &m.skeleton {
-        Some(s) => Some(skeletons::of(s, &take.layout, take.created_at)?.1),
-        None => None,
+    // The rig the encoder built when the codec keeps channels; built here otherwise.
+    let skeleton = match (&enc.rig, &m.skeleton) {
+        (Some(rig), _) => Some(skeletons::row_of(rig, &take.layout, take.created_at)),
+        (None, Some(s)) => Some(skeletons::of(s, &take.layout, take.created_at)?.1),
+        (None, None) => None,
     };
     take.skeleton = skeleton.as_ref().map(|k| k.id.clone());
     store

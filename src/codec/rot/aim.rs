@@ -13,7 +13,7 @@
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::codec::rig::Rig;
-use crate::motion::skeleton::Channel;
+use crate::motion::skeleton::{self, Joint};
 
 /// What aiming needs of the rig, once per take.
 pub(super) struct Bones {
@@ -21,11 +21,9 @@ pub(super) struct Bones {
 }
 
 struct Bone {
-    parent: Option<usize>,
+    joint: Joint,
     /// The joint's first channel in a frame's values.
     first: usize,
-    channels: Vec<Channel>,
-    offset: [f64; 3],
     /// Joints and End Sites this joint's rotation moves directly (aiming skips those at a
     /// zero offset: the joint's rotation does not move them).
     children: Vec<usize>,
@@ -39,10 +37,8 @@ impl Bones {
             .iter()
             .map(|j| {
                 let b = Bone {
-                    parent: j.parent,
+                    joint: j.clone(),
                     first,
-                    channels: j.channels.clone(),
-                    offset: j.offset,
                     children: Vec::new(),
                 };
                 first += j.channels.len();
@@ -57,31 +53,32 @@ impl Bones {
         Bones { joints }
     }
 
-    /// The joint's translation from its parent in one frame: the offset, with any position
-    /// channel (from `values`) replacing its component.
-    fn translation(&self, j: usize, values: &[f64]) -> Vector3<f64> {
+    /// The joint's channel values in a frame's `values`.
+    fn own<'v>(&self, j: usize, values: &'v [f64]) -> &'v [f64] {
         let b = &self.joints[j];
-        let mut t = b.offset;
-        for (k, c) in b.channels.iter().enumerate() {
-            let (axis, rot) = c.axis();
-            if !rot {
-                t[axis] = values[b.first + k];
-            }
-        }
-        Vector3::from(t)
+        &values[b.first..b.first + b.joint.channels.len()]
+    }
+
+    /// The joint's translation from its parent in one frame.
+    fn translation(&self, j: usize, values: &[f64]) -> Vector3<f64> {
+        Vector3::from(skeleton::translation(
+            &self.joints[j].joint,
+            self.own(j, values),
+        ))
     }
 
     /// The joint's local rotation in one frame, from its channel values (degrees).
     fn rotation(&self, j: usize, values: &[f64]) -> UnitQuaternion<f64> {
-        let b = &self.joints[j];
         let mut q = UnitQuaternion::identity();
-        for (k, c) in b.channels.iter().enumerate() {
+        for (c, v) in self.joints[j]
+            .joint
+            .channels
+            .iter()
+            .zip(self.own(j, values))
+        {
             let (axis, rot) = c.axis();
             if rot {
-                q *= UnitQuaternion::from_axis_angle(
-                    &Vector3::ith_axis(axis),
-                    values[b.first + k].to_radians(),
-                );
+                q *= UnitQuaternion::from_axis_angle(&Vector3::ith_axis(axis), v.to_radians());
             }
         }
         q
@@ -143,7 +140,7 @@ impl Pose {
     fn position(&mut self, bones: &Bones, j: usize, decoded: &[f64]) -> Vector3<f64> {
         if !self.known[j].1 {
             let t = bones.translation(j, decoded);
-            self.position[j] = match bones.joints[j].parent {
+            self.position[j] = match bones.joints[j].joint.parent {
                 Some(p) => self.position(bones, p, decoded) + self.rotation(bones, p, decoded) * t,
                 None => t,
             };
@@ -156,7 +153,7 @@ impl Pose {
     fn rotation(&mut self, bones: &Bones, j: usize, decoded: &[f64]) -> UnitQuaternion<f64> {
         if !self.known[j].0 {
             let local = self.local[j].unwrap_or_else(|| bones.rotation(j, decoded));
-            self.rotation[j] = match bones.joints[j].parent {
+            self.rotation[j] = match bones.joints[j].joint.parent {
                 Some(p) => self.rotation(bones, p, decoded) * local,
                 None => local,
             };
@@ -182,7 +179,7 @@ pub(super) fn aim(
     given: &[f64],
     original: &[f32],
 ) -> UnitQuaternion<f64> {
-    let parent = match bones.joints[j].parent {
+    let parent = match bones.joints[j].joint.parent {
         Some(p) => pose.rotation(bones, p, decoded),
         None => UnitQuaternion::identity(),
     };
@@ -260,18 +257,18 @@ mod tests {
         let original: Vec<f32> = m.positions()[m.point_count() * 3..m.point_count() * 6].to_vec();
         let mut checked = 0;
         for (j, b) in bones.joints.iter().enumerate() {
-            let (Some(p), [c]) = (b.parent, b.children.as_slice()) else {
+            let (Some(p), [c]) = (b.joint.parent, b.children.as_slice()) else {
                 continue;
             };
-            let Some(order) = rotation::euler_order(&b.channels) else {
+            let Some(order) = rotation::euler_order(&b.joint.channels) else {
                 continue;
             };
             // The parent decoded 3° off on its first rotation channel.
             let mut decoded = given.clone();
             let pb = &bones.joints[p];
-            let k = pb.channels.iter().position(|c| c.axis().1).unwrap();
+            let k = pb.joint.channels.iter().position(|c| c.axis().1).unwrap();
             decoded[pb.first + k] += 3.0;
-            let r = &given[b.first + b.channels.len() - 3..b.first + b.channels.len()];
+            let r = &given[b.first + b.joint.channels.len() - 3..b.first + b.joint.channels.len()];
             let wanted = rotation::from_euler(order, [r[0], r[1], r[2]]);
             let mut pose = Pose::new(&bones);
             let aimed = aim(&bones, &mut pose, j, wanted, &decoded, &given, &original);

@@ -43,11 +43,7 @@ pub(super) struct Coeffs {
 pub(super) fn analyse(plan: &Plan, values: &[f64], frames: usize) -> Coeffs {
     let cc = plan.channels;
     let d = dct::basis(frames, frames);
-    let transform = |x: &[f64]| -> Vec<f64> {
-        (0..frames)
-            .map(|j| (0..frames).map(|t| x[t] * d[t * frames + j]).sum())
-            .collect()
-    };
+    let transform = |x: &[f64]| coefficients(x, &d);
     let mut series = Vec::new();
     let mut rotations = Vec::new();
     for part in &plan.parts {
@@ -79,6 +75,14 @@ pub(super) fn analyse(plan: &Plan, values: &[f64], frames: usize) -> Coeffs {
         }
     }
     Coeffs { series, rotations }
+}
+
+/// The orthonormal DCT-II coefficients of a series, with `d` its length's [`dct::basis`].
+fn coefficients(x: &[f64], d: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|j| (0..n).map(|t| x[t] * d[t * n + j]).sum())
+        .collect()
 }
 
 /// Of the rotation vectors of one rotation (`v` turned by whole turns along its axis), the
@@ -264,9 +268,5 @@ fn aimed_series(
             comps[c][t] = v[c];
         }
     }
-    comps.map(|x| {
-        (0..frames)
-            .map(|j| (0..frames).map(|t| x[t] * d[t * frames + j]).sum())
-            .collect()
-    })
+    comps.map(|x| coefficients(&x, d))
 }
