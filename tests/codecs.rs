@@ -20,7 +20,7 @@ const CODECS: [CodecId; 3] = [CodecId::Raw, CodecId::Quant, CodecId::Mdtt];
 /// The codecs that code with a shared basis.
 const SHARED: [CodecId; 3] = [CodecId::LsdtClip, CodecId::LsdtFrame, CodecId::MdttShared];
 /// The codecs that keep a skeleton's channel values.
-const SKELETON: [CodecId; 2] = [CodecId::BvhLossless, CodecId::Rot];
+const SKELETON: [CodecId; 3] = [CodecId::BvhLossless, CodecId::Rot, CodecId::Pga];
 
 /// Bases of both kinds for the takes of one layout: LSDT on their frames (the DCT if none
 /// is complete), two MDTT bases by annealing.
@@ -93,6 +93,20 @@ fn check_with(
 ) {
     let enc = codec::encode_with(m, codec, bound, shared)
         .unwrap_or_else(|e| panic!("{name} {codec} {bound}: {e}"));
+    verify(name, m, codec, bound, enc, shared, rng);
+}
+
+/// `check_with` after encoding: the bound holds on the stored take as a reader decodes it,
+/// gaps stay gaps, and ranges read alone equal the whole decode.
+fn verify(
+    name: &str,
+    m: &Motion,
+    codec: CodecId,
+    bound: ErrorBound,
+    enc: codec::Encoded,
+    shared: Option<&Arc<Basis>>,
+    rng: &mut Rng,
+) {
     // What a reader needs: the basis, and the skeleton for codecs that keep channels.
     let shared = codec::Shared {
         basis: shared.cloned(),
@@ -254,6 +268,65 @@ fn every_corpus_skeleton_take_meets_bounds_with_rot() {
             check(name, m, CodecId::Rot, bound, rng);
         }
     });
+}
+
+/// Every skeleton take of the corpus that `pga` accepts (the others are unsuited, with the
+/// reason: a joint below the root whose position channels move), at a tight and a loose max
+/// bound and at a mean bound: the bound holds on the decoded FK positions, and ranges read
+/// alone equal the whole decode. Where no number of directions meets a bound, `pga` says
+/// so (`BoundMissed`), which per-take choice records and skips; it must stay rare.
+#[test]
+fn every_corpus_skeleton_take_pga_accepts_meets_bounds() {
+    let takes: Vec<_> = corpus_takes()
+        .into_iter()
+        .filter(|(_, m)| m.skeleton.is_some())
+        .collect();
+    let pga = codec::codec(CodecId::Pga).unwrap();
+    let accepted: Vec<_> = takes
+        .iter()
+        .filter(|(name, m)| match pga.unsuited(m) {
+            Some(why) => {
+                assert!(
+                    why.contains("moves") || why.contains("turns"),
+                    "{name}: {why}"
+                );
+                false
+            }
+            None => true,
+        })
+        .cloned()
+        .collect();
+    let missed = std::sync::atomic::AtomicUsize::new(0);
+    on_every_take(&accepted, 11, |_, name, m, rng| {
+        for bound in [
+            ErrorBound::MaxMm(1.0),
+            ErrorBound::MaxMm(12.5),
+            ErrorBound::MeanMm(3.0),
+        ] {
+            match codec::encode(m, CodecId::Pga, bound) {
+                Ok(enc) => verify(name, m, CodecId::Pga, bound, enc, None, rng),
+                Err(Error::BoundMissed { .. }) => {
+                    missed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+                Err(e) => panic!("{name} pga {bound}: {e}"),
+            }
+        }
+    });
+    let missed = missed.into_inner();
+    println!(
+        "pga: {} of {} skeleton takes accepted, {missed} bounds missed",
+        accepted.len(),
+        takes.len()
+    );
+    if corpus::for_tests().is_some() {
+        assert!(
+            accepted.len() * 10 >= takes.len() * 9,
+            "{} of {}",
+            accepted.len(),
+            takes.len()
+        );
+        assert!(missed * 100 <= accepted.len() * 3, "{missed} missed");
+    }
 }
 
 /// The acceptance test of the shared-basis codecs: bases per layout, trained on all takes

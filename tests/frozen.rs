@@ -18,6 +18,7 @@ use mocapstore::codec::container::pack_chunks;
 use mocapstore::codec::lsdt::spatial::dct_basis;
 use mocapstore::codec::lsdt::{clip, frame};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
+use mocapstore::codec::pga::encode::{Options, Take};
 use mocapstore::codec::{self, Basis, CodecId, Container, ErrorBound, Header, Limits};
 use mocapstore::motion::synthetic::walker;
 use mocapstore::motion::Motion;
@@ -80,6 +81,9 @@ const REQUIRED: &[&str] = &[
     "bvh-lossless-v1",
     "rot-v1",
     "rot-v2",
+    "pga-v1",
+    "pga-v1-plain",
+    "pga-v1-ik",
 ];
 
 #[test]
@@ -218,13 +222,34 @@ fn freeze_current_bitstreams() {
     )
     .unwrap();
     let mut skeletal = Vec::new();
-    for codec in [CodecId::BvhLossless, CodecId::Rot] {
+    for codec in [CodecId::BvhLossless, CodecId::Rot, CodecId::Pga] {
         let c = codec::encode(&bvh, codec, bound).unwrap().container;
         let name = format!("{codec}-v{}", c.header.params[0]);
         skeletal.push((
             name,
             c,
             format!("{codec} batch, {bound}, a dancer BVH take"),
+        ));
+    }
+    // `pga`'s two decoder paths on their own: poses from coordinates alone, and IK.
+    let ik = Options {
+        iterations: 3,
+        ..Options::IK
+    };
+    for (name, options, what) in [
+        ("plain", Options::PLAIN, "poses from coordinates alone"),
+        ("ik", ik, "decoded by IK (3 steps)"),
+    ] {
+        let c = codec::encode_variant(&bvh, CodecId::Pga, bound, None, |input, t| {
+            let (rig, sk) = input.skeleton.unwrap();
+            Take::new(rig, sk, input)?.encode(t, &[options])
+        })
+        .unwrap()
+        .container;
+        skeletal.push((
+            format!("pga-v{}-{name}", c.header.params[0]),
+            c,
+            format!("pga batch {what}, {bound}, a dancer BVH take"),
         ));
     }
 

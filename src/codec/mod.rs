@@ -14,11 +14,12 @@
 //!   `lsdt-frame`.
 //! - [`bvh_lossless`]: a skeleton's channel values exactly as printed. [`rot`]: its
 //!   rotations, error-bounded on the FK positions.
-//! - [`pga`]: principal geodesics of rotations with IK (Tournier et al. 2009) — its math so far.
+//! - [`pga`]: principal geodesics of rotations with IK (Tournier et al. 2009).
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
 //! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
 //!   that code channel values.
-//! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`]: shared pieces of the above.
+//! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`], [`search`]: shared pieces of
+//!   the above.
 
 pub mod basis;
 pub mod bvh_lossless;
@@ -40,6 +41,7 @@ pub mod read;
 pub mod residual;
 pub mod rig;
 pub mod rot;
+pub mod search;
 pub mod stream;
 mod wire;
 
@@ -171,6 +173,7 @@ pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
         CodecId::MdttShared => Ok(&mdtt::database::MdttShared),
         CodecId::BvhLossless => Ok(&bvh_lossless::BvhLossless),
         CodecId::Rot => Ok(&rot::Rot),
+        CodecId::Pga => Ok(&pga::Pga),
         other => Err(Error::Unsupported(format!(
             "codec {other} is not implemented yet"
         ))),

@@ -191,6 +191,17 @@ pub struct Channels {
     pub printed: Option<PrintedValues>,
 }
 
+/// Lossy codecs round decoded channel values to this many per unit (degrees, file units):
+/// six decimals, what a BVH file prints.
+const PRINTED: f64 = 1e6;
+
+/// A decoded channel value as a BVH file prints it. Codecs that keep channel values round
+/// what they decode with this, so the bound they verify on decoding holds on the served
+/// file.
+pub fn printed(v: f64) -> f64 {
+    (v * PRINTED).round() / PRINTED
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -212,13 +212,15 @@ mod tests {
             vec![
                 CodecId::LsdtClip,
                 CodecId::LsdtFrame,
+                CodecId::Pga,
                 CodecId::MdttShared,
                 CodecId::BvhLossless,
                 CodecId::Rot
             ]
         );
-        assert!(skipped[3].reason.contains("no skeleton"));
+        assert!(skipped[2].reason.contains("no skeleton"));
         assert!(skipped[4].reason.contains("no skeleton"));
+        assert!(skipped[5].reason.contains("no skeleton"));
         assert!(skipped[0].reason.contains("no shared lsdt basis"));
         let (run, skipped) = candidates(
             CodecRequest::Auto,
@@ -239,8 +241,8 @@ mod tests {
         );
         assert_eq!(
             skipped.len(),
-            3,
-            "mdtt-shared: no mdtt-set basis; bvh-lossless, rot: no skeleton"
+            4,
+            "pga, bvh-lossless, rot: no skeleton; mdtt-shared: no mdtt-set basis"
         );
         let (run, skipped) = candidates(
             CodecRequest::Auto,
@@ -280,7 +282,7 @@ mod tests {
             &m,
             &[],
         );
-        assert_eq!(run, vec![CodecId::BvhLossless, CodecId::Rot]);
+        assert_eq!(run, vec![CodecId::Pga, CodecId::BvhLossless, CodecId::Rot]);
         let raw = skipped.iter().find(|s| s.codec == CodecId::Raw).unwrap();
         assert!(raw.reason.contains("keep=animation"), "{}", raw.reason);
         let (run, _) = candidates(
@@ -296,6 +298,7 @@ mod tests {
                 CodecId::Raw,
                 CodecId::Quant,
                 CodecId::Mdtt,
+                CodecId::Pga,
                 CodecId::BvhLossless,
                 CodecId::Rot
             ]

@@ -16,14 +16,14 @@ const LEVELS: usize = 8;
 const KINDS: usize = 4;
 
 /// The steps details are quantised with.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Steps {
     /// Root and end positions (the take's units).
     pub position: f64,
     /// Root orientation (radians).
     pub orientation: f64,
-    /// Geodesic coordinates.
-    pub coordinate: f64,
+    /// Each geodesic coordinate's.
+    pub coordinate: Vec<f64>,
 }
 
 /// A chunk's trajectories, frame by frame.
@@ -46,14 +46,20 @@ pub fn code<I: Io>(
     ends: usize,
     k: usize,
     stride: usize,
-    steps: Steps,
+    steps: &Steps,
     given: Option<&Trajectories>,
 ) -> Result<Trajectories> {
+    if steps.coordinate.len() != k {
+        return Err(Error::Invalid(format!(
+            "{} coordinate steps for {k} coordinates",
+            steps.coordinate.len()
+        )));
+    }
     let mut models = vec![IntModel::default(); KINDS * LEVELS];
     let mut failed: Option<Error> = None;
     let mut series = |io: &mut I,
                       kind: usize,
-                      step: f64,
+                      step: [f64; 3],
                       detail: Vector3<f64>,
                       t: usize,
                       failed: &mut Option<Error>|
@@ -66,11 +72,11 @@ pub fn code<I: Io>(
         let m = &mut models[kind * LEVELS + level];
         let mut out = Vector3::zeros();
         for c in 0..3 {
-            let q = (detail[c] / step)
+            let q = (detail[c] / step[c])
                 .round()
                 .clamp(-(2f64.powi(62)), 2f64.powi(62)) as i64;
             match code_residual(io, m, q) {
-                Ok(v) => out[c] = v as f64 * step,
+                Ok(v) => out[c] = v as f64 * step[c],
                 Err(e) => {
                     failed.get_or_insert(e);
                 }
@@ -82,13 +88,13 @@ pub fn code<I: Io>(
         frames,
         stride,
         given.map(|g| &g.root_position[..]),
-        |t, d| series(io, 0, steps.position, d, t, &mut failed),
+        |t, d| series(io, 0, [steps.position; 3], d, t, &mut failed),
     );
     let root_orientation = lifting::code::<Orientations>(
         frames,
         stride,
         given.map(|g| &g.root_orientation[..]),
-        |t, d| series(io, 1, steps.orientation, d, t, &mut failed),
+        |t, d| series(io, 1, [steps.orientation; 3], d, t, &mut failed),
     );
     let mut end_series = Vec::with_capacity(ends);
     for e in 0..ends {
@@ -96,12 +102,14 @@ pub fn code<I: Io>(
             frames,
             stride,
             given.map(|g| &g.ends[e][..]),
-            |t, d| series(io, 2, steps.position, d, t, &mut failed),
+            |t, d| series(io, 2, [steps.position; 3], d, t, &mut failed),
         ));
     }
     // Coordinates three at a time (the last group padded with zeros) as points.
     let mut coordinates = vec![vec![0.0; k]; frames];
     for group in 0..k.div_ceil(3) {
+        let step: [f64; 3] =
+            std::array::from_fn(|c| steps.coordinate.get(3 * group + c).copied().unwrap_or(1.0));
         let samples: Option<Vec<Vector3<f64>>> = given.map(|g| {
             g.coordinates
                 .iter()
@@ -109,7 +117,7 @@ pub fn code<I: Io>(
                 .collect()
         });
         let decoded = lifting::code::<Positions>(frames, stride, samples.as_deref(), |t, d| {
-            series(io, 3, steps.coordinate, d, t, &mut failed)
+            series(io, 3, step, d, t, &mut failed)
         });
         for (x, v) in coordinates.iter_mut().zip(&decoded) {
             for c in 0..3 {
@@ -183,13 +191,13 @@ mod tests {
         let steps = Steps {
             position: 0.1,
             orientation: 1e-3,
-            coordinate: 1e-2,
+            coordinate: vec![1e-2; k],
         };
         let mut enc = Encoder::new();
-        let coded = code(&mut enc, frames, ends, k, 16, steps, Some(&t)).unwrap();
+        let coded = code(&mut enc, frames, ends, k, 16, &steps, Some(&t)).unwrap();
         let bytes = enc.finish();
         let mut dec = Decoder::new(&bytes);
-        let decoded = code(&mut dec, frames, ends, k, 16, steps, None).unwrap();
+        let decoded = code(&mut dec, frames, ends, k, 16, &steps, None).unwrap();
         assert_eq!(decoded, coded);
         for (a, b) in coded.root_position.iter().zip(&t.root_position) {
             assert!((a - b).amax() <= 0.05 + 1e-9);
@@ -213,15 +221,15 @@ mod tests {
         let steps = Steps {
             position: 0.5,
             orientation: 1e-2,
-            coordinate: 1e-2,
+            coordinate: vec![1e-2; 4],
         };
         let mut enc = Encoder::new();
-        code(&mut enc, 30, 3, 4, 8, steps, Some(&t)).unwrap();
+        code(&mut enc, 30, 3, 4, 8, &steps, Some(&t)).unwrap();
         let bytes = enc.finish();
         for i in 0..bytes.len() {
             let mut b = bytes.clone();
             b[i] ^= 0x5a;
-            let _ = code(&mut Decoder::new(&b), 30, 3, 4, 8, steps, None);
+            let _ = code(&mut Decoder::new(&b), 30, 3, 4, 8, &steps, None);
         }
     }
 }

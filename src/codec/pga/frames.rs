@@ -35,11 +35,13 @@ pub fn analyse(layout: &Layout, g: &Geodesics, values: &[f64], frames: usize) ->
 }
 
 /// How the decoder turns coordinates and end points back into poses.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Solve {
-    /// The weight of the decoded coordinates against reaching the end points, per squared
-    /// unit of the take.
-    pub lambda: f64,
+    /// Per coordinate, the weight of its decoded value against reaching the end points (per
+    /// squared unit of the take).
+    pub lambda: Vec<f64>,
+    /// Levenberg–Marquardt steps per frame; with none, each pose is its decoded coordinates'
+    /// and the end points are not used.
     pub iterations: usize,
 }
 
@@ -48,7 +50,7 @@ pub fn channels(
     layout: &Layout,
     g: &Geodesics,
     t: &Trajectories,
-    solve: Solve,
+    solve: &Solve,
     out: &mut Vec<f64>,
 ) {
     let cc = layout.channels();
@@ -64,16 +66,20 @@ pub fn channels(
             *target = series[f];
         }
         let reference = &t.coordinates[f];
-        let x = solver.solve(
-            chain,
-            g,
-            &targets,
-            reference,
-            reference,
-            solve.lambda,
-            solve.iterations,
-        );
-        g.pose(&x, &mut inner);
+        if solve.iterations == 0 || targets.len() != t.ends.len() {
+            g.pose(reference, &mut inner);
+        } else {
+            let x = solver.solve(
+                chain,
+                g,
+                &targets,
+                reference,
+                reference,
+                &solve.lambda,
+                solve.iterations,
+            );
+            g.pose(&x, &mut inner);
+        }
         let (done, rest) = out[base..].split_at_mut(f * cc);
         let previous = (f > 0).then(|| &done[(f - 1) * cc..]);
         layout.join(
@@ -115,11 +121,11 @@ mod tests {
         let steps = Steps {
             position: 1e-5,
             orientation: 1e-7,
-            coordinate: 1e-7,
+            coordinate: vec![1e-7; 3 * n],
         };
         let ends = layout.chain().ends().len();
         let mut enc = Encoder::new();
-        chunk::code(&mut enc, frames, ends, 3 * n, 16, steps, Some(&t)).unwrap();
+        chunk::code(&mut enc, frames, ends, 3 * n, 16, &steps, Some(&t)).unwrap();
         let bytes = enc.finish();
         let decoded = chunk::code(
             &mut Decoder::new(&bytes),
@@ -127,16 +133,16 @@ mod tests {
             ends,
             3 * n,
             16,
-            steps,
+            &steps,
             None,
         )
         .unwrap();
         let mut values = Vec::new();
         let solve = Solve {
-            lambda: 1.0,
+            lambda: vec![1.0; 3 * n],
             iterations: 4,
         };
-        channels(&layout, &g, &decoded, solve, &mut values);
+        channels(&layout, &g, &decoded, &solve, &mut values);
         let mut positions = vec![0f32; m.positions().len()];
         rig.positions(&values, &mut positions);
         let to_mm = m.unit.to_mm();

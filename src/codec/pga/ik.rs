@@ -3,7 +3,7 @@
 //! the root's frame, searched over the `k` coordinates `x` of [`Geodesics`] by
 //! Levenberg–Marquardt on
 //!
-//! `Σ_e |p_e(x) − target_e|² + λ |x − x_ref|²`
+//! `Σ_e |p_e(x) − target_e|² + Σ_i λ_i (x_i − x_ref,i)²`
 //!
 //! with the analytic Jacobian: moving `x_i` turns inner joint `j` by the angular velocity
 //! `G_j · J_r(w_j) · V_j[:, i]` (its global rotation times the right Jacobian of the exp map
@@ -75,21 +75,29 @@ impl Chain {
     }
 }
 
-/// Reusable state for solving one take frame by frame.
+/// Reusable state for solving one take frame by frame: poses, the Jacobian and the small
+/// system of each step, allocated once.
 pub struct Solver {
     rotation: Vec<UnitQuaternion<f64>>,
     position: Vec<Vector3<f64>>,
     /// Per link: its angular velocity per coordinate (`3 × k`), global frame.
     spin: Vec<DMatrix<f64>>,
+    /// `3·ends × k`.
+    jac: DMatrix<f64>,
+    /// `3·ends × 3·ends`: `I + J D⁻¹ Jᵀ` of a step.
+    small: DMatrix<f64>,
 }
 
 impl Solver {
     pub fn new(chain: &Chain, k: usize) -> Solver {
         let n = chain.links.len();
+        let m = 3 * chain.ends.len();
         Solver {
             rotation: vec![UnitQuaternion::identity(); n],
             position: vec![Vector3::zeros(); n],
             spin: vec![DMatrix::zeros(3, k); n],
+            jac: DMatrix::zeros(m, k),
+            small: DMatrix::zeros(m, m),
         }
     }
 
@@ -162,9 +170,13 @@ impl Solver {
     }
 
     /// The coordinates whose end points best reach `targets` (one per end, root frame),
-    /// held near `reference` with weight `lambda`, starting from `start`: damped Gauss–Newton
-    /// (Levenberg–Marquardt) for at most `iterations` steps. Each step computes the pose
-    /// once, for its cost and its Jacobian.
+    /// held near `reference` with weights `lambda` (one per coordinate), starting from
+    /// `start`: damped Gauss–Newton (Levenberg–Marquardt) for at most `iterations` steps.
+    /// Each step computes the pose once, for its cost and its Jacobian.
+    ///
+    /// A step solves `(JᵀJ + D) δ = −g` with `D` diagonal (the weights plus the damping), by
+    /// the Woodbury identity in the space of the end points: `3·ends` rows against `k` up to
+    /// `3n` coordinates, so the system to factor is small.
     #[allow(clippy::too_many_arguments)]
     pub fn solve(
         &mut self,
@@ -173,47 +185,100 @@ impl Solver {
         targets: &[Vector3<f64>],
         start: &[f64],
         reference: &[f64],
-        lambda: f64,
+        lambda: &[f64],
         iterations: usize,
     ) -> Vec<f64> {
         let k = g.dims();
         let m = 3 * chain.ends.len();
         let mut x = start.to_vec();
-        let mut jac = DMatrix::zeros(m, k);
-        let mut r = DVector::zeros(m);
+        let mut r = vec![0.0; m];
+        let (mut grad, mut diag, mut y, mut step, mut trial) = (
+            vec![0.0; k],
+            vec![0.0; k],
+            vec![0.0; k],
+            vec![0.0; k],
+            vec![0.0; k],
+        );
+        let mut z = DVector::zeros(m);
+        let mut jac = std::mem::take(&mut self.jac);
+        let mut small = std::mem::take(&mut self.small);
         let mut damping = 1e-6;
         self.pose(chain, g, &x);
+        let mut posed = true;
         let mut cost = self.cost(chain, targets, &x, reference, lambda);
         for _ in 0..iterations {
             // The pose at `x` is current here.
             self.jacobian(chain, g, &x, &mut jac);
             for (n, &e) in chain.ends.iter().enumerate() {
-                r.fixed_rows_mut::<3>(3 * n)
-                    .copy_from(&(self.position[e] - targets[n]));
+                let d = self.position[e] - targets[n];
+                r[3 * n..3 * n + 3].copy_from_slice(d.as_slice());
             }
-            let mut h = jac.tr_mul(&jac);
-            let mut grad = jac.tr_mul(&r);
+            // g = Jᵀr + Λ(x − x_ref); diag(JᵀJ) for the damping.
             for c in 0..k {
-                h[(c, c)] += lambda;
-                grad[c] += lambda * (x[c] - reference[c]);
+                let col = jac.column(c);
+                let mut dot = 0.0;
+                let mut sq = 0.0;
+                for (a, b) in col.iter().zip(&r) {
+                    dot += a * b;
+                    sq += a * a;
+                }
+                grad[c] = dot + lambda[c] * (x[c] - reference[c]);
+                diag[c] = sq + lambda[c];
             }
             let mut accepted = false;
             while damping < 1e12 {
-                let mut a = h.clone();
-                for c in 0..k {
-                    a[(c, c)] += damping * h[(c, c)].max(1e-12);
+                // D = Λ + μ diag(H); y = D⁻¹ g; z = J y; small = I + J D⁻¹ Jᵀ.
+                let d: Vec<f64> = (0..k)
+                    .map(|c| lambda[c] + damping * diag[c].max(1e-12))
+                    .collect();
+                if d.iter().any(|v| *v <= 0.0) {
+                    damping *= 10.0;
+                    continue;
                 }
-                let Some(chol) = a.cholesky() else {
+                for c in 0..k {
+                    y[c] = grad[c] / d[c];
+                }
+                z.fill(0.0);
+                small.fill_with_identity();
+                for c in 0..k {
+                    let col = jac.column(c);
+                    let inv = 1.0 / d[c];
+                    for i in 0..m {
+                        let a = col[i];
+                        if a == 0.0 {
+                            continue;
+                        }
+                        z[i] += a * y[c];
+                        let s = a * inv;
+                        for j in 0..=i {
+                            small[(i, j)] += s * col[j];
+                        }
+                    }
+                }
+                for i in 0..m {
+                    for j in 0..i {
+                        small[(j, i)] = small[(i, j)];
+                    }
+                }
+                let Some(chol) = small.clone().cholesky() else {
                     damping *= 10.0;
                     continue;
                 };
-                let step = chol.solve(&(-&grad));
-                let trial: Vec<f64> = x.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
+                let w = chol.solve(&z);
+                // δ = −y + D⁻¹ Jᵀ w.
+                for c in 0..k {
+                    let col = jac.column(c);
+                    let jw: f64 = col.iter().zip(w.iter()).map(|(a, b)| a * b).sum();
+                    step[c] = -y[c] + jw / d[c];
+                    trial[c] = x[c] + step[c];
+                }
                 self.pose(chain, g, &trial);
+                posed = false;
                 let c = self.cost(chain, targets, &trial, reference, lambda);
                 if c < cost {
-                    let size = step.norm();
-                    x = trial;
+                    posed = true;
+                    let size = step.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    std::mem::swap(&mut x, &mut trial);
                     cost = c;
                     damping = (damping / 10.0).max(1e-12);
                     accepted = size > 1e-9 * (1.0 + x.iter().map(|v| v * v).sum::<f64>().sqrt());
@@ -225,8 +290,12 @@ impl Solver {
                 break;
             }
         }
+        self.jac = jac;
+        self.small = small;
         // Leave the pose of the answer behind for the caller.
-        self.pose(chain, g, &x);
+        if !posed {
+            self.pose(chain, g, &x);
+        }
         x
     }
 
@@ -237,7 +306,7 @@ impl Solver {
         targets: &[Vector3<f64>],
         x: &[f64],
         reference: &[f64],
-        lambda: f64,
+        lambda: &[f64],
     ) -> f64 {
         let reach: f64 = chain
             .ends
@@ -248,9 +317,10 @@ impl Solver {
         let hold: f64 = x
             .iter()
             .zip(reference)
-            .map(|(a, b)| (a - b) * (a - b))
+            .zip(lambda)
+            .map(|((a, b), l)| l * (a - b) * (a - b))
             .sum();
-        reach + lambda * hold
+        reach + hold
     }
 }
 
@@ -366,7 +436,7 @@ mod tests {
         let targets: Vec<_> = c.ends().iter().map(|&e| s.position(e)).collect();
         // From nearby, as from the previous frame, with a light hold.
         let start: Vec<f64> = truth.iter().map(|v| v + 0.05).collect();
-        let x = s.solve(&c, &g, &targets, &start, &start, 1e-6, 50);
+        let x = s.solve(&c, &g, &targets, &start, &start, &[1e-6; 6], 50);
         s.pose(&c, &g, &x);
         for (n, &e) in c.ends().iter().enumerate() {
             assert!((s.position(e) - targets[n]).norm() < 1e-4, "end {n}");

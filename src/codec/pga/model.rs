@@ -8,6 +8,9 @@
 
 use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
 
+use crate::codec::entropy::ints::IntModel;
+use crate::codec::entropy::io::{code_residual, Io};
+use crate::codec::entropy::rangecoder::{Decoder, Encoder};
 use crate::codec::error::{malformed, Result};
 use crate::codec::linalg::leading_eigen;
 use crate::codec::wire::{Reader, Writer};
@@ -26,6 +29,50 @@ pub struct Geodesics {
     pub directions: DMatrix<f64>,
     /// The variance of the poses along each direction.
     pub variances: Vec<f64>,
+    /// `k × 3n`: what maps a tangent vector to coordinates — the least-squares projection
+    /// `(VᵀV)⁻¹Vᵀ`, which is `Vᵀ` for the fitted (orthonormal) directions and stays exact
+    /// for the stored ones, rounded to 16 bits.
+    projector: DMatrix<f64>,
+}
+
+/// The least-squares projection onto the columns of `v`; `None` when they are dependent.
+fn projector_of(v: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    let gram = v.transpose() * v;
+    Some(gram.cholesky()?.solve(&v.transpose()))
+}
+
+/// Direction steps run from 2⁻¹ to 2⁻³⁰: no component needs coarser than half its range,
+/// none finer than f32 gave.
+const MIN_EXPONENT: f64 = 1.0;
+const MAX_EXPONENT: f64 = 30.0;
+
+/// The directions' components as multiples of `2^−exponents[i]`, column by column, through
+/// `io`; from `given` when encoding. Malformed when a decoded component is past ±1.
+fn code_directions<I: Io>(
+    io: &mut I,
+    exponents: &[u8],
+    given: Option<&DMatrix<f64>>,
+    rows: usize,
+) -> Result<DMatrix<f64>> {
+    let mut out = DMatrix::zeros(rows, exponents.len());
+    for (i, &e) in exponents.iter().enumerate() {
+        let step = 2f64.powi(-i32::from(e));
+        let mut model = IntModel::default();
+        let mut previous = 0;
+        for r in 0..rows {
+            let q = given.map_or(0, |g| (g[(r, i)] / step).round() as i64);
+            // Components of one joint come in threes and neighbours alike: code the
+            // difference from the one before.
+            let v = previous + code_residual(io, &mut model, q - previous)?;
+            previous = v;
+            let x = v as f64 * step;
+            if x.abs() > 1.0 + step {
+                return Err(malformed("a pga direction is not part of a unit vector"));
+            }
+            out[(r, i)] = x;
+        }
+    }
+    Ok(out)
 }
 
 impl Geodesics {
@@ -53,8 +100,23 @@ impl Geodesics {
         let (directions, variances) = leading_eigen(&cov, k.min(dim));
         Some(Geodesics {
             mean,
+            projector: projector_of(&directions)?,
             directions,
             variances,
+        })
+    }
+
+    /// A model of given means and (independent) directions, variances unknown; `None` when
+    /// the directions are dependent or not `3 × joints` long.
+    pub fn new(mean: Vec<UnitQuaternion<f64>>, directions: DMatrix<f64>) -> Option<Geodesics> {
+        if directions.nrows() != 3 * mean.len() || directions.ncols() == 0 {
+            return None;
+        }
+        Some(Geodesics {
+            variances: vec![0.0; directions.ncols()],
+            projector: projector_of(&directions)?,
+            directions,
+            mean,
         })
     }
 
@@ -70,17 +132,24 @@ impl Geodesics {
     /// The first `k` directions only.
     pub fn truncated(&self, k: usize) -> Geodesics {
         let k = k.min(self.dims());
+        let directions = self.directions.columns(0, k).clone_owned();
         Geodesics {
             mean: self.mean.clone(),
-            directions: self.directions.columns(0, k).clone_owned(),
+            projector: projector_of(&directions).expect("leading columns of independent ones"),
+            directions,
             variances: self.variances[..k].to_vec(),
         }
     }
 
-    /// The model as stored: `n` and `k` (u32 each), then per joint its mean as a unit
-    /// quaternion (w, x, y, z; f32), then the `3n × k` directions column by column (f32).
+    /// The model as stored, each direction `i`'s components to within `precision[i]` (what
+    /// the encoder allows: a coordinate that never exceeds `x` turns a joint by at most
+    /// `x · precision` more): `n` and `k` (u32 each), per joint its mean as a unit
+    /// quaternion (w, x, y, z; f32), per direction its step exponent `e` (u8, step `2^−e`),
+    /// then the `3n × k` components column by column as multiples of their
+    /// direction's step, through the adaptive range coder (a context per direction), after
+    /// their length in bytes (u32).
     /// Variances are not stored (a decoder does not need them).
-    pub fn to_bytes(&self) -> Vec<u8> {
+    pub fn to_bytes(&self, precision: &[f64]) -> Vec<u8> {
         let mut w = Writer::new();
         w.u32(self.joints() as u32).u32(self.dims() as u32);
         for q in &self.mean {
@@ -90,16 +159,37 @@ impl Geodesics {
                 .f32(c.y as f32)
                 .f32(c.z as f32);
         }
-        for v in self.directions.iter() {
-            w.f32(*v as f32);
-        }
+        let exponents: Vec<u8> = (0..self.dims())
+            .map(|i| {
+                // The coarsest step whose rounding error (half a step) is within precision.
+                let p = precision.get(i).copied().unwrap_or(0.0);
+                let e = if p > 0.0 {
+                    (-(2.0 * p).log2()).ceil()
+                } else {
+                    30.0
+                };
+                e.clamp(MIN_EXPONENT, MAX_EXPONENT) as u8
+            })
+            .collect();
+        w.bytes(&exponents);
+        let mut enc = Encoder::new();
+        code_directions(
+            &mut enc,
+            &exponents,
+            Some(&self.directions),
+            self.directions.nrows(),
+        )
+        .expect("encoding cannot fail");
+        let coded = enc.finish();
+        w.u32(coded.len() as u32).bytes(&coded);
         w.0
     }
 
     /// The model of [`Geodesics::to_bytes`] for `joints` inner joints and at most
     /// `max_dims` directions; malformed unless it has exactly that many joints, finite
-    /// numbers and quaternions of unit norm (to f32 precision). The encoder codes with the
-    /// parsed model, so both sides use the same numbers.
+    /// numbers, quaternions of unit norm (to f32 precision), steps in range and independent
+    /// directions of components within ±1. The encoder codes with the parsed model, so both
+    /// sides use the same numbers.
     pub fn parse(bytes: &[u8], joints: usize, max_dims: usize) -> Result<Geodesics> {
         let mut r = Reader::named(bytes, "pga model");
         let n = r.u32()? as usize;
@@ -119,35 +209,42 @@ impl Geodesics {
             }
             mean.push(UnitQuaternion::new_normalize(q));
         }
-        let mut directions = DMatrix::zeros(3 * n, k);
-        for v in directions.iter_mut() {
-            let x = f64::from(r.f32()?);
-            if !x.is_finite() || x.abs() > 1.0 + 1e-5 {
-                return Err(malformed("a pga direction is not part of a unit vector"));
-            }
-            *v = x;
+        let exponents = r.take(k)?.to_vec();
+        if exponents
+            .iter()
+            .any(|&e| !(MIN_EXPONENT..=MAX_EXPONENT).contains(&f64::from(e)))
+        {
+            return Err(malformed("a pga direction step is out of range"));
         }
+        let length = r.u32()? as usize;
+        let coded = r.take(length)?;
         r.finish()?;
-        Ok(Geodesics {
-            mean,
-            directions,
-            variances: vec![0.0; k],
-        })
+        let mut dec = Decoder::new(coded);
+        let directions = code_directions(&mut dec, &exponents, None, 3 * n)?;
+        if dec.overran() {
+            return Err(malformed("pga model is truncated"));
+        }
+        Geodesics::new(mean, directions)
+            .ok_or_else(|| malformed("the pga directions are not independent"))
     }
 
     /// A pose's coordinates along the directions: the projection of its tangent vector.
     pub fn coordinates(&self, pose: &[UnitQuaternion<f64>]) -> Vec<f64> {
         let mut u = DVector::zeros(3 * self.joints());
         tangent_into(&self.mean, pose, &mut u);
-        (self.directions.transpose() * u).iter().copied().collect()
+        (&self.projector * u).iter().copied().collect()
     }
 
     /// Joint `j`'s rotation vector at the mean for coordinates `x`: `(V x)_j`.
     pub fn tangent_of(&self, j: usize, x: &[f64]) -> Vector3<f64> {
-        let rows = self.directions.rows(3 * j, 3);
+        // Column-major: direction `i`'s rows `3j..3j+3` sit together. Indexing the storage
+        // directly keeps this allocation-free (it runs once per joint per IK trial).
+        let rows = self.directions.nrows();
+        let data = self.directions.as_slice();
         let mut w = Vector3::zeros();
-        for (i, xi) in x.iter().enumerate() {
-            w += rows.column(i) * *xi;
+        for (i, xi) in x.iter().enumerate().take(self.directions.ncols()) {
+            let at = i * rows + 3 * j;
+            w += Vector3::new(data[at], data[at + 1], data[at + 2]) * *xi;
         }
         w
     }
@@ -218,14 +315,25 @@ mod tests {
     }
 
     #[test]
-    fn the_stored_model_parses_back_and_bad_ones_are_refused() {
+    fn the_stored_model_parses_back_within_its_precision_and_bad_ones_are_refused() {
         let (poses, n) = dancer_poses(60);
         let g = Geodesics::fit(&poses, n, 12).unwrap();
-        let bytes = g.to_bytes();
-        assert_eq!(bytes.len(), 8 + 16 * n + 4 * 3 * n * 12);
+        let precision: Vec<f64> = (0..12).map(|i| 1e-6 * (1 << i) as f64).collect();
+        let bytes = g.to_bytes(&precision);
         let back = Geodesics::parse(&bytes, n, 64).unwrap();
         assert_eq!(back.dims(), 12);
-        assert!((back.directions.clone() - &g.directions).amax() < 1e-6);
+        for (i, p) in precision.iter().enumerate() {
+            let error = (back.directions.column(i) - g.directions.column(i)).amax();
+            assert!(error <= *p, "direction {i}: {error} > {p}");
+        }
+        // Coarser precision, fewer bytes: far under the 4 bytes of an f32 per component.
+        let coarse = g.to_bytes(&[1e-3; 12]);
+        assert!(coarse.len() < bytes.len());
+        assert!(
+            coarse.len() < 8 + 16 * n + 3 * n * 12 * 2,
+            "{}",
+            coarse.len()
+        );
         assert!(back
             .mean
             .iter()
@@ -233,21 +341,46 @@ mod tests {
             .all(|(a, b)| a.angle_to(b) < 1e-6));
         // Stored once, parsed twice: the same numbers.
         assert_eq!(
-            Geodesics::parse(&back.to_bytes(), n, 64)
+            Geodesics::parse(&back.to_bytes(&precision), n, 64)
                 .unwrap()
-                .to_bytes(),
-            back.to_bytes()
+                .directions,
+            back.directions
         );
         assert!(Geodesics::parse(&bytes, n + 1, 64).is_err());
         assert!(Geodesics::parse(&bytes, n, 11).is_err());
-        assert!(Geodesics::parse(&bytes[..bytes.len() - 1], n, 64).is_err());
+        assert!(Geodesics::parse(&bytes[..8 + 16 * n + 5], n, 64).is_err());
         let mut bad = bytes.clone();
         bad[8..12].copy_from_slice(&7f32.to_le_bytes());
         assert!(Geodesics::parse(&bad, n, 64).is_err());
-        let mut bad = bytes;
-        let at = 8 + 16 * n;
-        bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+        let mut bad = bytes.clone();
+        bad[8 + 16 * n] = 0;
         assert!(Geodesics::parse(&bad, n, 64).is_err());
+        for i in 8 + 16 * n + 12..bytes.len() {
+            let mut b = bytes.clone();
+            b[i] ^= 0x5a;
+            let _ = Geodesics::parse(&b, n, 64);
+        }
+        // Two equal directions: no projection onto them.
+        let mut twice = g.directions.columns(0, 2).clone_owned();
+        let first = twice.column(0).clone_owned();
+        twice.set_column(1, &first);
+        assert!(Geodesics::new(g.mean.clone(), twice).is_none());
+    }
+
+    #[test]
+    fn the_stored_model_with_all_directions_still_gives_poses_back() {
+        let (poses, n) = dancer_poses(60);
+        let g = Geodesics::fit(&poses, n, 3 * n).unwrap();
+        let stored = Geodesics::parse(&g.to_bytes(&vec![1e-3; 3 * n]), n, 3 * n).unwrap();
+        let mut back = vec![UnitQuaternion::identity(); n];
+        for pose in poses.chunks_exact(n) {
+            stored.pose(&stored.coordinates(pose), &mut back);
+            for (a, b) in pose.iter().zip(&back) {
+                // Coarse directions, but every one of them: the projection is still exact;
+                // only the f32 mean's rounding is left.
+                assert!(a.angle_to(b) < 1e-6, "{}", a.angle_to(b));
+            }
+        }
     }
 
     #[test]

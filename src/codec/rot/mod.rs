@@ -26,7 +26,9 @@ use super::entropy::io::{Dry, Io};
 use super::entropy::rangecoder::{Decoder, Encoder};
 use super::error::{malformed, Error, Result};
 use super::measure::max_mean;
+pub(super) use super::rig::printed;
 use super::rig::{Channels, Rig};
+use super::search::largest_meeting;
 use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared,
     Target,
@@ -39,8 +41,6 @@ mod transform;
 
 /// What the encoder writes ([`Version::V2`]); the decoder reads every [`Version`].
 const VERSION: u8 = 2;
-/// Decoded channel values are rounded to this (degrees, file units).
-const PRINTED: f64 = 1e6;
 pub(super) const SIZE_CONTEXTS: usize = 20;
 
 pub struct Rot;
@@ -374,9 +374,7 @@ impl<'a> Take<'a> {
     }
 
     /// The largest step index at which chunk `i` coded `how` meets `target`; `None` if not
-    /// even the finest does. A search over the 256 indices that starts at `hint` (the
-    /// previous chunk's, when there is one) and gallops away from it, since neighbouring
-    /// chunks usually need about the same step.
+    /// even the finest does.
     fn step_for(
         &self,
         how: How,
@@ -384,47 +382,7 @@ impl<'a> Take<'a> {
         target: Target,
         hint: Option<u32>,
     ) -> Result<Option<u32>> {
-        let meets = |k: u32| self.meets(how, i, k, target);
-        // `lo` meets the bound, `hi` does not (256: past the coarsest).
-        let (mut lo, mut hi) = match hint {
-            Some(h) if meets(h)? => {
-                let (mut lo, mut d) = (h, 1);
-                loop {
-                    let k = lo + d;
-                    if k >= 256 {
-                        break (lo, 256);
-                    }
-                    if !meets(k)? {
-                        break (lo, k);
-                    }
-                    lo = k;
-                    d *= 2;
-                }
-            }
-            _ => {
-                let (mut hi, mut d) = (hint.unwrap_or(256), 1);
-                loop {
-                    let k = hi.saturating_sub(d);
-                    if meets(k)? {
-                        break (k, hi);
-                    }
-                    if k == 0 {
-                        return Ok(None);
-                    }
-                    hi = k;
-                    d *= 2;
-                }
-            }
-        };
-        while hi - lo > 1 {
-            let mid = (lo + hi) / 2;
-            if meets(mid)? {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        Ok(Some(lo))
+        largest_meeting(hint, |k| self.meets(how, i, k, target))
     }
 
     /// The bitstream: every chunk in the mode that codes it smaller, each at the largest
@@ -467,11 +425,6 @@ impl<'a> Take<'a> {
         params.extend_from_slice(&self.steps.base.to_le_bytes());
         Ok(CodecOutput { params, chunks })
     }
-}
-
-/// A decoded value as a file prints it (what the bound is verified on).
-pub(super) fn printed(v: f64) -> f64 {
-    (v * PRINTED).round() / PRINTED
 }
 
 /// The nearest integer, saturating (a residual past ±2^62 steps is no motion).

@@ -1,0 +1,92 @@
+//! The step search of the rate-controlled codecs that code each chunk at a step index of
+//! their own (`rot`, `pga`): the largest index whose decoded chunk meets the bound.
+
+use super::error::Result;
+
+/// The number of step indices (one byte in a chunk).
+pub const INDICES: u32 = 256;
+
+/// The largest index below [`INDICES`] for which `meets` holds, assuming it holds below some
+/// index and not above; `None` if it does not even hold at 0. The search starts at `hint`
+/// (the previous chunk's index, when there is one) and gallops away from it, since
+/// neighbouring chunks usually need about the same step: a chunk like its neighbour costs
+/// a handful of trials instead of eight.
+pub fn largest_meeting(
+    hint: Option<u32>,
+    mut meets: impl FnMut(u32) -> Result<bool>,
+) -> Result<Option<u32>> {
+    // `lo` meets the bound, `hi` does not (INDICES: past the coarsest).
+    let (mut lo, mut hi) = match hint.map(|h| h.min(INDICES - 1)) {
+        Some(h) if meets(h)? => {
+            let (mut lo, mut d) = (h, 1);
+            loop {
+                let k = lo + d;
+                if k >= INDICES {
+                    break (lo, INDICES);
+                }
+                if !meets(k)? {
+                    break (lo, k);
+                }
+                lo = k;
+                d *= 2;
+            }
+        }
+        h => {
+            let (mut hi, mut d) = (h.unwrap_or(INDICES), 1);
+            loop {
+                let k = hi.saturating_sub(d);
+                if meets(k)? {
+                    break (k, hi);
+                }
+                if k == 0 {
+                    return Ok(None);
+                }
+                hi = k;
+                d *= 2;
+            }
+        }
+    };
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        if meets(mid)? {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Ok(Some(lo))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finds_the_threshold_from_any_hint() {
+        for threshold in [0u32, 1, 7, 100, 200, 255] {
+            for hint in [None, Some(0), Some(5), Some(120), Some(255), Some(900)] {
+                let mut trials = 0;
+                let got = largest_meeting(hint, |k| {
+                    trials += 1;
+                    Ok(k <= threshold)
+                })
+                .unwrap();
+                assert_eq!(got, Some(threshold), "hint {hint:?}");
+                assert!(trials <= 20, "{trials} trials");
+            }
+        }
+        assert_eq!(largest_meeting(Some(3), |_| Ok(false)).unwrap(), None);
+        assert_eq!(largest_meeting(None, |_| Ok(false)).unwrap(), None);
+    }
+
+    #[test]
+    fn a_good_hint_costs_few_trials() {
+        let mut trials = 0;
+        largest_meeting(Some(150), |k| {
+            trials += 1;
+            Ok(k <= 150)
+        })
+        .unwrap();
+        assert_eq!(trials, 2);
+    }
+}
