@@ -24,6 +24,10 @@ pub struct Steps {
     pub orientation: f64,
     /// Each geodesic coordinate's.
     pub coordinate: Vec<f64>,
+    /// The encoder drops details within `½ + dead_zone` steps of zero (0: plain rounding):
+    /// zeros are what the range coder codes cheapest, and the lifting is closed loop, so a
+    /// dropped detail costs its own sample's error only. Nothing the decoder needs.
+    pub dead_zone: f64,
 }
 
 /// A chunk's trajectories, frame by frame.
@@ -72,9 +76,12 @@ pub fn code<I: Io>(
         let m = &mut models[kind * LEVELS + level];
         let mut out = Vector3::zeros();
         for c in 0..3 {
-            let q = (detail[c] / step[c])
-                .round()
-                .clamp(-(2f64.powi(62)), 2f64.powi(62)) as i64;
+            let r = detail[c] / step[c];
+            let q = if r.abs() < 0.5 + steps.dead_zone {
+                0
+            } else {
+                r.round().clamp(-(2f64.powi(62)), 2f64.powi(62)) as i64
+            };
             match code_residual(io, m, q) {
                 Ok(v) => out[c] = v as f64 * step[c],
                 Err(e) => {
@@ -192,6 +199,7 @@ mod tests {
             position: 0.1,
             orientation: 1e-3,
             coordinate: vec![1e-2; k],
+            dead_zone: 0.0,
         };
         let mut enc = Encoder::new();
         let coded = code(&mut enc, frames, ends, k, 16, &steps, Some(&t)).unwrap();
@@ -222,6 +230,7 @@ mod tests {
             position: 0.5,
             orientation: 1e-2,
             coordinate: vec![1e-2; 4],
+            dead_zone: 0.0,
         };
         let mut enc = Encoder::new();
         code(&mut enc, 30, 3, 4, 8, &steps, Some(&t)).unwrap();

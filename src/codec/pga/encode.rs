@@ -5,14 +5,14 @@
 
 use nalgebra::UnitQuaternion;
 
-use super::chunk::{self, Trajectories};
-use super::frames::{self, Solve};
+use super::chunk::Trajectories;
+use super::coder::Coder;
+use super::frames;
 use super::layout::Layout;
-use super::lifting::coarsest_stride;
 use super::model::Geodesics;
 use super::params::{Params, MAX_ITERATIONS, MAX_STRIDE_LOG2};
-use super::scale::{self, alpha, Scale};
-use crate::codec::entropy::io::{Dry, Io};
+use super::scale;
+use crate::codec::entropy::io::Dry;
 use crate::codec::entropy::rangecoder::Encoder;
 use crate::codec::error::{Error, Result};
 use crate::codec::measure::max_mean;
@@ -26,12 +26,14 @@ use crate::motion::Skeleton;
 pub struct Options {
     /// IK steps per decoded frame (0: no IK, no end points coded).
     pub iterations: u8,
-    /// Coordinate steps relative to position steps ([`Scale::steps`]).
+    /// Coordinate steps relative to position steps ([`Scale::steps`](super::scale::Scale::steps)).
     pub rho: f64,
-    /// IK weight of the coordinates ([`Scale::weights`]).
+    /// IK weight of the coordinates ([`Scale::weights`](super::scale::Scale::weights)).
     pub lambda: f64,
     /// log₂ of the lifting's coarsest stride.
     pub stride_log2: u8,
+    /// Details within `½ + dead_zone` steps of zero are dropped ([`Steps::dead_zone`](super::chunk::Steps::dead_zone)).
+    pub dead_zone: f64,
 }
 
 impl Options {
@@ -43,16 +45,20 @@ impl Options {
         rho: 1.0,
         lambda: 1.0,
         stride_log2: 5,
+        dead_zone: 0.0,
     };
     /// The paper's decoder: end points sent, coordinates 4× coarser, one Gauss–Newton step
     /// of IK per frame pulls the pose onto the end points (more steps changed no size on
-    /// CMU, Bandai and misc takes). 10–30 % smaller than [`Options::PLAIN`] at loose bounds
-    /// on those takes, decoding at 17–27 k frames/s.
+    /// CMU, Bandai and misc takes; `rho` 8, `lambda` 0.003 or stride 64 did worse). 10–30 %
+    /// smaller than [`Options::PLAIN`] at loose bounds on those takes, decoding at 17–27 k
+    /// frames/s. Its dead zone saved 7 % on CMU at 12.5 mm (0.4 did worse; without IK it
+    /// made no difference).
     pub const IK: Options = Options {
         iterations: 1,
         rho: 4.0,
         lambda: 0.01,
         stride_log2: 5,
+        dead_zone: 0.2,
     };
 }
 
@@ -211,7 +217,8 @@ impl<'a> Take<'a> {
                 model: model.clone(),
                 model_bytes: model_bytes.clone(),
             };
-            let coded = self.code(&Coder::new(&self.layout, params), &given, target, k);
+            let coder = Coder::new(&self.layout, params).with_dead_zone(o.dead_zone);
+            let coded = self.code(&coder, &given, target, k);
             best = match (best, coded) {
                 (Some(Ok(b)), Ok(c)) if size(&c) >= size(&b) => Some(Ok(b)),
                 (Some(Ok(b)), Err(_)) => Some(Ok(b)),
@@ -268,57 +275,4 @@ impl<'a> Take<'a> {
 /// The bytes a coded take stores (parameters and chunks).
 fn size(c: &CodecOutput) -> usize {
     c.params.len() + c.chunks.iter().map(|c| c.bytes.len()).sum::<usize>()
-}
-
-/// What codes and decodes chunks: the layout, the parameters, and what follows from them.
-pub struct Coder {
-    pub layout: Layout,
-    pub params: Params,
-    scale: Scale,
-    solve: Solve,
-}
-
-impl Coder {
-    pub fn new(layout: &Layout, params: Params) -> Coder {
-        let scale = Scale::new(layout.chain(), &params.model);
-        let solve = Solve {
-            lambda: scale.weights(params.lambda),
-            iterations: usize::from(params.iterations),
-        };
-        Coder {
-            layout: layout.clone(),
-            params,
-            scale,
-            solve,
-        }
-    }
-
-    /// One chunk of `frames` frames at step index `s` (when encoding; read when decoding)
-    /// through `io`: its decoded channel values, rounded as printed.
-    pub fn code<I: Io>(
-        &self,
-        io: &mut I,
-        s: u32,
-        frames: usize,
-        given: Option<&Trajectories>,
-    ) -> Result<Vec<f64>> {
-        let s = io.raw(s, 8);
-        let steps = self
-            .scale
-            .steps(alpha(self.params.base, s), self.params.rho);
-        let ends = if self.params.iterations == 0 {
-            0
-        } else {
-            self.layout.chain().ends().len()
-        };
-        let stride = coarsest_stride(frames, 1 << self.params.stride_log2);
-        let g = &self.params.model;
-        let t = chunk::code(io, frames, ends, g.dims(), stride, &steps, given)?;
-        let mut out = Vec::with_capacity(frames * self.layout.channels());
-        frames::channels(&self.layout, g, &t, &self.solve, &mut out);
-        for v in &mut out {
-            *v = printed(*v);
-        }
-        Ok(out)
-    }
 }

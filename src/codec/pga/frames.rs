@@ -122,6 +122,7 @@ mod tests {
             position: 1e-5,
             orientation: 1e-7,
             coordinate: vec![1e-7; 3 * n],
+            dead_zone: 0.0,
         };
         let ends = layout.chain().ends().len();
         let mut enc = Encoder::new();

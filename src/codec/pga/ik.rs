@@ -80,8 +80,8 @@ impl Chain {
 pub struct Solver {
     rotation: Vec<UnitQuaternion<f64>>,
     position: Vec<Vector3<f64>>,
-    /// Per link: its angular velocity per coordinate (`3 × k`), global frame.
-    spin: Vec<DMatrix<f64>>,
+    /// Per link: its angular velocity per coordinate (`k` of them), global frame.
+    spin: Vec<Vec<Vector3<f64>>>,
     /// `3·ends × k`.
     jac: DMatrix<f64>,
     /// `3·ends × 3·ends`: `I + J D⁻¹ Jᵀ` of a step.
@@ -95,7 +95,7 @@ impl Solver {
         Solver {
             rotation: vec![UnitQuaternion::identity(); n],
             position: vec![Vector3::zeros(); n],
-            spin: vec![DMatrix::zeros(3, k); n],
+            spin: vec![Vec::with_capacity(k); n],
             jac: DMatrix::zeros(m, k),
             small: DMatrix::zeros(m, m),
         }
@@ -139,31 +139,34 @@ impl Solver {
     /// The Jacobian of the end positions (`3·ends × k`) at the pose last computed at `x`.
     pub fn jacobian(&mut self, chain: &Chain, g: &Geodesics, x: &[f64], jac: &mut DMatrix<f64>) {
         let k = g.dims();
+        let rows = g.directions.nrows();
+        let dirs = g.directions.as_slice();
         for (i, l) in chain.links.iter().enumerate() {
             let Some(j) = l.inner else {
                 continue;
             };
             let w = g.tangent_of(j, x);
             let m = self.rotation[i].to_rotation_matrix().into_inner() * right_jacobian(&w);
-            let dirs = g.directions.rows(3 * j, 3);
             let spin = &mut self.spin[i];
+            spin.clear();
             for c in 0..k {
-                let v = m * Vector3::new(dirs[(0, c)], dirs[(1, c)], dirs[(2, c)]);
-                spin.fixed_view_mut::<3, 1>(0, c).copy_from(&v);
+                let at = c * rows + 3 * j;
+                spin.push(m * Vector3::new(dirs[at], dirs[at + 1], dirs[at + 2]));
             }
         }
         jac.fill(0.0);
+        let m = jac.nrows();
+        let js = jac.as_mut_slice();
         for (n, (&e, above)) in chain.ends.iter().zip(&chain.above).enumerate() {
             let pe = self.position[e];
             for &a in above {
                 let r = pe - self.position[a];
-                let spin = &self.spin[a];
-                for c in 0..k {
-                    let s = Vector3::new(spin[(0, c)], spin[(1, c)], spin[(2, c)]);
+                for (c, s) in self.spin[a].iter().enumerate() {
                     let d = s.cross(&r);
-                    jac[(3 * n, c)] += d.x;
-                    jac[(3 * n + 1, c)] += d.y;
-                    jac[(3 * n + 2, c)] += d.z;
+                    let at = c * m + 3 * n;
+                    js[at] += d.x;
+                    js[at + 1] += d.y;
+                    js[at + 2] += d.z;
                 }
             }
         }
@@ -240,23 +243,28 @@ impl Solver {
                 }
                 z.fill(0.0);
                 small.fill_with_identity();
-                for c in 0..k {
-                    let col = jac.column(c);
-                    let inv = 1.0 / d[c];
-                    for i in 0..m {
-                        let a = col[i];
-                        if a == 0.0 {
-                            continue;
-                        }
-                        z[i] += a * y[c];
-                        let s = a * inv;
-                        for j in 0..=i {
-                            small[(i, j)] += s * col[j];
+                {
+                    // Column-major storage: column `c` of J is `js[c·m..(c+1)·m]`; the lower
+                    // triangle of `small` is accumulated column by column.
+                    let js = jac.as_slice();
+                    let ss = small.as_mut_slice();
+                    for c in 0..k {
+                        let col = &js[c * m..(c + 1) * m];
+                        let inv = 1.0 / d[c];
+                        for (j, &b) in col.iter().enumerate() {
+                            if b == 0.0 {
+                                continue;
+                            }
+                            z[j] += b * y[c];
+                            let s = b * inv;
+                            for (out, &a) in ss[j * m + j..(j + 1) * m].iter_mut().zip(&col[j..]) {
+                                *out += s * a;
+                            }
                         }
                     }
                 }
-                for i in 0..m {
-                    for j in 0..i {
+                for j in 0..m {
+                    for i in j + 1..m {
                         small[(j, i)] = small[(i, j)];
                     }
                 }

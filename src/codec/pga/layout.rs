@@ -84,20 +84,37 @@ impl Layout {
             }
             first += joint.channels.len();
         }
+        // The channel that moves first in joint `j`'s, by name.
+        let moving = |j: usize, rotations: bool| {
+            joints[j]
+                .channels
+                .iter()
+                .enumerate()
+                .find(|(c, ch)| (rotations || !ch.axis().1) && moves(firsts[j] + c))
+                .map_or("position", |(_, ch)| ch.name())
+        };
         let root = match movers[..] {
             [] => 0,
-            [r] if everything_below(rig, r) && !(0..firsts[r]).any(moves) => r,
+            [r] if everything_below(rig, r) => {
+                if let Some(a) =
+                    (0..r).find(|&a| (firsts[a]..firsts[a] + joints[a].channels.len()).any(&moves))
+                {
+                    return Err(format!(
+                        "joint {} moves and so does {}'s {} channel above it; pga codes one \
+                         moving root",
+                        joints[r].name,
+                        joints[a].name,
+                        moving(a, true)
+                    ));
+                }
+                r
+            }
             _ => {
                 let j = movers[movers.len().min(2) - 1];
-                let ch = joints[j]
-                    .channels
-                    .iter()
-                    .enumerate()
-                    .find(|(c, ch)| !ch.axis().1 && moves(firsts[j] + c))
-                    .map_or("position", |(_, ch)| ch.name());
                 return Err(format!(
-                    "joint {}'s {ch} channel moves, and pga keeps bones rigid",
-                    joints[j].name
+                    "joint {}'s {} channel moves, and pga keeps bones rigid",
+                    joints[j].name,
+                    moving(j, false)
                 ));
             }
         };
@@ -423,7 +440,7 @@ mod tests {
         // Moving the top joint too leaves no joint to code from.
         values[cc] = 4.0;
         let e = Layout::new(&rig, &values, frames).unwrap_err();
-        assert!(e.contains("moves"), "{e}");
+        assert!(e.contains("moves") && e.contains("Top's Xposition"), "{e}");
     }
 
     #[test]

@@ -14,11 +14,15 @@
 //!
 //! Rate control ([`encode`]): `k` is the fewest directions whose truncation leaves room in
 //! the bound; each chunk is then coded at the largest step ([`scale`]) at which the
-//! decoder's own output meets the bound on the FK positions of every joint and End Site.
+//! decoder's own output ([`coder`], the one chunk coding both sides run) meets the bound on
+//! the FK positions of every joint and End Site. The take is coded with and without IK and
+//! the smaller kept. [`layout`] maps a skeleton's channels to root, inner joints and end
+//! points; [`params`] is the header.
 //! Channel values come back as Euler angles in each joint's own channel order, rounded as
 //! a BVH file prints them, so the take is served as BVH like any codec that keeps rotations.
 
 pub mod chunk;
+pub mod coder;
 pub mod encode;
 pub mod frames;
 pub mod ik;
@@ -30,7 +34,8 @@ pub mod scale;
 
 use std::sync::Arc;
 
-use self::encode::{Coder, Options, Take};
+use self::coder::Coder;
+use self::encode::{Options, Take};
 use self::layout::Layout;
 use self::params::Params;
 use super::entropy::rangecoder::Decoder;

@@ -71,6 +71,7 @@ impl Scale {
             position: alpha,
             orientation: alpha / self.reach,
             coordinate: self.lever.iter().map(|l| rho * alpha / l).collect(),
+            dead_zone: 0.0,
         }
     }
 

@@ -1,0 +1,77 @@
+//! One chunk's coding, written once for both directions: its step index, its trajectories
+//! through the lifting ([`chunk`]) and the frames they decode to ([`frames`]) — what the
+//! encoder's trials measure is exactly what the decoder gives.
+
+use super::chunk::{self, Steps, Trajectories};
+use super::frames::{self, Solve};
+use super::layout::Layout;
+use super::lifting::coarsest_stride;
+use super::params::Params;
+use super::scale::{alpha, Scale};
+use crate::codec::entropy::io::Io;
+use crate::codec::error::Result;
+use crate::codec::rig::printed;
+
+/// What codes and decodes chunks: the layout, the parameters, and what follows from them.
+pub struct Coder {
+    pub layout: Layout,
+    pub params: Params,
+    scale: Scale,
+    solve: Solve,
+    /// The encoder's dead zone ([`Steps::dead_zone`]); 0 when decoding.
+    dead_zone: f64,
+}
+
+impl Coder {
+    pub fn new(layout: &Layout, params: Params) -> Coder {
+        let scale = Scale::new(layout.chain(), &params.model);
+        let solve = Solve {
+            lambda: scale.weights(params.lambda),
+            iterations: usize::from(params.iterations),
+        };
+        Coder {
+            layout: layout.clone(),
+            params,
+            scale,
+            solve,
+            dead_zone: 0.0,
+        }
+    }
+
+    /// The same, encoding with a dead zone.
+    pub fn with_dead_zone(self, dead_zone: f64) -> Coder {
+        Coder { dead_zone, ..self }
+    }
+
+    /// One chunk of `frames` frames at step index `s` (when encoding; read when decoding)
+    /// through `io`: its decoded channel values, rounded as printed.
+    pub fn code<I: Io>(
+        &self,
+        io: &mut I,
+        s: u32,
+        frames: usize,
+        given: Option<&Trajectories>,
+    ) -> Result<Vec<f64>> {
+        let s = io.raw(s, 8);
+        let steps = Steps {
+            dead_zone: self.dead_zone,
+            ..self
+                .scale
+                .steps(alpha(self.params.base, s), self.params.rho)
+        };
+        let ends = if self.params.iterations == 0 {
+            0
+        } else {
+            self.layout.chain().ends().len()
+        };
+        let stride = coarsest_stride(frames, 1 << self.params.stride_log2);
+        let g = &self.params.model;
+        let t = chunk::code(io, frames, ends, g.dims(), stride, &steps, given)?;
+        let mut out = Vec::with_capacity(frames * self.layout.channels());
+        frames::channels(&self.layout, g, &t, &self.solve, &mut out);
+        for v in &mut out {
+            *v = printed(*v);
+        }
+        Ok(out)
+    }
+}
