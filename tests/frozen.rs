@@ -18,7 +18,7 @@ use mocapstore::codec::container::pack_chunks;
 use mocapstore::codec::lsdt::spatial::dct_basis;
 use mocapstore::codec::lsdt::{clip, frame};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
-use mocapstore::codec::pga::encode::{Options, Take};
+use mocapstore::codec::pga::encode::{Directions, Options, Take};
 use mocapstore::codec::{self, Basis, CodecId, Container, ErrorBound, Header, Limits};
 use mocapstore::motion::synthetic::walker;
 use mocapstore::motion::Motion;
@@ -84,6 +84,7 @@ const REQUIRED: &[&str] = &[
     "pga-v1",
     "pga-v1-plain",
     "pga-v1-ik",
+    "pga-v1-canonical",
 ];
 
 #[test]
@@ -236,13 +237,24 @@ fn freeze_current_bitstreams() {
         iterations: 3,
         ..Options::IK
     };
-    for (name, options, what) in [
-        ("plain", Options::PLAIN, "poses from coordinates alone"),
-        ("ik", ik, "decoded by IK (3 steps)"),
+    for (name, directions, options, what) in [
+        (
+            "plain",
+            Directions::Principal,
+            Options::PLAIN,
+            "poses from coordinates alone",
+        ),
+        ("ik", Directions::Principal, ik, "decoded by IK (3 steps)"),
+        (
+            "canonical",
+            Directions::Canonical,
+            Options::PLAIN,
+            "the canonical model (means only)",
+        ),
     ] {
         let c = codec::encode_variant(&bvh, CodecId::Pga, bound, None, |input, t| {
             let (rig, sk) = input.skeleton.unwrap();
-            Take::new(rig, sk, input)?.encode(t, &[options])
+            Take::new(rig, sk, input)?.encode(t, &[directions], &[options])
         })
         .unwrap()
         .container;

@@ -238,7 +238,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         );
         assert_eq!(meta["meta"]["decision"]["keep"], "animation");
         let codec = meta["codec"].as_str().unwrap();
-        assert!(["rot", "bvh-lossless"].contains(&codec), "{codec}");
+        assert!(["rot", "pga", "bvh-lossless"].contains(&codec), "{codec}");
         assert_eq!(
             meta["meta"]["point_names"][0], "Hips",
             "named by the skeleton"

@@ -120,6 +120,72 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
     }
 }
 
+/// A take coded by `pga` comes back as BVH of its skeleton within its bound, any range the
+/// same rows as the whole; a take without a skeleton is refused with the reason.
+#[tokio::test]
+async fn a_pga_take_is_served_as_bvh_within_its_bound() {
+    for t in common::all().await {
+        let srv = start(t.store.clone(), 8 << 20).await;
+        let text = dancer_bvh(400, 120.0, 3, 4);
+        let original = formats::read(text.as_bytes(), &ReadOptions::default())
+            .unwrap()
+            .motion;
+        let (status, report) = srv
+            .post("name=p&codec=pga&max_error_mm=5", text.as_bytes().to_vec())
+            .await;
+        assert_eq!(status, 201, "{} {report}", t.name);
+        assert_eq!(report["codec"], "pga");
+        assert!(report["max_mm"].as_f64().unwrap() <= 5.0, "{report}");
+        let id = report["id"].as_str().unwrap();
+        let (status, _, body) = srv
+            .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
+            .await;
+        assert_eq!(status, 200);
+        let served = formats::read(&body, &ReadOptions::default())
+            .unwrap()
+            .motion;
+        assert_eq!(
+            served.skeleton.as_ref().unwrap().joints,
+            original.skeleton.as_ref().unwrap().joints
+        );
+        let max = served_max_mm(&original, &served);
+        assert!(max <= 5.0, "{}: served BVH max {max} mm", t.name);
+        let whole = motion_rows(&String::from_utf8_lossy(&body));
+        let (status, _, part) = srv
+            .get(&format!(
+                "/v1/sequences/{id}/frames?format=bvh&start=37&end=211"
+            ))
+            .await;
+        assert_eq!(status, 200);
+        assert_eq!(motion_rows(&String::from_utf8_lossy(&part)), whole[37..211]);
+        let points = formats::write(
+            &mocapstore::motion::synthetic::walker(60, 4, 60.0, 1, 0.0),
+            formats::Format::Json,
+        )
+        .unwrap();
+        let (status, report) = srv.post("name=q&codec=pga", points).await;
+        assert!((400..500).contains(&status), "{status} {report}");
+        assert!(report["error"].to_string().contains("skeleton"), "{report}");
+        srv.stop().await;
+        t.finish().await;
+    }
+}
+
+/// The largest distance (mm) between a served take's FK positions and the original's.
+fn served_max_mm(
+    original: &mocapstore::motion::Motion,
+    served: &mocapstore::motion::Motion,
+) -> f64 {
+    mocapstore::motion::metrics::compare(
+        original.positions(),
+        served.positions(),
+        original.point_count(),
+        original.unit.to_mm(),
+    )
+    .unwrap()
+    .max_mm
+}
+
 /// The BVH rows of a file, whitespace normalised.
 fn rows_of(text: &str) -> Vec<String> {
     motion_rows(text)
@@ -182,15 +248,9 @@ async fn every_corpus_bvh_comes_back_as_bvh() {
                         assert_eq!(values(&other), values(&theirs), "{}", e.path);
                     }
                 }
-                "rot" => {
-                    let s = mocapstore::motion::metrics::compare(
-                        original.positions(),
-                        served.positions(),
-                        original.point_count(),
-                        original.unit.to_mm(),
-                    )
-                    .unwrap();
-                    assert!(s.max_mm <= 1.0, "{}: max {} mm", e.path, s.max_mm);
+                "rot" | "pga" => {
+                    let max = served_max_mm(&original, &served);
+                    assert!(max <= 1.0, "{}: max {max} mm", e.path);
                 }
                 other => panic!("{}: {other} does not keep the animation", e.path),
             }

@@ -49,8 +49,9 @@ impl Options {
     };
     /// The paper's decoder: end points sent, coordinates 4× coarser, one Gauss–Newton step
     /// of IK per frame pulls the pose onto the end points (more steps changed no size on
-    /// CMU, Bandai and misc takes; `rho` 8, `lambda` 0.003 or stride 64 did worse). 10–30 %
-    /// smaller than [`Options::PLAIN`] at loose bounds on those takes, decoding at 17–27 k
+    /// CMU, Bandai and misc takes; `rho` 8, `lambda` 0.003 or stride 64 did worse). Smaller
+    /// than [`Options::PLAIN`] at loose bounds (CMU at max 12.5 mm: 7 % with the canonical
+    /// model, 16–25 % with the principal one), larger at tight ones; decoding at 15–33 k
     /// frames/s. Its dead zone saved 7 % on CMU at 12.5 mm (0.4 did worse; without IK it
     /// made no difference).
     pub const IK: Options = Options {
@@ -179,9 +180,15 @@ impl<'a> Take<'a> {
         Ok(hi)
     }
 
-    /// The smallest bitstream for `target` among those coded with each of `options`; the
-    /// first error if none meets the bound.
-    pub fn encode(&self, target: Target, options: &[Options]) -> Result<CodecOutput> {
+    /// The smallest bitstream for `target`: each model of `models` coded with `options[0]`,
+    /// the one that codes smaller then with each other option; the first error if none
+    /// meets the bound.
+    pub fn encode(
+        &self,
+        target: Target,
+        models: &[Directions],
+        options: &[Options],
+    ) -> Result<CodecOutput> {
         let t = match target {
             Target::Max(t) | Target::Mean(t) => t,
         };
@@ -190,13 +197,43 @@ impl<'a> Take<'a> {
                 "pga needs a positive bound, got {t}"
             )));
         }
-        let k = self.directions_for(target, t, TRUNCATION_SHARE)?;
-        let (model_bytes, model) = self.stored(k, t)?;
+        let (Some(first), Some(_)) = (options.first(), models.first()) else {
+            return Err(Error::Invalid("pga was given no options".into()));
+        };
+        let mut best: Option<(Result<CodecOutput>, usize)> = None;
+        let mut candidates = Vec::with_capacity(models.len());
+        for (m, directions) in models.iter().enumerate() {
+            let candidate = self.model(*directions, target, t)?;
+            let coded = self.code(&candidate, *first, target);
+            best = better(best, (coded, m));
+            candidates.push(candidate);
+        }
+        let winner = best.as_ref().map_or(0, |b| b.1);
+        for o in &options[1..] {
+            let coded = self.code(&candidates[winner], *o, target);
+            best = better(best, (coded, winner));
+        }
+        best.expect("one model at least").0
+    }
+
+    /// A model for `target` and each chunk's trajectories along it.
+    fn model(&self, directions: Directions, target: Target, t: f64) -> Result<Model> {
+        let n = self.layout.inner_count();
+        let (bytes, model) = match directions {
+            Directions::Principal => {
+                let k = self.directions_for(target, t, TRUNCATION_SHARE)?;
+                self.stored(k, t)?
+            }
+            Directions::Canonical => {
+                let bytes = Geodesics::canonical(self.full.mean.clone()).to_bytes(&[]);
+                let model = Geodesics::parse(&bytes, n, 3 * n)?;
+                (bytes, model)
+            }
+        };
         let cc = self.layout.channels();
         let per = default_chunk_frames(self.input.fps);
-        let frames = self.poses.len() / self.layout.inner_count();
-        // Each chunk's trajectories: the same whatever the options.
-        let given: Vec<(usize, Trajectories)> = (0..frames)
+        let frames = self.poses.len() / n;
+        let given = (0..frames)
             .step_by(per)
             .map(|f0| {
                 let len = per.min(frames - f0);
@@ -204,39 +241,40 @@ impl<'a> Take<'a> {
                 (f0, frames::analyse(&self.layout, &model, values, len))
             })
             .collect();
-        let mut best: Option<Result<CodecOutput>> = None;
-        for o in options {
-            let params = Params {
-                iterations: o.iterations.min(MAX_ITERATIONS),
-                stride_log2: o.stride_log2.min(MAX_STRIDE_LOG2),
-                base: t,
-                rho: f64::from(o.rho as f32),
-                lambda: f64::from(o.lambda as f32),
-                root: self.layout.root(),
-                constants: self.layout.constants().to_vec(),
-                model: model.clone(),
-                model_bytes: model_bytes.clone(),
-            };
-            let coder = Coder::new(&self.layout, params).with_dead_zone(o.dead_zone);
-            let coded = self.code(&coder, &given, target, k);
-            best = match (best, coded) {
-                (Some(Ok(b)), Ok(c)) if size(&c) >= size(&b) => Some(Ok(b)),
-                (Some(Ok(b)), Err(_)) => Some(Ok(b)),
-                (Some(Err(e)), Err(_)) => Some(Err(e)),
-                (_, c) => Some(c),
-            };
-        }
-        best.unwrap_or_else(|| Err(Error::Invalid("pga was given no options".into())))
+        Ok(Model {
+            bytes,
+            model,
+            given,
+        })
+    }
+
+    /// The take coded with `model` and options `o`.
+    fn code(&self, model: &Model, o: Options, target: Target) -> Result<CodecOutput> {
+        let params = Params {
+            iterations: o.iterations.min(MAX_ITERATIONS),
+            stride_log2: o.stride_log2.min(MAX_STRIDE_LOG2),
+            base: match target {
+                Target::Max(t) | Target::Mean(t) => t,
+            },
+            rho: f64::from(o.rho as f32),
+            lambda: f64::from(o.lambda as f32),
+            root: self.layout.root(),
+            constants: self.layout.constants().to_vec(),
+            model: model.model.clone(),
+            model_bytes: model.bytes.clone(),
+        };
+        let coder = Coder::new(&self.layout, params).with_dead_zone(o.dead_zone);
+        self.code_chunks(&coder, &model.given, target)
     }
 
     /// Every chunk of `given` coded by `coder` at the largest step that meets `target`.
-    fn code(
+    fn code_chunks(
         &self,
         coder: &Coder,
         given: &[(usize, Trajectories)],
         target: Target,
-        k: usize,
     ) -> Result<CodecOutput> {
+        let k = coder.params.model.dims();
         let w = self.input.points * 3;
         let mut chunks = Vec::with_capacity(given.len());
         let mut hint = None;
@@ -275,4 +313,44 @@ impl<'a> Take<'a> {
 /// The bytes a coded take stores (parameters and chunks).
 fn size(c: &CodecOutput) -> usize {
     c.params.len() + c.chunks.iter().map(|c| c.bytes.len()).sum::<usize>()
+}
+
+/// The smaller of two outcomes (with what they were coded with); a success over an error,
+/// the first error over a later one.
+fn better<T>(
+    best: Option<(Result<CodecOutput>, T)>,
+    next: (Result<CodecOutput>, T),
+) -> Option<(Result<CodecOutput>, T)> {
+    Some(match (best, next) {
+        (Some((Ok(b), bt)), (Ok(c), ct)) => {
+            if size(&c) < size(&b) {
+                (Ok(c), ct)
+            } else {
+                (Ok(b), bt)
+            }
+        }
+        (Some((Ok(b), bt)), (Err(_), _)) => (Ok(b), bt),
+        (Some((Err(e), bt)), (Err(_), _)) => (Err(e), bt),
+        (_, next) => next,
+    })
+}
+
+/// Which directions a take's model has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Directions {
+    /// The fewest principal geodesics that leave room in the bound (the paper's).
+    Principal,
+    /// Every joint's own axes ([`Geodesics::canonical`]): nothing to store but the means,
+    /// and each coordinate's error stays with its joint. Without IK it coded 8–34 % smaller
+    /// than the principal directions on Bandai's 6 s takes and 6–26 % on CMU's (max 1 and
+    /// 12.5 mm): under a max bound, a principal direction spreads its coordinate's error
+    /// over every joint it moves, and its storage costs more than it saves.
+    Canonical,
+}
+
+/// A model as stored and parsed, and every chunk's trajectories along it.
+struct Model {
+    bytes: Vec<u8>,
+    model: Geodesics,
+    given: Vec<(usize, Trajectories)>,
 }

@@ -3,7 +3,9 @@
 //! CGF 28(2), 2009).
 //!
 //! A take's inner-joint rotations are points of SO(3)ⁿ; the header stores their intrinsic
-//! mean and the `k` leading principal geodesics ([`model`]). Each chunk codes, through the
+//! mean and the `k` leading principal geodesics ([`model`]), or only the mean when each
+//! joint's own axes code the take smaller (measured: they usually do under a max bound,
+//! since a principal direction spreads one coordinate's error over every joint it moves). Each chunk codes, through the
 //! paper's multiscale lifting ([`lifting`], [`chunk`]), the root's position and
 //! orientation, the pose's `k` geodesic coordinates and — when the take is decoded with IK —
 //! the end points (End Sites and leaf joints) in the root's frame. The decoder poses each
@@ -15,8 +17,8 @@
 //! Rate control ([`encode`]): `k` is the fewest directions whose truncation leaves room in
 //! the bound; each chunk is then coded at the largest step ([`scale`]) at which the
 //! decoder's own output ([`coder`], the one chunk coding both sides run) meets the bound on
-//! the FK positions of every joint and End Site. The take is coded with and without IK and
-//! the smaller kept. [`layout`] maps a skeleton's channels to root, inner joints and end
+//! the FK positions of every joint and End Site. Both models are tried without IK; the
+//! smaller is tried again with IK, and the smaller of those kept. [`layout`] maps a skeleton's channels to root, inner joints and end
 //! points; [`params`] is the header.
 //! Channel values come back as Euler angles in each joint's own channel order, rounded as
 //! a BVH file prints them, so the take is served as BVH like any codec that keeps rotations.
@@ -35,7 +37,7 @@ pub mod scale;
 use std::sync::Arc;
 
 use self::coder::Coder;
-use self::encode::{Options, Take};
+use self::encode::{Directions, Options, Take};
 use self::layout::Layout;
 use self::params::Params;
 use super::entropy::rangecoder::Decoder;
@@ -55,7 +57,11 @@ impl Codec for Pga {
         let (rig, skeleton) = input
             .skeleton
             .ok_or_else(|| Error::Invalid("pga needs a skeleton take".into()))?;
-        Take::new(rig, skeleton, input)?.encode(target, &[Options::PLAIN, Options::IK])
+        Take::new(rig, skeleton, input)?.encode(
+            target,
+            &[Directions::Principal, Directions::Canonical],
+            &[Options::PLAIN, Options::IK],
+        )
     }
 
     fn decoder(
@@ -158,7 +164,7 @@ mod tests {
             None,
             |input, t| {
                 let (rig, sk) = input.skeleton.unwrap();
-                Take::new(rig, sk, input)?.encode(t, &[options])
+                Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
             },
         )
         .unwrap();
@@ -190,25 +196,51 @@ mod tests {
             .all(|v| *v == crate::codec::rig::printed(*v)));
     }
 
+    /// Where no model and step meet the bound, `pga` says so with the typed error that
+    /// per-take choice records and skips: here a bone whose length wavers by a millionth,
+    /// which `pga` holds rigid, against a bound finer than that.
     #[test]
-    fn point_takes_and_stretching_bones_are_unsuited_with_the_reason() {
-        let points = crate::motion::synthetic::walker(50, 4, 60.0, 1, 0.0);
-        assert!(Pga.unsuited(&points).unwrap().contains("no skeleton"));
-        assert!(Pga.unsuited(&dancer(50, 60.0, 1)).is_none());
-        let mut m = dancer(20, 60.0, 2);
-        let sk = m.skeleton.as_mut().unwrap();
+    fn a_bound_pga_cannot_meet_is_reported_missed() {
+        let m = with_position_channel(dancer(60, 60.0, 2), |f| 10.0 + 5e-6 * (f % 2) as f64);
+        assert!(Pga.unsuited(&m).is_none());
+        match encode(&m, CodecId::Pga, ErrorBound::MaxMm(1e-6)) {
+            Err(Error::BoundMissed { codec, detail }) => {
+                assert_eq!(codec, "pga");
+                assert!(detail.contains("finest step"), "{detail}");
+            }
+            other => panic!("{:?}", other.map(|e| e.stats.max_mm)),
+        }
+        assert!(encode(&m, CodecId::Pga, ErrorBound::MaxMm(1.0)).is_ok());
+    }
+
+    /// `m` with an X position channel on joint 1 holding `value(frame)`, its positions by FK.
+    fn with_position_channel(m: Motion, value: impl Fn(usize) -> f64) -> Motion {
+        let frames = m.frame_count();
+        let mut sk = m.skeleton.clone().unwrap();
         sk.joints[1]
             .channels
             .insert(0, crate::motion::skeleton::Channel::Xposition);
         let cc: usize = sk.joints.iter().map(|j| j.channels.len()).sum();
         let first = sk.joints[0].channels.len();
         let old = std::mem::take(&mut sk.values);
-        for f in 0..20 {
+        for f in 0..frames {
             let row = &old[f * (cc - 1)..(f + 1) * (cc - 1)];
             sk.values.extend_from_slice(&row[..first]);
-            sk.values.push(f as f64);
+            sk.values.push(value(f));
             sk.values.extend_from_slice(&row[first..]);
         }
+        let rig = Rig::new(sk.joints.clone()).unwrap();
+        let mut positions = vec![0f32; m.positions().len()];
+        rig.positions(&sk.values, &mut positions);
+        Motion::new(m.fps, m.unit, m.point_names.clone(), positions, Some(sk)).unwrap()
+    }
+
+    #[test]
+    fn point_takes_and_stretching_bones_are_unsuited_with_the_reason() {
+        let points = crate::motion::synthetic::walker(50, 4, 60.0, 1, 0.0);
+        assert!(Pga.unsuited(&points).unwrap().contains("no skeleton"));
+        assert!(Pga.unsuited(&dancer(50, 60.0, 1)).is_none());
+        let m = with_position_channel(dancer(20, 60.0, 2), |f| f as f64);
         let why = Pga.unsuited(&m).unwrap();
         assert!(why.contains("moves"), "{why}");
     }

@@ -31,8 +31,11 @@ pub struct Geodesics {
     pub variances: Vec<f64>,
     /// `k × 3n`: what maps a tangent vector to coordinates — the least-squares projection
     /// `(VᵀV)⁻¹Vᵀ`, which is `Vᵀ` for the fitted (orthonormal) directions and stays exact
-    /// for the stored ones, rounded to 16 bits.
+    /// for the stored ones, rounded.
     projector: DMatrix<f64>,
+    /// Whether the directions are the canonical basis (each joint's own rotation-vector
+    /// components at its mean), which is stored as a flag instead of a matrix.
+    canonical: bool,
 }
 
 /// The least-squares projection onto the columns of `v`; `None` when they are dependent.
@@ -103,6 +106,7 @@ impl Geodesics {
             projector: projector_of(&directions)?,
             directions,
             variances,
+            canonical: false,
         })
     }
 
@@ -117,7 +121,23 @@ impl Geodesics {
             projector: projector_of(&directions)?,
             directions,
             mean,
+            canonical: false,
         })
+    }
+
+    /// The canonical model at `mean`: every direction a joint's own rotation-vector axis, so
+    /// coordinates are the joints' rotations at their mean. It costs the means alone to
+    /// store, which wins where a take is too short for its principal directions to pay for
+    /// themselves.
+    pub fn canonical(mean: Vec<UnitQuaternion<f64>>) -> Geodesics {
+        let d = 3 * mean.len();
+        Geodesics {
+            variances: vec![0.0; d],
+            projector: DMatrix::identity(d, d),
+            directions: DMatrix::identity(d, d),
+            mean,
+            canonical: true,
+        }
     }
 
     pub fn joints(&self) -> usize {
@@ -138,26 +158,34 @@ impl Geodesics {
             projector: projector_of(&directions).expect("leading columns of independent ones"),
             directions,
             variances: self.variances[..k].to_vec(),
+            canonical: self.canonical && k == self.dims(),
         }
     }
 
     /// The model as stored, each direction `i`'s components to within `precision[i]` (what
     /// the encoder allows: a coordinate that never exceeds `x` turns a joint by at most
-    /// `x · precision` more): `n` and `k` (u32 each), per joint its mean as a unit
-    /// quaternion (w, x, y, z; f32), per direction its step exponent `e` (u8, step `2^−e`),
+    /// `x · precision` more): `n` and `k` (u32 each), its kind (u8: 1 for the
+    /// [canonical](Geodesics::canonical) model, whose `k` is `3n` and nothing follows the
+    /// means; 0 otherwise), per joint its mean as a unit quaternion (w, x, y, z; f32), per
+    /// direction its step exponent `e` (u8, step `2^−e`),
     /// then the `3n × k` components column by column as multiples of their
     /// direction's step, through the adaptive range coder (a context per direction), after
     /// their length in bytes (u32).
     /// Variances are not stored (a decoder does not need them).
     pub fn to_bytes(&self, precision: &[f64]) -> Vec<u8> {
         let mut w = Writer::new();
-        w.u32(self.joints() as u32).u32(self.dims() as u32);
+        w.u32(self.joints() as u32)
+            .u32(self.dims() as u32)
+            .bytes(&[u8::from(self.canonical)]);
         for q in &self.mean {
             let c = q.quaternion().coords;
             w.f32(c.w as f32)
                 .f32(c.x as f32)
                 .f32(c.y as f32)
                 .f32(c.z as f32);
+        }
+        if self.canonical {
+            return w.0;
         }
         let exponents: Vec<u8> = (0..self.dims())
             .map(|i| {
@@ -194,7 +222,12 @@ impl Geodesics {
         let mut r = Reader::named(bytes, "pga model");
         let n = r.u32()? as usize;
         let k = r.u32()? as usize;
-        if n != joints || k == 0 || k > max_dims.min(3 * n) {
+        let canonical = match r.u8()? {
+            0 => false,
+            1 => true,
+            other => return Err(malformed(format!("pga model kind {other}"))),
+        };
+        if n != joints || k == 0 || k > max_dims.min(3 * n) || (canonical && k != 3 * n) {
             return Err(malformed(format!(
                 "pga model of {n} joints and {k} directions (the skeleton has {joints} inner joints)"
             )));
@@ -208,6 +241,10 @@ impl Geodesics {
                 return Err(malformed("a pga mean rotation is not a unit quaternion"));
             }
             mean.push(UnitQuaternion::new_normalize(q));
+        }
+        if canonical {
+            r.finish()?;
+            return Ok(Geodesics::canonical(mean));
         }
         let exponents = r.take(k)?.to_vec();
         if exponents
@@ -235,6 +272,16 @@ impl Geodesics {
         (&self.projector * u).iter().copied().collect()
     }
 
+    /// The directions that can turn joint `j`: all of them, or for the canonical model its
+    /// own three (what lets IK skip the zeros of a sparse model).
+    pub fn support(&self, j: usize) -> std::ops::Range<usize> {
+        if self.canonical {
+            3 * j..3 * j + 3
+        } else {
+            0..self.dims()
+        }
+    }
+
     /// Joint `j`'s rotation vector at the mean for coordinates `x`: `(V x)_j`.
     pub fn tangent_of(&self, j: usize, x: &[f64]) -> Vector3<f64> {
         // Column-major: direction `i`'s rows `3j..3j+3` sit together. Indexing the storage
@@ -242,7 +289,9 @@ impl Geodesics {
         let rows = self.directions.nrows();
         let data = self.directions.as_slice();
         let mut w = Vector3::zeros();
-        for (i, xi) in x.iter().enumerate().take(self.directions.ncols()) {
+        let support = self.support(j);
+        let end = support.end.min(x.len());
+        for (i, xi) in x.iter().enumerate().take(end).skip(support.start) {
             let at = i * rows + 3 * j;
             w += Vector3::new(data[at], data[at + 1], data[at + 2]) * *xi;
         }
@@ -330,7 +379,7 @@ mod tests {
         let coarse = g.to_bytes(&[1e-3; 12]);
         assert!(coarse.len() < bytes.len());
         assert!(
-            coarse.len() < 8 + 16 * n + 3 * n * 12 * 2,
+            coarse.len() < 9 + 16 * n + 3 * n * 12 * 2,
             "{}",
             coarse.len()
         );
@@ -348,14 +397,14 @@ mod tests {
         );
         assert!(Geodesics::parse(&bytes, n + 1, 64).is_err());
         assert!(Geodesics::parse(&bytes, n, 11).is_err());
-        assert!(Geodesics::parse(&bytes[..8 + 16 * n + 5], n, 64).is_err());
+        assert!(Geodesics::parse(&bytes[..9 + 16 * n + 5], n, 64).is_err());
         let mut bad = bytes.clone();
-        bad[8..12].copy_from_slice(&7f32.to_le_bytes());
+        bad[9..13].copy_from_slice(&7f32.to_le_bytes());
         assert!(Geodesics::parse(&bad, n, 64).is_err());
         let mut bad = bytes.clone();
-        bad[8 + 16 * n] = 0;
+        bad[9 + 16 * n] = 0;
         assert!(Geodesics::parse(&bad, n, 64).is_err());
-        for i in 8 + 16 * n + 12..bytes.len() {
+        for i in 9 + 16 * n + 12..bytes.len() {
             let mut b = bytes.clone();
             b[i] ^= 0x5a;
             let _ = Geodesics::parse(&b, n, 64);
@@ -365,6 +414,34 @@ mod tests {
         let first = twice.column(0).clone_owned();
         twice.set_column(1, &first);
         assert!(Geodesics::new(g.mean.clone(), twice).is_none());
+    }
+
+    #[test]
+    fn the_canonical_model_stores_only_its_means_and_gives_poses_back() {
+        let (poses, n) = dancer_poses(60);
+        let fitted = Geodesics::fit(&poses, n, 3).unwrap();
+        let g = Geodesics::canonical(fitted.mean.clone());
+        let bytes = g.to_bytes(&[]);
+        assert_eq!(bytes.len(), 9 + 16 * n);
+        let back = Geodesics::parse(&bytes, n, 3 * n).unwrap();
+        assert_eq!(back.to_bytes(&[]), bytes);
+        let mut out = vec![UnitQuaternion::identity(); n];
+        for pose in poses.chunks_exact(n) {
+            back.pose(&back.coordinates(pose), &mut out);
+            for (a, b) in pose.iter().zip(&out) {
+                assert!(a.angle_to(b) < 1e-6);
+            }
+        }
+        // Its `k` is every axis, and nothing may follow the means.
+        let mut bad = bytes.clone();
+        bad[4..8].copy_from_slice(&3u32.to_le_bytes());
+        assert!(Geodesics::parse(&bad, n, 3 * n).is_err());
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(Geodesics::parse(&longer, n, 3 * n).is_err());
+        let mut kind = bytes;
+        kind[8] = 2;
+        assert!(Geodesics::parse(&kind, n, 3 * n).is_err());
     }
 
     #[test]
