@@ -29,9 +29,10 @@ pub struct Geodesics {
     pub directions: DMatrix<f64>,
     /// The variance of the poses along each direction.
     pub variances: Vec<f64>,
-    /// `k × 3n`: what maps a tangent vector to coordinates — the least-squares projection
-    /// `(VᵀV)⁻¹Vᵀ`, which is `Vᵀ` for the fitted (orthonormal) directions and stays exact
-    /// for the stored ones, rounded.
+    /// `3n × k`, the transpose of what maps a tangent vector to coordinates — the
+    /// least-squares projection `(VᵀV)⁻¹Vᵀ`, which is `Vᵀ` for the fitted (orthonormal)
+    /// directions and stays exact for the stored ones, rounded. Transposed so that each
+    /// coordinate is one contiguous dot product.
     projector: DMatrix<f64>,
     /// Whether the directions are the canonical basis (each joint's own rotation-vector
     /// components at its mean), which is stored as a flag instead of a matrix.
@@ -39,9 +40,12 @@ pub struct Geodesics {
 }
 
 /// The least-squares projection onto the columns of `v`; `None` when they are dependent.
+/// The Gram matrix goes through [`linalg::tn`](crate::codec::linalg::tn), not nalgebra's
+/// product: the projection decides coordinates and so bitstream bytes, which must not
+/// depend on the SIMD kernels of the machine that encodes.
 fn projector_of(v: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-    let gram = v.transpose() * v;
-    Some(gram.cholesky()?.solve(&v.transpose()))
+    let gram = crate::codec::linalg::tn(v, v.as_view());
+    Some(gram.cholesky()?.solve(&v.transpose()).transpose())
 }
 
 /// Direction steps run from 2⁻¹ to 2⁻³⁰: no component needs coarser than half its range,
@@ -269,7 +273,11 @@ impl Geodesics {
     pub fn coordinates(&self, pose: &[UnitQuaternion<f64>]) -> Vec<f64> {
         let mut u = DVector::zeros(3 * self.joints());
         tangent_into(&self.mean, pose, &mut u);
-        (&self.projector * u).iter().copied().collect()
+        let rows = self.projector.nrows();
+        let p = self.projector.as_slice();
+        (0..self.projector.ncols())
+            .map(|i| crate::codec::linalg::dot(&p[i * rows..(i + 1) * rows], u.as_slice()))
+            .collect()
     }
 
     /// The directions that can turn joint `j`: all of them, or for the canonical model its
