@@ -19,7 +19,8 @@
 //! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
 //!   that code channel values.
 //! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`], [`search`]: shared pieces of
-//!   the above.
+//!   the above. [`segment`]: PPCA motion segmentation (Barbič et al. 2004), for `spca` and
+//!   `mdtt`'s adaptive clips.
 
 pub mod basis;
 pub mod bvh_lossless;
@@ -42,6 +43,7 @@ pub mod residual;
 pub mod rig;
 pub mod rot;
 pub mod search;
+pub mod segment;
 pub mod stream;
 mod wire;
 
