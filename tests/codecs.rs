@@ -212,6 +212,14 @@ fn corpus_takes() -> Vec<(String, Motion)> {
     takes
 }
 
+/// The corpus takes with a skeleton (BVH).
+fn skeleton_takes() -> Vec<(String, Motion)> {
+    corpus_takes()
+        .into_iter()
+        .filter(|(_, m)| m.skeleton.is_some())
+        .collect()
+}
+
 /// `f` on every take (with its index), the takes shared among up to four threads; thread `t`
 /// draws from `Rng::new(seed + t)`.
 fn on_every_take(
@@ -252,10 +260,7 @@ fn every_corpus_take_meets_max_and_mean_bounds_with_every_codec() {
 /// ranges read alone equal the whole decode (`check`).
 #[test]
 fn every_corpus_skeleton_take_meets_bounds_with_rot() {
-    let takes: Vec<_> = corpus_takes()
-        .into_iter()
-        .filter(|(_, m)| m.skeleton.is_some())
-        .collect();
+    let takes = skeleton_takes();
     if corpus::for_tests().is_some() {
         assert!(takes.len() >= 180, "{} skeleton takes", takes.len());
     }
@@ -277,10 +282,7 @@ fn every_corpus_skeleton_take_meets_bounds_with_rot() {
 /// so (`BoundMissed`), which per-take choice records and skips; it must stay rare.
 #[test]
 fn every_corpus_skeleton_take_pga_accepts_meets_bounds() {
-    let takes: Vec<_> = corpus_takes()
-        .into_iter()
-        .filter(|(_, m)| m.skeleton.is_some())
-        .collect();
+    let takes = skeleton_takes();
     let pga = codec::codec(CodecId::Pga).unwrap();
     let accepted: Vec<_> = takes
         .iter()

@@ -67,9 +67,7 @@ impl Codec for BvhLossless {
     }
 
     fn encode(&self, input: &Input<'_>, _target: Target) -> Result<CodecOutput> {
-        let (rig, skeleton) = input
-            .skeleton
-            .ok_or_else(|| Error::Invalid("bvh-lossless needs a skeleton take".into()))?;
+        let (rig, skeleton) = input.skeleton_for(CodecId::BvhLossless)?;
         let cc = rig.channel_count();
         let printed = match &skeleton.printed {
             Some(p) => p.clone(),

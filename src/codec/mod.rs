@@ -45,6 +45,8 @@ pub mod rot;
 pub mod search;
 pub mod segment;
 pub mod stream;
+#[cfg(test)]
+mod testing;
 mod wire;
 
 use crate::motion::{Motion, Skeleton};
@@ -75,9 +77,16 @@ pub struct Input<'a> {
     pub skeleton: Option<(&'a Rig, &'a Skeleton)>,
 }
 
-impl Input<'_> {
+impl<'a> Input<'a> {
     pub fn width(&self) -> usize {
         self.points * 3
+    }
+
+    /// The take's rig and skeleton, for a codec that codes channel values; `Invalid`, naming
+    /// `codec`, for a take of points only.
+    pub fn skeleton_for(&self, codec: CodecId) -> Result<(&'a Rig, &'a Skeleton)> {
+        self.skeleton
+            .ok_or_else(|| Error::Invalid(format!("{codec} needs a skeleton take")))
     }
 }
 

@@ -16,7 +16,7 @@ pub fn largest_meeting(
     mut meets: impl FnMut(u32) -> Result<bool>,
 ) -> Result<Option<u32>> {
     // `lo` meets the bound, `hi` does not (INDICES: past the coarsest).
-    let (mut lo, mut hi) = match hint.map(|h| h.min(INDICES - 1)) {
+    let (lo, hi) = match hint.map(|h| h.min(INDICES - 1)) {
         Some(h) if meets(h)? => {
             let (mut lo, mut d) = (h, 1);
             loop {
@@ -46,15 +46,27 @@ pub fn largest_meeting(
             }
         }
     };
+    let (lo, _) = narrow(lo as usize, hi as usize, |k| meets(k as u32))?;
+    Ok(Some(lo as u32))
+}
+
+/// Bisect `lo..hi` down to neighbours: `up(mid)` says the boundary lies above `mid` (which
+/// becomes `lo`), else at or below it (`hi`). Both ends are assumed to be on their sides
+/// already; neither is asked about.
+pub fn narrow(
+    mut lo: usize,
+    mut hi: usize,
+    mut up: impl FnMut(usize) -> Result<bool>,
+) -> Result<(usize, usize)> {
     while hi - lo > 1 {
         let mid = (lo + hi) / 2;
-        if meets(mid)? {
+        if up(mid)? {
             lo = mid;
         } else {
             hi = mid;
         }
     }
-    Ok(Some(lo))
+    Ok((lo, hi))
 }
 
 #[cfg(test)]

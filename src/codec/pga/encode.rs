@@ -17,7 +17,7 @@ use crate::codec::entropy::rangecoder::Encoder;
 use crate::codec::error::{Error, Result};
 use crate::codec::measure::max_mean;
 use crate::codec::rig::{printed, Rig};
-use crate::codec::search::largest_meeting;
+use crate::codec::search::{largest_meeting, narrow};
 use crate::codec::{default_chunk_frames, ChunkOut, CodecOutput, Input, Target};
 use crate::motion::Skeleton;
 
@@ -168,15 +168,7 @@ impl<'a> Take<'a> {
             Ok(within.holds(max, mean))
         };
         // `hi` meets (or is every direction), `lo` does not.
-        let (mut lo, mut hi) = (0, self.full.dims());
-        while hi - lo > 1 {
-            let mid = (lo + hi) / 2;
-            if meets(mid)? {
-                hi = mid;
-            } else {
-                lo = mid;
-            }
-        }
+        let (_, hi) = narrow(0, self.full.dims(), |k| Ok(!meets(k)?))?;
         Ok(hi)
     }
 

@@ -132,11 +132,6 @@ impl Solver {
         self.position[i]
     }
 
-    /// The global rotation of link `i` after [`Solver::pose`].
-    pub fn rotation(&self, i: usize) -> UnitQuaternion<f64> {
-        self.rotation[i]
-    }
-
     /// The Jacobian of the end positions (`3·ends × k`) at the pose last computed at `x`.
     pub fn jacobian(&mut self, chain: &Chain, g: &Geodesics, x: &[f64], jac: &mut DMatrix<f64>) {
         let rows = g.directions.nrows();

@@ -18,7 +18,6 @@ use crate::motion::rotation::{euler_order, from_euler, to_euler};
 /// A joint whose rotation is three Euler channels.
 #[derive(Debug, Clone, Copy)]
 struct Turning {
-    joint: usize,
     order: [usize; 3],
     /// Its rotation channels' indices in a frame, in channel order.
     idx: [usize; 3],
@@ -179,7 +178,6 @@ impl Layout {
             let turning = match (rot_idx.len(), euler_order(&joint.channels)) {
                 (0, _) => None,
                 (3, Some(order)) => Some(Turning {
-                    joint: j,
                     order,
                     idx: [rot_idx[0], rot_idx[1], rot_idx[2]],
                 }),
@@ -308,11 +306,6 @@ impl Layout {
     /// The joint PGA codes from.
     pub fn root(&self) -> usize {
         self.root
-    }
-
-    /// The rig joint of inner joint `i`.
-    pub fn inner_joint(&self, i: usize) -> usize {
-        self.inner[i].joint
     }
 }
 

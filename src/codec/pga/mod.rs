@@ -54,9 +54,7 @@ impl Codec for Pga {
     }
 
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput> {
-        let (rig, skeleton) = input
-            .skeleton
-            .ok_or_else(|| Error::Invalid("pga needs a skeleton take".into()))?;
+        let (rig, skeleton) = input.skeleton_for(CodecId::Pga)?;
         Take::new(rig, skeleton, input)?.encode(
             target,
             &[Directions::Principal, Directions::Canonical],
@@ -125,26 +123,15 @@ impl ChunkDecoder for PgaDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::codec::testing::{
+        damage_channels, first_chunk, meets_bounds_and_shrinks, skeleton_shared,
+    };
     use crate::codec::{encode, encode_variant, ErrorBound};
     use crate::motion::synthetic::dancer;
 
-    fn rig_of(m: &Motion) -> Arc<Rig> {
-        Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap())
-    }
-
     #[test]
     fn meets_max_and_mean_bounds_on_fk_positions_and_shrinks_as_they_loosen() {
-        let m = dancer(600, 120.0, 7);
-        let mut last = usize::MAX;
-        for mm in [0.5, 2.0, 10.0] {
-            let enc = encode(&m, CodecId::Pga, ErrorBound::MaxMm(mm)).unwrap();
-            assert!(enc.stats.max_mm <= mm, "{} > {mm}", enc.stats.max_mm);
-            assert!(enc.stats.max_mm > 0.5 * mm, "{} ≪ {mm}", enc.stats.max_mm);
-            assert!(enc.stored_bytes < last);
-            last = enc.stored_bytes;
-        }
-        let enc = encode(&m, CodecId::Pga, ErrorBound::MeanMm(2.0)).unwrap();
-        assert!(enc.stats.mean_mm <= 2.0);
+        meets_bounds_and_shrinks(&dancer(600, 120.0, 7), CodecId::Pga, [0.5, 2.0, 10.0]);
     }
 
     /// The paper's decoder: poses by IK from the decoded end points, held near the decoded
@@ -172,23 +159,15 @@ mod tests {
         let params = &enc.container.header.params;
         assert_eq!(params[1], 3, "IK steps stored");
         // Channels and positions agree: the positions served are the BVH's FK.
-        let rig = rig_of(&m);
-        let shared = Shared {
-            basis: None,
-            rig: Some(rig.clone()),
-        };
+        let shared = skeleton_shared(&m);
+        let rig = shared.rig.clone().unwrap();
         let d = Pga.decoder(params, m.point_count(), &shared).unwrap();
-        let frames = enc.container.header.chunks[0].frames as usize;
-        let (_, bytes) = crate::codec::container::unpack_chunk(
-            &enc.container.chunks[0],
-            frames * m.point_count(),
-        )
-        .unwrap();
-        let ch = d.decode_channels(bytes, frames).unwrap();
+        let (frames, bytes) = first_chunk(&enc, &m);
+        let ch = d.decode_channels(&bytes, frames).unwrap();
         let mut fk = vec![0f32; frames * m.point_count() * 3];
         rig.positions(&ch.values, &mut fk);
         let mut pos = vec![0f32; fk.len()];
-        d.decode_chunk(bytes, frames, &mut pos).unwrap();
+        d.decode_chunk(&bytes, frames, &mut pos).unwrap();
         assert_eq!(fk, pos);
         assert!(ch
             .values
@@ -249,10 +228,7 @@ mod tests {
     fn damaged_parameters_and_chunks_fail_cleanly() {
         let m = dancer(200, 60.0, 3);
         let enc = encode(&m, CodecId::Pga, ErrorBound::MaxMm(2.0)).unwrap();
-        let shared = Shared {
-            basis: None,
-            rig: Some(rig_of(&m)),
-        };
+        let shared = skeleton_shared(&m);
         let params = &enc.container.header.params;
         let d = Pga.decoder(params, m.point_count(), &shared).unwrap();
         assert!(Pga
@@ -276,19 +252,7 @@ mod tests {
                 let _ = d.decode_channels(&[0, 1, 2, 3], 10);
             }
         }
-        let frames = enc.container.header.chunks[0].frames as usize;
-        let (_, bytes) = crate::codec::container::unpack_chunk(
-            &enc.container.chunks[0],
-            frames * m.point_count(),
-        )
-        .unwrap();
-        for i in 0..bytes.len().min(300) {
-            let mut b = bytes.to_vec();
-            b[i] ^= 0x5a;
-            let _ = d.decode_channels(&b, frames);
-        }
-        for cut in [0, 1, bytes.len() / 2] {
-            let _ = d.decode_channels(&bytes[..cut], frames);
-        }
+        let (frames, bytes) = first_chunk(&enc, &m);
+        damage_channels(d.as_ref(), &bytes, frames);
     }
 }

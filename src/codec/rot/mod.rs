@@ -163,9 +163,7 @@ impl Codec for Rot {
     }
 
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput> {
-        let (rig, skeleton) = input
-            .skeleton
-            .ok_or_else(|| Error::Invalid("rot needs a skeleton take".into()))?;
+        let (rig, skeleton) = input.skeleton_for(CodecId::Rot)?;
         let t = match target {
             Target::Max(t) | Target::Mean(t) => t,
         };
@@ -470,6 +468,9 @@ impl ChunkDecoder for RotDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::codec::testing::{
+        damage_channels, first_chunk, meets_bounds_and_shrinks, skeleton_shared,
+    };
     use crate::codec::{encode, ErrorBound};
     use crate::motion::format::Format;
     use crate::motion::formats::{read_as, ReadOptions};
@@ -477,18 +478,7 @@ mod tests {
 
     #[test]
     fn meets_max_and_mean_bounds_on_fk_positions_and_shrinks_as_they_loosen() {
-        let m = dancer(600, 120.0, 7);
-        let mut last = usize::MAX;
-        for mm in [0.1, 1.0, 10.0] {
-            let enc = encode(&m, CodecId::Rot, ErrorBound::MaxMm(mm)).unwrap();
-            assert!(enc.stats.max_mm <= mm, "{} > {mm}", enc.stats.max_mm);
-            // The search lands close under the bound, not far below it.
-            assert!(enc.stats.max_mm > 0.5 * mm, "{} ≪ {mm}", enc.stats.max_mm);
-            assert!(enc.stored_bytes < last);
-            last = enc.stored_bytes;
-        }
-        let enc = encode(&m, CodecId::Rot, ErrorBound::MeanMm(2.0)).unwrap();
-        assert!(enc.stats.mean_mm <= 2.0);
+        meets_bounds_and_shrinks(&dancer(600, 120.0, 7), CodecId::Rot, [0.1, 1.0, 10.0]);
     }
 
     #[test]
@@ -515,11 +505,7 @@ mod tests {
     fn damaged_chunks_fail_cleanly() {
         let m = dancer(200, 60.0, 3);
         let enc = encode(&m, CodecId::Rot, ErrorBound::MaxMm(1.0)).unwrap();
-        let rig = Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
-        let shared = Shared {
-            basis: None,
-            rig: Some(rig),
-        };
+        let shared = skeleton_shared(&m);
         let d = Rot
             .decoder(&enc.container.header.params, m.point_count(), &shared)
             .unwrap();
@@ -527,19 +513,7 @@ mod tests {
         assert!(Rot
             .decoder(&[VERSION, 0, 0, 0, 0, 0, 0, 240, 255], 1, &shared)
             .is_err());
-        let frames = enc.container.header.chunks[0].frames as usize;
-        let (_, bytes) = crate::codec::container::unpack_chunk(
-            &enc.container.chunks[0],
-            frames * m.point_count(),
-        )
-        .unwrap();
-        for i in 0..bytes.len().min(300) {
-            let mut b = bytes.to_vec();
-            b[i] ^= 0x5a;
-            let _ = d.decode_channels(&b, frames);
-        }
-        for cut in [0, 1, bytes.len() / 2] {
-            let _ = d.decode_channels(&bytes[..cut], frames);
-        }
+        let (frames, bytes) = first_chunk(&enc, &m);
+        damage_channels(d.as_ref(), &bytes, frames);
     }
 }
