@@ -60,6 +60,7 @@ fn decode(c: &mut Criterion) {
         fps: other.fps,
         shared: None,
         skeleton: None,
+        names: &[],
     };
     let set = Arc::new(train_bases(&[input], 4, &SetOptions::default()).expect("trains"));
     for (codec, bound, basis) in [
@@ -92,6 +93,7 @@ fn encode(c: &mut Criterion) {
         fps: m.fps,
         shared: None,
         skeleton: None,
+        names: &[],
     };
     let mut g = c.benchmark_group("encode_cmu_01_03");
     g.sample_size(10);

@@ -35,6 +35,10 @@ pub const MAX_FPS: f64 = 100_000.0;
 /// covariance at this bound). Past it those codecs sit out (and say why); the others code.
 pub const MDTT_MAX_POINTS: usize = 400;
 
+/// Points of a take that `spca` codes: each segment's model is a `3J × 3J`
+/// eigendecomposition, and segmentation fits one every few frames.
+pub const SPCA_MAX_POINTS: usize = 400;
+
 /// Points of a layout that an LSDT basis (`J × J` per coordinate) is trained or built for,
 /// streams included: 3 × 2000² f32 is 48 MB per basis.
 pub const LSDT_MAX_POINTS: usize = 2_000;

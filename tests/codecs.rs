@@ -49,6 +49,7 @@ fn bases_for(ms: &[&Motion]) -> Vec<Arc<Basis>> {
             fps: m.fps,
             shared: None,
             skeleton: None,
+            names: &[],
         })
         .collect();
     let set = train_bases(&inputs, 2, &SetOptions::default()).expect("mdtt set");

@@ -161,6 +161,7 @@ fn freeze_current_bitstreams() {
         fps: m.fps,
         shared,
         skeleton: None,
+        names: &[],
     };
     let set = Arc::new(train_bases(&[input(None)], 2, &SetOptions::default()).unwrap());
     let bound = ErrorBound::MaxMm(1.0);

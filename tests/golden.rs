@@ -27,6 +27,7 @@ fn input<'a>(m: &Motion, filled: &'a [f32], shared: Option<&'a Basis>) -> codec:
         fps: m.fps,
         shared,
         skeleton: None,
+        names: &[],
     }
 }
 

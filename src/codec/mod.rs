@@ -15,6 +15,8 @@
 //! - [`bvh_lossless`]: a skeleton's channel values exactly as printed. [`rot`]: its
 //!   rotations, error-bounded on the FK positions.
 //! - [`pga`]: principal geodesics of rotations with IK (Tournier et al. 2009).
+//! - [`spca`]: segments, torso normalisation, PCA and key-framed splines (Liu & McMillan
+//!   2006).
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
 //! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
 //!   that code channel values.
@@ -44,6 +46,7 @@ pub mod rig;
 pub mod rot;
 pub mod search;
 pub mod segment;
+pub mod spca;
 pub mod stream;
 #[cfg(test)]
 mod testing;
@@ -75,6 +78,9 @@ pub struct Input<'a> {
     /// The take's skeleton and channel values, for codecs that code them
     /// ([`Codec::codes_channels`]); its rig is the one the header names.
     pub skeleton: Option<(&'a Rig, &'a Skeleton)>,
+    /// The points' names (empty when unknown): codecs that treat some points apart (`spca`'s
+    /// torso and feet) find them by name.
+    pub names: &'a [String],
 }
 
 impl<'a> Input<'a> {
@@ -173,7 +179,7 @@ pub trait ChunkDecoder: Send + Sync {
     }
 }
 
-/// The codec for an id, or `Unsupported` for ids whose codec has not landed yet.
+/// The codec for an id. (A `Result` so that an id may be named before its codec lands.)
 pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
     match id {
         CodecId::Raw => Ok(&raw::Raw),
@@ -185,9 +191,7 @@ pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
         CodecId::BvhLossless => Ok(&bvh_lossless::BvhLossless),
         CodecId::Rot => Ok(&rot::Rot),
         CodecId::Pga => Ok(&pga::Pga),
-        other => Err(Error::Unsupported(format!(
-            "codec {other} is not implemented yet"
-        ))),
+        CodecId::Spca => Ok(&spca::Spca),
     }
 }
 

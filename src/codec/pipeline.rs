@@ -106,6 +106,7 @@ pub fn encode_variant(
             .as_ref()
             .zip(motion.skeleton.as_ref())
             .map(|(r, s)| (r.as_ref(), s)),
+        names: &motion.point_names,
     };
     let out = encoder(&input, target)?;
 

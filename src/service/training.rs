@@ -262,6 +262,7 @@ async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<Bas
                 fps,
                 shared: None,
                 skeleton: None,
+                names: &[],
             })
             .collect();
         // Frames are in millimetres here, so the bound is too.

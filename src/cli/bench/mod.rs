@@ -563,6 +563,7 @@ fn split_and_train(
                     fps: m.fps,
                     shared: None,
                     skeleton: None,
+                    names: &[],
                 })
                 .collect();
             let targets: Vec<codec::Target> = train

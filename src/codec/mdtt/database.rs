@@ -763,6 +763,7 @@ mod tests {
                 fps: 120.0,
                 shared: None,
                 skeleton: None,
+                names: &[],
             })
             .collect();
         let t = train_set(

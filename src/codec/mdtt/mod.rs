@@ -611,6 +611,7 @@ mod tests {
             fps: 120.0,
             shared: None,
             skeleton: None,
+            names: &[],
         };
         let (k, l) = (5, 3);
         let mut a = Analysis::new(&input, clip_len(120.0), l);

@@ -524,6 +524,7 @@ impl StreamCoder for ClipStream {
             fps: self.fps,
             shared: Some(&self.basis),
             skeleton: None,
+            names: &[],
         };
         encode_fixed(&input, self.p)
     }
@@ -624,6 +625,7 @@ mod tests {
             fps: m.fps,
             shared: Some(basis),
             skeleton: None,
+            names: &[],
         }
     }
 

@@ -515,6 +515,7 @@ mod tests {
             fps: 120.0,
             shared: Some(basis),
             skeleton: None,
+            names: &[],
         }
     }
 

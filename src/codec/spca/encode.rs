@@ -1,0 +1,383 @@
+//! The `spca` encoder: normalise by the torso, cut into segments, fit each a PCA model, key
+//! its coefficient trajectories, and search the one tolerance scale every step follows
+//! from for the fewest bytes that meet the bound.
+//!
+//! Every tolerance of the paper is a fixed share of one scale `s` (take units):
+//! - PCA tolerance `s` (foot points `s/3`: the paper's 10 mm against 30 mm);
+//! - coefficient key threshold and key step `s/2` (a coefficient error moves a pose by at
+//!   most as much, since components are unit vectors);
+//! - torso key threshold and step `s/5`: a torso error turns the whole body, and a hand a
+//!   metre out moves about three times as far as the shoulder that turned it;
+//! - model means at `s/10`, components at about `s/10` of pose movement.
+//!
+//! Under a max bound the residual layer ([`crate::codec::residual`]) holds every sample
+//! within it, and `s` is searched for the fewest bytes of both layers together; under a mean
+//! bound `s` is the largest at which the decoded mean meets it.
+
+use std::ops::Range;
+
+use super::coder::{ChunkKeys, Coder};
+use super::model::Analysis;
+use super::params::Params;
+use super::spline::{self, Keys};
+use super::torso::{self, to_local};
+use crate::codec::entropy::Encoder;
+use crate::codec::error::{Error, Result};
+use crate::codec::measure::max_mean;
+use crate::codec::search::narrow;
+use crate::codec::{residual, segment, ChunkOut, CodecOutput, Input, Target};
+
+/// The longest segment, frames: a longer one is split evenly. Segments are chunks, and a
+/// range read decodes whole chunks.
+pub const MAX_SEGMENT: usize = 4096;
+
+/// Tolerances as shares of the scale `s` (module docs).
+const FOOT: f64 = 1.0 / 3.0;
+const COEF: f64 = 0.5;
+const TORSO: f64 = 0.2;
+const MEAN: f64 = 0.1;
+const BASIS: f64 = 0.1;
+
+/// Which parts of the method run: the paper's Table 3 compares PCA of the whole take, PCA
+/// per segment, and both with key frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Options {
+    /// Cut the take into segments (else one model for the whole take).
+    pub segmented: bool,
+    /// Key frames and splines (else every frame is a key).
+    pub keyframes: bool,
+}
+
+impl Options {
+    pub const SPCA: Options = Options {
+        segmented: true,
+        keyframes: true,
+    };
+}
+
+/// A take prepared for trials: its normalisation, segments and their PCA.
+pub struct Take<'a> {
+    input: &'a Input<'a>,
+    options: Options,
+    torso: Option<(u8, [usize; 3])>,
+    /// The points the models code and each one's share of the PCA tolerance.
+    posed: Vec<usize>,
+    share: Vec<f64>,
+    /// Poses normalised by the original torso (`frames × width`): what segments and models
+    /// are found from.
+    normalised: Vec<f64>,
+    segments: Vec<Range<usize>>,
+    analyses: Vec<Analysis>,
+    blend: usize,
+}
+
+/// The frames over which neighbouring models blend: the paper's 10–20 at 120 fps, scaled.
+pub fn blend_frames(fps: f64) -> usize {
+    ((15.0 * fps / 120.0).round() as usize).clamp(1, 64)
+}
+
+impl<'a> Take<'a> {
+    pub fn new(input: &'a Input<'a>, options: Options) -> Result<Take<'a>> {
+        let (frames, points) = (input.frames, input.points);
+        let torso = torso::find(input.names)
+            .map(|t| (torso::vertical_axis(input.data, points, input.valid), t));
+        let posed: Vec<usize> = (0..points)
+            .filter(|p| torso.is_none_or(|(_, t)| !t.contains(p)))
+            .collect();
+        if posed.is_empty() {
+            return Err(Error::Invalid(
+                "spca needs points beside the torso's three".into(),
+            ));
+        }
+        let feet = torso::feet(input.names, points);
+        let share = posed
+            .iter()
+            .map(|&p| if feet[p] { FOOT } else { 1.0 })
+            .collect();
+        let width = 3 * posed.len();
+        let w = input.width();
+        let mut normalised = vec![0.0; frames * width];
+        for f in 0..frames {
+            let row = &input.data[f * w..(f + 1) * w];
+            let placed = match torso {
+                Some((up, t)) => {
+                    let mut tv = [0.0; 9];
+                    for (j, &p) in t.iter().enumerate() {
+                        for a in 0..3 {
+                            tv[j * 3 + a] = f64::from(row[p * 3 + a]);
+                        }
+                    }
+                    torso::placement(&tv, up)
+                }
+                None => torso::Placement::IDENTITY,
+            };
+            let up = torso.map_or(0, |(up, _)| up);
+            for (i, &p) in posed.iter().enumerate() {
+                let x = [0, 1, 2].map(|a| f64::from(row[p * 3 + a]));
+                normalised[f * width + i * 3..f * width + i * 3 + 3]
+                    .copy_from_slice(&to_local(&placed, up, x));
+            }
+        }
+        let cuts = if options.segmented {
+            segment::cuts(&normalised, width, &segment::Params::at(input.fps))
+        } else {
+            Vec::new()
+        };
+        let segments = split_long(&cuts, frames);
+        let analyses = segments
+            .iter()
+            .map(|r| Analysis::of(&normalised[r.start * width..r.end * width], width))
+            .collect();
+        Ok(Take {
+            input,
+            options,
+            torso,
+            posed,
+            share,
+            normalised,
+            segments,
+            analyses,
+            blend: blend_frames(input.fps),
+        })
+    }
+
+    /// The segments (frame ranges), one chunk each.
+    pub fn segments(&self) -> &[Range<usize>] {
+        &self.segments
+    }
+
+    fn width(&self) -> usize {
+        3 * self.posed.len()
+    }
+
+    /// Code the take at scale `s`, with the residual layer at `residual_t` (0: none).
+    fn trial(&self, s: f64, residual_t: f64) -> Result<Trial> {
+        let width = self.width();
+        let tolerance: Vec<f64> = self.share.iter().map(|f| f * s).collect();
+        let models = self
+            .segments
+            .iter()
+            .zip(&self.analyses)
+            .map(|(r, a)| {
+                let rows = &self.normalised[r.start * width..r.end * width];
+                let k = a.components_for(rows, &tolerance);
+                a.model(k, MEAN * s, BASIS * s)
+            })
+            .collect();
+        let params = Params {
+            torso: self.torso,
+            blend: self.blend,
+            torso_step: TORSO * s,
+            coef_step: COEF * s,
+            mean_step: MEAN * s,
+            residual_t,
+            models,
+        };
+        let coder = Coder::new(params, self.input.points);
+        let (points, w) = (self.input.points, self.input.width());
+        let mut decoded = vec![0f32; self.input.data.len()];
+        let mut chunks = Vec::with_capacity(self.segments.len());
+        for (i, r) in self.segments.iter().enumerate() {
+            let keys = self.keys(&coder, i, r.clone(), s);
+            let n = r.len();
+            let mut enc = Encoder::new();
+            coder.code(&mut enc, n, Some(&keys))?;
+            let recon = &mut decoded[r.start * w..r.end * w];
+            coder.reconstruct(&keys, n, recon);
+            if residual_t > 0.0 {
+                let orig = &self.input.data[r.start * w..r.end * w];
+                let valid = self
+                    .input
+                    .valid
+                    .map(|v| &v[r.start * points..r.end * points]);
+                residual::encode(&mut enc, orig, recon, valid, points, residual_t);
+            }
+            chunks.push(ChunkOut {
+                frames: n,
+                bytes: enc.finish(),
+            });
+        }
+        let (max, mean) = max_mean(self.input.data, &decoded, self.input.valid);
+        let params = coder.params.to_bytes();
+        let bytes = params.len() + chunks.iter().map(|c| c.bytes.len()).sum::<usize>();
+        Ok(Trial {
+            out: CodecOutput { params, chunks },
+            bytes,
+            max,
+            mean,
+        })
+    }
+
+    /// Segment `i`'s keys at scale `s`: the torso's, then its coefficients' from the poses
+    /// normalised by the torso as the decoder will have it, then the next model's over the
+    /// blend.
+    fn keys(&self, coder: &Coder, i: usize, r: Range<usize>, s: f64) -> ChunkKeys {
+        let (n, w, width) = (r.len(), self.input.width(), self.width());
+        let threshold = |x: f64| if self.options.keyframes { x } else { 0.0 };
+        let column = |rows: &dyn Fn(usize) -> f64| (0..n).map(rows).collect::<Vec<_>>();
+        let torso = match self.torso {
+            Some((_, t)) => (0..9)
+                .map(|c| {
+                    let (p, a) = (t[c / 3], c % 3);
+                    let x = column(&|f| f64::from(self.input.data[(r.start + f) * w + p * 3 + a]));
+                    spline::fit(&x, threshold(TORSO * s), TORSO * s)
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        let mut keys = ChunkKeys {
+            segment: i,
+            torso,
+            coefs: Vec::new(),
+            lead: Vec::new(),
+        };
+        let (placed, _) = coder.placements(&keys, n);
+        let up = self.torso.map_or(0, |(up, _)| up);
+        let mut rows = vec![0.0; n * width];
+        for f in 0..n {
+            let row = &self.input.data[(r.start + f) * w..(r.start + f + 1) * w];
+            for (j, &p) in self.posed.iter().enumerate() {
+                let x = [0, 1, 2].map(|a| f64::from(row[p * 3 + a]));
+                rows[f * width + j * 3..f * width + j * 3 + 3]
+                    .copy_from_slice(&to_local(&placed[f], up, x));
+            }
+        }
+        let trajectories = |model: &super::model::Model, rows: &[f64]| -> Vec<Keys> {
+            let c = model.coefficients(rows);
+            (0..model.k())
+                .map(|j| {
+                    let x: Vec<f64> = c.row(j).iter().copied().collect();
+                    spline::fit(&x, threshold(COEF * s), COEF * s)
+                })
+                .collect()
+        };
+        let models = &coder.params.models;
+        keys.coefs = trajectories(&models[i], &rows);
+        let lead = coder.lead_frames(i, n);
+        if lead > 0 {
+            keys.lead = trajectories(&models[i + 1], &rows[(n - lead) * width..]);
+        }
+        keys
+    }
+
+    /// Search the scale for the fewest bytes that meet `target`.
+    pub fn encode(&self, target: Target) -> Result<CodecOutput> {
+        // Scales on a grid of quarter octaves around the bound: s = t · 2^((j − 32)/4).
+        let t = match target {
+            Target::Max(t) | Target::Mean(t) => t,
+        };
+        let scale = |j: usize| t * 2f64.powf((j as f64 - 32.0) / 4.0);
+        match target {
+            Target::Max(t) => {
+                // Every scale meets the bound; bytes fall and then rise with it. Coarse
+                // half-octave scan, then the quarter octaves beside the best.
+                let mut best: Option<(usize, Trial)> = None;
+                let consider = |j: usize, best: &mut Option<(usize, Trial)>| -> Result<()> {
+                    let trial = self.trial(scale(j), t)?;
+                    if best.as_ref().is_none_or(|(_, b)| trial.bytes < b.bytes) {
+                        *best = Some((j, trial));
+                    }
+                    Ok(())
+                };
+                for j in (24..=56).step_by(2) {
+                    consider(j, &mut best)?;
+                    // Past the best by two half octaves: bytes only grow from here.
+                    if best.as_ref().is_some_and(|(b, _)| j >= b + 4) {
+                        break;
+                    }
+                }
+                let b = best.as_ref().map_or(32, |(j, _)| *j);
+                for j in [b - 1, b + 1] {
+                    consider(j, &mut best)?;
+                }
+                let (_, trial) = best.expect("trials were run");
+                Ok(trial.out)
+            }
+            Target::Mean(_) => {
+                let meets = |j: usize| -> Result<Option<Trial>> {
+                    let trial = self.trial(scale(j), 0.0)?;
+                    Ok(target.holds(trial.max, trial.mean).then_some(trial))
+                };
+                // The largest grid scale that meets it: from the bound itself, gallop down
+                // to one that does, up to one that does not, then bisect.
+                let (mut lo, mut hi) = (32usize, 33usize);
+                let mut kept = meets(lo)?;
+                while kept.is_none() {
+                    if lo == 0 {
+                        return Err(Error::BoundMissed {
+                            codec: "spca".into(),
+                            detail: format!("no scale down to {:.3e} meets it", scale(0)),
+                        });
+                    }
+                    hi = lo;
+                    lo = lo.saturating_sub(4);
+                    kept = meets(lo)?;
+                }
+                if hi == 33 {
+                    hi = 64;
+                    let mut j = 36;
+                    while j < 64 {
+                        match meets(j)? {
+                            Some(trial) => {
+                                (lo, kept) = (j, Some(trial));
+                                j += 4;
+                            }
+                            None => {
+                                hi = j;
+                                break;
+                            }
+                        }
+                    }
+                }
+                narrow(lo, hi, |j| {
+                    Ok(match meets(j)? {
+                        Some(trial) => {
+                            kept = Some(trial);
+                            true
+                        }
+                        None => false,
+                    })
+                })?;
+                Ok(kept.expect("a scale met the bound").out)
+            }
+        }
+    }
+}
+
+struct Trial {
+    out: CodecOutput,
+    bytes: usize,
+    max: f64,
+    mean: f64,
+}
+
+/// Segments from cuts, each at most [`MAX_SEGMENT`] frames (longer ones split evenly).
+fn split_long(cuts: &[usize], frames: usize) -> Vec<Range<usize>> {
+    let mut bounds = vec![0];
+    bounds.extend_from_slice(cuts);
+    bounds.push(frames);
+    let mut out = Vec::new();
+    for w in bounds.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let parts = (b - a).div_ceil(MAX_SEGMENT).max(1);
+        for i in 0..parts {
+            out.push(a + (b - a) * i / parts..a + (b - a) * (i + 1) / parts);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn long_segments_are_split_evenly() {
+        assert_eq!(split_long(&[], 10), vec![0..10]);
+        assert_eq!(split_long(&[4], 10), vec![0..4, 4..10]);
+        let s = split_long(&[], 2 * MAX_SEGMENT + 1);
+        assert_eq!(s.len(), 3);
+        assert!(s.iter().all(|r| r.len() <= MAX_SEGMENT));
+        assert_eq!(s.last().unwrap().end, 2 * MAX_SEGMENT + 1);
+    }
+}
