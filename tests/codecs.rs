@@ -16,7 +16,7 @@ use mocapstore::motion::synthetic::{walker, Rng};
 use mocapstore::motion::Motion;
 use proptest::prelude::*;
 
-const CODECS: [CodecId; 3] = [CodecId::Raw, CodecId::Quant, CodecId::Mdtt];
+const CODECS: [CodecId; 4] = [CodecId::Raw, CodecId::Quant, CodecId::Mdtt, CodecId::Spca];
 /// The codecs that code with a shared basis.
 const SHARED: [CodecId; 3] = [CodecId::LsdtClip, CodecId::LsdtFrame, CodecId::MdttShared];
 /// The codecs that keep a skeleton's channel values.
@@ -250,7 +250,7 @@ fn every_corpus_take_meets_max_and_mean_bounds_with_every_codec() {
         for codec in CODECS {
             check(name, m, codec, ErrorBound::MaxMm(1.0), rng);
         }
-        for codec in [CodecId::Quant, CodecId::Mdtt] {
+        for codec in [CodecId::Quant, CodecId::Mdtt, CodecId::Spca] {
             check(name, m, codec, ErrorBound::MeanMm(3.0), rng);
         }
     });
@@ -446,6 +446,16 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
         let enc = codec::encode(&m, codec, ErrorBound::MaxMm(1.0)).unwrap();
         mutate(&enc.container, &shared, &mut rng, &mut outcomes);
     }
+    // `spca` with torso normalisation, several segments and blends.
+    let m = mocapstore::motion::synthetic::two_behaviours();
+    let enc = codec::encode(&m, CodecId::Spca, ErrorBound::MaxMm(1.0)).unwrap();
+    assert!(enc.container.chunks.len() >= 2);
+    mutate(
+        &enc.container,
+        &codec::Shared::default(),
+        &mut rng,
+        &mut outcomes,
+    );
     println!(
         "mutations: {} decoded, {} typed errors, {} resealed garbage decoded to numbers",
         outcomes[0], outcomes[1], outcomes[2]

@@ -20,7 +20,7 @@ use mocapstore::codec::lsdt::{clip, frame};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::pga::encode::{Directions, Options, Take};
 use mocapstore::codec::{self, Basis, CodecId, Container, ErrorBound, Header, Limits};
-use mocapstore::motion::synthetic::walker;
+use mocapstore::motion::synthetic::{two_behaviours, walker};
 use mocapstore::motion::Motion;
 
 fn dir() -> PathBuf {
@@ -85,6 +85,8 @@ const REQUIRED: &[&str] = &[
     "pga-v1-plain",
     "pga-v1-ik",
     "pga-v1-canonical",
+    "spca-v1",
+    "spca-v1-torso",
 ];
 
 #[test]
@@ -173,6 +175,7 @@ fn freeze_current_bitstreams() {
         (CodecId::MdttShared, Some(set.clone())),
         (CodecId::LsdtClip, Some(dct.clone())),
         (CodecId::LsdtFrame, Some(dct.clone())),
+        (CodecId::Spca, None),
     ] {
         let enc = codec::encode_with(&m, codec, bound, basis.as_ref()).unwrap();
         let c = enc.container;
@@ -265,6 +268,17 @@ fn freeze_current_bitstreams() {
             format!("pga batch {what}, {bound}, a dancer BVH take"),
         ));
     }
+
+    // `spca` with its torso normalisation, segments and blends.
+    let c = codec::encode(&two_behaviours(), CodecId::Spca, bound)
+        .unwrap()
+        .container;
+    out.push((
+        format!("spca-v{}-torso", c.header.params[0]),
+        c,
+        None,
+        "spca batch, max 1 mm, normalised by the torso, two segments blended".into(),
+    ));
 
     let mut index = std::fs::read_to_string(dir().join("index.txt")).unwrap_or_else(|_| {
         "# file, BLAKE3 (first 32 hex) of the decoded frames as little-endian f32, what it is\n"

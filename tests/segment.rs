@@ -1,9 +1,12 @@
-//! PPCA segmentation on real takes: two very different corpus takes joined end to end are
-//! cut within half a second of the join (an acceptance test of the `spca` issue).
+//! PPCA segmentation on real takes (acceptance tests of the `spca` issue): two very
+//! different corpus takes joined end to end are cut within half a second of the join, and
+//! `spca`'s segments hand over without a velocity spike.
 
 use mocapstore::codec::segment::{cuts, Params};
+use mocapstore::codec::{self, CodecId, ErrorBound};
 use mocapstore::corpus;
 use mocapstore::motion::formats::{self, ReadOptions};
+use mocapstore::motion::metrics::{accelerations, speeds};
 use mocapstore::motion::Motion;
 
 fn take(path: &str) -> Option<Motion> {
@@ -56,4 +59,59 @@ fn two_different_takes_joined_are_cut_near_the_join() {
         found.iter().any(|&c| c.abs_diff(n) <= half_second),
         "cuts {found:?}, the join is at frame {n}"
     );
+}
+
+/// Every corpus BVH take coded with `spca` under a mean bound (no residual layer: the models
+/// alone make the frames): where one segment hands over to the next, the decoded motion
+/// moves no faster than the original does anywhere. (Accelerations are printed, not held
+/// to the original's: in a slow take a step of a fraction of the bound at a hand-over is
+/// already a sharper turn than any in the original.)
+#[test]
+fn spca_segments_hand_over_without_a_velocity_spike() {
+    let Some((root, manifest)) = corpus::for_tests() else {
+        return;
+    };
+    let (mut takes, mut cuts_seen, mut worst) = (0, 0, 0.0f64);
+    for e in manifest.iter().filter(|e| e.path.starts_with("bvh/")) {
+        let Ok(bytes) = std::fs::read(root.join(&e.path)) else {
+            continue;
+        };
+        let Ok(m) = formats::read(&bytes, &ReadOptions::default()).map(|l| l.motion) else {
+            continue;
+        };
+        let Ok(enc) = codec::encode(&m, CodecId::Spca, ErrorBound::MeanMm(3.0)) else {
+            panic!("{}: spca refused it", e.path);
+        };
+        let chunks = &enc.container.header.chunks;
+        if chunks.len() < 2 {
+            continue;
+        }
+        takes += 1;
+        let decoded = codec::decode_all(&enc.container).unwrap();
+        let n = m.point_count();
+        let max = |v: Vec<f64>| v.into_iter().fold(0.0, f64::max);
+        let (vmax, amax) = (
+            max(speeds(m.positions(), n)),
+            max(accelerations(m.positions(), n)),
+        );
+        let (dv, da) = (speeds(&decoded, n), accelerations(&decoded, n));
+        for c in &chunks[1..] {
+            let b = c.first_frame as usize;
+            cuts_seen += 1;
+            assert!(
+                dv[b - 1] <= vmax,
+                "{} at {b}: speed {} > {vmax}",
+                e.path,
+                dv[b - 1]
+            );
+            for f in b.saturating_sub(2)..(b + 1).min(da.len()) {
+                worst = worst.max(da[f] / amax);
+            }
+        }
+    }
+    println!(
+        "{cuts_seen} segment hand-overs in {takes} takes; the sharpest turn at one is {worst:.2}x \
+         the original's sharpest"
+    );
+    assert!(cuts_seen > 0, "no corpus take was cut");
 }

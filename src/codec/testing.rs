@@ -1,4 +1,4 @@
-//! Checks the codecs that keep a skeleton's channel values share in their unit tests.
+//! Checks that codecs share in their unit tests.
 
 use std::sync::Arc;
 

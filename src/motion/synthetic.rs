@@ -182,6 +182,37 @@ pub fn dancer(frames: usize, fps: f64, seed: u64) -> Motion {
     .motion
 }
 
+/// Two behaviours: a dancer's first second, played over and over for 800 frames, with
+/// its forearms and hands also swinging fast and wide from frame 400 on (positions only; the
+/// skeleton is dropped). PPCA segmentation cuts it near frame 400.
+pub fn two_behaviours() -> Motion {
+    let m = dancer(120, 120.0, 3);
+    let n = m.point_count();
+    let arm: Vec<usize> = (0..n)
+        .filter(|&p| {
+            let k = m.point_names[p].to_ascii_lowercase();
+            ["leftforearm", "lefthand", "rightforearm", "righthand"]
+                .iter()
+                .any(|a| k.starts_with(a))
+        })
+        .collect();
+    assert!(!arm.is_empty());
+    let w = n * 3;
+    let mut x = Vec::with_capacity(800 * w);
+    for f in 0..800 {
+        let g = f % 120;
+        x.extend_from_slice(&m.positions()[g * w..(g + 1) * w]);
+        if f >= 400 {
+            let t = (f - 400) as f32;
+            for &p in &arm {
+                x[f * w + p * 3] += (t * 0.13).sin() * 60.0;
+                x[f * w + p * 3 + 2] += (t * 0.21).cos() * 80.0;
+            }
+        }
+    }
+    Motion::new(m.fps, m.unit, m.point_names.clone(), x, None).unwrap()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -205,7 +205,10 @@ mod tests {
             &long,
             &[],
         );
-        assert_eq!(run, vec![CodecId::Raw, CodecId::Quant, CodecId::Mdtt]);
+        assert_eq!(
+            run,
+            vec![CodecId::Raw, CodecId::Quant, CodecId::Mdtt, CodecId::Spca]
+        );
         // Without a trained basis the shared-basis codecs sit out, and say why.
         assert_eq!(
             skipped.iter().map(|s| s.codec).collect::<Vec<_>>(),
@@ -236,7 +239,8 @@ mod tests {
                 CodecId::Quant,
                 CodecId::Mdtt,
                 CodecId::LsdtClip,
-                CodecId::LsdtFrame
+                CodecId::LsdtFrame,
+                CodecId::Spca
             ]
         );
         assert_eq!(
@@ -298,6 +302,7 @@ mod tests {
                 CodecId::Raw,
                 CodecId::Quant,
                 CodecId::Mdtt,
+                CodecId::Spca,
                 CodecId::Pga,
                 CodecId::BvhLossless,
                 CodecId::Rot

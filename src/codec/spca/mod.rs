@@ -114,3 +114,106 @@ impl ChunkDecoder for SpcaDecoder {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codec::testing::meets_bounds_and_shrinks;
+    use crate::codec::{encode, gaps, ErrorBound};
+    use crate::motion::metrics::{accelerations, speeds};
+    use crate::motion::synthetic::{dancer, two_behaviours, walker};
+
+    #[test]
+    fn meets_bounds_and_shrinks_with_and_without_a_torso() {
+        meets_bounds_and_shrinks(&dancer(480, 120.0, 5), CodecId::Spca, [0.5, 2.0, 8.0]);
+        // Points with no names to find a torso by: coded as they are.
+        let w = walker(400, 9, 100.0, 4, 0.2);
+        for bound in [ErrorBound::MaxMm(1.0), ErrorBound::MeanMm(1.0)] {
+            let enc = encode(&w, CodecId::Spca, bound).unwrap();
+            assert!(bound.holds(enc.stats.max_mm, enc.stats.mean_mm), "{bound}");
+        }
+    }
+
+    #[test]
+    fn a_change_of_behaviour_starts_a_new_segment_and_the_hand_over_is_smooth() {
+        let m = two_behaviours();
+        let filled = gaps::fill(m.positions(), m.point_count());
+        let input = Input {
+            data: &filled,
+            valid: None,
+            frames: m.frame_count(),
+            points: m.point_count(),
+            fps: m.fps,
+            shared: None,
+            skeleton: None,
+            names: &m.point_names,
+        };
+        let take = Take::new(&input, Options::SPCA).unwrap();
+        let starts: Vec<usize> = take.segments().iter().skip(1).map(|r| r.start).collect();
+        assert!(
+            starts.iter().any(|&s| s.abs_diff(400) <= 60),
+            "segments start at {starts:?}"
+        );
+        // Without the residual layer (a mean bound) the models alone make the frames. At
+        // every cut the decoded motion moves no faster and turns no harder than the
+        // original does anywhere.
+        let enc = encode(&m, CodecId::Spca, ErrorBound::MeanMm(10.0)).unwrap();
+        let cuts: Vec<usize> = enc.container.header.chunks[1..]
+            .iter()
+            .map(|c| c.first_frame as usize)
+            .collect();
+        assert!(!cuts.is_empty());
+        let decoded = crate::codec::decode_all(&enc.container).unwrap();
+        let n = m.point_count();
+        let (v, a) = (speeds(m.positions(), n), accelerations(m.positions(), n));
+        let (vmax, amax) = (max(&v), max(&a));
+        let (dv, da) = (speeds(&decoded, n), accelerations(&decoded, n));
+        for &b in &cuts {
+            assert!(dv[b - 1] <= vmax, "speed {} at {b} > {vmax}", dv[b - 1]);
+            for f in b.saturating_sub(2)..b + 1 {
+                assert!(da[f] <= amax, "acceleration {} at {f} > {amax}", da[f]);
+            }
+        }
+    }
+
+    fn max(v: &[f64]) -> f64 {
+        v.iter().copied().fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn damaged_chunks_and_headers_give_errors_not_panics() {
+        let m = two_behaviours();
+        let enc = encode(&m, CodecId::Spca, ErrorBound::MaxMm(1.0)).unwrap();
+        let params = &enc.container.header.params;
+        for i in 0..params.len() {
+            let mut p = params.clone();
+            p[i] ^= 0x5a;
+            if let Ok(d) = Spca.decoder(&p, m.point_count(), &Shared::default()) {
+                let (frames, bytes) = crate::codec::testing::first_chunk(&enc, &m);
+                let mut out = vec![0f32; frames * m.point_count() * 3];
+                let _ = d.decode_chunk(&bytes, frames, &mut out);
+            }
+        }
+        for cut in [0, 1, 5, params.len() / 2] {
+            assert!(Spca
+                .decoder(&params[..cut], m.point_count(), &Shared::default())
+                .is_err());
+        }
+        let d = Spca
+            .decoder(params, m.point_count(), &Shared::default())
+            .unwrap();
+        let (frames, bytes) = crate::codec::testing::first_chunk(&enc, &m);
+        let mut out = vec![0f32; frames * m.point_count() * 3];
+        for i in 0..bytes.len().min(300) {
+            let mut b = bytes.clone();
+            b[i] ^= 0x5a;
+            let _ = d.decode_chunk(&b, frames, &mut out);
+        }
+        for cut in [0, 1, bytes.len() / 2] {
+            let _ = d.decode_chunk(&bytes[..cut], frames, &mut out);
+        }
+        assert!(Spca
+            .decoder(params, SPCA_MAX_POINTS + 1, &Shared::default())
+            .is_err());
+    }
+}
