@@ -104,8 +104,8 @@ fn spca_segments_hand_over_without_a_velocity_spike() {
                 e.path,
                 dv[b - 1]
             );
-            for f in b.saturating_sub(2)..(b + 1).min(da.len()) {
-                worst = worst.max(da[f] / amax);
+            for a in da.iter().take(b + 1).skip(b.saturating_sub(2)) {
+                worst = worst.max(a / amax);
             }
         }
     }

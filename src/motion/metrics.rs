@@ -223,6 +223,58 @@ fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
+/// Per frame step `f → f + 1` of `frames × points × 3` positions: the largest distance any
+/// point moves (units per frame; gaps count as 0). What a jump looks like.
+pub fn speeds(x: &[f32], points: usize) -> Vec<f64> {
+    let w = points * 3;
+    x.chunks_exact(w)
+        .zip(x.chunks_exact(w).skip(1))
+        .map(|(a, b)| {
+            a.chunks_exact(3)
+                .zip(b.chunks_exact(3))
+                .map(|(p, q)| distance(p, q))
+                .fold(0.0, f64::max)
+        })
+        .collect()
+}
+
+/// Per frame `f + 1` (`f` from 0): the largest second difference of any point (units per
+/// frame²; gaps count as 0). What a jerk looks like.
+pub fn accelerations(x: &[f32], points: usize) -> Vec<f64> {
+    let w = points * 3;
+    let frames = x.len().checked_div(w).unwrap_or(0);
+    (1..frames.saturating_sub(1))
+        .map(|f| {
+            (0..points)
+                .map(|p| {
+                    let c = |g: usize, k: usize| f64::from(x[g * w + p * 3 + k]);
+                    let a = (0..3)
+                        .map(|k| (c(f + 1, k) - 2.0 * c(f, k) + c(f - 1, k)).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    if a.is_nan() {
+                        0.0
+                    } else {
+                        a
+                    }
+                })
+                .fold(0.0, f64::max)
+        })
+        .collect()
+}
+
+fn distance(p: &[f32], q: &[f32]) -> f64 {
+    let d = (0..3)
+        .map(|k| (f64::from(p[k]) - f64::from(q[k])).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    if d.is_nan() {
+        0.0
+    } else {
+        d
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -302,57 +354,5 @@ mod tests {
     fn shape_mismatch_is_an_error() {
         assert!(compare(&[0.0; 6], &[0.0; 3], 1, 1.0).is_err());
         assert!(compare(&[0.0; 4], &[0.0; 4], 1, 1.0).is_err());
-    }
-}
-
-/// Per frame step `f → f + 1` of `frames × points × 3` positions: the largest distance any
-/// point moves (units per frame; gaps count as 0). What a jump looks like.
-pub fn speeds(x: &[f32], points: usize) -> Vec<f64> {
-    let w = points * 3;
-    x.chunks_exact(w)
-        .zip(x.chunks_exact(w).skip(1))
-        .map(|(a, b)| {
-            a.chunks_exact(3)
-                .zip(b.chunks_exact(3))
-                .map(|(p, q)| distance(p, q))
-                .fold(0.0, f64::max)
-        })
-        .collect()
-}
-
-/// Per frame `f + 1` (`f` from 0): the largest second difference of any point (units per
-/// frame²; gaps count as 0). What a jerk looks like.
-pub fn accelerations(x: &[f32], points: usize) -> Vec<f64> {
-    let w = points * 3;
-    let frames = x.len().checked_div(w).unwrap_or(0);
-    (1..frames.saturating_sub(1))
-        .map(|f| {
-            (0..points)
-                .map(|p| {
-                    let c = |g: usize, k: usize| f64::from(x[g * w + p * 3 + k]);
-                    let a = (0..3)
-                        .map(|k| (c(f + 1, k) - 2.0 * c(f, k) + c(f - 1, k)).powi(2))
-                        .sum::<f64>()
-                        .sqrt();
-                    if a.is_nan() {
-                        0.0
-                    } else {
-                        a
-                    }
-                })
-                .fold(0.0, f64::max)
-        })
-        .collect()
-}
-
-fn distance(p: &[f32], q: &[f32]) -> f64 {
-    let d = (0..3)
-        .map(|k| (f64::from(p[k]) - f64::from(q[k])).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    if d.is_nan() {
-        0.0
-    } else {
-        d
     }
 }

@@ -170,8 +170,8 @@ mod tests {
         let (dv, da) = (speeds(&decoded, n), accelerations(&decoded, n));
         for &b in &cuts {
             assert!(dv[b - 1] <= vmax, "speed {} at {b} > {vmax}", dv[b - 1]);
-            for f in b.saturating_sub(2)..b + 1 {
-                assert!(da[f] <= amax, "acceleration {} at {f} > {amax}", da[f]);
+            for (f, a) in da.iter().enumerate().take(b + 1).skip(b.saturating_sub(2)) {
+                assert!(*a <= amax, "acceleration {a} at {f} > {amax}");
             }
         }
     }
