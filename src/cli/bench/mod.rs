@@ -12,6 +12,8 @@ use std::time::Instant;
 
 use clap::Args;
 
+use mocapstore::codec::mdtt::{self, ClipMode};
+use mocapstore::codec::spca::{self, encode::Options as SpcaOptions};
 use mocapstore::codec::{self, Basis, BasisKind, CodecId, ErrorBound};
 use mocapstore::corpus;
 use mocapstore::motion::formats::{self, ReadOptions};
@@ -51,6 +53,15 @@ pub struct BenchArgs {
     /// Intra periods (seconds; `inf` for none) to measure `lsdt-frame` at.
     #[arg(long, value_delimiter = ',', default_value = "1")]
     intra_seconds: Vec<f64>,
+    /// How `mdtt` cuts clips, each its own row: `equal` (one length, the codec's default)
+    /// and `adaptive` (at PPCA segment boundaries).
+    #[arg(long, value_delimiter = ',', default_value = "equal")]
+    mdtt_clips: Vec<String>,
+    /// The parts of `spca` to measure, each its own row (the paper's Table 3): `pca` (one
+    /// PCA model for the take, every frame a key), `segments` (a model per segment, every
+    /// frame a key), `full` (segments and key frames: the codec).
+    #[arg(long, value_delimiter = ',', default_value = "full")]
+    spca_parts: Vec<String>,
     /// Instead of codecs, compare the entropy coders (adaptive range coder vs zigzag
     /// varints + zstd) on the integer streams `quant` produces at each max bound.
     #[arg(long)]
@@ -126,6 +137,10 @@ pub enum Variant {
     Clip(f64),
     /// `lsdt-frame` with an intra frame every this many seconds (infinite: none).
     Intra(f64),
+    /// `spca` with some parts of the method left out.
+    Spca(SpcaOptions),
+    /// `mdtt` with clips cut this way.
+    Mdtt(ClipMode),
 }
 
 impl Variant {
@@ -134,6 +149,8 @@ impl Variant {
             Variant::Default(c) => c,
             Variant::Clip(_) => CodecId::LsdtClip,
             Variant::Intra(_) => CodecId::LsdtFrame,
+            Variant::Spca(_) => CodecId::Spca,
+            Variant::Mdtt(_) => CodecId::Mdtt,
         }
     }
 
@@ -143,6 +160,14 @@ impl Variant {
             Variant::Clip(s) => format!("lsdt-clip L={s}s"),
             Variant::Intra(s) if s.is_infinite() => "lsdt-frame no intra".to_string(),
             Variant::Intra(s) => format!("lsdt-frame I={s}s"),
+            Variant::Spca(o) => match (o.segmented, o.keyframes) {
+                (true, true) => "spca".to_string(),
+                (true, false) => "spca segments, no key frames".to_string(),
+                (false, false) => "spca one PCA, no key frames".to_string(),
+                (false, true) => "spca one PCA, key frames".to_string(),
+            },
+            Variant::Mdtt(ClipMode::Equal) => "mdtt".to_string(),
+            Variant::Mdtt(ClipMode::Adaptive) => "mdtt adaptive clips".to_string(),
         }
     }
 
@@ -170,6 +195,16 @@ impl Variant {
             Variant::Intra(s) => {
                 codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
                     frame::encode_with_period(i, t, frames_of(s))
+                })
+            }
+            Variant::Spca(o) => {
+                codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
+                    spca::encode_with(i, t, o)
+                })
+            }
+            Variant::Mdtt(mode) => {
+                codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
+                    mdtt::encode_clips(i, t, mode)
                 })
             }
         }
@@ -403,6 +438,39 @@ pub fn run(args: &BenchArgs) -> ExitCode {
             }
             CodecId::LsdtFrame => {
                 variants.extend(args.intra_seconds.iter().map(|&s| Variant::Intra(s)))
+            }
+            CodecId::Mdtt => {
+                for mode in &args.mdtt_clips {
+                    variants.push(Variant::Mdtt(match mode.as_str() {
+                        "equal" => ClipMode::Equal,
+                        "adaptive" => ClipMode::Adaptive,
+                        other => {
+                            eprintln!(
+                                "mocapstore bench: --mdtt-clips takes equal, adaptive; not {other:?}"
+                            );
+                            return ExitCode::from(2);
+                        }
+                    }));
+                }
+            }
+            CodecId::Spca => {
+                for part in &args.spca_parts {
+                    let (segmented, keyframes) = match part.as_str() {
+                        "pca" => (false, false),
+                        "segments" => (true, false),
+                        "full" => (true, true),
+                        other => {
+                            eprintln!(
+                                "mocapstore bench: --spca-parts takes pca, segments, full; not {other:?}"
+                            );
+                            return ExitCode::from(2);
+                        }
+                    };
+                    variants.push(Variant::Spca(SpcaOptions {
+                        segmented,
+                        keyframes,
+                    }));
+                }
             }
             c => variants.push(Variant::Default(c)),
         }

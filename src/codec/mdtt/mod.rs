@@ -40,8 +40,9 @@ use super::residual;
 use super::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target};
 pub use params::Params;
 use params::{quantise_basis, MAX_BASIS_BITS};
-pub use transform::{clip_len, ratio};
-use transform::{coefs_for, reconstruct, Analysis, DctTables};
+use transform::clips_for;
+pub use transform::{clip_len, ratio, ClipMode};
+use transform::{coefs_for, reconstruct, Analysis};
 
 pub struct Mdtt;
 
@@ -95,11 +96,13 @@ fn decode_coefs(dec: &mut Decoder<'_>, k: usize, lc: usize, step: f64) -> Vec<f3
 
 /// The DCT table of a full clip (`clip × l`), kept by a decoder and made when it first
 /// decodes a full clip: a decoder that serves only a short take's one shorter clip (or reads
-/// a header claiming long clips) never tabulates it.
+/// a header claiming long clips) never tabulates it. Shorter clips' tables are kept beside
+/// it.
 struct FullClipTable {
     clip: usize,
     l: usize,
     table: std::sync::OnceLock<Vec<f32>>,
+    short: ShortTables,
 }
 
 impl FullClipTable {
@@ -108,6 +111,7 @@ impl FullClipTable {
             clip,
             l,
             table: std::sync::OnceLock::new(),
+            short: ShortTables::default(),
         }
     }
 
@@ -121,8 +125,37 @@ impl FullClipTable {
     }
 }
 
-/// Reconstruct a decoded clip of `frames` frames: the full clip's DCT table is kept by the
-/// decoder, a shorter last clip computes its own.
+/// Clips shorter than the full one whose DCT tables a decoder keeps: adaptive clips
+/// ([`ClipMode::Adaptive`]) come in many lengths, and a table costs a `cos` per entry.
+const SHORT_TABLES: usize = 32;
+
+/// The DCT tables of shorter clips a decoder has made, by (length, kept), up to
+/// [`SHORT_TABLES`] of them.
+#[derive(Default)]
+struct ShortTables(
+    std::sync::Mutex<std::collections::HashMap<(usize, usize), std::sync::Arc<Vec<f32>>>>,
+);
+
+impl ShortTables {
+    fn get(&self, len: usize, keep: usize) -> std::sync::Arc<Vec<f32>> {
+        let mut map = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(t) = map.get(&(len, keep)) {
+            return t.clone();
+        }
+        let t: std::sync::Arc<Vec<f32>> = std::sync::Arc::new(
+            crate::codec::dct::basis(len, keep)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+        );
+        if map.len() < SHORT_TABLES {
+            map.insert((len, keep), t.clone());
+        }
+        t
+    }
+}
+
+/// Reconstruct a decoded clip of `frames` frames with the decoder's tables.
 fn synthesise_clip(
     p: &Params,
     deq: &[f32],
@@ -134,8 +167,7 @@ fn synthesise_clip(
     if frames == p.clip {
         reconstruct(p, deq, full.get(), frames, lc, out);
     } else {
-        let mut t = DctTables::default();
-        reconstruct(p, deq, t.get(frames, lc), frames, lc, out);
+        reconstruct(p, deq, &full.short.get(frames, lc), frames, lc, out);
     }
 }
 
@@ -343,32 +375,38 @@ pub fn encode_with(
     })
 }
 
+/// Search the parameters for the fewest bytes that meet `target`, with clips cut as `mode`
+/// says.
+pub fn encode_clips(input: &Input<'_>, target: Target, mode: ClipMode) -> Result<CodecOutput> {
+    check_points(input.points)?;
+    let best = match target {
+        Target::Max(t) => search(input, target, t, mode),
+        // A mean bound no transform setting meets alone (noise-like or tiny takes) is
+        // met with the residual layer bounding every sample at a few times the mean.
+        Target::Mean(t) => search(input, target, 0.0, mode).or_else(|| {
+            [3.0, 2.0, 1.4, 1.0]
+                .into_iter()
+                .filter_map(|m| search(input, target, m * t, mode))
+                .min_by_key(|tr| tr.bytes)
+        }),
+    };
+    let best = best.ok_or_else(|| Error::BoundMissed {
+        codec: "mdtt".into(),
+        detail: format!("no setting meets {target:?}"),
+    })?;
+    Ok(CodecOutput {
+        params: best.params.to_bytes(),
+        chunks: best.chunks,
+    })
+}
+
 impl Codec for Mdtt {
     fn id(&self) -> CodecId {
         CodecId::Mdtt
     }
 
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput> {
-        check_points(input.points)?;
-        let best = match target {
-            Target::Max(t) => search(input, target, t),
-            // A mean bound no transform setting meets alone (noise-like or tiny takes) is
-            // met with the residual layer bounding every sample at a few times the mean.
-            Target::Mean(t) => search(input, target, 0.0).or_else(|| {
-                [3.0, 2.0, 1.4, 1.0]
-                    .into_iter()
-                    .filter_map(|m| search(input, target, m * t))
-                    .min_by_key(|tr| tr.bytes)
-            }),
-        };
-        let best = best.ok_or_else(|| Error::BoundMissed {
-            codec: "mdtt".into(),
-            detail: format!("no setting meets {target:?}"),
-        })?;
-        Ok(CodecOutput {
-            params: best.params.to_bytes(),
-            chunks: best.chunks,
-        })
+        encode_clips(input, target, ClipMode::Equal)
     }
 
     /// A per-take basis costs more than it saves on takes under a second (measured on the
@@ -398,7 +436,7 @@ impl Codec for Mdtt {
 
 /// Search the parameters for the fewest bytes that meet `target`, with the residual layer
 /// at `rt` (0: none). `None` if no setting meets it.
-fn search(input: &Input<'_>, target: Target, rt: f64) -> Option<Trial> {
+fn search(input: &Input<'_>, target: Target, rt: f64, mode: ClipMode) -> Option<Trial> {
     let w = input.width();
     let clip = clip_len(input.fps).min(input.frames);
     let r = ratio(clip, input.fps);
@@ -418,7 +456,7 @@ fn search(input: &Input<'_>, target: Target, rt: f64) -> Option<Trial> {
     } else {
         (&[], 1.0)
     };
-    let mut a = Analysis::new(input, clip, l_of(w, 3.0));
+    let mut a = Analysis::with_clips(input, clip, l_of(w, 3.0), clips_for(input, clip, mode));
     let mut best = Best {
         target,
         trial: None,

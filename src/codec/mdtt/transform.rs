@@ -9,7 +9,7 @@ use crate::codec::linalg::leading_eigen;
 
 use super::params::Params;
 use crate::codec::linalg::add_outer_products;
-use crate::codec::{dct, Input};
+use crate::codec::{dct, segment, Input};
 
 /// Clip length: the paper's 280 frames at 120 fps, scaled to the take's frame rate.
 pub fn clip_len(fps: f64) -> usize {
@@ -33,6 +33,58 @@ pub fn clips(frames: usize, clip: usize) -> Vec<(usize, usize)> {
         .step_by(clip)
         .map(|f| (f, clip.min(frames - f)))
         .collect()
+}
+
+/// How a take is cut into clips.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClipMode {
+    /// Clips of one length (the last shorter): the paper's default.
+    Equal,
+    /// Clip boundaries where the motion changes behaviour ([`crate::codec::segment`], the
+    /// PPCA segmentation the paper takes its best results with), each segment split evenly
+    /// into clips no longer than the equal length.
+    Adaptive,
+}
+
+/// The clips of `input` under `mode`, none longer than `clip`.
+pub fn clips_for(input: &Input<'_>, clip: usize, mode: ClipMode) -> Vec<(usize, usize)> {
+    match mode {
+        ClipMode::Equal => clips(input.frames, clip),
+        ClipMode::Adaptive => {
+            let w = input.width();
+            // Each frame relative to its centroid: where the body stands is not behaviour
+            // (a walk would otherwise look new at every step).
+            let mut poses = Vec::with_capacity(input.data.len());
+            for row in input.data.chunks_exact(w) {
+                let mut c = [0f64; 3];
+                for p in row.chunks_exact(3) {
+                    for a in 0..3 {
+                        c[a] += f64::from(p[a]);
+                    }
+                }
+                let n = (w / 3).max(1) as f64;
+                for p in row.chunks_exact(3) {
+                    for a in 0..3 {
+                        poses.push(f64::from(p[a]) - c[a] / n);
+                    }
+                }
+            }
+            let cuts = segment::cuts(&poses, w, &segment::Params::at(input.fps));
+            let mut bounds = vec![0];
+            bounds.extend(cuts);
+            bounds.push(input.frames);
+            let mut out = Vec::new();
+            for s in bounds.windows(2) {
+                let (a, b) = (s[0], s[1]);
+                let parts = (b - a).div_ceil(clip).max(1);
+                for i in 0..parts {
+                    let (f0, f1) = (a + (b - a) * i / parts, a + (b - a) * (i + 1) / parts);
+                    out.push((f0, f1 - f0));
+                }
+            }
+            out
+        }
+    }
 }
 
 /// f32 DCT bases by (length, kept), computed once: `cos` per entry is the costliest part of
@@ -113,6 +165,16 @@ pub struct Analysis {
 
 impl Analysis {
     pub fn new(input: &Input<'_>, clip: usize, lmax: usize) -> Analysis {
+        Analysis::with_clips(input, clip, lmax, clips(input.frames, clip))
+    }
+
+    /// As [`Analysis::new`] with the clips given (none longer than `clip`).
+    pub fn with_clips(
+        input: &Input<'_>,
+        clip: usize,
+        lmax: usize,
+        clips: Vec<(usize, usize)>,
+    ) -> Analysis {
         let w = input.width();
         let frames = input.frames;
         let mut sum = vec![0f64; w];
@@ -122,7 +184,6 @@ impl Analysis {
             }
         }
         let mean: Vec<f32> = sum.iter().map(|m| (m / frames as f64) as f32).collect();
-        let clips = clips(frames, clip);
         let coefs = clips
             .iter()
             .map(|&(f0, len)| {
