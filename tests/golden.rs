@@ -28,6 +28,7 @@ fn input<'a>(m: &Motion, filled: &'a [f32], shared: Option<&'a Basis>) -> codec:
         shared,
         skeleton: None,
         names: &[],
+        torso: None,
     }
 }
 
@@ -48,6 +49,8 @@ fn cases() -> Vec<(String, String)> {
         (CodecId::LsdtFrame, ErrorBound::MeanMm(3.0)),
         (CodecId::MdttShared, ErrorBound::MaxMm(1.0)),
         (CodecId::MdttShared, ErrorBound::MeanMm(3.0)),
+        (CodecId::Spca, ErrorBound::MaxMm(1.0)),
+        (CodecId::Spca, ErrorBound::MeanMm(3.0)),
     ];
     let mut out = Vec::new();
     for (name, m) in &motions {

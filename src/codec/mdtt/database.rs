@@ -16,7 +16,7 @@
 use nalgebra::DMatrix;
 
 use super::transform::{clip_len, coefs_for, ratio, reconstruct, Analysis};
-use super::{decode_coefs, encode_coefs, rank_ladder, synthesise_clip, Params};
+use super::{decode_coefs, encode_coefs, past_the_best, rank_ladder, synthesise_clip, Params};
 use crate::codec::basis::{Basis, BasisKind, Matrix};
 use crate::codec::entropy::{Decoder, Encoder, IntModel};
 use crate::codec::error::{malformed, Error, Result};
@@ -242,11 +242,8 @@ fn search(input: &Input<'_>, bases: &[Matrix], target: Target, rt: f64) -> Optio
             offer(code(input, &mut a, bases, k, l, step(k, l, beta0), rt)),
         ));
         let met: Vec<usize> = sizes.iter().filter_map(|s| s.1).collect();
-        if met.len() >= 3 {
-            let min = *met.iter().min().expect("non-empty");
-            if met[met.len() - 1] > min && met[met.len() - 2] > min {
-                break;
-            }
+        if past_the_best(&met) {
+            break;
         }
     }
     let k = sizes
@@ -764,6 +761,7 @@ mod tests {
                 shared: None,
                 skeleton: None,
                 names: &[],
+                torso: None,
             })
             .collect();
         let t = train_set(
