@@ -61,6 +61,7 @@ fn decode(c: &mut Criterion) {
         shared: None,
         skeleton: None,
         names: &[],
+        torso: None,
     };
     let set = Arc::new(train_bases(&[input], 4, &SetOptions::default()).expect("trains"));
     for (codec, bound, basis) in [
@@ -94,6 +95,7 @@ fn encode(c: &mut Criterion) {
         shared: None,
         skeleton: None,
         names: &[],
+        torso: None,
     };
     let mut g = c.benchmark_group("encode_cmu_01_03");
     g.sample_size(10);

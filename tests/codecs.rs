@@ -50,6 +50,7 @@ fn bases_for(ms: &[&Motion]) -> Vec<Arc<Basis>> {
             shared: None,
             skeleton: None,
             names: &[],
+            torso: None,
         })
         .collect();
     let set = train_bases(&inputs, 2, &SetOptions::default()).expect("mdtt set");

@@ -164,6 +164,7 @@ fn freeze_current_bitstreams() {
         shared,
         skeleton: None,
         names: &[],
+        torso: None,
     };
     let set = Arc::new(train_bases(&[input(None)], 2, &SetOptions::default()).unwrap());
     let bound = ErrorBound::MaxMm(1.0);

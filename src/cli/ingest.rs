@@ -37,6 +37,10 @@ pub struct IngestArgs {
     /// so the take comes back as BVH) or positions (position codecs compete too).
     #[arg(long)]
     keep: Option<String>,
+    /// For `spca`: the torso points of the files' marker set, by name: origin, left
+    /// shoulder, right shoulder (e.g. `C7,LSHO,RSHO`); found by name when not given.
+    #[arg(long)]
+    torso: Option<String>,
     /// Unit of the files (mm, cm, m, in, cmu or metres per unit).
     #[arg(long)]
     unit: Option<String>,
@@ -117,6 +121,7 @@ async fn upload_all(args: &IngestArgs, files: Vec<PathBuf>) -> Vec<Outcome> {
         ("codec", &args.codec),
         ("latency", &args.latency),
         ("keep", &args.keep),
+        ("torso", &args.torso),
         ("unit", &args.unit),
     ] {
         if let Some(v) = v {

@@ -59,8 +59,8 @@ pub use container::{Container, Header, Limits};
 pub use error::{Error, Result};
 pub use id::{CodecId, ErrorBound, Latency};
 pub use pipeline::{
-    decode_all, decode_all_with, decoded_digest, digest_update, encode, encode_variant,
-    encode_with, Encoded,
+    decode_all, decode_all_with, decoded_digest, digest_update, encode, encode_hinted,
+    encode_variant, encode_with, Encoded,
 };
 pub use read::{decode_chunk, decoder, ChunkSource, Reader, Shared, Stored};
 pub use rig::{Channels, Rig};
@@ -81,6 +81,39 @@ pub struct Input<'a> {
     /// The points' names (empty when unknown): codecs that treat some points apart (`spca`'s
     /// torso and feet) find them by name.
     pub names: &'a [String],
+    /// The torso points `[origin, left shoulder, right shoulder]` when the request named
+    /// them ([`Hints`]); codecs that need them otherwise find them by name.
+    pub torso: Option<[usize; 3]>,
+}
+
+/// What a request may say about a take's points that codecs cannot always find for
+/// themselves. Parsed at the boundary; checked against the take by [`Hints::torso_points`].
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Hints {
+    /// The torso points by name: origin (e.g. `C7`, `Hips`), left and right shoulder.
+    pub torso: Option<[String; 3]>,
+}
+
+impl Hints {
+    /// The torso as point indices of a take with these point names; `Invalid` naming a
+    /// point the take does not have.
+    pub fn torso_points(&self, names: &[String]) -> Result<Option<[usize; 3]>> {
+        let Some(t) = &self.torso else {
+            return Ok(None);
+        };
+        let mut out = [0; 3];
+        for (o, name) in out.iter_mut().zip(t) {
+            *o = names.iter().position(|n| n == name).ok_or_else(|| {
+                Error::Invalid(format!("torso point {name:?} is not a point of the take"))
+            })?;
+        }
+        if out[0] == out[1] || out[0] == out[2] || out[1] == out[2] {
+            return Err(Error::Invalid(
+                "the three torso points must be different points".into(),
+            ));
+        }
+        Ok(Some(out))
+    }
 }
 
 impl<'a> Input<'a> {

@@ -8,7 +8,7 @@ use super::error::{Error, Result};
 use super::id::{CodecId, ErrorBound};
 use super::read::{Reader, Shared, Stored};
 use super::rig::Rig;
-use super::{codec, gaps, Codec, Input, Target};
+use super::{codec, gaps, Codec, Hints, Input, Target};
 use crate::motion::metrics::{self, ErrorStats};
 use crate::motion::Motion;
 
@@ -62,8 +62,19 @@ pub fn encode_with(
     bound: ErrorBound,
     shared: Option<&Arc<Basis>>,
 ) -> Result<Encoded> {
+    encode_hinted(motion, codec_id, bound, shared, &Hints::default())
+}
+
+/// As [`encode_with`], with what the request said about the take's points.
+pub fn encode_hinted(
+    motion: &Motion,
+    codec_id: CodecId,
+    bound: ErrorBound,
+    shared: Option<&Arc<Basis>>,
+    hints: &Hints,
+) -> Result<Encoded> {
     let c = codec(codec_id)?;
-    encode_variant(motion, codec_id, bound, shared, |input, target| {
+    encode_checked(motion, codec_id, bound, shared, hints, |input, target| {
         c.encode(input, target)
     })
 }
@@ -78,6 +89,19 @@ pub fn encode_variant(
     shared: Option<&Arc<Basis>>,
     encoder: impl FnOnce(&Input<'_>, Target) -> Result<super::CodecOutput>,
 ) -> Result<Encoded> {
+    encode_checked(motion, codec_id, bound, shared, &Hints::default(), encoder)
+}
+
+/// Encode through `encoder`, then decode the container as a reader will and check the bound.
+fn encode_checked(
+    motion: &Motion,
+    codec_id: CodecId,
+    bound: ErrorBound,
+    shared: Option<&Arc<Basis>>,
+    hints: &Hints,
+    encoder: impl FnOnce(&Input<'_>, Target) -> Result<super::CodecOutput>,
+) -> Result<Encoded> {
+    let torso = hints.torso_points(&motion.point_names)?;
     let (frames, points) = (motion.frame_count(), motion.point_count());
     if frames == 0 || points == 0 {
         return Err(Error::Invalid(format!(
@@ -107,6 +131,7 @@ pub fn encode_variant(
             .zip(motion.skeleton.as_ref())
             .map(|(r, s)| (r.as_ref(), s)),
         names: &motion.point_names,
+        torso,
     };
     let out = encoder(&input, target)?;
 

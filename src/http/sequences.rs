@@ -12,7 +12,7 @@ use serde::Deserialize;
 use super::error::ApiError;
 use super::views::TakeView;
 use super::AppState;
-use crate::codec::{CodecId, ErrorBound, Latency};
+use crate::codec::{CodecId, ErrorBound, Hints, Latency};
 use crate::limits::Limits;
 use crate::motion::formats::{self, Format};
 use crate::motion::units::parse_unit;
@@ -34,6 +34,8 @@ pub struct IngestQuery {
     mean_error_mm: Option<f64>,
     latency: Option<String>,
     keep: Option<String>,
+    /// The torso points for `spca`: origin, left shoulder, right shoulder, by name.
+    torso: Option<String>,
     lenient: Option<bool>,
 }
 
@@ -81,6 +83,7 @@ impl IngestQuery {
         self.codec = self.codec.or_else(|| get("codec"));
         self.latency = self.latency.or_else(|| get("latency"));
         self.keep = self.keep.or_else(|| get("keep"));
+        self.torso = self.torso.or_else(|| get("torso"));
         if self.fps.is_none() {
             self.fps = num("fps")?;
         }
@@ -120,6 +123,9 @@ impl IngestQuery {
             None => Keep::default(),
             Some(k) => k.parse::<Keep>().map_err(|e| bad(&e))?,
         };
+        let hints = Hints {
+            torso: self.torso.as_deref().map(parse_torso).transpose()?,
+        };
         let unit = match self.unit.as_deref() {
             None => None,
             Some(u) => Some(parse_unit(u).map_err(|e| bad(&e))?),
@@ -156,7 +162,24 @@ impl IngestQuery {
             limits: formats::Limits::from(limits),
             format_hint: None,
             lenient: self.lenient.unwrap_or(false),
+            hints,
         })
+    }
+}
+
+/// `torso=C7,LSHO,RSHO`: three different point names, origin first.
+fn parse_torso(v: &str) -> Result<[String; 3], ApiError> {
+    let names: Vec<String> = v.split(',').map(|n| n.trim().to_string()).collect();
+    match <[String; 3]>::try_from(names) {
+        Ok(t)
+            if t.iter().all(|n| !n.is_empty()) && t[0] != t[1] && t[0] != t[2] && t[1] != t[2] =>
+        {
+            Ok(t)
+        }
+        _ => Err(ApiError::bad_request(format!(
+            "torso: {v:?} is not three different point names (origin, left shoulder, right \
+             shoulder), comma-separated"
+        ))),
     }
 }
 

@@ -10,7 +10,7 @@ use super::choose::{self, CodecRequest, Decision, Keep, Tried};
 use super::skeletons;
 use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
-use crate::codec::{self, CodecId, Encoded, ErrorBound, Latency};
+use crate::codec::{self, CodecId, Encoded, ErrorBound, Hints, Latency};
 use crate::motion::formats::{self, Format, Limits, ReadOptions};
 use crate::motion::Motion;
 use crate::store::{ChunkRow, NewTake, Store};
@@ -35,6 +35,19 @@ pub struct IngestRequest {
     pub format_hint: Option<Format>,
     /// Keep a file that contradicts its own header, with a warning (see [`ReadOptions`]).
     pub lenient: bool,
+    /// What the request said about the take's points (its torso, for `spca`).
+    pub hints: Hints,
+}
+
+/// How a take is to be coded: the codec asked for (or auto), its bound and latency, what a
+/// skeleton take keeps, and what the request said about its points.
+#[derive(Debug, Clone)]
+pub struct Coding {
+    pub codec: CodecRequest,
+    pub bound: ErrorBound,
+    pub latency: Latency,
+    pub keep: Keep,
+    pub hints: Hints,
 }
 
 /// What ingest reports back.
@@ -79,17 +92,20 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
             motion.frame_count()
         )));
     }
+    // Points the request named must be the take's: a 400 naming the point, not a codec
+    // that quietly sits out.
+    req.hints
+        .torso_points(&motion.point_names)
+        .map_err(|e| Error::InvalidRequest(e.to_string()))?;
     let layout = motion.layout_signature().to_hex();
-    let (decision, enc) = encode_best(
-        store,
-        motion.clone(),
-        &layout,
-        req.codec,
-        req.bound,
-        req.latency,
-        req.keep,
-    )
-    .await?;
+    let coding = Coding {
+        codec: req.codec,
+        bound: req.bound,
+        latency: req.latency,
+        keep: req.keep,
+        hints: req.hints.clone(),
+    };
+    let (decision, enc) = encode_best(store, motion.clone(), &layout, &coding).await?;
 
     let m = &motion;
     let meta = TakeMeta {
@@ -156,11 +172,16 @@ pub async fn encode_best(
     store: &Store,
     motion: Arc<Motion>,
     layout: &str,
-    request: CodecRequest,
-    bound: ErrorBound,
-    latency: Latency,
-    keep: Keep,
+    coding: &Coding,
 ) -> Result<(Decision, Encoded)> {
+    let Coding {
+        codec: request,
+        bound,
+        latency,
+        keep,
+        ..
+    } = *coding;
+    let hints = Arc::new(coding.hints.clone());
     let bases = super::bases::latest_for(store, layout).await?;
     let kinds: Vec<_> = bases.iter().map(|b| b.kind()).collect();
     let (run, skipped) = choose::candidates(request, latency, keep, &motion, &kinds);
@@ -170,9 +191,10 @@ pub async fn encode_best(
         let m = motion.clone();
 
         let shared = choose::basis_for(codec, &bases);
+        let hints = hints.clone();
         jobs.push(tokio::task::spawn_blocking(move || {
             let t0 = Instant::now();
-            let r = codec::encode_with(&m, codec, bound, shared.as_ref());
+            let r = codec::encode_hinted(&m, codec, bound, shared.as_ref(), &hints);
             (codec, r, t0.elapsed().as_secs_f64() * 1e3)
         }));
     }

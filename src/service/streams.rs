@@ -685,16 +685,14 @@ async fn reencode_take(store: &Store, take: &Take, positions: Vec<f32>) -> Resul
         Motion::new(take.fps, unit, names, positions, None)
             .map_err(|e| Error::Internal(e.to_string()))?,
     );
-    let (decision, enc) = super::ingest::encode_best(
-        store,
-        motion,
-        &take.layout,
-        CodecRequest::Auto,
-        take.bound,
-        Latency::Sequence,
-        Keep::default(),
-    )
-    .await?;
+    let coding = super::ingest::Coding {
+        codec: CodecRequest::Auto,
+        bound: take.bound,
+        latency: Latency::Sequence,
+        keep: Keep::default(),
+        hints: Default::default(),
+    };
+    let (decision, enc) = super::ingest::encode_best(store, motion, &take.layout, &coding).await?;
     if enc.stored_bytes as u64 >= take.stored_bytes {
         return Ok(());
     }

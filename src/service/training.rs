@@ -263,6 +263,7 @@ async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<Bas
                 shared: None,
                 skeleton: None,
                 names: &[],
+                torso: None,
             })
             .collect();
         // Frames are in millimetres here, so the bound is too.

@@ -349,3 +349,43 @@ async fn fields_may_come_as_headers() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// `spca`'s torso may be named in the request (query or `x-mocap-torso`): a marker set whose
+/// names it would not recognise is normalised by the points given; a name the take does
+/// not have, or not three names, is a 400 naming the problem.
+#[tokio::test]
+async fn the_torso_for_spca_may_be_named_in_the_request() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let m = mocapstore::motion::synthetic::walker(300, 8, 100.0, 3, 0.1);
+    let body = formats::write(&m, Format::Json).unwrap();
+    let (status, report) = srv
+        .post("codec=spca&max_error_mm=2&torso=M0,M2,M4", body.clone())
+        .await;
+    assert_eq!(status, 201, "{report}");
+    assert_eq!(report["codec"], "spca");
+    assert!(report["max_mm"].as_f64().unwrap() <= 2.0, "{report}");
+    let r = srv
+        .client
+        .post(format!("{}/v1/sequences?codec=spca", srv.base))
+        .header("x-mocap-torso", "M1, M3, M5")
+        .body(body.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 201);
+    for (torso, says) in [
+        ("M0,M2,C7", "\"C7\""),
+        ("M0,M2", "three"),
+        ("M0,M0,M1", "three"),
+    ] {
+        let (status, err) = srv
+            .post(&format!("codec=spca&torso={torso}"), body.clone())
+            .await;
+        assert_error(status, &err, 400);
+        let message = err["error"]["message"].as_str().unwrap();
+        assert!(message.contains(says), "{torso}: {message}");
+    }
+    srv.stop().await;
+    t.finish().await;
+}

@@ -632,6 +632,7 @@ fn split_and_train(
                     shared: None,
                     skeleton: None,
                     names: &[],
+                    torso: None,
                 })
                 .collect();
             let targets: Vec<codec::Target> = train

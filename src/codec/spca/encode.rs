@@ -79,7 +79,9 @@ pub fn blend_frames(fps: f64) -> usize {
 impl<'a> Take<'a> {
     pub fn new(input: &'a Input<'a>, options: Options) -> Result<Take<'a>> {
         let (frames, points) = (input.frames, input.points);
-        let torso = torso::find(input.names)
+        let torso = input
+            .torso
+            .or_else(|| torso::find(input.names))
             .map(|t| (torso::vertical_axis(input.data, points, input.valid), t));
         let posed: Vec<usize> = (0..points)
             .filter(|p| torso.is_none_or(|(_, t)| !t.contains(p)))

@@ -26,7 +26,8 @@
 //! - The cubic is a Hermite spline with mean-secant tangents (local: a frame depends on four
 //!   keys); the paper says only "cubic spline".
 //! - Segments longer than [`encode::MAX_SEGMENT`] frames are split, so no chunk is huge.
-//! - Without torso points (found by name) the poses are coded as they are: no normalisation.
+//! - Without torso points (named in the request, else found by name) the poses are coded as
+//!   they are: no normalisation.
 
 pub mod coder;
 pub mod encode;
@@ -147,6 +148,7 @@ mod tests {
             shared: None,
             skeleton: None,
             names: &m.point_names,
+            torso: None,
         };
         let take = Take::new(&input, Options::SPCA).unwrap();
         let starts: Vec<usize> = take.segments().iter().skip(1).map(|r| r.start).collect();
@@ -178,6 +180,30 @@ mod tests {
 
     fn max(v: &[f64]) -> f64 {
         v.iter().copied().fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn a_torso_named_in_the_request_normalises_a_take_with_unknown_names() {
+        let w = walker(300, 6, 100.0, 8, 0.1);
+        let bound = ErrorBound::MaxMm(2.0);
+        let plain = encode(&w, CodecId::Spca, bound).unwrap();
+        assert_eq!(
+            plain.container.header.params[1], 3,
+            "no torso found by name"
+        );
+        let names = &w.point_names;
+        let hints = crate::codec::Hints {
+            torso: Some([names[0].clone(), names[2].clone(), names[4].clone()]),
+        };
+        let enc = crate::codec::encode_hinted(&w, CodecId::Spca, bound, None, &hints).unwrap();
+        let p = Params::parse(&enc.container.header.params, w.point_count()).unwrap();
+        assert_eq!(p.torso.map(|(_, t)| t), Some([0, 2, 4]));
+        assert!(enc.stats.max_mm <= 2.0);
+        let bad = crate::codec::Hints {
+            torso: Some(["nope".into(), names[2].clone(), names[4].clone()]),
+        };
+        let err = crate::codec::encode_hinted(&w, CodecId::Spca, bound, None, &bad);
+        assert!(matches!(err, Err(Error::Invalid(e)) if e.contains("nope")));
     }
 
     #[test]

@@ -525,6 +525,7 @@ impl StreamCoder for ClipStream {
             shared: Some(&self.basis),
             skeleton: None,
             names: &[],
+            torso: None,
         };
         encode_fixed(&input, self.p)
     }
@@ -626,6 +627,7 @@ mod tests {
             shared: Some(basis),
             skeleton: None,
             names: &[],
+            torso: None,
         }
     }
 

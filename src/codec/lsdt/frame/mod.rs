@@ -516,6 +516,7 @@ mod tests {
             shared: Some(basis),
             skeleton: None,
             names: &[],
+            torso: None,
         }
     }
 
