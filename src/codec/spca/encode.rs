@@ -14,10 +14,11 @@
 //! within it, and `s` is searched for the fewest bytes of both layers together; under a mean
 //! bound `s` is the largest at which the decoded mean meets it.
 
+use std::cell::RefCell;
 use std::ops::Range;
 
 use super::coder::{ChunkKeys, Coder};
-use super::model::Analysis;
+use super::model::{Analysis, Truncation};
 use super::params::Params;
 use super::spline::{self, Keys};
 use super::torso::{self, to_local};
@@ -60,14 +61,12 @@ pub struct Take<'a> {
     input: &'a Input<'a>,
     options: Options,
     torso: Option<(u8, [usize; 3])>,
-    /// The points the models code and each one's share of the PCA tolerance.
+    /// The points the models code.
     posed: Vec<usize>,
-    share: Vec<f64>,
-    /// Poses normalised by the original torso (`frames × width`): what segments and models
-    /// are found from.
-    normalised: Vec<f64>,
     segments: Vec<Range<usize>>,
     analyses: Vec<Analysis>,
+    /// Each segment's truncation errors by component count, grown as trials ask.
+    truncations: RefCell<Vec<Truncation>>,
     blend: usize,
 }
 
@@ -92,7 +91,7 @@ impl<'a> Take<'a> {
             ));
         }
         let feet = torso::feet(input.names, points);
-        let share = posed
+        let share: Vec<f64> = posed
             .iter()
             .map(|&p| if feet[p] { FOOT } else { 1.0 })
             .collect();
@@ -126,19 +125,23 @@ impl<'a> Take<'a> {
             Vec::new()
         };
         let segments = split_long(&cuts, frames);
-        let analyses = segments
+        let analyses: Vec<Analysis> = segments
             .iter()
             .map(|r| Analysis::of(&normalised[r.start * width..r.end * width], width))
+            .collect();
+        let truncations = segments
+            .iter()
+            .zip(&analyses)
+            .map(|(r, a)| Truncation::new(a, &normalised[r.start * width..r.end * width], &share))
             .collect();
         Ok(Take {
             input,
             options,
             torso,
             posed,
-            share,
-            normalised,
             segments,
             analyses,
+            truncations: RefCell::new(truncations),
             blend: blend_frames(input.fps),
         })
     }
@@ -154,18 +157,13 @@ impl<'a> Take<'a> {
 
     /// Code the take at scale `s`, with the residual layer at `residual_t` (0: none).
     fn trial(&self, s: f64, residual_t: f64) -> Result<Trial> {
-        let width = self.width();
-        let tolerance: Vec<f64> = self.share.iter().map(|f| f * s).collect();
-        let models = self
-            .segments
-            .iter()
+        let mut truncations = self.truncations.borrow_mut();
+        let models = truncations
+            .iter_mut()
             .zip(&self.analyses)
-            .map(|(r, a)| {
-                let rows = &self.normalised[r.start * width..r.end * width];
-                let k = a.components_for(rows, &tolerance);
-                a.model(k, MEAN * s, BASIS * s)
-            })
+            .map(|(t, a)| a.model(t.components_for(a, s), MEAN * s, BASIS * s))
             .collect();
+        drop(truncations);
         let params = Params {
             torso: self.torso,
             blend: self.blend,

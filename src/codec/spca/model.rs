@@ -158,38 +158,6 @@ impl Analysis {
         }
     }
 
-    /// The fewest components that leave every point of `rows` within `tolerance[p]` of its
-    /// projection (point `p`'s own tolerance).
-    pub fn components_for(&self, rows: &[f64], tolerance: &[f64]) -> usize {
-        let width = self.mean.len();
-        let frames = rows.len() / width;
-        let mut r: Vec<f64> = rows
-            .chunks_exact(width)
-            .flat_map(|x| x.iter().zip(&self.mean).map(|(x, m)| x - m))
-            .collect();
-        let within = |r: &[f64]| {
-            r.chunks_exact(width).all(|x| {
-                x.chunks_exact(3)
-                    .zip(tolerance)
-                    .all(|(d, t)| d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= t * t)
-            })
-        };
-        for k in 0..width {
-            if within(&r) {
-                return k;
-            }
-            let u = self.vectors.column(k);
-            for f in 0..frames {
-                let x = &mut r[f * width..(f + 1) * width];
-                let c: f64 = x.iter().zip(u.iter()).map(|(a, b)| a * b).sum();
-                for (xi, ui) in x.iter_mut().zip(u.iter()) {
-                    *xi -= c * ui;
-                }
-            }
-        }
-        width
-    }
-
     /// The model of the first `k` components, quantised: the mean at `mean_step`, column `j`
     /// at the precision that moves a pose by about `basis_error` at its coefficients'
     /// typical size (an error δ in column j moves a pose by δ·|c_j|, and |c_j| is about the
@@ -222,6 +190,69 @@ impl Analysis {
     }
 }
 
+/// How far a segment's poses stray from their projection on the first `k` components, for
+/// growing `k`, computed as far as asked and kept: every trial of rate control asks for the
+/// fewest components within its tolerance, and each `k` costs a pass over the segment.
+pub struct Truncation {
+    width: usize,
+    /// Poses less the mean less their projection on the components so far.
+    residual: Vec<f64>,
+    /// `errors[k]`: the largest `distance / share` of any point with `k` components.
+    errors: Vec<f64>,
+    share: Vec<f64>,
+}
+
+impl Truncation {
+    /// For poses `rows` (`frames × width`) under `a`, point `p`'s distance counted as
+    /// `distance / share[p]` (feet have a smaller share of the tolerance).
+    pub fn new(a: &Analysis, rows: &[f64], share: &[f64]) -> Truncation {
+        let width = a.mean.len();
+        let residual = rows
+            .chunks_exact(width)
+            .flat_map(|x| x.iter().zip(&a.mean).map(|(x, m)| x - m))
+            .collect();
+        let mut t = Truncation {
+            width,
+            residual,
+            errors: Vec::new(),
+            share: share.to_vec(),
+        };
+        t.errors.push(t.error());
+        t
+    }
+
+    fn error(&self) -> f64 {
+        self.residual
+            .chunks_exact(3)
+            .zip(self.share.iter().cycle())
+            .map(|(d, s)| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() / s)
+            .fold(0.0, f64::max)
+    }
+
+    /// The fewest components of `a` (the analysis this was made for) that leave every point
+    /// within `tolerance` (times its share).
+    pub fn components_for(&mut self, a: &Analysis, tolerance: f64) -> usize {
+        if let Some(k) = self.errors.iter().position(|&e| e <= tolerance) {
+            return k;
+        }
+        while self.errors.len() <= self.width {
+            let k = self.errors.len() - 1;
+            let u = a.vectors.column(k);
+            for x in self.residual.chunks_exact_mut(self.width) {
+                let c: f64 = x.iter().zip(u.iter()).map(|(a, b)| a * b).sum();
+                for (xi, ui) in x.iter_mut().zip(u.iter()) {
+                    *xi -= c * ui;
+                }
+            }
+            self.errors.push(self.error());
+            if self.errors[k + 1] <= tolerance {
+                return k + 1;
+            }
+        }
+        self.width
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -245,8 +276,13 @@ mod tests {
     fn two_directions_need_two_components_and_round_trip() {
         let x = rows(200);
         let a = Analysis::of(&x, 12);
-        assert_eq!(a.components_for(&x, &[1e-6; 4]), 2);
-        assert_eq!(a.components_for(&x, &[1e6; 4]), 0);
+        let mut t = Truncation::new(&a, &x, &[1.0; 4]);
+        assert_eq!(t.components_for(&a, 1e6), 0);
+        assert_eq!(t.components_for(&a, 1e-6), 2);
+        assert_eq!(t.components_for(&a, 1e6), 0);
+        // A point with a third of the share needs the tolerance three times tighter.
+        let mut feet = Truncation::new(&a, &x, &[1.0, 1.0, 1.0, 1.0 / 3.0]);
+        assert_eq!(feet.components_for(&a, 1e-6), 2);
         let m = a.model(2, 0.01, 0.001);
         let c = m.coefficients(&x);
         let mut pose = vec![0.0; 12];
