@@ -166,10 +166,8 @@ impl Coder {
         for (f, x) in out.chunks_exact_mut(w).enumerate() {
             model.pose(&c[f * k..(f + 1) * k], x);
         }
-        let lead_n = keys
-            .lead
-            .first()
-            .map_or(0, |_| self.lead_frames(keys.segment, frames));
+        // A next model of no components still blends: into its mean.
+        let lead_n = self.lead_frames(keys.segment, frames);
         if lead_n > 0 {
             let next = &self.params.models[keys.segment + 1];
             let (kn, cn) = (next.k(), self.coefficients(&keys.lead, lead_n));
