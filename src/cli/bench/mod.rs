@@ -32,7 +32,7 @@ pub struct BenchArgs {
     /// Mean-error bounds in mm.
     #[arg(long = "mean-error", value_delimiter = ',', default_value = "3")]
     mean_error: Vec<f64>,
-    /// Folder for table.md, results.csv and rd.png.
+    /// Folder for table.md, results.csv, rd.png (rate–distortion) and speed.png.
     #[arg(long, default_value = "bench-out")]
     out: PathBuf,
     /// Repeat each decode (and each decoder's construction) this many times to time it.
@@ -535,11 +535,15 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     println!("{table}");
     if let Err(e) = write_outputs(&args.out, &table, &csv(&all))
         .and_then(|()| plot::rate_distortion(&sums, &args.out.join("rd.png")))
+        .and_then(|()| plot::speed(&sums, &args.out.join("speed.png")))
     {
         eprintln!("mocapstore bench: {e}");
         return ExitCode::FAILURE;
     }
-    eprintln!("wrote {}/table.md, results.csv, rd.png", args.out.display());
+    eprintln!(
+        "wrote {}/table.md, results.csv, rd.png, speed.png",
+        args.out.display()
+    );
     if failures > 0 {
         eprintln!("{failures} encodes failed");
         return ExitCode::FAILURE;
