@@ -287,7 +287,13 @@ impl<'a> Take<'a> {
                 let up = consider(START + 2)?;
                 let mut b = if up { START + 2 } else { START };
                 let (mut j, mut misses) = (b, usize::from(!up));
-                let step = |j: usize| if up { j.checked_add(2) } else { j.checked_sub(2) };
+                let step = |j: usize| {
+                    if up {
+                        j.checked_add(2)
+                    } else {
+                        j.checked_sub(2)
+                    }
+                };
                 while misses < 2 {
                     let Some(n) = step(j).filter(|&n| (8..=64).contains(&n)) else {
                         break;
