@@ -17,6 +17,8 @@
 //!
 //! Pure math over frames of numbers.
 
+use std::ops::Range;
+
 use nalgebra::{DMatrix, DVector};
 
 use super::linalg::{add_outer_products, dot, leading_eigen};
@@ -60,6 +62,24 @@ pub fn cuts(data: &[f64], width: usize, p: &Params) -> Vec<usize> {
     while let Some(cut) = next_cut(data, width, frames, start, p) {
         out.push(cut);
         start = cut;
+    }
+    out
+}
+
+/// The segments `cuts` (increasing, inside `0..frames`) make of `frames` frames, each longer
+/// than `longest` split evenly into the fewest pieces no longer than it: what codecs that
+/// code a segment per chunk (`spca`) or clip (`mdtt`'s adaptive clips) code.
+pub fn pieces(cuts: &[usize], frames: usize, longest: usize) -> Vec<Range<usize>> {
+    let mut bounds = vec![0];
+    bounds.extend_from_slice(cuts);
+    bounds.push(frames);
+    let mut out = Vec::new();
+    for w in bounds.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let parts = (b - a).div_ceil(longest.max(1)).max(1);
+        for i in 0..parts {
+            out.push(a + (b - a) * i / parts..a + (b - a) * (i + 1) / parts);
+        }
     }
     out
 }
@@ -206,6 +226,16 @@ impl Model {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn long_segments_are_split_evenly() {
+        assert_eq!(pieces(&[], 10, 100), vec![0..10]);
+        assert_eq!(pieces(&[4], 10, 100), vec![0..4, 4..10]);
+        let s = pieces(&[], 2 * 4096 + 1, 4096);
+        assert_eq!(s.len(), 3);
+        assert!(s.iter().all(|r| r.len() <= 4096));
+        assert_eq!(s.last().unwrap().end, 2 * 4096 + 1);
+    }
     use crate::rng::Rng;
 
     /// `frames` frames of `width` coordinates moving in a few directions of their own.

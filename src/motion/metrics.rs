@@ -264,10 +264,7 @@ pub fn accelerations(x: &[f32], points: usize) -> Vec<f64> {
 }
 
 fn distance(p: &[f32], q: &[f32]) -> f64 {
-    let d = (0..3)
-        .map(|k| (f64::from(p[k]) - f64::from(q[k])).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let d = norm([0, 1, 2].map(|k| f64::from(p[k]) - f64::from(q[k])));
     if d.is_nan() {
         0.0
     } else {

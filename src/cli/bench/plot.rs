@@ -24,9 +24,7 @@ const COLOURS: [RGBColor; 7] = [
 /// Draw `totals` (one row per codec and bound) to a PNG; rows with mean bounds and codecs
 /// with fewer than two max bounds are left out.
 pub fn rate_distortion(totals: &[Row], path: &Path) -> Result<(), String> {
-    // The bitmap backend draws text with a font we embed, so no system fonts are needed.
-    let _ =
-        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+    register_font();
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for r in totals {
         let ErrorBound::MaxMm(b) = r.bound else {
@@ -81,14 +79,29 @@ pub fn rate_distortion(totals: &[Row], path: &Path) -> Result<(), String> {
             .draw_series(pts.iter().map(|&p| Circle::new(p, 4, colour.filled())))
             .map_err(|e| err(&e))?;
     }
+    legend(&mut chart, SeriesLabelPosition::MiddleRight).map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))
+}
+
+/// The bitmap backend draws text with a font we embed, so no system fonts are needed.
+fn register_font() {
+    let _ =
+        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+}
+
+/// Both charts' legend, at `position`.
+fn legend<'a, X: Ranged, Y: Ranged>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, Cartesian2d<X, Y>>,
+    position: SeriesLabelPosition,
+) -> Result<(), String> {
     chart
         .configure_series_labels()
+        .position(position)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .label_font(("sans-serif", 16))
         .draw()
-        .map_err(|e| err(&e))?;
-    root.present().map_err(|e| err(&e))
+        .map_err(|e| e.to_string())
 }
 
 /// A log axis's range around positive values: a little room either side.
@@ -105,8 +118,7 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 /// Encode and decode frames/s of each codec (one row per label, one dot per bound; the
 /// decoder built beforehand, as a server keeps it), on a log axis.
 pub fn speed(totals: &[Row], path: &Path) -> Result<(), String> {
-    let _ =
-        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+    register_font();
     let mut labels: Vec<String> = Vec::new();
     let mut points: Vec<(usize, f64, f64)> = Vec::new();
     for r in totals {
@@ -180,14 +192,7 @@ pub fn speed(totals: &[Row], path: &Path) -> Result<(), String> {
         .map_err(|e| err(&e))?
         .label("decode")
         .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 6, dec.filled()));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperMiddle)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 16))
-        .draw()
-        .map_err(|e| err(&e))?;
+    legend(&mut chart, SeriesLabelPosition::UpperMiddle).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))
 }
 

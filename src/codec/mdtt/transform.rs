@@ -70,19 +70,10 @@ pub fn clips_for(input: &Input<'_>, clip: usize, mode: ClipMode) -> Vec<(usize, 
                 }
             }
             let cuts = segment::cuts(&poses, w, &segment::Params::at(input.fps));
-            let mut bounds = vec![0];
-            bounds.extend(cuts);
-            bounds.push(input.frames);
-            let mut out = Vec::new();
-            for s in bounds.windows(2) {
-                let (a, b) = (s[0], s[1]);
-                let parts = (b - a).div_ceil(clip).max(1);
-                for i in 0..parts {
-                    let (f0, f1) = (a + (b - a) * i / parts, a + (b - a) * (i + 1) / parts);
-                    out.push((f0, f1 - f0));
-                }
-            }
-            out
+            segment::pieces(&cuts, input.frames, clip)
+                .into_iter()
+                .map(|r| (r.start, r.len()))
+                .collect()
         }
     }
 }

@@ -25,7 +25,7 @@ use super::torso::{self, to_local};
 use crate::codec::entropy::Encoder;
 use crate::codec::error::{Error, Result};
 use crate::codec::measure::max_mean;
-use crate::codec::search::narrow;
+use crate::codec::search::largest_meeting;
 use crate::codec::{residual, segment, ChunkOut, CodecOutput, Input, Target};
 
 /// The longest segment, frames: a longer one is split evenly. Segments are chunks, and a
@@ -96,35 +96,23 @@ impl<'a> Take<'a> {
             .map(|&p| if feet[p] { FOOT } else { 1.0 })
             .collect();
         let width = 3 * posed.len();
-        let w = input.width();
-        let mut normalised = vec![0.0; frames * width];
-        for f in 0..frames {
-            let row = &input.data[f * w..(f + 1) * w];
-            let placed = match torso {
-                Some((up, t)) => {
-                    let mut tv = [0.0; 9];
-                    for (j, &p) in t.iter().enumerate() {
-                        for a in 0..3 {
-                            tv[j * 3 + a] = f64::from(row[p * 3 + a]);
-                        }
-                    }
-                    torso::placement(&tv, up)
-                }
-                None => torso::Placement::IDENTITY,
-            };
-            let up = torso.map_or(0, |(up, _)| up);
-            for (i, &p) in posed.iter().enumerate() {
-                let x = [0, 1, 2].map(|a| f64::from(row[p * 3 + a]));
-                normalised[f * width + i * 3..f * width + i * 3 + 3]
-                    .copy_from_slice(&to_local(&placed, up, x));
+        let up = torso.map_or(0, |(up, _)| up);
+        let normalised = normalise(input.data, input.width(), &posed, up, |row| match torso {
+            Some((up, t)) => {
+                let tv: Vec<f64> = t
+                    .iter()
+                    .flat_map(|&p| (0..3).map(move |a| f64::from(row[p * 3 + a])))
+                    .collect();
+                torso::placement(&tv, up)
             }
-        }
+            None => torso::Placement::IDENTITY,
+        });
         let cuts = if options.segmented {
             segment::cuts(&normalised, width, &segment::Params::at(input.fps))
         } else {
             Vec::new()
         };
-        let segments = split_long(&cuts, frames);
+        let segments = segment::pieces(&cuts, frames, MAX_SEGMENT);
         let analyses: Vec<Analysis> = segments
             .iter()
             .map(|r| Analysis::of(&normalised[r.start * width..r.end * width], width))
@@ -233,15 +221,14 @@ impl<'a> Take<'a> {
         };
         let (placed, _) = coder.placements(&keys, n);
         let up = self.torso.map_or(0, |(up, _)| up);
-        let mut rows = vec![0.0; n * width];
-        for f in 0..n {
-            let row = &self.input.data[(r.start + f) * w..(r.start + f + 1) * w];
-            for (j, &p) in self.posed.iter().enumerate() {
-                let x = [0, 1, 2].map(|a| f64::from(row[p * 3 + a]));
-                rows[f * width + j * 3..f * width + j * 3 + 3]
-                    .copy_from_slice(&to_local(&placed[f], up, x));
-            }
-        }
+        let mut next = placed.iter();
+        let rows = normalise(
+            &self.input.data[r.start * w..r.end * w],
+            w,
+            &self.posed,
+            up,
+            |_| *next.next().expect("a placement per frame"),
+        );
         let trajectories = |model: &super::model::Model, rows: &[f64]| -> Vec<Keys> {
             let c = model.coefficients(rows);
             (0..model.k())
@@ -312,54 +299,48 @@ impl<'a> Take<'a> {
                 Ok(trial.out)
             }
             Target::Mean(_) => {
-                let meets = |j: usize| -> Result<Option<Trial>> {
-                    let trial = self.trial(scale(j), 0.0)?;
-                    Ok(target.holds(trial.max, trial.mean).then_some(trial))
-                };
-                // The largest grid scale that meets it: from the bound itself, gallop down
-                // to one that does, up to one that does not, then bisect.
-                let (mut lo, mut hi) = (32usize, 33usize);
-                let mut kept = meets(lo)?;
-                while kept.is_none() {
-                    if lo == 0 {
-                        return Err(Error::BoundMissed {
-                            codec: "spca".into(),
-                            detail: format!("no scale down to {:.3e} meets it", scale(0)),
-                        });
+                // The largest grid scale (up to 16t) that meets it, galloping from the bound
+                // itself; the trial of each scale that met it is kept, the largest's returned.
+                let mut kept: Option<(u32, Trial)> = None;
+                largest_meeting(Some(32), |j| {
+                    if j > 64 {
+                        return Ok(false);
                     }
-                    hi = lo;
-                    lo = lo.saturating_sub(4);
-                    kept = meets(lo)?;
-                }
-                if hi == 33 {
-                    hi = 64;
-                    let mut j = 36;
-                    while j < 64 {
-                        match meets(j)? {
-                            Some(trial) => {
-                                (lo, kept) = (j, Some(trial));
-                                j += 4;
-                            }
-                            None => {
-                                hi = j;
-                                break;
-                            }
-                        }
+                    let trial = self.trial(scale(j as usize), 0.0)?;
+                    let meets = target.holds(trial.max, trial.mean);
+                    if meets && kept.as_ref().is_none_or(|(k, _)| j > *k) {
+                        kept = Some((j, trial));
                     }
-                }
-                narrow(lo, hi, |j| {
-                    Ok(match meets(j)? {
-                        Some(trial) => {
-                            kept = Some(trial);
-                            true
-                        }
-                        None => false,
-                    })
+                    Ok(meets)
                 })?;
-                Ok(kept.expect("a scale met the bound").out)
+                kept.map(|(_, trial)| trial.out)
+                    .ok_or_else(|| Error::BoundMissed {
+                        codec: "spca".into(),
+                        detail: format!("no scale down to {:.3e} meets it", scale(0)),
+                    })
             }
         }
     }
+}
+
+/// The posed points of each frame of `data` (`frames × w`) in the body's frame that
+/// `placement` gives for that frame's row: `frames × 3·posed`.
+fn normalise(
+    data: &[f32],
+    w: usize,
+    posed: &[usize],
+    up: u8,
+    mut placement: impl FnMut(&[f32]) -> torso::Placement,
+) -> Vec<f64> {
+    let mut out = Vec::with_capacity(data.len() / w.max(1) * 3 * posed.len());
+    for row in data.chunks_exact(w) {
+        let placed = placement(row);
+        for &p in posed {
+            let x = [0, 1, 2].map(|a| f64::from(row[p * 3 + a]));
+            out.extend_from_slice(&to_local(&placed, up, x));
+        }
+    }
+    out
 }
 
 struct Trial {
@@ -367,35 +348,4 @@ struct Trial {
     bytes: usize,
     max: f64,
     mean: f64,
-}
-
-/// Segments from cuts, each at most [`MAX_SEGMENT`] frames (longer ones split evenly).
-fn split_long(cuts: &[usize], frames: usize) -> Vec<Range<usize>> {
-    let mut bounds = vec![0];
-    bounds.extend_from_slice(cuts);
-    bounds.push(frames);
-    let mut out = Vec::new();
-    for w in bounds.windows(2) {
-        let (a, b) = (w[0], w[1]);
-        let parts = (b - a).div_ceil(MAX_SEGMENT).max(1);
-        for i in 0..parts {
-            out.push(a + (b - a) * i / parts..a + (b - a) * (i + 1) / parts);
-        }
-    }
-    out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn long_segments_are_split_evenly() {
-        assert_eq!(split_long(&[], 10), vec![0..10]);
-        assert_eq!(split_long(&[4], 10), vec![0..4, 4..10]);
-        let s = split_long(&[], 2 * MAX_SEGMENT + 1);
-        assert_eq!(s.len(), 3);
-        assert!(s.iter().all(|r| r.len() <= MAX_SEGMENT));
-        assert_eq!(s.last().unwrap().end, 2 * MAX_SEGMENT + 1);
-    }
 }
