@@ -649,6 +649,42 @@ mod tests {
     }
 
     #[test]
+    fn adaptive_clips_start_where_the_behaviour_changes_and_meet_the_bound() {
+        use crate::codec::{encode_variant, ErrorBound};
+        let m = crate::motion::synthetic::two_behaviours();
+        let bound = ErrorBound::MaxMm(1.0);
+        let enc = encode_variant(&m, CodecId::Mdtt, bound, None, |i, t| {
+            encode_clips(i, t, ClipMode::Adaptive)
+        })
+        .unwrap();
+        assert!(enc.stats.max_mm <= 1.0);
+        let starts: Vec<u32> = enc
+            .container
+            .header
+            .chunks
+            .iter()
+            .map(|c| c.first_frame)
+            .collect();
+        // Equal clips start at multiples of 280 frames; adaptive ones at the cut near 400.
+        assert!(
+            starts.iter().any(|&s| s.abs_diff(400) <= 60),
+            "clips start at {starts:?}"
+        );
+        let equal = encode_variant(&m, CodecId::Mdtt, bound, None, |i, t| {
+            encode_clips(i, t, ClipMode::Equal)
+        })
+        .unwrap();
+        let equal_starts: Vec<u32> = equal
+            .container
+            .header
+            .chunks
+            .iter()
+            .map(|c| c.first_frame)
+            .collect();
+        assert_eq!(equal_starts, vec![0, 280, 560]);
+    }
+
+    #[test]
     fn basis_and_coefficients_match_a_dense_svd_reference() {
         let (frames, points) = (600, 6);
         let data = smooth(frames, points);
