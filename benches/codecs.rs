@@ -28,11 +28,11 @@ fn decode(c: &mut Criterion) {
     g.sample_size(20);
     g.throughput(Throughput::Elements(m.frame_count() as u64));
     for (codec, bound) in [
-        (CodecId::Raw, ErrorBound::MaxMm(1.0)),
-        (CodecId::Quant, ErrorBound::MaxMm(1.0)),
-        (CodecId::Quant, ErrorBound::MeanMm(3.0)),
-        (CodecId::Mdtt, ErrorBound::MaxMm(1.0)),
-        (CodecId::Mdtt, ErrorBound::MeanMm(3.0)),
+        (CodecId::Raw, ErrorBound::max(1.0)),
+        (CodecId::Quant, ErrorBound::max(1.0)),
+        (CodecId::Quant, ErrorBound::mean(3.0)),
+        (CodecId::Mdtt, ErrorBound::max(1.0)),
+        (CodecId::Mdtt, ErrorBound::mean(3.0)),
     ] {
         let enc = codec::encode(&m, codec, bound).expect("encodes");
         g.bench_function(format!("{codec} {bound}"), |b| {
@@ -65,12 +65,12 @@ fn decode(c: &mut Criterion) {
     };
     let set = Arc::new(train_bases(&[input], 4, &SetOptions::default()).expect("trains"));
     for (codec, bound, basis) in [
-        (CodecId::LsdtFrame, ErrorBound::MaxMm(1.0), &lsdt),
-        (CodecId::LsdtFrame, ErrorBound::MeanMm(3.0), &lsdt),
-        (CodecId::LsdtClip, ErrorBound::MaxMm(1.0), &lsdt),
-        (CodecId::LsdtClip, ErrorBound::MeanMm(3.0), &lsdt),
-        (CodecId::MdttShared, ErrorBound::MaxMm(1.0), &set),
-        (CodecId::MdttShared, ErrorBound::MeanMm(3.0), &set),
+        (CodecId::LsdtFrame, ErrorBound::max(1.0), &lsdt),
+        (CodecId::LsdtFrame, ErrorBound::mean(3.0), &lsdt),
+        (CodecId::LsdtClip, ErrorBound::max(1.0), &lsdt),
+        (CodecId::LsdtClip, ErrorBound::mean(3.0), &lsdt),
+        (CodecId::MdttShared, ErrorBound::max(1.0), &set),
+        (CodecId::MdttShared, ErrorBound::mean(3.0), &set),
     ] {
         let enc = codec::encode_with(&m, codec, bound, Some(basis)).expect("encodes");
         let reader = codec::Reader::new(enc.container.header.clone(), Some(basis.clone())).unwrap();
@@ -102,13 +102,24 @@ fn encode(c: &mut Criterion) {
     g.throughput(Throughput::Elements(m.frame_count() as u64));
     // The paper's setting: one rank, one step, no search; k = 30 at a 3 mm-ish step.
     g.bench_function("mdtt fixed k=30 (paper setting)", |b| {
-        b.iter(|| mdtt::encode_with(&input, 30, 3.0 / mm, Target::Mean(3.0 / mm)).unwrap())
+        b.iter(|| {
+            mdtt::encode_with(
+                &input,
+                30,
+                3.0 / mm,
+                Target {
+                    max: 30.0 / mm,
+                    mean: Some(3.0 / mm),
+                },
+            )
+            .unwrap()
+        })
     });
     g.bench_function("mdtt rate-controlled mean 3 mm", |b| {
-        b.iter(|| codec::encode(&m, CodecId::Mdtt, ErrorBound::MeanMm(3.0)).unwrap())
+        b.iter(|| codec::encode(&m, CodecId::Mdtt, ErrorBound::mean(3.0)).unwrap())
     });
     g.bench_function("quant rate-controlled max 1 mm", |b| {
-        b.iter(|| codec::encode(&m, CodecId::Quant, ErrorBound::MaxMm(1.0)).unwrap())
+        b.iter(|| codec::encode(&m, CodecId::Quant, ErrorBound::max(1.0)).unwrap())
     });
     g.finish();
 }

@@ -167,7 +167,7 @@ fn freeze_current_bitstreams() {
         torso: None,
     };
     let set = Arc::new(train_bases(&[input(None)], 2, &SetOptions::default()).unwrap());
-    let bound = ErrorBound::MaxMm(1.0);
+    let bound = ErrorBound::max(1.0);
     let mut out: Vec<(String, Container, Option<Arc<Basis>>, String)> = Vec::new();
     for (codec, basis) in [
         (CodecId::Raw, None),

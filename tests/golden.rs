@@ -38,19 +38,19 @@ fn cases() -> Vec<(String, String)> {
         ("walker-500x5@60-gaps", walker(500, 5, 60.0, 2, 0.3)),
     ];
     let encodings = [
-        (CodecId::Raw, ErrorBound::MaxMm(1.0)),
-        (CodecId::Quant, ErrorBound::MaxMm(1.0)),
-        (CodecId::Quant, ErrorBound::MeanMm(3.0)),
-        (CodecId::Mdtt, ErrorBound::MaxMm(1.0)),
-        (CodecId::Mdtt, ErrorBound::MeanMm(3.0)),
-        (CodecId::LsdtClip, ErrorBound::MaxMm(1.0)),
-        (CodecId::LsdtClip, ErrorBound::MeanMm(3.0)),
-        (CodecId::LsdtFrame, ErrorBound::MaxMm(1.0)),
-        (CodecId::LsdtFrame, ErrorBound::MeanMm(3.0)),
-        (CodecId::MdttShared, ErrorBound::MaxMm(1.0)),
-        (CodecId::MdttShared, ErrorBound::MeanMm(3.0)),
-        (CodecId::Spca, ErrorBound::MaxMm(1.0)),
-        (CodecId::Spca, ErrorBound::MeanMm(3.0)),
+        (CodecId::Raw, ErrorBound::max(1.0)),
+        (CodecId::Quant, ErrorBound::max(1.0)),
+        (CodecId::Quant, ErrorBound::mean(3.0)),
+        (CodecId::Mdtt, ErrorBound::max(1.0)),
+        (CodecId::Mdtt, ErrorBound::mean(3.0)),
+        (CodecId::LsdtClip, ErrorBound::max(1.0)),
+        (CodecId::LsdtClip, ErrorBound::mean(3.0)),
+        (CodecId::LsdtFrame, ErrorBound::max(1.0)),
+        (CodecId::LsdtFrame, ErrorBound::mean(3.0)),
+        (CodecId::MdttShared, ErrorBound::max(1.0)),
+        (CodecId::MdttShared, ErrorBound::mean(3.0)),
+        (CodecId::Spca, ErrorBound::max(1.0)),
+        (CodecId::Spca, ErrorBound::mean(3.0)),
     ];
     let mut out = Vec::new();
     for (name, m) in &motions {

@@ -23,8 +23,11 @@ pub struct IngestArgs {
     /// Comma-separated tags for every file.
     #[arg(long)]
     tags: Option<String>,
+    /// No decoded sample farther than this, mm (default 1; 10× the mean when only a mean
+    /// is given: the default cap).
     #[arg(long = "max-error-mm")]
     max_error_mm: Option<f64>,
+    /// Mean error at most this, mm; with --max-error-mm, both hold.
     #[arg(long = "mean-error-mm")]
     mean_error_mm: Option<f64>,
     /// auto, or a codec id.

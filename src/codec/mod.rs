@@ -129,19 +129,52 @@ impl<'a> Input<'a> {
     }
 }
 
-/// A bound in the take's own units (the pipeline converts from millimetres).
+/// A bound in the take's own units (the pipeline converts from millimetres): every sample
+/// within `max`, and the mean within `mean` when one is asked for.
+///
+/// Codecs meet both with one rule: the residual layer (or the step) holds the max, and the
+/// search aims at the mean when there is one — a setting is kept only if it [`holds`]
+/// both, so a mean bound never lets a sample past the max.
+///
+/// [`holds`]: Target::holds
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Target {
-    Max(f64),
-    Mean(f64),
+pub struct Target {
+    pub max: f64,
+    pub mean: Option<f64>,
 }
 
 impl Target {
+    /// Every sample within `t`.
+    pub const fn max(t: f64) -> Self {
+        Target { max: t, mean: None }
+    }
+
     pub fn holds(self, max: f64, mean: f64) -> bool {
-        match self {
-            Target::Max(t) => max <= t,
-            Target::Mean(t) => mean <= t,
+        max <= self.max && self.mean.is_none_or(|m| mean <= m)
+    }
+
+    /// The tighter of the two bounds: the scale a codec's steps start from (a max bound
+    /// at this is a mean bound too).
+    pub fn tightest(self) -> f64 {
+        self.mean.map_or(self.max, |m| m.min(self.max))
+    }
+
+    /// Both bounds times `f` (a share of the bound given to one stage of a codec).
+    pub fn scaled(self, f: f64) -> Target {
+        Target {
+            max: self.max * f,
+            mean: self.mean.map(|m| m * f),
         }
+    }
+}
+
+impl std::fmt::Display for Target {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "max {:.6}", self.max)?;
+        if let Some(m) = self.mean {
+            write!(f, " and mean {m:.6}")?;
+        }
+        write!(f, " (take units)")
     }
 }
 

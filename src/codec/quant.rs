@@ -41,13 +41,13 @@ pub fn step_for(data: &[f32], valid: Option<&[bool]>, target: Target) -> Result<
     let amplitude = data.iter().fold(0f64, |a, &x| a.max(f64::from(x).abs()));
     // Integers must stay well inside i32 after prediction (which can double them).
     let min_step = amplitude / f64::from(1 << 28);
-    let t = match target {
-        Target::Max(t) | Target::Mean(t) => t,
-    };
-    // Per coordinate error ≤ step/2, so step = 2t/√3 meets a max bound by construction.
+    // Per coordinate error ≤ step/2, so step = 2t/√3 meets a max bound of t by
+    // construction, and a mean bound of t too.
+    let t = target.tightest();
     let mut step = 2.0 * t / 3f64.sqrt();
-    if let Target::Mean(_) = target {
-        // The mean error of uniform quantisation is ~0.48·step: grow, then bisect.
+    if target.mean.is_some() {
+        // The mean error of uniform quantisation is ~0.48·step: grow while both bounds
+        // hold (the max stops it where the mean does not), then bisect.
         let (mut lo, mut hi) = (step, step);
         while meets(hi) && hi < 1e12 {
             lo = hi;

@@ -41,9 +41,12 @@ impl<'a> StreamSpec<'a> {
             .ok_or_else(|| Error::Basis("this codec streams with a shared basis".into()))
     }
 
-    /// The bound in the take's units, a hair inside as batch encoding aims.
+    /// The bound in the take's units, a hair inside as batch encoding aims: a stream codes
+    /// every sample within the tighter of the two bounds, which meets a mean bound too
+    /// (a frame-by-frame coder cannot aim at a mean it has not yet seen).
     pub fn target(&self) -> f64 {
-        self.bound.in_units(self.metres_per_unit * 1000.0)
+        let t = self.bound.target(self.metres_per_unit * 1000.0);
+        t.tightest()
     }
 }
 
@@ -249,7 +252,7 @@ impl StreamEncoder {
         a.add(&original, &decoded);
         let max_mm = a.finish(self.mm_per_unit).max_mm;
         let index = self.handed_out;
-        if max_mm > self.bound.mm() {
+        if max_mm > self.bound.tightest_mm() {
             return Err(Error::BoundMissed {
                 codec: self.header.codec.to_string(),
                 detail: format!(
@@ -342,7 +345,7 @@ mod tests {
             points: 4,
             fps: 60.0,
             metres_per_unit: 0.001,
-            bound: ErrorBound::MaxMm(1.0),
+            bound: ErrorBound::max(1.0),
             chunk_frames: 30,
             shared: Some(basis),
         }

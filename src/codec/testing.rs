@@ -42,13 +42,13 @@ pub fn damage_channels(d: &dyn ChunkDecoder, bytes: &[u8], frames: usize) {
 pub fn meets_bounds_and_shrinks(m: &Motion, codec: CodecId, bounds: [f64; 3]) {
     let mut last = usize::MAX;
     for mm in bounds {
-        let enc = encode(m, codec, ErrorBound::MaxMm(mm)).unwrap();
+        let enc = encode(m, codec, ErrorBound::max(mm)).unwrap();
         assert!(enc.stats.max_mm <= mm, "{} > {mm}", enc.stats.max_mm);
         // The search lands close under the bound, not far below it.
         assert!(enc.stats.max_mm > 0.5 * mm, "{} ≪ {mm}", enc.stats.max_mm);
         assert!(enc.stored_bytes < last);
         last = enc.stored_bytes;
     }
-    let enc = encode(m, codec, ErrorBound::MeanMm(2.0)).unwrap();
+    let enc = encode(m, codec, ErrorBound::mean(2.0)).unwrap();
     assert!(enc.stats.mean_mm <= 2.0);
 }

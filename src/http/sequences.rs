@@ -99,8 +99,10 @@ impl IngestQuery {
                 }
             };
         }
-        if self.max_error_mm.is_none() && self.mean_error_mm.is_none() {
+        if self.max_error_mm.is_none() {
             self.max_error_mm = num("max-error-mm")?;
+        }
+        if self.mean_error_mm.is_none() {
             self.mean_error_mm = num("mean-error-mm")?;
         }
         Ok(self)

@@ -145,7 +145,7 @@ fn check_record(take: &Take, header: &Header, index: &[ChunkEntry], live: bool) 
         ));
     }
     // Statistics against the bound and the sizes they were computed from.
-    let slack = 1e-9 * take.bound.mm().max(1.0);
+    let slack = 1e-9 * take.bound.max_mm().max(1.0);
     if !take.bound.holds(take.max_mm - slack, take.mean_mm - slack) {
         problems.push(format!(
             "stored errors (max {} mm, mean {} mm) are over its bound, {}",

@@ -202,7 +202,7 @@ mod tests {
         let enc = codec::encode(
             &walker(20, 2, 30.0, 1, 0.0),
             CodecId::Quant,
-            ErrorBound::MaxMm(1.0),
+            ErrorBound::max(1.0),
         )
         .unwrap();
         Arc::new(Prepared {

@@ -29,7 +29,7 @@ pub struct Take {
     pub layout: String,
     pub source_format: String,
     pub codec: CodecId,
-    /// Stored as `bound_kind` and `bound_mm`.
+    /// Stored as `max_bound_mm` and `mean_bound_mm`.
     #[serde(flatten, with = "bound_fields")]
     pub bound: ErrorBound,
     pub raw_bytes: u64,
@@ -162,7 +162,7 @@ impl Take {
                 .codec
                 .parse()
                 .map_err(|e| corrupt(format!("codec: {e}")))?,
-            bound: ErrorBound::from_kind(&row.bound_kind, row.bound_mm)
+            bound: ErrorBound::from_stored(row.max_bound_mm, row.mean_bound_mm)
                 .map_err(|e| corrupt(format!("bound: {e}")))?,
             raw_bytes: bytes("raw_bytes", row.totals.raw_bytes)?,
             stored_bytes: bytes("stored_bytes", row.totals.stored_bytes)?,
@@ -236,8 +236,8 @@ impl Take {
             layout: self.layout.clone(),
             source_format: self.source_format.clone(),
             codec: self.codec.to_string(),
-            bound_kind: self.bound.kind().to_string(),
-            bound_mm: self.bound.mm(),
+            max_bound_mm: self.bound.max_mm(),
+            mean_bound_mm: self.bound.mean_mm(),
             header: self.header.clone(),
             meta,
             created_at: self.created_at,
@@ -304,30 +304,52 @@ impl Take {
     }
 }
 
-/// An [`ErrorBound`] as two fields, `bound_kind` (`max`, `mean`) and `bound_mm`: the names
-/// of the stored columns and of the API.
+/// An [`ErrorBound`] as the stored columns' fields: `max_bound_mm`, `mean_bound_mm` (absent
+/// when no mean was asked for), and, shown but not read back, `max_bound_is_default` (the
+/// max is the default cap of the mean). Manifests exported before caps existed carry
+/// `bound_kind` and `bound_mm`; a mean bound of theirs had no max, so it reads back with the
+/// loosest max a client may state, as migration 0005 stores such takes.
 mod bound_fields {
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
     use crate::codec::ErrorBound;
+    use crate::limits::MAX_BOUND_MM;
 
-    #[derive(Serialize, Deserialize)]
-    struct Fields {
-        bound_kind: String,
-        bound_mm: f64,
+    #[derive(Serialize)]
+    struct Shown {
+        max_bound_mm: f64,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        mean_bound_mm: Option<f64>,
+        max_bound_is_default: bool,
+    }
+
+    #[derive(Deserialize)]
+    struct Read {
+        max_bound_mm: Option<f64>,
+        mean_bound_mm: Option<f64>,
+        bound_kind: Option<String>,
+        bound_mm: Option<f64>,
     }
 
     pub fn serialize<S: Serializer>(b: &ErrorBound, s: S) -> Result<S::Ok, S::Error> {
-        Fields {
-            bound_kind: b.kind().to_string(),
-            bound_mm: b.mm(),
+        Shown {
+            max_bound_mm: b.max_mm(),
+            mean_bound_mm: b.mean_mm(),
+            max_bound_is_default: b.max_is_default(),
         }
         .serialize(s)
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<ErrorBound, D::Error> {
-        let f = Fields::deserialize(d)?;
-        ErrorBound::from_kind(&f.bound_kind, f.bound_mm).map_err(serde::de::Error::custom)
+        use serde::de::Error;
+        let f = Read::deserialize(d)?;
+        let (max, mean) = match (f.max_bound_mm, f.bound_kind.as_deref(), f.bound_mm) {
+            (Some(max), _, _) => (max, f.mean_bound_mm),
+            (None, Some("max"), Some(v)) => (v, None),
+            (None, Some("mean"), Some(v)) => (MAX_BOUND_MM.max(v), Some(v)),
+            _ => return Err(D::Error::custom("a take needs max_bound_mm")),
+        };
+        ErrorBound::from_stored(max, mean).map_err(D::Error::custom)
     }
 }
 
@@ -350,7 +372,7 @@ mod tests {
             layout: "ab".into(),
             source_format: "trc".into(),
             codec: CodecId::Quant,
-            bound: ErrorBound::MeanMm(0.5),
+            bound: ErrorBound::mean(0.5),
             raw_bytes: 240,
             stored_bytes: 100,
             ratio: 2.4,
@@ -407,7 +429,10 @@ mod tests {
             );
         }
         let mut row = take().to_row().unwrap();
-        row.bound_kind = "median".into();
+        row.max_bound_mm = f64::NAN;
+        assert!(matches!(Take::from_row(row, None), Err(Error::Corrupt(_))));
+        let mut row = take().to_row().unwrap();
+        row.mean_bound_mm = Some(-1.0);
         assert!(matches!(Take::from_row(row, None), Err(Error::Corrupt(_))));
         let mut row = take().to_row().unwrap();
         row.codec = "zip".into();
@@ -421,12 +446,33 @@ mod tests {
     fn the_serialised_take_names_its_bound_as_stored() {
         let v = serde_json::to_value(take()).unwrap();
         assert_eq!(
-            (v["bound_kind"].as_str(), v["bound_mm"].as_f64()),
-            (Some("mean"), Some(0.5))
+            (
+                v["max_bound_mm"].as_f64(),
+                v["mean_bound_mm"].as_f64(),
+                v["max_bound_is_default"].as_bool()
+            ),
+            (Some(5.0), Some(0.5), Some(true))
         );
         assert_eq!(v["codec"], "quant");
         assert!(v.get("header").is_none() && v.get("bound").is_none());
-        let back: Take = serde_json::from_value(v).unwrap();
-        assert_eq!(back.bound, ErrorBound::MeanMm(0.5));
+        let back: Take = serde_json::from_value(v.clone()).unwrap();
+        assert_eq!(back.bound, ErrorBound::mean(0.5));
+        // A manifest from before caps: a max bound reads as it was; a mean bound had no
+        // max, and reads back with the loosest.
+        let mut old = v.as_object().unwrap().clone();
+        for f in ["max_bound_mm", "mean_bound_mm", "max_bound_is_default"] {
+            old.remove(f);
+        }
+        for (kind, want) in [
+            ("max", ErrorBound::max(0.5)),
+            ("mean", ErrorBound::both(crate::limits::MAX_BOUND_MM, 0.5)),
+        ] {
+            old.insert("bound_kind".into(), kind.into());
+            old.insert("bound_mm".into(), 0.5.into());
+            let back: Take = serde_json::from_value(old.clone().into()).unwrap();
+            assert_eq!(back.bound, want);
+        }
+        old.remove("bound_kind");
+        assert!(serde_json::from_value::<Take>(old.into()).is_err());
     }
 }

@@ -58,9 +58,9 @@ pub async fn select(store: &Store, req: &TrainRequest) -> Result<Selection> {
             "k must list numbers of bases in 1..=32".into(),
         ));
     }
-    let bound_mm = crate::codec::ErrorBound::new_max(req.max_error_mm.unwrap_or(1.0))
+    let bound_mm = crate::codec::ErrorBound::from_request(req.max_error_mm, None)
         .map_err(|e| Error::InvalidRequest(e.to_string()))?
-        .mm();
+        .max_mm();
     let sparsity = req.sparsity.unwrap_or(8);
     let max_iterations = req.max_iterations.unwrap_or(50);
     let max_samples = req.max_samples.unwrap_or(50_000);
@@ -267,7 +267,7 @@ async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<Bas
             })
             .collect();
         // Frames are in millimetres here, so the bound is too.
-        let targets = vec![Target::Max(bound_mm); inputs.len()];
+        let targets = vec![Target::max(bound_mm); inputs.len()];
         train_set(&inputs, &targets, &set)
     })
     .await??;

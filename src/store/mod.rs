@@ -151,14 +151,14 @@ impl Store {
         dispatch!(self, pool => {
             let mut tx = pool.begin().await?;
             let sql = format!(
-                "UPDATE sequences SET {}, codec = $10, bound_kind = $11, bound_mm = $12, \
+                "UPDATE sequences SET {}, codec = $10, max_bound_mm = $11, mean_bound_mm = $12, \
                  header = $13, meta = $14 WHERE id = $15",
                 rows::SET_TOTALS
             );
             let r = rows::bind_totals(sqlx::query(&sql), &row.totals)
             .bind(&row.codec)
-            .bind(&row.bound_kind)
-            .bind(row.bound_mm)
+            .bind(row.max_bound_mm)
+            .bind(row.mean_bound_mm)
             .bind(&row.header)
             .bind(&row.meta)
             .bind(&row.id)
@@ -499,7 +499,7 @@ impl Store {
         let w = query::where_clause(filter, None);
         let sql = format!(
             "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, \
-             max_mm, id, name, layout, source_format, bound_kind, meta, skeleton_id, \
+             max_mm, id, name, layout, source_format, meta, skeleton_id, \
              (SELECT COUNT(*) FROM chunks c WHERE c.sequence_id = sequences.id) AS chunk_rows, \
              (SELECT COALESCE(SUM(LENGTH(t.tag) + LENGTH(t.sequence_id)), 0) \
               FROM sequence_tags t WHERE t.sequence_id = sequences.id) AS tag_bytes \
@@ -522,7 +522,6 @@ impl Store {
                         + text("name")?
                         + text("layout")?
                         + text("source_format")?
-                        + text("bound_kind")?
                         + text("meta")?
                         + text("skeleton_id")?
                         + r.try_get::<i64, _>("tag_bytes")?;

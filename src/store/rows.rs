@@ -41,8 +41,9 @@ pub struct TakeRow {
     pub layout: String,
     pub source_format: String,
     pub codec: String,
-    pub bound_kind: String,
-    pub bound_mm: f64,
+    pub max_bound_mm: f64,
+    /// `None` when no mean bound was asked for.
+    pub mean_bound_mm: Option<f64>,
     /// The codec container header (chunk index included).
     pub header: Vec<u8>,
     /// Point names, unit provenance, skeleton, codec decision, warnings: JSON text.
@@ -56,7 +57,7 @@ pub struct TakeRow {
 }
 
 /// Numeric columns of a take's row (8 bytes each on disk).
-const NUMERIC_COLUMNS: i64 = 19;
+const NUMERIC_COLUMNS: i64 = 20;
 /// A chunk row beside its payload: the take's id (36 characters) and four integers.
 const CHUNK_ROW: i64 = 36 + 4 * 8;
 
@@ -78,7 +79,6 @@ impl TakeRow {
             + self.layout.len()
             + self.source_format.len()
             + self.codec.len()
-            + self.bound_kind.len()
             + self.meta.len()
             + self.skeleton_id.as_ref().map_or(0, String::len)
             + tags) as i64
@@ -119,7 +119,7 @@ impl std::ops::Deref for NewTake {
 }
 
 pub const TAKE_COLUMNS: &str = "id, name, library, fps, frames, points, duration_s, \
-    metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, raw_bytes, \
+    metres_per_unit, layout, source_format, codec, max_bound_mm, mean_bound_mm, raw_bytes, \
     stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at, live_until, skeleton_id";
 
 /// The running totals' columns as `$1..$9`, in the order [`bind_totals`] binds them: every
@@ -129,7 +129,7 @@ pub const SET_TOTALS: &str = "frames = $1, duration_s = $2, raw_bytes = $3, stor
 
 pub const INSERT_TAKE: &str = "INSERT INTO sequences (frames, duration_s, raw_bytes, \
     stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, id, name, library, fps, points, \
-    metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, header, meta, \
+    metres_per_unit, layout, source_format, codec, max_bound_mm, mean_bound_mm, header, meta, \
     created_at, live_until, skeleton_id) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, \
     $12, $13, $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24, $25)";
 
@@ -163,6 +163,7 @@ where
     f64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     Option<i64>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    Option<f64>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     Option<String>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     Vec<u8>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
 {
@@ -176,8 +177,8 @@ where
         .bind(s.layout.clone())
         .bind(s.source_format.clone())
         .bind(s.codec.clone())
-        .bind(s.bound_kind.clone())
-        .bind(s.bound_mm)
+        .bind(s.max_bound_mm)
+        .bind(s.mean_bound_mm)
         .bind(s.header.clone())
         .bind(s.meta.clone())
         .bind(s.created_at)
@@ -193,6 +194,7 @@ where
     for<'a> f64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> i64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> Option<i64>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> Option<f64>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> Option<String>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
 {
@@ -218,8 +220,8 @@ where
         layout: r.try_get("layout")?,
         source_format: r.try_get("source_format")?,
         codec: r.try_get("codec")?,
-        bound_kind: r.try_get("bound_kind")?,
-        bound_mm: r.try_get("bound_mm")?,
+        max_bound_mm: r.try_get("max_bound_mm")?,
+        mean_bound_mm: r.try_get("mean_bound_mm")?,
         header: r.try_get("header")?,
         meta: r.try_get("meta")?,
         created_at: r.try_get("created_at")?,

@@ -58,6 +58,19 @@ async fn ingest_fetch_and_errors_on_every_backend() {
             ),
             ("json", json, "max_error_mm=2&latency=frame".into()),
             ("npy", npy.clone(), "max_error_mm=1&fps=100&unit=mm".into()),
+            // A mean alone: every codec competes (positions kept), and no served sample may
+            // pass the default cap, 10× the mean.
+            (
+                "bvh",
+                corpus_bytes("bvh/cmu/01_01.bvh"),
+                "mean_error_mm=3&keep=positions".into(),
+            ),
+            // Both bounds at once, each of which can bind.
+            (
+                "bvh",
+                corpus_bytes("bvh/cmu/131_02.bvh"),
+                "max_error_mm=3&mean_error_mm=1&keep=positions".into(),
+            ),
         ];
         let mut ids = Vec::new();
         for (kind, bytes, query) in &uploads {
@@ -99,28 +112,31 @@ async fn ingest_fetch_and_errors_on_every_backend() {
                 original.unit.to_mm(),
             )
             .unwrap();
-            let bound: f64 = query
-                .split('&')
-                .find_map(|kv| {
-                    kv.strip_prefix("max_error_mm=")
-                        .or(kv.strip_prefix("mean_error_mm="))
-                })
-                .unwrap()
-                .parse()
-                .unwrap();
-            if query.contains("max_error_mm") {
-                assert!(
-                    s.max_mm <= bound,
-                    "{kind}: served max {} > {bound}",
-                    s.max_mm
-                );
-            } else {
-                assert!(
-                    s.mean_mm <= bound,
-                    "{kind}: served mean {} > {bound}",
-                    s.mean_mm
-                );
-            }
+            let field = |name: &str| -> Option<f64> {
+                query
+                    .split('&')
+                    .find_map(|kv| kv.strip_prefix(name))
+                    .map(|v| v.parse().unwrap())
+            };
+            let mean = field("mean_error_mm=");
+            let max = field("max_error_mm=").unwrap_or_else(|| 10.0 * mean.unwrap());
+            assert!(
+                s.max_mm <= max && mean.is_none_or(|m| s.mean_mm <= m),
+                "{kind} {query}: served max {} mean {} (bounds {max}, {mean:?})",
+                s.max_mm,
+                s.mean_mm
+            );
+            // The take states its bounds, the cap among them, and the max it measured.
+            let (_, _, meta) = srv.get(&format!("/v1/sequences/{id}")).await;
+            let meta: Value = serde_json::from_slice(&meta).unwrap();
+            assert_eq!(meta["max_bound_mm"].as_f64(), Some(max), "{query}");
+            assert_eq!(meta["mean_bound_mm"].as_f64(), mean, "{query}");
+            assert_eq!(
+                meta["max_bound_is_default"].as_bool(),
+                Some(!query.contains("max_error_mm")),
+                "{query}"
+            );
+            assert!((meta["max_mm"].as_f64().unwrap() - s.max_mm).abs() < 1e-6);
             if *kind == "json" {
                 assert_eq!(report["codec"], "quant", "latency=frame excludes mdtt");
             }
@@ -257,7 +273,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
             ("codec=zip", bvh.clone(), 400),
             ("max_error_mm=-1", bvh.clone(), 400),
             ("max_error_mm=NaN", bvh.clone(), 400),
-            ("max_error_mm=1&mean_error_mm=1", bvh.clone(), 400),
+            ("max_error_mm=1&mean_error_mm=-1", bvh.clone(), 400),
             ("latency=soon", bvh.clone(), 400),
             ("unit=furlong", bvh.clone(), 400),
             ("fps=0", bvh.clone(), 400),
@@ -334,8 +350,11 @@ async fn fields_may_come_as_headers() {
         (Some("knee"), Some("q"))
     );
     assert_eq!(
-        (meta["bound_kind"].as_str(), meta["bound_mm"].as_f64()),
-        (Some("mean"), Some(2.5))
+        (
+            meta["max_bound_mm"].as_f64(),
+            meta["mean_bound_mm"].as_f64()
+        ),
+        (Some(25.0), Some(2.5))
     );
     let r = srv
         .client

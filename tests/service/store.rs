@@ -40,8 +40,8 @@ fn take(id: &str, n: usize) -> NewTake {
             layout: "abc".into(),
             source_format: "bvh".into(),
             codec: "quant".into(),
-            bound_kind: "max".into(),
-            bound_mm: 1.0,
+            max_bound_mm: 1.0,
+            mean_bound_mm: None,
             header: vec![1, 2, 3, 255],
             meta: r#"{"points": ["a", "b"], "decision": {"winner": "quant"}}"#.into(),
             created_at: 1_700_000_000_000,
@@ -182,4 +182,63 @@ async fn a_corrupt_meta_row_is_an_error_not_an_empty_record() {
         srv.stop().await;
         t.finish().await;
     }
+}
+
+/// Migration 0005 on a store written before it: a take under a max bound keeps it; one
+/// under a mean bound alone keeps its mean and gets the loosest max (it was coded to none),
+/// and both read back as typed bounds through the service.
+#[tokio::test]
+async fn migration_0005_gives_every_stored_take_a_max_bound() {
+    use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
+    use std::str::FromStr;
+
+    let dir = std::env::temp_dir().join(format!("mocapstore-migrate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let url = format!("sqlite://{}", dir.join("old.db").display());
+    {
+        let pool = SqlitePoolOptions::new()
+            .connect_with(
+                SqliteConnectOptions::from_str(&url)
+                    .unwrap()
+                    .create_if_missing(true),
+            )
+            .await
+            .unwrap();
+        let mut before = sqlx::migrate!("migrations/sqlite");
+        let first: Vec<_> = before
+            .migrations
+            .iter()
+            .filter(|m| m.version < 5)
+            .cloned()
+            .collect();
+        assert_eq!(first.len(), 4);
+        before.migrations = first.into();
+        before.run(&pool).await.unwrap();
+        for (id, kind, mm) in [("a", "max", 1.0), ("b", "mean", 3.0)] {
+            sqlx::query(
+                "INSERT INTO sequences (id, name, library, fps, frames, points, duration_s, \
+                 metres_per_unit, layout, source_format, codec, bound_kind, bound_mm, raw_bytes, \
+                 stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, \
+                 created_at) VALUES ($1, $1, '', 120, 1, 1, 0.01, 0.001, 'l', 'c3d', 'quant', \
+                 $2, $3, 12, 10, 1.2, 0.5, 0.5, 71.0, 0, x'00', '{}', 1)",
+            )
+            .bind(id)
+            .bind(kind)
+            .bind(mm)
+            .execute(&pool)
+            .await
+            .unwrap();
+        }
+        pool.close().await;
+    }
+    let store = Store::open(&url).await.unwrap();
+    let a = store.get("a").await.unwrap().unwrap();
+    assert_eq!((a.max_bound_mm, a.mean_bound_mm), (1.0, None));
+    let b = store.get("b").await.unwrap().unwrap();
+    assert_eq!(
+        (b.max_bound_mm, b.mean_bound_mm),
+        (mocapstore::limits::MAX_BOUND_MM, Some(3.0))
+    );
+    store.close().await;
+    std::fs::remove_dir_all(&dir).unwrap();
 }

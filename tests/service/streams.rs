@@ -243,7 +243,7 @@ fn encoder_stream_bytes(codec: &str) -> String {
         points: m.point_count(),
         fps: 100.0,
         metres_per_unit: 0.001,
-        bound: mocapstore::codec::ErrorBound::MaxMm(0.5),
+        bound: mocapstore::codec::ErrorBound::max(0.5),
         chunk_frames: 40,
         shared: Some(&basis),
     };

@@ -29,7 +29,8 @@ pub struct BenchArgs {
     /// Max-error bounds in mm.
     #[arg(long = "max-error", value_delimiter = ',', default_value = "0.5,1,2,5")]
     max_error: Vec<f64>,
-    /// Mean-error bounds in mm.
+    /// Mean-error bounds in mm, each with the default max cap (10× the mean) that a request
+    /// stating only a mean gets.
     #[arg(long = "mean-error", value_delimiter = ',', default_value = "3")]
     mean_error: Vec<f64>,
     /// Folder for table.md, results.csv, rd.png (rate–distortion) and speed.png.
@@ -265,9 +266,10 @@ pub fn measure(
 }
 
 fn bound_label(b: ErrorBound) -> String {
-    match b {
-        ErrorBound::MaxMm(v) => format!("max {v}"),
-        ErrorBound::MeanMm(v) => format!("mean {v}"),
+    match b.mean_mm() {
+        None => format!("max {}", b.max_mm()),
+        Some(m) if b.max_is_default() => format!("mean {m}"),
+        Some(m) => format!("mean {m}, max {}", b.max_mm()),
     }
 }
 
@@ -341,12 +343,15 @@ pub fn markdown(rows: &[Row]) -> String {
 }
 
 fn csv(rows: &[Row]) -> String {
-    let mut s = String::from("file,codec,bound_kind,bound_mm,frames,points,raw_bytes,stored_bytes,ratio,bits_per_frame,mean_mm,rms_mm,max_mm,kg_percent,encode_fps,decode_fps,decode_setup_us\n");
+    let mut s = String::from("file,codec,max_bound_mm,mean_bound_mm,frames,points,raw_bytes,stored_bytes,ratio,bits_per_frame,mean_mm,rms_mm,max_mm,kg_percent,encode_fps,decode_fps,decode_setup_us\n");
     for r in rows {
-        let (kind, v) = (r.bound.kind(), r.bound.mm());
+        let (max, mean) = (
+            r.bound.max_mm(),
+            r.bound.mean_mm().map_or(String::new(), |m| m.to_string()),
+        );
         let _ = writeln!(
             s,
-            "{},{},{kind},{v},{},{},{},{},{:.4},{:.2},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{:.1}",
+            "{},{},{max},{mean},{},{},{},{},{:.4},{:.2},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{:.1}",
             r.file.replace(',', ";"),
             r.label,
             r.frames,
@@ -390,10 +395,11 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     };
     let mut bounds = Vec::new();
     for &b in &args.max_error {
-        bounds.push(ErrorBound::new_max(b));
+        bounds.push(ErrorBound::from_request(Some(b), None));
     }
     for &b in &args.mean_error {
-        bounds.push(ErrorBound::new_mean(b));
+        // The default cap, as a request with only a mean gets.
+        bounds.push(ErrorBound::from_request(None, Some(b)));
     }
     let bounds: Vec<ErrorBound> = match bounds.into_iter().collect() {
         Ok(b) => b,
@@ -641,7 +647,7 @@ fn split_and_train(
                 .collect();
             let targets: Vec<codec::Target> = train
                 .iter()
-                .map(|(_, (_, m))| codec::Target::Max(1.0 / m.unit.to_mm()))
+                .map(|(_, (_, m))| codec::Target::max(1.0 / m.unit.to_mm()))
                 .collect();
             let t = match train_set(&inputs, &targets, &SetOptions::default()) {
                 Ok(t) => t,
@@ -722,7 +728,7 @@ fn entropy_comparison(
                 continue;
             }
             let filled = mocapstore::codec::gaps::fill(m.positions(), m.point_count());
-            let target = Target::Max(b / m.unit.to_mm());
+            let target = Target::max(b / m.unit.to_mm());
             let Ok(step) = quant::step_for(&filled, None, target) else {
                 continue;
             };

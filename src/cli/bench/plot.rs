@@ -9,7 +9,6 @@ use std::path::Path;
 use plotters::prelude::*;
 
 use super::Row;
-use mocapstore::codec::ErrorBound;
 
 const COLOURS: [RGBColor; 7] = [
     RGBColor(31, 119, 180),
@@ -27,9 +26,10 @@ pub fn rate_distortion(totals: &[Row], path: &Path) -> Result<(), String> {
     register_font();
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for r in totals {
-        let ErrorBound::MaxMm(b) = r.bound else {
+        if r.bound.mean_mm().is_some() {
             continue;
-        };
+        }
+        let b = r.bound.max_mm();
         let bpf = r.stored_bytes as f64 * 8.0 / r.frames as f64;
         match series.iter_mut().find(|(c, _)| *c == r.label) {
             Some((_, pts)) => pts.push((bpf, b)),

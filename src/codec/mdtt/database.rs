@@ -208,16 +208,15 @@ fn code(
     }
 }
 
-/// The parameter search: rank on a ladder, then bandwidth, then the step (scanned with a
-/// residual layer, bisected without).
+/// The parameter search: rank on a ladder, then bandwidth, then the step: scanned (the
+/// residual layer at `rt` holds the max at any step), and under a mean bound also grown and
+/// bisected for the largest that meets it.
 fn search(input: &Input<'_>, bases: &[Matrix], target: Target, rt: f64) -> Option<Trial> {
     let w = input.width();
     let clip = clip_len(input.fps).min(input.frames);
     let r = ratio(clip, input.fps);
     let l_of = |k: usize, m: f64| ((r * m * k as f64).round() as usize).clamp(1, clip);
-    let t = match target {
-        Target::Max(t) | Target::Mean(t) => t,
-    };
+    let t = target.tightest();
     let step = |k: usize, l: usize, beta: f64| {
         beta * t * ((clip * w) as f64 / (k * l) as f64).sqrt().min(8.0)
     };
@@ -233,7 +232,8 @@ fn search(input: &Input<'_>, bases: &[Matrix], target: Target, rt: f64) -> Optio
         }
         Some(b)
     };
-    let beta0 = if rt > 0.0 { 0.5 } else { 1.0 };
+    let bisect = target.mean.is_some();
+    let beta0 = if bisect { 1.0 } else { 0.5 };
     let mut sizes: Vec<(usize, Option<usize>)> = Vec::new();
     for k in rank_ladder(w) {
         let l = l_of(k, 1.0);
@@ -261,11 +261,13 @@ fn search(input: &Input<'_>, bases: &[Matrix], target: Target, rt: f64) -> Optio
         }
     }
     let l = l_of(k, m_best.0);
-    if rt > 0.0 {
-        for beta in [0.25, 0.35, 0.7, 1.0] {
-            offer(code(input, &mut a, bases, k, l, step(k, l, beta), rt));
-        }
-    } else {
+    for beta in [0.25, 0.35, 0.5, 0.7, 1.0]
+        .into_iter()
+        .filter(|&b| b != beta0)
+    {
+        offer(code(input, &mut a, bases, k, l, step(k, l, beta), rt));
+    }
+    if bisect {
         let (mut lo, mut hi) = (beta0, beta0 * 1.5);
         while hi < 64.0 && offer(code(input, &mut a, bases, k, l, step(k, l, hi), rt)).is_some() {
             lo = hi;
@@ -300,18 +302,19 @@ impl Codec for MdttShared {
             .ok_or_else(|| Error::Basis("mdtt-shared needs an mdtt-set basis".into()))?;
         check_basis(basis, input.width())?;
         let bases = basis.matrices();
-        let best = match target {
-            Target::Max(t) => search(input, bases, target, t),
-            Target::Mean(t) => search(input, bases, target, 0.0).or_else(|| {
-                [3.0, 1.4, 1.0]
-                    .into_iter()
-                    .filter_map(|m| search(input, bases, target, m * t))
-                    .min_by_key(|tr| tr.bytes)
-            }),
-        };
+        // The residual layer at the max; where a mean bound is not met so, at a few times
+        // the mean (never past the max).
+        let best = search(input, bases, target, target.max).or_else(|| {
+            target
+                .mean
+                .into_iter()
+                .flat_map(|m| [3.0, 1.4, 1.0].map(|f| (f * m).min(target.max)))
+                .filter_map(|rt| search(input, bases, target, rt))
+                .min_by_key(|tr| tr.bytes)
+        });
         let best = best.ok_or_else(|| Error::BoundMissed {
             codec: "mdtt-shared".into(),
-            detail: format!("no setting meets {target:?}"),
+            detail: format!("no setting meets {target}"),
         })?;
         Ok(CodecOutput {
             params: best.params.to_bytes(),
@@ -766,7 +769,7 @@ mod tests {
             .collect();
         let t = train_set(
             &inputs,
-            &[Target::Max(0.5), Target::Max(0.5)],
+            &[Target::max(0.5), Target::max(0.5)],
             &SetOptions {
                 ks: vec![1, 2],
                 rounds: 12,

@@ -288,12 +288,22 @@ fn code(input: &Input<'_>, a: &mut Analysis, c: Choice, residual_t: f64) -> Tria
     }
 }
 
-/// The residual layer enforces max bounds; mean bounds are met by the transform alone.
+/// The residual layer holds every sample to the max bound; a mean bound is met by the
+/// transform.
 fn residual_for(target: Target) -> f64 {
-    match target {
-        Target::Max(t) => t,
-        Target::Mean(_) => 0.0,
-    }
+    target.max
+}
+
+/// Residual bounds to fall back on when no transform setting meets a mean bound with the
+/// residual layer at the max (noise-like or tiny takes): a few times the mean, never past
+/// the max.
+fn fallback_residuals(target: Target) -> Vec<f64> {
+    target.mean.map_or_else(Vec::new, |m| {
+        [3.0, 2.0, 1.4, 1.0]
+            .into_iter()
+            .map(|f| (f * m).min(target.max))
+            .collect()
+    })
 }
 
 /// Keeps the smallest trial that meets the target.
@@ -393,20 +403,15 @@ pub fn encode_with(
 /// says.
 pub fn encode_clips(input: &Input<'_>, target: Target, mode: ClipMode) -> Result<CodecOutput> {
     check_points(input.points)?;
-    let best = match target {
-        Target::Max(t) => search(input, target, t, mode),
-        // A mean bound no transform setting meets alone (noise-like or tiny takes) is
-        // met with the residual layer bounding every sample at a few times the mean.
-        Target::Mean(t) => search(input, target, 0.0, mode).or_else(|| {
-            [3.0, 2.0, 1.4, 1.0]
-                .into_iter()
-                .filter_map(|m| search(input, target, m * t, mode))
-                .min_by_key(|tr| tr.bytes)
-        }),
-    };
+    let best = search(input, target, residual_for(target), mode).or_else(|| {
+        fallback_residuals(target)
+            .into_iter()
+            .filter_map(|rt| search(input, target, rt, mode))
+            .min_by_key(|tr| tr.bytes)
+    });
     let best = best.ok_or_else(|| Error::BoundMissed {
         codec: "mdtt".into(),
-        detail: format!("no setting meets {target:?}"),
+        detail: format!("no setting meets {target}"),
     })?;
     Ok(CodecOutput {
         params: best.params.to_bytes(),
@@ -449,27 +454,23 @@ impl Codec for Mdtt {
 }
 
 /// Search the parameters for the fewest bytes that meet `target`, with the residual layer
-/// at `rt` (0: none). `None` if no setting meets it.
+/// at `rt`. `None` if no setting meets it.
 fn search(input: &Input<'_>, target: Target, rt: f64, mode: ClipMode) -> Option<Trial> {
     let w = input.width();
     let clip = clip_len(input.fps).min(input.frames);
     let r = ratio(clip, input.fps);
     let l_of = |k: usize, m: f64| ((r * m * k as f64).round() as usize).clamp(1, clip);
-    let t = match target {
-        Target::Max(t) | Target::Mean(t) => t,
-    };
+    let t = target.tightest();
     // The quantisation error of S spreads over a whole clip (B and D̃ are orthonormal),
     // so the step scales with √(L·w / k·l) relative to the bound.
     let step = |k: usize, l: usize, beta: f64| {
         beta * t * ((clip * w) as f64 / (k * l) as f64).sqrt().min(8.0)
     };
-    // With a residual layer every step meets the bound, and the fewest bytes come from a
-    // scan; without one, error grows with the step and bisection finds the largest.
-    let (betas, beta0): (&[f64], f64) = if rt > 0.0 {
-        (&[0.25, 0.35, 0.5, 0.7, 1.0], 0.5)
-    } else {
-        (&[], 1.0)
-    };
+    // The residual layer holds the max at every step, and the fewest bytes come from a
+    // scan; a mean bound's error grows with the step, and bisection finds the largest.
+    let betas: &[f64] = &[0.25, 0.35, 0.5, 0.7, 1.0];
+    let bisect = target.mean.is_some();
+    let beta0 = if bisect { 1.0 } else { 0.5 };
     let mut a = Analysis::with_clips(input, clip, l_of(w, 3.0), clips_for(input, clip, mode));
     let mut best = Best {
         target,
@@ -531,50 +532,45 @@ fn search(input: &Input<'_>, target: Target, rt: f64, mode: ClipMode) -> Option<
         }
     }
     if let Some(c) = best.choice() {
-        match rt == 0.0 {
-            // Mean error grows with the step: bisect for the largest step that meets it.
-            true => {
-                let (mut lo, mut hi) = (beta0, beta0);
-                while hi < 64.0
-                    && best
-                        .offer(code(
-                            input,
-                            &mut a,
-                            choice(c.k, m_best, hi * 1.5, c.basis_gamma),
-                            rt,
-                        ))
-                        .is_some()
-                {
-                    lo = hi * 1.5;
-                    hi = lo;
-                }
-                hi *= 1.5;
-                for _ in 0..5 {
-                    let mid = (lo * hi).sqrt();
-                    if best
-                        .offer(code(
-                            input,
-                            &mut a,
-                            choice(c.k, m_best, mid, c.basis_gamma),
-                            rt,
-                        ))
-                        .is_some()
-                    {
-                        lo = mid;
-                    } else {
-                        hi = mid;
-                    }
-                }
-            }
-            // The residual layer holds the bound at any step: scan for the fewest bytes.
-            false => {
-                for &beta in betas.iter().filter(|&&b| b != beta0) {
-                    best.offer(code(
+        for &beta in betas.iter().filter(|&&b| b != beta0) {
+            best.offer(code(
+                input,
+                &mut a,
+                choice(c.k, m_best, beta, c.basis_gamma),
+                rt,
+            ));
+        }
+        if bisect {
+            // Grow the step while the mean holds, then bisect.
+            let (mut lo, mut hi) = (beta0, beta0);
+            while hi < 64.0
+                && best
+                    .offer(code(
                         input,
                         &mut a,
-                        choice(c.k, m_best, beta, c.basis_gamma),
+                        choice(c.k, m_best, hi * 1.5, c.basis_gamma),
                         rt,
-                    ));
+                    ))
+                    .is_some()
+            {
+                lo = hi * 1.5;
+                hi = lo;
+            }
+            hi *= 1.5;
+            for _ in 0..5 {
+                let mid = (lo * hi).sqrt();
+                if best
+                    .offer(code(
+                        input,
+                        &mut a,
+                        choice(c.k, m_best, mid, c.basis_gamma),
+                        rt,
+                    ))
+                    .is_some()
+                {
+                    lo = mid;
+                } else {
+                    hi = mid;
                 }
             }
         }
@@ -652,7 +648,7 @@ mod tests {
     fn adaptive_clips_start_where_the_behaviour_changes_and_meet_the_bound() {
         use crate::codec::{encode_variant, ErrorBound};
         let m = crate::motion::synthetic::two_behaviours();
-        let bound = ErrorBound::MaxMm(1.0);
+        let bound = ErrorBound::max(1.0);
         let enc = encode_variant(&m, CodecId::Mdtt, bound, None, |i, t| {
             encode_clips(i, t, ClipMode::Adaptive)
         })

@@ -159,10 +159,7 @@ impl<'a> Take<'a> {
 
     /// The fewest directions whose truncation error, as stored, meets `share` of `target`.
     fn directions_for(&self, target: Target, t: f64, share: f64) -> Result<usize> {
-        let within = match target {
-            Target::Max(_) => Target::Max(share * t),
-            Target::Mean(_) => Target::Mean(share * t),
-        };
+        let within = target.scaled(share);
         let meets = |k: usize| -> Result<bool> {
             let (max, mean) = self.truncation_error(&self.stored(k, t)?.1);
             Ok(within.holds(max, mean))
@@ -181,9 +178,7 @@ impl<'a> Take<'a> {
         models: &[Directions],
         options: &[Options],
     ) -> Result<CodecOutput> {
-        let t = match target {
-            Target::Max(t) | Target::Mean(t) => t,
-        };
+        let t = target.tightest();
         if !(t.is_finite() && t > 0.0) {
             return Err(Error::Invalid(format!(
                 "pga needs a positive bound, got {t}"
@@ -245,9 +240,7 @@ impl<'a> Take<'a> {
         let params = Params {
             iterations: o.iterations.min(MAX_ITERATIONS),
             stride_log2: o.stride_log2.min(MAX_STRIDE_LOG2),
-            base: match target {
-                Target::Max(t) | Target::Mean(t) => t,
-            },
+            base: target.tightest(),
             rho: f64::from(o.rho as f32),
             lambda: f64::from(o.lambda as f32),
             root: self.layout.root(),

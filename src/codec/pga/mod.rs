@@ -144,16 +144,10 @@ mod tests {
             iterations: 3,
             ..Options::IK
         };
-        let enc = encode_variant(
-            &m,
-            CodecId::Pga,
-            ErrorBound::MaxMm(5.0),
-            None,
-            |input, t| {
-                let (rig, sk) = input.skeleton.unwrap();
-                Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
-            },
-        )
+        let enc = encode_variant(&m, CodecId::Pga, ErrorBound::max(5.0), None, |input, t| {
+            let (rig, sk) = input.skeleton.unwrap();
+            Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
+        })
         .unwrap();
         assert!(enc.stats.max_mm <= 5.0);
         let params = &enc.container.header.params;
@@ -182,14 +176,14 @@ mod tests {
     fn a_bound_pga_cannot_meet_is_reported_missed() {
         let m = with_position_channel(dancer(60, 60.0, 2), |f| 10.0 + 5e-6 * (f % 2) as f64);
         assert!(Pga.unsuited(&m).is_none());
-        match encode(&m, CodecId::Pga, ErrorBound::MaxMm(1e-6)) {
+        match encode(&m, CodecId::Pga, ErrorBound::max(1e-6)) {
             Err(Error::BoundMissed { codec, detail }) => {
                 assert_eq!(codec, "pga");
                 assert!(detail.contains("finest step"), "{detail}");
             }
             other => panic!("{:?}", other.map(|e| e.stats.max_mm)),
         }
-        assert!(encode(&m, CodecId::Pga, ErrorBound::MaxMm(1.0)).is_ok());
+        assert!(encode(&m, CodecId::Pga, ErrorBound::max(1.0)).is_ok());
     }
 
     /// `m` with an X position channel on joint 1 holding `value(frame)`, its positions by FK.
@@ -227,7 +221,7 @@ mod tests {
     #[test]
     fn damaged_parameters_and_chunks_fail_cleanly() {
         let m = dancer(200, 60.0, 3);
-        let enc = encode(&m, CodecId::Pga, ErrorBound::MaxMm(2.0)).unwrap();
+        let enc = encode(&m, CodecId::Pga, ErrorBound::max(2.0)).unwrap();
         let shared = skeleton_shared(&m);
         let params = &enc.container.header.params;
         let d = Pga.decoder(params, m.point_count(), &shared).unwrap();

@@ -164,9 +164,9 @@ impl Codec for Rot {
 
     fn encode(&self, input: &Input<'_>, target: Target) -> Result<CodecOutput> {
         let (rig, skeleton) = input.skeleton_for(CodecId::Rot)?;
-        let t = match target {
-            Target::Max(t) | Target::Mean(t) => t,
-        };
+        // Steps scale with the tighter bound; each chunk's search keeps the largest step
+        // that meets both.
+        let t = target.tightest();
         if !(t.is_finite() && t > 0.0) {
             return Err(Error::Invalid(format!(
                 "rot needs a positive bound, got {t}"
@@ -497,14 +497,14 @@ mod tests {
         let m = read_as(Format::Bvh, t.as_bytes(), &ReadOptions::default())
             .unwrap()
             .motion;
-        let enc = encode(&m, CodecId::Rot, ErrorBound::MaxMm(0.5)).unwrap();
+        let enc = encode(&m, CodecId::Rot, ErrorBound::max(0.5)).unwrap();
         assert!(enc.stats.max_mm <= 0.5);
     }
 
     #[test]
     fn damaged_chunks_fail_cleanly() {
         let m = dancer(200, 60.0, 3);
-        let enc = encode(&m, CodecId::Rot, ErrorBound::MaxMm(1.0)).unwrap();
+        let enc = encode(&m, CodecId::Rot, ErrorBound::max(1.0)).unwrap();
         let shared = skeleton_shared(&m);
         let d = Rot
             .decoder(&enc.container.header.params, m.point_count(), &shared)

@@ -248,78 +248,129 @@ impl<'a> Take<'a> {
     }
 
     /// Search the scale for the fewest bytes that meet `target`.
+    ///
+    /// Scales lie on a grid of quarter octaves around the tighter bound `t`:
+    /// `s = t · 2^((j − 32)/4)`. The residual layer holds every sample to the max at any
+    /// scale, and bytes fall and then rise with it. Under a max bound alone every scale
+    /// meets it; a mean bound's error grows with the scale, so first the largest grid scale
+    /// that meets it is found (galloping from `t`), and the search stays at or below it.
+    ///
+    /// Then half-octave steps from `s = 2t` (where most corpus takes come out smallest under
+    /// a max bound: 261 of 345 take-bounds at 2–2.4t), or from the largest that meets the
+    /// mean if that is smaller, in whichever direction bytes fall, until two steps in a row
+    /// find nothing smaller; then the quarter octaves beside the best.
     pub fn encode(&self, target: Target) -> Result<CodecOutput> {
-        // Scales on a grid of quarter octaves around the bound: s = t · 2^((j − 32)/4).
-        let t = match target {
-            Target::Max(t) | Target::Mean(t) => t,
+        const START: usize = 36;
+        const GRID: std::ops::RangeInclusive<usize> = 8..=64;
+        let t = target.tightest();
+        let mut search = ScaleSearch {
+            take: self,
+            target,
+            t,
+            tried: std::collections::HashMap::new(),
+            best: None,
         };
-        let scale = |j: usize| t * 2f64.powf((j as f64 - 32.0) / 4.0);
-        match target {
-            Target::Max(t) => {
-                // Every scale meets the bound; bytes fall and then rise with it. Half-octave
-                // steps from s = 2t (where most corpus takes come out smallest: 261 of 345
-                // take-bounds at 2–2.4t), in whichever direction bytes fall, until two steps
-                // in a row find nothing smaller; then the quarter octaves beside the best.
-                let mut best: Option<(usize, Trial)> = None;
-                let mut consider = |j: usize| -> Result<bool> {
-                    let trial = self.trial(scale(j), t)?;
-                    let better = best.as_ref().is_none_or(|(_, b)| trial.bytes < b.bytes);
-                    if better {
-                        best = Some((j, trial));
-                    }
-                    Ok(better)
-                };
-                const START: usize = 36;
-                consider(START)?;
-                let up = consider(START + 2)?;
-                let mut b = if up { START + 2 } else { START };
-                let (mut j, mut misses) = (b, usize::from(!up));
-                let step = |j: usize| {
-                    if up {
-                        j.checked_add(2)
-                    } else {
-                        j.checked_sub(2)
-                    }
-                };
-                while misses < 2 {
-                    let Some(n) = step(j).filter(|&n| (8..=64).contains(&n)) else {
-                        break;
-                    };
-                    j = n;
-                    if consider(n)? {
-                        (b, misses) = (n, 0);
-                    } else {
-                        misses += 1;
-                    }
-                }
-                for j in [b - 1, b + 1] {
-                    consider(j)?;
-                }
-                let (_, trial) = best.expect("trials were run");
-                Ok(trial.out)
-            }
-            Target::Mean(_) => {
-                // The largest grid scale (up to 16t) that meets it, galloping from the bound
-                // itself; the trial of each scale that met it is kept, the largest's returned.
-                let mut kept: Option<(u32, Trial)> = None;
-                largest_meeting(Some(32), |j| {
-                    if j > 64 {
-                        return Ok(false);
-                    }
-                    let trial = self.trial(scale(j as usize), 0.0)?;
-                    let meets = target.holds(trial.max, trial.mean);
-                    if meets && kept.as_ref().is_none_or(|(k, _)| j > *k) {
-                        kept = Some((j, trial));
-                    }
-                    Ok(meets)
+        let top = match target.mean {
+            None => *GRID.end(),
+            Some(_) => {
+                let top = largest_meeting(Some(32), |j| {
+                    let j = j as usize;
+                    Ok(j <= *GRID.end() && search.bytes(j)?.is_some())
                 })?;
-                kept.map(|(_, trial)| trial.out)
-                    .ok_or_else(|| Error::BoundMissed {
-                        codec: "spca".into(),
-                        detail: format!("no scale down to {:.3e} meets it", scale(0)),
-                    })
+                match top {
+                    Some(j) if j as usize >= *GRID.start() => j as usize,
+                    _ => {
+                        return Err(Error::BoundMissed {
+                            codec: "spca".into(),
+                            detail: format!(
+                                "no scale down to {:.3e} meets {target}",
+                                search.scale(*GRID.start())
+                            ),
+                        })
+                    }
+                }
+            }
+        };
+        let start = START.min(top);
+        search.better(start)?;
+        let up = start + 2 <= top && search.better(start + 2)?;
+        let (mut b, mut j, mut misses) = if up {
+            (start + 2, start + 2, 0)
+        } else {
+            (start, start, 1)
+        };
+        while misses < 2 {
+            let next = if up {
+                j.checked_add(2)
+            } else {
+                j.checked_sub(2)
+            };
+            let Some(n) = next.filter(|&n| GRID.contains(&n) && n <= top) else {
+                break;
+            };
+            j = n;
+            if search.better(n)? {
+                (b, misses) = (n, 0);
+            } else {
+                misses += 1;
             }
         }
+        for j in [b - 1, b + 1] {
+            if j <= top {
+                search.better(j)?;
+            }
+        }
+        let (_, trial) = search.best.ok_or_else(|| Error::BoundMissed {
+            codec: "spca".into(),
+            detail: format!("no scale meets {target}"),
+        })?;
+        Ok(trial.out)
+    }
+}
+
+/// The trials of [`Take::encode`]'s search over the scale grid: each grid index coded once,
+/// the smallest trial that meets the target kept.
+struct ScaleSearch<'s, 'a> {
+    take: &'s Take<'a>,
+    target: Target,
+    t: f64,
+    /// Grid index → its size if it met the target.
+    tried: std::collections::HashMap<usize, Option<usize>>,
+    best: Option<(usize, Trial)>,
+}
+
+impl ScaleSearch<'_, '_> {
+    fn scale(&self, j: usize) -> f64 {
+        self.t * 2f64.powf((j as f64 - 32.0) / 4.0)
+    }
+
+    /// Grid index `j`'s size if it meets the target.
+    fn bytes(&mut self, j: usize) -> Result<Option<usize>> {
+        if let Some(&r) = self.tried.get(&j) {
+            return Ok(r);
+        }
+        let trial = self.take.trial(self.scale(j), self.target.max)?;
+        let r = self
+            .target
+            .holds(trial.max, trial.mean)
+            .then_some(trial.bytes);
+        if r.is_some()
+            && self
+                .best
+                .as_ref()
+                .is_none_or(|(_, b)| trial.bytes < b.bytes)
+        {
+            self.best = Some((j, trial));
+        }
+        self.tried.insert(j, r);
+        Ok(r)
+    }
+
+    /// Whether grid index `j` meets the target with fewer bytes than any before it.
+    fn better(&mut self, j: usize) -> Result<bool> {
+        let before = self.best.as_ref().map(|(_, b)| b.bytes);
+        let r = self.bytes(j)?;
+        Ok(r.is_some_and(|b| before.is_none_or(|x| b < x)))
     }
 }
 

@@ -129,7 +129,7 @@ mod tests {
         meets_bounds_and_shrinks(&dancer(480, 120.0, 5), CodecId::Spca, [0.5, 2.0, 8.0]);
         // Points with no names to find a torso by: coded as they are.
         let w = walker(400, 9, 100.0, 4, 0.2);
-        for bound in [ErrorBound::MaxMm(1.0), ErrorBound::MeanMm(1.0)] {
+        for bound in [ErrorBound::max(1.0), ErrorBound::mean(1.0)] {
             let enc = encode(&w, CodecId::Spca, bound).unwrap();
             assert!(bound.holds(enc.stats.max_mm, enc.stats.mean_mm), "{bound}");
         }
@@ -159,7 +159,7 @@ mod tests {
         // Without the residual layer (a mean bound) the models alone make the frames. At
         // every cut the decoded motion moves no faster and turns no harder than the
         // original does anywhere.
-        let enc = encode(&m, CodecId::Spca, ErrorBound::MeanMm(10.0)).unwrap();
+        let enc = encode(&m, CodecId::Spca, ErrorBound::mean(10.0)).unwrap();
         let cuts: Vec<usize> = enc.container.header.chunks[1..]
             .iter()
             .map(|c| c.first_frame as usize)
@@ -185,7 +185,7 @@ mod tests {
     #[test]
     fn a_torso_named_in_the_request_normalises_a_take_with_unknown_names() {
         let w = walker(300, 6, 100.0, 8, 0.1);
-        let bound = ErrorBound::MaxMm(2.0);
+        let bound = ErrorBound::max(2.0);
         let plain = encode(&w, CodecId::Spca, bound).unwrap();
         assert_eq!(
             plain.container.header.params[1], 3,
@@ -209,7 +209,7 @@ mod tests {
     #[test]
     fn damaged_chunks_and_headers_give_errors_not_panics() {
         let m = two_behaviours();
-        let enc = encode(&m, CodecId::Spca, ErrorBound::MaxMm(1.0)).unwrap();
+        let enc = encode(&m, CodecId::Spca, ErrorBound::max(1.0)).unwrap();
         let params = &enc.container.header.params;
         for i in 0..params.len() {
             let mut p = params.clone();

@@ -362,50 +362,56 @@ pub fn encode_with_clip(input: &Input<'_>, target: Target, clip: usize) -> Resul
         step: 1.0,
         residual_t: 0.0,
     };
-    match target {
-        Target::Max(t) => {
-            for beta in [0.6, 0.9, 1.3, 1.8, 2.5, 3.5] {
-                offer(ClipParams {
-                    step: beta * t,
-                    residual_t: t,
-                    ..base
-                });
+    // The residual layer holds every sample to the max; steps around it meet it with the
+    // fewest bytes.
+    let t = target.max;
+    for beta in [0.6, 0.9, 1.3, 1.8, 2.5, 3.5] {
+        offer(ClipParams {
+            step: beta * t,
+            residual_t: t,
+            ..base
+        });
+    }
+    if let Some(m) = target.mean {
+        // A mean bound: bisect for the largest step that meets it, the residual layer still
+        // holding the max.
+        let with_cap = ClipParams {
+            residual_t: t,
+            ..base
+        };
+        let (mut lo, mut hi) = (0.0f64, 8.0f64);
+        let mut met = offer(ClipParams {
+            step: hi * m,
+            ..with_cap
+        });
+        if !met {
+            for _ in 0..8 {
+                let mid = if lo == 0.0 { hi / 4.0 } else { (lo + hi) / 2.0 };
+                if offer(ClipParams {
+                    step: mid * m,
+                    ..with_cap
+                }) {
+                    lo = mid;
+                    met = true;
+                } else {
+                    hi = mid;
+                }
             }
         }
-        Target::Mean(t) => {
-            let (mut lo, mut hi) = (0.0f64, 8.0f64);
-            let mut met = offer(ClipParams {
-                step: hi * t,
-                ..base
-            });
-            if !met {
-                for _ in 0..8 {
-                    let mid = if lo == 0.0 { hi / 4.0 } else { (lo + hi) / 2.0 };
-                    if offer(ClipParams {
-                        step: mid * t,
-                        ..base
-                    }) {
-                        lo = mid;
-                        met = true;
-                    } else {
-                        hi = mid;
-                    }
-                }
-            }
-            if !met {
-                for beta in [1.3, 2.0] {
-                    offer(ClipParams {
-                        step: beta * t,
-                        residual_t: t,
-                        ..base
-                    });
-                }
+        if !met {
+            // Noise-like takes: bound every sample at the mean.
+            for beta in [1.3, 2.0] {
+                offer(ClipParams {
+                    step: beta * m,
+                    residual_t: m.min(t),
+                    ..base
+                });
             }
         }
     }
     let (bytes, p, params, chunks) = best.ok_or_else(|| Error::BoundMissed {
         codec: "lsdt-clip".into(),
-        detail: format!("no setting meets {target:?}"),
+        detail: format!("no setting meets {target}"),
     })?;
     // On a take of a few clips the models can cost more than they save; the adaptive stage
     // codes the same reconstruction, so it meets the target too.
@@ -701,7 +707,7 @@ mod tests {
             let m = walker(frames, 6, 60.0, 5, 0.0);
             let basis = dct_basis(m.point_count());
             let input = take(&m, &basis);
-            let out = encode_with_clip(&input, Target::Max(0.5), 60).unwrap();
+            let out = encode_with_clip(&input, Target::max(0.5), 60).unwrap();
             assert_eq!(out.params[0], version, "{frames} frames");
             let decoded = decode(&out.params, &out.chunks, &basis, m.point_count()).unwrap();
             assert!(max_mean(input.data, &decoded, None).0 <= 0.5);

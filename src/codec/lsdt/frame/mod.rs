@@ -334,46 +334,51 @@ pub fn encode_with_period(
             intra_period: period,
             order,
         };
-        match target {
-            Target::Max(t) => {
-                for beta in [0.6, 0.9, 1.2, 1.6, 2.2, 3.0] {
-                    offer(FrameParams {
-                        step: beta * t,
-                        residual_t: t,
-                        ..base
-                    });
-                }
+        // The residual layer holds every sample to the max; steps around it meet it with
+        // the fewest bytes.
+        let t = target.max;
+        for beta in [0.6, 0.9, 1.2, 1.6, 2.2, 3.0] {
+            offer(FrameParams {
+                step: beta * t,
+                residual_t: t,
+                ..base
+            });
+        }
+        let Some(m) = target.mean else {
+            continue;
+        };
+        // A mean bound: its error grows with the step, so bisect for the largest step
+        // that meets it (the residual layer still holding the max).
+        let with_cap = FrameParams {
+            residual_t: t,
+            ..base
+        };
+        let (mut lo, mut hi) = (0.0f64, 8.0f64);
+        if offer(FrameParams {
+            step: hi * m,
+            ..with_cap
+        }) {
+            continue;
+        }
+        for _ in 0..8 {
+            let mid = if lo == 0.0 { hi / 4.0 } else { (lo + hi) / 2.0 };
+            if offer(FrameParams {
+                step: mid * m,
+                ..with_cap
+            }) {
+                lo = mid;
+            } else {
+                hi = mid;
             }
-            Target::Mean(t) => {
-                // Mean error grows with the step: bisect for the largest that meets it.
-                let (mut lo, mut hi) = (0.0f64, 8.0f64);
-                if offer(FrameParams {
-                    step: hi * t,
+        }
+        if lo == 0.0 {
+            // Noise-like takes: bound every sample at the mean.
+            for beta in [1.2, 2.0] {
+                offer(FrameParams {
+                    step: beta * m,
+                    residual_t: m.min(t),
                     ..base
-                }) {
-                    continue;
-                }
-                for _ in 0..8 {
-                    let mid = if lo == 0.0 { hi / 4.0 } else { (lo + hi) / 2.0 };
-                    if offer(FrameParams {
-                        step: mid * t,
-                        ..base
-                    }) {
-                        lo = mid;
-                    } else {
-                        hi = mid;
-                    }
-                }
-                if lo == 0.0 {
-                    // Noise-like takes: bound every sample at the mean.
-                    for beta in [1.2, 2.0] {
-                        offer(FrameParams {
-                            step: beta * t,
-                            residual_t: t,
-                            ..base
-                        });
-                    }
-                }
+                });
             }
         }
     }
@@ -388,7 +393,7 @@ pub fn encode_with_period(
     }
     let (_, params, chunks) = best.ok_or_else(|| Error::BoundMissed {
         codec: "lsdt-frame".into(),
-        detail: format!("no setting meets {target:?}"),
+        detail: format!("no setting meets {target}"),
     })?;
     Ok(CodecOutput { params, chunks })
 }
