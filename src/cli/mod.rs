@@ -67,6 +67,11 @@ struct ServeArgs {
     /// Memory for decoded chunks kept between range requests, in MiB (0 turns it off).
     #[arg(long, env = "MOCAP_DECODED_CACHE_MIB", default_value_t = 256)]
     decoded_cache_mib: usize,
+    /// Encode every candidate codec of every take in full, as if each were the first of its
+    /// layout: slower, and the choice never leaves out a candidate that a layout's earlier
+    /// takes say would lose.
+    #[arg(long, env = "MOCAP_EXHAUSTIVE_CHOICE")]
+    exhaustive_choice: bool,
     #[command(flatten)]
     limits: LimitArgs,
 }
@@ -190,6 +195,7 @@ fn serve(args: ServeArgs) -> ExitCode {
         database_url: args.database_url,
         limits: args.limits.limits(),
         decoded_cache_mib: args.decoded_cache_mib,
+        exhaustive_choice: args.exhaustive_choice,
         ..mocapstore::http::Config::default()
     };
     let runtime = match tokio::runtime::Runtime::new() {

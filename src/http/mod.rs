@@ -30,6 +30,7 @@ pub use error::ApiError;
 pub use metrics::Metrics;
 
 use crate::limits::Limits;
+use crate::service::history::Histories;
 use crate::service::jobs::Jobs;
 use crate::service::prepared::ReadCaches;
 use crate::service::streams::Streams;
@@ -47,6 +48,9 @@ pub struct Config {
     /// How long a live take stays live when its server stops renewing it (see
     /// [`Streams::lease`]); leases are renewed every [`MAINTENANCE_PERIOD`].
     pub stream_lease: Duration,
+    /// Encode every candidate of every take in full: no candidate is left out by what a
+    /// layout's earlier takes say ([`crate::service::history`]).
+    pub exhaustive_choice: bool,
 }
 
 /// How often the server renews its streams' leases, finishes idle streams and closes the
@@ -61,6 +65,7 @@ impl Default for Config {
             limits: Limits::default(),
             decoded_cache_mib: 256,
             stream_lease: Duration::from_secs(60),
+            exhaustive_choice: false,
         }
     }
 }
@@ -76,6 +81,9 @@ pub struct AppState {
     pub caches: Arc<ReadCaches>,
     pub jobs: Arc<Jobs>,
     pub streams: Arc<Streams>,
+    /// What per-take choice has learnt from the takes ingested so far; `None` when every
+    /// candidate is encoded ([`Config::exhaustive_choice`]).
+    pub histories: Option<Arc<Histories>>,
 }
 
 pub fn router(state: AppState) -> Router {
@@ -181,6 +189,7 @@ impl Application {
             caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
             jobs: Arc::new(Jobs::default()),
             streams: Arc::new(Streams::new(limits, config.stream_lease)),
+            histories: (!config.exhaustive_choice).then(|| Arc::new(Histories::default())),
         };
         // Takes left live by a server that died mid-stream are closed before serving.
         state

@@ -206,7 +206,7 @@ pub async fn create(
     let Query(q) = query?;
     let req = ingest_request(q, &headers, body?, &state.limits)?;
     let uploaded = req.bytes.len();
-    let report = ingest::ingest(&state.store, req).await?;
+    let report = ingest::ingest(&state.store, state.histories.as_deref(), req).await?;
     state
         .metrics
         .ingested(report.frames, uploaded, report.stored_bytes);

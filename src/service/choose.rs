@@ -151,6 +151,10 @@ pub struct Decision {
     /// For a skeleton take chosen automatically: which rule chose the candidates.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub keep: Option<Keep>,
+    /// Candidates not encoded because the takes before this one say they would have lost
+    /// ([`super::history`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pruned: Vec<super::history::Pruned>,
 }
 
 /// Pick the smallest successful candidate; `None` if every one failed.
@@ -176,6 +180,7 @@ pub fn decide(tried: Vec<Tried>, skipped: Vec<Skipped>, bound: &str) -> Option<D
         tried,
         skipped,
         keep: None,
+        pruned: Vec::new(),
     })
 }
 

@@ -7,6 +7,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::choose::{self, CodecRequest, Decision, Keep, Tried};
+use super::history::{self, Histories};
 use super::skeletons;
 use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
@@ -70,7 +71,13 @@ pub struct IngestReport {
     pub warnings: Vec<String>,
 }
 
-pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
+/// Ingest one take; `histories`, if given, is what choice has learnt from the takes before
+/// ([`super::history`]).
+pub async fn ingest(
+    store: &Store,
+    histories: Option<&Histories>,
+    req: IngestRequest,
+) -> Result<IngestReport> {
     let bytes = req.bytes.clone();
     let options = ReadOptions {
         limits: req.limits,
@@ -105,7 +112,7 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
         keep: req.keep,
         hints: req.hints.clone(),
     };
-    let (decision, enc) = encode_best(store, motion.clone(), &layout, &coding).await?;
+    let (decision, enc) = encode_best(store, motion.clone(), &layout, &coding, histories).await?;
 
     let m = &motion;
     let meta = TakeMeta {
@@ -168,11 +175,14 @@ pub async fn ingest(store: &Store, req: IngestRequest) -> Result<IngestReport> {
 
 /// Encode `motion` with every candidate codec (shared-basis codecs with the newest basis of
 /// its layout) in parallel on the blocking pool, and keep the smallest that meets `bound`.
+/// With `histories`, an automatic choice leaves out the candidates that the takes of this
+/// layout before it say would lose ([`history`]), and an explored take teaches it.
 pub async fn encode_best(
     store: &Store,
     motion: Arc<Motion>,
     layout: &str,
     coding: &Coding,
+    histories: Option<&Histories>,
 ) -> Result<(Decision, Encoded)> {
     let Coding {
         codec: request,
@@ -186,6 +196,21 @@ pub async fn encode_best(
     let kinds: Vec<_> = bases.iter().map(|b| b.kind()).collect();
     let (run, skipped) = choose::candidates(request, latency, keep, &motion, &kinds);
     let rule = (request == CodecRequest::Auto && motion.skeleton.is_some()).then_some(keep);
+    let learning = histories
+        .filter(|_| request == CodecRequest::Auto)
+        .map(|h| {
+            let key = history::Key {
+                layout: layout.to_string(),
+                bound: bound.to_string(),
+                rules: format!("{latency:?}, keep {keep:?}"),
+                bases: bases.iter().map(|b| codec::basis::hex(&b.hash())).collect(),
+            };
+            let plan = h.plan(&key, &run);
+            (h, key, plan)
+        });
+    let run = learning
+        .as_ref()
+        .map_or(run, |(_, _, plan)| plan.run.clone());
     let mut jobs = Vec::with_capacity(run.len());
     for codec in run {
         let m = motion.clone();
@@ -231,6 +256,39 @@ pub async fn encode_best(
         decision.reason += " (keep=animation: only codecs that keep the channel values competed)";
     }
     decision.keep = rule;
+    if let Some((h, key, plan)) = learning {
+        if plan.explore {
+            let sizes = encodings
+                .iter()
+                .map(|(c, e)| (*c, e.stored_bytes))
+                .collect();
+            h.record(&key, sizes);
+        }
+        let best = encodings
+            .iter()
+            .map(|(_, e)| e.stored_bytes)
+            .min()
+            .unwrap_or(0);
+        decision.pruned = plan
+            .pruned
+            .into_iter()
+            .map(|p| history::Pruned {
+                estimated_bytes: Some((best as f64 * p.median_ratio).round() as usize),
+                ..p
+            })
+            .collect();
+        if !decision.pruned.is_empty() {
+            let names: Vec<String> = decision
+                .pruned
+                .iter()
+                .map(|p| p.codec.to_string())
+                .collect();
+            decision.reason += &format!(
+                "; not encoded: {} (the layout's earlier takes say they would lose; see pruned)",
+                names.join(", ")
+            );
+        }
+    }
     let (_, enc) = encodings
         .into_iter()
         .find(|(c, _)| *c == decision.winner)

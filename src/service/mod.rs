@@ -8,6 +8,7 @@
 //! - [`training`]: training shared bases from a selection of takes, as a background job.
 //! - [`jobs`]: background jobs and their progress.
 //! - [`choose`]: which codecs compete for a take, and the decision record.
+//! - [`history`]: what choice learns from a library's takes: candidates not worth encoding.
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
 //! - [`fetch`]: metadata and decoded frame ranges.
 //! - [`library`]: listings, statistics, edits.
@@ -19,6 +20,7 @@ pub mod archive;
 pub mod bases;
 pub mod choose;
 pub mod fetch;
+pub mod history;
 pub mod ingest;
 pub mod jobs;
 pub mod library;

@@ -359,6 +359,7 @@ impl Streams {
             tried: Vec::new(),
             skipped: Vec::new(),
             keep: None,
+            pruned: Vec::new(),
         };
         let meta = TakeMeta {
             point_names: plan.names,
@@ -692,7 +693,8 @@ async fn reencode_take(store: &Store, take: &Take, positions: Vec<f32>) -> Resul
         keep: Keep::default(),
         hints: Default::default(),
     };
-    let (decision, enc) = super::ingest::encode_best(store, motion, &take.layout, &coding).await?;
+    let (decision, enc) =
+        super::ingest::encode_best(store, motion, &take.layout, &coding, None).await?;
     if enc.stored_bytes as u64 >= take.stored_bytes {
         return Ok(());
     }

@@ -390,6 +390,7 @@ mod tests {
                     tried: vec![],
                     skipped: vec![],
                     keep: None,
+                    pruned: vec![],
                 },
                 decoded_blake3: Some("00".into()),
                 interrupted: None,

@@ -7,6 +7,7 @@ mod common;
 
 mod archive;
 mod bases;
+mod choice;
 mod cli;
 mod http;
 mod library;
