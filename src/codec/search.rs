@@ -69,9 +69,37 @@ pub fn narrow(
     Ok((lo, hi))
 }
 
+/// The largest multiplier in (0, `top`] at which `meets` holds, for a setting whose error
+/// grows with it: `top` itself if it meets, else eight steps of bisection that start at a
+/// quarter of it; `None` if no multiplier tried meets. The mean-bound step searches of the
+/// LSDT encoders, which keep every setting that meets as a candidate.
+pub fn largest_multiplier(top: f64, mut meets: impl FnMut(f64) -> bool) -> Option<f64> {
+    if meets(top) {
+        return Some(top);
+    }
+    let (mut lo, mut hi) = (0.0f64, top);
+    for _ in 0..8 {
+        let mid = if lo == 0.0 { hi / 4.0 } else { (lo + hi) / 2.0 };
+        if meets(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (lo > 0.0).then_some(lo)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn largest_multiplier_bisects_below_the_top_and_says_when_nothing_meets() {
+        assert_eq!(largest_multiplier(8.0, |f| f <= 9.0), Some(8.0));
+        let found = largest_multiplier(8.0, |f| f <= 3.0).unwrap();
+        assert!(found <= 3.0 && found > 3.0 - 8.0 / 256.0, "{found}");
+        assert_eq!(largest_multiplier(8.0, |_| false), None);
+    }
 
     #[test]
     fn finds_the_threshold_from_any_hint() {

@@ -26,6 +26,7 @@ use crate::codec::entropy::{magnitude_context, Decoder, Encoder, IntModel};
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::{max_mean, quantise};
 use crate::codec::residual;
+use crate::codec::search::largest_multiplier;
 use crate::codec::stream::{StreamCoder, StreamSpec, Streaming};
 use crate::codec::wire::{Reader, Writer};
 use crate::codec::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target};
@@ -379,25 +380,13 @@ pub fn encode_with_clip(input: &Input<'_>, target: Target, clip: usize) -> Resul
             residual_t: t,
             ..base
         };
-        let (mut lo, mut hi) = (0.0f64, 8.0f64);
-        let mut met = offer(ClipParams {
-            step: hi * m,
-            ..with_cap
-        });
-        if !met {
-            for _ in 0..8 {
-                let mid = if lo == 0.0 { hi / 4.0 } else { (lo + hi) / 2.0 };
-                if offer(ClipParams {
-                    step: mid * m,
-                    ..with_cap
-                }) {
-                    lo = mid;
-                    met = true;
-                } else {
-                    hi = mid;
-                }
-            }
-        }
+        let met = largest_multiplier(8.0, |f| {
+            offer(ClipParams {
+                step: f * m,
+                ..with_cap
+            })
+        })
+        .is_some();
         if !met {
             // Noise-like takes: bound every sample at the mean.
             for beta in [1.3, 2.0] {

@@ -32,6 +32,7 @@ use crate::codec::basis::{Basis, BasisKind};
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::{max_mean, quantise};
 use crate::codec::residual::FrameResidual;
+use crate::codec::search::largest_multiplier;
 use crate::codec::stream::{StreamCoder, StreamSpec, Streaming};
 use crate::codec::wire::{Reader, Writer};
 use crate::codec::{
@@ -353,25 +354,13 @@ pub fn encode_with_period(
             residual_t: t,
             ..base
         };
-        let (mut lo, mut hi) = (0.0f64, 8.0f64);
-        if offer(FrameParams {
-            step: hi * m,
-            ..with_cap
-        }) {
-            continue;
-        }
-        for _ in 0..8 {
-            let mid = if lo == 0.0 { hi / 4.0 } else { (lo + hi) / 2.0 };
-            if offer(FrameParams {
-                step: mid * m,
+        let met = largest_multiplier(8.0, |f| {
+            offer(FrameParams {
+                step: f * m,
                 ..with_cap
-            }) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        if lo == 0.0 {
+            })
+        });
+        if met.is_none() {
             // Noise-like takes: bound every sample at the mean.
             for beta in [1.2, 2.0] {
                 offer(FrameParams {
