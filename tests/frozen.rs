@@ -71,6 +71,7 @@ fn index() -> Vec<(String, String, String)> {
 const REQUIRED: &[&str] = &[
     "raw",
     "quant",
+    "quant-v2",
     "mdtt",
     "mdtt-shared-v1",
     "lsdt-clip-v1",
@@ -191,6 +192,18 @@ fn freeze_current_bitstreams() {
             format!("{codec} batch, {bound}"),
         ));
     }
+    // quant's parameters version 2 (rANS tables), which the encoder keeps where it codes
+    // smaller.
+    let enc = codec::encode_variant(&m, CodecId::Quant, bound, None, |i, t| {
+        codec::quant::encode_version(i, t, Some(2))
+    })
+    .unwrap();
+    out.push((
+        "quant-v2".into(),
+        enc.container,
+        None,
+        format!("quant batch, parameters version 2, {bound}"),
+    ));
     // The live streams' adaptive stages.
     let t = 1.0 / m.unit.to_mm();
     let p = frame::stream_params(t, m.fps);
