@@ -128,7 +128,8 @@ pub const DEFAULT_BOUND_MM: f64 = 1.0;
 /// mean. Why 10: a mean bound alone let truncating codecs (PCA, DCT) serve a hand 70 cm
 /// from where it was under "mean 3 mm" — an error the papers' mean hides and no archive may
 /// serve. Errors that are noise-like never come near 10× their mean (an isotropic Gaussian
-/// error's largest of a million samples is 3.7× its mean; uniform quantisation's, 1.7×),
+/// error's largest of a million samples is about 3.5× its mean; uniform quantisation's is
+/// never more than 1.8×),
 /// so the cap leaves the codecs' mean-bound savings alone and binds only on outliers —
 /// the structured misses it is there to stop. At mean 3 mm it allows 3 cm, under a
 /// marker's spacing on a limb.
