@@ -289,6 +289,18 @@ fn diff_context(r: &[i32], c: usize, f: usize, frames: usize, last: i32) -> usiz
     context(last, above)
 }
 
+/// A chunk's predictor order (its first byte, 1 or 2) and the bytes after it: the same in
+/// every version.
+fn split_order(bytes: &[u8]) -> Result<(u8, &[u8])> {
+    let (&order, rest) = bytes
+        .split_first()
+        .ok_or_else(|| malformed("empty quant chunk"))?;
+    if order != 1 && order != 2 {
+        return Err(malformed(format!("predictor order {order}")));
+    }
+    Ok((order, rest))
+}
+
 /// Inverse of [`encode_block`].
 pub fn decode_block(
     bytes: &[u8],
@@ -296,12 +308,7 @@ pub fn decode_block(
     w: usize,
     mut emit: impl FnMut(usize, i32),
 ) -> Result<()> {
-    let (&order, rest) = bytes
-        .split_first()
-        .ok_or_else(|| malformed("empty quant chunk"))?;
-    if order != 1 && order != 2 {
-        return Err(malformed(format!("predictor order {order}")));
-    }
+    let (order, rest) = split_order(bytes)?;
     let mut dec = Decoder::new(rest);
     let mut m = BlockModels::new();
     let mut residuals = vec![0i32; w * frames];

@@ -11,7 +11,7 @@
 //! Params: `2u8`, step `f64`, the context models ([`write_models`]). Chunk: order `u8`,
 //! `varint(rANS length)`, the rANS stream, then the raw bits (low bits and signs).
 
-use super::{context, predict, prediction_residuals, MAX_REFERENCE, NEIGHBOUR};
+use super::{context, predict, prediction_residuals, split_order, MAX_REFERENCE, NEIGHBOUR};
 use crate::codec::entropy::geometric::{read_models, tables_of, token, write_models, Stats};
 use crate::codec::entropy::rans::{self, BitReader, BitWriter, TableSet};
 use crate::codec::entropy::tokens::{get_signed, get_unsigned, signed_token};
@@ -155,12 +155,7 @@ impl Tables {
         w: usize,
         mut emit: impl FnMut(usize, i32),
     ) -> Result<()> {
-        let (&order, rest) = bytes
-            .split_first()
-            .ok_or_else(|| malformed("empty quant chunk"))?;
-        if order != 1 && order != 2 {
-            return Err(malformed(format!("predictor order {order}")));
-        }
+        let (order, rest) = split_order(bytes)?;
         let mut pos = 0;
         let len = get_varint(rest, &mut pos)
             .and_then(|n| usize::try_from(n).ok())
