@@ -249,7 +249,7 @@ fn on_every_take(
 /// every take, and the suite must stay within its time.
 fn with_both(i: usize, bounds: &[ErrorBound]) -> Vec<ErrorBound> {
     let mut v = bounds.to_vec();
-    if i % 3 == 0 {
+    if i.is_multiple_of(3) {
         v.push(ErrorBound::both(3.0, 1.0));
     }
     v
