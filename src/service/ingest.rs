@@ -211,31 +211,50 @@ pub async fn encode_best(
     let run = learning
         .as_ref()
         .map_or(run, |(_, _, plan)| plan.run.clone());
-    let mut jobs = Vec::with_capacity(run.len());
-    for codec in run {
-        let m = motion.clone();
-
-        let shared = choose::basis_for(codec, &bases);
-        let hints = hints.clone();
-        jobs.push(tokio::task::spawn_blocking(move || {
-            let t0 = Instant::now();
-            let r = codec::encode_hinted(&m, codec, bound, shared.as_ref(), &hints);
-            (codec, r, t0.elapsed().as_secs_f64() * 1e3)
-        }));
-    }
-    let mut tried = Vec::new();
-    let mut encodings: Vec<(CodecId, Encoded)> = Vec::new();
-    for job in jobs {
-        let (codec, r, ms) = job
-            .await
-            .map_err(|e| Error::Internal(format!("encoder failed: {e}")))?;
-        match r {
-            Ok(e) => {
-                let measured = (e.stored_bytes, e.stats.max_mm, e.stats.mean_mm);
-                tried.push(Tried::new(codec, Ok(measured), ms));
-                encodings.push((codec, e));
+    let encode = |codecs: Vec<CodecId>| {
+        let (motion, bases, hints) = (&motion, &bases, &hints);
+        async move {
+            let jobs: Vec<_> = codecs
+                .into_iter()
+                .map(|codec| {
+                    let m = motion.clone();
+                    let shared = choose::basis_for(codec, bases);
+                    let hints = hints.clone();
+                    tokio::task::spawn_blocking(move || {
+                        let t0 = Instant::now();
+                        let r = codec::encode_hinted(&m, codec, bound, shared.as_ref(), &hints);
+                        (codec, r, t0.elapsed().as_secs_f64() * 1e3)
+                    })
+                })
+                .collect();
+            let mut tried = Vec::new();
+            let mut encodings: Vec<(CodecId, Encoded)> = Vec::new();
+            for job in jobs {
+                let (codec, r, ms) = job
+                    .await
+                    .map_err(|e| Error::Internal(format!("encoder failed: {e}")))?;
+                match r {
+                    Ok(e) => {
+                        let measured = (e.stored_bytes, e.stats.max_mm, e.stats.mean_mm);
+                        tried.push(Tried::new(codec, Ok(measured), ms));
+                        encodings.push((codec, e));
+                    }
+                    Err(e) => tried.push(Tried::new(codec, Err(e.to_string()), ms)),
+                }
             }
-            Err(e) => tried.push(Tried::new(codec, Err(e.to_string()), ms)),
+            Ok::<_, Error>((tried, encodings))
+        }
+    };
+    let (mut tried, mut encodings) = encode(run).await?;
+    // Where every candidate kept failed on this take, the ones the history left out run
+    // after all: a history says what usually loses, not what can be done without.
+    let mut learning = learning;
+    if let Some((_, _, plan)) = learning.as_mut() {
+        if encodings.is_empty() && !plan.pruned.is_empty() {
+            let rest = plan.pruned.drain(..).map(|p| p.codec).collect();
+            let (more, enc) = encode(rest).await?;
+            tried.extend(more);
+            encodings.extend(enc);
         }
     }
     let errors: Vec<String> = tried.iter().filter_map(|t| t.error.clone()).collect();
