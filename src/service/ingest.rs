@@ -196,7 +196,7 @@ pub async fn encode_best(
     let kinds: Vec<_> = bases.iter().map(|b| b.kind()).collect();
     let (run, skipped) = choose::candidates(request, latency, keep, &motion, &kinds);
     let rule = (request == CodecRequest::Auto && motion.skeleton.is_some()).then_some(keep);
-    let learning = histories
+    let mut learning = histories
         .filter(|_| request == CodecRequest::Auto)
         .map(|h| {
             let key = history::Key {
@@ -248,7 +248,6 @@ pub async fn encode_best(
     let (mut tried, mut encodings) = encode(run).await?;
     // Where every candidate kept failed on this take, the ones the history left out run
     // after all: a history says what usually loses, not what can be done without.
-    let mut learning = learning;
     if let Some((_, _, plan)) = learning.as_mut() {
         if encodings.is_empty() && !plan.pruned.is_empty() {
             let rest = plan.pruned.drain(..).map(|p| p.codec).collect();
