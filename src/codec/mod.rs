@@ -236,6 +236,26 @@ pub fn available() -> Vec<CodecId> {
 pub trait ChunkDecoder: Send + Sync {
     /// Decode one chunk of `frames` frames into `out` (`frames × points × 3`).
     fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()>;
+    /// Decode frames `rows` of a chunk of `frames` frames into `out` (`rows.len()` frames),
+    /// for a range read that wants part of a chunk and keeps none of it. Decoders that
+    /// synthesise frames from chunk-wide coefficients override this to synthesise only the
+    /// rows asked for; by default the whole chunk is decoded and the rows copied out.
+    fn decode_rows(
+        &self,
+        bytes: &[u8],
+        frames: usize,
+        rows: std::ops::Range<usize>,
+        out: &mut [f32],
+    ) -> Result<()> {
+        if rows == (0..frames) {
+            return self.decode_chunk(bytes, frames, out);
+        }
+        let w = out.len() / rows.len().max(1);
+        let mut all = vec![0f32; frames * w];
+        self.decode_chunk(bytes, frames, &mut all)?;
+        out.copy_from_slice(&all[rows.start * w..rows.end * w]);
+        Ok(())
+    }
     /// Decode one chunk's channel values, for codecs that code them
     /// ([`Codec::codes_channels`]).
     fn decode_channels(&self, _bytes: &[u8], _frames: usize) -> Result<Channels> {

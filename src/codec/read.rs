@@ -134,9 +134,11 @@ impl Reader {
             let decoded = match source.chunk(i)? {
                 Chunk::Decoded(d) => d,
                 Chunk::Stored(payload) => {
-                    if points.is_none() && (lo, hi) == (r.start, r.end) && !source.keeps() {
-                        // The whole chunk is wanted and kept nowhere: decode in place.
-                        decode_chunk_into(&self.header, self.decoder.as_ref(), i, payload, dest)?;
+                    if points.is_none() && !source.keeps() {
+                        // Kept nowhere: decode the rows wanted straight into the output.
+                        let rows = lo - r.start..hi - r.start;
+                        let decoder = self.decoder.as_ref();
+                        decode_rows_into(&self.header, decoder, i, payload, rows, dest)?;
                         continue;
                     }
                     let d = Arc::new(self.decode_chunk(i, payload)?);
@@ -318,16 +320,43 @@ fn decode_chunk_into(
     payload: &[u8],
     out: &mut [f32],
 ) -> Result<()> {
+    let frames = header
+        .chunks
+        .get(index)
+        .map_or(0, |meta| meta.frames as usize);
+    decode_rows_into(header, decoder, index, payload, 0..frames, out)
+}
+
+/// Frames `rows` of chunk `index` (counted from the chunk's first) into `out`, NaN at gaps.
+fn decode_rows_into(
+    header: &Header,
+    decoder: &dyn ChunkDecoder,
+    index: usize,
+    payload: &[u8],
+    rows: Range<usize>,
+    out: &mut [f32],
+) -> Result<()> {
     let meta = header
         .chunks
         .get(index)
         .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
     verify_chunk(meta, payload, index)?;
     let n = meta.frames as usize;
-    let (mask, codec_bytes) = unpack_chunk(payload, n * header.points as usize)?;
-    decoder.decode_chunk(codec_bytes, n, out)?;
+    let points = header.points as usize;
+    if rows.start > rows.end || rows.end > n || out.len() != rows.len() * points * 3 {
+        return Err(Error::Invalid(format!(
+            "rows {rows:?} of chunk {index} ({n} frames) into {} values",
+            out.len()
+        )));
+    }
+    let (mask, codec_bytes) = unpack_chunk(payload, n * points)?;
+    if rows == (0..n) {
+        decoder.decode_chunk(codec_bytes, n, out)?;
+    } else {
+        decoder.decode_rows(codec_bytes, n, rows.clone(), out)?;
+    }
     if let Some(mask) = mask {
-        for (s, ok) in out.chunks_exact_mut(3).zip(mask) {
+        for (s, ok) in out.chunks_exact_mut(3).zip(&mask[rows.start * points..]) {
             if !ok {
                 s.fill(f32::NAN);
             }

@@ -228,8 +228,26 @@ pub fn encode(
 
 /// Apply the corrections coded by [`encode`] to `recon`.
 pub fn decode(dec: &mut Decoder<'_>, recon: &mut [f32], points: usize, t: f64) {
+    let frames = recon.len() / (points * 3).max(1);
+    decode_rows(dec, recon, points, t, 0..frames);
+}
+
+/// Apply the corrections of frames `rows` of a chunk to `recon` (those frames only). The
+/// stream is read up to the end of `rows` and no further; the corrections of the frames
+/// before are decoded (the models adapt through them) and dropped.
+pub fn decode_rows(
+    dec: &mut Decoder<'_>,
+    recon: &mut [f32],
+    points: usize,
+    t: f64,
+    rows: std::ops::Range<usize>,
+) {
     let mut r = FrameResidual::new(points, t);
-    for rc in recon.chunks_exact_mut(points * 3) {
+    let mut dropped = vec![0f32; points * 3];
+    for _ in 0..rows.start {
+        r.decode_frame(dec, &mut dropped);
+    }
+    for rc in recon.chunks_exact_mut(points * 3).take(rows.len()) {
         r.decode_frame(dec, rc);
     }
 }

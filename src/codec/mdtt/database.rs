@@ -15,8 +15,8 @@
 
 use nalgebra::DMatrix;
 
-use super::transform::{clip_len, coefs_for, ratio, reconstruct, Analysis};
-use super::{decode_coefs, encode_coefs, past_the_best, rank_ladder, synthesise_clip, Params};
+use super::transform::{clip_len, ratio, reconstruct, Analysis};
+use super::{decode_clip, encode_coefs, past_the_best, rank_ladder, Params};
 use crate::codec::basis::{Basis, BasisKind, Matrix};
 use crate::codec::entropy::{Decoder, Encoder, IntModel};
 use crate::codec::error::{malformed, Error, Result};
@@ -178,7 +178,14 @@ fn code(
         IntModel::default().encode(&mut enc, b as i32);
         let deq = encode_coefs(&mut enc, &s, coef_step);
         let recon = &mut recon_all[f0 * w..(f0 + len) * w];
-        reconstruct(&per[b], &deq, a.tables.get(len, lc), len, lc, recon);
+        reconstruct(
+            &per[b],
+            &deq,
+            a.tables.get(len, lc),
+            (len, lc),
+            0..len,
+            recon,
+        );
         if rt > 0.0 {
             let valid = input
                 .valid
@@ -364,29 +371,40 @@ struct SharedDecoder {
 
 impl ChunkDecoder for SharedDecoder {
     fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
-        let p = &self.p;
-        if frames > p.clip {
-            return Err(malformed(format!(
-                "mdtt-shared chunk of {frames} frames, clips are {}",
-                p.clip
-            )));
-        }
+        self.decode_rows(bytes, frames, 0..frames, out)
+    }
+
+    fn decode_rows(
+        &self,
+        bytes: &[u8],
+        frames: usize,
+        rows: std::ops::Range<usize>,
+        out: &mut [f32],
+    ) -> Result<()> {
         let mut dec = Decoder::new(bytes);
         let b = IntModel::default().decode(&mut dec);
-        let params = usize::try_from(b)
+        let basis = usize::try_from(b)
             .ok()
             .and_then(|b| self.per.get(b))
             .ok_or_else(|| malformed(format!("mdtt-shared chunk names basis {b}")))?;
-        let lc = coefs_for(frames, p.clip, p.l);
-        let deq = decode_coefs(&mut dec, p.k, lc, p.coef_step);
-        synthesise_clip(params, &deq, &self.full, frames, lc, out);
-        if p.residual_t > 0.0 {
-            residual::decode(&mut dec, out, self.points, p.residual_t);
-        }
-        if dec.overran() {
-            return Err(malformed("mdtt-shared chunk ends early"));
-        }
-        Ok(())
+        let p = &self.p;
+        let coding = super::ClipCoding {
+            clip: p.clip,
+            k: p.k,
+            l: p.l,
+            coef_step: p.coef_step,
+            residual_t: p.residual_t,
+        };
+        decode_clip(
+            &mut dec,
+            coding,
+            basis,
+            &self.full,
+            self.points,
+            frames,
+            rows,
+            out,
+        )
     }
 }
 

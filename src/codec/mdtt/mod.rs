@@ -156,20 +156,66 @@ impl ShortTables {
     }
 }
 
-/// Reconstruct a decoded clip of `frames` frames with the decoder's tables.
-fn synthesise_clip(
-    p: &Params,
-    deq: &[f32],
-    full: &FullClipTable,
-    frames: usize,
-    lc: usize,
-    out: &mut [f32],
-) {
-    if frames == p.clip {
-        reconstruct(p, deq, full.get(), frames, lc, out);
-    } else {
-        reconstruct(p, deq, &full.short.get(frames, lc), frames, lc, out);
+/// How a take's clips are coded: what [`decode_clip`] needs of the header's parameters
+/// (`mdtt`'s own and `mdtt-shared`'s, whose bases live apart).
+#[derive(Debug, Clone, Copy)]
+struct ClipCoding {
+    clip: usize,
+    k: usize,
+    l: usize,
+    coef_step: f64,
+    residual_t: f64,
+}
+
+impl Params {
+    fn coding(&self) -> ClipCoding {
+        ClipCoding {
+            clip: self.clip,
+            k: self.k,
+            l: self.l,
+            coef_step: self.coef_step,
+            residual_t: self.residual_t,
+        }
     }
+}
+
+/// Frames `rows` of a clip of `frames` frames into `out`, from its coefficients and
+/// residual corrections (what `dec` reads next): `p` says how they were coded, `basis` is
+/// what the coefficients weight. Only the rows asked for are
+/// synthesised and the residual stream is read no further than the last of them, so a
+/// range read of part of a clip costs part of its decode.
+#[allow(clippy::too_many_arguments)]
+fn decode_clip(
+    dec: &mut Decoder<'_>,
+    p: ClipCoding,
+    basis: &Params,
+    full: &FullClipTable,
+    points: usize,
+    frames: usize,
+    rows: std::ops::Range<usize>,
+    out: &mut [f32],
+) -> Result<()> {
+    if frames > p.clip || rows.end > frames {
+        return Err(malformed(format!(
+            "mdtt chunk of {frames} frames (rows {rows:?}), clips are {}",
+            p.clip
+        )));
+    }
+    let lc = coefs_for(frames, p.clip, p.l);
+    let deq = decode_coefs(dec, p.k, lc, p.coef_step);
+    if frames == p.clip {
+        reconstruct(basis, &deq, full.get(), (frames, lc), rows.clone(), out);
+    } else {
+        let d = full.short.get(frames, lc);
+        reconstruct(basis, &deq, &d, (frames, lc), rows.clone(), out);
+    }
+    if p.residual_t > 0.0 {
+        residual::decode_rows(dec, out, points, p.residual_t, rows);
+    }
+    if dec.overran() {
+        return Err(malformed("mdtt chunk ends early"));
+    }
+    Ok(())
 }
 
 /// Starting basis precision of the search (see [`basis_bits`]).
@@ -261,7 +307,14 @@ fn code(input: &Input<'_>, a: &mut Analysis, c: Choice, residual_t: f64) -> Tria
         let mut enc = Encoder::new();
         let deq = encode_coefs(&mut enc, &s, c.coef_step);
         let recon = &mut recon_all[f0 * w..(f0 + len) * w];
-        reconstruct(&params, &deq, a.tables.get(len, lc), len, lc, recon);
+        reconstruct(
+            &params,
+            &deq,
+            a.tables.get(len, lc),
+            (len, lc),
+            0..len,
+            recon,
+        );
         if residual_t > 0.0 {
             let valid = input
                 .valid
@@ -587,24 +640,28 @@ struct MdttDecoder {
 
 impl ChunkDecoder for MdttDecoder {
     fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
+        self.decode_rows(bytes, frames, 0..frames, out)
+    }
+
+    fn decode_rows(
+        &self,
+        bytes: &[u8],
+        frames: usize,
+        rows: std::ops::Range<usize>,
+        out: &mut [f32],
+    ) -> Result<()> {
         let p = &self.p;
-        if frames > p.clip {
-            return Err(malformed(format!(
-                "mdtt chunk of {frames} frames, clips are {}",
-                p.clip
-            )));
-        }
-        let lc = coefs_for(frames, p.clip, p.l);
         let mut dec = Decoder::new(bytes);
-        let deq = decode_coefs(&mut dec, p.k, lc, p.coef_step);
-        synthesise_clip(p, &deq, &self.full, frames, lc, out);
-        if p.residual_t > 0.0 {
-            residual::decode(&mut dec, out, self.points, p.residual_t);
-        }
-        if dec.overran() {
-            return Err(malformed("mdtt chunk ends early"));
-        }
-        Ok(())
+        decode_clip(
+            &mut dec,
+            p.coding(),
+            p,
+            &self.full,
+            self.points,
+            frames,
+            rows,
+            out,
+        )
     }
 }
 
@@ -746,5 +803,41 @@ mod tests {
         assert!((s - s_ref).norm() < 1e-6);
         // B is orthonormal.
         assert!((b.transpose() * &b - DMatrix::identity(k, k)).norm() < 1e-10);
+    }
+
+    /// A range read of part of a clip synthesises only its rows and stops reading the
+    /// residual stream after them: the rows must be bit for bit those of the whole clip,
+    /// wherever they lie (first, middle, last rows; a short last clip), residual layer on.
+    #[test]
+    fn rows_of_a_clip_decode_as_the_whole_clip_does() {
+        use crate::codec::{encode, ErrorBound, Shared};
+        let m = crate::motion::synthetic::walker(700, 7, 120.0, 5, 0.0);
+        let enc = encode(&m, CodecId::Mdtt, ErrorBound::max(0.3)).unwrap();
+        let c = &enc.container;
+        let dec = Mdtt
+            .decoder(&c.header.params, 7, &Shared::default())
+            .unwrap();
+        let p = Params::parse(&c.header.params, 7).unwrap();
+        assert!(p.residual_t > 0.0, "the residual layer is exercised");
+        let w = 21;
+        for (i, meta) in c.header.chunks.iter().enumerate() {
+            let n = meta.frames as usize;
+            let (_, bytes) = crate::codec::container::unpack_chunk(&c.chunks[i], n * 7).unwrap();
+            let mut whole = vec![0f32; n * w];
+            dec.decode_chunk(bytes, n, &mut whole).unwrap();
+            for rows in [0..1, 0..n / 2, n / 3..n / 3 + 17, n - 5..n, n - 1..n] {
+                let mut part = vec![0f32; rows.len() * w];
+                dec.decode_rows(bytes, n, rows.clone(), &mut part).unwrap();
+                let want = &whole[rows.start * w..rows.end * w];
+                assert!(
+                    part.iter()
+                        .zip(want)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "chunk {i} rows {rows:?}"
+                );
+            }
+            let mut past = vec![0f32; w];
+            assert!(dec.decode_rows(bytes, n, n..n + 1, &mut past).is_err());
+        }
     }
 }

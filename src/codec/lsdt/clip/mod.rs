@@ -134,7 +134,10 @@ fn table(n: usize) -> Vec<f32> {
 
 /// Reconstruct `n` frames from quantised coefficients `q` (`(kmax + 1) × w`, frequency
 /// major): inverse spatial transform per frequency, then the inverse DCT. One function for
-/// encoder and decoder, so the residual layer sees exactly what the decoder will.
+/// encoder and decoder, so the residual layer sees exactly what the decoder will. Compiled
+/// for AVX2 too and chosen at run time: element-wise loops, so the same bits either way
+/// (see `mdtt::transform::reconstruct`).
+#[multiversion::multiversion(targets("x86_64+avx2"))]
 fn synthesise(spatial: &Spatial, q: &[i32], step: f32, n: usize, table: &[f32], out: &mut [f32]) {
     let w = spatial.points() * 3;
     let kn = q.len() / w;
