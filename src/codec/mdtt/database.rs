@@ -40,6 +40,16 @@ struct SharedParams {
 }
 
 impl SharedParams {
+    fn coding(&self) -> super::ClipCoding {
+        super::ClipCoding {
+            clip: self.clip,
+            k: self.k,
+            l: self.l,
+            coef_step: self.coef_step,
+            residual_t: self.residual_t,
+        }
+    }
+
     fn to_bytes(&self) -> Vec<u8> {
         let mut w = Writer::new();
         w.bytes(&[PARAMS_VERSION]);
@@ -387,17 +397,9 @@ impl ChunkDecoder for SharedDecoder {
             .ok()
             .and_then(|b| self.per.get(b))
             .ok_or_else(|| malformed(format!("mdtt-shared chunk names basis {b}")))?;
-        let p = &self.p;
-        let coding = super::ClipCoding {
-            clip: p.clip,
-            k: p.k,
-            l: p.l,
-            coef_step: p.coef_step,
-            residual_t: p.residual_t,
-        };
         decode_clip(
             &mut dec,
-            coding,
+            self.p.coding(),
             basis,
             &self.full,
             self.points,
