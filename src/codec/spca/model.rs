@@ -35,13 +35,7 @@ impl Model {
 
     /// The pose of coefficients `c`: `mean + Σ_j c_j · column_j`, into `out`.
     pub fn pose(&self, c: &[f64], out: &mut [f64]) {
-        out.copy_from_slice(&self.mean);
-        let w = self.width();
-        for (column, &cj) in self.basis.chunks_exact(w).zip(c) {
-            for (o, &b) in out.iter_mut().zip(column) {
-                *o += b * cj;
-            }
-        }
+        combine(&self.mean, &self.basis, c, out);
     }
 
     /// The coefficients of poses `rows` (`frames × width`) that come closest to them
@@ -250,6 +244,19 @@ impl Truncation {
             }
         }
         self.width
+    }
+}
+
+/// `mean + Σ_j c_j · column_j` into `out` (columns of `mean.len()` values, contiguous): the
+/// spca decoder's inner loop. Compiled for AVX2 too and chosen at run time; element-wise,
+/// so the same bits either way (see `mdtt::transform::reconstruct`).
+#[multiversion::multiversion(targets("x86_64+avx2"))]
+fn combine(mean: &[f64], basis: &[f64], c: &[f64], out: &mut [f64]) {
+    out.copy_from_slice(mean);
+    for (column, &cj) in basis.chunks_exact(mean.len().max(1)).zip(c) {
+        for (o, &b) in out.iter_mut().zip(column) {
+            *o += b * cj;
+        }
     }
 }
 
