@@ -14,10 +14,12 @@
 //! Dependencies point one way, from the top of this list to the bottom:
 //!
 //! - [`http`]: the axum API under `/v1` (`openapi.yaml`), errors as JSON, request budgets,
-//!   metrics. Parses requests into typed values, calls the service, writes responses; no
-//!   math, no SQL.
+//!   metrics, bearer tokens, route scopes, CORS, rate limits and the audit of writes
+//!   ([`http::auth`]). Parses requests into typed values, calls the service, writes
+//!   responses; no math, no SQL.
 //! - [`service`]: use-cases — ingest with per-take codec choice, range reads with caches,
-//!   live streams, library queries, shared-basis training, verify/export/import. Owns the
+//!   live streams, library queries, shared-basis training, verify/export/import, tokens and
+//!   the audit log ([`service::access`]). Owns the
 //!   typed take record ([`service::take::Take`]) and moves codec work to the blocking pool.
 //! - [`store`]: SQLite (default) and Postgres via sqlx; keeps rows, in one transaction per
 //!   change.

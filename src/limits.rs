@@ -46,6 +46,21 @@ pub const LSDT_MAX_POINTS: usize = 2_000;
 /// Seconds a client is told to wait (`Retry-After`) when the server is at its memory budget.
 pub const RETRY_AFTER_S: u64 = 2;
 
+/// How long a server trusts what the store said about a token (and whether any token
+/// exists): a token revoked through another server sharing the database, or by the CLI,
+/// stops working within this time. Short, since one lookup costs only tens of microseconds.
+pub const TOKEN_CACHE: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Token lookups cached at once; past it the cache is emptied, so made-up secrets cannot
+/// grow it.
+pub const TOKEN_CACHE_ENTRIES: usize = 10_000;
+
+/// Libraries one token may be limited to.
+pub const MAX_TOKEN_LIBRARIES: usize = 100;
+
+/// Audit entries one request may ask for.
+pub const MAX_AUDIT_PAGE: usize = 1_000;
+
 /// The tunable limits, with their defaults in [`Limits::default`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {
@@ -78,6 +93,13 @@ pub struct Limits {
     /// Bytes of frames a stream keeps for re-encoding on finish; past it the stream drops
     /// the copy (and says so) rather than grow without bound.
     pub stream_archive_bytes: u64,
+    /// Requests per second each token may make (each address, for requests without one
+    /// on a server that needs tokens), sustained; 0: no limit. Past it: 429 with
+    /// `Retry-After`. Anonymous requests on a server without tokens (loopback only) are
+    /// not limited.
+    pub requests_per_s: u64,
+    /// Requests a token (or address) may make at once above the sustained rate.
+    pub request_burst: u64,
 }
 
 impl Default for Limits {
@@ -95,6 +117,8 @@ impl Default for Limits {
             open_streams: 32,
             stream_chunk_samples: 2_000_000,
             stream_archive_bytes: 256 << 20,
+            requests_per_s: 200,
+            request_burst: 400,
         }
     }
 }

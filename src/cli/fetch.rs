@@ -17,6 +17,9 @@ pub struct FetchArgs {
     /// The service to fetch from.
     #[arg(long, env = "MOCAP_SERVER", default_value = "http://127.0.0.1:8080")]
     server: String,
+    /// API token of a server that needs one (`mocapstore token create`).
+    #[arg(long, env = "MOCAP_TOKEN", hide_env_values = true)]
+    token: Option<String>,
     /// The output format, when the extension does not say.
     #[arg(long)]
     to: Option<String>,
@@ -76,7 +79,7 @@ fn fetch(args: &FetchArgs) -> Result<usize, String> {
     );
     let runtime = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
     let body = runtime.block_on(async {
-        let r = reqwest::Client::new()
+        let r = super::token::client(args.token.as_deref())?
             .get(&url)
             .query(&query)
             .send()

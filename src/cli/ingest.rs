@@ -18,6 +18,9 @@ pub struct IngestArgs {
     /// The service to upload to.
     #[arg(long, env = "MOCAP_SERVER", default_value = "http://127.0.0.1:8080")]
     server: String,
+    /// API token of a server that needs one (`mocapstore token create`).
+    #[arg(long, env = "MOCAP_TOKEN", hide_env_values = true)]
+    token: Option<String>,
     #[arg(long)]
     library: Option<String>,
     /// Comma-separated tags for every file.
@@ -74,7 +77,14 @@ pub fn run(args: &IngestArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let outcomes = runtime.block_on(upload_all(args, files));
+    let client = match super::token::client(args.token.as_deref()) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("mocapstore ingest: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let outcomes = runtime.block_on(upload_all(args, &client, files));
     let failed: Vec<&Outcome> = outcomes.iter().filter(|o| o.result.is_err()).collect();
     println!(
         "{:<48} {:<8} {:>8} {:>9} {:>9}",
@@ -109,13 +119,16 @@ pub fn run(args: &IngestArgs) -> ExitCode {
     }
 }
 
-async fn upload_all(args: &IngestArgs, files: Vec<PathBuf>) -> Vec<Outcome> {
+async fn upload_all(
+    args: &IngestArgs,
+    client: &reqwest::Client,
+    files: Vec<PathBuf>,
+) -> Vec<Outcome> {
     let bar = ProgressBar::new(files.len() as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {wide_msg}")
             .expect("valid template"),
     );
-    let client = reqwest::Client::new();
     let slots = Arc::new(Semaphore::new(args.concurrency.max(1)));
     let mut fixed: Vec<(&str, String)> = Vec::new();
     for (k, v) in [

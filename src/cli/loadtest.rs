@@ -86,6 +86,12 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
             listen: "127.0.0.1:0".into(),
             database_url: url.clone(),
             decoded_cache_mib: args.decoded_cache_mib,
+            // The limiter runs for requests with a token (measured below) but never refuses.
+            limits: mocapstore::limits::Limits {
+                requests_per_s: 1_000_000_000,
+                request_burst: 1_000_000_000,
+                ..mocapstore::limits::Limits::default()
+            },
             ..Config::default()
         },
     )
@@ -174,17 +180,41 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
         args.requests,
         args.decoded_cache_mib
     );
+    let codec_url: Arc<dyn Fn(usize) -> String + Send + Sync> = Arc::new(codec_url);
+    let route = "GET /v1/sequences/{id}/frames?t0&t1&format=f32";
     for (name, url) in [
+        (route.to_string(), codec_url.clone()),
         (
-            "GET /v1/sequences/{id}/frames?t0&t1&format=f32",
-            Arc::new(codec_url) as Arc<dyn Fn(usize) -> String + Send + Sync>,
+            "raw f32 BLOB from SQLite (baseline)".to_string(),
+            Arc::new(raw_url) as Arc<dyn Fn(usize) -> String + Send + Sync>,
         ),
-        ("raw f32 BLOB from SQLite (baseline)", Arc::new(raw_url)),
     ] {
         let (p50, p99, rps) =
             hammer(&client, url, seconds - 1, args.clients, args.requests).await?;
         out += &format!("| {name} | {p50:.3} | {p99:.3} | {rps:.0} |\n");
     }
+    // The cost of access control: the same route on the same server once a token exists,
+    // each request's bearer checked (a cached lookup), its scope and the rate limiter. The
+    // anonymous run above is the row without it (no token can exist then).
+    let token = mocapstore::service::access::create_token(
+        &store,
+        mocapstore::service::access::TokenRequest {
+            name: "loadtest".into(),
+            scope: "read".into(),
+            libraries: None,
+            expires_at: None,
+        },
+    )
+    .await
+    .map_err(|e| e.to_string())?;
+    // The server notices the first token within its cache time.
+    tokio::time::sleep(mocapstore::limits::TOKEN_CACHE + Duration::from_millis(100)).await;
+    let authed = super::token::client(Some(&token.secret))?;
+    let (p50, p99, rps) =
+        hammer(&authed, codec_url, seconds - 1, args.clients, args.requests).await?;
+    out += &format!(
+        "| {route}, with a read token (auth + rate limiter) | {p50:.3} | {p99:.3} | {rps:.0} |\n"
+    );
     let _ = stop.send(());
     let _ = server.await;
     raw_server.abort();

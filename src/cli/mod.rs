@@ -13,6 +13,7 @@ mod ingest;
 mod inspect;
 mod loadtest;
 mod streamtest;
+mod token;
 mod train_bases;
 
 #[derive(Parser)]
@@ -54,6 +55,10 @@ enum Command {
     Export(archive::ExportArgs),
     /// Store the takes of an export again, byte for byte (into SQLite or Postgres).
     Import(archive::ImportArgs),
+    /// API tokens, on the database itself: create (the secret is shown once), list, revoke.
+    Token(token::TokenArgs),
+    /// The audit log: every write, delete, basis training and token change, newest first.
+    Audit(token::AuditArgs),
 }
 
 #[derive(Args)]
@@ -72,6 +77,18 @@ struct ServeArgs {
     /// takes say would lose.
     #[arg(long, env = "MOCAP_EXHAUSTIVE_CHOICE")]
     exhaustive_choice: bool,
+    /// Serve on a non-loopback address although no token exists: anyone who reaches it may
+    /// read, change and delete the archive. Without it, `serve` refuses to start so.
+    #[arg(long, env = "MOCAP_INSECURE_NO_AUTH")]
+    insecure_no_auth: bool,
+    /// A web origin (https://viewer.example) whose pages may call the API (CORS); repeat
+    /// for several. Writes from any other origin are refused.
+    #[arg(
+        long = "cors-origin",
+        env = "MOCAP_CORS_ORIGINS",
+        value_delimiter = ','
+    )]
+    cors_origins: Vec<String>,
     #[command(flatten)]
     limits: LimitArgs,
 }
@@ -109,6 +126,13 @@ struct LimitArgs {
     /// Live streams open at once; past it, opening one gets 503 with Retry-After.
     #[arg(long, env = "MOCAP_MAX_OPEN_STREAMS", default_value_t = 32)]
     max_open_streams: u64,
+    /// Requests per second each token may make, sustained (each address for anonymous
+    /// requests beyond loopback); past it, 429 with Retry-After. 0: no limit.
+    #[arg(long, env = "MOCAP_REQUESTS_PER_S", default_value_t = 200)]
+    requests_per_s: u64,
+    /// Requests a token may make at once above the sustained rate.
+    #[arg(long, env = "MOCAP_REQUEST_BURST", default_value_t = 400)]
+    request_burst: u64,
 }
 
 impl LimitArgs {
@@ -123,6 +147,8 @@ impl LimitArgs {
             hierarchy_depth: self.max_depth,
             stream_points: self.max_stream_points,
             open_streams: self.max_open_streams,
+            requests_per_s: self.requests_per_s,
+            request_burst: self.request_burst,
             ..mocapstore::limits::Limits::default()
         }
     }
@@ -180,6 +206,8 @@ pub fn main() -> ExitCode {
         Command::Verify(args) => archive::verify(&args),
         Command::Export(args) => archive::export(&args),
         Command::Import(args) => archive::import(&args),
+        Command::Token(args) => token::run(&args),
+        Command::Audit(args) => token::audit(&args),
     }
 }
 
@@ -196,6 +224,10 @@ fn serve(args: ServeArgs) -> ExitCode {
         limits: args.limits.limits(),
         decoded_cache_mib: args.decoded_cache_mib,
         exhaustive_choice: args.exhaustive_choice,
+        policy: mocapstore::http::auth::Policy {
+            allowed_origins: args.cors_origins,
+            open_beyond_loopback: args.insecure_no_auth,
+        },
         ..mocapstore::http::Config::default()
     };
     let runtime = match tokio::runtime::Runtime::new() {

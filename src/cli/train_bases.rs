@@ -14,6 +14,9 @@ pub struct TrainArgs {
     /// The service whose takes to train on.
     #[arg(long, env = "MOCAP_SERVER", default_value = "http://127.0.0.1:8080")]
     server: String,
+    /// API token of a server that needs one (`mocapstore token create`).
+    #[arg(long, env = "MOCAP_TOKEN", hide_env_values = true)]
+    token: Option<String>,
     /// Basis kind.
     #[arg(long, default_value = "lsdt")]
     kind: String,
@@ -60,7 +63,7 @@ pub fn run(args: &TrainArgs) -> ExitCode {
 }
 
 async fn train(args: &TrainArgs) -> Result<Value, String> {
-    let client = reqwest::Client::new();
+    let client = super::token::client(args.token.as_deref())?;
     let base = args.server.trim_end_matches('/');
     let mut body = json!({ "kind": args.kind });
     let fields = [

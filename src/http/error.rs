@@ -31,6 +31,11 @@ impl ApiError {
         ApiError::new(StatusCode::BAD_REQUEST, "bad_request", message)
     }
 
+    /// 401, with the `WWW-Authenticate` challenge that names the scheme.
+    pub fn unauthorized(message: impl Into<String>) -> Self {
+        ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", message)
+    }
+
     /// 503 at a capacity limit, with `Retry-After`.
     pub fn busy(message: impl Into<String>) -> Self {
         ApiError {
@@ -44,6 +49,12 @@ impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let body = serde_json::json!({"error": {"code": self.code, "message": self.message}});
         let mut r = (self.status, Json(body)).into_response();
+        if self.status == StatusCode::UNAUTHORIZED {
+            r.headers_mut().insert(
+                header::WWW_AUTHENTICATE,
+                HeaderValue::from_static("Bearer realm=\"mocapstore\""),
+            );
+        }
         if let Some(s) = self.retry_after {
             r.headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from(s));
@@ -63,6 +74,8 @@ impl From<service::Error> for ApiError {
             E::Unsatisfiable(_) => (StatusCode::CONFLICT, "unsatisfiable"),
             E::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
             E::Busy(_) => return ApiError::busy(e.to_string()),
+            E::Unauthorized(_) => return ApiError::unauthorized(e.to_string()),
+            E::Forbidden(_) => (StatusCode::FORBIDDEN, "forbidden"),
             E::Codec(crate::codec::Error::Invalid(_)) => (StatusCode::BAD_REQUEST, "bad_request"),
             E::Store(crate::store::Error::Conflict(_)) => (StatusCode::CONFLICT, "conflict"),
             E::Codec(_) | E::Store(_) | E::Corrupt(_) | E::Internal(_) => {

@@ -3,12 +3,14 @@
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::response::{IntoResponse, Response};
+use axum::Extension;
 use axum::Json;
 use serde::Deserialize;
 
 use super::error::ApiError;
 use super::views::{ListingView, TakeView};
 use super::AppState;
+use crate::service::access::{self, Caller};
 use crate::service::library::{self, Stats};
 use crate::store::{Filter, SortKey};
 
@@ -53,12 +55,14 @@ impl ListQuery {
             min_ratio: self.min_ratio,
             created_after: self.created_after,
             created_before: self.created_before,
+            within: None,
         }
     }
 }
 
 pub async fn list(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
@@ -72,7 +76,7 @@ pub async fn list(
             )))
         }
     };
-    let filter = q.filter();
+    let filter = caller.grant.restrict(q.filter());
     let listing = library::list(
         &state.store,
         &filter,
@@ -94,15 +98,16 @@ pub struct StatsQuery {
 
 pub async fn stats(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     query: Result<Query<StatsQuery>, QueryRejection>,
 ) -> Result<Json<Stats>, ApiError> {
     let Query(q) = query?;
-    let filter = Filter {
+    let filter = caller.grant.restrict(Filter {
         library: q.library,
         tag: q.tag,
         codec: q.codec,
         ..Filter::default()
-    };
+    });
     Ok(Json(library::stats(&state.store, &filter).await?))
 }
 
@@ -131,10 +136,15 @@ where
 
 pub async fn patch(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
     body: Result<Json<Patch>, JsonRejection>,
 ) -> Result<Response, ApiError> {
     let Json(p) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    access::check_take(&state.store, &caller.grant, &id).await?;
+    if let Some(to) = &p.library {
+        caller.grant.library(to)?;
+    }
     let row = library::update(
         &state.store,
         &id,

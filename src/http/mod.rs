@@ -3,6 +3,7 @@
 //! [`Application::build`] binds the listener first, so it knows its port before serving:
 //! tests start the real server on `127.0.0.1:0` and read the port back.
 
+pub mod auth;
 mod bases;
 pub mod budget;
 mod error;
@@ -11,6 +12,7 @@ mod metrics;
 mod sequences;
 mod skeletons;
 mod streams;
+mod tokens;
 mod views;
 
 use std::net::SocketAddr;
@@ -25,11 +27,13 @@ use axum::Router;
 use tokio::net::TcpListener;
 use tower_http::trace::TraceLayer;
 
+use auth::{Front, Policy, RateKey};
 use budget::{hold_body, BodyBudget, BodyGate};
 pub use error::ApiError;
 pub use metrics::Metrics;
 
 use crate::limits::Limits;
+use crate::service::access::Authenticator;
 use crate::service::history::Histories;
 use crate::service::jobs::Jobs;
 use crate::service::prepared::ReadCaches;
@@ -51,6 +55,8 @@ pub struct Config {
     /// Encode every candidate of every take in full: no candidate is left out by what a
     /// layout's earlier takes say ([`crate::service::history`]).
     pub exhaustive_choice: bool,
+    /// Browser origins allowed, and whether to serve anonymous requests beyond loopback.
+    pub policy: Policy,
 }
 
 /// How often the server renews its streams' leases, finishes idle streams and closes the
@@ -66,6 +72,7 @@ impl Default for Config {
             decoded_cache_mib: 256,
             stream_lease: Duration::from_secs(60),
             exhaustive_choice: false,
+            policy: Policy::default(),
         }
     }
 }
@@ -84,9 +91,16 @@ pub struct AppState {
     /// What per-take choice has learnt from the takes ingested so far; `None` when every
     /// candidate is encoded ([`Config::exhaustive_choice`]).
     pub histories: Option<Arc<Histories>>,
+    /// Who requests are, from their tokens (cached briefly).
+    pub auth: Arc<Authenticator>,
 }
 
-pub fn router(state: AppState) -> Router {
+/// Forgets the rate limiter's idle keys; run with the other maintenance.
+type Forget = Arc<dyn Fn() + Send + Sync>;
+
+/// The routes, behind authentication, scopes, rate limits, CORS and the audit log
+/// ([`auth`]); with the rate limiter's key sweeper when limits are on.
+pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
     let limits = state.limits;
     // Each route with a body reads it through the server's budget, under its own limit.
     let gate = |limit: u64| {
@@ -101,7 +115,8 @@ pub fn router(state: AppState) -> Router {
     let upload = gate(limits.upload_bytes);
     let append = gate(limits.append_bytes);
     let json = gate(limits.json_body_bytes);
-    Router::new()
+    let json_tokens = json.clone();
+    let inner = Router::new()
         .route("/healthz", get(|| async { "ok" }))
         .route("/metrics", get(metrics::render))
         .route(
@@ -134,6 +149,13 @@ pub fn router(state: AppState) -> Router {
         )
         .route("/v1/streams/{id}/finish", post(streams::finish.layer(json)))
         .route("/v1/sequences/{id}/frames", get(sequences::frames))
+        .route(
+            "/v1/tokens",
+            get(tokens::list).post(tokens::create.layer(json_tokens)),
+        )
+        .route("/v1/tokens/{id}", axum::routing::delete(tokens::revoke))
+        .route("/v1/audit", get(tokens::audit))
+        .route_layer(axum::middleware::from_fn(auth::require_scope))
         .fallback(|| async {
             ApiError::new(
                 StatusCode::NOT_FOUND,
@@ -150,12 +172,83 @@ pub fn router(state: AppState) -> Router {
         })
         // The gates above have read and bounded every body already.
         .layer(DefaultBodyLimit::max(limits.upload_bytes as usize))
+        .with_state(state.clone());
+    let mut forget: Option<Forget> = None;
+    let mut refuse = None;
+    let limited = (limits.requests_per_s > 0).then(|| {
+        let config = tower_governor::governor::GovernorConfigBuilder::default()
+            .key_extractor(RateKey)
+            .period(Duration::from_secs_f64(1.0 / limits.requests_per_s as f64))
+            .burst_size(limits.request_burst.clamp(1, u64::from(u32::MAX)) as u32)
+            .finish()
+            .expect("a positive rate and burst");
+        let limiter = config.limiter().clone();
+        forget = Some(Arc::new(move || limiter.retain_recent()));
+        // One limiter for both: refusals count against their address like any request.
+        let layer = tower_governor::GovernorLayer::new(config).error_handler(auth::too_many);
+        refuse = Some(Router::new().fallback(auth::refusal).layer(layer.clone()));
+        inner.clone().layer(layer)
+    });
+    let cors = (!policy.allowed_origins.is_empty()).then(|| cors(&policy.allowed_origins));
+    let front = Front {
+        store: state.store.clone(),
+        auth: state.auth.clone(),
+        policy: Arc::new(policy),
+        limited,
+        refuse,
+    };
+    // Around the router as one service, not layered onto each route: a route layer runs
+    // after routing, and sending the request on through `limited` would route it twice.
+    let gated = tower::ServiceBuilder::new()
+        .layer(axum::middleware::from_fn_with_state(front, auth::front))
+        .service(inner);
+    let router = Router::new()
+        .fallback_service(gated)
+        .layer(tower::util::option_layer(cors))
         .layer(axum::middleware::from_fn_with_state(
             state.metrics.clone(),
             metrics::count_requests,
         ))
-        .layer(TraceLayer::new_for_http())
-        .with_state(state)
+        .layer(TraceLayer::new_for_http());
+    (router, forget)
+}
+
+/// CORS for the allowed origins: the methods and headers the API takes, and the headers of
+/// its answers a page may read.
+fn cors(origins: &[String]) -> tower_http::cors::CorsLayer {
+    use axum::http::{header, HeaderName, HeaderValue, Method};
+    let origins: Vec<HeaderValue> = origins
+        .iter()
+        .filter_map(|o| HeaderValue::from_str(o).ok())
+        .collect();
+    let mut allow = vec![header::AUTHORIZATION, header::CONTENT_TYPE];
+    for f in [
+        "name",
+        "library",
+        "tags",
+        "unit",
+        "fps",
+        "codec",
+        "max-error-mm",
+        "mean-error-mm",
+        "latency",
+        "keep",
+        "torso",
+        "lenient",
+    ] {
+        allow.push(HeaderName::from_bytes(format!("x-mocap-{f}").as_bytes()).expect("ASCII"));
+    }
+    let expose: Vec<HeaderName> = ["x-frames", "x-points", "x-start-frame", "x-fps"]
+        .iter()
+        .map(|h| HeaderName::from_static(h))
+        .chain([header::LOCATION, header::RETRY_AFTER])
+        .collect();
+    tower_http::cors::CorsLayer::new()
+        .allow_origin(origins)
+        .allow_methods([Method::GET, Method::POST, Method::PATCH, Method::DELETE])
+        .allow_headers(allow)
+        .expose_headers(expose)
+        .max_age(Duration::from_secs(3600))
 }
 
 /// A bound, ready-to-serve service.
@@ -164,6 +257,7 @@ pub struct Application {
     router: Router,
     store: Store,
     state: AppState,
+    forget_idle_keys: Option<Forget>,
 }
 
 impl Application {
@@ -190,18 +284,48 @@ impl Application {
             jobs: Arc::new(Jobs::default()),
             streams: Arc::new(Streams::new(limits, config.stream_lease)),
             histories: (!config.exhaustive_choice).then(|| Arc::new(Histories::default())),
+            auth: Arc::new(Authenticator::default()),
         };
+        // Without tokens the server answers anyone who reaches it: only loopback, unless
+        // the operator says otherwise.
+        let addr = listener
+            .local_addr()
+            .map_err(|e| format!("{}: {e}", config.listen))?;
+        if !addr.ip().is_loopback() {
+            let tokens = state
+                .auth
+                .required(&store)
+                .await
+                .map_err(|e| format!("reading tokens: {e}"))?;
+            if !tokens && !config.policy.open_beyond_loopback {
+                return Err(format!(
+                    "refusing to serve {addr} without tokens: anyone who reaches it could read, \
+                     change and delete the archive. Create one first (mocapstore token create \
+                     --scope admin --name NAME), or listen on 127.0.0.1, or pass \
+                     --insecure-no-auth"
+                ));
+            }
+            if !tokens {
+                tracing::warn!(
+                    %addr,
+                    "serving WITHOUT authentication beyond loopback (--insecure-no-auth): \
+                     anyone who reaches this address can read, change and delete the archive"
+                );
+            }
+        }
         // Takes left live by a server that died mid-stream are closed before serving.
         state
             .streams
             .close_orphans(&state.store, &state.caches)
             .await
             .map_err(|e| format!("closing interrupted streams: {e}"))?;
+        let (router, forget_idle_keys) = router(state.clone(), config.policy);
         Ok(Application {
             listener,
-            router: router(state.clone()),
+            router,
             store,
             state,
+            forget_idle_keys,
         })
     }
 
@@ -218,14 +342,22 @@ impl Application {
     ) -> std::io::Result<()> {
         // Stream leases, idle streams and orphaned live takes, in the background.
         let state = self.state.clone();
+        let forget = self.forget_idle_keys.clone();
         let reaper = tokio::spawn(async move {
             let mut tick = tokio::time::interval(MAINTENANCE_PERIOD);
             loop {
                 tick.tick().await;
                 state.streams.maintain(&state.store, &state.caches).await;
+                if let Some(f) = &forget {
+                    f();
+                }
             }
         });
-        let served = axum::serve(self.listener, self.router)
+        // Peer addresses: the rate limit's key for requests without a token.
+        let service = self
+            .router
+            .into_make_service_with_connect_info::<SocketAddr>();
+        let served = axum::serve(self.listener, service)
             .with_graceful_shutdown(shutdown)
             .await;
         reaper.abort();

@@ -6,6 +6,7 @@ use axum::extract::rejection::{BytesRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
+use axum::Extension;
 use axum::Json;
 use serde::Deserialize;
 
@@ -17,6 +18,7 @@ use crate::limits::Limits;
 use crate::motion::formats::{self, Format};
 use crate::motion::units::parse_unit;
 use crate::motion::{Motion, Unit, UnitSource};
+use crate::service::access::{self, Caller};
 use crate::service::choose::{CodecRequest, Keep};
 use crate::service::fetch::{self, TimeRange};
 use crate::service::ingest::{self, IngestRequest};
@@ -199,12 +201,14 @@ pub fn ingest_request(
 
 pub async fn create(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     headers: HeaderMap,
     query: Result<Query<IngestQuery>, QueryRejection>,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
-    let req = ingest_request(q, &headers, body?, &state.limits)?;
+    let mut req = ingest_request(q, &headers, body?, &state.limits)?;
+    req.label.library = caller.grant.library_for_new(&req.label.library)?;
     let uploaded = req.bytes.len();
     let report = ingest::ingest(&state.store, state.histories.as_deref(), req).await?;
     state
@@ -221,8 +225,10 @@ pub async fn create(
 
 pub async fn get(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
+    access::check_take(&state.store, &caller.grant, &id).await?;
     let take = fetch::take(&state.store, &id).await?;
     Ok(Json(TakeView::from(&take)).into_response())
 }
@@ -292,10 +298,12 @@ pub fn frames_request(q: FramesQuery) -> Result<FramesRequest, ApiError> {
 
 pub async fn frames(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
     query: Result<Query<FramesQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
+    access::check_take(&state.store, &caller.grant, &id).await?;
     let FramesRequest {
         range,
         format,

@@ -5,6 +5,7 @@ use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
+use axum::Extension;
 use axum::Json;
 use serde::de::{DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::Deserialize;
@@ -12,13 +13,16 @@ use serde::Deserialize;
 use super::error::ApiError;
 use super::views::TakeView;
 use super::AppState;
+use crate::service::access::{self, Caller};
 use crate::service::streams::{OpenRequest, StreamInfo};
 
 pub async fn open(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     body: Result<Json<OpenRequest>, JsonRejection>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let Json(req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let Json(mut req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    req.library = caller.grant.library_for_new(&req.library)?;
     let info = state.streams.open(&state.store, req).await?;
     let location = format!("/v1/streams/{}", info.id);
     Ok((
@@ -30,8 +34,10 @@ pub async fn open(
 
 pub async fn get(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
 ) -> Result<Json<StreamInfo>, ApiError> {
+    access::check_take(&state.store, &caller.grant, &id).await?;
     Ok(Json(state.streams.info(&state.store, &id).await?))
 }
 
@@ -146,12 +152,14 @@ impl<'de> Visitor<'de> for Frame<'_> {
 
 pub async fn append(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
     query: Result<Query<AppendQuery>, QueryRejection>,
     headers: HeaderMap,
     body: Bytes,
 ) -> Result<Json<StreamInfo>, ApiError> {
     let Query(q) = query?;
+    access::check_take(&state.store, &caller.grant, &id).await?;
     let frames = parse_frames(&headers, &body)?;
     let info = state
         .streams
@@ -162,8 +170,10 @@ pub async fn append(
 
 pub async fn finish(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
+    access::check_take(&state.store, &caller.grant, &id).await?;
     let take = state
         .streams
         .finish(&state.store, &state.caches, &id)

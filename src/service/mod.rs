@@ -2,6 +2,7 @@
 //! transactions (through the store) and moves codec work off the async executor.
 //!
 //! # Layout
+//! - [`access`]: tokens, scopes and libraries; who a request is; the audit log.
 //! - [`archive`]: verify everything stored; export takes to open files and bitstreams,
 //!   import them back.
 //! - [`bases`]: shared bases as stored objects — loading, the newest per layout, deleting.
@@ -16,6 +17,7 @@
 //! - [`prepared`]: readers kept ready per take for range requests.
 //! - [`take`]: a stored take as a typed record, parsed from its row once.
 
+pub mod access;
 pub mod archive;
 pub mod bases;
 pub mod choose;
@@ -52,6 +54,12 @@ pub enum Error {
     /// The request clashes with what is stored (e.g. deleting a basis takes still use).
     #[error("{0}")]
     Conflict(String),
+    /// The request has no valid token, and this server needs one.
+    #[error("{0}")]
+    Unauthorized(String),
+    /// The token is valid but does not reach what was asked (scope or library).
+    #[error("{0}")]
+    Forbidden(String),
     /// The server is at a capacity limit (open streams); the same request may succeed later.
     #[error("{0}")]
     Busy(String),

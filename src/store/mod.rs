@@ -112,7 +112,7 @@ impl Store {
                 .execute(&mut *tx)
                 .await;
             if let Err(e) = r {
-                return Err(conflict_or(e, &s.id));
+                return Err(conflict_or(e, &format!("sequence {}", s.id)));
             }
             for tag in &s.tags {
                 sqlx::query("INSERT INTO sequence_tags (sequence_id, tag) VALUES ($1, $2)")
@@ -341,6 +341,17 @@ impl Store {
         })
     }
 
+    /// The library a take is in, `None` if there is no such take (one indexed lookup: what
+    /// access checks read on every request, as the take may have moved since it was cached).
+    pub async fn library_of(&self, id: &str) -> Result<Option<String>> {
+        dispatch!(self, pool => {
+            Ok(sqlx::query_scalar::<_, String>("SELECT library FROM sequences WHERE id = $1")
+                .bind(id)
+                .fetch_optional(pool)
+                .await?)
+        })
+    }
+
     /// Delete a take (chunks and tags cascade); false if there was none.
     pub async fn delete(&self, id: &str) -> Result<bool> {
         dispatch!(self, pool => {
@@ -419,6 +430,8 @@ mod bases;
 pub use bases::{BasisRow, Deletion};
 mod skeletons;
 pub use skeletons::SkeletonRow;
+mod access;
+pub use access::{AuditRow, TokenRow};
 
 /// One page of a listing.
 #[derive(Debug, Clone)]
@@ -584,11 +597,10 @@ impl Store {
     }
 }
 
-fn conflict_or(e: sqlx::Error, id: &str) -> Error {
+/// A unique violation as a `Conflict` naming `what`; any other error as it is.
+fn conflict_or(e: sqlx::Error, what: &str) -> Error {
     match &e {
-        sqlx::Error::Database(d) if d.is_unique_violation() => {
-            Error::Conflict(format!("sequence {id}"))
-        }
+        sqlx::Error::Database(d) if d.is_unique_violation() => Error::Conflict(what.to_string()),
         _ => Error::Database(e),
     }
 }

@@ -22,6 +22,9 @@ pub struct Filter {
     /// Milliseconds since the Unix epoch.
     pub created_after: Option<i64>,
     pub created_before: Option<i64>,
+    /// Only takes in these libraries (an access limit, not a user's filter); an empty list
+    /// matches nothing.
+    pub within: Option<Vec<String>>,
 }
 
 /// Sort keys; every sort ends with the id, so pages are stable.
@@ -110,6 +113,19 @@ pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
     };
     if let Some(v) = &f.library {
         s.push("library = ?", Value::Text(v.clone()));
+    }
+    if let Some(libraries) = &f.within {
+        if libraries.is_empty() {
+            s.text += " AND 1 = 0";
+        }
+        let mut marks = Vec::with_capacity(libraries.len());
+        for l in libraries {
+            s.values.push(Value::Text(l.clone()));
+            marks.push(format!("${}", s.values.len()));
+        }
+        if !marks.is_empty() {
+            s.text += &format!(" AND library IN ({})", marks.join(", "));
+        }
     }
     if let Some(v) = &f.tag {
         s.push(

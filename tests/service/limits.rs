@@ -131,7 +131,7 @@ async fn a_content_length_over_the_limit_is_refused_before_the_body_is_read() {
     let srv = common::start(t.store.clone(), 8 << 20).await;
     // 600 MiB declared, not one byte sent: the answer comes from the header alone.
     let head = format!(
-        "POST /v1/sequences?name=big HTTP/1.1\r\nHost: x\r\nContent-Length: {}\r\n\r\n",
+        "POST /v1/sequences?name=big HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
         600u64 << 20
     );
     let (status, text, _conn) = raw(&srv.base, &head, b"").await;
@@ -165,7 +165,7 @@ async fn uploads_past_the_server_budget_get_503_and_what_is_held_stays_bounded()
     for _ in 0..2 {
         let mut s = TcpStream::connect(&addr).await.unwrap();
         let head = format!(
-            "POST /v1/sequences?name=slow HTTP/1.1\r\nHost: x\r\nContent-Length: {}\r\n\r\n",
+            "POST /v1/sequences?name=slow HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
             2u64 << 20
         );
         s.write_all(head.as_bytes()).await.unwrap();
@@ -179,7 +179,7 @@ async fn uploads_past_the_server_budget_get_503_and_what_is_held_stays_bounded()
     // A third upload, declared or chunked, is refused at once with Retry-After.
     let take = formats::write(&walker(60, 4, 60.0, 1, 0.0), Format::Json).unwrap();
     let head = format!(
-        "POST /v1/sequences?name=third HTTP/1.1\r\nHost: x\r\nContent-Length: {}\r\n\r\n",
+        "POST /v1/sequences?name=third HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
         take.len()
     );
     let (status, text, _c) = raw(&srv.base, &head, &take).await;
@@ -195,7 +195,7 @@ async fn uploads_past_the_server_budget_get_503_and_what_is_held_stays_bounded()
     chunked.extend_from_slice(b"\r\n0\r\n\r\n");
     let (status, text, _c) = raw(
         &srv.base,
-        "POST /v1/sequences?name=chunked HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: chunked\r\n\r\n",
+        "POST /v1/sequences?name=chunked HTTP/1.1\r\nHost: localhost\r\nTransfer-Encoding: chunked\r\n\r\n",
         &chunked,
     )
     .await;
@@ -509,7 +509,7 @@ async fn an_append_larger_than_its_limit_is_refused_before_it_is_read() {
     let id = s["id"].as_str().unwrap().to_string();
     // Frames per append are bounded by the append body limit (24 bytes a frame here).
     let head = format!(
-        "POST /v1/streams/{id}/frames HTTP/1.1\r\nHost: x\r\nContent-Type: application/octet-stream\r\nContent-Length: {}\r\n\r\n",
+        "POST /v1/streams/{id}/frames HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/octet-stream\r\nContent-Length: {}\r\n\r\n",
         100 * 24
     );
     let (status, text, _c) = raw(&srv.base, &head, b"").await;

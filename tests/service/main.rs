@@ -5,6 +5,7 @@
 
 mod common;
 
+mod access;
 mod archive;
 mod bases;
 mod choice;

@@ -79,7 +79,7 @@ async fn interrupted_uploads_leave_nothing() {
                 let mut s = TcpStream::connect(&addr).unwrap();
                 write!(
                     s,
-                    "POST /v1/sequences?name=cut HTTP/1.1\r\nHost: x\r\nContent-Length: {}\r\n\r\n",
+                    "POST /v1/sequences?name=cut HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
                     body.len()
                 )
                 .unwrap();

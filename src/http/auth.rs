@@ -1,0 +1,435 @@
+//! Who is asking, and whether they may: the bearer token of each request, the scope each
+//! route needs, browser safety (cross-origin writes, DNS rebinding), rate limits and the
+//! audit entry of every write. Tokens themselves, grants and the log live in
+//! [`crate::service::access`]; this module reads headers and answers with statuses.
+//!
+//! # Order
+//! [`front`] runs before routing: it refuses cross-origin writes, authenticates (401), puts
+//! the [`Caller`] in the request, and sends the request on either through the rate limiter
+//! (any request with a token, anonymous ones on a server open beyond loopback, and every
+//! refusal, keyed by address) or straight on (anonymous on loopback). After routing, [`require_scope`] checks the route's
+//! scope ([`route_scope`], 403). Handlers check libraries, which only the service knows. When
+//! the answer is back, [`front`] records writes in the audit log, refusals included.
+//!
+//! # Routes and scopes
+//! | route | scope |
+//! |---|---|
+//! | `GET /healthz` | none |
+//! | `GET /metrics`, every other `GET` | read |
+//! | `POST /v1/sequences`, `PATCH /v1/sequences/{id}`, `POST /v1/streams…` | write |
+//! | `DELETE /v1/sequences/{id}`, `POST`/`DELETE /v1/bases…`, `DELETE /v1/skeletons/{id}`, `/v1/tokens…`, `GET /v1/audit` | admin |
+//!
+//! A read or write token limited to libraries sees and changes only takes in them; an
+//! admin token is over every library.
+
+use std::net::{IpAddr, SocketAddr};
+use std::sync::Arc;
+
+use axum::extract::{ConnectInfo, MatchedPath, Request, State};
+use axum::http::{header, HeaderMap, Method, StatusCode};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use axum::Router;
+use tower::ServiceExt;
+use tower_governor::key_extractor::KeyExtractor;
+use tower_governor::GovernorError;
+
+use super::error::ApiError;
+use crate::service::access::{self, Audit, Authenticator, Caller, Scope};
+use crate::store::Store;
+
+/// How the server treats requests beyond their tokens.
+#[derive(Debug, Clone, Default)]
+pub struct Policy {
+    /// Origins (`https://viewer.example:8443`) whose pages may call the API from a browser:
+    /// CORS answers for them, and their writes are not refused as cross-origin.
+    pub allowed_origins: Vec<String>,
+    /// Serve anonymous requests beyond loopback (`serve --insecure-no-auth`): no check of
+    /// the `Host` a request names, and anonymous requests are rate-limited per address.
+    pub open_beyond_loopback: bool,
+}
+
+/// What [`front`] needs.
+#[derive(Clone)]
+pub struct Front {
+    pub store: Store,
+    pub auth: Arc<Authenticator>,
+    pub policy: Arc<Policy>,
+    /// The same routes behind the rate limiter; `None` when limits are off.
+    pub limited: Option<Router>,
+    /// [`refusal`] behind the same limiter: refused requests are limited per address, so
+    /// guessing tokens or flooding the audit log with refusals is slowed like anything else.
+    pub refuse: Option<Router>,
+}
+
+/// Why [`front`] refuses a request, for [`refusal`] to answer.
+#[derive(Debug, Clone)]
+struct Refused {
+    status: StatusCode,
+    code: &'static str,
+    message: String,
+}
+
+/// The answer to a refused request, once it has passed the rate limiter.
+pub async fn refusal(req: Request) -> Response {
+    match req.extensions().get::<Refused>() {
+        Some(r) => ApiError::new(r.status, r.code, r.message.clone()).into_response(),
+        None => ApiError::unauthorized("refused").into_response(),
+    }
+}
+
+/// The one write route not audited entry by entry (see [`front`]).
+const UNAUDITED: &str = "/v1/streams/{id}/frames";
+
+/// The route a request matched, for its audit entry (set by [`require_scope`]).
+#[derive(Debug, Clone)]
+struct Route(String);
+
+/// The scope a route needs; `None` for the routes anyone may call.
+pub fn route_scope(method: &Method, route: &str) -> Option<Scope> {
+    if route == "/healthz" {
+        return None;
+    }
+    let admin = route.starts_with("/v1/tokens")
+        || route == "/v1/audit"
+        || (route.starts_with("/v1/bases") && *method != Method::GET)
+        || (*method == Method::DELETE
+            && (route.starts_with("/v1/sequences") || route.starts_with("/v1/skeletons")));
+    Some(if admin {
+        Scope::Admin
+    } else if *method == Method::GET || *method == Method::HEAD {
+        Scope::Read
+    } else {
+        Scope::Write
+    })
+}
+
+/// Whether a method changes state (and so is audited and checked for its origin).
+fn changes_state(method: &Method) -> bool {
+    !matches!(*method, Method::GET | Method::HEAD | Method::OPTIONS)
+}
+
+/// The secret of an `Authorization: Bearer` header; `Err` for any other authorization.
+fn bearer(headers: &HeaderMap) -> Result<Option<&str>, ApiError> {
+    let Some(v) = headers.get(header::AUTHORIZATION) else {
+        return Ok(None);
+    };
+    let v = v.to_str().map_err(|_| {
+        ApiError::unauthorized("the Authorization header is not ASCII: send Bearer <token>")
+    })?;
+    match v.split_once(' ') {
+        Some((scheme, secret))
+            if scheme.eq_ignore_ascii_case("bearer") && !secret.trim().is_empty() =>
+        {
+            Ok(Some(secret.trim()))
+        }
+        _ => Err(ApiError::unauthorized(
+            "the Authorization header must be Bearer <token>",
+        )),
+    }
+}
+
+/// The host of a `Host` header (`name`, `name:port`, `[v6]:port`).
+fn host_name(host: &str) -> &str {
+    if let Some(rest) = host.strip_prefix('[') {
+        return rest.split(']').next().unwrap_or(rest);
+    }
+    host.rsplit_once(':').map_or(host, |(h, _)| h)
+}
+
+fn is_loopback_host(host: &str) -> bool {
+    let h = host_name(host);
+    h.eq_ignore_ascii_case("localhost") || h.parse::<IpAddr>().is_ok_and(|ip| ip.is_loopback())
+}
+
+/// Whether a write's `Origin` (sent by browsers, never by curl or the CLI) is the server's
+/// own or one it allows. A page elsewhere can send a "simple" POST (text/plain, no
+/// preflight) to a server on the user's machine; this is what stops it.
+fn origin_allowed(headers: &HeaderMap, policy: &Policy) -> bool {
+    let Some(origin) = headers.get(header::ORIGIN).and_then(|v| v.to_str().ok()) else {
+        return true;
+    };
+    if policy.allowed_origins.iter().any(|o| o == origin) {
+        return true;
+    }
+    let host = headers.get(header::HOST).and_then(|v| v.to_str().ok());
+    let own = origin
+        .split_once("://")
+        .map(|(_, authority)| authority.trim_end_matches('/'));
+    matches!((own, host), (Some(o), Some(h)) if o.eq_ignore_ascii_case(h))
+}
+
+/// Authenticate, refuse what must be refused, rate-limit, audit. See the module doc.
+pub async fn front(State(f): State<Front>, mut req: Request, next: Next) -> Response {
+    let method = req.method().clone();
+    let path = req.uri().path().to_string();
+    if path == "/healthz" || method == Method::OPTIONS {
+        return next.run(req).await;
+    }
+    let writes = changes_state(&method);
+    let caller = match authenticate(&f, req.headers(), writes).await {
+        Ok(c) => c,
+        Err(e) => {
+            let response = match &f.refuse {
+                Some(refuse) => {
+                    req.extensions_mut().insert(Refused {
+                        status: e.status,
+                        code: e.code,
+                        message: e.message,
+                    });
+                    match refuse.clone().oneshot(req).await {
+                        Ok(r) => r,
+                        Err(never) => match never {},
+                    }
+                }
+                None => e.into_response(),
+            };
+            // Past the limit nothing was tried: not worth an entry each.
+            if writes && response.status() != StatusCode::TOO_MANY_REQUESTS {
+                let done = Done::of(&response);
+                audit(&f.store, None, &method, &path, done).await;
+            }
+            return response;
+        }
+    };
+    req.extensions_mut().insert(caller.clone());
+    let response = if caller.token.is_some() || f.policy.open_beyond_loopback {
+        match &f.limited {
+            Some(limited) => match limited.clone().oneshot(req).await {
+                Ok(r) => r,
+                Err(never) => match never {},
+            },
+            None => next.run(req).await,
+        }
+    } else {
+        next.run(req).await
+    };
+    if writes {
+        let done = Done::of(&response);
+        // A live stream's appends come many times a second; its open and finish entries
+        // stand for them.
+        if done.route.as_deref() != Some(UNAUDITED) {
+            audit(&f.store, caller.token.as_ref(), &method, &path, done).await;
+        }
+    }
+    response
+}
+
+/// The caller, or the answer that refuses it (`writes`: the request changes state).
+async fn authenticate(f: &Front, headers: &HeaderMap, writes: bool) -> Result<Caller, ApiError> {
+    if writes && !origin_allowed(headers, &f.policy) {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            "cross_origin",
+            "a page from another origin may not call this server; allow its origin with \
+             serve --cors-origin",
+        ));
+    }
+    let caller = f.auth.authenticate(&f.store, bearer(headers)?).await?;
+    if caller.token.is_none() && !f.policy.open_beyond_loopback {
+        // A server without tokens answers only requests addressed to a loopback name: a
+        // page whose own name resolves to 127.0.0.1 (DNS rebinding) is refused.
+        let host = headers.get(header::HOST).and_then(|v| v.to_str().ok());
+        if !host.is_some_and(is_loopback_host) {
+            return Err(ApiError::new(
+                StatusCode::FORBIDDEN,
+                "misdirected",
+                "this server has no tokens and answers only requests addressed to localhost",
+            ));
+        }
+    }
+    Ok(caller)
+}
+
+/// After routing: the route's scope, or 403.
+pub async fn require_scope(req: Request, next: Next) -> Response {
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or_else(|| req.uri().path().to_string(), |m| m.as_str().to_string());
+    let needed = route_scope(req.method(), &route);
+    let allowed = match (needed, req.extensions().get::<Caller>()) {
+        (None, _) => Ok(()),
+        (Some(scope), Some(caller)) => caller.grant.require(scope).map_err(ApiError::from),
+        (Some(_), None) => Err(ApiError::unauthorized("no credentials were checked")),
+    };
+    let mut response = match allowed {
+        Ok(()) => next.run(req).await,
+        Err(e) => e.into_response(),
+    };
+    response.extensions_mut().insert(Route(route));
+    response
+}
+
+/// What an answer says for the audit log (read before the log is written: a response
+/// body cannot be held across an await).
+struct Done {
+    status: u16,
+    route: Option<String>,
+    detail: String,
+}
+
+impl Done {
+    fn of(response: &Response) -> Done {
+        Done {
+            status: response.status().as_u16(),
+            route: response.extensions().get::<Route>().map(|r| r.0.clone()),
+            detail: response
+                .headers()
+                .get(header::LOCATION)
+                .and_then(|v| v.to_str().ok())
+                .map(|l| format!("created {l}"))
+                .unwrap_or_default(),
+        }
+    }
+}
+
+/// One audit entry; a failure to write it is logged, not turned into the answer (the
+/// change it describes has happened).
+async fn audit(
+    store: &Store,
+    token: Option<&access::TokenRef>,
+    method: &Method,
+    path: &str,
+    done: Done,
+) {
+    let entry = Audit {
+        caller: token,
+        action: format!("{method} {}", done.route.as_deref().unwrap_or(path)),
+        target: path.to_string(),
+        status: done.status,
+        detail: done.detail,
+    };
+    if let Err(e) = access::record(store, entry).await {
+        tracing::error!(error = %e, "could not write the audit log");
+    }
+}
+
+/// Rate-limit key: the token, or for anonymous requests the client's address.
+#[derive(Debug, Clone, Copy)]
+pub struct RateKey;
+
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Limited {
+    Token(String),
+    Address(IpAddr),
+}
+
+impl KeyExtractor for RateKey {
+    type Key = Limited;
+
+    fn extract<T>(&self, req: &axum::http::Request<T>) -> Result<Limited, GovernorError> {
+        if let Some(t) = req
+            .extensions()
+            .get::<Caller>()
+            .and_then(|c| c.token.as_ref())
+        {
+            return Ok(Limited::Token(t.id.clone()));
+        }
+        let ip = req
+            .extensions()
+            .get::<ConnectInfo<SocketAddr>>()
+            .map_or(IpAddr::from([0, 0, 0, 0]), |c| c.0.ip());
+        Ok(Limited::Address(ip))
+    }
+}
+
+/// A rate-limit refusal in the one error shape, with `Retry-After`.
+pub fn too_many(e: GovernorError) -> Response {
+    match e {
+        GovernorError::TooManyRequests { wait_time, .. } => ApiError {
+            retry_after: Some(wait_time.max(1)),
+            ..ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "rate_limited",
+                format!("too many requests for this token or address; retry in {wait_time} s"),
+            )
+        }
+        .into_response(),
+        other => {
+            tracing::error!(error = %other, "rate limiter");
+            ApiError::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "internal",
+                "internal error; see the server log",
+            )
+            .into_response()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use axum::http::HeaderValue;
+
+    #[test]
+    fn routes_need_the_scopes_the_docs_give() {
+        let s = |m: Method, r: &str| route_scope(&m, r);
+        assert_eq!(s(Method::GET, "/healthz"), None);
+        assert_eq!(
+            s(Method::GET, "/v1/sequences/{id}/frames"),
+            Some(Scope::Read)
+        );
+        assert_eq!(s(Method::GET, "/metrics"), Some(Scope::Read));
+        assert_eq!(s(Method::POST, "/v1/sequences"), Some(Scope::Write));
+        assert_eq!(s(Method::PATCH, "/v1/sequences/{id}"), Some(Scope::Write));
+        assert_eq!(
+            s(Method::POST, "/v1/streams/{id}/frames"),
+            Some(Scope::Write)
+        );
+        assert_eq!(s(Method::DELETE, "/v1/sequences/{id}"), Some(Scope::Admin));
+        assert_eq!(s(Method::POST, "/v1/bases"), Some(Scope::Admin));
+        assert_eq!(s(Method::GET, "/v1/bases"), Some(Scope::Read));
+        assert_eq!(s(Method::GET, "/v1/tokens"), Some(Scope::Admin));
+        assert_eq!(s(Method::GET, "/v1/audit"), Some(Scope::Admin));
+        assert_eq!(s(Method::DELETE, "/v1/skeletons/{id}"), Some(Scope::Admin));
+    }
+
+    #[test]
+    fn bearer_headers_parse_and_others_are_refused() {
+        let mut h = HeaderMap::new();
+        assert!(matches!(bearer(&h), Ok(None)));
+        h.insert(
+            header::AUTHORIZATION,
+            HeaderValue::from_static("Bearer mcs_x"),
+        );
+        assert_eq!(bearer(&h).unwrap(), Some("mcs_x"));
+        h.insert(
+            header::AUTHORIZATION,
+            HeaderValue::from_static("Basic dXNlcg=="),
+        );
+        assert!(bearer(&h).is_err());
+        h.insert(header::AUTHORIZATION, HeaderValue::from_static("Bearer "));
+        assert!(bearer(&h).is_err());
+    }
+
+    #[test]
+    fn origins_other_than_the_servers_own_or_allowed_are_refused() {
+        let policy = Policy {
+            allowed_origins: vec!["https://viewer.example".into()],
+            open_beyond_loopback: false,
+        };
+        let h = |origin: &'static str| {
+            let mut h = HeaderMap::new();
+            h.insert(header::HOST, HeaderValue::from_static("127.0.0.1:8080"));
+            h.insert(header::ORIGIN, HeaderValue::from_static(origin));
+            h
+        };
+        assert!(origin_allowed(&h("http://127.0.0.1:8080"), &policy));
+        assert!(origin_allowed(&h("https://viewer.example"), &policy));
+        assert!(!origin_allowed(&h("https://evil.example"), &policy));
+        assert!(!origin_allowed(&h("null"), &policy));
+        assert!(origin_allowed(&HeaderMap::new(), &policy));
+    }
+
+    #[test]
+    fn loopback_hosts_are_told_apart() {
+        for h in ["localhost:8080", "127.0.0.1", "[::1]:80", "LOCALHOST"] {
+            assert!(is_loopback_host(h), "{h}");
+        }
+        for h in ["evil.example", "10.0.0.2:8080", "[2001:db8::1]:80"] {
+            assert!(!is_loopback_host(h), "{h}");
+        }
+    }
+}

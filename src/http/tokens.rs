@@ -1,0 +1,66 @@
+//! `/v1/tokens` and `/v1/audit`: API tokens (admin) and the audit log (admin).
+
+use axum::extract::rejection::{JsonRejection, QueryRejection};
+use axum::extract::{Path, Query, State};
+use axum::http::{header, StatusCode};
+use axum::response::IntoResponse;
+use axum::Json;
+use serde::Deserialize;
+
+use super::error::ApiError;
+use super::AppState;
+use crate::limits::MAX_AUDIT_PAGE;
+use crate::service::access::{self, NewToken, TokenInfo, TokenRequest};
+use crate::store::AuditRow;
+
+pub async fn create(
+    State(state): State<AppState>,
+    body: Result<Json<TokenRequest>, JsonRejection>,
+) -> Result<impl IntoResponse, ApiError> {
+    let Json(req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let token: NewToken = access::create_token(&state.store, req).await?;
+    state.auth.forget();
+    let location = format!("/v1/tokens/{}", token.info.id);
+    Ok((
+        StatusCode::CREATED,
+        [(header::LOCATION, location)],
+        Json(token),
+    ))
+}
+
+pub async fn list(State(state): State<AppState>) -> Result<Json<Vec<TokenInfo>>, ApiError> {
+    Ok(Json(access::list_tokens(&state.store).await?))
+}
+
+pub async fn revoke(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    access::revoke_token(&state.store, &id).await?;
+    state.auth.forget();
+    Ok(StatusCode::NO_CONTENT)
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AuditQuery {
+    /// Entries before this `seq` (the last `seq` of the previous page).
+    before: Option<i64>,
+    limit: Option<usize>,
+}
+
+pub async fn audit(
+    State(state): State<AppState>,
+    query: Result<Query<AuditQuery>, QueryRejection>,
+) -> Result<Json<Vec<AuditRow>>, ApiError> {
+    let Query(q) = query?;
+    let limit = q.limit.unwrap_or(100);
+    if limit == 0 || limit > MAX_AUDIT_PAGE {
+        return Err(ApiError::bad_request(format!(
+            "limit must be 1 to {MAX_AUDIT_PAGE}"
+        )));
+    }
+    Ok(Json(
+        access::audit_log(&state.store, q.before, limit).await?,
+    ))
+}

@@ -1,0 +1,851 @@
+//! Access control: every route × every kind of caller gives the documented status, on both
+//! backends; secrets never reach the database, the audit log or the server's log; a server
+//! without tokens stays on loopback; cross-origin writes are refused; rate limits answer 429
+//! and recover.
+
+use crate::common;
+
+use std::collections::BTreeSet;
+
+use mocapstore::http::Config;
+use mocapstore::limits::Limits;
+use mocapstore::motion::formats::{self, Format};
+use mocapstore::motion::synthetic::walker;
+use mocapstore::service::access::{self, TokenRequest};
+use mocapstore::store::Store;
+use reqwest::Method;
+use serde_json::{json, Value};
+
+/// The callers of the matrix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Who {
+    Nobody,
+    Read,
+    Write,
+    Admin,
+    /// A write token limited to another library than the takes'.
+    WrongLibrary,
+    Revoked,
+    Expired,
+}
+
+const EVERYONE: [Who; 7] = [
+    Who::Nobody,
+    Who::Read,
+    Who::Write,
+    Who::Admin,
+    Who::WrongLibrary,
+    Who::Revoked,
+    Who::Expired,
+];
+
+struct Secrets {
+    read: String,
+    write: String,
+    admin: String,
+    wrong: String,
+    revoked: String,
+    expired: String,
+}
+
+impl Secrets {
+    fn of(&self, who: Who) -> Option<&str> {
+        match who {
+            Who::Nobody => None,
+            Who::Read => Some(&self.read),
+            Who::Write => Some(&self.write),
+            Who::Admin => Some(&self.admin),
+            Who::WrongLibrary => Some(&self.wrong),
+            Who::Revoked => Some(&self.revoked),
+            Who::Expired => Some(&self.expired),
+        }
+    }
+
+    fn all(&self) -> [&str; 6] {
+        [
+            &self.read,
+            &self.write,
+            &self.admin,
+            &self.wrong,
+            &self.revoked,
+            &self.expired,
+        ]
+    }
+}
+
+async fn token(store: &Store, name: &str, scope: &str, libraries: Option<&[&str]>) -> String {
+    access::create_token(
+        store,
+        TokenRequest {
+            name: name.into(),
+            scope: scope.into(),
+            libraries: libraries.map(|l| l.iter().map(|s| s.to_string()).collect()),
+            expires_at: None,
+        },
+    )
+    .await
+    .unwrap()
+    .secret
+}
+
+async fn tokens(store: &Store) -> Secrets {
+    let expired = access::create_token(
+        store,
+        TokenRequest {
+            name: "expired".into(),
+            scope: "admin".into(),
+            libraries: None,
+            expires_at: Some(now_ms() + 1_500),
+        },
+    )
+    .await
+    .unwrap()
+    .secret;
+    let s = Secrets {
+        read: token(store, "reader", "read", Some(&["lab"])).await,
+        write: token(store, "writer", "write", Some(&["lab"])).await,
+        admin: token(store, "admin", "admin", None).await,
+        wrong: token(store, "elsewhere", "write", Some(&["elsewhere"])).await,
+        revoked: token(store, "revoked", "admin", None).await,
+        expired,
+    };
+    access::revoke_token(store, "revoked").await.unwrap();
+    // Let the expiry pass.
+    tokio::time::sleep(std::time::Duration::from_millis(1_600)).await;
+    s
+}
+
+fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_millis() as i64
+}
+
+/// One request as a caller; the status and the JSON answer (if any).
+async fn call(
+    srv: &common::Server,
+    secret: Option<&str>,
+    method: Method,
+    path: &str,
+    body: Body,
+) -> (u16, Value) {
+    let mut rb = srv.client.request(method, format!("{}{path}", srv.base));
+    if let Some(s) = secret {
+        rb = rb.bearer_auth(s);
+    }
+    rb = match body {
+        Body::None => rb,
+        Body::Json(v) => rb.json(&v),
+        Body::Bytes(b) => rb.body(b),
+    };
+    let r = rb.send().await.unwrap();
+    let status = r.status().as_u16();
+    let bytes = r.bytes().await.unwrap();
+    (
+        status,
+        serde_json::from_slice(&bytes).unwrap_or(Value::Null),
+    )
+}
+
+#[derive(Clone)]
+enum Body {
+    None,
+    Json(Value),
+    Bytes(Vec<u8>),
+}
+
+fn take_bytes(seed: u64) -> Vec<u8> {
+    formats::write(&walker(60, 4, 60.0, seed, 0.0), Format::Json).unwrap()
+}
+
+/// A take in library `lab`, stored by the admin; its id.
+async fn new_take(srv: &common::Server, admin: &str, seed: u64) -> String {
+    let (status, v) = call(
+        srv,
+        Some(admin),
+        Method::POST,
+        "/v1/sequences?library=lab&codec=quant&max_error_mm=1",
+        Body::Bytes(take_bytes(seed)),
+    )
+    .await;
+    assert_eq!(status, 201, "{v}");
+    v["id"].as_str().unwrap().to_string()
+}
+
+/// An open stream in library `lab`; its id.
+async fn new_stream(srv: &common::Server, admin: &str) -> String {
+    let (status, v) = call(
+        srv,
+        Some(admin),
+        Method::POST,
+        "/v1/streams",
+        Body::Json(json!({"fps": 60.0, "points": 4, "library": "lab"})),
+    )
+    .await;
+    assert_eq!(status, 201, "{v}");
+    v["id"].as_str().unwrap().to_string()
+}
+
+/// The scope a route needs, and the status it answers a caller it lets through.
+struct Case {
+    method: Method,
+    /// The route as `openapi.yaml` names it.
+    route: &'static str,
+    scope: &'static str,
+    /// Whether a library-limited token outside `lab` is refused (the route touches a take
+    /// of `lab`).
+    in_lab: bool,
+    ok: u16,
+}
+
+fn cases() -> Vec<Case> {
+    let c = |method: Method, route, scope, in_lab, ok| Case {
+        method,
+        route,
+        scope,
+        in_lab,
+        ok,
+    };
+    vec![
+        c(Method::GET, "/metrics", "read", false, 200),
+        c(Method::GET, "/v1/sequences", "read", false, 200),
+        c(Method::POST, "/v1/sequences", "write", true, 201),
+        c(Method::GET, "/v1/sequences/{id}", "read", true, 200),
+        c(Method::PATCH, "/v1/sequences/{id}", "write", true, 200),
+        c(Method::DELETE, "/v1/sequences/{id}", "admin", true, 204),
+        c(Method::GET, "/v1/sequences/{id}/frames", "read", true, 200),
+        c(Method::GET, "/v1/stats", "read", false, 200),
+        c(Method::GET, "/v1/bases", "read", false, 200),
+        c(Method::POST, "/v1/bases", "admin", false, 400),
+        c(Method::GET, "/v1/bases/{id}", "read", false, 404),
+        c(Method::DELETE, "/v1/bases/{id}", "admin", false, 404),
+        c(Method::GET, "/v1/jobs/{id}", "read", false, 404),
+        c(Method::GET, "/v1/skeletons", "read", false, 200),
+        c(Method::GET, "/v1/skeletons/{id}", "read", false, 404),
+        c(Method::DELETE, "/v1/skeletons/{id}", "admin", false, 404),
+        c(Method::POST, "/v1/streams", "write", true, 201),
+        c(Method::GET, "/v1/streams/{id}", "read", true, 200),
+        c(Method::POST, "/v1/streams/{id}/frames", "write", true, 200),
+        c(Method::POST, "/v1/streams/{id}/finish", "write", true, 200),
+        c(Method::GET, "/v1/tokens", "admin", false, 200),
+        c(Method::POST, "/v1/tokens", "admin", false, 201),
+        c(Method::DELETE, "/v1/tokens/{id}", "admin", false, 404),
+        c(Method::GET, "/v1/audit", "admin", false, 200),
+    ]
+}
+
+/// What `who` should get from `case`: the documented status.
+fn expected(case: &Case, who: Who) -> u16 {
+    let rank = |s: &str| match s {
+        "read" => 1,
+        "write" => 2,
+        _ => 3,
+    };
+    let has = match who {
+        Who::Nobody | Who::Revoked | Who::Expired => return 401,
+        Who::Read => 1,
+        Who::Write | Who::WrongLibrary => 2,
+        Who::Admin => 3,
+    };
+    if has < rank(case.scope) {
+        return 403;
+    }
+    if who == Who::WrongLibrary && case.in_lab {
+        return 403;
+    }
+    case.ok
+}
+
+/// The concrete request of a case, with fresh objects where a call uses one up.
+async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (String, Body) {
+    let take = || async { new_take(srv, admin, n).await };
+    let stream = || async { new_stream(srv, admin).await };
+    match (case.method.as_str(), case.route) {
+        ("POST", "/v1/sequences") => (
+            "/v1/sequences?library=lab&codec=quant&max_error_mm=1".into(),
+            Body::Bytes(take_bytes(n)),
+        ),
+        ("GET", "/v1/sequences/{id}") => (format!("/v1/sequences/{}", take().await), Body::None),
+        ("PATCH", _) => (
+            format!("/v1/sequences/{}", take().await),
+            Body::Json(json!({"tags": ["seen"]})),
+        ),
+        ("DELETE", "/v1/sequences/{id}") => (format!("/v1/sequences/{}", take().await), Body::None),
+        ("GET", "/v1/sequences/{id}/frames") => (
+            format!(
+                "/v1/sequences/{}/frames?start=0&end=10&format=f32",
+                take().await
+            ),
+            Body::None,
+        ),
+        ("POST", "/v1/bases") => (
+            "/v1/bases".into(),
+            Body::Json(json!({"library": "no such library"})),
+        ),
+        ("GET" | "DELETE", "/v1/bases/{id}") => ("/v1/bases/none".into(), Body::None),
+        ("GET", "/v1/jobs/{id}") => ("/v1/jobs/none".into(), Body::None),
+        ("GET" | "DELETE", "/v1/skeletons/{id}") => ("/v1/skeletons/none".into(), Body::None),
+        ("POST", "/v1/streams") => (
+            "/v1/streams".into(),
+            Body::Json(json!({"fps": 60.0, "points": 4, "library": "lab"})),
+        ),
+        ("GET", "/v1/streams/{id}") => (format!("/v1/streams/{}", stream().await), Body::None),
+        ("POST", "/v1/streams/{id}/frames") => (
+            format!("/v1/streams/{}/frames", stream().await),
+            Body::Bytes(vec![0u8; 4 * 3 * 4 * 2]),
+        ),
+        ("POST", "/v1/streams/{id}/finish") => {
+            (format!("/v1/streams/{}/finish", stream().await), Body::None)
+        }
+        ("POST", "/v1/tokens") => (
+            "/v1/tokens".into(),
+            Body::Json(json!({"name": format!("made-{n}"), "scope": "read"})),
+        ),
+        ("DELETE", "/v1/tokens/{id}") => ("/v1/tokens/none".into(), Body::None),
+        (_, route) => (route.to_string(), Body::None),
+    }
+}
+
+/// Open streams left by the matrix, finished so that none holds a slot.
+async fn finish_streams(srv: &common::Server, admin: &str, opened: &[String]) {
+    for id in opened {
+        call(
+            srv,
+            Some(admin),
+            Method::POST,
+            &format!("/v1/streams/{id}/finish"),
+            Body::None,
+        )
+        .await;
+    }
+}
+
+#[tokio::test]
+async fn every_route_answers_every_caller_as_documented() {
+    for t in common::all().await {
+        let secrets = tokens(&t.store).await;
+        // Hundreds of calls in a few seconds: a rate limit that never refuses (it has its own
+        // test), but is on, so every route goes through it.
+        let srv = common::start_with(
+            t.store.clone(),
+            Config {
+                limits: Limits {
+                    upload_bytes: 8 << 20,
+                    requests_per_s: 1_000_000,
+                    request_burst: 1_000_000,
+                    ..Limits::default()
+                },
+                ..Config::default()
+            },
+        )
+        .await;
+        let admin = secrets.admin.clone();
+        let mut failures = Vec::new();
+        let mut n = 0u64;
+        for case in cases() {
+            for who in EVERYONE {
+                n += 1;
+                let (path, body) = request(&srv, &admin, &case, n).await;
+                let (status, answer) =
+                    call(&srv, secrets.of(who), case.method.clone(), &path, body).await;
+                // Streams opened for (or by) this call are finished: none keeps a slot.
+                let opened = match path.strip_prefix("/v1/streams/") {
+                    Some(rest) => rest.split('/').next().map(str::to_string),
+                    None => answer["id"]
+                        .as_str()
+                        .filter(|_| case.route == "/v1/streams")
+                        .map(str::to_string),
+                };
+                finish_streams(&srv, &admin, opened.as_slice()).await;
+                let want = expected(&case, who);
+                if status != want {
+                    failures.push(format!(
+                        "{} {} as {who:?}: {status}, documented {want}: {answer}",
+                        case.method, case.route
+                    ));
+                }
+                if matches!(status, 401 | 403) {
+                    let code = answer["error"]["code"].as_str().unwrap_or("");
+                    if !["unauthorized", "forbidden"].contains(&code) {
+                        failures.push(format!("{} {path}: error body {answer}", case.method));
+                    }
+                }
+            }
+        }
+        assert!(failures.is_empty(), "{}:\n{}", t.name, failures.join("\n"));
+
+        // A limited token's listing shows only its libraries.
+        let (_, mine) = call(
+            &srv,
+            Some(&secrets.read),
+            Method::GET,
+            "/v1/sequences",
+            Body::None,
+        )
+        .await;
+        let (_, none) = call(
+            &srv,
+            Some(&secrets.wrong),
+            Method::GET,
+            "/v1/sequences",
+            Body::None,
+        )
+        .await;
+        assert!(!mine["items"].as_array().unwrap().is_empty(), "{mine}");
+        assert!(none["items"].as_array().unwrap().is_empty(), "{none}");
+        let (_, stats) = call(
+            &srv,
+            Some(&secrets.wrong),
+            Method::GET,
+            "/v1/stats",
+            Body::None,
+        )
+        .await;
+        assert_eq!(stats["total"]["takes"], 0, "{stats}");
+
+        // The audit log names who did what, refusals included, and holds no secret.
+        let (status, log) = call(
+            &srv,
+            Some(&admin),
+            Method::GET,
+            "/v1/audit?limit=1000",
+            Body::None,
+        )
+        .await;
+        assert_eq!(status, 200);
+        let entries = log.as_array().unwrap();
+        assert!(entries
+            .iter()
+            .any(|e| e["action"] == "DELETE /v1/sequences/{id}"
+                && e["status"] == 204
+                && e["token_name"] == "admin"));
+        assert!(entries
+            .iter()
+            .any(|e| e["action"] == "DELETE /v1/sequences/{id}"
+                && e["status"] == 403
+                && e["token_name"] == "writer"));
+        assert!(entries
+            .iter()
+            .any(|e| e["status"] == 401 && e["token_name"].is_null()));
+        let text = log.to_string();
+        for s in secrets.all() {
+            assert!(!text.contains(s), "a secret in the audit log");
+        }
+        srv.stop().await;
+        assert_no_secret_stored(&t, &secrets.all()).await;
+        t.finish().await;
+    }
+}
+
+/// No secret in any table (every column of every row, as text), nor in SQLite's files.
+async fn assert_no_secret_stored(t: &common::TestStore, secrets: &[&str]) {
+    let store = Store::open(t.url()).await.unwrap();
+    let dump: Vec<String> = match &store {
+        Store::Sqlite(_) => {
+            // The database's own bytes: every table, index and page not yet checkpointed.
+            let mut all = Vec::new();
+            let path = t.url().trim_start_matches("sqlite://").to_string();
+            for suffix in ["", "-wal"] {
+                if let Ok(bytes) = std::fs::read(format!("{path}{suffix}")) {
+                    all.push(String::from_utf8_lossy(&bytes).into_owned());
+                }
+            }
+            all
+        }
+        Store::Postgres(pool) => {
+            let mut all = Vec::new();
+            for table in ["tokens", "audit_log", "sequences", "sequence_tags"] {
+                let rows: Vec<String> =
+                    sqlx::query_scalar(&format!("SELECT t::text FROM {table} t"))
+                        .fetch_all(pool)
+                        .await
+                        .unwrap();
+                all.extend(rows);
+            }
+            all
+        }
+    };
+    assert!(!dump.is_empty(), "the dump read the database");
+    for s in secrets {
+        let hex_tail = &s[4..];
+        assert!(
+            !dump.iter().any(|d| d.contains(s) || d.contains(hex_tail)),
+            "{}: a token secret is stored",
+            t.name
+        );
+    }
+    store.close().await;
+}
+
+#[tokio::test]
+async fn without_tokens_the_server_stays_on_loopback_and_refuses_other_hosts() {
+    let t = common::sqlite().await;
+    let config = |listen: &str, open: bool| Config {
+        listen: listen.into(),
+        policy: mocapstore::http::auth::Policy {
+            open_beyond_loopback: open,
+            ..Default::default()
+        },
+        ..Config::default()
+    };
+    let refused =
+        mocapstore::http::Application::with_store(t.store.clone(), config("0.0.0.0:0", false))
+            .await
+            .err()
+            .expect("no tokens: refused");
+    assert!(refused.contains("--insecure-no-auth"), "{refused}");
+    assert!(
+        mocapstore::http::Application::with_store(t.store.clone(), config("0.0.0.0:0", true))
+            .await
+            .is_ok(),
+        "the operator may insist"
+    );
+    // On loopback without tokens: anyone, but only by a loopback name (DNS rebinding).
+    let srv = common::start(t.store.clone(), 1 << 20).await;
+    let r = srv
+        .client
+        .get(format!("{}/v1/sequences", srv.base))
+        .header("host", "evil.example")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 403);
+    let (status, _, _) = srv.get("/v1/sequences").await;
+    assert_eq!(status, 200);
+    // With a token, the same address may serve beyond loopback.
+    token(&t.store, "ops", "admin", None).await;
+    assert!(
+        mocapstore::http::Application::with_store(t.store.clone(), config("0.0.0.0:0", false))
+            .await
+            .is_ok()
+    );
+    srv.stop().await;
+    t.finish().await;
+}
+
+#[tokio::test]
+async fn cross_origin_writes_are_refused_unless_the_origin_is_allowed() {
+    let t = common::sqlite().await;
+    let srv = common::start_with(
+        t.store.clone(),
+        Config {
+            policy: mocapstore::http::auth::Policy {
+                allowed_origins: vec!["https://viewer.example".into()],
+                open_beyond_loopback: false,
+            },
+            ..Config::default()
+        },
+    )
+    .await;
+    let post = |origin: &'static str| {
+        srv.client
+            .post(format!("{}/v1/sequences?codec=quant", srv.base))
+            .header("origin", origin)
+            .header("content-type", "text/plain")
+            .body(take_bytes(1))
+            .send()
+    };
+    let r = post("https://evil.example").await.unwrap();
+    assert_eq!(r.status(), 403);
+    let v: Value = r.json().await.unwrap();
+    assert_eq!(v["error"]["code"], "cross_origin");
+    let (_, list) = srv.get_json("/v1/sequences").await;
+    assert!(
+        list["items"].as_array().unwrap().is_empty(),
+        "nothing stored"
+    );
+    let r = post("https://viewer.example").await.unwrap();
+    assert_eq!(r.status(), 201);
+    assert_eq!(
+        r.headers()["access-control-allow-origin"],
+        "https://viewer.example"
+    );
+    // A preflight from the allowed origin is answered; one from elsewhere gets no grant.
+    let pre = |origin: &'static str| {
+        srv.client
+            .request(Method::OPTIONS, format!("{}/v1/sequences", srv.base))
+            .header("origin", origin)
+            .header("access-control-request-method", "POST")
+            .header(
+                "access-control-request-headers",
+                "authorization,content-type",
+            )
+            .send()
+    };
+    let ok = pre("https://viewer.example").await.unwrap();
+    assert_eq!(
+        ok.headers()["access-control-allow-origin"],
+        "https://viewer.example"
+    );
+    let no = pre("https://evil.example").await.unwrap();
+    assert!(no.headers().get("access-control-allow-origin").is_none());
+    srv.stop().await;
+    t.finish().await;
+}
+
+#[tokio::test]
+async fn the_rate_limit_answers_429_with_retry_after_and_recovers() {
+    let t = common::sqlite().await;
+    let secret = token(&t.store, "busy", "read", None).await;
+    let other = token(&t.store, "calm", "read", None).await;
+    let srv = common::start_with(
+        t.store.clone(),
+        Config {
+            limits: Limits {
+                requests_per_s: 2,
+                request_burst: 3,
+                ..Limits::default()
+            },
+            ..Config::default()
+        },
+    )
+    .await;
+    // Routes with path parameters go through the limiter too (a take to read first).
+    let writer = token(&t.store, "writer", "write", None).await;
+    let (status, v) = call(
+        &srv,
+        Some(&writer),
+        Method::POST,
+        "/v1/sequences?codec=quant",
+        Body::Bytes(take_bytes(5)),
+    )
+    .await;
+    assert_eq!(status, 201, "{v}");
+    let frames = format!(
+        "/v1/sequences/{}/frames?start=0&end=5",
+        v["id"].as_str().unwrap()
+    );
+    let (status, v) = call(&srv, Some(&other), Method::GET, &frames, Body::None).await;
+    assert_eq!(status, 200, "{v}");
+    let mut statuses = Vec::new();
+    let mut retry = None;
+    for _ in 0..6 {
+        let r = srv
+            .client
+            .get(format!("{}/v1/stats", srv.base))
+            .bearer_auth(&secret)
+            .send()
+            .await
+            .unwrap();
+        statuses.push(r.status().as_u16());
+        if r.status() == 429 {
+            retry = r.headers().get("retry-after").cloned();
+            let v: Value = r.json().await.unwrap();
+            assert_eq!(v["error"]["code"], "rate_limited");
+        }
+    }
+    assert_eq!(&statuses[..3], &[200, 200, 200], "{statuses:?}");
+    assert!(statuses[3..].contains(&429), "{statuses:?}");
+    let wait: u64 = retry.unwrap().to_str().unwrap().parse().unwrap();
+    assert!(wait >= 1);
+    // Another token is not held back by this one.
+    let (status, _) = call(&srv, Some(&other), Method::GET, "/v1/stats", Body::None).await;
+    assert_eq!(status, 200);
+    tokio::time::sleep(std::time::Duration::from_millis(1_100 * wait)).await;
+    let (status, _) = call(&srv, Some(&secret), Method::GET, "/v1/stats", Body::None).await;
+    assert_eq!(status, 200, "recovered");
+    // Refusals count against their address: guessing secrets is slowed down too.
+    let mut refused = Vec::new();
+    for _ in 0..6 {
+        let (status, _) = call(
+            &srv,
+            Some("mcs_guess"),
+            Method::GET,
+            "/v1/stats",
+            Body::None,
+        )
+        .await;
+        refused.push(status);
+    }
+    assert_eq!(&refused[..3], &[401, 401, 401], "{refused:?}");
+    assert!(refused[3..].contains(&429), "{refused:?}");
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// Every route of `openapi.yaml` is in the matrix, so a new route cannot go untested.
+#[test]
+fn the_matrix_covers_every_documented_route() {
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml")).unwrap();
+    let spec: Value = serde_yaml_ng::from_str(&text).unwrap();
+    let mut documented = BTreeSet::new();
+    for (path, ops) in spec["paths"].as_object().unwrap() {
+        for (method, op) in ops.as_object().unwrap() {
+            if method == "parameters" || path == "/healthz" {
+                continue;
+            }
+            documented.insert(format!("{} {path}", method.to_uppercase()));
+            let scope = op["x-scope"].as_str().unwrap_or("none");
+            let case = cases()
+                .into_iter()
+                .find(|c| c.method.as_str().eq_ignore_ascii_case(method) && c.route == path);
+            let case = case.unwrap_or_else(|| panic!("{method} {path} is not in the matrix"));
+            assert_eq!(case.scope, scope, "{method} {path}: scope in openapi.yaml");
+        }
+    }
+    assert_eq!(documented.len(), cases().len());
+}
+
+/// The operator's commands: create (secret shown once), list, revoke, audit; and a server
+/// logging at trace level never prints a secret, valid or not.
+#[tokio::test]
+async fn token_commands_work_and_no_secret_reaches_the_server_log() {
+    let t = common::sqlite().await;
+    let db = t.url().to_string();
+    let (ok, out, err) = common::mocapstore(&[
+        "token",
+        "create",
+        "--scope",
+        "write",
+        "--name",
+        "lab-writer",
+        "--library",
+        "lab",
+        "--expires",
+        "30d",
+        "--database-url",
+        &db,
+    ]);
+    assert!(ok, "{err}");
+    let secret = out
+        .lines()
+        .find_map(|l| l.strip_prefix("secret, shown this once: "))
+        .expect("the secret is printed")
+        .to_string();
+    assert!(secret.starts_with("mcs_") && secret.len() == 68, "{secret}");
+    let (ok, out, _) = common::mocapstore(&[
+        "token",
+        "create",
+        "--first",
+        "--scope",
+        "admin",
+        "--name",
+        "boot",
+        "--database-url",
+        &db,
+    ]);
+    assert!(
+        ok && out.is_empty(),
+        "--first creates nothing once a token exists: {out}"
+    );
+    let (ok, _, err) = common::mocapstore(&[
+        "token",
+        "create",
+        "--scope",
+        "admin",
+        "--name",
+        "x",
+        "--library",
+        "lab",
+        "--database-url",
+        &db,
+    ]);
+    assert!(!ok && err.contains("admin token"), "{err}");
+
+    // Without tokens, `serve` on a non-loopback address refuses to start, and says why.
+    let empty = common::sqlite().await;
+    let (ok, _, err) = common::mocapstore(&[
+        "serve",
+        "--listen",
+        "0.0.0.0:0",
+        "--database-url",
+        empty.url(),
+    ]);
+    assert!(
+        !ok && err.contains("refusing to serve") && err.contains("--insecure-no-auth"),
+        "{err}"
+    );
+    empty.finish().await;
+
+    // The real binary, logging everything, asked with the secret and with a wrong one.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let log = std::env::temp_dir().join(format!("mocapstore-auth-log-{port}.txt"));
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_mocapstore"))
+        .args([
+            "serve",
+            "--listen",
+            &format!("127.0.0.1:{port}"),
+            "--database-url",
+            &db,
+        ])
+        .env("RUST_LOG", "trace")
+        .stdout(std::fs::File::create(&log).unwrap())
+        .stderr(std::fs::File::create(log.with_extension("err")).unwrap())
+        .spawn()
+        .unwrap();
+    let base = format!("http://127.0.0.1:{port}");
+    let client = reqwest::Client::new();
+    let mut up = false;
+    for _ in 0..200 {
+        if client.get(format!("{base}/healthz")).send().await.is_ok() {
+            up = true;
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    assert!(up, "the server started");
+    let wrong = format!("mcs_{}", "0".repeat(64));
+    for s in [&secret, &wrong] {
+        let _ = client
+            .post(format!("{base}/v1/sequences?library=lab&codec=quant"))
+            .bearer_auth(s)
+            .body(take_bytes(3))
+            .send()
+            .await
+            .unwrap();
+    }
+    let r = client
+        .get(format!("{base}/v1/sequences"))
+        .bearer_auth(&secret)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let _ = child.kill();
+    let _ = child.wait();
+    let text = std::fs::read_to_string(&log).unwrap_or_default()
+        + &std::fs::read_to_string(log.with_extension("err")).unwrap_or_default();
+    assert!(
+        text.contains("/v1/sequences"),
+        "the log has the requests: {text}"
+    );
+    for s in [&secret, &wrong] {
+        assert!(
+            !text.contains(s.as_str()) && !text.contains(&s[4..]),
+            "a secret in the log"
+        );
+    }
+
+    let (ok, out, _) = common::mocapstore(&["token", "list", "--database-url", &db]);
+    assert!(
+        ok && out.contains("lab-writer") && out.contains("| write | lab |"),
+        "{out}"
+    );
+    assert!(!out.contains(&secret[4..]));
+    let (ok, out, _) =
+        common::mocapstore(&["token", "revoke", "lab-writer", "--database-url", &db]);
+    assert!(ok, "{out}");
+    let (ok, _, err) =
+        common::mocapstore(&["token", "revoke", "lab-writer", "--database-url", &db]);
+    assert!(!ok && err.contains("not found"), "{err}");
+    let (ok, out, _) = common::mocapstore(&["audit", "--database-url", &db]);
+    assert!(ok, "{out}");
+    assert!(
+        out.contains("token revoke") && out.contains("token create"),
+        "{out}"
+    );
+    assert!(
+        out.contains("POST /v1/sequences") && out.contains("| lab-writer |"),
+        "{out}"
+    );
+    assert!(!out.contains(&secret[4..]));
+    let _ = std::fs::remove_file(&log);
+    let _ = std::fs::remove_file(log.with_extension("err"));
+    t.finish().await;
+}
