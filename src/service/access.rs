@@ -24,7 +24,7 @@
 use std::collections::{BTreeSet, HashMap};
 use std::fmt;
 use std::str::FromStr;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use serde::Serialize;
@@ -343,8 +343,16 @@ pub async fn audit_log(store: &Store, before: Option<i64>, limit: usize) -> Resu
     Ok(store.audit_log(before, limit).await?)
 }
 
-/// A looked-up secret: its token, or none.
-type Looked = Option<TokenRow>;
+/// A looked-up secret, parsed once: the caller it makes and when that stops, or none.
+type Looked = Option<Arc<Known>>;
+
+#[derive(Debug)]
+struct Known {
+    caller: Caller,
+    name: String,
+    expires_at: Option<i64>,
+    revoked: bool,
+}
 
 /// Authenticates requests, caching what the store says for [`TOKEN_CACHE`].
 #[derive(Debug)]
@@ -405,44 +413,54 @@ impl Authenticator {
                 .filter(|(at, _)| at.elapsed() < TOKEN_CACHE)
                 .map(|(_, t)| t.clone())
         };
-        let row = match cached {
-            Some(t) => t,
+        let known = match cached {
+            Some(k) => k,
             None => {
-                let t = store.token_by_hash(&h).await?;
+                let k = match store.token_by_hash(&h).await? {
+                    None => None,
+                    Some(row) => {
+                        let info = info_of(&row)?;
+                        Some(Arc::new(Known {
+                            caller: Caller {
+                                token: Some(TokenRef {
+                                    id: info.id,
+                                    name: info.name.clone(),
+                                }),
+                                grant: Grant {
+                                    scope: info.scope,
+                                    libraries: info.libraries.map(|l| l.into_iter().collect()),
+                                },
+                            },
+                            name: info.name,
+                            expires_at: info.expires_at,
+                            revoked: info.revoked_at.is_some(),
+                        }))
+                    }
+                };
                 let mut lookups = self.lookups.lock().expect("auth cache");
                 if lookups.len() >= TOKEN_CACHE_ENTRIES {
                     lookups.clear();
                 }
-                lookups.insert(h, (Instant::now(), t.clone()));
-                t
+                lookups.insert(h, (Instant::now(), k.clone()));
+                k
             }
         };
-        let Some(row) = row else {
+        let Some(known) = known else {
             return Err(Error::Unauthorized("unknown token".into()));
         };
-        let info = info_of(&row)?;
-        if info.revoked_at.is_some() {
+        if known.revoked {
             return Err(Error::Unauthorized(format!(
                 "token {:?} was revoked",
-                info.name
+                known.name
             )));
         }
-        if info.expires_at.is_some_and(|e| e <= now_ms()) {
+        if known.expires_at.is_some_and(|e| e <= now_ms()) {
             return Err(Error::Unauthorized(format!(
                 "token {:?} has expired",
-                info.name
+                known.name
             )));
         }
-        Ok(Caller {
-            token: Some(TokenRef {
-                id: info.id,
-                name: info.name,
-            }),
-            grant: Grant {
-                scope: info.scope,
-                libraries: info.libraries.map(|l| l.into_iter().collect()),
-            },
-        })
+        Ok(known.caller.clone())
     }
 }
 
