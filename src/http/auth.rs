@@ -14,7 +14,7 @@
 //! # Routes and scopes
 //! | route | scope |
 //! |---|---|
-//! | `GET /healthz` | none |
+//! | `GET /healthz`, `GET /` and `GET /ui/…` (the viewer's files) | none |
 //! | `GET /metrics`, every other `GET` | read |
 //! | `POST /v1/sequences`, `PATCH /v1/sequences/{id}`, `POST /v1/streams…` | write |
 //! | `DELETE /v1/sequences/{id}`, `POST`/`DELETE /v1/bases…`, `DELETE /v1/skeletons/{id}`, `/v1/tokens…`, `GET /v1/audit` | admin |
@@ -85,9 +85,15 @@ const UNAUDITED: &str = "/v1/streams/{id}/frames";
 #[derive(Debug, Clone)]
 struct Route(String);
 
+/// Routes anyone may call: liveness, and the viewer's files (which hold no data; the
+/// viewer asks for a token when the API answers 401).
+fn is_public(path: &str) -> bool {
+    path == "/healthz" || path == "/" || path.starts_with("/ui/")
+}
+
 /// The scope a route needs; `None` for the routes anyone may call.
 pub fn route_scope(method: &Method, route: &str) -> Option<Scope> {
-    if route == "/healthz" {
+    if is_public(route) {
         return None;
     }
     let admin = route.starts_with("/v1/tokens")
@@ -163,7 +169,7 @@ fn origin_allowed(headers: &HeaderMap, policy: &Policy) -> bool {
 pub async fn front(State(f): State<Front>, mut req: Request, next: Next) -> Response {
     let method = req.method().clone();
     let path = req.uri().path().to_string();
-    if path == "/healthz" || method == Method::OPTIONS {
+    if is_public(&path) || method == Method::OPTIONS {
         return next.run(req).await;
     }
     let writes = changes_state(&method);

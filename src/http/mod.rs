@@ -13,6 +13,7 @@ mod sequences;
 mod skeletons;
 mod streams;
 mod tokens;
+mod ui;
 mod views;
 
 use std::net::SocketAddr;
@@ -118,6 +119,8 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
     let json_tokens = json.clone();
     let inner = Router::new()
         .route("/healthz", get(|| async { "ok" }))
+        .route("/", get(ui::index))
+        .route("/ui/{*path}", get(ui::file))
         .route("/metrics", get(metrics::render))
         .route(
             "/v1/sequences",

@@ -18,3 +18,4 @@ mod robustness;
 mod skeletons;
 mod store;
 mod streams;
+mod viewer;

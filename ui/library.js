@@ -1,0 +1,130 @@
+// The library page: every take with its numbers, filtered, sorted and paged through the
+// listing API; files dropped on the page are uploaded with a progress bar.
+
+import { json, upload } from './api.js';
+import { showError } from './app.js';
+
+const FILTERS = ['library', 'tag', 'layout', 'codec'];
+const SORTS = ['created', 'name', 'duration', 'frames', 'ratio', 'max_mm'];
+
+function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (v === null || v === undefined || v === false) continue;
+    if (k === 'class') e.className = v;
+    else if (k.startsWith('on')) e.addEventListener(k.slice(2), v);
+    else e.setAttribute(k, v);
+  }
+  e.append(...children.filter((c) => c !== null && c !== undefined));
+  return e;
+}
+
+const fmt = {
+  num: (v, d = 1) => (Number.isFinite(v) ? v.toFixed(d) : '—'),
+  secs: (s) => (s >= 60 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s` : `${s.toFixed(1)} s`),
+};
+
+export { el, fmt };
+
+export async function libraryPage(main, params) {
+  const state = Object.fromEntries(FILTERS.map((f) => [f, params.get(f) ?? '']));
+  state.sort = params.get('sort') ?? 'created';
+  state.order = params.get('order') ?? (state.sort === 'created' ? 'desc' : 'asc');
+  const cursors = [null];
+  let page = 0;
+
+  const form = el('form', { class: 'filters', 'aria-label': 'Filter takes' });
+  for (const f of FILTERS) {
+    form.append(
+      el('label', {}, f, el('input', { name: f, value: state[f], placeholder: 'any', autocomplete: 'off' })),
+    );
+  }
+  const sort = el('select', { name: 'sort' }, ...SORTS.map((s) => el('option', { value: s }, s)));
+  sort.value = state.sort;
+  const order = el('select', { name: 'order' }, el('option', { value: 'asc' }, 'ascending'), el('option', { value: 'desc' }, 'descending'));
+  order.value = state.order;
+  form.append(el('label', {}, 'sort', sort), el('label', {}, 'order', order), el('button', { type: 'submit' }, 'Apply'));
+  form.addEventListener('submit', (e) => {
+    e.preventDefault();
+    const q = new URLSearchParams();
+    for (const [k, v] of new FormData(form)) if (v) q.set(k, v);
+    location.hash = `#/?${q}`;
+  });
+
+  const drop = el('div', { class: 'drop', tabindex: '0', role: 'button', 'aria-label': 'Upload files' },
+    'Drop mocap files here (BVH, C3D, TRC, JSON, NPY) or ',
+    el('label', { class: 'link' }, 'choose files', el('input', { type: 'file', multiple: '', hidden: '' })));
+  const uploads = el('ul', { class: 'uploads' });
+  const table = el('table', { class: 'takes' });
+  const pager = el('div', { class: 'pager' });
+  main.append(el('h1', {}, 'Library'), form, drop, uploads, el('div', { class: 'scroll' }, table), pager);
+
+  async function load() {
+    const q = new URLSearchParams({ limit: '50', sort: state.sort, order: state.order });
+    for (const f of FILTERS) if (state[f]) q.set(f, state[f]);
+    if (cursors[page]) q.set('cursor', cursors[page]);
+    const list = await json(`/v1/sequences?${q}`);
+    cursors[page + 1] = list.next_cursor;
+    table.replaceChildren(
+      el('thead', {}, el('tr', {}, ...['name', 'library', 'tags', 'duration', 'fps', 'points', 'codec', 'ratio', 'max mm', 'mean mm'].map((h) => el('th', { scope: 'col' }, h)))),
+      el('tbody', {}, ...list.items.map(row)),
+    );
+    if (list.items.length === 0) table.append(el('caption', {}, 'No takes match.'));
+    pager.replaceChildren(
+      el('button', { onclick: () => { page -= 1; load().catch(showError); } }, '← previous'),
+      el('span', {}, ` page ${page + 1} `),
+      el('button', { onclick: () => { page += 1; load().catch(showError); } }, 'next →'),
+    );
+    if (page === 0) pager.firstChild.disabled = true;
+    if (!list.next_cursor) pager.lastChild.disabled = true;
+  }
+
+  function row(t) {
+    return el('tr', { 'data-id': t.id },
+      el('td', {}, el('a', { href: `#/take/${encodeURIComponent(t.id)}` }, t.name || t.id)),
+      el('td', {}, t.library || '—'),
+      el('td', {}, (t.tags || []).join(', ')),
+      el('td', { class: 'n' }, fmt.secs(t.duration_s)),
+      el('td', { class: 'n' }, fmt.num(t.fps, 1)),
+      el('td', { class: 'n' }, String(t.points)),
+      el('td', {}, t.codec),
+      el('td', { class: 'n' }, fmt.num(t.ratio, 1)),
+      el('td', { class: 'n' }, fmt.num(t.max_mm, 3)),
+      el('td', { class: 'n' }, fmt.num(t.mean_mm, 3)),
+    );
+  }
+
+  async function send(files) {
+    for (const file of files) {
+      const bar = el('progress', { max: '1', value: '0' });
+      const status = el('span', {}, ' uploading…');
+      uploads.append(el('li', {}, `${file.name} `, bar, status));
+      const q = new URLSearchParams({ name: file.name.replace(/\.[^.]+$/, '') });
+      if (state.library) q.set('library', state.library);
+      try {
+        const r = await upload(file, q, (f) => { bar.value = f; });
+        bar.value = 1;
+        status.textContent = ` stored as ${r.codec}, ratio ${fmt.num(r.ratio, 1)}, max ${fmt.num(r.max_mm, 3)} mm`;
+        status.className = 'ok';
+      } catch (e) {
+        status.textContent = ` refused: ${e.message}`;
+        status.className = 'error';
+      }
+    }
+    await load();
+  }
+
+  drop.addEventListener('dragover', (e) => { e.preventDefault(); drop.classList.add('over'); });
+  drop.addEventListener('dragleave', () => drop.classList.remove('over'));
+  drop.addEventListener('drop', (e) => {
+    e.preventDefault();
+    drop.classList.remove('over');
+    send([...e.dataTransfer.files]).catch(showError);
+  });
+  const picker = drop.querySelector('input[type=file]');
+  picker.addEventListener('change', () => send([...picker.files]).catch(showError));
+  drop.addEventListener('keydown', (e) => { if (e.key === 'Enter' || e.key === ' ') { e.preventDefault(); picker.click(); } });
+
+  await load();
+  return null;
+}

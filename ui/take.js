@@ -1,0 +1,203 @@
+// The take page: the figure in 3-D with play/pause, speed, a scrubber and a loop range;
+// frames fetched one second at a time as the playhead moves (so an hour-long take opens as
+// fast as a short one); the take's numbers, its codec decision, and downloads of the range.
+
+import { download, frames as fetchFrames, json } from './api.js';
+import { el, fmt } from './library.js';
+import { showError } from './app.js';
+import { Player } from './player.js';
+
+const SPEEDS = [0.1, 0.25, 0.5, 1, 2, 4];
+/** Seconds of frames kept in memory at most. */
+const KEPT_WINDOWS = 120;
+
+export async function takePage(main, id, params) {
+  const take = await json(`/v1/sequences/${encodeURIComponent(id)}`);
+  let bones = [];
+  if (take.skeleton) {
+    const sk = await json(`/v1/skeletons/${encodeURIComponent(take.skeleton)}`);
+    if (sk.hierarchy?.length === take.points) {
+      sk.hierarchy.forEach((j, i) => { if (j.parent !== null && j.parent !== undefined) bones.push([j.parent, i]); });
+    }
+  }
+  const fps = take.fps;
+  const total = take.frames;
+  const window = Math.max(1, Math.round(fps));
+
+  // --- layout
+  const canvas = el('canvas', { class: 'view', 'aria-label': `3-D view of ${take.name}`, tabindex: '0' });
+  const play = el('button', { class: 'play', 'aria-label': 'play' }, '▶');
+  const speed = el('select', { 'aria-label': 'speed' }, ...SPEEDS.map((s) => el('option', { value: String(s) }, `${s}×`)));
+  speed.value = params.get('speed') ?? '1';
+  const scrub = el('input', { type: 'range', min: '0', max: String(Math.max(0, total - 1)), step: '1', value: '0', 'aria-label': 'playhead (frame)' });
+  const clock = el('output', { class: 'clock' }, '0.00 s');
+  const from = el('input', { type: 'number', min: '0', step: '0.1', value: params.get('from') ?? '0', 'aria-label': 'loop from (s)' });
+  const to = el('input', { type: 'number', min: '0', step: '0.1', value: params.get('to') ?? (total / fps).toFixed(2), 'aria-label': 'loop to (s)' });
+  const loop = el('input', { type: 'checkbox', 'aria-label': 'loop' });
+  loop.checked = params.get('loop') === '1';
+  const fetched = el('span', { class: 'muted' });
+  main.append(
+    el('h1', {}, take.name || take.id, ' ', el('small', { class: 'muted' }, take.library ? `in ${take.library}` : '')),
+    canvas,
+    el('div', { class: 'controls' }, play, speed, scrub, clock),
+    el('div', { class: 'controls' },
+      el('label', {}, 'loop ', loop), el('label', {}, 'from ', from, ' s'), el('label', {}, 'to ', to, ' s'), fetched),
+    el('p', { class: 'muted' }, 'Keys: space play/pause, ←/→ one frame (shift: one second), Home/End.'),
+  );
+
+  // --- frames, one window (a second) at a time
+  const windows = new Map(); // index -> Promise<Float32Array>
+  let fetchCount = 0;
+  const abort = new AbortController();
+  function windowOf(index) {
+    let w = windows.get(index);
+    if (!w) {
+      const start = index * window;
+      const end = Math.min(total, start + window);
+      fetchCount += 1;
+      fetched.textContent = ` ${fetchCount} ranges fetched`;
+      w = fetchFrames(id, start, end, abort.signal).then((r) => r.data);
+      w.catch(() => windows.delete(index));
+      windows.set(index, w);
+      if (windows.size > KEPT_WINDOWS) windows.delete(windows.keys().next().value);
+    }
+    return w;
+  }
+  const ready = new Map(); // index -> Float32Array, once loaded
+  async function frameData(f) {
+    const index = Math.floor(f / window);
+    let data = ready.get(index);
+    if (!data) {
+      data = await windowOf(index);
+      ready.set(index, data);
+      if (ready.size > KEPT_WINDOWS) ready.delete(ready.keys().next().value);
+    }
+    const n = take.points * 3;
+    const k = f - index * window;
+    return data.subarray(k * n, (k + 1) * n);
+  }
+
+  const player = new Player(canvas, { points: take.points, bones, metres: take.metres_per_unit });
+  let current = Math.min(total - 1, Math.max(0, Math.round(Number(params.get('t') ?? 0) * fps)));
+  let playing = false;
+  let last = 0;
+  let shownFrame = -1;
+  let raf = 0;
+
+  async function show(f) {
+    current = Math.min(total - 1, Math.max(0, f));
+    scrub.value = String(current);
+    clock.textContent = `${(current / fps).toFixed(2)} s`;
+    const xyz = await frameData(current);
+    if (shownFrame < 0) player.frame(xyz);
+    shownFrame = current;
+    player.show(xyz);
+    canvas.dataset.frame = String(current);
+    // Fetch the next second before the playhead needs it.
+    const next = Math.floor(current / window) + 1;
+    if (next * window < total) windowOf(next);
+  }
+
+  function range() {
+    const a = Math.max(0, Math.floor(Number(from.value) * fps));
+    const b = Math.min(total, Math.ceil(Number(to.value) * fps));
+    return b > a ? [a, b] : [0, total];
+  }
+
+  function share() {
+    const q = new URLSearchParams({ t: (current / fps).toFixed(2), speed: speed.value });
+    if (loop.checked) { q.set('loop', '1'); q.set('from', from.value); q.set('to', to.value); }
+    history.replaceState(null, '', `#/take/${encodeURIComponent(id)}?${q}`);
+  }
+
+  function tick(now) {
+    if (!playing) return;
+    const dt = last ? (now - last) / 1000 : 0;
+    last = now;
+    let t = current / fps + dt * Number(speed.value);
+    let f = Math.floor(t * fps);
+    const [a, b] = loop.checked ? range() : [0, total];
+    if (f >= b) {
+      if (loop.checked) f = a;
+      else { f = total - 1; setPlaying(false); }
+    }
+    if (f !== shownFrame) show(f).catch(showError);
+    else current = f;
+    // Keep fractional time: store it on the frame counter's scale.
+    current = Math.min(total - 1, t * fps);
+    if (f !== Math.floor(current)) current = f;
+    raf = requestAnimationFrame(tick);
+  }
+
+  function setPlaying(on, keepUrl = false) {
+    playing = on;
+    play.textContent = on ? '❚❚' : '▶';
+    play.setAttribute('aria-label', on ? 'pause' : 'play');
+    last = 0;
+    if (on) raf = requestAnimationFrame(tick);
+    else {
+      cancelAnimationFrame(raf);
+      current = Math.floor(current);
+      if (!keepUrl) share();
+    }
+  }
+
+  play.addEventListener('click', () => setPlaying(!playing));
+  speed.addEventListener('change', share);
+  loop.addEventListener('change', share);
+  scrub.addEventListener('input', () => show(Number(scrub.value)).then(share).catch(showError));
+  function onKey(e) {
+    if (e.target instanceof HTMLInputElement && e.target.type !== 'range') return;
+    const step = e.shiftKey ? window : 1;
+    if (e.key === ' ') { e.preventDefault(); setPlaying(!playing); }
+    else if (e.key === 'ArrowRight') { e.preventDefault(); show(Math.floor(current) + step).then(share).catch(showError); }
+    else if (e.key === 'ArrowLeft') { e.preventDefault(); show(Math.floor(current) - step).then(share).catch(showError); }
+    else if (e.key === 'Home') { e.preventDefault(); show(0).then(share).catch(showError); }
+    else if (e.key === 'End') { e.preventDefault(); show(total - 1).then(share).catch(showError); }
+  }
+  document.addEventListener('keydown', onKey);
+
+  // --- numbers, decision, downloads
+  const facts = [
+    ['id', take.id], ['library', take.library || '—'], ['tags', (take.tags || []).join(', ') || '—'],
+    ['source format', take.source_format], ['frames', `${total} at ${fmt.num(fps, 3)} fps (${fmt.secs(take.duration_s)})`],
+    ['points', String(take.points)], ['codec', take.codec], ['ratio', fmt.num(take.ratio, 1)],
+    ['bound', `max ${take.max_bound_mm} mm${take.mean_bound_mm ? `, mean ${take.mean_bound_mm} mm` : ''}`],
+    ['max / mean error', `${fmt.num(take.max_mm, 3)} / ${fmt.num(take.mean_mm, 3)} mm`],
+    ['stored', `${take.stored_bytes} bytes of ${take.raw_bytes} raw`],
+  ];
+  main.append(el('h2', {}, 'Take'), el('div', { class: 'scroll' }, el('table', { class: 'facts' }, el('tbody', {}, ...facts.map(([k, v]) => el('tr', {}, el('th', { scope: 'row' }, k), el('td', {}, v)))))));
+  const d = take.meta?.decision;
+  if (d) {
+    main.append(
+      el('h2', {}, 'Codec decision'),
+      el('p', { class: 'reason' }, d.reason),
+      el('div', { class: 'scroll' }, el('table', { class: 'decision' },
+        el('thead', {}, el('tr', {}, ...['codec', 'stored bytes', 'max mm', 'mean mm', 'encode ms', ''].map((h) => el('th', { scope: 'col' }, h)))),
+        el('tbody', {},
+          ...(d.tried || []).map((c) => el('tr', { class: c.codec === d.winner ? 'winner' : '' },
+            el('td', {}, c.codec), el('td', { class: 'n' }, String(c.stored_bytes)),
+            el('td', { class: 'n' }, fmt.num(c.max_mm, 3)), el('td', { class: 'n' }, fmt.num(c.mean_mm, 3)),
+            el('td', { class: 'n' }, fmt.num(c.encode_ms, 1)), el('td', {}, c.codec === d.winner ? 'winner' : ''))),
+          ...(d.skipped || []).map((s) => el('tr', { class: 'skipped' },
+            el('td', {}, s.codec ?? String(s)), el('td', { colspan: '5' }, s.reason ?? 'skipped'))),
+        ))),
+    );
+  }
+  const formats = ['json', 'csv', 'trc', 'npy', 'f32'];
+  if (take.source_format === 'bvh') formats.unshift('bvh');
+  main.append(el('h2', {}, 'Download'), el('p', {}, 'The loop range (or the whole take): ',
+    ...formats.map((f) => el('button', { class: 'download', onclick: () => {
+      const [a, b] = loop.checked ? range() : [0, total];
+      download(`/v1/sequences/${encodeURIComponent(id)}/frames?start=${a}&end=${b}&format=${f}`, `${take.name || take.id}_${a}-${b}.${f}`).catch(showError);
+    } }, f.toUpperCase()))));
+
+  await show(current);
+  // Leaving the page: stop, without writing this take's URL over the one navigated to.
+  return () => {
+    setPlaying(false, true);
+    abort.abort();
+    document.removeEventListener('keydown', onKey);
+    player.dispose();
+  };
+}
