@@ -74,7 +74,7 @@ export class Player {
     const r = Math.max(world.getSize(new THREE.Vector3()).length(), 0.5);
     this.grid.position.set(c.x, world.min.y, c.z);
     this.controls.target.copy(c);
-    this.camera.position.set(c.x + r * 1.2, c.y + r * 0.6, c.z + r * 1.6);
+    this.camera.position.set(c.x + r * 0.9, c.y + r * 0.35, c.z + r * 1.2);
     this.camera.near = r / 100;
     this.camera.far = r * 100;
     this.camera.updateProjectionMatrix();

@@ -36,10 +36,12 @@ export async function takePage(main, id, params) {
   const loop = el('input', { type: 'checkbox', 'aria-label': 'loop' });
   loop.checked = params.get('loop') === '1';
   const fetched = el('span', { class: 'muted' });
+  const chart = el('div', { class: 'chart' });
   main.append(
     el('h1', {}, take.name || take.id, ' ', el('small', { class: 'muted' }, take.library ? `in ${take.library}` : '')),
     canvas,
     el('div', { class: 'controls' }, play, speed, scrub, clock),
+    chart,
     el('div', { class: 'controls' },
       el('label', {}, 'loop ', loop), el('label', {}, 'from ', from, ' s'), el('label', {}, 'to ', to, ' s'), fetched),
     el('p', { class: 'muted' }, 'Keys: space play/pause, ←/→ one frame (shift: one second), Home/End.'),
@@ -84,8 +86,10 @@ export async function takePage(main, id, params) {
   let shownFrame = -1;
   let raf = 0;
 
+  let moveMarker = () => {};
   async function show(f) {
     current = Math.min(total - 1, Math.max(0, f));
+    moveMarker(current);
     scrub.value = String(current);
     clock.textContent = `${(current / fps).toFixed(2)} s`;
     const xyz = await frameData(current);
@@ -192,6 +196,14 @@ export async function takePage(main, id, params) {
       download(`/v1/sequences/${encodeURIComponent(id)}/frames?start=${a}&end=${b}&format=${f}`, `${take.name || take.id}_${a}-${b}.${f}`).catch(showError);
     } }, f.toUpperCase()))));
 
+  // --- what compression did: the error second by second against the bound
+  try {
+    const e = await json(`/v1/sequences/${encodeURIComponent(id)}/errors`);
+    moveMarker = errorChart(chart, e, total, (f) => show(f).then(share).catch(showError));
+  } catch (err) {
+    chart.replaceChildren(el('p', { class: 'muted' }, `No error chart: ${err.message}`));
+  }
+
   await show(current);
   // Leaving the page: stop, without writing this take's URL over the one navigated to.
   return () => {
@@ -199,5 +211,56 @@ export async function takePage(main, id, params) {
     abort.abort();
     document.removeEventListener('keydown', onKey);
     player.dispose();
+  };
+}
+
+const SVG = 'http://www.w3.org/2000/svg';
+function svg(tag, attrs = {}) {
+  const e = document.createElementNS(SVG, tag);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, String(v));
+  return e;
+}
+
+/**
+ * The largest and mean error per second as lines over the take, the bound as a dashed line,
+ * and a marker at the playhead; a click seeks there. Returns the marker's mover.
+ */
+function errorChart(box, e, total, seek) {
+  const W = 1000, H = 160, L = 48, R = 8, T = 10, B = 22;
+  const bins = e.max_mm.length;
+  const top = Math.max(e.max_bound_mm, ...e.max_mm, 1e-6) * 1.1;
+  const x = (f) => L + ((W - L - R) * f) / Math.max(1, total - 1);
+  const y = (mm) => T + (H - T - B) * (1 - mm / top);
+  const line = (values) => values.map((v, i) => `${x((i + 0.5) * e.frames_per_bin).toFixed(1)},${y(v).toFixed(1)}`).join(' ');
+  const s = svg('svg', { viewBox: `0 0 ${W} ${H}`, class: 'errors', role: 'img',
+    'aria-label': `Error per second: largest up to ${Math.max(...e.max_mm).toFixed(3)} mm, bound ${e.max_bound_mm} mm` });
+  s.append(svg('rect', { x: L, y: T, width: W - L - R, height: H - T - B, fill: '#fff', stroke: '#d5d9de' }));
+  for (const mm of [0, top / 2 / 1.1, e.max_bound_mm]) {
+    const t = svg('text', { x: L - 4, y: y(mm) + 4, 'text-anchor': 'end', 'font-size': 11, fill: '#667' });
+    t.textContent = mm.toFixed(mm < 1 ? 2 : 1);
+    s.append(t);
+  }
+  s.append(svg('line', { x1: L, x2: W - R, y1: y(e.max_bound_mm), y2: y(e.max_bound_mm), stroke: '#c0392b', 'stroke-dasharray': '6 4', class: 'bound' }));
+  if (e.mean_bound_mm) {
+    s.append(svg('line', { x1: L, x2: W - R, y1: y(e.mean_bound_mm), y2: y(e.mean_bound_mm), stroke: '#1f5fbf', 'stroke-dasharray': '2 4' }));
+  }
+  if (bins) {
+    s.append(svg('polyline', { points: line(e.max_mm), fill: 'none', stroke: '#c0392b', 'stroke-width': 1.5, class: 'max' }));
+    s.append(svg('polyline', { points: line(e.mean_mm), fill: 'none', stroke: '#1f5fbf', 'stroke-width': 1.5, class: 'mean' }));
+  }
+  const marker = svg('line', { y1: T, y2: H - B, stroke: '#1d2430', 'stroke-width': 1.5 });
+  s.append(marker);
+  const label = svg('text', { x: W - R, y: H - 6, 'text-anchor': 'end', 'font-size': 11, fill: '#667' });
+  label.textContent = 'error per second (mm): largest — red, mean — blue; dashed: bound';
+  s.append(label);
+  s.addEventListener('click', (ev) => {
+    const r = s.getBoundingClientRect();
+    const fx = ((ev.clientX - r.left) / r.width) * W;
+    seek(Math.round(((fx - L) / (W - L - R)) * (total - 1)));
+  });
+  box.replaceChildren(s);
+  return (f) => {
+    marker.setAttribute('x1', x(f));
+    marker.setAttribute('x2', x(f));
   };
 }

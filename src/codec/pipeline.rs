@@ -9,7 +9,7 @@ use super::id::{CodecId, ErrorBound};
 use super::read::{Reader, Shared, Stored};
 use super::rig::Rig;
 use super::{codec, gaps, Codec, Hints, Input, Target};
-use crate::motion::metrics::{self, ErrorStats};
+use crate::motion::metrics::{self, ErrorSeries, ErrorStats};
 use crate::motion::Motion;
 
 /// A take encoded and checked: the container, the errors measured on its decoded output,
@@ -25,6 +25,8 @@ pub struct Encoded {
     /// The skeleton the header names (codecs that code channel values): with the basis,
     /// what a reader of this container needs.
     pub rig: Option<Arc<Rig>>,
+    /// The error second by second, measured on the same decode as `stats`.
+    pub series: ErrorSeries,
 }
 
 /// BLAKE3 (hex) of decoded frames as little-endian f32, gaps included: what `verify`
@@ -174,12 +176,15 @@ fn encode_checked(
         });
     }
     let stored_bytes = container.stored_bytes();
+    let per_second = (motion.fps.round() as usize).max(1);
+    let series = ErrorSeries::of(positions, &decoded, points, per_second, to_mm);
     Ok(Encoded {
         container,
         stats,
         stored_bytes,
         decoded_digest: decoded_digest(&decoded),
         rig,
+        series,
     })
 }
 

@@ -241,6 +241,16 @@ pub async fn delete(
     Ok(StatusCode::NO_CONTENT.into_response())
 }
 
+/// `GET /v1/sequences/{id}/errors`: the take's error second by second and its bound.
+pub async fn errors(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    access::check_take(&state.store, &caller.grant, &id).await?;
+    Ok(Json(fetch::errors(&state.store, &id).await?).into_response())
+}
+
 #[derive(Deserialize)]
 pub struct FramesQuery {
     start: Option<usize>,

@@ -272,6 +272,97 @@ fn distance(p: &[f32], q: &[f32]) -> f64 {
     }
 }
 
+/// Error over time, one bin of `frames_per_bin` frames (a second) at a time: each bin's
+/// largest and mean sample distance in mm, over the samples the original has. What a viewer
+/// charts against the bound; stored beside a take, a few bytes a second.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ErrorSeries {
+    pub frames_per_bin: usize,
+    pub max_mm: Vec<f32>,
+    pub mean_mm: Vec<f32>,
+}
+
+const SERIES_MAGIC: &[u8; 4] = b"MCES";
+
+impl ErrorSeries {
+    /// The series of `decoded` against `original` (equal lengths, whole frames of `points`,
+    /// take units; `mm_per_unit` converts).
+    pub fn of(
+        original: &[f32],
+        decoded: &[f32],
+        points: usize,
+        frames_per_bin: usize,
+        mm_per_unit: f64,
+    ) -> ErrorSeries {
+        let frames_per_bin = frames_per_bin.max(1);
+        let bin_len = points * 3 * frames_per_bin;
+        let (mut max_mm, mut mean_mm) = (Vec::new(), Vec::new());
+        if points > 0 {
+            for (a, b) in original.chunks(bin_len).zip(decoded.chunks(bin_len)) {
+                let (mut max, mut sum, mut n) = (0.0f64, 0.0f64, 0usize);
+                for (pa, pb) in a.chunks_exact(3).zip(b.chunks_exact(3)) {
+                    if pa[0].is_nan() {
+                        continue;
+                    }
+                    let d = (0..3)
+                        .map(|k| (f64::from(pa[k]) - f64::from(pb[k])).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    let d = if d.is_finite() { d } else { f64::INFINITY };
+                    max = max.max(d);
+                    sum += d;
+                    n += 1;
+                }
+                max_mm.push((max * mm_per_unit) as f32);
+                mean_mm.push(if n > 0 {
+                    (sum / n as f64 * mm_per_unit) as f32
+                } else {
+                    0.0
+                });
+            }
+        }
+        ErrorSeries {
+            frames_per_bin,
+            max_mm,
+            mean_mm,
+        }
+    }
+
+    /// `"MCES"`, frames per bin u32, bins u32, then per bin max and mean as f32; all
+    /// little-endian.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(12 + self.max_mm.len() * 8);
+        out.extend_from_slice(SERIES_MAGIC);
+        out.extend_from_slice(&(self.frames_per_bin as u32).to_le_bytes());
+        out.extend_from_slice(&(self.max_mm.len() as u32).to_le_bytes());
+        for (a, b) in self.max_mm.iter().zip(&self.mean_mm) {
+            out.extend_from_slice(&a.to_le_bytes());
+            out.extend_from_slice(&b.to_le_bytes());
+        }
+        out
+    }
+
+    /// The series of [`ErrorSeries::to_bytes`]; `Err` for anything else.
+    pub fn from_bytes(bytes: &[u8]) -> Result<ErrorSeries> {
+        let bad = |why: &str| Error::Invalid(format!("error series: {why}"));
+        if bytes.len() < 12 || &bytes[..4] != SERIES_MAGIC {
+            return Err(bad("not an error series"));
+        }
+        let word =
+            |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        let (per, bins) = (word(4) as usize, word(8) as usize);
+        if per == 0 || bytes.len() != 12 + bins.saturating_mul(8) {
+            return Err(bad("lengths do not add up"));
+        }
+        let f = |i: usize| f32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        Ok(ErrorSeries {
+            frames_per_bin: per,
+            max_mm: (0..bins).map(|k| f(12 + 8 * k)).collect(),
+            mean_mm: (0..bins).map(|k| f(16 + 8 * k)).collect(),
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -351,5 +442,21 @@ mod tests {
     fn shape_mismatch_is_an_error() {
         assert!(compare(&[0.0; 6], &[0.0; 3], 1, 1.0).is_err());
         assert!(compare(&[0.0; 4], &[0.0; 4], 1, 1.0).is_err());
+    }
+
+    #[test]
+    fn error_series_bins_seconds_and_round_trips() {
+        // 3 frames of 1 point, bins of 2 frames: errors 1, 3 (bin 0), then 2 with a gap.
+        let a = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let b = [1.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 2.0];
+        let s = ErrorSeries::of(&a, &b, 1, 2, 10.0);
+        assert_eq!(s.max_mm, vec![30.0, 20.0]);
+        assert_eq!(s.mean_mm, vec![20.0, 20.0]);
+        assert_eq!(ErrorSeries::from_bytes(&s.to_bytes()).unwrap(), s);
+        assert!(ErrorSeries::from_bytes(&s.to_bytes()[..15]).is_err());
+        assert!(ErrorSeries::from_bytes(b"MCES\0\0\0\0\0\0\0\0").is_err());
+        let gap = [f32::NAN, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let s = ErrorSeries::of(&gap, &[5.0, 0.0, 0.0, 1.0, 0.0, 0.0], 1, 1, 1.0);
+        assert_eq!(s.max_mm, vec![0.0, 1.0], "missing samples are not errors");
     }
 }

@@ -441,6 +441,8 @@ pub async fn import_take(
             chunks,
             basis: container.header.basis.as_ref().map(hex),
             skeleton: skeleton.map(|(_, row)| row),
+            // An export holds the bitstream, not the original: no series to measure.
+            errors: None,
         })
         .await?;
     Ok(Imported::Stored)

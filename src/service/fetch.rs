@@ -163,6 +163,40 @@ pub async fn frames(
     })
 }
 
+/// A take's error second by second, with its bound: what a viewer charts.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct TakeErrors {
+    pub id: String,
+    pub fps: f64,
+    pub frames: usize,
+    pub max_bound_mm: f64,
+    pub mean_bound_mm: Option<f64>,
+    #[serde(flatten)]
+    pub series: crate::motion::metrics::ErrorSeries,
+}
+
+/// The error series measured when take `id` was stored; `Unsatisfiable` for takes that
+/// have none (stored before series were measured, imported, or streamed live).
+pub async fn errors(store: &Store, id: &str) -> Result<TakeErrors> {
+    let take = take(store, id).await?;
+    let bytes = store.error_series(id).await?.ok_or_else(|| {
+        Error::Unsatisfiable(format!(
+            "take {id} has no error series: it was streamed live, imported, or stored before \
+             series were measured"
+        ))
+    })?;
+    let series = crate::motion::metrics::ErrorSeries::from_bytes(&bytes)
+        .map_err(|e| Error::Corrupt(format!("take {id}: {e}")))?;
+    Ok(TakeErrors {
+        id: take.id,
+        fps: take.fps,
+        frames: take.frames,
+        max_bound_mm: take.bound.max_mm(),
+        mean_bound_mm: take.bound.mean_mm(),
+        series,
+    })
+}
+
 /// A range of a take as BVH: its skeleton, `Frames:` the range's length, and the channel
 /// values of those frames (with the characters they were uploaded with, for `bvh-lossless`).
 #[derive(Debug, Clone)]

@@ -151,6 +151,7 @@ pub async fn ingest(
             chunks: chunk_rows(&enc.container),
             basis,
             skeleton,
+            errors: Some(enc.series.to_bytes()),
         })
         .await?;
     let (raw_bytes, ratio) = (take.raw_bytes as usize, take.ratio);

@@ -388,6 +388,7 @@ impl Streams {
                 chunks: Vec::new(),
                 basis: basis.as_ref().map(|b| b.id()),
                 skeleton: None,
+                errors: None,
             })
             .await?;
         let live = Live {

@@ -131,8 +131,27 @@ impl Store {
                     .execute(&mut *tx)
                     .await?;
             }
+            if let Some(e) = &s.errors {
+                sqlx::query("INSERT INTO take_errors (sequence_id, series) VALUES ($1, $2)")
+                    .bind(&s.id)
+                    .bind(e)
+                    .execute(&mut *tx)
+                    .await?;
+            }
             tx.commit().await?;
             Ok(())
+        })
+    }
+
+    /// A take's error series bytes: `None` if it has none (or there is no such take).
+    pub async fn error_series(&self, id: &str) -> Result<Option<Vec<u8>>> {
+        dispatch!(self, pool => {
+            Ok(sqlx::query_scalar::<_, Vec<u8>>(
+                "SELECT series FROM take_errors WHERE sequence_id = $1",
+            )
+            .bind(id)
+            .fetch_optional(pool)
+            .await?)
         })
     }
 

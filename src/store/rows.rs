@@ -109,6 +109,8 @@ pub struct NewTake {
     pub basis: Option<String>,
     /// The skeleton `row.skeleton_id` names, stored with the take unless it is already.
     pub skeleton: Option<super::SkeletonRow>,
+    /// The take's error over time (`motion::metrics::ErrorSeries` bytes), if measured.
+    pub errors: Option<Vec<u8>>,
 }
 
 impl std::ops::Deref for NewTake {

@@ -215,6 +215,7 @@ fn cases() -> Vec<Case> {
         c(Method::PATCH, "/v1/sequences/{id}", "write", true, 200),
         c(Method::DELETE, "/v1/sequences/{id}", "admin", true, 204),
         c(Method::GET, "/v1/sequences/{id}/frames", "read", true, 200),
+        c(Method::GET, "/v1/sequences/{id}/errors", "read", true, 200),
         c(Method::GET, "/v1/stats", "read", false, 200),
         c(Method::GET, "/v1/bases", "read", false, 200),
         c(Method::POST, "/v1/bases", "admin", false, 400),
@@ -279,6 +280,9 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
             ),
             Body::None,
         ),
+        ("GET", "/v1/sequences/{id}/errors") => {
+            (format!("/v1/sequences/{}/errors", take().await), Body::None)
+        }
         ("POST", "/v1/bases") => (
             "/v1/bases".into(),
             Body::Json(json!({"library": "no such library"})),

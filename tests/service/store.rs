@@ -51,6 +51,7 @@ fn take(id: &str, n: usize) -> NewTake {
         chunks,
         basis: None,
         skeleton: None,
+        errors: None,
     }
 }
 

@@ -85,12 +85,14 @@ impl Browser {
             .as_str()
             .unwrap_or_else(|| panic!("no session: {r}"))
             .to_string();
-        Some(Browser {
+        let b = Browser {
             driver,
             base,
             session,
             http,
-        })
+        };
+        b.viewport(1280, 720).await;
+        Some(b)
     }
 
     async fn cmd(&self, method: reqwest::Method, path: &str, body: Option<Value>) -> Value {
@@ -104,6 +106,27 @@ impl Browser {
             panic!("WebDriver {path}: {v}");
         }
         v["value"].clone()
+    }
+
+    /// Make the page's viewport `width × height` CSS pixels (the window is larger by its
+    /// frame).
+    async fn viewport(&self, width: i64, height: i64) {
+        let frame = self
+            .js(
+                "return [window.outerWidth - window.innerWidth, window.outerHeight - window.innerHeight];",
+                json!([]),
+            )
+            .await;
+        let (fw, fh) = (
+            frame[0].as_i64().unwrap_or(0),
+            frame[1].as_i64().unwrap_or(0),
+        );
+        self.cmd(
+            reqwest::Method::POST,
+            "/window/rect",
+            Some(json!({"width": width + fw, "height": height + fh})),
+        )
+        .await;
     }
 
     async fn goto(&self, url: &str) {
@@ -317,6 +340,18 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
         )
         .await;
     assert_eq!(winner, take["meta"]["decision"]["winner"]);
+    // What compression did: the error per second charted against the bound.
+    let chart = browser
+        .until(
+            "the error chart",
+            "const s = document.querySelector('svg.errors'); return s && [s.querySelector('polyline.max').getAttribute('points').split(' ').length, !!s.querySelector('line.bound')];",
+        )
+        .await;
+    assert_eq!(
+        chart,
+        json!([11, true]),
+        "1,247 frames at 120 fps: 11 seconds"
+    );
     assert!(browser.console_errors().await.is_empty());
 
     // Drag and drop: a TRC file dropped on the library page is stored; a file the server
@@ -364,13 +399,7 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     assert!(errors.is_empty(), "{errors:?}");
 
     // Phone-sized: the take page still fits.
-    browser
-        .cmd(
-            reqwest::Method::POST,
-            "/window/rect",
-            Some(json!({"width": 390, "height": 844})),
-        )
-        .await;
+    browser.viewport(390, 844).await;
     browser
         .goto(&format!("{}/#/take/{bvh_id}?t=2", srv.base))
         .await;
@@ -396,4 +425,51 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     browser.quit().await;
     srv.stop().await;
     t.finish().await;
+}
+
+/// The series the viewer charts: one bin a second, its worst bin the take's max error, no
+/// bin over the bound; a live take has none and says so.
+#[tokio::test]
+async fn error_series_are_measured_at_ingest_and_served() {
+    if corpus::for_tests().is_none() {
+        return;
+    }
+    for t in common::all().await {
+        let srv = common::start(t.store.clone(), 64 << 20).await;
+        let (status, take) = srv
+            .post(
+                "name=131_02&max_error_mm=1",
+                corpus_bytes("bvh/cmu/131_02.bvh"),
+            )
+            .await;
+        assert_eq!(status, 201, "{take}");
+        let id = take["id"].as_str().unwrap();
+        let (status, e) = srv.get_json(&format!("/v1/sequences/{id}/errors")).await;
+        assert_eq!(status, 200, "{e}");
+        let per = e["frames_per_bin"].as_u64().unwrap();
+        assert_eq!(per, 120);
+        let max: Vec<f64> = serde_json::from_value(e["max_mm"].clone()).unwrap();
+        let mean: Vec<f64> = serde_json::from_value(e["mean_mm"].clone()).unwrap();
+        assert_eq!(max.len() as u64, 1247u64.div_ceil(per));
+        assert_eq!(mean.len(), max.len());
+        let worst = max.iter().cloned().fold(0.0, f64::max);
+        assert!(
+            (worst - take["max_mm"].as_f64().unwrap()).abs() < 1e-4,
+            "{worst} vs {take}"
+        );
+        assert!(max.iter().all(|m| *m <= 1.0 + 1e-6));
+        assert!(mean.iter().zip(&max).all(|(a, b)| a <= b));
+        assert_eq!(e["max_bound_mm"], 1.0);
+
+        let (_, _, stream) = srv
+            .post_json("/v1/streams", &json!({"fps": 60.0, "points": 2}))
+            .await;
+        let sid = stream["id"].as_str().unwrap();
+        let (status, e) = srv.get_json(&format!("/v1/sequences/{sid}/errors")).await;
+        assert_eq!(status, 409, "{e}");
+        let (status, _) = srv.get_json("/v1/sequences/nope/errors").await;
+        assert_eq!(status, 404);
+        srv.stop().await;
+        t.finish().await;
+    }
 }
