@@ -1,8 +1,9 @@
-// The viewer's shell: the hash router (#/ the library, #/take/ID?… a take), the token
+// The viewer's shell: the hash router (#/ the library, #/take/ID?… a take, #/stats), the token
 // form, and one place where errors are shown.
 
 import { ApiError, token } from './api.js';
 import { libraryPage } from './library.js';
+import { statsPage } from './stats.js';
 import { takePage } from './take.js';
 
 const main = document.getElementById('main');
@@ -39,6 +40,8 @@ async function render() {
     const take = path.match(/^\/take\/([^/]+)$/);
     if (take) {
       leave = await takePage(main, decodeURIComponent(take[1]), params);
+    } else if (path === '/stats') {
+      leave = await statsPage(main);
     } else {
       leave = await libraryPage(main, params);
     }

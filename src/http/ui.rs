@@ -35,6 +35,7 @@ static ASSETS: &[Asset] = &[
     asset!("api.js", JS),
     asset!("library.js", JS),
     asset!("take.js", JS),
+    asset!("stats.js", JS),
     asset!("player.js", JS),
     asset!("vendor/three/three.module.js", JS),
     asset!("vendor/three/three.core.js", JS),

@@ -398,6 +398,21 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
         .collect();
     assert!(errors.is_empty(), "{errors:?}");
 
+    // Statistics: /v1/stats as charts, and one dot per take.
+    browser.goto(&format!("{}/#/stats", srv.base)).await;
+    let drawn = browser
+        .until(
+            "the statistics charts",
+            "const f = document.querySelectorAll('figure'); return f.length === 4 && [document.querySelectorAll('svg.bars')[1].querySelectorAll('rect.stored_bytes').length, document.querySelectorAll('svg.scatter circle.take').length];",
+        )
+        .await;
+    let (_, stats) = srv.get_json("/v1/stats").await;
+    let codecs = stats["by_codec"].as_object().unwrap().len();
+    let takes = stats["total"]["takes"].as_u64().unwrap();
+    assert_eq!(drawn, json!([codecs, takes]), "{stats}");
+    browser.screenshot("stats").await;
+    assert!(browser.console_errors().await.is_empty());
+
     // Phone-sized: the take page still fits.
     browser.viewport(390, 844).await;
     browser
