@@ -144,6 +144,12 @@ impl Browser {
         .await
     }
 
+    /// Go to `url` and wait until `script` holds there; its value.
+    async fn visit(&self, url: &str, what: &str, script: &str) -> Value {
+        self.goto(url).await;
+        self.until(what, script).await
+    }
+
     /// Wait until `script` returns something truthy; its value.
     async fn until(&self, what: &str, script: &str) -> Value {
         for _ in 0..300 {
@@ -203,6 +209,13 @@ fn corpus_bytes(rel: &str) -> Vec<u8> {
     std::fs::read(corpus::root().join(rel)).unwrap()
 }
 
+/// Upload corpus file `rel` with `query`; the stored take's report.
+async fn stored(srv: &common::Server, query: &str, rel: &str) -> Value {
+    let (status, take) = srv.post(query, corpus_bytes(rel)).await;
+    assert_eq!(status, 201, "{rel}: {take}");
+    take
+}
+
 #[tokio::test]
 async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     if corpus::for_tests().is_none() {
@@ -213,46 +226,36 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     };
     let t = common::sqlite().await;
     let srv = common::start(t.store.clone(), 64 << 20).await;
-    let (status, bvh) = srv
-        .post(
-            "name=131_02&library=cmu&tags=run&max_error_mm=1",
-            corpus_bytes("bvh/cmu/131_02.bvh"),
-        )
-        .await;
-    assert_eq!(status, 201, "{bvh}");
-    let (status, c3d) = srv
-        .post(
-            "name=gait&library=lab&max_error_mm=1",
-            corpus_bytes("c3d/btkdata__others__Gait.c3d"),
-        )
-        .await;
-    assert_eq!(status, 201, "{c3d}");
+    let bvh = stored(
+        &srv,
+        "name=131_02&library=cmu&tags=run&max_error_mm=1",
+        "bvh/cmu/131_02.bvh",
+    )
+    .await;
+    stored(
+        &srv,
+        "name=gait&library=lab&max_error_mm=1",
+        "c3d/btkdata__others__Gait.c3d",
+    )
+    .await;
     let bvh_id = bvh["id"].as_str().unwrap().to_string();
 
     // Library: both takes, then a filter leaves one.
-    browser.goto(&format!("{}/#/", srv.base)).await;
     let rows = browser
-        .until(
-            "the listing",
-            "const r = document.querySelectorAll('table.takes tbody tr'); return r.length >= 2 && r.length;",
-        )
+        .visit(&format!("{}/#/", srv.base), "the listing", "const r = document.querySelectorAll('table.takes tbody tr'); return r.length >= 2 && r.length;")
         .await;
     assert_eq!(rows, 2);
     browser.screenshot("library").await;
-    browser.goto(&format!("{}/#/?library=lab", srv.base)).await;
     let names = browser
-        .until(
-            "the filtered listing",
-            "const r = [...document.querySelectorAll('table.takes tbody tr td:first-child')].map(e => e.textContent); return r.length === 1 && r;",
-        )
+        .visit(&format!("{}/#/?library=lab", srv.base), "the filtered listing", "const r = [...document.querySelectorAll('table.takes tbody tr td:first-child')].map(e => e.textContent); return r.length === 1 && r;")
         .await;
     assert_eq!(names, json!(["gait"]));
     assert!(browser.console_errors().await.is_empty());
 
     // A take: the figure is drawn (pixels, not only DOM), play advances the playhead.
-    browser.goto(&format!("{}/#/take/{bvh_id}", srv.base)).await;
     browser
-        .until(
+        .visit(
+            &format!("{}/#/take/{bvh_id}", srv.base),
             "the first frame",
             "return document.querySelector('canvas.view')?.dataset.frame === '0';",
         )
@@ -357,10 +360,8 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     // Drag and drop: a TRC file dropped on the library page is stored; a file the server
     // refuses shows its error.
     browser
-        .goto(&format!("{}/#/?library=dropped", srv.base))
-        .await;
-    browser
-        .until(
+        .visit(
+            &format!("{}/#/?library=dropped", srv.base),
             "the library page",
             "return document.querySelector('.drop') !== null;",
         )
@@ -399,12 +400,8 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     assert!(errors.is_empty(), "{errors:?}");
 
     // Statistics: /v1/stats as charts, and one dot per take.
-    browser.goto(&format!("{}/#/stats", srv.base)).await;
     let drawn = browser
-        .until(
-            "the statistics charts",
-            "const f = document.querySelectorAll('figure'); return f.length === 4 && [document.querySelectorAll('svg.bars')[1].querySelectorAll('rect.stored_bytes').length, document.querySelectorAll('svg.scatter circle.take').length];",
-        )
+        .visit(&format!("{}/#/stats", srv.base), "the statistics charts", "const f = document.querySelectorAll('figure'); return f.length === 4 && [document.querySelectorAll('svg.bars')[1].querySelectorAll('rect.stored_bytes').length, document.querySelectorAll('svg.scatter circle.take').length];")
         .await;
     let (_, stats) = srv.get_json("/v1/stats").await;
     let codecs = stats["by_codec"].as_object().unwrap().len();
@@ -416,10 +413,8 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     // Phone-sized: the take page still fits.
     browser.viewport(390, 844).await;
     browser
-        .goto(&format!("{}/#/take/{bvh_id}?t=2", srv.base))
-        .await;
-    browser
-        .until(
+        .visit(
+            &format!("{}/#/take/{bvh_id}?t=2", srv.base),
             "the phone layout",
             "return document.querySelector('canvas.view')?.dataset.frame === '240';",
         )
@@ -451,13 +446,7 @@ async fn error_series_are_measured_at_ingest_and_served() {
     }
     for t in common::all().await {
         let srv = common::start(t.store.clone(), 64 << 20).await;
-        let (status, take) = srv
-            .post(
-                "name=131_02&max_error_mm=1",
-                corpus_bytes("bvh/cmu/131_02.bvh"),
-            )
-            .await;
-        assert_eq!(status, 201, "{take}");
+        let take = stored(&srv, "name=131_02&max_error_mm=1", "bvh/cmu/131_02.bvh").await;
         let id = take["id"].as_str().unwrap();
         let (status, e) = srv.get_json(&format!("/v1/sequences/{id}/errors")).await;
         assert_eq!(status, 200, "{e}");
