@@ -88,17 +88,20 @@ export async function takePage(main, id, params) {
 
   let moveMarker = () => {};
   async function show(f) {
-    current = Math.min(total - 1, Math.max(0, f));
-    moveMarker(current);
-    scrub.value = String(current);
-    clock.textContent = `${(current / fps).toFixed(2)} s`;
-    const xyz = await frameData(current);
+    const g = Math.min(total - 1, Math.max(0, Math.floor(f)));
+    current = g;
+    moveMarker(g);
+    scrub.value = String(g);
+    clock.textContent = `${(g / fps).toFixed(2)} s`;
+    const xyz = await frameData(g);
+    // A later call may have moved the playhead while this frame's second was fetched.
+    if (current !== g) return;
     if (shownFrame < 0) player.frame(xyz);
-    shownFrame = current;
+    shownFrame = g;
     player.show(xyz);
-    canvas.dataset.frame = String(current);
+    canvas.dataset.frame = String(g);
     // Fetch the next second before the playhead needs it.
-    const next = Math.floor(current / window) + 1;
+    const next = Math.floor(g / window) + 1;
     if (next * window < total) windowOf(next);
   }
 
@@ -114,22 +117,25 @@ export async function takePage(main, id, params) {
     history.replaceState(null, '', `#/take/${encodeURIComponent(id)}?${q}`);
   }
 
+  // Playback keeps its own clock (seconds into the take): frames are whole, time is not.
+  let clockT = 0;
   function tick(now) {
     if (!playing) return;
     const dt = last ? (now - last) / 1000 : 0;
     last = now;
-    let t = current / fps + dt * Number(speed.value);
-    let f = Math.floor(t * fps);
+    clockT += dt * Number(speed.value);
+    let f = Math.floor(clockT * fps);
     const [a, b] = loop.checked ? range() : [0, total];
-    if (f >= b) {
-      if (loop.checked) f = a;
-      else { f = total - 1; setPlaying(false); }
+    if (f >= b || f < a) {
+      if (loop.checked) {
+        f = a;
+        clockT = a / fps;
+      } else {
+        f = total - 1;
+        setPlaying(false);
+      }
     }
     if (f !== shownFrame) show(f).catch(showError);
-    else current = f;
-    // Keep fractional time: store it on the frame counter's scale.
-    current = Math.min(total - 1, t * fps);
-    if (f !== Math.floor(current)) current = f;
     raf = requestAnimationFrame(tick);
   }
 
@@ -138,10 +144,11 @@ export async function takePage(main, id, params) {
     play.textContent = on ? '❚❚' : '▶';
     play.setAttribute('aria-label', on ? 'pause' : 'play');
     last = 0;
-    if (on) raf = requestAnimationFrame(tick);
-    else {
+    if (on) {
+      clockT = current / fps;
+      raf = requestAnimationFrame(tick);
+    } else {
       cancelAnimationFrame(raf);
-      current = Math.floor(current);
       if (!keepUrl) share();
     }
   }
@@ -154,8 +161,8 @@ export async function takePage(main, id, params) {
     if (e.target instanceof HTMLInputElement && e.target.type !== 'range') return;
     const step = e.shiftKey ? window : 1;
     if (e.key === ' ') { e.preventDefault(); setPlaying(!playing); }
-    else if (e.key === 'ArrowRight') { e.preventDefault(); show(Math.floor(current) + step).then(share).catch(showError); }
-    else if (e.key === 'ArrowLeft') { e.preventDefault(); show(Math.floor(current) - step).then(share).catch(showError); }
+    else if (e.key === 'ArrowRight') { e.preventDefault(); show(current + step).then(share).catch(showError); }
+    else if (e.key === 'ArrowLeft') { e.preventDefault(); show(current - step).then(share).catch(showError); }
     else if (e.key === 'Home') { e.preventDefault(); show(0).then(share).catch(showError); }
     else if (e.key === 'End') { e.preventDefault(); show(total - 1).then(share).catch(showError); }
   }

@@ -287,7 +287,7 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     browser
         .until(
             "playback",
-            "return Number(document.querySelector('canvas.view').dataset.frame) > 30;",
+            "const f = document.querySelector('canvas.view').dataset.frame; return Number(f) > 30 && Number.isInteger(Number(f));",
         )
         .await;
     browser
