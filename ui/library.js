@@ -3,28 +3,11 @@
 
 import { json, upload } from './api.js';
 import { showError } from './app.js';
+import { el, fmt } from './dom.js';
 
 const FILTERS = ['library', 'tag', 'layout', 'codec'];
 const SORTS = ['created', 'name', 'duration', 'frames', 'ratio', 'max_mm'];
 
-function el(tag, attrs = {}, ...children) {
-  const e = document.createElement(tag);
-  for (const [k, v] of Object.entries(attrs)) {
-    if (v === null || v === undefined || v === false) continue;
-    if (k === 'class') e.className = v;
-    else if (k.startsWith('on')) e.addEventListener(k.slice(2), v);
-    else e.setAttribute(k, v);
-  }
-  e.append(...children.filter((c) => c !== null && c !== undefined));
-  return e;
-}
-
-const fmt = {
-  num: (v, d = 1) => (Number.isFinite(v) ? v.toFixed(d) : '—'),
-  secs: (s) => (s >= 60 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s` : `${s.toFixed(1)} s`),
-};
-
-export { el, fmt };
 
 export async function libraryPage(main, params) {
   const state = Object.fromEntries(FILTERS.map((f) => [f, params.get(f) ?? '']));

@@ -2,15 +2,7 @@
 // codec, takes per codec) and every take's ratio against its error bound.
 
 import { json } from './api.js';
-import { el, fmt } from './library.js';
-
-const SVG = 'http://www.w3.org/2000/svg';
-function svg(tag, attrs = {}, text) {
-  const e = document.createElementNS(SVG, tag);
-  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, String(v));
-  if (text !== undefined) e.textContent = text;
-  return e;
-}
+import { el, fmt, svg } from './dom.js';
 
 const bytes = (b) => {
   const u = ['B', 'KB', 'MB', 'GB', 'TB'];

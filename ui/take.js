@@ -3,7 +3,7 @@
 // fast as a short one); the take's numbers, its codec decision, and downloads of the range.
 
 import { download, frames as fetchFrames, json } from './api.js';
-import { el, fmt } from './library.js';
+import { el, fmt, svg } from './dom.js';
 import { showError } from './app.js';
 import { Player } from './player.js';
 
@@ -219,13 +219,6 @@ export async function takePage(main, id, params) {
     document.removeEventListener('keydown', onKey);
     player.dispose();
   };
-}
-
-const SVG = 'http://www.w3.org/2000/svg';
-function svg(tag, attrs = {}) {
-  const e = document.createElementNS(SVG, tag);
-  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, String(v));
-  return e;
 }
 
 /**

@@ -148,7 +148,7 @@ async fn token(args: &TokenArgs) -> Result<String, String> {
             }
             let expires_at = expires
                 .as_deref()
-                .map(|e| expiry(e, now_ms()))
+                .map(|e| expiry(e, mocapstore::service::now_ms()))
                 .transpose()?;
             let req = TokenRequest {
                 name: name.clone(),
@@ -236,12 +236,6 @@ fn listing(tokens: &[TokenInfo]) -> String {
         );
     }
     out
-}
-
-fn now_ms() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as i64)
 }
 
 /// Days since 1970-01-01 of a proleptic Gregorian date (Howard Hinnant's `days_from_civil`).

@@ -7,8 +7,8 @@
 //! [`front`] runs before routing: it refuses cross-origin writes, authenticates (401), puts
 //! the [`Caller`] in the request, and sends the request on either through the rate limiter
 //! (any request with a token, anonymous ones on a server open beyond loopback, and every
-//! refusal, keyed by address) or straight on (anonymous on loopback). After routing, [`require_scope`] checks the route's
-//! scope ([`route_scope`], 403). Handlers check libraries, which only the service knows. When
+//! refusal, keyed by address) or straight on (anonymous on loopback). After routing,
+//! [`require_scope`] checks the route's scope ([`route_scope`], 403). Handlers check libraries, which only the service knows. When
 //! the answer is back, [`front`] records writes in the audit log, refusals included.
 //!
 //! # Routes and scopes

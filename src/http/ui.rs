@@ -33,6 +33,7 @@ static ASSETS: &[Asset] = &[
     asset!("style.css", "text/css; charset=utf-8"),
     asset!("app.js", JS),
     asset!("api.js", JS),
+    asset!("dom.js", JS),
     asset!("library.js", JS),
     asset!("take.js", JS),
     asset!("stats.js", JS),

@@ -55,6 +55,19 @@ pub fn compare(
     Ok(acc.finish(mm_per_unit))
 }
 
+/// The distance between an original and a decoded sample (take units); infinite when the
+/// decoded one is not finite, so it can never pass a bound.
+fn sample_error(pa: &[f32], pb: &[f32]) -> f64 {
+    let d2: f64 = (0..3)
+        .map(|k| (f64::from(pa[k]) - f64::from(pb[k])).powi(2))
+        .sum();
+    if d2.is_finite() {
+        d2.sqrt()
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Error sums over frames as they come (a live stream's chunks), giving the same
 /// [`ErrorStats`] as [`compare`] over all of them at once.
 #[derive(Debug, Clone)]
@@ -103,15 +116,7 @@ impl Accumulator {
                 if pa[0].is_nan() {
                     continue;
                 }
-                let pb = &b[p * 3..p * 3 + 3];
-                let d2: f64 = (0..3)
-                    .map(|k| (f64::from(pa[k]) - f64::from(pb[k])).powi(2))
-                    .sum();
-                let d = if d2.is_finite() {
-                    d2.sqrt()
-                } else {
-                    f64::INFINITY
-                };
+                let d = sample_error(pa, &b[p * 3..p * 3 + 3]);
                 self.sum += d;
                 self.sum_sq += d * d;
                 if d > self.max || self.worst.is_none() {
@@ -304,11 +309,7 @@ impl ErrorSeries {
                     if pa[0].is_nan() {
                         continue;
                     }
-                    let d = (0..3)
-                        .map(|k| (f64::from(pa[k]) - f64::from(pb[k])).powi(2))
-                        .sum::<f64>()
-                        .sqrt();
-                    let d = if d.is_finite() { d } else { f64::INFINITY };
+                    let d = sample_error(pa, pb);
                     max = max.max(d);
                     sum += d;
                     n += 1;
