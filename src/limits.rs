@@ -61,6 +61,22 @@ pub const MAX_TOKEN_LIBRARIES: usize = 100;
 /// Audit entries one request may ask for.
 pub const MAX_AUDIT_PAGE: usize = 1_000;
 
+/// Watchers of one live stream at once (the viewer's live page, `GET /v1/streams/{id}/events`).
+pub const STREAM_WATCHERS: usize = 16;
+
+/// Batches of frames queued for a watcher that reads slower than frames arrive; past it the
+/// watcher skips to the newest (and is told how many it missed).
+pub const STREAM_WATCH_QUEUE: usize = 16;
+
+/// Samples (frames × points) of one append passed on to watchers: the newest frames of a
+/// larger batch. With [`STREAM_WATCH_QUEUE`] this bounds what a stream's watchers hold,
+/// ≤ 16 × 50,000 × 12 bytes ≈ 9.6 MB, shared by all of them.
+pub const STREAM_WATCH_SAMPLES: usize = 50_000;
+
+/// Latest capture time an append may carry (`captured_ms`, ms since the Unix epoch): the
+/// year 3000. Earlier than the epoch is refused too.
+pub const MAX_CAPTURE_MS: i64 = 32_503_680_000_000;
+
 /// The tunable limits, with their defaults in [`Limits::default`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {

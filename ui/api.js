@@ -68,6 +68,41 @@ export async function frames(id, start, end, signal) {
   };
 }
 
+/**
+ * Server-sent events from `path`, read through fetch (EventSource cannot send the token):
+ * `onEvent(name, data)` for each event, data parsed as JSON. Resolves when the server ends
+ * the stream; rejects with an ApiError if it refuses it.
+ */
+export async function events(path, onEvent, signal) {
+  const r = await request(path, { signal });
+  const reader = r.body.pipeThrough(new TextDecoderStream()).getReader();
+  let buffer = '';
+  for (;;) {
+    const { value, done } = await reader.read();
+    if (done) return;
+    buffer += value.replace(/\r\n?/g, '\n');
+    let cut;
+    while ((cut = buffer.indexOf('\n\n')) >= 0) {
+      const block = buffer.slice(0, cut);
+      buffer = buffer.slice(cut + 2);
+      let name = 'message';
+      const data = [];
+      for (const line of block.split('\n')) {
+        if (line.startsWith('event:')) name = line.slice(6).trim();
+        else if (line.startsWith('data:')) data.push(line.slice(5).replace(/^ /, ''));
+      }
+      // Comment lines alone (the server's keep-alive) make no event.
+      if (data.length) onEvent(name, JSON.parse(data.join('\n')));
+    }
+  }
+}
+
+/** Little-endian f32 values from base64. */
+export function f32(base64) {
+  const bytes = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
+  return new Float32Array(bytes.buffer);
+}
+
 /** A file download through the API (the token goes in a header, so not a plain link). */
 export async function download(path, filename) {
   const r = await request(path);

@@ -1,8 +1,11 @@
-// The viewer's shell: the hash router (#/ the library, #/take/ID?… a take, #/stats), the token
-// form, and one place where errors are shown.
+// The viewer's shell: the hash router (#/ the library, #/take/ID?… a take, #/live/ID an open
+// stream, #/compare?ids=… takes in step, #/stats), the token form, and one place where
+// errors are shown.
 
 import { ApiError, token } from './api.js';
+import { comparePage } from './compare.js';
 import { libraryPage } from './library.js';
+import { livePage } from './live.js';
 import { statsPage } from './stats.js';
 import { takePage } from './take.js';
 
@@ -25,8 +28,14 @@ export function showError(e) {
 }
 
 let leave = null;
+let generation = 0;
 
+/**
+ * Show the page the hash names. Each render gets its own box: a page still loading when the
+ * hash changes again ends up detached, and is disposed as soon as it has loaded.
+ */
 async function render() {
+  const mine = ++generation;
   if (leave) {
     leave();
     leave = null;
@@ -35,19 +44,28 @@ async function render() {
   const hash = location.hash.replace(/^#/, '') || '/';
   const [path, query] = hash.split('?');
   const params = new URLSearchParams(query ?? '');
-  main.replaceChildren();
+  const box = document.createElement('div');
+  main.replaceChildren(box);
+  let done = null;
   try {
     const take = path.match(/^\/take\/([^/]+)$/);
+    const live = path.match(/^\/live\/([^/]+)$/);
     if (take) {
-      leave = await takePage(main, decodeURIComponent(take[1]), params);
+      done = await takePage(box, decodeURIComponent(take[1]), params);
+    } else if (live) {
+      done = await livePage(box, decodeURIComponent(live[1]));
+    } else if (path === '/compare') {
+      done = await comparePage(box, params);
     } else if (path === '/stats') {
-      leave = await statsPage(main);
+      done = await statsPage(box);
     } else {
-      leave = await libraryPage(main, params);
+      done = await libraryPage(box, params);
     }
   } catch (e) {
-    showError(e);
+    if (mine === generation) showError(e);
   }
+  if (mine === generation) leave = done;
+  else if (done) done();
 }
 
 const form = document.getElementById('token-form');
@@ -61,7 +79,7 @@ form.addEventListener('submit', (e) => {
 
 window.addEventListener('hashchange', render);
 window.addEventListener('unhandledrejection', (e) => {
-  showError(e.reason);
+  if (e.reason?.name !== 'AbortError') showError(e.reason);
   e.preventDefault();
 });
 render();

@@ -40,7 +40,13 @@ export async function libraryPage(main, params) {
   const uploads = el('ul', { class: 'uploads' });
   const table = el('table', { class: 'takes' });
   const pager = el('div', { class: 'pager' });
-  main.append(el('h1', {}, 'Library'), form, drop, uploads, el('div', { class: 'scroll' }, table), pager);
+  // Takes ticked in the last column, compared on the compare page.
+  const chosen = new Set();
+  const compare = el('button', { class: 'compare', disabled: '', onclick: () => {
+    location.hash = `#/compare?ids=${[...chosen].map(encodeURIComponent).join(',')}`;
+  } }, 'Compare ticked takes');
+  main.append(el('h1', {}, 'Library'), form, drop, uploads, el('div', { class: 'controls' }, compare),
+    el('div', { class: 'scroll' }, table), pager);
 
   async function load() {
     const q = new URLSearchParams({ limit: '50', sort: state.sort, order: state.order });
@@ -49,7 +55,7 @@ export async function libraryPage(main, params) {
     const list = await json(`/v1/sequences?${q}`);
     cursors[page + 1] = list.next_cursor;
     table.replaceChildren(
-      el('thead', {}, el('tr', {}, ...['name', 'library', 'tags', 'duration', 'fps', 'points', 'codec', 'ratio', 'max mm', 'mean mm'].map((h) => el('th', { scope: 'col' }, h)))),
+      el('thead', {}, el('tr', {}, ...['name', 'library', 'tags', 'duration', 'fps', 'points', 'codec', 'ratio', 'max mm', 'mean mm', 'compare'].map((h) => el('th', { scope: 'col' }, h)))),
       el('tbody', {}, ...list.items.map(row)),
     );
     if (list.items.length === 0) table.append(el('caption', {}, 'No takes match.'));
@@ -64,7 +70,9 @@ export async function libraryPage(main, params) {
 
   function row(t) {
     return el('tr', { 'data-id': t.id },
-      el('td', {}, el('a', { href: `#/take/${encodeURIComponent(t.id)}` }, t.name || t.id)),
+      el('td', {}, t.live
+        ? el('a', { href: `#/live/${encodeURIComponent(t.id)}` }, t.name || t.id, ' ', el('span', { class: 'badge live' }, 'live'))
+        : el('a', { href: `#/take/${encodeURIComponent(t.id)}` }, t.name || t.id)),
       el('td', {}, t.library || '—'),
       el('td', {}, (t.tags || []).join(', ')),
       el('td', { class: 'n' }, fmt.secs(t.duration_s)),
@@ -74,6 +82,15 @@ export async function libraryPage(main, params) {
       el('td', { class: 'n' }, fmt.num(t.ratio, 1)),
       el('td', { class: 'n' }, fmt.num(t.max_mm, 3)),
       el('td', { class: 'n' }, fmt.num(t.mean_mm, 3)),
+      el('td', {}, t.live ? '' : el('input', {
+        type: 'checkbox', 'aria-label': `compare ${t.name || t.id}`, checked: chosen.has(t.id) ? '' : null,
+        onchange: (e) => {
+          if (e.target.checked) chosen.add(t.id);
+          else chosen.delete(t.id);
+          compare.disabled = chosen.size === 0;
+          compare.textContent = `Compare ticked takes (${chosen.size})`;
+        },
+      })),
     );
   }
 
@@ -87,7 +104,8 @@ export async function libraryPage(main, params) {
       try {
         const r = await upload(file, q, (f) => { bar.value = f; });
         bar.value = 1;
-        status.textContent = ` stored as ${r.codec}, ratio ${fmt.num(r.ratio, 1)}, max ${fmt.num(r.max_mm, 3)} mm`;
+        status.replaceChildren(` stored as ${r.codec}, ratio ${fmt.num(r.ratio, 1)}, max ${fmt.num(r.max_mm, 3)} mm: `,
+          el('a', { href: `#/take/${encodeURIComponent(r.id)}` }, 'see what compression did'));
         status.className = 'ok';
       } catch (e) {
         status.textContent = ` refused: ${e.message}`;

@@ -1,18 +1,101 @@
-// The 3-D figure: points (markers, joints, End Sites) and, for skeleton takes, bones; one
-// frame at a time. Samples missing in a frame (gaps, NaN) are left out, with their bones.
+// The 3-D view: one scene, camera and orbit control per canvas, holding one figure per take
+// shown (several overlaid on the compare page). A figure is points (markers, joints, End
+// Sites) and, for skeleton takes, bones; samples missing in a frame (gaps, NaN) are left
+// out, with their bones.
 
 import * as THREE from 'three';
 import { OrbitControls } from '/ui/vendor/three/OrbitControls.js';
 
-export class Player {
-  /**
-   * @param {HTMLCanvasElement} canvas
-   * @param {{points: number, bones: [number, number][], metres: number}} shape
-   *   metres: metres per stored unit.
-   */
-  constructor(canvas, shape) {
+/** Figure colours, in order; the first is the single-take colour. */
+export const COLOURS = ['#1f5fbf', '#c0392b', '#1e8449', '#8e44ad', '#d35400', '#117a8b'];
+
+const finite = (x, y, z) => Number.isFinite(x) && Number.isFinite(y) && Number.isFinite(z);
+
+class Figure {
+  constructor(player, shape, colour) {
+    this.player = player;
     this.shape = shape;
+    this.group = new THREE.Group();
+    player.root.add(this.group);
+
+    const n = shape.points;
+    this.pointPos = new Float32Array(n * 3);
+    const pg = new THREE.BufferGeometry();
+    pg.setAttribute('position', new THREE.BufferAttribute(this.pointPos, 3));
+    pg.setDrawRange(0, 0);
+    this.points = new THREE.Points(pg, new THREE.PointsMaterial({ color: colour, size: 6, sizeAttenuation: false }));
+    this.points.frustumCulled = false;
+    this.group.add(this.points);
+
+    this.bonePos = new Float32Array(shape.bones.length * 6);
+    const bg = new THREE.BufferGeometry();
+    bg.setAttribute('position', new THREE.BufferAttribute(this.bonePos, 3));
+    bg.setDrawRange(0, 0);
+    // Bones darker than their points, so a figure's joints stay visible.
+    const bone = new THREE.Color(colour).multiplyScalar(0.55);
+    this.bones = new THREE.LineSegments(bg, new THREE.LineBasicMaterial({ color: bone }));
+    this.bones.frustumCulled = false;
+    this.group.add(this.bones);
+  }
+
+  /** Turn Z-up takes Y-up (BVH is Y-up, most marker systems Z-up: the taller is up). */
+  orient(xyz) {
+    const box = this.localBox(xyz);
+    if (box.isEmpty()) return;
+    const size = box.getSize(new THREE.Vector3());
+    this.group.rotation.x = size.z > size.y * 1.2 ? -Math.PI / 2 : 0;
+    this.group.updateMatrixWorld();
+  }
+
+  localBox(xyz) {
+    const m = this.shape.metres;
+    const box = new THREE.Box3();
+    const v = new THREE.Vector3();
+    for (let i = 0; i + 2 < xyz.length; i += 3) {
+      if (finite(xyz[i], xyz[i + 1], xyz[i + 2])) box.expandByPoint(v.set(xyz[i] * m, xyz[i + 1] * m, xyz[i + 2] * m));
+    }
+    return box;
+  }
+
+  /** Set one frame (`xyz`: points × 3, stored units, NaN where missing); not yet drawn. */
+  set(xyz) {
+    const m = this.shape.metres;
+    let k = 0;
+    for (let p = 0; p < this.shape.points; p++) {
+      const x = xyz[3 * p];
+      const y = xyz[3 * p + 1];
+      const z = xyz[3 * p + 2];
+      if (finite(x, y, z)) {
+        this.pointPos[k++] = x * m;
+        this.pointPos[k++] = y * m;
+        this.pointPos[k++] = z * m;
+      }
+    }
+    this.points.geometry.setDrawRange(0, k / 3);
+    this.points.geometry.attributes.position.needsUpdate = true;
+    let b = 0;
+    for (const [a, c] of this.shape.bones) {
+      if (finite(xyz[3 * a], xyz[3 * a + 1], xyz[3 * a + 2]) && finite(xyz[3 * c], xyz[3 * c + 1], xyz[3 * c + 2])) {
+        for (let i = 0; i < 3; i++) this.bonePos[b++] = xyz[3 * a + i] * m;
+        for (let i = 0; i < 3; i++) this.bonePos[b++] = xyz[3 * c + i] * m;
+      }
+    }
+    this.bones.geometry.setDrawRange(0, b / 3);
+    this.bones.geometry.attributes.position.needsUpdate = true;
+  }
+
+  /** Set one frame and draw. */
+  show(xyz) {
+    this.set(xyz);
+    this.player.draw();
+  }
+}
+
+export class Player {
+  /** @param {HTMLCanvasElement} canvas */
+  constructor(canvas) {
     this.canvas = canvas;
+    this.figures = [];
     // preserveDrawingBuffer: what is drawn can be read back (screenshots, tests).
     this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
@@ -25,25 +108,20 @@ export class Player {
     this.scene.add(this.root);
     this.grid = new THREE.GridHelper(10, 20, 0x9aa3ad, 0xd5d9de);
     this.scene.add(this.grid);
-
-    const n = shape.points;
-    this.pointPos = new Float32Array(n * 3);
-    const pg = new THREE.BufferGeometry();
-    pg.setAttribute('position', new THREE.BufferAttribute(this.pointPos, 3));
-    this.points = new THREE.Points(pg, new THREE.PointsMaterial({ color: 0x1f5fbf, size: 6, sizeAttenuation: false }));
-    this.points.frustumCulled = false;
-    this.root.add(this.points);
-
-    this.bonePos = new Float32Array(shape.bones.length * 6);
-    const bg = new THREE.BufferGeometry();
-    bg.setAttribute('position', new THREE.BufferAttribute(this.bonePos, 3));
-    this.bones = new THREE.LineSegments(bg, new THREE.LineBasicMaterial({ color: 0x223344 }));
-    this.bones.frustumCulled = false;
-    this.root.add(this.bones);
-
     this.resize = new ResizeObserver(() => this.fit());
     this.resize.observe(canvas);
     this.fit();
+  }
+
+  /**
+   * A figure of a take's shape.
+   * @param {{points: number, bones: [number, number][], metres: number}} shape
+   *   metres: metres per stored unit.
+   */
+  add(shape, colour = COLOURS[this.figures.length % COLOURS.length]) {
+    const f = new Figure(this, shape, colour);
+    this.figures.push(f);
+    return f;
   }
 
   fit() {
@@ -55,21 +133,15 @@ export class Player {
     this.draw();
   }
 
-  /** Point the camera at a frame (`xyz`, stored units), Z-up takes turned Y-up. */
-  frame(xyz) {
-    const m = this.shape.metres;
-    const box = new THREE.Box3();
-    for (let i = 0; i + 2 < xyz.length; i += 3) {
-      if (Number.isFinite(xyz[i]) && Number.isFinite(xyz[i + 1]) && Number.isFinite(xyz[i + 2])) {
-        box.expandByPoint(new THREE.Vector3(xyz[i] * m, xyz[i + 1] * m, xyz[i + 2] * m));
-      }
+  /** Point the camera at figures' frames: `[figure, xyz]` pairs, each turned up first. */
+  frame(pairs) {
+    const world = new THREE.Box3();
+    for (const [fig, xyz] of pairs) {
+      fig.orient(xyz);
+      const b = fig.localBox(xyz);
+      if (!b.isEmpty()) world.union(b.applyMatrix4(fig.group.matrixWorld));
     }
-    if (box.isEmpty()) return;
-    const size = box.getSize(new THREE.Vector3());
-    // BVH is Y-up; most marker systems are Z-up: the taller of the two is up.
-    this.root.rotation.x = size.z > size.y * 1.2 ? -Math.PI / 2 : 0;
-    this.root.updateMatrixWorld();
-    const world = box.clone().applyMatrix4(this.root.matrixWorld);
+    if (world.isEmpty()) return;
     const c = world.getCenter(new THREE.Vector3());
     const r = Math.max(world.getSize(new THREE.Vector3()).length(), 0.5);
     this.grid.position.set(c.x, world.min.y, c.z);
@@ -79,36 +151,6 @@ export class Player {
     this.camera.far = r * 100;
     this.camera.updateProjectionMatrix();
     this.controls.update();
-  }
-
-  /** Show one frame (`xyz`: points × 3, stored units, NaN where missing). */
-  show(xyz) {
-    const m = this.shape.metres;
-    let k = 0;
-    for (let p = 0; p < this.shape.points; p++) {
-      const x = xyz[3 * p];
-      const y = xyz[3 * p + 1];
-      const z = xyz[3 * p + 2];
-      if (Number.isFinite(x) && Number.isFinite(y) && Number.isFinite(z)) {
-        this.pointPos[k++] = x * m;
-        this.pointPos[k++] = y * m;
-        this.pointPos[k++] = z * m;
-      }
-    }
-    this.points.geometry.setDrawRange(0, k / 3);
-    this.points.geometry.attributes.position.needsUpdate = true;
-    let b = 0;
-    for (const [a, c] of this.shape.bones) {
-      const pa = xyz.subarray(3 * a, 3 * a + 3);
-      const pc = xyz.subarray(3 * c, 3 * c + 3);
-      if (pa.every(Number.isFinite) && pc.every(Number.isFinite)) {
-        for (const v of pa) this.bonePos[b++] = v * m;
-        for (const v of pc) this.bonePos[b++] = v * m;
-      }
-    }
-    this.bones.geometry.setDrawRange(0, b / 3);
-    this.bones.geometry.attributes.position.needsUpdate = true;
-    this.draw();
   }
 
   draw() {

@@ -2,171 +2,66 @@
 // frames fetched one second at a time as the playhead moves (so an hour-long take opens as
 // fast as a short one); the take's numbers, its codec decision, and downloads of the range.
 
-import { download, frames as fetchFrames, json } from './api.js';
+import { download, json } from './api.js';
 import { el, fmt, svg } from './dom.js';
 import { showError } from './app.js';
+import { shapeOf, TakeFrames } from './frames.js';
 import { Player } from './player.js';
-
-const SPEEDS = [0.1, 0.25, 0.5, 1, 2, 4];
-/** Seconds of frames kept in memory at most. */
-const KEPT_WINDOWS = 120;
+import { Transport } from './transport.js';
 
 export async function takePage(main, id, params) {
   const take = await json(`/v1/sequences/${encodeURIComponent(id)}`);
-  let bones = [];
-  if (take.skeleton) {
-    const sk = await json(`/v1/skeletons/${encodeURIComponent(take.skeleton)}`);
-    if (sk.hierarchy?.length === take.points) {
-      sk.hierarchy.forEach((j, i) => { if (j.parent !== null && j.parent !== undefined) bones.push([j.parent, i]); });
-    }
+  if (take.live) {
+    // Still recording: the live page shows it as it arrives.
+    location.replace(`#/live/${encodeURIComponent(id)}`);
+    return () => {};
   }
+  const shape = await shapeOf(take);
   const fps = take.fps;
   const total = take.frames;
-  const window = Math.max(1, Math.round(fps));
 
-  // --- layout
   const canvas = el('canvas', { class: 'view', 'aria-label': `3-D view of ${take.name}`, tabindex: '0' });
-  const play = el('button', { class: 'play', 'aria-label': 'play' }, '▶');
-  const speed = el('select', { 'aria-label': 'speed' }, ...SPEEDS.map((s) => el('option', { value: String(s) }, `${s}×`)));
-  speed.value = params.get('speed') ?? '1';
-  const scrub = el('input', { type: 'range', min: '0', max: String(Math.max(0, total - 1)), step: '1', value: '0', 'aria-label': 'playhead (frame)' });
-  const clock = el('output', { class: 'clock' }, '0.00 s');
-  const from = el('input', { type: 'number', min: '0', step: '0.1', value: params.get('from') ?? '0', 'aria-label': 'loop from (s)' });
-  const to = el('input', { type: 'number', min: '0', step: '0.1', value: params.get('to') ?? (total / fps).toFixed(2), 'aria-label': 'loop to (s)' });
-  const loop = el('input', { type: 'checkbox', 'aria-label': 'loop' });
-  loop.checked = params.get('loop') === '1';
   const fetched = el('span', { class: 'muted' });
   const chart = el('div', { class: 'chart' });
+  const abort = new AbortController();
+  const frames = new TakeFrames(take, abort.signal, () => {
+    fetched.textContent = ` ${frames.fetches} ranges fetched`;
+  });
+  const player = new Player(canvas);
+  const figure = player.add(shape);
+  let shownFrame = -1;
+  let moveMarker = () => {};
+
+  async function show(t) {
+    const f = frames.frameAt(t);
+    moveMarker(f);
+    const xyz = await frames.at(f);
+    // A later seek may have moved the playhead while this frame's second was fetched.
+    if (frames.frameAt(transport.t) !== f) return;
+    if (shownFrame < 0) player.frame([[figure, xyz]]);
+    shownFrame = f;
+    figure.show(xyz);
+    canvas.dataset.frame = String(f);
+    frames.prefetch(f);
+  }
+  const transport = new Transport({
+    last: Math.max(0, total - 1) / fps,
+    rate: fps,
+    params,
+    onSeek: show,
+    onShare: () => history.replaceState(null, '', `#/take/${encodeURIComponent(id)}?${transport.query()}`),
+    onError: showError,
+  });
+  transport.loopBar.append(fetched);
+  const compare = el('a', { href: `#/compare?ids=${encodeURIComponent(id)}` }, 'compare with another take');
   main.append(
     el('h1', {}, take.name || take.id, ' ', el('small', { class: 'muted' }, take.library ? `in ${take.library}` : '')),
     canvas,
-    el('div', { class: 'controls' }, play, speed, scrub, clock),
+    transport.bar,
     chart,
-    el('div', { class: 'controls' },
-      el('label', {}, 'loop ', loop), el('label', {}, 'from ', from, ' s'), el('label', {}, 'to ', to, ' s'), fetched),
-    el('p', { class: 'muted' }, 'Keys: space play/pause, ←/→ one frame (shift: one second), Home/End.'),
+    transport.loopBar,
+    el('p', { class: 'muted' }, transport.help.textContent, ' ', compare),
   );
-
-  // --- frames, one window (a second) at a time
-  const windows = new Map(); // index -> Promise<Float32Array>
-  let fetchCount = 0;
-  const abort = new AbortController();
-  function windowOf(index) {
-    let w = windows.get(index);
-    if (!w) {
-      const start = index * window;
-      const end = Math.min(total, start + window);
-      fetchCount += 1;
-      fetched.textContent = ` ${fetchCount} ranges fetched`;
-      w = fetchFrames(id, start, end, abort.signal).then((r) => r.data);
-      w.catch(() => windows.delete(index));
-      windows.set(index, w);
-      if (windows.size > KEPT_WINDOWS) windows.delete(windows.keys().next().value);
-    }
-    return w;
-  }
-  const ready = new Map(); // index -> Float32Array, once loaded
-  async function frameData(f) {
-    const index = Math.floor(f / window);
-    let data = ready.get(index);
-    if (!data) {
-      data = await windowOf(index);
-      ready.set(index, data);
-      if (ready.size > KEPT_WINDOWS) ready.delete(ready.keys().next().value);
-    }
-    const n = take.points * 3;
-    const k = f - index * window;
-    return data.subarray(k * n, (k + 1) * n);
-  }
-
-  const player = new Player(canvas, { points: take.points, bones, metres: take.metres_per_unit });
-  let current = Math.min(total - 1, Math.max(0, Math.round(Number(params.get('t') ?? 0) * fps)));
-  let playing = false;
-  let last = 0;
-  let shownFrame = -1;
-  let raf = 0;
-
-  let moveMarker = () => {};
-  async function show(f) {
-    const g = Math.min(total - 1, Math.max(0, Math.floor(f)));
-    current = g;
-    moveMarker(g);
-    scrub.value = String(g);
-    clock.textContent = `${(g / fps).toFixed(2)} s`;
-    const xyz = await frameData(g);
-    // A later call may have moved the playhead while this frame's second was fetched.
-    if (current !== g) return;
-    if (shownFrame < 0) player.frame(xyz);
-    shownFrame = g;
-    player.show(xyz);
-    canvas.dataset.frame = String(g);
-    // Fetch the next second before the playhead needs it.
-    const next = Math.floor(g / window) + 1;
-    if (next * window < total) windowOf(next);
-  }
-
-  function range() {
-    const a = Math.max(0, Math.floor(Number(from.value) * fps));
-    const b = Math.min(total, Math.ceil(Number(to.value) * fps));
-    return b > a ? [a, b] : [0, total];
-  }
-
-  function share() {
-    const q = new URLSearchParams({ t: (current / fps).toFixed(2), speed: speed.value });
-    if (loop.checked) { q.set('loop', '1'); q.set('from', from.value); q.set('to', to.value); }
-    history.replaceState(null, '', `#/take/${encodeURIComponent(id)}?${q}`);
-  }
-
-  // Playback keeps its own clock (seconds into the take): frames are whole, time is not.
-  let clockT = 0;
-  function tick(now) {
-    if (!playing) return;
-    const dt = last ? (now - last) / 1000 : 0;
-    last = now;
-    clockT += dt * Number(speed.value);
-    let f = Math.floor(clockT * fps);
-    const [a, b] = loop.checked ? range() : [0, total];
-    if (f >= b || f < a) {
-      if (loop.checked) {
-        f = a;
-        clockT = a / fps;
-      } else {
-        f = total - 1;
-        setPlaying(false);
-      }
-    }
-    if (f !== shownFrame) show(f).catch(showError);
-    raf = requestAnimationFrame(tick);
-  }
-
-  function setPlaying(on, keepUrl = false) {
-    playing = on;
-    play.textContent = on ? '❚❚' : '▶';
-    play.setAttribute('aria-label', on ? 'pause' : 'play');
-    last = 0;
-    if (on) {
-      clockT = current / fps;
-      raf = requestAnimationFrame(tick);
-    } else {
-      cancelAnimationFrame(raf);
-      if (!keepUrl) share();
-    }
-  }
-
-  play.addEventListener('click', () => setPlaying(!playing));
-  speed.addEventListener('change', share);
-  loop.addEventListener('change', share);
-  scrub.addEventListener('input', () => show(Number(scrub.value)).then(share).catch(showError));
-  function onKey(e) {
-    if (e.target instanceof HTMLInputElement && e.target.type !== 'range') return;
-    const step = e.shiftKey ? window : 1;
-    if (e.key === ' ') { e.preventDefault(); setPlaying(!playing); }
-    else if (e.key === 'ArrowRight') { e.preventDefault(); show(current + step).then(share).catch(showError); }
-    else if (e.key === 'ArrowLeft') { e.preventDefault(); show(current - step).then(share).catch(showError); }
-    else if (e.key === 'Home') { e.preventDefault(); show(0).then(share).catch(showError); }
-    else if (e.key === 'End') { e.preventDefault(); show(total - 1).then(share).catch(showError); }
-  }
-  document.addEventListener('keydown', onKey);
 
   // --- numbers, decision, downloads
   const facts = [
@@ -195,30 +90,31 @@ export async function takePage(main, id, params) {
         ))),
     );
   }
+  /** Seconds [a, b] as frames [start, end). */
+  const frameRange = ([a, b]) => [Math.floor(a * fps + 1e-6), Math.min(total, Math.floor(b * fps + 1e-6) + 1)];
   const formats = ['json', 'csv', 'trc', 'npy', 'f32'];
   if (take.source_format === 'bvh') formats.unshift('bvh');
   main.append(el('h2', {}, 'Download'), el('p', {}, 'The loop range (or the whole take): ',
     ...formats.map((f) => el('button', { class: 'download', onclick: () => {
-      const [a, b] = loop.checked ? range() : [0, total];
+      const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];
       download(`/v1/sequences/${encodeURIComponent(id)}/frames?start=${a}&end=${b}&format=${f}`, `${take.name || take.id}_${a}-${b}.${f}`).catch(showError);
     } }, f.toUpperCase()))));
 
   // --- what compression did: the error second by second against the bound
   try {
     const e = await json(`/v1/sequences/${encodeURIComponent(id)}/errors`);
-    moveMarker = errorChart(chart, e, total, (f) => show(f).then(share).catch(showError));
+    moveMarker = errorChart(chart, e, total, (f) => transport.jump(f / fps));
   } catch (err) {
     chart.replaceChildren(el('p', { class: 'muted' }, `No error chart: ${err.message}`));
   }
 
-  await show(current);
-  // Leaving the page: stop, without writing this take's URL over the one navigated to.
+  await transport.seek(transport.t);
   return () => {
-    setPlaying(false, true);
+    transport.dispose();
     abort.abort();
-    document.removeEventListener('keydown', onKey);
     player.dispose();
   };
+
 }
 
 /**

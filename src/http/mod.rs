@@ -146,6 +146,7 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
         )
         .route("/v1/streams", post(streams::open.layer(json.clone())))
         .route("/v1/streams/{id}", get(streams::get))
+        .route("/v1/streams/{id}/events", get(streams::events))
         .route(
             "/v1/streams/{id}/frames",
             post(streams::append.layer(append)),
@@ -361,6 +362,13 @@ impl Application {
         let service = self
             .router
             .into_make_service_with_connect_info::<SocketAddr>();
+        // Watches of live streams never end on their own: end them first, or the graceful
+        // shutdown would wait for them.
+        let streams = self.state.streams.clone();
+        let shutdown = async move {
+            shutdown.await;
+            streams.stop_watchers();
+        };
         let served = axum::serve(self.listener, service)
             .with_graceful_shutdown(shutdown)
             .await;

@@ -1,20 +1,28 @@
-//! `/v1/streams`: live takes. Open, append frames (JSON or little-endian f32), finish.
+//! `/v1/streams`: live takes. Open, append frames (JSON or little-endian f32), watch them
+//! arrive (server-sent events), finish.
+
+use std::convert::Infallible;
+use std::sync::Arc;
 
 use axum::body::Bytes;
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
+use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
 use axum::Json;
+use base64::Engine;
+use futures_util::StreamExt;
 use serde::de::{DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
+use tokio::sync::broadcast::error::RecvError;
 
 use super::error::ApiError;
 use super::views::TakeView;
 use super::AppState;
 use crate::service::access::{self, Caller};
-use crate::service::streams::{OpenRequest, StreamInfo};
+use crate::service::streams::{Arrival, OpenRequest, StreamInfo, Watch};
 
 pub async fn open(
     State(state): State<AppState>,
@@ -46,6 +54,9 @@ pub struct AppendQuery {
     /// Commit the frames still pending in an unfinished chunk now.
     #[serde(default)]
     flush: bool,
+    /// When the producer captured the last frame sent, in ms since the Unix epoch (its
+    /// clock): watchers show the delay from capture to their screen.
+    captured_ms: Option<i64>,
 }
 
 /// Frames from the body: JSON (`{"frames": [[x, y, z, …], …]}` or a bare array of frames,
@@ -163,7 +174,14 @@ pub async fn append(
     let frames = parse_frames(&headers, &body)?;
     let info = state
         .streams
-        .append(&state.store, &state.caches, &id, frames, q.flush)
+        .append(
+            &state.store,
+            &state.caches,
+            &id,
+            frames,
+            q.flush,
+            q.captured_ms,
+        )
         .await?;
     Ok(Json(info))
 }
@@ -179,4 +197,103 @@ pub async fn finish(
         .finish(&state.store, &state.caches, &id)
         .await?;
     Ok(Json(TakeView::from(&take)).into_response())
+}
+
+/// The first event of a watch: the stream, and this server's clock (for a watcher to
+/// estimate its offset from it).
+#[derive(Serialize)]
+struct Hello<'a> {
+    #[serde(flatten)]
+    info: &'a StreamInfo,
+    server_ms: i64,
+}
+
+/// A `frames` event: an append as it arrived.
+#[derive(Serialize)]
+struct Frames<'a> {
+    first: usize,
+    frames: usize,
+    received_ms: i64,
+    captured_ms: Option<i64>,
+    /// `frames × points × 3` little-endian f32 in stored units (NaN: missing), base64.
+    data: &'a str,
+}
+
+fn frames_event(a: &Arrival) -> Event {
+    let bytes: Vec<u8> = a.positions.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let data = base64::engine::general_purpose::STANDARD.encode(bytes);
+    json_event(
+        "frames",
+        &Frames {
+            first: a.first,
+            frames: a.frames,
+            received_ms: a.received_ms,
+            captured_ms: a.captured_ms,
+            data: &data,
+        },
+    )
+}
+
+fn json_event(name: &str, value: &impl Serialize) -> Event {
+    let data = serde_json::to_string(value).unwrap_or_else(|_| "{}".into());
+    Event::default().event(name).data(data)
+}
+
+/// What a watch does next.
+enum Next {
+    Arrival(Arc<Arrival>),
+    Skipped(u64),
+    End(&'static str),
+}
+
+async fn next(w: &mut Watch) -> Next {
+    tokio::select! {
+        r = w.arrivals.recv() => match r {
+            Ok(a) => Next::Arrival(a),
+            Err(RecvError::Lagged(n)) => Next::Skipped(n),
+            Err(RecvError::Closed) => Next::End("finished"),
+        },
+        _ = w.stopping.wait_for(|s| *s) => Next::End("the server is shutting down"),
+    }
+}
+
+/// `GET /v1/streams/{id}/events`: an open stream's frames as they arrive, as server-sent
+/// events: `stream` (its state and the server's clock), then `frames` for the newest frame
+/// and for every append after it (with when it was received and, if the producer said,
+/// captured), `skipped` when this watcher fell behind, and `end` when the stream closes.
+pub async fn events(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path(id): Path<String>,
+) -> Result<impl IntoResponse, ApiError> {
+    access::check_take(&state.store, &caller.grant, &id).await?;
+    let mut watch = state.streams.watch(&state.store, &id).await?;
+    let hello = json_event(
+        "stream",
+        &Hello {
+            info: &watch.info,
+            server_ms: crate::service::now_ms(),
+        },
+    );
+    let head: Vec<Event> = std::iter::once(hello)
+        .chain(watch.latest.take().map(|a| frames_event(&a)))
+        .collect();
+    let rest = futures_util::stream::unfold(Some(watch), |w| async move {
+        let mut w = w?;
+        Some(match next(&mut w).await {
+            Next::Arrival(a) => (frames_event(&a), Some(w)),
+            Next::Skipped(n) => (
+                json_event("skipped", &serde_json::json!({ "appends": n })),
+                Some(w),
+            ),
+            Next::End(reason) => (
+                json_event("end", &serde_json::json!({ "reason": reason })),
+                None,
+            ),
+        })
+    });
+    let events = futures_util::stream::iter(head)
+        .chain(rest)
+        .map(Ok::<_, Infallible>);
+    Ok(Sse::new(events).keep_alive(KeepAlive::default()))
 }

@@ -25,7 +25,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
-use tokio::sync::{OwnedSemaphorePermit, Semaphore};
+use tokio::sync::{broadcast, watch, OwnedSemaphorePermit, Semaphore};
 
 use super::choose::{CodecRequest, Decision, Keep};
 use super::prepared::ReadCaches;
@@ -33,7 +33,10 @@ use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
 use crate::codec::stream::{StreamChunk, StreamEncoder, StreamSpec};
 use crate::codec::{self, Basis, CodecId, ErrorBound, Latency};
-use crate::limits::{Limits, MAX_COORDINATE_M, MAX_FPS};
+use crate::limits::{
+    Limits, MAX_CAPTURE_MS, MAX_COORDINATE_M, MAX_FPS, STREAM_WATCHERS, STREAM_WATCH_QUEUE,
+    STREAM_WATCH_SAMPLES,
+};
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
 use crate::store::{BasisRow, ChunkRow, NewTake, Store};
@@ -177,6 +180,32 @@ pub struct StreamInfo {
     pub warnings: Vec<String>,
 }
 
+/// Frames as they arrived at an open stream, for its watchers: the newest frames of one
+/// append (at most [`STREAM_WATCH_SAMPLES`] samples), as sent, before they are coded.
+#[derive(Debug, Clone)]
+pub struct Arrival {
+    /// The index in the take of the first frame here.
+    pub first: usize,
+    pub frames: usize,
+    /// When this server took the append (ms since the Unix epoch, server clock).
+    pub received_ms: i64,
+    /// When the producer captured the append's last frame, if it said (`captured_ms`,
+    /// producer clock).
+    pub captured_ms: Option<i64>,
+    /// `frames × points × 3`, stored units, NaN where a sample is missing.
+    pub positions: Vec<f32>,
+}
+
+/// A watcher of an open stream: its state now, its newest frame (so there is something
+/// to show at once), and every append from here on.
+pub struct Watch {
+    pub info: StreamInfo,
+    pub latest: Option<Arc<Arrival>>,
+    pub arrivals: broadcast::Receiver<Arc<Arrival>>,
+    /// Turns true when the server shuts down: watchers end then, not hold it open.
+    pub stopping: watch::Receiver<bool>,
+}
+
 struct Live {
     take: Take,
     /// The codec layer's stream encoder: chunks, their checks, the take's index and totals.
@@ -190,6 +219,10 @@ struct Live {
     /// Every frame as sent, for re-encoding on finish (if asked for).
     archive: Option<Vec<f32>>,
     warnings: Vec<String>,
+    /// Every append, to this stream's watchers; dropped (which ends them) when it closes.
+    watchers: broadcast::Sender<Arc<Arrival>>,
+    /// The newest frame received, for a watcher that joins between appends.
+    latest: Option<Arc<Arrival>>,
     /// This stream's place among the server's open streams, given back when it closes.
     _slot: OwnedSemaphorePermit,
 }
@@ -213,6 +246,37 @@ impl Live {
         }
     }
 
+    /// Pass an append on to the watchers (its newest frames) and keep its last frame.
+    fn show_watchers(&mut self, first: usize, frames: &[f32], captured_ms: Option<i64>) {
+        let w = self.take.points * 3;
+        let n = frames.len() / w;
+        if n == 0 {
+            return;
+        }
+        let received_ms = super::now_ms();
+        let newest = |k: usize| {
+            Arc::new(Arrival {
+                first: first + n - k,
+                frames: k,
+                received_ms,
+                captured_ms,
+                positions: frames[(n - k) * w..].to_vec(),
+            })
+        };
+        let latest = newest(1);
+        if self.watchers.receiver_count() > 0 {
+            let kept = n.min((STREAM_WATCH_SAMPLES / self.take.points).max(1));
+            let arrival = if kept == 1 {
+                latest.clone()
+            } else {
+                newest(kept)
+            };
+            // Fails only when every watcher has gone since the count: nothing to do.
+            let _ = self.watchers.send(arrival);
+        }
+        self.latest = Some(latest);
+    }
+
     fn encoder(&self) -> Result<&StreamEncoder> {
         self.encoder
             .as_ref()
@@ -233,6 +297,8 @@ pub struct Streams {
     /// How long a live take stays live without its server renewing it. Servers renew the
     /// leases of their open streams at every [`Streams::maintain`]; run that more often.
     pub lease: Duration,
+    /// Set when the server shuts down ([`Streams::stop_watchers`]).
+    stopping: watch::Sender<bool>,
 }
 
 impl Streams {
@@ -248,6 +314,7 @@ impl Streams {
             limits,
             idle: Duration::from_secs(300),
             lease,
+            stopping: watch::Sender::new(false),
         }
     }
 
@@ -401,6 +468,8 @@ impl Streams {
             last_activity: Instant::now(),
             archive: plan.reencode_on_finish.then(Vec::new),
             warnings: Vec::new(),
+            watchers: broadcast::Sender::new(STREAM_WATCH_QUEUE),
+            latest: None,
             _slot: slot,
         };
         let info = live.info();
@@ -418,6 +487,31 @@ impl Streams {
             Some(e) => Ok(e.lock().await.info()),
             None => Err(Self::not_open(store, id).await),
         }
+    }
+
+    /// Watch an open stream: every append from now on, as it arrives. At most
+    /// [`STREAM_WATCHERS`] at once per stream; the watch ends when the stream closes.
+    pub async fn watch(&self, store: &Store, id: &str) -> Result<Watch> {
+        let Some(entry) = self.entry(id) else {
+            return Err(Self::not_open(store, id).await);
+        };
+        let live = entry.lock().await;
+        if live.watchers.receiver_count() >= STREAM_WATCHERS {
+            return Err(Error::Busy(format!(
+                "stream {id} has {STREAM_WATCHERS} watchers, the most it takes at once"
+            )));
+        }
+        Ok(Watch {
+            info: live.info(),
+            latest: live.latest.clone(),
+            arrivals: live.watchers.subscribe(),
+            stopping: self.stopping.subscribe(),
+        })
+    }
+
+    /// End every watch: the server is shutting down, and open watches would hold it.
+    pub fn stop_watchers(&self) {
+        self.stopping.send_replace(true);
     }
 
     /// Why a stream id is not open here: finished or coded elsewhere (409), or unknown (404).
@@ -446,7 +540,13 @@ impl Streams {
         id: &str,
         frames: Vec<f32>,
         flush: bool,
+        captured_ms: Option<i64>,
     ) -> Result<StreamInfo> {
+        if let Some(t) = captured_ms.filter(|t| !(0..=MAX_CAPTURE_MS).contains(t)) {
+            return Err(Error::InvalidRequest(format!(
+                "captured_ms {t} is not a time in ms since the Unix epoch (0..={MAX_CAPTURE_MS})"
+            )));
+        }
         let entry = match self.entry(id) {
             Some(e) => e,
             None => return Err(Self::not_open(store, id).await),
@@ -477,7 +577,9 @@ impl Streams {
             )));
         }
         live.last_activity = Instant::now();
+        let first = live.received;
         live.received += frames.len() / w;
+        live.show_watchers(first, &frames, captured_ms);
         let limit = self.limits.stream_archive_bytes as usize;
         if let Some(a) = &mut live.archive {
             if (a.len() + frames.len()) * 4 > limit {

@@ -141,6 +141,14 @@ async fn call(
     };
     let r = rb.send().await.unwrap();
     let status = r.status().as_u16();
+    // An event stream lasts as long as its stream: its status is the answer.
+    let events = r
+        .headers()
+        .get("content-type")
+        .is_some_and(|t| t.as_bytes().starts_with(b"text/event-stream"));
+    if events {
+        return (status, Value::Null);
+    }
     let bytes = r.bytes().await.unwrap();
     (
         status,
@@ -227,6 +235,7 @@ fn cases() -> Vec<Case> {
         c(Method::DELETE, "/v1/skeletons/{id}", "admin", false, 404),
         c(Method::POST, "/v1/streams", "write", true, 201),
         c(Method::GET, "/v1/streams/{id}", "read", true, 200),
+        c(Method::GET, "/v1/streams/{id}/events", "read", true, 200),
         c(Method::POST, "/v1/streams/{id}/frames", "write", true, 200),
         c(Method::POST, "/v1/streams/{id}/finish", "write", true, 200),
         c(Method::GET, "/v1/tokens", "admin", false, 200),
@@ -295,6 +304,9 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
             Body::Json(json!({"fps": 60.0, "points": 4, "library": "lab"})),
         ),
         ("GET", "/v1/streams/{id}") => (format!("/v1/streams/{}", stream().await), Body::None),
+        ("GET", "/v1/streams/{id}/events") => {
+            (format!("/v1/streams/{}/events", stream().await), Body::None)
+        }
         ("POST", "/v1/streams/{id}/frames") => (
             format!("/v1/streams/{}/frames", stream().await),
             Body::Bytes(vec![0u8; 4 * 3 * 4 * 2]),

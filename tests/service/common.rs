@@ -7,6 +7,8 @@
 
 #![allow(dead_code)]
 
+use std::time::Duration;
+
 use mocapstore::http::{Application, Config};
 use mocapstore::limits::Limits;
 use mocapstore::store::Store;
@@ -100,6 +102,49 @@ pub async fn all() -> Vec<TestStore> {
         v.push(pg);
     }
     v
+}
+
+/// A server-sent event stream, read event by event.
+pub struct Events {
+    response: reqwest::Response,
+    buffer: String,
+}
+
+impl Events {
+    pub fn new(response: reqwest::Response) -> Events {
+        Events {
+            response,
+            buffer: String::new(),
+        }
+    }
+
+    /// The next event's name and JSON data; None when the response ends. Fails the test if
+    /// none comes within 10 s.
+    pub async fn next(&mut self) -> Option<(String, Value)> {
+        loop {
+            if let Some(cut) = self.buffer.find("\n\n") {
+                let block: String = self.buffer.drain(..cut + 2).collect();
+                let mut name = "message".to_string();
+                let mut data = String::new();
+                for line in block.lines() {
+                    if let Some(n) = line.strip_prefix("event:") {
+                        name = n.trim().to_string();
+                    } else if let Some(d) = line.strip_prefix("data:") {
+                        data.push_str(d.strip_prefix(' ').unwrap_or(d));
+                    }
+                }
+                if data.is_empty() {
+                    continue; // a keep-alive comment
+                }
+                return Some((name, serde_json::from_str(&data).unwrap()));
+            }
+            let chunk = tokio::time::timeout(Duration::from_secs(10), self.response.chunk())
+                .await
+                .expect("an event within 10 s")
+                .unwrap()?;
+            self.buffer.push_str(std::str::from_utf8(&chunk).unwrap());
+        }
+    }
 }
 
 /// The real server on 127.0.0.1:0 over a test store, and a client for it.

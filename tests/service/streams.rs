@@ -294,3 +294,195 @@ async fn streams_store_the_same_bytes_as_before_streams_moved_to_the_codec_layer
         t.finish().await;
     }
 }
+
+/// Frames of a `frames` event.
+fn event_frames(e: &Value) -> Vec<f32> {
+    use base64::Engine;
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(e["data"].as_str().unwrap())
+        .unwrap();
+    bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect()
+}
+
+async fn watch(srv: &common::Server, id: &str) -> reqwest::Response {
+    srv.client
+        .get(format!("{}/v1/streams/{id}/events", srv.base))
+        .send()
+        .await
+        .unwrap()
+}
+
+/// What the viewer's live page reads: every append as it arrives, before it is coded, with
+/// when it was received and captured; the newest frame for a watcher that joins late; the
+/// end when the stream finishes. Watchers are bounded; a closed or unknown stream has none.
+#[tokio::test]
+async fn watchers_see_frames_as_they_arrive_and_the_end() {
+    for t in common::all().await {
+        let srv = common::start(t.store.clone(), 8 << 20).await;
+        let points = 3;
+        let (status, _, info) = srv
+            .post_json(
+                "/v1/streams",
+                &json!({"fps": 120.0, "points": points, "unit": "mm", "max_error_mm": 1.0}),
+            )
+            .await;
+        assert_eq!(status, 201, "{info}");
+        let id = info["id"].as_str().unwrap().to_string();
+
+        let r = watch(&srv, &id).await;
+        assert_eq!(r.status(), 200);
+        assert_eq!(r.headers()["content-type"], "text/event-stream");
+        let mut a = common::Events::new(r);
+        let (name, hello) = a.next().await.unwrap();
+        assert_eq!(name, "stream", "{hello}");
+        assert_eq!(hello["id"], id.as_str());
+        assert_eq!(hello["points"], points);
+        let now = mocapstore::service::now_ms();
+        assert!((hello["server_ms"].as_i64().unwrap() - now).abs() < 10_000);
+
+        // An append reaches the watcher as sent, with its times.
+        let m = walker(5, points, 120.0, 3, 0.0);
+        let sent = m.positions().to_vec();
+        let r = srv
+            .client
+            .post(format!(
+                "{}/v1/streams/{id}/frames?captured_ms=1234",
+                srv.base
+            ))
+            .header("content-type", "application/octet-stream")
+            .body(f32_bytes(&sent))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200);
+        let (name, e) = a.next().await.unwrap();
+        assert_eq!(name, "frames", "{e}");
+        assert_eq!(
+            (e["first"].as_u64(), e["frames"].as_u64()),
+            (Some(0), Some(5))
+        );
+        assert_eq!(e["captured_ms"], 1234);
+        let received = e["received_ms"].as_i64().unwrap();
+        assert!((received - mocapstore::service::now_ms()).abs() < 10_000);
+        assert_eq!(event_frames(&e), sent);
+
+        // A watcher joining now sees the newest frame at once.
+        let mut b = common::Events::new(watch(&srv, &id).await);
+        assert_eq!(b.next().await.unwrap().0, "stream");
+        let (name, e) = b.next().await.unwrap();
+        assert_eq!(name, "frames");
+        assert_eq!(
+            (e["first"].as_u64(), e["frames"].as_u64()),
+            (Some(4), Some(1))
+        );
+        assert_eq!(event_frames(&e), sent[4 * 9..].to_vec());
+
+        // JSON frames with a gap: NaN on the wire; no capture time said, none shown.
+        let r = srv
+            .client
+            .post(format!("{}/v1/streams/{id}/frames", srv.base))
+            .json(&json!([[1.0, 2.0, 3.0, null, 5.0, 6.0, 7.0, 8.0, 9.0]]))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200);
+        for w in [&mut a, &mut b] {
+            let (name, e) = w.next().await.unwrap();
+            assert_eq!(name, "frames");
+            assert_eq!(e["first"], 5);
+            assert!(e["captured_ms"].is_null(), "{e}");
+            let v = event_frames(&e);
+            assert!(v[3].is_nan() && v[8] == 9.0, "{v:?}");
+        }
+
+        // A large append: watchers get its newest frames, at most 50,000 samples.
+        let big = walker(20_000, points, 120.0, 4, 0.0);
+        let (status, _) = append(&srv, &id, big.positions(), false).await;
+        assert_eq!(status, 200);
+        let (_, e) = a.next().await.unwrap();
+        let kept = 50_000 / points;
+        assert_eq!(e["frames"].as_u64(), Some(kept as u64));
+        assert_eq!(e["first"].as_u64(), Some((6 + 20_000 - kept) as u64));
+        assert_eq!(
+            event_frames(&e),
+            big.positions()[(20_000 - kept) * 9..].to_vec()
+        );
+        b.next().await.unwrap();
+
+        // A capture time that is not one.
+        for bad in ["-1", "40000000000000", "soon"] {
+            let r = srv
+                .client
+                .post(format!(
+                    "{}/v1/streams/{id}/frames?captured_ms={bad}",
+                    srv.base
+                ))
+                .json(&json!([[1, 2, 3, 4, 5, 6, 7, 8, 9]]))
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(r.status(), 400, "captured_ms={bad}");
+        }
+
+        // At most 16 watchers; the 17th is told to come back.
+        let mut more = Vec::new();
+        for _ in 0..14 {
+            let r = watch(&srv, &id).await;
+            assert_eq!(r.status(), 200);
+            more.push(r);
+        }
+        let r = watch(&srv, &id).await;
+        assert_eq!(r.status(), 503);
+        assert!(r.headers().contains_key("retry-after"));
+        let body: Value = r.json().await.unwrap();
+        assert!(
+            body["error"]["message"]
+                .as_str()
+                .unwrap()
+                .contains("16 watchers"),
+            "{body}"
+        );
+        drop(more);
+
+        // Finishing ends every watch.
+        let (status, _, done) = srv
+            .post_json(&format!("/v1/streams/{id}/finish"), &json!({}))
+            .await;
+        assert_eq!(status, 200, "{done}");
+        for w in [&mut a, &mut b] {
+            let (name, e) = w.next().await.unwrap();
+            assert_eq!(
+                (name.as_str(), e["reason"].as_str()),
+                ("end", Some("finished"))
+            );
+            assert!(w.next().await.is_none(), "the response ends");
+        }
+        assert_eq!(watch(&srv, &id).await.status(), 409);
+        assert_eq!(watch(&srv, "no-such-stream").await.status(), 404);
+        srv.stop().await;
+        t.finish().await;
+    }
+}
+
+/// A server shutting down ends its watches rather than wait for them.
+#[tokio::test]
+async fn shutting_down_ends_watches() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let (_, _, info) = srv
+        .post_json("/v1/streams", &json!({"fps": 60.0, "points": 2}))
+        .await;
+    let id = info["id"].as_str().unwrap();
+    let mut w = common::Events::new(watch(&srv, id).await);
+    assert_eq!(w.next().await.unwrap().0, "stream");
+    tokio::time::timeout(std::time::Duration::from_secs(10), srv.stop())
+        .await
+        .expect("the server stops with a watch open");
+    let (name, e) = w.next().await.unwrap();
+    assert_eq!(name, "end");
+    assert_eq!(e["reason"], "the server is shutting down");
+    t.finish().await;
+}

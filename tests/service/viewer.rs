@@ -201,6 +201,46 @@ impl Browser {
     }
 }
 
+/// Pixels of the `index`th 3-D view of the page whose colour `test` (a JS expression over
+/// r, g, b) accepts.
+async fn pixels(browser: &Browser, index: usize, test: &str) -> u64 {
+    browser
+        .js(
+            "const c = document.querySelectorAll('canvas.view')[arguments[0]];
+             const test = new Function('r', 'g', 'b', 'return ' + arguments[1]);
+             const gl = c.getContext('webgl2') || c.getContext('webgl');
+             const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
+             const px = new Uint8Array(w * h * 4);
+             gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+             let n = 0;
+             for (let i = 0; i < px.length; i += 4) if (test(px[i], px[i+1], px[i+2])) n++;
+             return n;",
+            json!([index, test]),
+        )
+        .await
+        .as_u64()
+        .unwrap()
+}
+
+/// Dark pixels (points and bones) on the `index`th 3-D view of the page.
+async fn drawn(browser: &Browser, index: usize) -> u64 {
+    pixels(browser, index, "r + g + b < 300").await
+}
+
+/// Controls a screen reader could not name: buttons, fields, links and focusable views with
+/// neither text, a label nor an aria-label.
+async fn unnamed_controls(browser: &Browser) -> Value {
+    browser
+        .js(
+            "return [...document.querySelectorAll('button, input, select, a, [tabindex]')]
+               .filter(e => !e.hidden && e.type !== 'hidden' && e.id !== 'main')
+               .filter(e => !(e.getAttribute('aria-label') || e.textContent.trim() || e.labels?.length || e.closest('label')))
+               .map(e => e.outerHTML.slice(0, 80));",
+            json!([]),
+        )
+        .await
+}
+
 fn screenshots() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/viewer-screenshots")
 }
@@ -476,4 +516,315 @@ async fn error_series_are_measured_at_ingest_and_served() {
         srv.stop().await;
         t.finish().await;
     }
+}
+
+/// The live page follows an open stream as a producer sends it in real time: the figure is
+/// drawn and moves, the delays from capture and from the server to the screen are shown,
+/// and the page says when the stream ends.
+#[tokio::test]
+async fn the_live_page_shows_a_stream_as_it_arrives() {
+    if corpus::for_tests().is_none() {
+        return;
+    }
+    let Some(browser) = Browser::start().await else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    // A real take's positions, sent again as a live capture would send them.
+    let src = stored(&srv, "name=131_02&max_error_mm=1", "bvh/cmu/131_02.bvh").await;
+    let src_id = src["id"].as_str().unwrap();
+    let (_, _, bytes) = srv
+        .get(&format!("/v1/sequences/{src_id}/frames?format=f32"))
+        .await;
+    let points = src["points"].as_u64().unwrap() as usize;
+    let (_, src) = srv.get_json(&format!("/v1/sequences/{src_id}")).await;
+    let (status, _, stream) = srv
+        .post_json(
+            "/v1/streams",
+            &json!({"name": "stage-live", "library": "stage", "fps": 120.0, "points": points,
+                    "unit": src["metres_per_unit"].to_string(), "max_error_mm": 1.0}),
+        )
+        .await;
+    assert_eq!(status, 201, "{stream}");
+    let sid = stream["id"].as_str().unwrap().to_string();
+
+    let status = browser
+        .visit(
+            &format!("{}/#/live/{sid}", srv.base),
+            "the live page",
+            "const s = document.querySelector('.status'); return s && s.textContent.startsWith('live') && s.textContent;",
+        )
+        .await;
+    assert!(status.as_str().unwrap().contains("as they arrive"));
+
+    // 12 frames every 100 ms, each append saying when its last frame was captured.
+    let (client, base, id) = (srv.client.clone(), srv.base.clone(), sid.clone());
+    let frame_bytes = points * 12;
+    let src_frames = bytes.clone();
+    let producer = tokio::spawn(async move {
+        let start = tokio::time::Instant::now();
+        for (i, batch) in bytes.chunks(12 * frame_bytes).take(40).enumerate() {
+            tokio::time::sleep_until(start + Duration::from_millis(100 * (i as u64 + 1))).await;
+            let r = client
+                .post(format!(
+                    "{base}/v1/streams/{id}/frames?captured_ms={}",
+                    mocapstore::service::now_ms()
+                ))
+                .header("content-type", "application/octet-stream")
+                .body(batch.to_vec())
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(r.status(), 200);
+        }
+    });
+    let first = browser
+        .until(
+            "frames shown",
+            "const f = Number(document.querySelector('canvas.view').dataset.frame); return f > 60 && f;",
+        )
+        .await;
+    // A stream has no skeleton: its points, in blue.
+    let points_drawn = pixels(&browser, 0, "b > 150 && r < 100").await;
+    assert!(
+        points_drawn > 100,
+        "the figure is drawn: {points_drawn} pixels"
+    );
+    let later = browser
+        .until(
+            "the figure moving",
+            &format!("const f = Number(document.querySelector('canvas.view').dataset.frame); return f > {first} + 60 && f;"),
+        )
+        .await;
+    assert!(later.as_u64() > first.as_u64());
+    let delays = browser
+        .until(
+            "the delays",
+            "const d = [...document.querySelectorAll('.live-stats dd')]; return d[2].dataset.median && d[3].dataset.median && [Number(d[2].dataset.median), Number(d[3].dataset.median), d[2].textContent, d[3].textContent];",
+        )
+        .await;
+    let (capture, server) = (delays[0].as_f64().unwrap(), delays[1].as_f64().unwrap());
+    println!(
+        "live page: capture → visible {}, server → visible {} (median / p95)",
+        delays[2], delays[3]
+    );
+    // Frames are captured before the server takes them, and shown after.
+    assert!(server >= -20.0, "{delays}");
+    assert!(capture >= server - 20.0, "{delays}");
+    assert_eq!(unnamed_controls(&browser).await, json!([]));
+    browser.screenshot("live").await;
+    producer.await.unwrap();
+
+    let (status, _, _) = srv
+        .post_json(&format!("/v1/streams/{sid}/finish"), &json!({}))
+        .await;
+    assert_eq!(status, 200);
+    let ended = browser
+        .until(
+            "the end of the stream",
+            "const s = document.querySelector('.status'); return s.textContent.includes('has ended') && s.querySelector('a').getAttribute('href');",
+        )
+        .await;
+    assert_eq!(ended, json!(format!("#/take/{sid}")));
+    let skipped = browser
+        .js(
+            "return document.querySelectorAll('.live-stats dd')[4].textContent;",
+            json!([]),
+        )
+        .await;
+    assert_eq!(skipped, "0");
+    let errors = browser.console_errors().await;
+    assert!(errors.is_empty(), "{errors:?}");
+
+    // Another server on the same database has no events of a stream coded here: its live
+    // page shows the newest stored frame instead, and sees the stream end.
+    let other = common::start(t.store.clone(), 64 << 20).await;
+    let (_, _, stream) = srv
+        .post_json(
+            "/v1/streams",
+            &json!({"name": "elsewhere", "fps": 120.0, "points": points,
+                    "unit": src["metres_per_unit"].to_string(), "max_error_mm": 1.0}),
+        )
+        .await;
+    let sid = stream["id"].as_str().unwrap().to_string();
+    let r = srv
+        .client
+        .post(format!("{}/v1/streams/{sid}/frames?flush=true", srv.base))
+        .header("content-type", "application/octet-stream")
+        .body(src_frames[..240 * frame_bytes].to_vec())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let status = browser
+        .visit(
+            &format!("{}/#/live/{sid}", other.base),
+            "the stored frames of a stream coded elsewhere",
+            "const c = document.querySelector('canvas.view'); return c?.dataset.frame === '239' && document.querySelector('.status').textContent;",
+        )
+        .await;
+    assert!(
+        status.as_str().unwrap().contains("newest stored frame"),
+        "{status}"
+    );
+    let (status, _, _) = srv
+        .post_json(&format!("/v1/streams/{sid}/finish"), &json!({}))
+        .await;
+    assert_eq!(status, 200);
+    browser
+        .until(
+            "the end of the stream coded elsewhere",
+            "return document.querySelector('.status').textContent.includes('has ended');",
+        )
+        .await;
+    // The 409 that sent the page to the stored frames is the browser's network log line.
+    let errors: Vec<String> = browser
+        .console_errors()
+        .await
+        .into_iter()
+        .filter(|e| !e.contains("the server responded with a status of 409"))
+        .collect();
+    assert!(errors.is_empty(), "{errors:?}");
+    browser.quit().await;
+    other.stop().await;
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// One take stored at two bounds, compared: overlaid and side by side, in step, from a
+/// shareable URL; the frame-by-frame distance between them within the sum of the bounds.
+#[tokio::test]
+async fn the_compare_page_keeps_takes_in_step() {
+    if corpus::for_tests().is_none() {
+        return;
+    }
+    let Some(browser) = Browser::start().await else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let fine = stored(&srv, "name=fine&max_error_mm=1", "bvh/cmu/131_02.bvh").await;
+    let coarse = stored(&srv, "name=coarse&max_error_mm=20", "bvh/cmu/131_02.bvh").await;
+    let (a, b) = (fine["id"].as_str().unwrap(), coarse["id"].as_str().unwrap());
+
+    // Ticking both takes in the library opens them on the compare page.
+    browser
+        .visit(
+            &format!("{}/#/", srv.base),
+            "the listing",
+            "return document.querySelectorAll('table.takes tbody tr').length === 2;",
+        )
+        .await;
+    let hash = browser
+        .js(
+            "document.querySelectorAll('table.takes tbody input[type=checkbox]').forEach(c => c.click());
+             document.querySelector('button.compare').click();
+             return location.hash;",
+            json!([]),
+        )
+        .await;
+    let hash = hash.as_str().unwrap();
+    assert!(
+        hash.starts_with("#/compare?ids=") && hash.contains(a) && hash.contains(b),
+        "{hash}"
+    );
+
+    // Overlaid at second 3: both figures drawn, in their own colours.
+    let url = format!("{}/#/compare?ids={a},{b}&t=3", srv.base);
+    browser
+        .visit(
+            &url,
+            "both takes at second 3",
+            "return document.querySelector('canvas.view')?.dataset.frames === '360,360';",
+        )
+        .await;
+    let blue = pixels(&browser, 0, "b > 150 && r < 100").await;
+    let red = pixels(&browser, 0, "r > 150 && g < 100 && b < 100").await;
+    assert!(blue > 30 && red > 30, "blue and red figures: {blue}, {red}");
+    // Each take is within its bound of the original, so within 21 mm of the other.
+    let now = browser
+        .js(
+            "return [...document.querySelectorAll('table.legend td.now')].map(e => e.textContent);",
+            json!([]),
+        )
+        .await;
+    let second = now[1].as_str().unwrap();
+    let max: f64 = second
+        .split("max ")
+        .nth(1)
+        .and_then(|s| s.split(',').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("{now}"));
+    assert!(max > 0.0 && max <= 21.0, "{now}");
+    browser.screenshot("compare-overlay").await;
+
+    // Playing moves both in step; pausing writes the view into the URL.
+    browser
+        .js(
+            "document.querySelector('button.play').click(); return true;",
+            json!([]),
+        )
+        .await;
+    let frames = browser
+        .until(
+            "both takes playing",
+            "const f = document.querySelector('canvas.view').dataset.frames.split(',').map(Number); return f[0] > 400 && f;",
+        )
+        .await;
+    assert_eq!(frames[0], frames[1], "in step: {frames}");
+    browser
+        .js(
+            "document.querySelector('button.play').click(); return true;",
+            json!([]),
+        )
+        .await;
+    let shared = browser
+        .until(
+            "the shared URL",
+            "return /[?&]t=([0-9.]+)/.test(location.hash) && Number(location.hash.match(/[?&]t=([0-9.]+)/)[1]) > 3 && location.hash;",
+        )
+        .await;
+    let shared = shared.as_str().unwrap().to_string();
+    assert!(
+        shared.contains(&format!("ids={a}%2C{b}")) && shared.contains("mode=overlay"),
+        "{shared}"
+    );
+    let paused = browser
+        .js(
+            "return document.querySelector('canvas.view').dataset.frames;",
+            json!([]),
+        )
+        .await;
+
+    // Side by side, from the URL: one view per take, both drawn, at the same frames.
+    browser
+        .js(
+            "document.querySelector('input[value=side]').click(); return true;",
+            json!([]),
+        )
+        .await;
+    browser
+        .until(
+            "side by side",
+            "return location.hash.includes('mode=side') && document.querySelectorAll('canvas.view').length === 2 && document.querySelector('canvas.view').dataset.frames;",
+        )
+        .await;
+    assert!(drawn(&browser, 0).await > 100 && drawn(&browser, 1).await > 100);
+    browser.screenshot("compare-side").await;
+    // The shared URL opens the same view at the same playhead.
+    browser.goto(&format!("{}/", srv.base)).await;
+    let again = browser
+        .visit(
+            &format!("{}/{shared}", srv.base),
+            "the shared view",
+            "return document.querySelector('canvas.view')?.dataset.frames;",
+        )
+        .await;
+    assert_eq!(again, paused);
+    assert_eq!(unnamed_controls(&browser).await, json!([]));
+    assert!(browser.console_errors().await.is_empty());
+    browser.quit().await;
+    srv.stop().await;
+    t.finish().await;
 }
