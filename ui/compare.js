@@ -62,17 +62,18 @@ export async function comparePage(main, params) {
   if (mode === 'side') linkCameras(players);
   const sources = takes.map((t) => new TakeFrames(t, abort.signal));
   const same = takes.every((t) => t.layout === takes[0].layout);
-  let framed = false;
+  const framed = players.map(() => false);
 
   async function show(t) {
     const f = sources.map((s) => s.frameAt(t));
     const xyz = await Promise.all(f.map((g, i) => sources[i].at(g)));
     // A later seek may have moved the playhead while these frames were fetched.
     if (sources.some((s, i) => s.frameAt(transport.t) !== f[i])) return;
-    if (!framed) {
-      players.forEach((p) => p.frame(figures.map((fig, i) => [fig, xyz[i]]).filter(([fig]) => fig.player === p)));
-      framed = true;
-    }
+    // Each view's camera is pointed once any of its points is present (a capture may start
+    // with none).
+    players.forEach((p, k) => {
+      if (!framed[k]) framed[k] = p.frame(figures.map((fig, i) => [fig, xyz[i]]).filter(([fig]) => fig.player === p));
+    });
     figures.forEach((fig, i) => fig.set(xyz[i]));
     players.forEach((p) => p.draw());
     canvases[0].dataset.frames = f.join(',');

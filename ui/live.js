@@ -55,6 +55,7 @@ export async function livePage(main, id) {
   let offset = 0; // this browser's clock minus the server's, ms
   let queue = []; // { frame, xyz, due (performance.now() ms), captured, received }
   let shown = -1;
+  let framed = false; // the camera pointed at the figure (once a point is present)
   let skipped = 0;
   const delays = []; // [performance.now(), capture ms | null, server ms]
   let raf = 0;
@@ -85,7 +86,7 @@ export async function livePage(main, id) {
     let next = null;
     while (queue.length && queue[0].due <= now) next = queue.shift();
     if (next) {
-      if (shown < 0) player.frame([[figure, next.xyz]]);
+      if (!framed) framed = player.frame([[figure, next.xyz]]);
       figure.show(next.xyz);
       shown = next.frame;
       canvas.dataset.frame = String(shown);
@@ -144,7 +145,7 @@ export async function livePage(main, id) {
       out.stored.textContent = String(t.frames);
       if (t.frames > 0 && t.frames - 1 !== shown) {
         const r = await fetchFrames(id, t.frames - 1, t.frames, abort.signal);
-        if (shown < 0) player.frame([[figure, r.data]]);
+        if (!framed) framed = player.frame([[figure, r.data]]);
         figure.show(r.data);
         shown = t.frames - 1;
         canvas.dataset.frame = String(shown);
@@ -161,7 +162,7 @@ export async function livePage(main, id) {
   async function pollStored() {
     while (active) {
       const t = await json(`/v1/sequences/${encodeURIComponent(id)}`, { signal: abort.signal });
-      out.stored.textContent = `${t.frames} (${fmt.num(t.ratio, 1)}× smaller than raw)`;
+      out.stored.textContent = t.frames ? `${t.frames} (${fmt.num(t.ratio, 1)}× smaller than raw)` : '0';
       if (!t.live) return;
       await new Promise((r) => setTimeout(r, 1000));
     }

@@ -57,8 +57,42 @@ class Figure {
     return box;
   }
 
+  /**
+   * Name the points on screen: one label per point in `box` (an element laid over the
+   * canvas), placed at every draw; `null` removes them.
+   */
+  label(names, box) {
+    this.labelBox?.replaceChildren();
+    this.labelBox = box;
+    this.labels = names ? names.map((n) => {
+      const e = document.createElement('span');
+      e.textContent = n;
+      box.append(e);
+      return e;
+    }) : null;
+    this.player.draw();
+  }
+
+  /** Move the labels to their points as the camera sees them now; missing points' are hidden. */
+  placeLabels(camera, width, height) {
+    if (!this.labels || !this.xyz) return;
+    const m = this.shape.metres;
+    const v = new THREE.Vector3();
+    this.labels.forEach((e, p) => {
+      const [x, y, z] = [this.xyz[3 * p], this.xyz[3 * p + 1], this.xyz[3 * p + 2]];
+      if (!finite(x, y, z)) {
+        e.hidden = true;
+        return;
+      }
+      v.set(x * m, y * m, z * m).applyMatrix4(this.group.matrixWorld).project(camera);
+      e.hidden = v.z > 1 || Math.abs(v.x) > 1 || Math.abs(v.y) > 1;
+      e.style.transform = `translate(${((v.x + 1) / 2) * width + 5}px, ${((1 - v.y) / 2) * height - 8}px)`;
+    });
+  }
+
   /** Set one frame (`xyz`: points × 3, stored units, NaN where missing); not yet drawn. */
   set(xyz) {
+    this.xyz = xyz;
     const m = this.shape.metres;
     let k = 0;
     for (let p = 0; p < this.shape.points; p++) {
@@ -133,7 +167,10 @@ export class Player {
     this.draw();
   }
 
-  /** Point the camera at figures' frames: `[figure, xyz]` pairs, each turned up first. */
+  /**
+   * Point the camera at figures' frames: `[figure, xyz]` pairs, each turned up first. False
+   * (and the camera left alone) when no point of them is present.
+   */
   frame(pairs) {
     const world = new THREE.Box3();
     for (const [fig, xyz] of pairs) {
@@ -141,7 +178,7 @@ export class Player {
       const b = fig.localBox(xyz);
       if (!b.isEmpty()) world.union(b.applyMatrix4(fig.group.matrixWorld));
     }
-    if (world.isEmpty()) return;
+    if (world.isEmpty()) return false;
     const c = world.getCenter(new THREE.Vector3());
     const r = Math.max(world.getSize(new THREE.Vector3()).length(), 0.5);
     this.grid.position.set(c.x, world.min.y, c.z);
@@ -151,10 +188,13 @@ export class Player {
     this.camera.far = r * 100;
     this.camera.updateProjectionMatrix();
     this.controls.update();
+    return true;
   }
 
   draw() {
     this.renderer.render(this.scene, this.camera);
+    const [w, h] = [this.canvas.clientWidth, this.canvas.clientHeight];
+    for (const f of this.figures) f.placeLabels(this.camera, w, h);
   }
 
   dispose() {

@@ -29,7 +29,7 @@ export async function takePage(main, id, params) {
   });
   const player = new Player(canvas);
   const figure = player.add(shape);
-  let shownFrame = -1;
+  let framed = false;
   let moveMarker = () => {};
 
   async function show(t) {
@@ -38,9 +38,12 @@ export async function takePage(main, id, params) {
     const xyz = await frames.at(f);
     // A later seek may have moved the playhead while this frame's second was fetched.
     if (frames.frameAt(transport.t) !== f) return;
-    if (shownFrame < 0) player.frame([[figure, xyz]]);
-    shownFrame = f;
+    // The camera is pointed at the first frame with a point present (a capture may start
+    // with every marker missing).
+    if (!framed) framed = player.frame([[figure, xyz]]);
     figure.show(xyz);
+    // Time to first frame, for anyone measuring the page (performance.getEntriesByName).
+    if (!canvas.dataset.frame) performance.mark('mocapstore:first-frame');
     canvas.dataset.frame = String(f);
     frames.prefetch(f);
   }
@@ -53,10 +56,16 @@ export async function takePage(main, id, params) {
     onError: showError,
   });
   transport.loopBar.append(fetched);
+  // Point names over the figure (marker labels, joint names), on demand.
+  const labelBox = el('div', { class: 'labels', 'aria-hidden': 'true' });
+  const names = take.meta?.point_names ?? [];
+  const labels = el('input', { type: 'checkbox', class: 'labels-toggle', disabled: names.length ? null : '' });
+  labels.addEventListener('change', () => figure.label(labels.checked ? names : null, labelBox));
+  transport.loopBar.prepend(el('label', {}, 'point names ', labels));
   const compare = el('a', { href: `#/compare?ids=${encodeURIComponent(id)}` }, 'compare with another take');
   main.append(
     el('h1', {}, take.name || take.id, ' ', el('small', { class: 'muted' }, take.library ? `in ${take.library}` : '')),
-    canvas,
+    el('div', { class: 'stage' }, canvas, labelBox),
     transport.bar,
     chart,
     transport.loopBar,

@@ -486,3 +486,45 @@ async fn shutting_down_ends_watches() {
     assert_eq!(e["reason"], "the server is shutting down");
     t.finish().await;
 }
+
+/// A watcher that does not read holds neither the producer nor unbounded memory: appends go
+/// on, and when it reads again it is told how many it missed.
+#[tokio::test]
+async fn a_slow_watcher_skips_appends_and_never_holds_the_producer() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let points = 500;
+    let (status, _, info) = srv
+        .post_json(
+            "/v1/streams",
+            &json!({"fps": 100.0, "points": points, "unit": "mm", "max_error_mm": 5.0}),
+        )
+        .await;
+    assert_eq!(status, 201, "{info}");
+    let id = info["id"].as_str().unwrap().to_string();
+    let mut w = common::Events::new(watch(&srv, &id).await);
+    assert_eq!(w.next().await.unwrap().0, "stream");
+    // 100 frames × 500 points an append: 800 KB of events each, 48 MB in all, far more than
+    // the sockets buffer and the 16 appends queued.
+    let m = walker(100, points, 100.0, 9, 0.0);
+    for _ in 0..60 {
+        let (status, v) = append(&srv, &id, m.positions(), false).await;
+        assert_eq!(status, 200, "{v}");
+    }
+    let mut seen = 0;
+    let mut skipped = 0;
+    loop {
+        let (name, e) = w.next().await.unwrap();
+        match name.as_str() {
+            "frames" => seen += 1,
+            "skipped" => skipped += e["appends"].as_u64().unwrap(),
+            other => panic!("{other}: {e}"),
+        }
+        if seen + skipped == 60 {
+            break;
+        }
+    }
+    assert!(skipped > 0, "{seen} seen, none skipped");
+    srv.stop().await;
+    t.finish().await;
+}

@@ -24,6 +24,8 @@ struct Browser {
     base: String,
     session: String,
     http: reqwest::Client,
+    /// Whether `screenshot` saves (one backend's tour is enough).
+    shots: std::cell::Cell<bool>,
 }
 
 impl Browser {
@@ -90,6 +92,7 @@ impl Browser {
             base,
             session,
             http,
+            shots: std::cell::Cell::new(true),
         };
         b.viewport(1280, 720).await;
         Some(b)
@@ -129,6 +132,28 @@ impl Browser {
         .await;
     }
 
+    /// Press keys as a user would (WebDriver key actions): each entry is pressed and
+    /// released in turn, with `modifier` (e.g. Shift, "\u{E008}") held if given.
+    async fn keys(&self, modifier: Option<&str>, keys: &[&str]) {
+        let mut actions = Vec::new();
+        if let Some(m) = modifier {
+            actions.push(json!({"type": "keyDown", "value": m}));
+        }
+        for k in keys {
+            actions.push(json!({"type": "keyDown", "value": k}));
+            actions.push(json!({"type": "keyUp", "value": k}));
+        }
+        if let Some(m) = modifier {
+            actions.push(json!({"type": "keyUp", "value": m}));
+        }
+        self.cmd(
+            reqwest::Method::POST,
+            "/actions",
+            Some(json!({"actions": [{"type": "key", "id": "keyboard", "actions": actions}]})),
+        )
+        .await;
+    }
+
     async fn goto(&self, url: &str) {
         self.cmd(reqwest::Method::POST, "/url", Some(json!({"url": url})))
             .await;
@@ -162,7 +187,14 @@ impl Browser {
         panic!("timed out waiting for {what}");
     }
 
+    fn shots(&self, on: bool) {
+        self.shots.set(on);
+    }
+
     async fn screenshot(&self, name: &str) {
+        if !self.shots.get() {
+            return;
+        }
         use base64::Engine;
         let v = self.cmd(reqwest::Method::GET, "/screenshot", None).await;
         let png = base64::engine::general_purpose::STANDARD
@@ -264,217 +296,324 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
     let Some(browser) = Browser::start().await else {
         return;
     };
-    let t = common::sqlite().await;
-    let srv = common::start(t.store.clone(), 64 << 20).await;
-    let bvh = stored(
-        &srv,
-        "name=131_02&library=cmu&tags=run&max_error_mm=1",
-        "bvh/cmu/131_02.bvh",
-    )
-    .await;
-    stored(
-        &srv,
-        "name=gait&library=lab&max_error_mm=1",
-        "c3d/btkdata__others__Gait.c3d",
-    )
-    .await;
-    let bvh_id = bvh["id"].as_str().unwrap().to_string();
+    // The same tour on every backend; screenshots of the SQLite one (the default).
+    for t in common::all().await {
+        browser.viewport(1280, 720).await;
+        browser.shots(t.name == "sqlite");
+        let srv = common::start(t.store.clone(), 64 << 20).await;
+        let bvh = stored(
+            &srv,
+            "name=131_02&library=cmu&tags=run&max_error_mm=1",
+            "bvh/cmu/131_02.bvh",
+        )
+        .await;
+        let gait = stored(
+            &srv,
+            "name=gait&library=lab&max_error_mm=1",
+            "c3d/btkdata__others__Gait.c3d",
+        )
+        .await;
+        let bvh_id = bvh["id"].as_str().unwrap().to_string();
 
-    // Library: both takes, then a filter leaves one.
-    let rows = browser
-        .visit(&format!("{}/#/", srv.base), "the listing", "const r = document.querySelectorAll('table.takes tbody tr'); return r.length >= 2 && r.length;")
-        .await;
-    assert_eq!(rows, 2);
-    browser.screenshot("library").await;
-    let names = browser
-        .visit(&format!("{}/#/?library=lab", srv.base), "the filtered listing", "const r = [...document.querySelectorAll('table.takes tbody tr td:first-child')].map(e => e.textContent); return r.length === 1 && r;")
-        .await;
-    assert_eq!(names, json!(["gait"]));
-    assert!(browser.console_errors().await.is_empty());
+        // Library: both takes, then a filter leaves one.
+        let rows = browser
+            .visit(&format!("{}/#/", srv.base), "the listing", "const r = document.querySelectorAll('table.takes tbody tr'); return r.length >= 2 && r.length;")
+            .await;
+        assert_eq!(rows, 2);
+        browser.screenshot("library").await;
+        let names = browser
+            .visit(&format!("{}/#/?library=lab", srv.base), "the filtered listing", "const r = [...document.querySelectorAll('table.takes tbody tr td:first-child')].map(e => e.textContent); return r.length === 1 && r;")
+            .await;
+        assert_eq!(names, json!(["gait"]));
+        assert_eq!(unnamed_controls(&browser).await, json!([]));
+        assert!(browser.console_errors().await.is_empty());
 
-    // A take: the figure is drawn (pixels, not only DOM), play advances the playhead.
-    browser
-        .visit(
-            &format!("{}/#/take/{bvh_id}", srv.base),
-            "the first frame",
-            "return document.querySelector('canvas.view')?.dataset.frame === '0';",
-        )
-        .await;
-    let drawn = browser
-        .js(
-            "const c = document.querySelector('canvas.view');
-             const gl = c.getContext('webgl2') || c.getContext('webgl');
-             const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
-             const px = new Uint8Array(w * h * 4);
-             gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
-             let dark = 0;
-             for (let i = 0; i < px.length; i += 4) if (px[i] + px[i+1] + px[i+2] < 300) dark++;
-             return dark;",
-            json!([]),
-        )
-        .await;
-    assert!(
-        drawn.as_u64().unwrap() > 200,
-        "the figure's points and bones are drawn: {drawn} dark pixels"
-    );
-    browser.screenshot("take").await;
-    browser
-        .js(
-            "document.querySelector('button.play').click(); return true;",
-            json!([]),
-        )
-        .await;
-    browser
-        .until(
-            "playback",
-            "const f = document.querySelector('canvas.view').dataset.frame; return Number(f) > 30 && Number.isInteger(Number(f));",
-        )
-        .await;
-    browser
-        .js(
-            "document.querySelector('button.play').click(); return true;",
-            json!([]),
-        )
-        .await;
+        // A take: the figure is drawn (pixels, not only DOM), play advances the playhead.
+        browser
+            .visit(
+                &format!("{}/#/take/{bvh_id}", srv.base),
+                "the first frame",
+                "return document.querySelector('canvas.view')?.dataset.frame === '0';",
+            )
+            .await;
+        let drawn = browser
+            .js(
+                "const c = document.querySelector('canvas.view');
+                 const gl = c.getContext('webgl2') || c.getContext('webgl');
+                 const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
+                 const px = new Uint8Array(w * h * 4);
+                 gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+                 let dark = 0;
+                 for (let i = 0; i < px.length; i += 4) if (px[i] + px[i+1] + px[i+2] < 300) dark++;
+                 return dark;",
+                json!([]),
+            )
+            .await;
+        assert!(
+            drawn.as_u64().unwrap() > 200,
+            "the figure's points and bones are drawn: {drawn} dark pixels"
+        );
+        browser.screenshot("take").await;
+        browser
+            .js(
+                "document.querySelector('button.play').click(); return true;",
+                json!([]),
+            )
+            .await;
+        browser
+            .until(
+                "playback",
+                "const f = document.querySelector('canvas.view').dataset.frame; return Number(f) > 30 && Number.isInteger(Number(f));",
+            )
+            .await;
+        browser
+            .js(
+                "document.querySelector('button.play').click(); return true;",
+                json!([]),
+            )
+            .await;
 
-    // Scrubbing to second 8 fetches that second's range (the page's own request log).
-    browser
-        .js(
-            "const s = document.querySelector('input[type=range]');
-             s.value = String(Math.round(8 * 120.0005)); s.dispatchEvent(new Event('input'));
-             return true;",
-            json!([]),
-        )
-        .await;
-    let fetched = browser
-        .until(
-            "the range of second 8",
-            "return performance.getEntriesByType('resource').map(e => e.name).find(n => /frames\\?start=960&end=1080&format=f32/.test(n)) || '';",
-        )
-        .await;
-    assert!(fetched.as_str().unwrap().contains("start=960"), "{fetched}");
-    let url = browser
-        .until(
-            "a shareable URL",
-            "return location.hash.includes('t=8') && location.hash;",
-        )
-        .await;
-    assert!(url.as_str().unwrap().contains(&bvh_id), "{url}");
+        // The keyboard: → one frame, shift+→ one second, Home the start.
+        let frame = || async {
+            browser
+                .js(
+                    "return Number(document.querySelector('canvas.view').dataset.frame);",
+                    json!([]),
+                )
+                .await
+                .as_i64()
+                .unwrap()
+        };
+        browser
+            .js(
+                "document.querySelector('canvas.view').focus(); return true;",
+                json!([]),
+            )
+            .await;
+        browser.keys(None, &["\u{E011}"]).await; // Home
+        browser
+            .until(
+                "Home",
+                "return document.querySelector('canvas.view').dataset.frame === '0';",
+            )
+            .await;
+        browser.keys(None, &["\u{E014}", "\u{E014}"]).await; // → →
+        browser
+            .until(
+                "→ →",
+                "return document.querySelector('canvas.view').dataset.frame === '2';",
+            )
+            .await;
+        browser.keys(Some("\u{E008}"), &["\u{E014}"]).await; // shift+→
+        browser
+            .until(
+                "shift+→",
+                "return document.querySelector('canvas.view').dataset.frame === '122';",
+            )
+            .await;
+        assert_eq!(frame().await, 122);
+        assert_eq!(unnamed_controls(&browser).await, json!([]));
 
-    // The decision table is the take's decision record.
-    let (_, take) = srv.get_json(&format!("/v1/sequences/{bvh_id}")).await;
-    let table = browser
-        .js(
-            "return [...document.querySelectorAll('table.decision tbody tr:not(.skipped)')].map(r => [r.cells[0].textContent, Number(r.cells[1].textContent)]);",
-            json!([]),
-        )
-        .await;
-    let tried: Vec<Value> = take["meta"]["decision"]["tried"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| json!([c["codec"], c["stored_bytes"]]))
-        .collect();
-    assert_eq!(table, Value::Array(tried));
-    let winner = browser
-        .js(
-            "return document.querySelector('table.decision tr.winner td').textContent;",
-            json!([]),
-        )
-        .await;
-    assert_eq!(winner, take["meta"]["decision"]["winner"]);
-    // What compression did: the error per second charted against the bound.
-    let chart = browser
-        .until(
-            "the error chart",
-            "const s = document.querySelector('svg.errors'); return s && [s.querySelector('polyline.max').getAttribute('points').split(' ').length, !!s.querySelector('line.bound')];",
-        )
-        .await;
-    assert_eq!(
-        chart,
-        json!([11, true]),
-        "1,247 frames at 120 fps: 11 seconds"
-    );
-    assert!(browser.console_errors().await.is_empty());
+        // Scrubbing to second 8 fetches that second's range (the page's own request log).
+        browser
+            .js(
+                "const s = document.querySelector('input[type=range]');
+                 s.value = String(Math.round(8 * 120.0005)); s.dispatchEvent(new Event('input'));
+                 return true;",
+                json!([]),
+            )
+            .await;
+        let fetched = browser
+            .until(
+                "the range of second 8",
+                "return performance.getEntriesByType('resource').map(e => e.name).find(n => /frames\\?start=960&end=1080&format=f32/.test(n)) || '';",
+            )
+            .await;
+        assert!(fetched.as_str().unwrap().contains("start=960"), "{fetched}");
+        let url = browser
+            .until(
+                "a shareable URL",
+                "return location.hash.includes('t=8') && location.hash;",
+            )
+            .await;
+        assert!(url.as_str().unwrap().contains(&bvh_id), "{url}");
 
-    // Drag and drop: a TRC file dropped on the library page is stored; a file the server
-    // refuses shows its error.
-    browser
-        .visit(
-            &format!("{}/#/?library=dropped", srv.base),
-            "the library page",
-            "return document.querySelector('.drop') !== null;",
-        )
-        .await;
-    let trc = String::from_utf8(corpus_bytes("trc/TRCSamples__Gait.trc")).unwrap();
-    browser
-        .js(
-            "const drop = document.querySelector('.drop');
-             const dt = new DataTransfer();
-             dt.items.add(new File([arguments[0]], 'gait.trc', {type: 'text/plain'}));
-             dt.items.add(new File(['not a take'], 'junk.bvh'));
-             drop.dispatchEvent(new DragEvent('drop', {dataTransfer: dt, bubbles: true, cancelable: true}));
-             return true;",
-            json!([trc]),
-        )
-        .await;
-    let outcome = browser
-        .until(
-            "both uploads",
-            "const li = [...document.querySelectorAll('.uploads li')]; return li.length === 2 && li.every(l => /stored|refused/.test(l.textContent)) && li.map(l => l.textContent);",
-        )
-        .await;
-    let outcome: Vec<String> = serde_json::from_value(outcome).unwrap();
-    assert!(outcome[0].contains("stored as"), "{outcome:?}");
-    assert!(outcome[1].contains("refused"), "{outcome:?}");
-    let (_, list) = srv.get_json("/v1/sequences?library=dropped").await;
-    assert_eq!(list["items"][0]["name"], "gait", "{list}");
-    browser.screenshot("upload").await;
-    // The refused upload's 4xx is the page's message, not a console error of ours.
-    let errors: Vec<String> = browser
-        .console_errors()
-        .await
-        .into_iter()
-        .filter(|e| !e.contains("the server responded with a status of 4"))
-        .collect();
-    assert!(errors.is_empty(), "{errors:?}");
+        // The decision table is the take's decision record.
+        let (_, take) = srv.get_json(&format!("/v1/sequences/{bvh_id}")).await;
+        let table = browser
+            .js(
+                "return [...document.querySelectorAll('table.decision tbody tr:not(.skipped)')].map(r => [r.cells[0].textContent, Number(r.cells[1].textContent)]);",
+                json!([]),
+            )
+            .await;
+        let tried: Vec<Value> = take["meta"]["decision"]["tried"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| json!([c["codec"], c["stored_bytes"]]))
+            .collect();
+        assert_eq!(table, Value::Array(tried));
+        let winner = browser
+            .js(
+                "return document.querySelector('table.decision tr.winner td').textContent;",
+                json!([]),
+            )
+            .await;
+        assert_eq!(winner, take["meta"]["decision"]["winner"]);
+        // What compression did: the error per second charted against the bound.
+        let chart = browser
+            .until(
+                "the error chart",
+                "const s = document.querySelector('svg.errors'); return s && [s.querySelector('polyline.max').getAttribute('points').split(' ').length, !!s.querySelector('line.bound')];",
+            )
+            .await;
+        assert_eq!(
+            chart,
+            json!([11, true]),
+            "1,247 frames at 120 fps: 11 seconds"
+        );
+        assert!(browser.console_errors().await.is_empty());
 
-    // Statistics: /v1/stats as charts, and one dot per take.
-    let drawn = browser
-        .visit(&format!("{}/#/stats", srv.base), "the statistics charts", "const f = document.querySelectorAll('figure'); return f.length === 4 && [document.querySelectorAll('svg.bars')[1].querySelectorAll('rect.stored_bytes').length, document.querySelectorAll('svg.scatter circle.take').length];")
-        .await;
-    let (_, stats) = srv.get_json("/v1/stats").await;
-    let codecs = stats["by_codec"].as_object().unwrap().len();
-    let takes = stats["total"]["takes"].as_u64().unwrap();
-    assert_eq!(drawn, json!([codecs, takes]), "{stats}");
-    browser.screenshot("stats").await;
-    assert!(browser.console_errors().await.is_empty());
+        // Drag and drop: a TRC file dropped on the library page is stored; a file the server
+        // refuses shows its error.
+        browser
+            .visit(
+                &format!("{}/#/?library=dropped", srv.base),
+                "the library page",
+                "return document.querySelector('.drop') !== null;",
+            )
+            .await;
+        let trc = String::from_utf8(corpus_bytes("trc/TRCSamples__Gait.trc")).unwrap();
+        browser
+            .js(
+                "const drop = document.querySelector('.drop');
+                 const dt = new DataTransfer();
+                 dt.items.add(new File([arguments[0]], 'gait.trc', {type: 'text/plain'}));
+                 dt.items.add(new File(['not a take'], 'junk.bvh'));
+                 drop.dispatchEvent(new DragEvent('drop', {dataTransfer: dt, bubbles: true, cancelable: true}));
+                 return true;",
+                json!([trc]),
+            )
+            .await;
+        let outcome = browser
+            .until(
+                "both uploads",
+                "const li = [...document.querySelectorAll('.uploads li')]; return li.length === 2 && li.every(l => /stored|refused/.test(l.textContent)) && li.map(l => l.textContent);",
+            )
+            .await;
+        let outcome: Vec<String> = serde_json::from_value(outcome).unwrap();
+        assert!(outcome[0].contains("stored as"), "{outcome:?}");
+        assert!(outcome[1].contains("refused"), "{outcome:?}");
+        let (_, list) = srv.get_json("/v1/sequences?library=dropped").await;
+        assert_eq!(list["items"][0]["name"], "gait", "{list}");
+        browser.screenshot("upload").await;
+        // The refused upload's 4xx is the page's message, not a console error of ours.
+        let errors: Vec<String> = browser
+            .console_errors()
+            .await
+            .into_iter()
+            .filter(|e| !e.contains("the server responded with a status of 4"))
+            .collect();
+        assert!(errors.is_empty(), "{errors:?}");
 
-    // Phone-sized: the take page still fits.
-    browser.viewport(390, 844).await;
-    browser
-        .visit(
-            &format!("{}/#/take/{bvh_id}?t=2", srv.base),
-            "the phone layout",
-            "return document.querySelector('canvas.view')?.dataset.frame === '240';",
-        )
-        .await;
-    let overflow = browser
-        .js(
-            "return document.documentElement.scrollWidth - document.documentElement.clientWidth;",
-            json!([]),
-        )
-        .await;
-    assert!(
-        overflow.as_i64().unwrap() <= 0,
-        "horizontal overflow {overflow}"
-    );
-    browser.screenshot("take-phone").await;
-    assert!(browser.console_errors().await.is_empty());
+        // Statistics: /v1/stats as charts, and one dot per take.
+        let drawn = browser
+            .visit(&format!("{}/#/stats", srv.base), "the statistics charts", "const f = document.querySelectorAll('figure'); return f.length === 4 && [document.querySelectorAll('svg.bars')[1].querySelectorAll('rect.stored_bytes').length, document.querySelectorAll('svg.scatter circle.take').length];")
+            .await;
+        let (_, stats) = srv.get_json("/v1/stats").await;
+        let codecs = stats["by_codec"].as_object().unwrap().len();
+        let takes = stats["total"]["takes"].as_u64().unwrap();
+        assert_eq!(drawn, json!([codecs, takes]), "{stats}");
+        browser.screenshot("stats").await;
+        assert_eq!(unnamed_controls(&browser).await, json!([]));
+        assert!(browser.console_errors().await.is_empty());
 
+        // An error answer is the page's message, in the server's words.
+        let message = browser
+            .visit(
+                &format!("{}/#/take/no-such-take", srv.base),
+                "the error message",
+                "const m = document.getElementById('message'); return !m.hidden && m.getAttribute('role') === 'alert' && m.textContent;",
+            )
+            .await;
+        assert!(
+            message.as_str().unwrap().contains("(not_found)"),
+            "{message}"
+        );
+        let errors: Vec<String> = browser
+            .console_errors()
+            .await
+            .into_iter()
+            .filter(|e| !e.contains("the server responded with a status of 404"))
+            .collect();
+        assert!(errors.is_empty(), "{errors:?}");
+
+        // A marker take with its markers named on screen, at their points.
+        let gait_id = gait["id"].as_str().unwrap();
+        let (_, gait) = srv.get_json(&format!("/v1/sequences/{gait_id}")).await;
+        browser
+            .visit(
+                // Second 2: the subject is in the capture volume (most markers are missing
+                // before second 1.5 and after 3.7).
+                &format!("{}/#/take/{gait_id}?t=2", srv.base),
+                "the marker take",
+                "return document.querySelector('canvas.view')?.dataset.frame;",
+            )
+            .await;
+        let labels = browser
+            .js(
+                "document.querySelector('input.labels-toggle').click();
+                 const c = document.querySelector('canvas.view').getBoundingClientRect();
+                 return [...document.querySelectorAll('.labels span')].map(s => {
+                   const r = s.getBoundingClientRect();
+                   return [s.textContent, !s.hidden && r.left >= c.left && r.top >= c.top - 16 && r.left <= c.right && r.top <= c.bottom];
+                 });",
+                json!([]),
+            )
+            .await;
+        let labels = labels.as_array().unwrap();
+        let names: Vec<&Value> = labels.iter().map(|l| &l[0]).collect();
+        let want: Vec<&Value> = gait["meta"]["point_names"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .collect();
+        assert_eq!(names, want);
+        let on_view = labels.iter().filter(|l| l[1] == true).count();
+        assert!(
+            on_view * 2 > labels.len(),
+            "{on_view} of {} labels over the view",
+            labels.len()
+        );
+        browser.screenshot("take-labels").await;
+        assert!(browser.console_errors().await.is_empty());
+
+        // Phone-sized: the take page still fits.
+        browser.viewport(390, 844).await;
+        browser
+            .visit(
+                &format!("{}/#/take/{bvh_id}?t=2", srv.base),
+                "the phone layout",
+                "return document.querySelector('canvas.view')?.dataset.frame === '240';",
+            )
+            .await;
+        let overflow = browser
+            .js(
+                "return document.documentElement.scrollWidth - document.documentElement.clientWidth;",
+                json!([]),
+            )
+            .await;
+        assert!(
+            overflow.as_i64().unwrap() <= 0,
+            "horizontal overflow {overflow}"
+        );
+        browser.screenshot("take-phone").await;
+        assert!(browser.console_errors().await.is_empty());
+
+        srv.stop().await;
+        t.finish().await;
+    }
     browser.quit().await;
-    srv.stop().await;
-    t.finish().await;
 }
 
 /// The series the viewer charts: one bin a second, its worst bin the take's max error, no
@@ -824,6 +963,28 @@ async fn the_compare_page_keeps_takes_in_step() {
     assert_eq!(again, paused);
     assert_eq!(unnamed_controls(&browser).await, json!([]));
     assert!(browser.console_errors().await.is_empty());
+
+    // Phone-sized: the side-by-side views stack and nothing overflows.
+    browser.viewport(390, 844).await;
+    browser.goto(&format!("{}/", srv.base)).await;
+    browser
+        .visit(
+            &format!("{}/{}", srv.base, shared.replace("mode=overlay", "mode=side")),
+            "the phone layout",
+            "return document.querySelectorAll('canvas.view').length === 2 && document.querySelector('canvas.view').dataset.frames;",
+        )
+        .await;
+    let overflow = browser
+        .js(
+            "return document.documentElement.scrollWidth - document.documentElement.clientWidth;",
+            json!([]),
+        )
+        .await;
+    assert!(
+        overflow.as_i64().unwrap() <= 0,
+        "horizontal overflow {overflow}"
+    );
+    browser.screenshot("compare-phone").await;
     browser.quit().await;
     srv.stop().await;
     t.finish().await;
