@@ -11,6 +11,7 @@
 
 use crate::common;
 
+use std::os::unix::process::CommandExt;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -50,8 +51,10 @@ impl Browser {
             .local_addr()
             .unwrap()
             .port();
+        // Its own process group, which the browsers it starts join: `Drop` ends them all.
         let driver = Command::new("chromedriver")
             .arg(format!("--port={port}"))
+            .process_group(0)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -205,6 +208,37 @@ impl Browser {
         std::fs::write(dir.join(format!("{name}.png")), png).unwrap();
     }
 
+    /// Click the first element `selector` finds.
+    async fn click(&self, selector: &str) {
+        self.js(
+            "document.querySelector(arguments[0]).click(); return true;",
+            json!([selector]),
+        )
+        .await;
+    }
+
+    /// How far the page is wider than the viewport, CSS pixels (≤ 0: it fits).
+    async fn overflow(&self) -> i64 {
+        self.js(
+            "return document.documentElement.scrollWidth - document.documentElement.clientWidth;",
+            json!([]),
+        )
+        .await
+        .as_i64()
+        .unwrap()
+    }
+
+    /// Console errors since the last call, but for the browser's own line about an HTTP
+    /// status starting with `status` (an error answer the page was meant to get and show).
+    async fn console_errors_but_status(&self, status: &str) -> Vec<String> {
+        let expected = format!("the server responded with a status of {status}");
+        self.console_errors()
+            .await
+            .into_iter()
+            .filter(|e| !e.contains(&expected))
+            .collect()
+    }
+
     /// Console messages at level SEVERE since the last call.
     async fn console_errors(&self) -> Vec<String> {
         let v = self
@@ -222,13 +256,22 @@ impl Browser {
             .collect()
     }
 
-    async fn quit(mut self) {
+    /// End the session politely; `Drop` then stops chromedriver.
+    async fn quit(self) {
         let _ = self
             .http
             .delete(format!("{}/session/{}", self.base, self.session))
             .send()
             .await;
-        let _ = self.driver.kill();
+    }
+}
+
+/// chromedriver and every browser it started, also when a test fails half-way: a headless
+/// Chromium left behind keeps drawing its page and takes a core from every later test.
+impl Drop for Browser {
+    fn drop(&mut self) {
+        let group = format!("-{}", self.driver.id());
+        let _ = Command::new("kill").args(["-KILL", "--", &group]).status();
         let _ = self.driver.wait();
     }
 }
@@ -354,24 +397,14 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
             "the figure's points and bones are drawn: {drawn} dark pixels"
         );
         browser.screenshot("take").await;
-        browser
-            .js(
-                "document.querySelector('button.play').click(); return true;",
-                json!([]),
-            )
-            .await;
+        browser.click("button.play").await;
         browser
             .until(
                 "playback",
                 "const f = document.querySelector('canvas.view').dataset.frame; return Number(f) > 30 && Number.isInteger(Number(f));",
             )
             .await;
-        browser
-            .js(
-                "document.querySelector('button.play').click(); return true;",
-                json!([]),
-            )
-            .await;
+        browser.click("button.play").await;
 
         // The keyboard: → one frame, shift+→ one second, Home the start.
         let frame = || async {
@@ -508,12 +541,7 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
         assert_eq!(list["items"][0]["name"], "gait", "{list}");
         browser.screenshot("upload").await;
         // The refused upload's 4xx is the page's message, not a console error of ours.
-        let errors: Vec<String> = browser
-            .console_errors()
-            .await
-            .into_iter()
-            .filter(|e| !e.contains("the server responded with a status of 4"))
-            .collect();
+        let errors = browser.console_errors_but_status("4").await;
         assert!(errors.is_empty(), "{errors:?}");
 
         // Statistics: /v1/stats as charts, and one dot per take.
@@ -540,12 +568,7 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
             message.as_str().unwrap().contains("(not_found)"),
             "{message}"
         );
-        let errors: Vec<String> = browser
-            .console_errors()
-            .await
-            .into_iter()
-            .filter(|e| !e.contains("the server responded with a status of 404"))
-            .collect();
+        let errors = browser.console_errors_but_status("404").await;
         assert!(errors.is_empty(), "{errors:?}");
 
         // A marker take with its markers named on screen, at their points.
@@ -597,16 +620,8 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
                 "return document.querySelector('canvas.view')?.dataset.frame === '240';",
             )
             .await;
-        let overflow = browser
-            .js(
-                "return document.documentElement.scrollWidth - document.documentElement.clientWidth;",
-                json!([]),
-            )
-            .await;
-        assert!(
-            overflow.as_i64().unwrap() <= 0,
-            "horizontal overflow {overflow}"
-        );
+        let overflow = browser.overflow().await;
+        assert!(overflow <= 0, "horizontal overflow {overflow}");
         browser.screenshot("take-phone").await;
         assert!(browser.console_errors().await.is_empty());
 
@@ -818,12 +833,7 @@ async fn the_live_page_shows_a_stream_as_it_arrives() {
         )
         .await;
     // The 409 that sent the page to the stored frames is the browser's network log line.
-    let errors: Vec<String> = browser
-        .console_errors()
-        .await
-        .into_iter()
-        .filter(|e| !e.contains("the server responded with a status of 409"))
-        .collect();
+    let errors = browser.console_errors_but_status("409").await;
     assert!(errors.is_empty(), "{errors:?}");
     browser.quit().await;
     other.stop().await;
@@ -899,12 +909,7 @@ async fn the_compare_page_keeps_takes_in_step() {
     browser.screenshot("compare-overlay").await;
 
     // Playing moves both in step; pausing writes the view into the URL.
-    browser
-        .js(
-            "document.querySelector('button.play').click(); return true;",
-            json!([]),
-        )
-        .await;
+    browser.click("button.play").await;
     let frames = browser
         .until(
             "both takes playing",
@@ -912,12 +917,7 @@ async fn the_compare_page_keeps_takes_in_step() {
         )
         .await;
     assert_eq!(frames[0], frames[1], "in step: {frames}");
-    browser
-        .js(
-            "document.querySelector('button.play').click(); return true;",
-            json!([]),
-        )
-        .await;
+    browser.click("button.play").await;
     let shared = browser
         .until(
             "the shared URL",
@@ -937,12 +937,7 @@ async fn the_compare_page_keeps_takes_in_step() {
         .await;
 
     // Side by side, from the URL: one view per take, both drawn, at the same frames.
-    browser
-        .js(
-            "document.querySelector('input[value=side]').click(); return true;",
-            json!([]),
-        )
-        .await;
+    browser.click("input[value=side]").await;
     browser
         .until(
             "side by side",
@@ -974,16 +969,8 @@ async fn the_compare_page_keeps_takes_in_step() {
             "return document.querySelectorAll('canvas.view').length === 2 && document.querySelector('canvas.view').dataset.frames;",
         )
         .await;
-    let overflow = browser
-        .js(
-            "return document.documentElement.scrollWidth - document.documentElement.clientWidth;",
-            json!([]),
-        )
-        .await;
-    assert!(
-        overflow.as_i64().unwrap() <= 0,
-        "horizontal overflow {overflow}"
-    );
+    let overflow = browser.overflow().await;
+    assert!(overflow <= 0, "horizontal overflow {overflow}");
     browser.screenshot("compare-phone").await;
     browser.quit().await;
     srv.stop().await;
