@@ -16,6 +16,10 @@
 //! into the header once, when the stream closes. Memory is bounded per stream (points,
 //! chunk length, the re-encoding copy) and per server (open streams), by [`Limits`].
 //!
+//! Watchers ([`Streams::watch`], the viewer's live page) get every append as it arrives,
+//! before it is coded, through a bounded broadcast: one that reads too slowly skips appends
+//! (and is told), so watching never holds the producer nor grows memory.
+//!
 //! With no search possible frame by frame, a stream codes to its bound as a max bound (a
 //! mean bound is then met too) with the residual layer, and checks every chunk on its decoded
 //! output before committing it. `finish` can re-encode the whole take with per-take choice.
