@@ -60,6 +60,7 @@ export async function livePage(main, id) {
   const delays = []; // [performance.now(), capture ms | null, server ms]
   let raf = 0;
   let active = true;
+  let elsewhere = false; // the stream is coded by another server
 
   function arrive(e) {
     const data = f32(e.data);
@@ -139,6 +140,7 @@ export async function livePage(main, id) {
 
   /** The newest committed frame, once a second (the stream is coded by another server). */
   async function pollCommitted(why) {
+    elsewhere = true;
     status.textContent = `${why}. Showing the newest stored frame, once a second.`;
     while (active) {
       const t = await json(`/v1/sequences/${encodeURIComponent(id)}`, { signal: abort.signal });
@@ -160,7 +162,8 @@ export async function livePage(main, id) {
 
   /** How much of the stream is stored (committed chunk by chunk), once a second. */
   async function pollStored() {
-    while (active) {
+    // Coded elsewhere, `pollCommitted` reads the same take each second and says it.
+    while (active && !elsewhere) {
       const t = await json(`/v1/sequences/${encodeURIComponent(id)}`, { signal: abort.signal });
       out.stored.textContent = t.frames ? `${t.frames} (${fmt.num(t.ratio, 1)}× smaller than raw)` : '0';
       if (!t.live) return;

@@ -30,6 +30,13 @@ struct Browser {
 }
 
 impl Browser {
+    /// A browser for a test on corpus takes; None (the test passes, saying why) without the
+    /// corpus, or without a browser when none is required.
+    async fn with_corpus() -> Option<Browser> {
+        corpus::for_tests()?;
+        Browser::start().await
+    }
+
     async fn start() -> Option<Browser> {
         let required = std::env::var("MOCAP_TEST_BROWSER").is_ok_and(|v| v == "1");
         let found = |name: &str| {
@@ -333,10 +340,7 @@ async fn stored(srv: &common::Server, query: &str, rel: &str) -> Value {
 
 #[tokio::test]
 async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
-    if corpus::for_tests().is_none() {
-        return;
-    }
-    let Some(browser) = Browser::start().await else {
+    let Some(browser) = Browser::with_corpus().await else {
         return;
     };
     // The same tour on every backend; screenshots of the SQLite one (the default).
@@ -677,10 +681,7 @@ async fn error_series_are_measured_at_ingest_and_served() {
 /// and the page says when the stream ends.
 #[tokio::test]
 async fn the_live_page_shows_a_stream_as_it_arrives() {
-    if corpus::for_tests().is_none() {
-        return;
-    }
-    let Some(browser) = Browser::start().await else {
+    let Some(browser) = Browser::with_corpus().await else {
         return;
     };
     let t = common::sqlite().await;
@@ -845,10 +846,7 @@ async fn the_live_page_shows_a_stream_as_it_arrives() {
 /// shareable URL; the frame-by-frame distance between them within the sum of the bounds.
 #[tokio::test]
 async fn the_compare_page_keeps_takes_in_step() {
-    if corpus::for_tests().is_none() {
-        return;
-    }
-    let Some(browser) = Browser::start().await else {
+    let Some(browser) = Browser::with_corpus().await else {
         return;
     };
     let t = common::sqlite().await;
