@@ -13,6 +13,7 @@
 //! README ("Limits") and `openapi.yaml` quote the defaults; keep the three in step.
 
 use std::ops::RangeInclusive;
+use std::time::Duration;
 
 /// Metres per stored unit that a take may declare or a client may state: from a micrometre
 /// to a kilometre. Beyond either end the unit is a mistake (or an attack): errors in
@@ -73,6 +74,19 @@ pub const STREAM_WATCH_QUEUE: usize = 16;
 /// ≤ 16 × 50,000 × 12 bytes ≈ 9.6 MB, shared by all of them.
 pub const STREAM_WATCH_SAMPLES: usize = 50_000;
 
+/// Bytes of an audit entry's free-text fields (the path asked for, the detail) kept; longer
+/// ones are cut and say so. A 65,000-character path is not evidence worth 65 KB a row.
+pub const AUDIT_FIELD_BYTES: usize = 256;
+
+/// Callers (addresses or tokens) whose refused requests are counted apart within one
+/// minute; past it the rest of the minute's refusals are counted together, so a flood from
+/// many addresses adds one row more, not one per address.
+pub const AUDIT_REFUSED_KEYS: usize = 1_000;
+
+/// How often a token's `last_used_at` is written: at most once this often per token, so
+/// that reads do not each cost a database write.
+pub const TOKEN_LAST_USED_EVERY: Duration = Duration::from_secs(60);
+
 /// Latest capture time an append may carry (`captured_ms`, ms since the Unix epoch): the
 /// year 3000. Earlier than the epoch is refused too.
 pub const MAX_CAPTURE_MS: i64 = 32_503_680_000_000;
@@ -87,8 +101,9 @@ pub struct Limits {
     pub append_bytes: u64,
     /// Largest JSON request body of the other routes (open a stream, train, edit), bytes.
     pub json_body_bytes: u64,
-    /// Request bodies held at once across the whole server, bytes. A request that would go
-    /// over waits for nothing: it gets 503 with `Retry-After`.
+    /// Request bodies held at once across the whole server, bytes, counted as they arrive
+    /// (not as declared). A request that would go over waits for nothing: it gets 503
+    /// with `Retry-After`.
     pub inflight_bytes: u64,
     /// Points (markers, joints and end sites) in one take.
     pub points: u64,
@@ -116,6 +131,38 @@ pub struct Limits {
     pub requests_per_s: u64,
     /// Requests a token (or address) may make at once above the sustained rate.
     pub request_burst: u64,
+    /// Of [`Limits::inflight_bytes`], what one caller (a token, or an address without one)
+    /// may hold across its uploads at once: others keep the rest. Alone, a caller may
+    /// still send one body of the route's full size.
+    pub body_share_bytes: u64,
+    /// A request body from which nothing arrives for this long is dropped (408), and
+    /// what it held is freed.
+    pub body_idle: Duration,
+    /// The largest range answer, frames × points (checked before anything is decoded).
+    pub answer_samples: u64,
+    /// Memory range answers hold at once across the server, bytes: each reserves what it
+    /// will hold (about one decoded chunk, the payloads read ahead and output not yet
+    /// written; [`crate::service::answer`]), whatever the take's length; past it, 503.
+    pub answer_bytes: u64,
+    /// Of [`Limits::answer_bytes`], what one caller's answers may hold at once.
+    pub answer_share_bytes: u64,
+    /// Connections open at once; past it a new one is answered 503 and closed.
+    pub connections: u64,
+    /// Connections open at once from one address.
+    pub connections_per_address: u64,
+    /// Time a client has to send a request's headers, from its first byte.
+    pub header_timeout: Duration,
+    /// A connection with no request in progress is closed after this long.
+    pub idle_timeout: Duration,
+    /// A connection whose client reads nothing of an answer for this long is closed.
+    pub send_timeout: Duration,
+    /// Live streams one caller may have open at once (of [`Limits::open_streams`]).
+    pub streams_per_caller: u64,
+    /// Watchers one caller may have on one stream at once (of [`STREAM_WATCHERS`]).
+    pub watchers_per_caller: u64,
+    /// Audit entries older than this are deleted (by every server, once a maintenance
+    /// period).
+    pub audit_retention: Duration,
 }
 
 impl Default for Limits {
@@ -135,6 +182,23 @@ impl Default for Limits {
             stream_archive_bytes: 256 << 20,
             requests_per_s: 200,
             request_burst: 400,
+            body_share_bytes: 512 << 20,
+            body_idle: Duration::from_secs(20),
+            answer_samples: 200_000_000,
+            answer_bytes: 256 << 20,
+            answer_share_bytes: 64 << 20,
+            // With the database's connections, the log and the listener, well within the
+            // 1,024 files a service is commonly allowed.
+            connections: 768,
+            connections_per_address: 256,
+            header_timeout: Duration::from_secs(10),
+            // Longer than the 60 s idle time of common load balancers, so that the balancer
+            // closes a connection first and never sends on one this server is closing.
+            idle_timeout: Duration::from_secs(75),
+            send_timeout: Duration::from_secs(60),
+            streams_per_caller: 8,
+            watchers_per_caller: 4,
+            audit_retention: Duration::from_secs(90 * 24 * 3600),
         }
     }
 }

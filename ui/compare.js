@@ -41,7 +41,7 @@ export async function comparePage(main, params) {
   const legend = el('table', { class: 'legend' },
     el('thead', {}, el('tr', {}, ...['', 'take', 'codec', 'bound mm', 'max / mean error mm', 'ratio', 'now', ''].map((h) => el('th', { scope: 'col' }, h)))),
     el('tbody', {}, ...takes.map((t, i) => el('tr', {},
-      el('td', {}, el('span', { class: 'swatch', style: `background:${COLOURS[i]}`, 'aria-label': `colour ${i + 1}` })),
+      el('td', {}, el('span', { class: 'swatch', style: { background: COLOURS[i] }, 'aria-label': `colour ${i + 1}` })),
       el('td', {}, el('a', { href: `#/take/${encodeURIComponent(t.id)}` }, t.name || t.id), ' ', el('small', { class: 'muted' }, t.library || '')),
       el('td', {}, t.codec),
       el('td', { class: 'n' }, String(t.max_bound_mm)),

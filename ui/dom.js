@@ -1,12 +1,17 @@
 // Small DOM helpers every page uses: HTML and SVG elements from attributes and children,
 // and number formats.
 
-/** An HTML element; `on…` attributes become listeners, null/undefined/false ones are left out. */
+/**
+ * An HTML element; `on…` attributes become listeners, null/undefined/false ones are left out.
+ * `style` is an object of properties, set through the element's style (the page's
+ * Content-Security-Policy refuses style attributes, not styles set from script).
+ */
 export function el(tag, attrs = {}, ...children) {
   const e = document.createElement(tag);
   for (const [k, v] of Object.entries(attrs)) {
     if (v === null || v === undefined || v === false) continue;
     if (k === 'class') e.className = v;
+    else if (k === 'style') Object.assign(e.style, v);
     else if (k.startsWith('on')) e.addEventListener(k.slice(2), v);
     else e.setAttribute(k, v);
   }

@@ -3,7 +3,7 @@
 // Sites) and, for skeleton takes, bones; samples missing in a frame (gaps, NaN) are left
 // out, with their bones.
 
-import * as THREE from 'three';
+import * as THREE from '/ui/vendor/three/three.module.js';
 import { OrbitControls } from '/ui/vendor/three/OrbitControls.js';
 
 /** Figure colours, in order; the first is the single-take colour. */

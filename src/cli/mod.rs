@@ -89,6 +89,16 @@ struct ServeArgs {
         value_delimiter = ','
     )]
     cors_origins: Vec<String>,
+    /// A host name requests to a server without tokens may name, besides loopback names
+    /// (and IP addresses, with --insecure-no-auth); repeat for several, `*` for any. Other
+    /// names are refused, so that a web page cannot reach the server through a name of
+    /// its own that resolves to it (DNS rebinding).
+    #[arg(long = "allow-host", env = "MOCAP_ALLOW_HOSTS", value_delimiter = ',')]
+    allowed_hosts: Vec<String>,
+    /// Also serve GET /metrics without a token on this address (for a Prometheus scraper
+    /// on an internal network); on --listen, /metrics needs an admin token.
+    #[arg(long, env = "MOCAP_METRICS_LISTEN")]
+    metrics_listen: Option<String>,
     #[command(flatten)]
     limits: LimitArgs,
 }
@@ -99,40 +109,115 @@ struct ServeArgs {
 struct LimitArgs {
     /// Largest upload (POST /v1/sequences body), MiB: a larger Content-Length gets 413
     /// before the body is read.
-    #[arg(long, env = "MOCAP_MAX_UPLOAD_MIB", default_value_t = 512)]
+    #[arg(long, env = "MOCAP_MAX_UPLOAD_MIB", default_value_t = d().upload_bytes >> 20)]
     max_upload_mib: u64,
     /// Request bodies held at once across the server, MiB; past it requests get 503 with
     /// Retry-After instead of memory.
-    #[arg(long, env = "MOCAP_MAX_INFLIGHT_MIB", default_value_t = 1024)]
+    #[arg(long, env = "MOCAP_MAX_INFLIGHT_MIB", default_value_t = d().inflight_bytes >> 20)]
     max_inflight_mib: u64,
     /// Largest frames append to a live stream, MiB.
-    #[arg(long, env = "MOCAP_MAX_APPEND_MIB", default_value_t = 64)]
+    #[arg(long, env = "MOCAP_MAX_APPEND_MIB", default_value_t = d().append_bytes >> 20)]
     max_append_mib: u64,
     /// Points (markers, joints) in one take.
-    #[arg(long, env = "MOCAP_MAX_POINTS", default_value_t = 10_000)]
+    #[arg(long, env = "MOCAP_MAX_POINTS", default_value_t = d().points)]
     max_points: u64,
     /// Frames in one take.
-    #[arg(long, env = "MOCAP_MAX_FRAMES", default_value_t = 20_000_000)]
+    #[arg(long, env = "MOCAP_MAX_FRAMES", default_value_t = d().frames)]
     max_frames: u64,
     /// Frames × points in one take.
-    #[arg(long, env = "MOCAP_MAX_SAMPLES", default_value_t = 200_000_000)]
+    #[arg(long, env = "MOCAP_MAX_SAMPLES", default_value_t = d().samples)]
     max_samples: u64,
     /// Nesting depth of a BVH hierarchy.
-    #[arg(long, env = "MOCAP_MAX_DEPTH", default_value_t = 512)]
+    #[arg(long, env = "MOCAP_MAX_DEPTH", default_value_t = d().hierarchy_depth)]
     max_depth: u64,
     /// Points in one live stream (each open stream holds 3 × points² basis values).
-    #[arg(long, env = "MOCAP_MAX_STREAM_POINTS", default_value_t = 1_000)]
+    #[arg(long, env = "MOCAP_MAX_STREAM_POINTS", default_value_t = d().stream_points)]
     max_stream_points: u64,
     /// Live streams open at once; past it, opening one gets 503 with Retry-After.
-    #[arg(long, env = "MOCAP_MAX_OPEN_STREAMS", default_value_t = 32)]
+    #[arg(long, env = "MOCAP_MAX_OPEN_STREAMS", default_value_t = d().open_streams)]
     max_open_streams: u64,
     /// Requests per second each token may make, sustained (each address for anonymous
     /// requests beyond loopback); past it, 429 with Retry-After. 0: no limit.
-    #[arg(long, env = "MOCAP_REQUESTS_PER_S", default_value_t = 200)]
+    #[arg(long, env = "MOCAP_REQUESTS_PER_S", default_value_t = d().requests_per_s)]
     requests_per_s: u64,
     /// Requests a token may make at once above the sustained rate.
-    #[arg(long, env = "MOCAP_REQUEST_BURST", default_value_t = 400)]
+    #[arg(long, env = "MOCAP_REQUEST_BURST", default_value_t = d().request_burst)]
     request_burst: u64,
+    /// Of the in-flight budget, what one caller (a token, or an address without one) may
+    /// hold across its uploads at once, MiB; alone, a caller may still send one upload of
+    /// the full size.
+    #[arg(long, env = "MOCAP_BODY_SHARE_MIB", default_value_t = d().body_share_bytes >> 20)]
+    body_share_mib: u64,
+    /// An upload from which nothing arrives for this many seconds gets 408 and is dropped.
+    #[arg(long, env = "MOCAP_BODY_IDLE_S", default_value_t = d().body_idle.as_secs())]
+    body_idle_s: u64,
+    /// The largest range answer, frames × points.
+    #[arg(long, env = "MOCAP_MAX_ANSWER_SAMPLES", default_value_t = d().answer_samples)]
+    max_answer_samples: u64,
+    /// Memory range answers hold at once across the server, MiB (each holds about one
+    /// decoded chunk and its output, whatever the take's length); past it, 503.
+    #[arg(long, env = "MOCAP_ANSWER_BUDGET_MIB", default_value_t = d().answer_bytes >> 20)]
+    answer_budget_mib: u64,
+    /// Of the answer budget, what one caller's answers may hold at once, MiB.
+    #[arg(long, env = "MOCAP_ANSWER_SHARE_MIB", default_value_t = d().answer_share_bytes >> 20)]
+    answer_share_mib: u64,
+    /// Connections open at once; past it a new one gets 503 and is closed. With the
+    /// database's files, the default fits a process allowed 1,024 files (`ulimit -n`).
+    #[arg(long, env = "MOCAP_MAX_CONNECTIONS", default_value_t = d().connections)]
+    max_connections: u64,
+    /// Connections open at once from one client address.
+    #[arg(long, env = "MOCAP_MAX_CONNECTIONS_PER_ADDRESS", default_value_t = d().connections_per_address)]
+    max_connections_per_address: u64,
+    /// Seconds a client has to send a request's headers.
+    #[arg(long, env = "MOCAP_HEADER_TIMEOUT_S", default_value_t = d().header_timeout.as_secs())]
+    header_timeout_s: u64,
+    /// Seconds a connection may stay open with no request in progress.
+    #[arg(long, env = "MOCAP_IDLE_TIMEOUT_S", default_value_t = d().idle_timeout.as_secs())]
+    idle_timeout_s: u64,
+    /// Seconds a client may read nothing of an answer before its connection is closed.
+    #[arg(long, env = "MOCAP_SEND_TIMEOUT_S", default_value_t = d().send_timeout.as_secs())]
+    send_timeout_s: u64,
+    /// Live streams one caller may have open at once.
+    #[arg(long, env = "MOCAP_MAX_STREAMS_PER_CALLER", default_value_t = d().streams_per_caller)]
+    max_streams_per_caller: u64,
+    /// Watchers one caller may have on one live stream at once.
+    #[arg(long, env = "MOCAP_MAX_WATCHERS_PER_CALLER", default_value_t = d().watchers_per_caller)]
+    max_watchers_per_caller: u64,
+    /// How long audit entries are kept: days, or a number with d, h or m (`90d`, `12h`).
+    #[arg(long, env = "MOCAP_AUDIT_RETENTION", default_value = "90d", value_parser = parse_retention)]
+    audit_retention: std::time::Duration,
+}
+
+/// The default limits, which the flags' defaults quote.
+fn d() -> mocapstore::limits::Limits {
+    mocapstore::limits::Limits::default()
+}
+
+/// `90d`, `12h`, `30m`, or a number of days.
+fn parse_retention(v: &str) -> Result<std::time::Duration, String> {
+    let v = v.trim();
+    let (n, unit) = match v.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => (&v[..i], c),
+        _ => (v, 'd'),
+    };
+    let seconds = match unit {
+        'd' => 86_400,
+        'h' => 3_600,
+        'm' => 60,
+        _ => return Err(format!("{v:?}: give days, or a number with d, h or m")),
+    };
+    let n: u64 = n
+        .parse()
+        .map_err(|_| format!("{v:?}: give days, or a number with d, h or m"))?;
+    if n == 0 {
+        return Err("a retention of 0 would delete every entry as it is written".into());
+    }
+    Ok(std::time::Duration::from_secs(n.saturating_mul(seconds)))
+}
+
+/// Whole seconds, at least one (a timeout of 0 would close everything at once).
+fn secs(s: u64) -> std::time::Duration {
+    std::time::Duration::from_secs(s.max(1))
 }
 
 impl LimitArgs {
@@ -149,6 +234,19 @@ impl LimitArgs {
             open_streams: self.max_open_streams,
             requests_per_s: self.requests_per_s,
             request_burst: self.request_burst,
+            body_share_bytes: self.body_share_mib << 20,
+            body_idle: secs(self.body_idle_s),
+            answer_samples: self.max_answer_samples,
+            answer_bytes: self.answer_budget_mib << 20,
+            answer_share_bytes: self.answer_share_mib << 20,
+            connections: self.max_connections,
+            connections_per_address: self.max_connections_per_address,
+            header_timeout: secs(self.header_timeout_s),
+            idle_timeout: secs(self.idle_timeout_s),
+            send_timeout: secs(self.send_timeout_s),
+            streams_per_caller: self.max_streams_per_caller,
+            watchers_per_caller: self.max_watchers_per_caller,
+            audit_retention: self.audit_retention,
             ..mocapstore::limits::Limits::default()
         }
     }
@@ -224,9 +322,11 @@ fn serve(args: ServeArgs) -> ExitCode {
         limits: args.limits.limits(),
         decoded_cache_mib: args.decoded_cache_mib,
         exhaustive_choice: args.exhaustive_choice,
+        metrics_listen: args.metrics_listen,
         policy: mocapstore::http::auth::Policy {
             allowed_origins: args.cors_origins,
             open_beyond_loopback: args.insecure_no_auth,
+            allowed_hosts: args.allowed_hosts,
         },
         ..mocapstore::http::Config::default()
     };
@@ -247,6 +347,9 @@ fn serve(args: ServeArgs) -> ExitCode {
             }
         };
         tracing::info!(address = %app.local_addr(), %database, "mocapstore listening");
+        if let Some(m) = app.metrics_addr() {
+            tracing::info!(address = %m, "GET /metrics without a token");
+        }
         match app.run_until(mocapstore::http::shutdown_signal()).await {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {

@@ -89,15 +89,16 @@ pub fn audit(args: &AuditArgs) -> ExitCode {
             .await
             .map_err(|e| e.to_string())?;
         store.close().await;
-        let mut out = String::from("| when (UTC) | token | action | target | status | detail |\n|---|---|---|---|---:|---|\n");
+        let mut out = String::from("| when (UTC) | token | action | target | status | count | detail |\n|---|---|---|---|---:|---:|---|\n");
         for r in rows {
             out += &format!(
-                "| {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} |\n",
                 utc(r.at),
                 r.token_name.as_deref().unwrap_or("—"),
                 r.action,
                 r.target,
                 r.status,
+                r.count,
                 r.detail
             );
         }
@@ -221,11 +222,11 @@ async fn record(store: &Store, action: &str, target: String, status: u16) {
 
 fn listing(tokens: &[TokenInfo]) -> String {
     let mut out = String::from(
-        "| id | name | scope | libraries | created (UTC) | expires | revoked |\n|---|---|---|---|---|---|---|\n",
+        "| id | name | scope | libraries | created (UTC) | expires | revoked | last used |\n|---|---|---|---|---|---|---|---|\n",
     );
     for t in tokens {
         out += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
             t.id,
             t.name,
             t.scope,
@@ -233,6 +234,7 @@ fn listing(tokens: &[TokenInfo]) -> String {
             utc(t.created_at),
             t.expires_at.map_or("never".into(), utc),
             t.revoked_at.map_or("—".into(), utc),
+            t.last_used_at.map_or("never".into(), utc),
         );
     }
     out

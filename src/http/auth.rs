@@ -15,12 +15,16 @@
 //! | route | scope |
 //! |---|---|
 //! | `GET /healthz`, `GET /` and `GET /ui/…` (the viewer's files) | none |
-//! | `GET /metrics`, every other `GET` | read |
+//! | every other `GET` | read |
 //! | `POST /v1/sequences`, `PATCH /v1/sequences/{id}`, `POST /v1/streams…` | write |
-//! | `DELETE /v1/sequences/{id}`, `POST`/`DELETE /v1/bases…`, `DELETE /v1/skeletons/{id}`, `/v1/tokens…`, `GET /v1/audit` | admin |
+//! | `DELETE /v1/sequences/{id}`, `POST`/`DELETE /v1/bases…`, `DELETE /v1/skeletons/{id}`, `/v1/tokens…`, `GET /v1/audit`, `GET /metrics` | admin |
 //!
-//! A read or write token limited to libraries sees and changes only takes in them; an
-//! admin token is over every library.
+//! A read or write token limited to libraries sees and changes only takes in them, and
+//! only the skeletons, bases, jobs and statistics of its libraries; a take of another
+//! library answers 404, as one that does not exist. An admin token is over every library.
+//! `/metrics` (archive-wide totals) is also served without a token on a separate address
+//! when the operator asks for one (`serve --metrics-listen`), for a scraper on an internal
+//! network.
 
 use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
@@ -35,7 +39,8 @@ use tower_governor::key_extractor::KeyExtractor;
 use tower_governor::GovernorError;
 
 use super::error::ApiError;
-use crate::service::access::{self, Audit, Authenticator, Caller, Scope};
+use crate::service::access::{self, Attempt, AuditLog, Authenticator, Caller, Scope};
+use crate::service::budget::Holder;
 use crate::store::Store;
 
 /// How the server treats requests beyond their tokens.
@@ -44,9 +49,13 @@ pub struct Policy {
     /// Origins (`https://viewer.example:8443`) whose pages may call the API from a browser:
     /// CORS answers for them, and their writes are not refused as cross-origin.
     pub allowed_origins: Vec<String>,
-    /// Serve anonymous requests beyond loopback (`serve --insecure-no-auth`): no check of
-    /// the `Host` a request names, and anonymous requests are rate-limited per address.
+    /// Serve anonymous requests beyond loopback (`serve --insecure-no-auth`): requests
+    /// may name the server by IP address as well as by a loopback name, and anonymous
+    /// requests are rate-limited per address.
     pub open_beyond_loopback: bool,
+    /// Host names (besides loopback names and, beyond loopback, IP addresses) that requests
+    /// to a server without tokens may name (`serve --allow-host`); `*` allows any.
+    pub allowed_hosts: Vec<String>,
 }
 
 /// What [`front`] needs.
@@ -54,6 +63,7 @@ pub struct Policy {
 pub struct Front {
     pub store: Store,
     pub auth: Arc<Authenticator>,
+    pub audit: Arc<AuditLog>,
     pub policy: Arc<Policy>,
     /// The same routes behind the rate limiter; `None` when limits are off.
     pub limited: Option<Router>,
@@ -98,6 +108,8 @@ pub fn route_scope(method: &Method, route: &str) -> Option<Scope> {
     }
     let admin = route.starts_with("/v1/tokens")
         || route == "/v1/audit"
+        // Archive-wide totals: for the operator (or a separate `--metrics-listen` address).
+        || route == "/metrics"
         || (route.starts_with("/v1/bases") && *method != Method::GET)
         || (*method == Method::DELETE
             && (route.starts_with("/v1/sequences") || route.starts_with("/v1/skeletons")));
@@ -173,6 +185,7 @@ pub async fn front(State(f): State<Front>, mut req: Request, next: Next) -> Resp
         return next.run(req).await;
     }
     let writes = changes_state(&method);
+    let address = peer(&req);
     let caller = match authenticate(&f, req.headers(), writes).await {
         Ok(c) => c,
         Err(e) => {
@@ -193,11 +206,13 @@ pub async fn front(State(f): State<Front>, mut req: Request, next: Next) -> Resp
             // Past the limit nothing was tried: not worth an entry each.
             if writes && response.status() != StatusCode::TOO_MANY_REQUESTS {
                 let done = Done::of(&response);
-                audit(&f.store, None, &method, &path, done).await;
+                audit(&f, None, address, &method, &path, done).await;
             }
             return response;
         }
     };
+    let holder = holder_of(&req, &caller);
+    req.extensions_mut().insert(holder);
     req.extensions_mut().insert(caller.clone());
     let response = if caller.token.is_some() || f.policy.open_beyond_loopback {
         match &f.limited {
@@ -215,7 +230,7 @@ pub async fn front(State(f): State<Front>, mut req: Request, next: Next) -> Resp
         // A live stream's appends come many times a second; its open and finish entries
         // stand for them.
         if done.route.as_deref() != Some(UNAUDITED) {
-            audit(&f.store, caller.token.as_ref(), &method, &path, done).await;
+            audit(&f, caller.token.as_ref(), address, &method, &path, done).await;
         }
     }
     response
@@ -232,19 +247,35 @@ async fn authenticate(f: &Front, headers: &HeaderMap, writes: bool) -> Result<Ca
         ));
     }
     let caller = f.auth.authenticate(&f.store, bearer(headers)?).await?;
-    if caller.token.is_none() && !f.policy.open_beyond_loopback {
-        // A server without tokens answers only requests addressed to a loopback name: a
-        // page whose own name resolves to 127.0.0.1 (DNS rebinding) is refused.
+    if caller.token.is_none() {
+        // A server without tokens answers only requests that name it by a name no web page
+        // can take over: a page whose own name resolves to this server (DNS rebinding)
+        // is refused.
         let host = headers.get(header::HOST).and_then(|v| v.to_str().ok());
-        if !host.is_some_and(is_loopback_host) {
+        if !host.is_some_and(|h| host_allowed(h, &f.policy)) {
             return Err(ApiError::new(
                 StatusCode::FORBIDDEN,
                 "misdirected",
-                "this server has no tokens and answers only requests addressed to localhost",
+                "this server has no tokens and answers only requests addressed to localhost \
+                 (or, with --insecure-no-auth, to its IP address) or to a name allowed with \
+                 serve --allow-host",
             ));
         }
     }
     Ok(caller)
+}
+
+/// Whether a server without tokens answers a request naming `host`: a loopback name; beyond
+/// loopback, an IP address (a page's name can be made to resolve anywhere, an address
+/// literal cannot be rebound); or a name the operator allowed.
+fn host_allowed(host: &str, policy: &Policy) -> bool {
+    let name = host_name(host);
+    is_loopback_host(host)
+        || (policy.open_beyond_loopback && name.parse::<IpAddr>().is_ok())
+        || policy
+            .allowed_hosts
+            .iter()
+            .any(|a| a == "*" || a.eq_ignore_ascii_case(name))
 }
 
 /// After routing: the route's scope, or 403.
@@ -290,53 +321,59 @@ impl Done {
     }
 }
 
-/// One audit entry; a failure to write it is logged, not turned into the answer (the
-/// change it describes has happened).
+/// Note a write in the audit log ([`AuditLog`]: a row if it changed something, else a
+/// count); a failure to write it is logged, not turned into the answer (the change it
+/// describes has happened).
 async fn audit(
-    store: &Store,
+    f: &Front,
     token: Option<&access::TokenRef>,
+    address: IpAddr,
     method: &Method,
     path: &str,
     done: Done,
 ) {
-    let entry = Audit {
+    let attempt = Attempt {
         caller: token,
+        address,
         action: format!("{method} {}", done.route.as_deref().unwrap_or(path)),
-        target: path.to_string(),
+        path,
         status: done.status,
         detail: done.detail,
     };
-    if let Err(e) = access::record(store, entry).await {
+    if let Err(e) = f.audit.note(&f.store, attempt).await {
         tracing::error!(error = %e, "could not write the audit log");
     }
 }
 
-/// Rate-limit key: the token, or for anonymous requests the client's address.
+/// Who a request counts against (rate limits, shares of the server's budgets): its token,
+/// or for a request without one, the client's address.
+fn holder_of(req: &Request, caller: &Caller) -> Holder {
+    match &caller.token {
+        Some(t) => Holder::Token(t.id.clone()),
+        None => Holder::Address(peer(req)),
+    }
+}
+
+/// The client's address (unspecified when the server was not given it, as in unit tests).
+fn peer<T>(req: &axum::http::Request<T>) -> IpAddr {
+    req.extensions()
+        .get::<ConnectInfo<SocketAddr>>()
+        .map_or(IpAddr::from([0, 0, 0, 0]), |c| c.0.ip())
+}
+
+/// Rate-limit key: the request's [`Holder`]; a refused request (no holder yet) by address.
 #[derive(Debug, Clone, Copy)]
 pub struct RateKey;
 
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub enum Limited {
-    Token(String),
-    Address(IpAddr),
-}
-
 impl KeyExtractor for RateKey {
-    type Key = Limited;
+    type Key = Holder;
 
-    fn extract<T>(&self, req: &axum::http::Request<T>) -> Result<Limited, GovernorError> {
-        if let Some(t) = req
+    fn extract<T>(&self, req: &axum::http::Request<T>) -> Result<Holder, GovernorError> {
+        Ok(req
             .extensions()
-            .get::<Caller>()
-            .and_then(|c| c.token.as_ref())
-        {
-            return Ok(Limited::Token(t.id.clone()));
-        }
-        let ip = req
-            .extensions()
-            .get::<ConnectInfo<SocketAddr>>()
-            .map_or(IpAddr::from([0, 0, 0, 0]), |c| c.0.ip());
-        Ok(Limited::Address(ip))
+            .get::<Holder>()
+            .cloned()
+            .unwrap_or_else(|| Holder::Address(peer(req))))
     }
 }
 
@@ -377,7 +414,7 @@ mod tests {
             s(Method::GET, "/v1/sequences/{id}/frames"),
             Some(Scope::Read)
         );
-        assert_eq!(s(Method::GET, "/metrics"), Some(Scope::Read));
+        assert_eq!(s(Method::GET, "/metrics"), Some(Scope::Admin));
         assert_eq!(s(Method::POST, "/v1/sequences"), Some(Scope::Write));
         assert_eq!(s(Method::PATCH, "/v1/sequences/{id}"), Some(Scope::Write));
         assert_eq!(
@@ -414,7 +451,7 @@ mod tests {
     fn origins_other_than_the_servers_own_or_allowed_are_refused() {
         let policy = Policy {
             allowed_origins: vec!["https://viewer.example".into()],
-            open_beyond_loopback: false,
+            ..Policy::default()
         };
         let h = |origin: &'static str| {
             let mut h = HeaderMap::new();
@@ -427,6 +464,33 @@ mod tests {
         assert!(!origin_allowed(&h("https://evil.example"), &policy));
         assert!(!origin_allowed(&h("null"), &policy));
         assert!(origin_allowed(&HeaderMap::new(), &policy));
+    }
+
+    #[test]
+    fn without_tokens_only_names_no_page_can_take_are_answered() {
+        let loopback = Policy::default();
+        let open = Policy {
+            open_beyond_loopback: true,
+            ..Policy::default()
+        };
+        let allowed = Policy {
+            open_beyond_loopback: true,
+            allowed_hosts: vec!["mocap.lab".into()],
+            ..Policy::default()
+        };
+        assert!(host_allowed("localhost:8080", &loopback));
+        assert!(!host_allowed("10.0.0.2:8080", &loopback));
+        assert!(host_allowed("10.0.0.2:8080", &open));
+        assert!(host_allowed("[2001:db8::1]:80", &open));
+        // --insecure-no-auth no longer answers any name (DNS rebinding).
+        assert!(!host_allowed("evil.example", &open));
+        assert!(!host_allowed("mocap.lab:8080", &open));
+        assert!(host_allowed("MOCAP.lab:8080", &allowed));
+        let any = Policy {
+            allowed_hosts: vec!["*".into()],
+            ..Policy::default()
+        };
+        assert!(host_allowed("evil.example", &any));
     }
 
     #[test]

@@ -4,12 +4,13 @@ use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
-use axum::Json;
+use axum::{Extension, Json};
 use serde::Deserialize;
 
 use super::error::ApiError;
 use super::AppState;
 use crate::codec::BasisKind;
+use crate::service::access::Caller;
 use crate::service::bases;
 use crate::service::jobs::{Job, MAX_WAIT_S};
 use crate::service::training::{self, TrainRequest};
@@ -40,18 +41,20 @@ pub struct ListQuery {
 
 pub async fn list(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let Query(q) = query?;
-    let items = bases::list(&state.store, q.layout.as_deref(), q.kind).await?;
+    let items = bases::list(&state.store, q.layout.as_deref(), q.kind, &caller.grant).await?;
     Ok(Json(serde_json::json!({ "items": items })))
 }
 
 pub async fn get(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
 ) -> Result<Json<BasisRow>, ApiError> {
-    Ok(Json(bases::get(&state.store, &id).await?))
+    Ok(Json(bases::get(&state.store, &id, &caller.grant).await?))
 }
 
 /// 204, 404, or 409 while takes still reference the basis.
@@ -72,6 +75,7 @@ pub struct JobQuery {
 
 pub async fn job(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
     query: Result<Query<JobQuery>, QueryRejection>,
 ) -> Result<Json<Job>, ApiError> {
@@ -84,7 +88,7 @@ pub async fn job(
     }
     state
         .jobs
-        .wait(&id, std::time::Duration::from_secs(wait))
+        .wait_for(&id, std::time::Duration::from_secs(wait), &caller.grant)
         .await
         .map(Json)
         .ok_or_else(|| Error::NotFound(format!("job {id}")).into())

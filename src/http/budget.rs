@@ -1,12 +1,12 @@
-//! Request bodies under one server-wide memory budget.
-//!
-//! A limit per request does not bound a server: three 500 MB uploads at once held 2.7 GB.
-//! So every body is read here, before its handler runs, against two bounds:
-//! - its route's size limit: a `Content-Length` over it is refused (413) before a byte of
-//!   the body is read, and a body without one is cut off (413) once it passes the limit;
-//! - the server's budget for bodies held at once ([`crate::limits::Limits::inflight_bytes`]):
-//!   a body that would go over is refused at once with 503 and `Retry-After`, never queued
-//!   in memory.
+//! Request bodies read under the server's budget for them ([`Budget`]: a total and a share
+//! per caller), before their handler runs:
+//! - a body over its route's size limit is refused (413): at once when its
+//!   `Content-Length` says so, else when it passes the limit;
+//! - the budget counts what has arrived, not what was declared: a client that declares
+//!   512 MiB and sends nothing holds nothing. A body that would take the server past its
+//!   budget, or its caller past its share, is refused at once (503, `Retry-After`);
+//! - a body from which nothing arrives for [`crate::limits::Limits::body_idle`] is dropped
+//!   (408) and what it held is freed.
 //!
 //! The reservation travels with the bytes: the body reaches its handler as [`Bytes`] that own
 //! their reservation, so it is returned when the last copy of the upload is dropped (the
@@ -14,6 +14,7 @@
 //! response is written. What the budget counts is therefore what the server really holds.
 
 use std::sync::Arc;
+use std::time::Duration;
 
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
@@ -21,61 +22,31 @@ use axum::http::{header, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use http_body_util::BodyExt;
-use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
 use super::error::ApiError;
 use crate::limits::RETRY_AFTER_S;
+use crate::service::budget::{Budget, Holder, Refused, Reservation};
 
-/// The budget counts in KiB so that one `u32` reservation covers any body.
-const UNIT: u64 = 1024;
-
-/// Bytes of request bodies the server may hold at once.
-pub struct BodyBudget {
-    permits: Arc<Semaphore>,
-    total_units: u64,
-}
-
-impl BodyBudget {
-    pub fn new(bytes: u64) -> Self {
-        let units = (bytes / UNIT).clamp(1, Semaphore::MAX_PERMITS as u64);
-        BodyBudget {
-            permits: Arc::new(Semaphore::new(units as usize)),
-            total_units: units,
-        }
-    }
-
-    /// Bytes reserved by bodies held now (rounded up to KiB per reservation).
-    pub fn held_bytes(&self) -> u64 {
-        (self.total_units - self.permits.available_permits() as u64) * UNIT
-    }
-
-    /// The budget, bytes.
-    pub fn total_bytes(&self) -> u64 {
-        self.total_units * UNIT
-    }
-
-    /// Reserve room for `bytes` more, or `None` if the budget has not got it now.
-    fn reserve(&self, bytes: u64) -> Option<OwnedSemaphorePermit> {
-        let units = u32::try_from(bytes.div_ceil(UNIT)).ok()?;
-        self.permits.clone().try_acquire_many_owned(units).ok()
-    }
-}
+/// A body's buffer grows in steps of at least this many bytes.
+const STEP: usize = 64 << 10;
 
 /// What one route's bodies are read under.
 #[derive(Clone)]
 pub struct BodyGate {
-    pub budget: Arc<BodyBudget>,
+    pub budget: Arc<Budget>,
     /// Largest body this route takes, bytes.
     pub limit: u64,
+    /// How long a body may send nothing.
+    pub idle: Duration,
 }
 
 /// A body and the reservation it holds while any copy of it lives.
-struct Held {
+struct HeldBody {
     data: Vec<u8>,
-    _reserved: Vec<OwnedSemaphorePermit>,
+    _reserved: Reservation,
 }
 
-impl AsRef<[u8]> for Held {
+impl AsRef<[u8]> for HeldBody {
     fn as_ref(&self) -> &[u8] {
         &self.data
     }
@@ -90,11 +61,10 @@ fn too_large(limit: u64, what: String) -> Response {
     .into_response()
 }
 
-fn busy(budget: &BodyBudget) -> Response {
+fn busy(refused: Refused) -> Response {
     ApiError::busy(format!(
-        "the server holds as many request bodies as its memory budget allows ({} bytes); \
-         retry in {RETRY_AFTER_S} s",
-        budget.total_bytes()
+        "{}; retry in {RETRY_AFTER_S} s",
+        refused.reason("request bodies")
     ))
     .into_response()
 }
@@ -112,54 +82,56 @@ pub async fn hold_body(State(gate): State<BodyGate>, req: Request, next: Next) -
     if let Some(n) = declared.filter(|&n| n > gate.limit) {
         return too_large(gate.limit, format!("Content-Length is {n} bytes"));
     }
-    let mut reserved = Vec::new();
-    if let Some(n) = declared.filter(|&n| n > 0) {
-        match gate.budget.reserve(n) {
-            Some(p) => reserved.push(p),
-            None => return busy(&gate.budget),
-        }
-    }
-    let (parts, body) = req.into_parts();
-    // Room for what was declared (and reserved); a body without a length grows as it comes.
-    let mut data = Vec::with_capacity(declared.unwrap_or(0) as usize);
-    let mut body = body;
-    let mut unreserved = 0u64;
-    while let Some(frame) = body.frame().await {
-        let frame = match frame {
-            Ok(f) => f,
-            Err(e) => {
+    // The front door puts the caller's holder in every request it lets through.
+    let holder = req
+        .extensions()
+        .get::<Holder>()
+        .cloned()
+        .unwrap_or(Holder::Address([0, 0, 0, 0].into()));
+    let mut reserved = gate.budget.reservation(holder);
+    // The buffer never grows past what the body may be: declared, or the route's limit.
+    let most = declared.unwrap_or(gate.limit) as usize;
+    let (parts, mut body) = req.into_parts();
+    let mut data: Vec<u8> = Vec::new();
+    loop {
+        let frame = match tokio::time::timeout(gate.idle, body.frame()).await {
+            Err(_) => {
+                return ApiError::new(
+                    StatusCode::REQUEST_TIMEOUT,
+                    "body_timeout",
+                    format!(
+                        "no part of the request body arrived for {} s; send it again",
+                        gate.idle.as_secs()
+                    ),
+                )
+                .into_response()
+            }
+            Ok(None) => break,
+            Ok(Some(Err(e))) => {
                 return ApiError::bad_request(format!("could not read the request body: {e}"))
                     .into_response()
             }
+            Ok(Some(Ok(f))) => f,
         };
         let Ok(chunk) = frame.into_data() else {
             continue; // trailers
         };
-        let len = (data.len() + chunk.len()) as u64;
-        if len > gate.limit {
+        let len = data.len() + chunk.len();
+        if len as u64 > gate.limit {
             return too_large(gate.limit, format!("the body passed {} bytes", gate.limit));
         }
-        if declared.is_none() {
-            // Reserve in steps of at least 64 KiB, so that a chunked upload does not take a
-            // permit per network read.
-            unreserved += chunk.len() as u64;
-            if unreserved >= 64 * UNIT || len == gate.limit {
-                match gate.budget.reserve(unreserved) {
-                    Some(p) => reserved.push(p),
-                    None => return busy(&gate.budget),
-                }
-                unreserved = 0;
+        if len > data.capacity() {
+            // Room is reserved before it is allocated, and counted as allocated: capacity,
+            // not length.
+            let want = len.max(data.capacity() * 2).max(STEP).min(most.max(len));
+            if let Err(r) = reserved.grow_to(want as u64) {
+                return busy(r);
             }
+            data.reserve_exact(want - data.len());
         }
         data.extend_from_slice(&chunk);
     }
-    if unreserved > 0 {
-        match gate.budget.reserve(unreserved) {
-            Some(p) => reserved.push(p),
-            None => return busy(&gate.budget),
-        }
-    }
-    let body = Bytes::from_owner(Held {
+    let body = Bytes::from_owner(HeldBody {
         data,
         _reserved: reserved,
     });
@@ -172,19 +144,18 @@ mod tests {
 
     #[test]
     fn reservations_come_back_when_their_bytes_are_dropped() {
-        let b = BodyBudget::new(10 * UNIT);
-        let p = b.reserve(4 * UNIT + 1).unwrap(); // rounds up to 5 KiB
-        assert_eq!(b.held_bytes(), 5 * UNIT);
-        assert!(b.reserve(6 * UNIT).is_none(), "over the budget");
-        let bytes = Bytes::from_owner(Held {
+        let b = Arc::new(Budget::new(10 << 10, 10 << 10));
+        let mut r = b.reservation(Holder::Address([10, 0, 0, 1].into()));
+        r.grow_to((4 << 10) + 1).unwrap(); // rounds up to 5 KiB
+        assert_eq!(b.reserved_bytes(), 5 << 10);
+        let bytes = Bytes::from_owner(HeldBody {
             data: vec![1, 2, 3],
-            _reserved: vec![p],
+            _reserved: r,
         });
         let copy = bytes.clone();
         drop(bytes);
-        assert_eq!(b.held_bytes(), 5 * UNIT, "a copy still holds it");
+        assert_eq!(b.reserved_bytes(), 5 << 10, "a copy still holds it");
         drop(copy);
-        assert_eq!(b.held_bytes(), 0);
-        assert!(b.reserve(10 * UNIT).is_some());
+        assert_eq!(b.reserved_bytes(), 0);
     }
 }

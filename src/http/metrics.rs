@@ -28,6 +28,11 @@ pub struct Metrics {
     uploaded_bytes: AtomicU64,
     stored_bytes: AtomicU64,
     served_bytes: AtomicU64,
+    connections_open: AtomicU64,
+    connections_refused: AtomicU64,
+    closed_header: AtomicU64,
+    closed_idle: AtomicU64,
+    closed_send: AtomicU64,
 }
 
 impl Metrics {
@@ -46,6 +51,30 @@ impl Metrics {
         self.decoded_frames
             .fetch_add(frames as u64, Ordering::Relaxed);
         self.served_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+    }
+
+    pub fn connection_opened(&self) {
+        self.connections_open.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub fn connection_ended(&self) {
+        self.connections_open.fetch_sub(1, Ordering::Relaxed);
+    }
+
+    /// A connection past the cap, answered 503 (or closed unanswered).
+    pub fn connection_refused(&self) {
+        self.connections_refused.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// A connection the server closed when one of its timeouts ran out: `header_timeout`,
+    /// `idle_timeout` or `send_timeout`.
+    pub fn connection_closed(&self, reason: &str) {
+        let c = match reason {
+            "header_timeout" => &self.closed_header,
+            "idle_timeout" => &self.closed_idle,
+            _ => &self.closed_send,
+        };
+        c.fetch_add(1, Ordering::Relaxed);
     }
 
     fn observe(&self, seconds: f64, error: bool) {
@@ -116,6 +145,27 @@ impl Metrics {
             s += &format!("# TYPE mocapstore_{name}_bytes_total counter\n");
             s += &format!("mocapstore_{name}_bytes_total {}\n", g(v));
         }
+        s += "# TYPE mocapstore_connections_open gauge\n";
+        s += &format!(
+            "mocapstore_connections_open {}\n",
+            g(&self.connections_open)
+        );
+        s += "# TYPE mocapstore_connections_refused_total counter\n";
+        s += &format!(
+            "mocapstore_connections_refused_total {}\n",
+            g(&self.connections_refused)
+        );
+        s += "# TYPE mocapstore_connections_closed_total counter\n";
+        for (why, v) in [
+            ("header_timeout", &self.closed_header),
+            ("idle_timeout", &self.closed_idle),
+            ("send_timeout", &self.closed_send),
+        ] {
+            s += &format!(
+                "mocapstore_connections_closed_total{{reason=\"{why}\"}} {}\n",
+                g(v)
+            );
+        }
         s
     }
 }
@@ -142,16 +192,47 @@ pub async fn count_requests(State(m): State<Arc<Metrics>>, req: Request, next: N
 pub async fn render(State(state): State<super::AppState>) -> Response {
     let mut text = state.metrics.render_text();
     // What the server holds now, against its limits (gauges).
+    let (answers_held, answers_peak, answer_peak) = state.answers.held();
     for (name, help, value) in [
         (
             "mocapstore_request_body_bytes_held",
-            "request bodies held now, against the in-flight budget",
-            state.bodies.held_bytes(),
+            "request bodies held now (reserved as they arrive), against the in-flight budget",
+            state.bodies.reserved_bytes(),
         ),
         (
             "mocapstore_request_body_bytes_budget",
             "the in-flight budget for request bodies",
             state.bodies.total_bytes(),
+        ),
+        (
+            "mocapstore_request_body_bytes_share",
+            "what one caller's request bodies may hold at once",
+            state.bodies.share_bytes(),
+        ),
+        (
+            "mocapstore_answer_bytes_reserved",
+            "what range answers being written have reserved now",
+            state.answers.reserved_bytes(),
+        ),
+        (
+            "mocapstore_answer_bytes_held",
+            "what range answers being written hold now (their buffers)",
+            answers_held,
+        ),
+        (
+            "mocapstore_answer_bytes_held_peak",
+            "the most range answers held at once since the server started",
+            answers_peak,
+        ),
+        (
+            "mocapstore_answer_bytes_one_peak",
+            "the most one range answer held since the server started",
+            answer_peak,
+        ),
+        (
+            "mocapstore_answer_bytes_budget",
+            "the budget for range answers",
+            state.answers.total_bytes(),
         ),
         (
             "mocapstore_streams_open",

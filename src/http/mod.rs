@@ -10,6 +10,7 @@ mod error;
 mod library;
 mod metrics;
 mod sequences;
+pub mod serve;
 mod skeletons;
 mod streams;
 mod tokens;
@@ -26,15 +27,17 @@ use axum::http::StatusCode;
 use axum::routing::{get, post};
 use axum::Router;
 use tokio::net::TcpListener;
+use tower_http::set_header::SetResponseHeaderLayer;
 use tower_http::trace::TraceLayer;
 
 use auth::{Front, Policy, RateKey};
-use budget::{hold_body, BodyBudget, BodyGate};
+use budget::{hold_body, BodyGate};
 pub use error::ApiError;
 pub use metrics::Metrics;
 
 use crate::limits::Limits;
-use crate::service::access::Authenticator;
+use crate::service::access::{AuditLog, Authenticator};
+use crate::service::budget::Budget;
 use crate::service::history::Histories;
 use crate::service::jobs::Jobs;
 use crate::service::prepared::ReadCaches;
@@ -58,6 +61,9 @@ pub struct Config {
     pub exhaustive_choice: bool,
     /// Browser origins allowed, and whether to serve anonymous requests beyond loopback.
     pub policy: Policy,
+    /// A second address serving `GET /metrics` alone, without a token (for a scraper on an
+    /// internal network); on the main address `/metrics` needs an admin token.
+    pub metrics_listen: Option<String>,
 }
 
 /// How often the server renews its streams' leases, finishes idle streams and closes the
@@ -74,6 +80,7 @@ impl Default for Config {
             stream_lease: Duration::from_secs(60),
             exhaustive_choice: false,
             policy: Policy::default(),
+            metrics_listen: None,
         }
     }
 }
@@ -83,8 +90,10 @@ impl Default for Config {
 pub struct AppState {
     pub store: Store,
     pub limits: Limits,
-    /// Request bodies held now, against [`Limits::inflight_bytes`].
-    pub bodies: Arc<BodyBudget>,
+    /// Request bodies held now, against [`Limits::inflight_bytes`] (a share per caller).
+    pub bodies: Arc<Budget>,
+    /// What range answers hold now, against [`Limits::answer_bytes`] (a share per caller).
+    pub answers: Arc<Budget>,
     pub metrics: Arc<Metrics>,
     pub caches: Arc<ReadCaches>,
     pub jobs: Arc<Jobs>,
@@ -94,6 +103,8 @@ pub struct AppState {
     pub histories: Option<Arc<Histories>>,
     /// Who requests are, from their tokens (cached briefly).
     pub auth: Arc<Authenticator>,
+    /// The audit log, with the counts of refused requests not yet written.
+    pub audit: Arc<AuditLog>,
 }
 
 /// Forgets the rate limiter's idle keys; run with the other maintenance.
@@ -109,6 +120,7 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
             BodyGate {
                 budget: state.bodies.clone(),
                 limit,
+                idle: limits.body_idle,
             },
             hold_body,
         )
@@ -198,6 +210,7 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
     let front = Front {
         store: state.store.clone(),
         auth: state.auth.clone(),
+        audit: state.audit.clone(),
         policy: Arc::new(policy),
         limited,
         refuse,
@@ -210,6 +223,11 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
     let router = Router::new()
         .fallback_service(gated)
         .layer(tower::util::option_layer(cors))
+        // No answer is ever to be read by a browser as another type than it says.
+        .layer(SetResponseHeaderLayer::if_not_present(
+            axum::http::header::X_CONTENT_TYPE_OPTIONS,
+            axum::http::HeaderValue::from_static("nosniff"),
+        ))
         .layer(axum::middleware::from_fn_with_state(
             state.metrics.clone(),
             metrics::count_requests,
@@ -259,6 +277,8 @@ fn cors(origins: &[String]) -> tower_http::cors::CorsLayer {
 /// A bound, ready-to-serve service.
 pub struct Application {
     listener: TcpListener,
+    /// `--metrics-listen`'s listener, if asked for.
+    metrics_listener: Option<TcpListener>,
     router: Router,
     store: Store,
     state: AppState,
@@ -279,17 +299,27 @@ impl Application {
         let listener = TcpListener::bind(&config.listen)
             .await
             .map_err(|e| format!("cannot listen on {}: {e}", config.listen))?;
+        let metrics_listener = match &config.metrics_listen {
+            None => None,
+            Some(addr) => Some(
+                TcpListener::bind(addr)
+                    .await
+                    .map_err(|e| format!("cannot listen on {addr} (--metrics-listen): {e}"))?,
+            ),
+        };
         let limits = config.limits;
         let state = AppState {
             store: store.clone(),
             limits,
-            bodies: Arc::new(BodyBudget::new(limits.inflight_bytes)),
+            bodies: Arc::new(Budget::new(limits.inflight_bytes, limits.body_share_bytes)),
+            answers: Arc::new(Budget::new(limits.answer_bytes, limits.answer_share_bytes)),
             metrics: Arc::new(Metrics::default()),
             caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
             jobs: Arc::new(Jobs::default()),
             streams: Arc::new(Streams::new(limits, config.stream_lease)),
             histories: (!config.exhaustive_choice).then(|| Arc::new(Histories::default())),
             auth: Arc::new(Authenticator::default()),
+            audit: Arc::new(AuditLog::default()),
         };
         // Without tokens the server answers anyone who reaches it: only loopback, unless
         // the operator says otherwise.
@@ -327,6 +357,7 @@ impl Application {
         let (router, forget_idle_keys) = router(state.clone(), config.policy);
         Ok(Application {
             listener,
+            metrics_listener,
             router,
             store,
             state,
@@ -340,6 +371,13 @@ impl Application {
             .expect("a bound listener has an address")
     }
 
+    /// The address `/metrics` is served on without a token, if one was asked for.
+    pub fn metrics_addr(&self) -> Option<SocketAddr> {
+        self.metrics_listener
+            .as_ref()
+            .and_then(|l| l.local_addr().ok())
+    }
+
     /// Serve until `shutdown` resolves; in-flight requests finish, then the pool closes.
     pub async fn run_until(
         self,
@@ -350,29 +388,61 @@ impl Application {
         let forget = self.forget_idle_keys.clone();
         let reaper = tokio::spawn(async move {
             let mut tick = tokio::time::interval(MAINTENANCE_PERIOD);
+            let mut pruned: Option<std::time::Instant> = None;
             loop {
                 tick.tick().await;
                 state.streams.maintain(&state.store, &state.caches).await;
                 if let Some(f) = &forget {
                     f();
                 }
+                if let Err(e) = state.audit.flush(&state.store, false).await {
+                    tracing::warn!(error = %e, "writing the counts of refused requests failed");
+                }
+                // Old audit entries go once a minute (a DELETE by the indexed time).
+                if pruned.is_none_or(|t| t.elapsed() >= Duration::from_secs(60)) {
+                    pruned = Some(std::time::Instant::now());
+                    let retention = state.limits.audit_retention;
+                    if let Err(e) = AuditLog::prune(&state.store, retention).await {
+                        tracing::warn!(error = %e, "deleting old audit entries failed");
+                    }
+                }
             }
         });
-        // Peer addresses: the rate limit's key for requests without a token.
-        let service = self
-            .router
-            .into_make_service_with_connect_info::<SocketAddr>();
         // Watches of live streams never end on their own: end them first, or the graceful
         // shutdown would wait for them.
         let streams = self.state.streams.clone();
+        let (stopping, stopped) = tokio::sync::watch::channel(false);
         let shutdown = async move {
             shutdown.await;
             streams.stop_watchers();
+            stopping.send_replace(true);
         };
-        let served = axum::serve(self.listener, service)
-            .with_graceful_shutdown(shutdown)
-            .await;
+        let metrics = self.metrics_listener.map(|l| {
+            let router = Router::new()
+                .route("/metrics", get(metrics::render))
+                .with_state(self.state.clone());
+            let mut stopped = stopped.clone();
+            let (limits, m) = (self.state.limits, self.state.metrics.clone());
+            tokio::spawn(serve::serve(l, router, limits, m, async move {
+                let _ = stopped.wait_for(|s| *s).await;
+            }))
+        });
+        let served = serve::serve(
+            self.listener,
+            self.router,
+            self.state.limits,
+            self.state.metrics.clone(),
+            shutdown,
+        )
+        .await;
         reaper.abort();
+        if let Some(m) = metrics {
+            let _ = m.await;
+        }
+        drop(stopped);
+        if let Err(e) = self.state.audit.flush(&self.state.store, true).await {
+            tracing::warn!(error = %e, "writing the counts of refused requests failed");
+        }
         served?;
         self.store.close().await;
         Ok(())

@@ -1,13 +1,14 @@
 //! `/v1/sequences`: ingest, metadata, frame ranges, delete. Handlers parse the request into
 //! domain types and call the service; no math, no SQL.
 
-use axum::body::Bytes;
+use axum::body::{Body, Bytes};
 use axum::extract::rejection::{BytesRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
 use axum::Json;
+use futures_util::StreamExt;
 use serde::Deserialize;
 
 use super::error::ApiError;
@@ -17,8 +18,9 @@ use crate::codec::{CodecId, ErrorBound, Hints, Latency};
 use crate::limits::Limits;
 use crate::motion::formats::{self, Format};
 use crate::motion::units::parse_unit;
-use crate::motion::{Motion, Unit, UnitSource};
 use crate::service::access::{self, Caller};
+use crate::service::answer::{self, RangeRequest};
+use crate::service::budget::Holder;
 use crate::service::choose::{CodecRequest, Keep};
 use crate::service::fetch::{self, TimeRange};
 use crate::service::ingest::{self, IngestRequest};
@@ -261,16 +263,8 @@ pub struct FramesQuery {
     format: Option<String>,
 }
 
-/// What a range request asks for.
-pub struct FramesRequest {
-    pub range: TimeRange,
-    pub format: Format,
-    /// Point names, or every point.
-    pub points: Option<Vec<String>>,
-}
-
 /// A range request's query as the range, output format and points it asks for.
-pub fn frames_request(q: FramesQuery) -> Result<FramesRequest, ApiError> {
+pub fn frames_request(q: FramesQuery) -> Result<RangeRequest, ApiError> {
     let range = match (q.start, q.end, q.t0, q.t1) {
         (None, None, None, None) => TimeRange::All,
         (s, e, None, None) => TimeRange::Frames {
@@ -299,7 +293,7 @@ pub fn frames_request(q: FramesQuery) -> Result<FramesRequest, ApiError> {
             "BVH output is the whole skeleton: leave out points",
         ));
     }
-    Ok(FramesRequest {
+    Ok(RangeRequest {
         range,
         format,
         points,
@@ -309,69 +303,61 @@ pub fn frames_request(q: FramesQuery) -> Result<FramesRequest, ApiError> {
 pub async fn frames(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
     query: Result<Query<FramesQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
     access::check_take(&state.store, &caller.grant, &id).await?;
-    let FramesRequest {
-        range,
-        format,
-        points,
-    } = frames_request(q)?;
-    if format == Format::Bvh {
-        let b = fetch::bvh(&state.store, &id, range).await?;
-        state.metrics.decoded(b.end - b.start, b.bytes.len());
-        let mut headers = HeaderMap::new();
-        let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
-        headers.insert("x-frames", hv((b.end - b.start).to_string()));
-        headers.insert("x-start-frame", hv(b.start.to_string()));
-        headers.insert("x-fps", hv(b.fps.to_string()));
-        headers.insert(header::CONTENT_TYPE, HeaderValue::from_static("text/plain"));
-        return Ok((headers, b.bytes).into_response());
-    }
-    let frames = fetch::frames(&state.store, &state.caches, &id, range, points.as_deref()).await?;
+    let request = frames_request(q)?;
+    let mut a = answer::open(
+        &state.store,
+        &state.caches,
+        &state.answers,
+        holder,
+        &state.limits,
+        &id,
+        request,
+    )
+    .await?;
     state
         .metrics
-        .decoded(frames.end - frames.start, frames.data.len() * 4);
-    frames_response(frames, format)
-}
-
-/// Decoded frames in the format asked for, with their place in the take as headers. JSON
-/// is the JSON file format plus the take's id, the range and its unit in metres.
-fn frames_response(frames: fetch::Frames, format: Format) -> Result<Response, ApiError> {
+        .decoded(a.frames(), a.frames() * a.points.unwrap_or(0) * 12);
     let mut headers = HeaderMap::new();
     let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
-    headers.insert("x-frames", hv((frames.end - frames.start).to_string()));
-    headers.insert("x-points", hv(frames.points.len().to_string()));
-    headers.insert("x-start-frame", hv(frames.start.to_string()));
-    headers.insert("x-fps", hv(frames.fps.to_string()));
-    headers.insert("x-metres-per-unit", hv(frames.metres_per_unit.to_string()));
-    let unit = Unit::new(frames.metres_per_unit, UnitSource::Declared)
-        .map_err(|e| crate::service::Error::Internal(e.to_string()))?;
-    let mut fields = serde_json::Map::new();
-    fields.insert("id".into(), frames.id.into());
-    fields.insert("start".into(), frames.start.into());
-    fields.insert("end".into(), frames.end.into());
-    fields.insert("metres_per_unit".into(), frames.metres_per_unit.into());
-    let motion = Motion::new(frames.fps, unit, frames.points, frames.data, None)
-        .map_err(|e| crate::service::Error::Internal(e.to_string()))?;
-    let (bytes, content_type) = match format {
-        Format::Json => (
-            formats::json::write_with(&motion, fields),
-            "application/json",
-        ),
-        _ => {
-            let bytes = formats::write(&motion, format)
-                .map_err(|e| crate::service::Error::Unsatisfiable(e.to_string()))?;
-            let ct = match format {
-                Format::Csv => "text/csv",
-                Format::Trc => "text/plain",
-                _ => "application/octet-stream",
-            };
-            (bytes, ct)
-        }
+    headers.insert("x-frames", hv(a.frames().to_string()));
+    headers.insert("x-start-frame", hv(a.start.to_string()));
+    headers.insert("x-fps", hv(a.fps.to_string()));
+    if let Some(points) = a.points {
+        headers.insert("x-points", hv(points.to_string()));
+        headers.insert("x-metres-per-unit", hv(a.metres_per_unit.to_string()));
+    }
+    if let Some(n) = a.length {
+        headers.insert(header::CONTENT_LENGTH, hv(n.to_string()));
+    }
+    let content_type = match a.format {
+        Format::Json => "application/json",
+        Format::Csv => "text/csv",
+        Format::Trc | Format::Bvh => "text/plain",
+        _ => "application/octet-stream",
     };
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
-    Ok((headers, bytes).into_response())
+    // The first piece before the status: what fails at the start (a stored chunk that does
+    // not decode) is still an error answer, not a cut-off one.
+    let first = a.next().await?;
+    let rest = futures_util::stream::unfold(Some(a), |a| async move {
+        let mut a = a?;
+        match a.next().await {
+            Ok(Some(piece)) => Some((Ok(piece), Some(a))),
+            Ok(None) => None,
+            Err(e) => {
+                // The status is sent: all that is left is to cut the answer short, which a
+                // client sees as a body shorter than its length or an unfinished chunking.
+                tracing::error!(take = %a.id, error = %e, "a range answer failed part way");
+                Some((Err(e), None))
+            }
+        }
+    });
+    let body = futures_util::stream::iter(first.map(Ok)).chain(rest);
+    Ok((headers, Body::from_stream(body)).into_response())
 }

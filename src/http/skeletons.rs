@@ -3,12 +3,13 @@
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
-use axum::Json;
+use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
 
 use super::error::ApiError;
 use super::AppState;
 use crate::motion::skeleton::Joint;
+use crate::service::access::Caller;
 use crate::service::skeletons;
 use crate::store::SkeletonRow;
 
@@ -20,10 +21,11 @@ pub struct ListQuery {
 
 pub async fn list(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let Query(q) = query?;
-    let items = skeletons::list(&state.store, q.layout.as_deref()).await?;
+    let items = skeletons::list(&state.store, q.layout.as_deref(), &caller.grant).await?;
     Ok(Json(serde_json::json!({ "items": items })))
 }
 
@@ -37,9 +39,10 @@ pub struct SkeletonView {
 
 pub async fn get(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
 ) -> Result<Json<SkeletonView>, ApiError> {
-    let (row, rig) = skeletons::get(&state.store, &id).await?;
+    let (row, rig) = skeletons::get(&state.store, &id, &caller.grant).await?;
     Ok(Json(SkeletonView {
         row,
         hierarchy: rig.joints().to_vec(),

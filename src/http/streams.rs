@@ -22,16 +22,18 @@ use super::error::ApiError;
 use super::views::TakeView;
 use super::AppState;
 use crate::service::access::{self, Caller};
+use crate::service::budget::Holder;
 use crate::service::streams::{Arrival, OpenRequest, StreamInfo, Watch};
 
 pub async fn open(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
     body: Result<Json<OpenRequest>, JsonRejection>,
 ) -> Result<impl IntoResponse, ApiError> {
     let Json(mut req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
     req.library = caller.grant.library_for_new(&req.library)?;
-    let info = state.streams.open(&state.store, req).await?;
+    let info = state.streams.open(&state.store, req, &holder).await?;
     let location = format!("/v1/streams/{}", info.id);
     Ok((
         StatusCode::CREATED,
@@ -243,31 +245,50 @@ fn json_event(name: &str, value: &impl Serialize) -> Event {
 enum Next {
     Arrival(Arc<Arrival>),
     Skipped(u64),
-    End(&'static str),
+    End(String),
+    /// Time to ask again whether the watcher may still watch.
+    Recheck,
 }
 
-async fn next(w: &mut Watch) -> Next {
+async fn next(w: &mut Watch, tick: &mut tokio::time::Interval) -> Next {
     tokio::select! {
         r = w.arrivals.recv() => match r {
             Ok(a) => Next::Arrival(a),
             Err(RecvError::Lagged(n)) => Next::Skipped(n),
-            Err(RecvError::Closed) => Next::End("finished"),
+            Err(RecvError::Closed) => Next::End("finished".into()),
         },
-        _ = w.stopping.wait_for(|s| *s) => Next::End("the server is shutting down"),
+        _ = w.stopping.wait_for(|s| *s) => Next::End("the server is shutting down".into()),
+        _ = tick.tick() => Next::Recheck,
     }
 }
+
+/// A watch as its event stream goes: the watch, and who watches what.
+struct Watching {
+    watch: Watch,
+    tick: tokio::time::Interval,
+    state: AppState,
+    caller: Caller,
+    id: String,
+}
+
+/// How often a watch asks again whether its caller may still watch: a revoked or expired
+/// token, or a take moved out of the token's libraries, ends it within this time.
+pub const WATCH_RECHECK: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// `GET /v1/streams/{id}/events`: an open stream's frames as they arrive, as server-sent
 /// events: `stream` (its state and the server's clock), then `frames` for the newest frame
 /// and for every append after it (with when it was received and, if the producer said,
-/// captured), `skipped` when this watcher fell behind, and `end` when the stream closes.
+/// captured), `skipped` when this watcher fell behind, and `end` when the stream closes —
+/// or when the watcher may no longer watch it (its token revoked or expired, the take moved
+/// out of its libraries), asked again every [`WATCH_RECHECK`].
 pub async fn events(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
 ) -> Result<impl IntoResponse, ApiError> {
     access::check_take(&state.store, &caller.grant, &id).await?;
-    let mut watch = state.streams.watch(&state.store, &id).await?;
+    let mut watch = state.streams.watch(&state.store, &id, &holder).await?;
     let hello = json_event(
         "stream",
         &Hello {
@@ -278,22 +299,48 @@ pub async fn events(
     let head: Vec<Event> = std::iter::once(hello)
         .chain(watch.latest.take().map(|a| frames_event(&a)))
         .collect();
-    let rest = futures_util::stream::unfold(Some(watch), |w| async move {
+    let mut tick = tokio::time::interval(WATCH_RECHECK);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    tick.reset();
+    let watching = Watching {
+        watch,
+        tick,
+        state,
+        caller,
+        id,
+    };
+    let rest = futures_util::stream::unfold(Some(watching), |w| async move {
         let mut w = w?;
-        Some(match next(&mut w).await {
-            Next::Arrival(a) => (frames_event(&a), Some(w)),
-            Next::Skipped(n) => (
-                json_event("skipped", &serde_json::json!({ "appends": n })),
-                Some(w),
-            ),
-            Next::End(reason) => (
-                json_event("end", &serde_json::json!({ "reason": reason })),
-                None,
-            ),
-        })
+        loop {
+            let event = match next(&mut w.watch, &mut w.tick).await {
+                Next::Arrival(a) => frames_event(&a),
+                Next::Skipped(n) => json_event("skipped", &serde_json::json!({ "appends": n })),
+                Next::End(reason) => return Some((end_event(&reason), None)),
+                Next::Recheck => {
+                    let s = &w.state;
+                    match s.auth.recheck(&s.store, &w.caller, &w.id).await {
+                        Ok(()) => continue,
+                        Err(e) => {
+                            let why = match e {
+                                crate::service::Error::NotFound(_) => {
+                                    "the take is no longer in this token's libraries".to_string()
+                                }
+                                e => e.to_string(),
+                            };
+                            return Some((end_event(&why), None));
+                        }
+                    }
+                }
+            };
+            return Some((event, Some(w)));
+        }
     });
     let events = futures_util::stream::iter(head)
         .chain(rest)
         .map(Ok::<_, Infallible>);
     Ok(Sse::new(events).keep_alive(KeepAlive::default()))
+}
+
+fn end_event(reason: &str) -> Event {
+    json_event("end", &serde_json::json!({ "reason": reason }))
 }

@@ -65,6 +65,8 @@ pub async fn audit(
             "limit must be 1 to {MAX_AUDIT_PAGE}"
         )));
     }
+    // What is counted but not yet written belongs in the answer.
+    state.audit.flush(&state.store, true).await?;
     Ok(Json(
         access::audit_log(&state.store, q.before, limit).await?,
     ))

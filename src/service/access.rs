@@ -23,6 +23,7 @@
 
 use std::collections::{BTreeSet, HashMap};
 use std::fmt;
+use std::net::IpAddr;
 use std::str::FromStr;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -30,7 +31,10 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::{now_ms, Error, Result};
-use crate::limits::{MAX_TOKEN_LIBRARIES, TOKEN_CACHE, TOKEN_CACHE_ENTRIES};
+use crate::limits::{
+    AUDIT_FIELD_BYTES, AUDIT_REFUSED_KEYS, MAX_TOKEN_LIBRARIES, TOKEN_CACHE, TOKEN_CACHE_ENTRIES,
+    TOKEN_LAST_USED_EVERY,
+};
 use crate::store::{AuditRow, Filter, Store, TokenRow};
 
 /// What a token may do; each includes the ones before it.
@@ -138,17 +142,18 @@ impl Grant {
     }
 }
 
-/// `Forbidden` unless `grant` reaches the library of take (or stream) `id`; `NotFound` if
-/// there is no such take. A grant over every library costs no lookup.
+/// `NotFound` unless take (or stream) `id` exists and `grant` reaches its library: a take
+/// in another library answers as one that does not exist, so that a limited token learns
+/// neither that the id exists nor which library holds it. A grant over every library costs
+/// no lookup.
 pub async fn check_take(store: &Store, grant: &Grant, id: &str) -> Result<()> {
     if grant.libraries.is_none() {
         return Ok(());
     }
-    let library = store
-        .library_of(id)
-        .await?
-        .ok_or_else(|| Error::NotFound(format!("sequence {id}")))?;
-    grant.library(&library)
+    match store.library_of(id).await? {
+        Some(library) if grant.library(&library).is_ok() => Ok(()),
+        _ => Err(Error::NotFound(format!("sequence {id}"))),
+    }
 }
 
 /// The token a request came with, as the audit log names it.
@@ -186,6 +191,8 @@ pub struct TokenInfo {
     pub created_at: i64,
     pub expires_at: Option<i64>,
     pub revoked_at: Option<i64>,
+    /// When a request last presented it (to within [`TOKEN_LAST_USED_EVERY`]).
+    pub last_used_at: Option<i64>,
 }
 
 /// A new token, with its secret: the only time the secret is seen.
@@ -235,6 +242,7 @@ fn info_of(row: &TokenRow) -> Result<TokenInfo> {
         created_at: row.created_at,
         expires_at: row.expires_at,
         revoked_at: row.revoked_at,
+        last_used_at: row.last_used_at,
     })
 }
 
@@ -289,6 +297,7 @@ pub async fn create_token(store: &Store, req: TokenRequest) -> Result<NewToken> 
         created_at: now,
         expires_at: req.expires_at,
         revoked_at: None,
+        last_used_at: None,
     };
     store.insert_token(&row).await?;
     Ok(NewToken {
@@ -321,21 +330,174 @@ pub struct Audit<'a> {
     pub detail: String,
 }
 
-/// Append to the audit log.
+/// `text` cut to [`AUDIT_FIELD_BYTES`] (at a character boundary), saying how long it was.
+fn clip(text: &str) -> String {
+    if text.len() <= AUDIT_FIELD_BYTES {
+        return text.to_string();
+    }
+    let mut end = AUDIT_FIELD_BYTES;
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}… ({} bytes)", &text[..end], text.len())
+}
+
+/// Append one entry to the audit log (its free-text fields cut to [`AUDIT_FIELD_BYTES`]).
 pub async fn record(store: &Store, a: Audit<'_>) -> Result<()> {
-    store
-        .audit(&AuditRow {
-            seq: 0,
-            at: now_ms(),
-            token_id: a.caller.map(|t| t.id.clone()),
-            token_name: a.caller.map(|t| t.name.clone()),
-            action: a.action,
-            target: a.target,
-            status: i64::from(a.status),
-            detail: a.detail,
-        })
-        .await?;
+    store.audit(&row_of(a, now_ms(), 1)).await?;
     Ok(())
+}
+
+fn row_of(a: Audit<'_>, at: i64, count: i64) -> AuditRow {
+    AuditRow {
+        seq: 0,
+        at,
+        token_id: a.caller.map(|t| t.id.clone()),
+        token_name: a.caller.map(|t| t.name.clone()),
+        action: clip(&a.action),
+        target: clip(&a.target),
+        status: i64::from(a.status),
+        detail: clip(&a.detail),
+        count,
+    }
+}
+
+/// The audit log of a server: a row for each request that changed something, and for
+/// refused or failed ones (any status but 2xx) a count per caller, status and minute, with
+/// the first one's action and target.
+///
+/// Why counts: every refused request was a row with its full path, twice, so 4.3 s of
+/// refused POSTs with 65,000-character paths added 165 MB. Counted, a flood from one caller
+/// adds a row a minute per status; from many addresses, at most [`AUDIT_REFUSED_KEYS`] rows
+/// a minute and one for the rest. IPv6 addresses are counted by their /64, the block one
+/// client holds.
+#[derive(Debug, Default)]
+pub struct AuditLog {
+    counts: Mutex<HashMap<CountKey, Counted>>,
+}
+
+/// A request to audit, as the HTTP layer saw it.
+#[derive(Debug, Clone)]
+pub struct Attempt<'a> {
+    pub caller: Option<&'a TokenRef>,
+    pub address: IpAddr,
+    /// `METHOD /route/{id}` (the route's template, or the path when none matched).
+    pub action: String,
+    pub path: &'a str,
+    pub status: u16,
+    pub detail: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+struct CountKey {
+    minute: i64,
+    /// A token's id, an address (a /64 for IPv6), or "others" past the key limit.
+    who: String,
+    status: u16,
+}
+
+#[derive(Debug)]
+struct Counted {
+    first: AuditRow,
+    count: i64,
+}
+
+const MINUTE_MS: i64 = 60_000;
+
+/// The unit refusals are counted by: the address, or for IPv6 its /64.
+fn counted_as(address: IpAddr) -> String {
+    match address {
+        IpAddr::V4(a) => a.to_string(),
+        IpAddr::V6(a) => {
+            let s = a.segments();
+            format!("{:x}:{:x}:{:x}:{:x}::/64", s[0], s[1], s[2], s[3])
+        }
+    }
+}
+
+impl AuditLog {
+    /// Record a request: a row now if it changed something (2xx), else a count.
+    pub async fn note(&self, store: &Store, a: Attempt<'_>) -> Result<()> {
+        let entry = Audit {
+            caller: a.caller,
+            action: a.action,
+            target: a.path.to_string(),
+            status: a.status,
+            detail: a.detail,
+        };
+        if (200..300).contains(&a.status) {
+            return record(store, entry).await;
+        }
+        let now = now_ms();
+        let who = match a.caller {
+            Some(t) => format!("token {}", t.id),
+            None => counted_as(a.address),
+        };
+        let mut key = CountKey {
+            minute: now - now.rem_euclid(MINUTE_MS),
+            who,
+            status: a.status,
+        };
+        let mut counts = self.counts.lock().expect("audit lock");
+        if !counts.contains_key(&key) && counts.len() >= AUDIT_REFUSED_KEYS {
+            key.who = "others".into();
+        }
+        let others = key.who == "others";
+        counts
+            .entry(key.clone())
+            .or_insert_with(|| {
+                let mut first = row_of(entry, key.minute, 0);
+                if others {
+                    first.token_id = None;
+                    first.token_name = None;
+                }
+                Counted { first, count: 0 }
+            })
+            .count += 1;
+        Ok(())
+    }
+
+    /// Write the counts of minutes that have ended (with `all`, every count so far: at
+    /// shutdown, and before the log is read). Servers run this with their maintenance.
+    pub async fn flush(&self, store: &Store, all: bool) -> Result<usize> {
+        let now = now_ms();
+        let minute = now - now.rem_euclid(MINUTE_MS);
+        let done: Vec<(CountKey, Counted)> = {
+            let mut counts = self.counts.lock().expect("audit lock");
+            let keys: Vec<CountKey> = counts
+                .keys()
+                .filter(|k| all || k.minute < minute)
+                .cloned()
+                .collect();
+            keys.into_iter()
+                .filter_map(|k| counts.remove_entry(&k))
+                .collect()
+        };
+        let n = done.len();
+        for (key, Counted { mut first, count }) in done {
+            first.count = count;
+            first.detail = clip(&format!(
+                "{count} request(s) from {} ended {} in the minute from {} (ms since the \
+                 epoch); the target is the first's{}",
+                key.who,
+                key.status,
+                key.minute,
+                if first.detail.is_empty() {
+                    String::new()
+                } else {
+                    format!("; {}", first.detail)
+                }
+            ));
+            store.audit(&first).await?;
+        }
+        Ok(n)
+    }
+
+    /// Delete entries older than `retention`; how many.
+    pub async fn prune(store: &Store, retention: std::time::Duration) -> Result<u64> {
+        let before = now_ms().saturating_sub(retention.as_millis().min(i64::MAX as u128) as i64);
+        Ok(store.prune_audit(before).await?)
+    }
 }
 
 /// The audit log, newest first, `limit` entries before `before` (a `seq`).
@@ -362,6 +524,8 @@ pub struct Authenticator {
     /// Secret hash → token, and when it was read. Bounded: a flood of made-up secrets
     /// empties it rather than growing it.
     lookups: Mutex<HashMap<[u8; 32], (Instant, Looked)>>,
+    /// Token id → when this server last wrote its `last_used_at`.
+    touched: Mutex<HashMap<String, Instant>>,
 }
 
 impl Default for Authenticator {
@@ -369,6 +533,7 @@ impl Default for Authenticator {
         Authenticator {
             required: Mutex::new(None),
             lookups: Mutex::new(HashMap::new()),
+            touched: Mutex::new(HashMap::new()),
         }
     }
 }
@@ -460,7 +625,72 @@ impl Authenticator {
                 known.name
             )));
         }
+        if let Some(t) = &known.caller.token {
+            self.touch(store, &t.id);
+        }
         Ok(known.caller.clone())
+    }
+
+    /// Whether `caller`, authenticated a while ago, may still read take `id`: its token
+    /// still valid (not revoked, not expired, read afresh from the store), the server still
+    /// without tokens for a caller who came without one, and the take still in the
+    /// token's libraries. What a long-lived answer (a stream's watch) asks again as it goes;
+    /// the error says why not.
+    pub async fn recheck(&self, store: &Store, caller: &Caller, id: &str) -> Result<()> {
+        match &caller.token {
+            None => {
+                if store.any_token().await? {
+                    return Err(Error::Unauthorized(
+                        "this server needs a token now: send Authorization: Bearer <token>".into(),
+                    ));
+                }
+            }
+            Some(t) => {
+                let row = store.token_by_id(&t.id).await?;
+                let info = row.as_ref().map(info_of).transpose()?;
+                match info {
+                    None => return Err(Error::Unauthorized("unknown token".into())),
+                    Some(i) if i.revoked_at.is_some() => {
+                        return Err(Error::Unauthorized(format!(
+                            "token {:?} was revoked",
+                            i.name
+                        )))
+                    }
+                    Some(i) if i.expires_at.is_some_and(|e| e <= now_ms()) => {
+                        return Err(Error::Unauthorized(format!(
+                            "token {:?} has expired",
+                            i.name
+                        )))
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
+        check_take(store, &caller.grant, id).await
+    }
+
+    /// Write that token `id` was used, at most once per [`TOKEN_LAST_USED_EVERY`] per
+    /// token and in the background: a request never waits on it.
+    fn touch(&self, store: &Store, id: &str) {
+        {
+            let mut touched = self.touched.lock().expect("auth cache");
+            if touched
+                .get(id)
+                .is_some_and(|at| at.elapsed() < TOKEN_LAST_USED_EVERY)
+            {
+                return;
+            }
+            if touched.len() >= TOKEN_CACHE_ENTRIES {
+                touched.clear();
+            }
+            touched.insert(id.to_string(), Instant::now());
+        }
+        let (store, id) = (store.clone(), id.to_string());
+        tokio::spawn(async move {
+            if let Err(e) = store.touch_token(&id, now_ms()).await {
+                tracing::warn!(token = %id, error = %e, "could not note a token's last use");
+            }
+        });
     }
 }
 

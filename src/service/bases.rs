@@ -3,6 +3,7 @@
 
 use std::sync::Arc;
 
+use super::access::Grant;
 use super::{blocking, Error, Result};
 use crate::codec::{Basis, BasisKind};
 use crate::store::{BasisRow, Deletion, Store};
@@ -43,20 +44,64 @@ pub async fn latest_for(store: &Store, layout: &str) -> Result<Vec<Arc<Basis>>> 
 }
 
 /// Stored bases, newest first, optionally of one layout and/or kind (payloads not read).
+/// A grant limited to libraries sees those its libraries' takes use or were trained from
+/// ([`scoped`]).
 pub async fn list(
     store: &Store,
     layout: Option<&str>,
     kind: Option<BasisKind>,
+    grant: &Grant,
 ) -> Result<Vec<BasisRow>> {
-    Ok(store.bases(layout, kind.map(BasisKind::name)).await?)
+    let rows = store.bases(layout, kind.map(BasisKind::name)).await?;
+    scoped(store, rows, grant).await
 }
 
-/// One stored basis.
-pub async fn get(store: &Store, id: &str) -> Result<BasisRow> {
-    store
-        .basis(id)
+/// One stored basis; to a grant limited to libraries, only one of theirs ([`scoped`]; any
+/// other is `NotFound`, as if it did not exist).
+pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<BasisRow> {
+    let row = store.basis(id).await?;
+    scoped(store, row.into_iter().collect(), grant)
         .await?
+        .pop()
         .ok_or_else(|| Error::NotFound(format!("basis {id}")))
+}
+
+/// The bases of `rows` a grant reaches, as it may see them. Over every library: all, as
+/// stored. Limited to libraries: those that takes of its libraries use or were trained
+/// from, with `used_by` counting only those takes and the provenance's takes (and their
+/// frame total) only those in its libraries — what another library holds stays unsaid.
+async fn scoped(store: &Store, rows: Vec<BasisRow>, grant: &Grant) -> Result<Vec<BasisRow>> {
+    let Some(within) = grant.within() else {
+        return Ok(rows);
+    };
+    let uses = store.basis_use_within(&within).await?;
+    let mut out = Vec::with_capacity(rows.len());
+    for mut row in rows {
+        let trained: Vec<String> = row.provenance["takes"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|v| v.as_str().map(str::to_string))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let visible = store.take_frames_within(&trained, &within).await?;
+        let used = uses.get(&row.id).copied().unwrap_or(0);
+        if used == 0 && visible.is_empty() {
+            continue;
+        }
+        row.used_by = used;
+        if !trained.is_empty() {
+            let mine: Vec<&String> = trained
+                .iter()
+                .filter(|t| visible.contains_key(*t))
+                .collect();
+            row.provenance["takes"] = serde_json::json!(mine);
+            row.provenance["frames"] = serde_json::json!(visible.values().sum::<i64>());
+        }
+        out.push(row);
+    }
+    Ok(out)
 }
 
 /// Delete a basis no take references.

@@ -1,16 +1,15 @@
-//! Read side: a take's metadata, and any frame range decoded from only the chunks that
-//! overlap it.
+//! Read side: a take's metadata and error series, and the readers range answers decode
+//! with ([`super::answer`]), kept per take.
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use super::prepared::{Prepared, ReadCaches};
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::container::ChunkMeta;
-use crate::codec::read::Chunk;
 use crate::codec::{self, basis::hex, ChunkSource, Header, Limits, Reader, Shared, Stored};
 use crate::motion::Skeleton;
-use crate::store::{ChunkEntry, ChunkRow, Store, TakeRow};
+use crate::store::{ChunkEntry, Store, TakeRow};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,20 +56,6 @@ impl TimeRange {
     }
 }
 
-/// Decoded frames of a take.
-#[derive(Debug, Clone)]
-pub struct Frames {
-    pub id: String,
-    pub start: usize,
-    pub end: usize,
-    pub fps: f64,
-    pub metres_per_unit: f64,
-    /// The names of the returned points, in order.
-    pub points: Vec<String>,
-    /// `(end − start) × points × 3`, NaN where the take has a gap.
-    pub data: Vec<f32>,
-}
-
 /// The take stored under `id`, parsed.
 pub async fn take(store: &Store, id: &str) -> Result<Take> {
     let row = store
@@ -87,80 +72,6 @@ pub async fn parse(store: &Store, row: TakeRow) -> Result<Take> {
         None => None,
     };
     Take::from_row(row, rig.as_deref())
-}
-
-/// Decode `range` of take `id`, optionally only the named points. The range and the
-/// points are checked before anything is decoded; chunks already decoded come from
-/// `caches`, and of the rest only those the range lies in are read.
-pub async fn frames(
-    store: &Store,
-    caches: &ReadCaches,
-    id: &str,
-    range: TimeRange,
-    subset: Option<&[String]>,
-) -> Result<Frames> {
-    let (prepared, (start, end)) = prepare(store, caches, id, range).await?;
-    let selected = match subset {
-        None => None,
-        Some(names) => Some(prepared.point_indices(names)?),
-    };
-    let reader = &prepared.reader;
-    let wanted = reader.chunks_for(start..end)?;
-    let cached: Vec<Option<Arc<Vec<f32>>>> =
-        wanted.clone().map(|i| caches.chunks.get(id, i)).collect();
-    // The chunks not cached lie in lo..=hi: read those rows in one query.
-    let missing = |k: Option<usize>| k.map(|k| wanted.start + k);
-    let lo = missing(cached.iter().position(Option::is_none));
-    let hi = missing(cached.iter().rposition(Option::is_none));
-    let stored = match (lo, hi) {
-        (Some(lo), Some(hi)) => {
-            let rows = store.chunks(id, lo as i64, hi as i64 + 1).await?;
-            if rows.len() != hi + 1 - lo {
-                // Deleted since its reader was cached: forget it, and say so.
-                caches.forget(id);
-                take(store, id).await?;
-                return Err(Error::Internal(format!(
-                    "take {id} is missing chunks {lo}..={hi}"
-                )));
-            }
-            (lo, rows)
-        }
-        _ => (0, Vec::new()),
-    };
-    let source = Gathered {
-        first: wanted.start,
-        cached,
-        stored,
-        fresh: Mutex::new(Vec::new()),
-    };
-    let read = move |p: &Prepared, source: Gathered| {
-        let data = p.reader.read(start..end, selected.as_deref(), &source);
-        (data, source.fresh.into_inner().unwrap_or_default())
-    };
-    let (data, fresh) = if source.stored.1.is_empty() {
-        // Every chunk is decoded already: copying the range out costs less than a trip to
-        // the blocking pool.
-        read(&prepared, source)
-    } else {
-        let p = prepared.clone();
-        blocking(move || read(&p, source)).await?
-    };
-    for (i, chunk) in fresh {
-        caches.chunks.insert(id, i, chunk);
-    }
-    let points = match subset {
-        Some(names) => names.to_vec(),
-        None => prepared.point_names.clone(),
-    };
-    Ok(Frames {
-        id: id.to_string(),
-        start,
-        end,
-        fps: prepared.fps,
-        metres_per_unit: prepared.metres_per_unit,
-        points,
-        data: data?,
-    })
 }
 
 /// A take's error second by second, with its bound: what a viewer charts.
@@ -197,68 +108,6 @@ pub async fn errors(store: &Store, id: &str) -> Result<TakeErrors> {
     })
 }
 
-/// A range of a take as BVH: its skeleton, `Frames:` the range's length, and the channel
-/// values of those frames (with the characters they were uploaded with, for `bvh-lossless`).
-#[derive(Debug, Clone)]
-pub struct Bvh {
-    pub start: usize,
-    pub end: usize,
-    pub fps: f64,
-    pub bytes: Vec<u8>,
-}
-
-/// Frames `range` of take `id` as BVH, for takes whose codec keeps the channel values; a
-/// take coded as positions is `Unsatisfiable`, saying why and which codecs would keep them.
-pub async fn bvh(store: &Store, id: &str, range: TimeRange) -> Result<Bvh> {
-    let take = take(store, id).await?;
-    let (start, end) = range.resolve(take.frames, take.fps)?;
-    let keeps = codec::codec(take.codec).is_ok_and(|c| c.codes_channels());
-    if !keeps {
-        let keepers: Vec<String> = codec::available()
-            .into_iter()
-            .filter(|&c| codec::codec(c).is_ok_and(|k| k.codes_channels()))
-            .map(|c| c.to_string())
-            .collect();
-        let why = if take.skeleton.is_none() {
-            "the take is point data (it has no skeleton)".to_string()
-        } else {
-            format!(
-                "the take was coded with {}, which keeps joint positions only; codecs that \
-                 keep the animation: {} (ingest with keep=animation, the default for skeleton takes)",
-                take.codec,
-                keepers.join(", ")
-            )
-        };
-        return Err(Error::Unsatisfiable(format!("no BVH for take {id}: {why}")));
-    }
-    let (header, _) = header_of(store, &take).await?;
-    let shared = shared(store, &header).await?;
-    let chunks = header.chunks_for(start, end);
-    let rows = store
-        .chunks(id, chunks.start as i64, chunks.end as i64)
-        .await?;
-    if rows.len() != chunks.len() {
-        return Err(Error::NotFound(format!("sequence {id}")));
-    }
-    let fps = take.fps;
-    let bytes = blocking(move || {
-        let payloads: Vec<&[u8]> = rows.iter().map(|r| &r.payload[..]).collect();
-        bvh_of(
-            &header,
-            shared,
-            &Stored::new(chunks.start, payloads),
-            start..end,
-        )
-    })
-    .await??;
-    Ok(Bvh {
-        start,
-        end,
-        fps,
-        bytes,
-    })
-}
-
 /// Frames `range` of a take coded with a codec that keeps channel values, as BVH, from its
 /// header, what the header names, and a source of the chunks the range lies in.
 pub fn bvh_of(
@@ -282,7 +131,7 @@ pub fn bvh_of(
 
 /// The take's reader (cached, or built and cached unless the take is live) and `range`
 /// resolved against it; the range is checked before a reader is built.
-async fn prepare(
+pub(super) async fn prepare(
     store: &Store,
     caches: &ReadCaches,
     id: &str,
@@ -308,42 +157,6 @@ async fn prepare(
         caches.decoders.insert(p.clone());
     }
     Ok((p, r))
-}
-
-/// The chunks of one range request: those decoded already (cached), the payloads of the
-/// rest (read from the store), and those decoded now, for the cache.
-struct Gathered {
-    first: usize,
-    cached: Vec<Option<Arc<Vec<f32>>>>,
-    stored: (usize, Vec<ChunkRow>),
-    fresh: Mutex<Vec<(usize, Arc<Vec<f32>>)>>,
-}
-
-impl ChunkSource for Gathered {
-    fn chunk(&self, index: usize) -> codec::Result<Chunk<'_>> {
-        let cached = index
-            .checked_sub(self.first)
-            .and_then(|i| self.cached.get(i).cloned().flatten());
-        if let Some(d) = cached {
-            return Ok(Chunk::Decoded(d));
-        }
-        let (lo, rows) = &self.stored;
-        index
-            .checked_sub(*lo)
-            .and_then(|i| rows.get(i))
-            .map(|r| Chunk::Stored(&r.payload))
-            .ok_or_else(|| codec::Error::Invalid(format!("chunk {index} was not read")))
-    }
-
-    fn keeps(&self) -> bool {
-        true
-    }
-
-    fn keep(&self, index: usize, decoded: Arc<Vec<f32>>) {
-        if let Ok(mut fresh) = self.fresh.lock() {
-            fresh.push((index, decoded));
-        }
-    }
 }
 
 /// What a header names (a shared basis, a skeleton), loaded by id.

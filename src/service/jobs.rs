@@ -7,6 +7,8 @@ use std::sync::{Arc, Mutex};
 
 use serde::Serialize;
 
+use super::access::Grant;
+
 /// Finished jobs kept for inspection before the oldest are forgotten.
 const KEEP_FINISHED: usize = 256;
 
@@ -33,6 +35,21 @@ pub struct Job {
     /// Milliseconds since the Unix epoch.
     pub created_at: i64,
     pub finished_at: Option<i64>,
+    /// The libraries of the takes it works on: a token limited to libraries sees the job
+    /// only if it reaches every one of them.
+    pub libraries: Vec<String>,
+}
+
+impl Job {
+    /// Whether `grant` may see this job: over every library, or over all of the job's.
+    pub fn visible_to(&self, grant: &Grant) -> bool {
+        match &grant.libraries {
+            None => true,
+            Some(mine) => {
+                !self.libraries.is_empty() && self.libraries.iter().all(|l| mine.contains(l))
+            }
+        }
+    }
 }
 
 #[derive(Default)]
@@ -46,8 +63,9 @@ pub struct Jobs {
 pub const MAX_WAIT_S: u64 = 600;
 
 impl Jobs {
-    /// Register a running job and return the handle its worker reports through.
-    pub fn start(self: &Arc<Self>, kind: &str) -> Progress {
+    /// Register a running job on takes of `libraries` and return the handle its worker
+    /// reports through.
+    pub fn start(self: &Arc<Self>, kind: &str, libraries: Vec<String>) -> Progress {
         let id = uuid::Uuid::now_v7().to_string();
         let job = Job {
             id: id.clone(),
@@ -59,6 +77,7 @@ impl Jobs {
             error: None,
             created_at: super::now_ms(),
             finished_at: None,
+            libraries,
         };
         self.inner
             .lock()
@@ -76,7 +95,21 @@ impl Jobs {
     }
 
     /// The job once it has finished, or as it is after `timeout` (a long poll: clients and
-    /// tests wait for a job without polling in a loop).
+    /// tests wait for a job without polling in a loop); `None` when there is no such job or
+    /// `grant` may not see it (the same answer, so that a limited token learns nothing).
+    pub async fn wait_for(
+        &self,
+        id: &str,
+        timeout: std::time::Duration,
+        grant: &Grant,
+    ) -> Option<Job> {
+        if !self.get(id)?.visible_to(grant) {
+            return None;
+        }
+        self.wait(id, timeout).await
+    }
+
+    /// [`Jobs::wait_for`] over every library.
     pub async fn wait(&self, id: &str, timeout: std::time::Duration) -> Option<Job> {
         let deadline = tokio::time::Instant::now() + timeout;
         loop {
@@ -157,7 +190,7 @@ mod tests {
     #[test]
     fn a_job_reports_progress_then_its_outcome() {
         let jobs = Arc::new(Jobs::default());
-        let p = jobs.start("train-bases");
+        let p = jobs.start("train-bases", vec!["lab".into()]);
         p.report(0.5, "training x");
         let j = jobs.get(&p.id).unwrap();
         assert_eq!(
@@ -168,7 +201,7 @@ mod tests {
         let j = jobs.get(&p.id).unwrap();
         assert_eq!(j.state, JobState::Succeeded);
         assert!(j.finished_at.is_some() && j.result.is_some());
-        let q = jobs.start("train-bases");
+        let q = jobs.start("train-bases", vec!["lab".into()]);
         q.fail("no takes".into());
         assert_eq!(jobs.get(&q.id).unwrap().error.as_deref(), Some("no takes"));
     }
@@ -177,7 +210,7 @@ mod tests {
     async fn waiting_returns_when_the_job_finishes_or_at_the_timeout() {
         use std::time::Duration;
         let jobs = Arc::new(Jobs::default());
-        let p = jobs.start("train-bases");
+        let p = jobs.start("train-bases", vec!["lab".into()]);
         let running = jobs.wait(&p.id, Duration::from_millis(1)).await.unwrap();
         assert_eq!(running.state, JobState::Running);
         let (j2, id) = (jobs.clone(), p.id.clone());

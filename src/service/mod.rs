@@ -3,6 +3,8 @@
 //!
 //! # Layout
 //! - [`access`]: tokens, scopes and libraries; who a request is; the audit log.
+//! - [`answer`]: range answers in any output format, decoded and written a chunk at a time.
+//! - [`budget`]: memory held for requests (bodies, answers): a total and a share per caller.
 //! - [`archive`]: verify everything stored; export takes to open files and bitstreams,
 //!   import them back.
 //! - [`bases`]: shared bases as stored objects — loading, the newest per layout, deleting.
@@ -11,15 +13,17 @@
 //! - [`choose`]: which codecs compete for a take, and the decision record.
 //! - [`history`]: what choice learns from a library's takes: candidates not worth encoding.
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.
-//! - [`fetch`]: metadata and decoded frame ranges.
+//! - [`fetch`]: metadata, error series, and the readers range answers decode with.
 //! - [`library`]: listings, statistics, edits.
 //! - [`streams`]: live takes coded and committed chunk by chunk as frames arrive.
 //! - [`prepared`]: readers kept ready per take for range requests.
 //! - [`take`]: a stored take as a typed record, parsed from its row once.
 
 pub mod access;
+pub mod answer;
 pub mod archive;
 pub mod bases;
+pub mod budget;
 pub mod choose;
 pub mod fetch;
 pub mod history;

@@ -20,6 +20,8 @@ pub struct Prepared {
     pub fps: f64,
     pub metres_per_unit: f64,
     pub frames: usize,
+    /// Whether the take has a skeleton (a BVH take), whatever its codec keeps.
+    pub skeleton: bool,
 }
 
 impl Prepared {
@@ -34,6 +36,7 @@ impl Prepared {
             fps: take.fps,
             metres_per_unit: take.metres_per_unit,
             frames: take.frames,
+            skeleton: take.skeleton.is_some(),
         })
     }
 
@@ -212,6 +215,7 @@ mod tests {
             fps: 30.0,
             metres_per_unit: 0.001,
             frames: 20,
+            skeleton: false,
         })
     }
 

@@ -6,6 +6,7 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
+use super::access::Grant;
 use super::{blocking, Error, Result};
 use crate::codec::Rig;
 use crate::limits;
@@ -70,17 +71,32 @@ pub fn row_of(rig: &Rig, layout: &str, now_ms: i64) -> SkeletonRow {
     }
 }
 
-/// Stored skeletons, newest first, optionally of one layout (payloads not read).
-pub async fn list(store: &Store, layout: Option<&str>) -> Result<Vec<SkeletonRow>> {
-    Ok(store.skeletons(layout).await?)
+/// Stored skeletons, newest first, optionally of one layout (payloads not read). A grant
+/// limited to libraries sees those of its libraries' takes, each counted by those takes.
+pub async fn list(store: &Store, layout: Option<&str>, grant: &Grant) -> Result<Vec<SkeletonRow>> {
+    let rows = store.skeletons(layout).await?;
+    let Some(within) = grant.within() else {
+        return Ok(rows);
+    };
+    let uses = store.skeleton_use_within(&within).await?;
+    Ok(rows
+        .into_iter()
+        .filter_map(|mut r| {
+            r.used_by = *uses.get(&r.id)?;
+            Some(r)
+        })
+        .collect())
 }
 
-/// One stored skeleton, parsed.
-pub async fn get(store: &Store, id: &str) -> Result<(SkeletonRow, Arc<Rig>)> {
-    let row = store
-        .skeleton(id)
-        .await?
-        .ok_or_else(|| Error::NotFound(format!("skeleton {id}")))?;
+/// One stored skeleton, parsed; to a grant limited to libraries, only one of their takes'
+/// (any other is `NotFound`, as if it did not exist).
+pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<(SkeletonRow, Arc<Rig>)> {
+    let missing = || Error::NotFound(format!("skeleton {id}"));
+    let mut row = store.skeleton(id).await?.ok_or_else(missing)?;
+    if let Some(within) = grant.within() {
+        let uses = store.skeleton_use_within(&within).await?;
+        row.used_by = *uses.get(id).ok_or_else(missing)?;
+    }
     let rig = load(store, id).await?;
     Ok((row, rig))
 }

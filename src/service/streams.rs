@@ -31,6 +31,7 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 use tokio::sync::{broadcast, watch, OwnedSemaphorePermit, Semaphore};
 
+use super::budget::{Holder, Share, Shares};
 use super::choose::{CodecRequest, Decision, Keep};
 use super::prepared::ReadCaches;
 use super::take::{Label, Take, TakeMeta};
@@ -208,6 +209,8 @@ pub struct Watch {
     pub arrivals: broadcast::Receiver<Arc<Arrival>>,
     /// Turns true when the server shuts down: watchers end then, not hold it open.
     pub stopping: watch::Receiver<bool>,
+    /// This watcher's place among its caller's watchers of the stream.
+    _share: Share,
 }
 
 struct Live {
@@ -227,8 +230,12 @@ struct Live {
     watchers: broadcast::Sender<Arc<Arrival>>,
     /// The newest frame received, for a watcher that joins between appends.
     latest: Option<Arc<Arrival>>,
-    /// This stream's place among the server's open streams, given back when it closes.
+    /// Watchers per caller ([`Limits::watchers_per_caller`]).
+    watchers_by: Shares,
+    /// This stream's place among the server's open streams, and among its caller's, given
+    /// back when it closes.
     _slot: OwnedSemaphorePermit,
+    _share: Share,
 }
 
 impl Live {
@@ -295,6 +302,8 @@ pub struct Streams {
     open: Mutex<HashMap<String, Entry>>,
     /// One permit per stream that may be open at once.
     slots: Arc<Semaphore>,
+    /// Streams open per caller ([`Limits::streams_per_caller`]).
+    by_caller: Shares,
     limits: Limits,
     /// A stream with no request for this long is finished by [`Streams::maintain`].
     pub idle: Duration,
@@ -315,6 +324,7 @@ impl Streams {
         Streams {
             open: Mutex::new(HashMap::new()),
             slots: Arc::new(Semaphore::new(limits.open_streams as usize)),
+            by_caller: Shares::new(limits.streams_per_caller as usize),
             limits,
             idle: Duration::from_secs(300),
             lease,
@@ -384,10 +394,22 @@ impl Streams {
         self.open.lock().expect("streams lock").get(id).cloned()
     }
 
-    /// Open a stream: the take exists (with no frames) from now on.
-    pub async fn open(&self, store: &Store, req: OpenRequest) -> Result<StreamInfo> {
+    /// Open a stream for `holder`: the take exists (with no frames) from now on.
+    pub async fn open(
+        &self,
+        store: &Store,
+        req: OpenRequest,
+        holder: &Holder,
+    ) -> Result<StreamInfo> {
         let plan = Plan::of(req, &self.limits)?;
-        // A place among the open streams, held until the stream closes.
+        // A place among the caller's and the server's open streams, held until it closes.
+        let share = self.by_caller.take(holder).ok_or_else(|| {
+            Error::Busy(format!(
+                "this caller has {} streams open, the most one caller may have at once; \
+                 finish one first",
+                self.by_caller.most()
+            ))
+        })?;
         let slot = self.slots.clone().try_acquire_owned().map_err(|_| {
             Error::Busy(format!(
                 "{} streams are open, the most this server takes at once; finish one or retry later",
@@ -474,7 +496,9 @@ impl Streams {
             warnings: Vec::new(),
             watchers: broadcast::Sender::new(STREAM_WATCH_QUEUE),
             latest: None,
+            watchers_by: Shares::new(self.limits.watchers_per_caller as usize),
             _slot: slot,
+            _share: share,
         };
         let info = live.info();
         let id = live.take.id.clone();
@@ -493,9 +517,10 @@ impl Streams {
         }
     }
 
-    /// Watch an open stream: every append from now on, as it arrives. At most
-    /// [`STREAM_WATCHERS`] at once per stream; the watch ends when the stream closes.
-    pub async fn watch(&self, store: &Store, id: &str) -> Result<Watch> {
+    /// Watch an open stream for `holder`: every append from now on, as it arrives. At most
+    /// [`STREAM_WATCHERS`] at once per stream, [`Limits::watchers_per_caller`] of them one
+    /// caller's; the watch ends when the stream closes.
+    pub async fn watch(&self, store: &Store, id: &str, holder: &Holder) -> Result<Watch> {
         let Some(entry) = self.entry(id) else {
             return Err(Self::not_open(store, id).await);
         };
@@ -505,11 +530,18 @@ impl Streams {
                 "stream {id} has {STREAM_WATCHERS} watchers, the most it takes at once"
             )));
         }
+        let share = live.watchers_by.take(holder).ok_or_else(|| {
+            Error::Busy(format!(
+                "this caller watches stream {id} {} times, the most one caller may",
+                live.watchers_by.most()
+            ))
+        })?;
         Ok(Watch {
             info: live.info(),
             latest: live.latest.clone(),
             arrivals: live.watchers.subscribe(),
             stopping: self.stopping.subscribe(),
+            _share: share,
         })
     }
 

@@ -298,7 +298,10 @@ pub async fn start_training(
     req: TrainRequest,
 ) -> Result<crate::service::jobs::Job> {
     let sel = select(store, &req).await?;
-    let progress = jobs.start("train-bases");
+    let mut libraries: Vec<String> = sel.takes.iter().map(|t| t.library.clone()).collect();
+    libraries.sort();
+    libraries.dedup();
+    let progress = jobs.start("train-bases", libraries);
     let (store, p) = (store.clone(), progress.clone());
     tokio::spawn(async move {
         match train(&store, sel, &p).await {

@@ -20,9 +20,11 @@ pub struct TokenRow {
     pub created_at: i64,
     pub expires_at: Option<i64>,
     pub revoked_at: Option<i64>,
+    /// When a request last presented it (to the minute; see `service::access`).
+    pub last_used_at: Option<i64>,
 }
 
-/// One audited request or command.
+/// One audited request or command, or a count of like ones.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct AuditRow {
     /// Increasing; the cursor of the next page.
@@ -37,10 +39,13 @@ pub struct AuditRow {
     /// The HTTP status it ended with (the CLI's commands record 200 or 500 likewise).
     pub status: i64,
     pub detail: String,
+    /// How many requests the row stands for: 1 for a change, more for refused or failed
+    /// requests counted together (same caller, status and minute; `target` is the first's).
+    pub count: i64,
 }
 
 const TOKEN_COLUMNS: &str =
-    "id, name, secret_hash, scope, libraries, created_at, expires_at, revoked_at";
+    "id, name, secret_hash, scope, libraries, created_at, expires_at, revoked_at, last_used_at";
 
 fn token_from_row<R: Row>(r: &R) -> Result<TokenRow>
 where
@@ -58,6 +63,7 @@ where
         created_at: r.try_get("created_at")?,
         expires_at: r.try_get("expires_at")?,
         revoked_at: r.try_get("revoked_at")?,
+        last_used_at: r.try_get("last_used_at")?,
     })
 }
 
@@ -77,6 +83,7 @@ where
         target: r.try_get("target")?,
         status: i64::from(r.try_get::<i32, _>("status")?),
         detail: r.try_get("detail")?,
+        count: r.try_get("count")?,
     })
 }
 
@@ -85,7 +92,7 @@ impl Store {
     pub async fn insert_token(&self, t: &TokenRow) -> Result<()> {
         dispatch!(self, pool => {
             sqlx::query(&format!(
-                "INSERT INTO tokens ({TOKEN_COLUMNS}) VALUES ($1, $2, $3, $4, $5, $6, $7, $8)"
+                "INSERT INTO tokens ({TOKEN_COLUMNS}) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)"
             ))
             .bind(&t.id)
             .bind(&t.name)
@@ -95,6 +102,7 @@ impl Store {
             .bind(t.created_at)
             .bind(t.expires_at)
             .bind(t.revoked_at)
+            .bind(t.last_used_at)
             .execute(pool)
             .await
             .map_err(|e| conflict_or(e, &format!("token {:?}", t.name)))?;
@@ -108,6 +116,19 @@ impl Store {
         dispatch!(self, pool => {
             sqlx::query(&sql)
                 .bind(hash)
+                .fetch_optional(pool)
+                .await?
+                .map(|r| token_from_row(&r))
+                .transpose()
+        })
+    }
+
+    /// The token with this id, revoked or not.
+    pub async fn token_by_id(&self, id: &str) -> Result<Option<TokenRow>> {
+        let sql = format!("SELECT {TOKEN_COLUMNS} FROM tokens WHERE id = $1");
+        dispatch!(self, pool => {
+            sqlx::query(&sql)
+                .bind(id)
                 .fetch_optional(pool)
                 .await?
                 .map(|r| token_from_row(&r))
@@ -157,12 +178,25 @@ impl Store {
         })
     }
 
+    /// Note that the token `id` was presented at `at`.
+    pub async fn touch_token(&self, id: &str, at: i64) -> Result<()> {
+        dispatch!(self, pool => {
+            sqlx::query("UPDATE tokens SET last_used_at = $1 WHERE id = $2")
+                .bind(at)
+                .bind(id)
+                .execute(pool)
+                .await?;
+            Ok(())
+        })
+    }
+
     /// Append to the audit log.
     pub async fn audit(&self, a: &AuditRow) -> Result<()> {
         dispatch!(self, pool => {
             sqlx::query(
-                "INSERT INTO audit_log (at, token_id, token_name, action, target, status, detail) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7)",
+                "INSERT INTO audit_log \
+                 (at, token_id, token_name, action, target, status, detail, count) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
             )
             .bind(a.at)
             .bind(&a.token_id)
@@ -171,9 +205,21 @@ impl Store {
             .bind(&a.target)
             .bind(a.status as i32)
             .bind(&a.detail)
+            .bind(a.count)
             .execute(pool)
             .await?;
             Ok(())
+        })
+    }
+
+    /// Delete audit entries from before `before` (ms since the epoch); how many.
+    pub async fn prune_audit(&self, before: i64) -> Result<u64> {
+        dispatch!(self, pool => {
+            Ok(sqlx::query("DELETE FROM audit_log WHERE at < $1")
+                .bind(before)
+                .execute(pool)
+                .await?
+                .rows_affected())
         })
     }
 
@@ -181,7 +227,7 @@ impl Store {
     pub async fn audit_log(&self, before: Option<i64>, limit: usize) -> Result<Vec<AuditRow>> {
         dispatch!(self, pool => {
             sqlx::query(
-                "SELECT seq, at, token_id, token_name, action, target, status, detail \
+                "SELECT seq, at, token_id, token_name, action, target, status, detail, count \
                  FROM audit_log WHERE seq < $1 ORDER BY seq DESC LIMIT $2",
             )
             .bind(before.unwrap_or(i64::MAX))

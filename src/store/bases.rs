@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 use sqlx::Row;
 
-use super::{Error, Result, Store};
+use super::{BeginWrite, Error, Result, Store};
 
 /// A stored basis. `payload` is empty in listings (it can be megabytes).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -149,6 +149,20 @@ impl Store {
         })
     }
 
+    /// For each basis used by takes of `libraries`, how many of those takes use it.
+    pub async fn basis_use_within(
+        &self,
+        libraries: &[String],
+    ) -> Result<std::collections::HashMap<String, i64>> {
+        let sql = format!(
+            "SELECT sb.basis_id AS id, COUNT(*) AS n FROM sequence_bases sb \
+             JOIN sequences s ON s.id = sb.sequence_id \
+             WHERE s.library IN ({}) GROUP BY sb.basis_id",
+            super::marks(1, libraries.len())
+        );
+        self.counts_by_id(&sql, libraries).await
+    }
+
     /// Delete a basis unless a take references it.
     pub async fn delete_basis(&self, id: &str) -> Result<Deletion> {
         self.delete_unreferenced(
@@ -169,7 +183,7 @@ impl Store {
         id: &str,
     ) -> Result<Deletion> {
         dispatch!(self, pool => {
-            let mut tx = pool.begin().await?;
+            let mut tx = pool.begin_write().await?;
             let used: i64 = sqlx::query(count)
                 .bind(id)
                 .fetch_one(&mut *tx)

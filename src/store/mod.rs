@@ -12,6 +12,7 @@
 pub mod query;
 mod rows;
 
+use std::collections::HashMap;
 use std::str::FromStr;
 use std::time::Duration;
 
@@ -50,6 +51,38 @@ pub enum Store {
 }
 
 /// Run `$body` with `$pool` bound to whichever pool the store holds.
+/// A transaction that writes. On SQLite it takes the write lock when it begins (`BEGIN
+/// IMMEDIATE`), waiting for it under the busy timeout: a deferred transaction that reads and
+/// then writes fails at once (`SQLITE_BUSY_SNAPSHOT`, "database is locked") when another
+/// connection commits in between, which background writes (a token's last use, the audit
+/// log's counts) made common. Postgres waits on row locks by itself.
+pub(crate) trait BeginWrite {
+    type Db: sqlx::Database;
+    async fn begin_write(&self) -> Result<sqlx::Transaction<'static, Self::Db>>;
+}
+
+impl BeginWrite for SqlitePool {
+    type Db = sqlx::Sqlite;
+    async fn begin_write(&self) -> Result<sqlx::Transaction<'static, sqlx::Sqlite>> {
+        Ok(self.begin_with("BEGIN IMMEDIATE").await?)
+    }
+}
+
+impl BeginWrite for PgPool {
+    type Db = sqlx::Postgres;
+    async fn begin_write(&self) -> Result<sqlx::Transaction<'static, sqlx::Postgres>> {
+        Ok(self.begin().await?)
+    }
+}
+
+/// `$from, $from+1, …` (`n` of them): the placeholders of an `IN (…)` list.
+pub(crate) fn marks(from: usize, n: usize) -> String {
+    (from..from + n)
+        .map(|i| format!("${i}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 macro_rules! dispatch {
     ($store:expr, $pool:ident => $body:expr) => {
         match $store {
@@ -97,7 +130,7 @@ impl Store {
     /// atomically.
     pub async fn insert(&self, s: &NewTake) -> Result<()> {
         dispatch!(self, pool => {
-            let mut tx = pool.begin().await?;
+            let mut tx = pool.begin_write().await?;
             if let Some(k) = &s.skeleton {
                 sqlx::query(skeletons::INSERT)
                     .bind(&k.id)
@@ -168,7 +201,7 @@ impl Store {
         basis: Option<&str>,
     ) -> Result<bool> {
         dispatch!(self, pool => {
-            let mut tx = pool.begin().await?;
+            let mut tx = pool.begin_write().await?;
             let sql = format!(
                 "UPDATE sequences SET {}, codec = $10, max_bound_mm = $11, mean_bound_mm = $12, \
                  header = $13, meta = $14 WHERE id = $15",
@@ -223,7 +256,7 @@ impl Store {
         live_until: i64,
     ) -> Result<bool> {
         dispatch!(self, pool => {
-            let mut tx = pool.begin().await?;
+            let mut tx = pool.begin_write().await?;
             let sql = format!(
                 "UPDATE sequences SET {}, live_until = $10 WHERE id = $11 AND live_until IS NOT NULL",
                 rows::SET_TOTALS
@@ -368,6 +401,51 @@ impl Store {
                 .bind(id)
                 .fetch_optional(pool)
                 .await?)
+        })
+    }
+
+    /// Of the takes `ids`, those in `libraries`, with their frame counts.
+    pub async fn take_frames_within(
+        &self,
+        ids: &[String],
+        libraries: &[String],
+    ) -> Result<HashMap<String, i64>> {
+        let mut out = HashMap::new();
+        if libraries.is_empty() {
+            return Ok(out);
+        }
+        // A few hundred ids per query: well within either database's bound on parameters.
+        for part in ids.chunks(500) {
+            let sql = format!(
+                "SELECT id, frames AS n FROM sequences WHERE library IN ({}) AND id IN ({})",
+                marks(1, libraries.len()),
+                marks(libraries.len() + 1, part.len())
+            );
+            let binds: Vec<String> = libraries.iter().chain(part).cloned().collect();
+            out.extend(self.counts_by_id(&sql, &binds).await?);
+        }
+        Ok(out)
+    }
+
+    /// Rows of `(id, n)` from `sql`, with `binds` bound in order, as a map.
+    pub(crate) async fn counts_by_id(
+        &self,
+        sql: &str,
+        binds: &[String],
+    ) -> Result<HashMap<String, i64>> {
+        if binds.is_empty() {
+            return Ok(HashMap::new());
+        }
+        dispatch!(self, pool => {
+            let mut q = sqlx::query(sql);
+            for b in binds {
+                q = q.bind(b);
+            }
+            let mut out = HashMap::new();
+            for r in q.fetch_all(pool).await? {
+                out.insert(r.try_get::<String, _>("id")?, r.try_get::<i64, _>("n")?);
+            }
+            Ok(out)
         })
     }
 
@@ -585,7 +663,7 @@ impl Store {
         tags: Option<&[String]>,
     ) -> Result<bool> {
         dispatch!(self, pool => {
-            let mut tx = pool.begin().await?;
+            let mut tx = pool.begin_write().await?;
             let found = sqlx::query("SELECT id FROM sequences WHERE id = $1")
                 .bind(id)
                 .fetch_optional(&mut *tx)

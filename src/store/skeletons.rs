@@ -83,6 +83,19 @@ impl Store {
         })
     }
 
+    /// For each skeleton of takes of `libraries`, how many of those takes have it.
+    pub async fn skeleton_use_within(
+        &self,
+        libraries: &[String],
+    ) -> Result<std::collections::HashMap<String, i64>> {
+        let sql = format!(
+            "SELECT skeleton_id AS id, COUNT(*) AS n FROM sequences \
+             WHERE skeleton_id IS NOT NULL AND library IN ({}) GROUP BY skeleton_id",
+            super::marks(1, libraries.len())
+        );
+        self.counts_by_id(&sql, libraries).await
+    }
+
     /// Delete a skeleton unless a take references it.
     pub async fn delete_skeleton(&self, id: &str) -> Result<Deletion> {
         self.delete_unreferenced(

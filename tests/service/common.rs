@@ -13,6 +13,8 @@ use mocapstore::http::{Application, Config};
 use mocapstore::limits::Limits;
 use mocapstore::store::Store;
 use serde_json::Value;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
 
 pub struct TestStore {
     pub name: &'static str,
@@ -150,6 +152,8 @@ impl Events {
 /// The real server on 127.0.0.1:0 over a test store, and a client for it.
 pub struct Server {
     pub base: String,
+    /// Where `/metrics` is served without a token, if the config asked for it.
+    pub metrics_addr: Option<std::net::SocketAddr>,
     pub client: reqwest::Client,
     stop: tokio::sync::oneshot::Sender<()>,
     task: tokio::task::JoinHandle<()>,
@@ -184,6 +188,7 @@ pub async fn start_with(store: Store, config: Config) -> Server {
     };
     let app = Application::with_store(store, config).await.unwrap();
     let base = format!("http://{}", app.local_addr());
+    let metrics_addr = app.metrics_addr();
     let (stop, rx) = tokio::sync::oneshot::channel::<()>();
     let task = tokio::spawn(async move {
         app.run_until(async {
@@ -194,6 +199,7 @@ pub async fn start_with(store: Store, config: Config) -> Server {
     });
     Server {
         base,
+        metrics_addr,
         client: reqwest::Client::new(),
         stop,
         task,
@@ -277,9 +283,34 @@ pub async fn wait_for_job(srv: &Server, location: &str) -> Value {
     job
 }
 
-/// Metrics from one read of `/metrics`, by name.
+/// [`wait_for_job`] on a server that needs tokens, as `secret`.
+pub async fn wait_for_job_as(srv: &Server, secret: &str, location: &str) -> Value {
+    let r = srv
+        .client
+        .get(format!("{}{location}?wait_s=600", srv.base))
+        .bearer_auth(secret)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let job: Value = r.json().await.unwrap();
+    assert_eq!(job["state"], "succeeded", "{job}");
+    job
+}
+
+/// Metrics from one read of `/metrics` (on the metrics address if the server has one: a
+/// server with tokens serves `/metrics` to admins only), by name.
 pub async fn metrics(srv: &Server) -> std::collections::HashMap<String, u64> {
-    let (_, _, body) = srv.get("/metrics").await;
+    let body = match srv.metrics_addr {
+        Some(a) => reqwest::get(format!("http://{a}/metrics"))
+            .await
+            .unwrap()
+            .bytes()
+            .await
+            .unwrap()
+            .to_vec(),
+        None => srv.get("/metrics").await.2,
+    };
     String::from_utf8(body)
         .unwrap()
         .lines()
@@ -308,6 +339,98 @@ pub async fn settled(srv: &Server, requests: u64) {
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
     }
     panic!("the server did not settle");
+}
+
+/// The status line and body of a raw HTTP exchange: `head` is sent, then `body`, and the
+/// answer read until the server closes or `Content-Length` is met.
+pub async fn raw(base: &str, head: &str, body: &[u8]) -> (u16, String, TcpStream) {
+    let addr = base.trim_start_matches("http://");
+    let mut s = TcpStream::connect(addr).await.unwrap();
+    s.write_all(head.as_bytes()).await.unwrap();
+    s.write_all(body).await.unwrap();
+    let mut buf = Vec::new();
+    let mut chunk = [0u8; 4096];
+    loop {
+        let n = tokio::time::timeout(Duration::from_secs(30), s.read(&mut chunk))
+            .await
+            .expect("the server answers")
+            .unwrap();
+        buf.extend_from_slice(&chunk[..n]);
+        let text = String::from_utf8_lossy(&buf).to_string();
+        if let Some((h, b)) = text.split_once("\r\n\r\n") {
+            let len = h
+                .lines()
+                .find_map(|l| {
+                    l.to_ascii_lowercase()
+                        .strip_prefix("content-length:")
+                        .map(|v| v.trim().parse::<usize>().unwrap())
+                })
+                .unwrap_or(0);
+            if b.len() >= len || n == 0 {
+                let status = h[9..12].parse().unwrap();
+                return (status, text, s);
+            }
+        }
+        if n == 0 {
+            panic!("connection closed without an answer: {text}");
+        }
+    }
+}
+
+/// A gauge from `/metrics`.
+pub async fn gauge(srv: &Server, name: &str) -> u64 {
+    metrics(srv).await[name]
+}
+
+/// Poll `f` until it holds, at most `tries` times 50 ms apart.
+pub async fn eventually<F: std::future::Future<Output = bool>>(
+    tries: usize,
+    mut f: impl FnMut() -> F,
+) {
+    for _ in 0..tries {
+        if f().await {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("condition never held");
+}
+
+/// A token made on the store itself, its secret.
+pub async fn token(store: &Store, name: &str, scope: &str, libraries: Option<&[&str]>) -> String {
+    mocapstore::service::access::create_token(
+        store,
+        mocapstore::service::access::TokenRequest {
+            name: name.into(),
+            scope: scope.into(),
+            libraries: libraries.map(|l| l.iter().map(|s| s.to_string()).collect()),
+            expires_at: None,
+        },
+    )
+    .await
+    .unwrap()
+    .secret
+}
+
+/// The Python with the independent readers the tests check files against (py-c3d), from
+/// `MOCAP_TEST_PYTHON` (`scripts/pyenv` makes it; `.ci/run` sets it). Unset: `None`, and
+/// the test says it skips that part. Set but unusable: the test fails.
+pub fn python() -> Option<std::path::PathBuf> {
+    let Ok(p) = std::env::var("MOCAP_TEST_PYTHON") else {
+        eprintln!("MOCAP_TEST_PYTHON is not set: skipping the independent reader's half (scripts/pyenv makes one)");
+        return None;
+    };
+    let p = std::path::PathBuf::from(p);
+    let ok = std::process::Command::new(&p)
+        .args(["-c", "import c3d, numpy"])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        ok,
+        "MOCAP_TEST_PYTHON={} is set but cannot import c3d and numpy",
+        p.display()
+    );
+    Some(p)
 }
 
 /// Run the `mocapstore` binary: success, stdout, stderr.

@@ -12,60 +12,10 @@ use mocapstore::limits::Limits;
 use mocapstore::motion::formats::{self, Format};
 use mocapstore::motion::synthetic::walker;
 use serde_json::{json, Value};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::AsyncWriteExt;
 use tokio::net::TcpStream;
 
-/// The status line and body of a raw HTTP exchange: `head` is sent, then `body`, and the
-/// answer read until the server closes or `Content-Length` is met.
-async fn raw(base: &str, head: &str, body: &[u8]) -> (u16, String, TcpStream) {
-    let addr = base.trim_start_matches("http://");
-    let mut s = TcpStream::connect(addr).await.unwrap();
-    s.write_all(head.as_bytes()).await.unwrap();
-    s.write_all(body).await.unwrap();
-    let mut buf = Vec::new();
-    let mut chunk = [0u8; 4096];
-    loop {
-        let n = tokio::time::timeout(Duration::from_secs(30), s.read(&mut chunk))
-            .await
-            .expect("the server answers")
-            .unwrap();
-        buf.extend_from_slice(&chunk[..n]);
-        let text = String::from_utf8_lossy(&buf).to_string();
-        if let Some((h, b)) = text.split_once("\r\n\r\n") {
-            let len = h
-                .lines()
-                .find_map(|l| {
-                    l.to_ascii_lowercase()
-                        .strip_prefix("content-length:")
-                        .map(|v| v.trim().parse::<usize>().unwrap())
-                })
-                .unwrap_or(0);
-            if b.len() >= len || n == 0 {
-                let status = h[9..12].parse().unwrap();
-                return (status, text, s);
-            }
-        }
-        if n == 0 {
-            panic!("connection closed without an answer: {text}");
-        }
-    }
-}
-
-/// A gauge from `/metrics`.
-async fn gauge(srv: &common::Server, name: &str) -> u64 {
-    common::metrics(srv).await[name]
-}
-
-/// Poll `f` until it holds, at most `tries` times 50 ms apart.
-async fn eventually<F: std::future::Future<Output = bool>>(tries: usize, mut f: impl FnMut() -> F) {
-    for _ in 0..tries {
-        if f().await {
-            return;
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-    panic!("condition never held");
-}
+use common::{eventually, gauge, raw};
 
 fn is_error_shape(v: &Value) -> bool {
     v["error"]["code"].is_string() && v["error"]["message"].is_string()
@@ -160,7 +110,8 @@ async fn uploads_past_the_server_budget_get_503_and_what_is_held_stays_bounded()
     )
     .await;
     let addr = srv.base.trim_start_matches("http://").to_string();
-    // Two slow clients each declare 2 MiB and send 1 KiB: together they hold the budget.
+    // Two slow clients each declare 2 MiB and send 1.5 MiB: the budget counts what has
+    // arrived (room for it, growing to the declared size), and together they hold it all.
     let mut slow = Vec::new();
     for _ in 0..2 {
         let mut s = TcpStream::connect(&addr).await.unwrap();
@@ -169,7 +120,7 @@ async fn uploads_past_the_server_budget_get_503_and_what_is_held_stays_bounded()
             2u64 << 20
         );
         s.write_all(head.as_bytes()).await.unwrap();
-        s.write_all(&[b' '; 1024]).await.unwrap();
+        s.write_all(&vec![b' '; 1536 << 10]).await.unwrap();
         slow.push(s);
     }
     eventually(100, || async {

@@ -10,6 +10,7 @@ mod archive;
 mod bases;
 mod choice;
 mod cli;
+mod hostile;
 mod http;
 mod library;
 mod limits;

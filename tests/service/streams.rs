@@ -321,7 +321,19 @@ async fn watch(srv: &common::Server, id: &str) -> reqwest::Response {
 #[tokio::test]
 async fn watchers_see_frames_as_they_arrive_and_the_end() {
     for t in common::all().await {
-        let srv = common::start(t.store.clone(), 8 << 20).await;
+        // One caller may watch a stream as many times as the stream takes watchers here
+        // (the share per caller has its own test, in `hostile`).
+        let srv = common::start_with(
+            t.store.clone(),
+            mocapstore::http::Config {
+                limits: mocapstore::limits::Limits {
+                    watchers_per_caller: mocapstore::limits::STREAM_WATCHERS as u64,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+        )
+        .await;
         let points = 3;
         let (status, _, info) = srv
             .post_json(

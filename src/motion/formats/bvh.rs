@@ -392,31 +392,80 @@ pub fn write(motion: &Motion) -> Result<Vec<u8>> {
 
 /// Write a skeleton and its channel values at `fps` as BVH.
 pub fn write_skeleton(s: &Skeleton, fps: f64) -> Vec<u8> {
-    let mut out = String::with_capacity(64 * s.joints.len() + 12 * s.values.len());
-    out.push_str("HIERARCHY\n");
-    if !s.joints.is_empty() {
-        write_hierarchy(s, &mut out);
+    let w = ChannelWriter::new(s.joints.clone(), fps, s.frame_count());
+    let mut out = Vec::with_capacity(64 * s.joints.len() + 12 * s.values.len());
+    w.head(&mut out);
+    w.frames(&s.values, s.printed.as_ref(), 0..s.frame_count(), &mut out);
+    out
+}
+
+/// BVH block by block: the hierarchy and the `MOTION` header (which states the frame
+/// count), then a line of channel values per frame.
+pub struct ChannelWriter {
+    joints: Vec<Joint>,
+    channels: usize,
+    fps: f64,
+    frames: usize,
+}
+
+impl ChannelWriter {
+    /// A writer of `frames` frames of the skeleton `joints` at `fps`.
+    pub fn new(joints: Vec<Joint>, fps: f64, frames: usize) -> ChannelWriter {
+        let channels = joints.iter().map(|j| j.channels.len()).sum();
+        ChannelWriter {
+            joints,
+            channels,
+            fps,
+            frames,
+        }
     }
-    let frames = s.frame_count();
-    let _ = write!(out, "MOTION\nFrames: {frames}\nFrame Time: ");
-    out.push_str(&format_frame_time(1.0 / fps));
-    out.push('\n');
-    let cc = s.channel_count();
-    for f in 0..frames {
-        for i in f * cc..(f + 1) * cc {
-            if i > f * cc {
-                out.push(' ');
-            }
-            match &s.printed {
-                Some(p) => p.write(i, &mut out),
-                None => {
-                    let _ = write!(out, "{}", s.values[i]);
+
+    pub fn head(&self, out: &mut Vec<u8>) {
+        let mut text = String::from("HIERARCHY\n");
+        if !self.joints.is_empty() {
+            write_hierarchy(&self.joints, &mut text);
+        }
+        let _ = write!(text, "MOTION\nFrames: {}\nFrame Time: ", self.frames);
+        text.push_str(&format_frame_time(1.0 / self.fps));
+        text.push('\n');
+        out.extend_from_slice(text.as_bytes());
+    }
+
+    /// Frames `frames` of whole frames of channel values, printed as `printed` holds them
+    /// when given (values as a lossless archive keeps them), else in the shortest form that
+    /// reads back.
+    pub fn frames(
+        &self,
+        values: &[f64],
+        printed: Option<&PrintedValues>,
+        frames: std::ops::Range<usize>,
+        out: &mut Vec<u8>,
+    ) {
+        let cc = self.channels;
+        let mut text = String::with_capacity(frames.len() * cc * 12);
+        for f in frames {
+            for (k, v) in values[f * cc..(f + 1) * cc].iter().enumerate() {
+                if k > 0 {
+                    text.push(' ');
+                }
+                match printed {
+                    Some(p) => p.write(f * cc + k, &mut text),
+                    None => {
+                        let _ = write!(text, "{v}");
+                    }
                 }
             }
+            text.push('\n');
         }
-        out.push('\n');
+        out.extend_from_slice(text.as_bytes());
     }
-    out.into_bytes()
+
+    /// The most bytes one frame takes: a printed value is at most 24 characters and its
+    /// separator (an f64 in its shortest form), a verbatim token at most what a BVH reader
+    /// accepts as one.
+    pub fn frame_bytes(&self) -> usize {
+        self.channels * 25 + 1
+    }
 }
 
 fn format_frame_time(t: f64) -> String {
@@ -427,9 +476,9 @@ fn format_frame_time(t: f64) -> String {
 
 /// Print the hierarchy: each joint's block opens before its children's and closes after
 /// them. Walked with an explicit stack (no recursion on depth), children found once.
-fn write_hierarchy(s: &Skeleton, out: &mut String) {
-    let mut children: Vec<Vec<usize>> = vec![Vec::new(); s.joints.len()];
-    for (k, j) in s.joints.iter().enumerate() {
+fn write_hierarchy(joints: &[Joint], out: &mut String) {
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); joints.len()];
+    for (k, j) in joints.iter().enumerate() {
         if let Some(p) = j.parent {
             children[p].push(k);
         }
@@ -443,7 +492,7 @@ fn write_hierarchy(s: &Skeleton, out: &mut String) {
             let _ = writeln!(out, "{ind}}}");
             continue;
         }
-        let j = &s.joints[i];
+        let j = &joints[i];
         if j.end_site {
             let _ = writeln!(out, "{ind}End Site");
         } else if j.parent.is_none() {

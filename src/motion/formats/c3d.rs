@@ -379,6 +379,8 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     let names = point_names(&params, points);
     let abs_scale = scale.abs();
     let mut positions = vec![f32::NAN; frames * points * 3];
+    // Samples whose residual says valid but whose numbers are not finite (Vicon writes NaN
+    // for unlabelled samples): gaps, counted.
     let mut not_finite = 0usize;
     // Frames with no point data (analog-only files) read nothing from the data section.
     for f in (0..frames).filter(|_| points > 0) {
@@ -393,23 +395,21 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
                 let v = |k: usize| f32::from(proc.i16(&frame[at + k * 2..]));
                 ([v(0) * abs_scale, v(1) * abs_scale, v(2) * abs_scale], v(3))
             };
-            if residual >= 0.0 {
-                // A sample marked valid (residual ≥ 0) must be a number: C3D marks gaps by
-                // the residual, never by the coordinates.
-                if xyz.iter().all(|c| c.is_finite()) {
-                    positions[(f * points + p) * 3..(f * points + p) * 3 + 3].copy_from_slice(&xyz);
-                } else {
-                    not_finite += 1;
-                }
+            // A gap as py-c3d reads one: the residual word's integer is negative (-1 marks
+            // a gap; a float residual is that integer stored as a float, and it truncates
+            // like a cast), or any of the four numbers is not finite.
+            let marked_valid = residual.is_nan() || residual.trunc() >= 0.0;
+            if !marked_valid {
+                continue;
+            }
+            if xyz.iter().all(|c| c.is_finite()) && residual.is_finite() {
+                positions[(f * points + p) * 3..(f * points + p) * 3 + 3].copy_from_slice(&xyz);
+            } else {
+                not_finite += 1;
             }
         }
     }
-
-    if not_finite > 0 {
-        contradictions.push(format!(
-            "{not_finite} samples are marked valid but their coordinates are not finite"
-        ));
-    }
+    warnings.extend(super::non_finite_warning(not_finite));
     let motion = if points == 0 {
         Motion::without_points(rate, unsettled_unit(), frames)?
     } else {
@@ -524,6 +524,45 @@ mod tests {
             }
             b
         }
+    }
+
+    /// As [`Builder::build`], in float storage (`POINT:SCALE` -0.5): `[x, y, z, residual]`
+    /// floats, as Vicon Nexus writes them.
+    fn build_float(b: &Builder, frames: &[[f32; 4]]) -> Vec<u8> {
+        let mut out = b.build(frames.len() as u16, &[]);
+        out[12..16].copy_from_slice(&(-0.5f32).to_le_bytes());
+        for f in frames {
+            for v in f {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn non_finite_samples_are_gaps_as_py_c3d_reads_them() {
+        let nan = f32::NAN;
+        let rows = [
+            [1.0, 2.0, 3.0, 0.0],  // valid
+            [nan, nan, nan, 0.0],  // Vicon's unlabelled sample: NaN, residual 0
+            [4.0, 5.0, 6.0, -1.0], // a gap by its residual
+            [7.0, 8.0, 9.0, -0.5], // py-c3d casts the residual to an integer: 0, valid
+            [1.0, 1.0, 1.0, nan],  // a residual that is not a number: a gap, counted
+            [f32::INFINITY, 0.0, 0.0, 2.0],
+        ];
+        let p = read(&build_float(&Builder::new(), &rows), &Limits::default()).unwrap();
+        assert!(p.contradictions.is_empty(), "{:?}", p.contradictions);
+        let m = &p.motion;
+        let valid: Vec<bool> = (0..6).map(|f| m.sample(f, 0).is_some()).collect();
+        assert_eq!(valid, [true, false, false, true, false, false]);
+        assert_eq!(m.sample(3, 0), Some([7.0, 8.0, 9.0]));
+        assert!(
+            p.warnings
+                .iter()
+                .any(|w| w.starts_with("3 samples") && w.contains("not finite")),
+            "{:?}",
+            p.warnings
+        );
     }
 
     fn tiny_c3d(residual_frame1: i16) -> Vec<u8> {

@@ -2,9 +2,9 @@
 //! "frames": [[[x, y, z], …], …]}`; a missing sample is `null`. `unit` may be a name or a
 //! number of metres per unit and may be omitted (then it is inferred).
 
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 
-use super::text::push_f32;
+use super::writer::{push_f32, write_whole, FrameWriter, Shape, TEXT_VALUE_BYTES};
 use super::{perr, unsettled_unit, Format, Limits, Parsed};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
@@ -24,13 +24,6 @@ struct Doc {
     unit: Option<UnitField>,
     points: Vec<String>,
     frames: Vec<Vec<Option<[f32; 3]>>>,
-}
-
-#[derive(Serialize)]
-struct Header<'a> {
-    fps: f64,
-    unit: serde_json::Value,
-    points: &'a [String],
 }
 
 fn err(at: Location, reason: impl Into<String>) -> Error {
@@ -63,7 +56,9 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         Some(UnitField::Name(s)) => Some(parse_unit(&s)?),
         Some(UnitField::Metres(m)) => Some(parse_unit(&m.to_string())?),
     };
-    let contradictions = super::infinite_values(&positions).into_iter().collect();
+    let warnings = super::non_finite_warning(super::infinite_samples(&positions))
+        .into_iter()
+        .collect();
     let motion = if n == 0 {
         Motion::without_points(doc.fps, unsettled_unit(), doc.frames.len())?
     } else {
@@ -72,8 +67,8 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     Ok(Parsed {
         motion,
         declared_unit,
-        warnings: Vec::new(),
-        contradictions,
+        warnings,
+        contradictions: Vec::new(),
     })
 }
 
@@ -84,58 +79,89 @@ pub fn write(motion: &Motion) -> Vec<u8> {
 
 /// [`write`] with more top-level fields beside the document's own (a range response says
 /// which take and frames it holds); readers ignore them, so the result reads back as a take.
-pub fn write_with(
-    motion: &Motion,
-    mut fields: serde_json::Map<String, serde_json::Value>,
-) -> Vec<u8> {
-    let m = motion.unit.metres_per_unit;
-    let name = unit_name(m);
-    // Named units as their name, anything else as a number of metres.
-    let unit = if parse_unit(&name).is_ok() {
-        serde_json::Value::from(name)
-    } else {
-        serde_json::Value::from(m)
-    };
-    let own = serde_json::to_value(Header {
-        fps: motion.fps,
-        unit,
-        points: &motion.point_names,
-    })
-    .expect("strings and numbers serialise");
-    if let serde_json::Value::Object(own) = own {
-        fields.extend(own);
-    }
-    let header = serde_json::Value::Object(fields).to_string();
-    // Frames are written by hand: serde_json would print f32 through f64 with noise digits.
-    let mut out = String::with_capacity(header.len() + motion.positions().len() * 10);
-    out.push_str(&header[..header.len() - 1]);
-    out.push_str(",\"frames\":[");
-    for f in 0..motion.frame_count() {
-        if f > 0 {
-            out.push(',');
+pub fn write_with(motion: &Motion, fields: serde_json::Map<String, serde_json::Value>) -> Vec<u8> {
+    write_whole(
+        Box::new(Writer::new(Shape::of(motion), fields)),
+        motion.frame_count(),
+        motion.positions(),
+    )
+}
+
+/// The JSON document frame by frame: the header's fields, then `"frames":[` and a frame
+/// per block value, then `]}`.
+pub struct Writer {
+    shape: Shape,
+    fields: serde_json::Map<String, serde_json::Value>,
+    written: usize,
+}
+
+impl Writer {
+    pub fn new(shape: Shape, fields: serde_json::Map<String, serde_json::Value>) -> Writer {
+        Writer {
+            shape,
+            fields,
+            written: 0,
         }
-        out.push('[');
-        for (i, p) in motion.frame(f).chunks_exact(3).enumerate() {
-            if i > 0 {
-                out.push(',');
+    }
+}
+
+impl FrameWriter for Writer {
+    fn head(&mut self, out: &mut Vec<u8>) {
+        let m = self.shape.unit.metres_per_unit;
+        let name = unit_name(m);
+        // Named units as their name, anything else as a number of metres.
+        let unit = if parse_unit(&name).is_ok() {
+            serde_json::Value::from(name)
+        } else {
+            serde_json::Value::from(m)
+        };
+        let mut fields = std::mem::take(&mut self.fields);
+        fields.insert("fps".into(), self.shape.fps.into());
+        fields.insert("unit".into(), unit);
+        fields.insert("points".into(), self.shape.point_names.clone().into());
+        let header = serde_json::Value::Object(fields).to_string();
+        out.extend_from_slice(&header.as_bytes()[..header.len() - 1]);
+        out.extend_from_slice(b",\"frames\":[");
+    }
+
+    /// Frames are written by hand: serde_json would print f32 through f64 with noise digits.
+    fn frames(&mut self, n: usize, values: &[f32], out: &mut Vec<u8>) {
+        let w = self.shape.width();
+        for f in 0..n {
+            let frame = &values[f * w..(f + 1) * w];
+            if self.written > 0 {
+                out.push(b',');
             }
-            if p[0].is_nan() {
-                out.push_str("null");
-            } else {
-                out.push('[');
-                for (k, v) in p.iter().enumerate() {
-                    if k > 0 {
-                        out.push(',');
-                    }
-                    push_f32(&mut out, *v, "null");
+            self.written += 1;
+            out.push(b'[');
+            for (i, p) in frame.chunks_exact(3).enumerate() {
+                if i > 0 {
+                    out.push(b',');
                 }
-                out.push(']');
+                if p[0].is_nan() {
+                    out.extend_from_slice(b"null");
+                } else {
+                    out.push(b'[');
+                    for (k, v) in p.iter().enumerate() {
+                        if k > 0 {
+                            out.push(b',');
+                        }
+                        push_f32(out, *v, "null");
+                    }
+                    out.push(b']');
+                }
             }
+            out.push(b']');
         }
-        out.push(']');
     }
-    out.push_str("]}\n");
-    out.into_bytes()
+
+    fn tail(&mut self, out: &mut Vec<u8>) {
+        out.extend_from_slice(b"]}\n");
+    }
+
+    fn frame_bytes(&self) -> usize {
+        self.shape.point_names.len() * (3 * TEXT_VALUE_BYTES + 3) + 3
+    }
 }
 
 #[cfg(test)]

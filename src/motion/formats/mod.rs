@@ -17,6 +17,9 @@ pub mod npy;
 pub mod rawf32;
 mod text;
 pub mod trc;
+pub mod writer;
+
+pub use writer::{FrameWriter, Shape};
 
 /// Bounds on untrusted input, checked before anything proportional to them is allocated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -113,11 +116,26 @@ pub(crate) struct Parsed {
     pub contradictions: Vec<String>,
 }
 
-/// Values a reader produced that are infinite (or overflowed f32): never a position, and
-/// not a gap marker in any format. Readers report them as a contradiction.
-pub(crate) fn infinite_values(positions: &[f32]) -> Option<String> {
-    let n = positions.iter().filter(|v| v.is_infinite()).count();
-    (n > 0).then(|| format!("{n} coordinates are infinite or overflow 32-bit floats"))
+/// Samples (point triples) with an infinite coordinate (or one that overflowed f32): never
+/// a position.
+pub(crate) fn infinite_samples(positions: &[f32]) -> usize {
+    positions
+        .chunks_exact(3)
+        .filter(|s| s.iter().any(|v| v.is_infinite()))
+        .count()
+}
+
+/// The warning for `n` samples whose coordinates are not finite numbers (NaN where the
+/// format marks gaps otherwise, ±infinity, overflow), kept as missing samples: a number
+/// that is not one is a gap, not a broken file. Vicon writes NaN for unlabelled samples;
+/// ezc3d and py-c3d read such files, and so do we.
+pub(crate) fn non_finite_warning(n: usize) -> Option<String> {
+    (n > 0).then(|| {
+        format!(
+            "{n} samples have coordinates that are not finite numbers (NaN or ±infinity); \
+             stored as missing samples"
+        )
+    })
 }
 
 /// Guess the format from the first bytes.
@@ -272,17 +290,41 @@ fn settle_unit(
     }
 }
 
+/// The writer of `format` for an answer of `shape`; `fields` are extra top-level members
+/// of a JSON answer (which take, which frames), ignored by readers. BVH is written from
+/// joint channels ([`bvh::ChannelWriter`]) and C3D not at all: both are refused.
+pub fn frame_writer(
+    format: Format,
+    shape: Shape,
+    fields: serde_json::Map<String, serde_json::Value>,
+) -> Result<Box<dyn FrameWriter>> {
+    Ok(match format {
+        Format::Json => Box::new(json::Writer::new(shape, fields)),
+        Format::Csv => Box::new(csv::Writer::new(shape)),
+        Format::Trc => Box::new(trc::Writer::new(shape)),
+        Format::Npy => Box::new(npy::Writer::new(shape)),
+        Format::F32 => Box::new(rawf32::Writer::new(shape)),
+        Format::Bvh => {
+            return Err(Error::Unsupported(
+                "BVH is written from a skeleton's channels, not from points".into(),
+            ))
+        }
+        Format::C3d => {
+            return Err(Error::Unsupported(
+                "writing C3D is not supported yet".into(),
+            ))
+        }
+    })
+}
+
 /// Write a take in `format`.
 pub fn write(motion: &Motion, format: Format) -> Result<Vec<u8>> {
     match format {
         Format::Bvh => bvh::write(motion),
-        Format::Trc => Ok(trc::write(motion)),
-        Format::Json => Ok(json::write(motion)),
-        Format::Npy => Ok(npy::write(motion)),
-        Format::Csv => Ok(csv::write(motion)),
-        Format::F32 => Ok(rawf32::write(motion)),
-        Format::C3d => Err(Error::Unsupported(
-            "writing C3D is not supported yet".into(),
+        _ => Ok(writer::write_whole(
+            frame_writer(format, Shape::of(motion), Default::default())?,
+            motion.frame_count(),
+            motion.positions(),
         )),
     }
 }
@@ -300,6 +342,7 @@ pub(crate) fn unsettled_unit() -> Unit {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::motion::synthetic::walker;
 
     #[test]
     fn detects_from_content() {
@@ -340,6 +383,47 @@ mod tests {
             read(b"HIERARCHY\nROOT a", &opts),
             Err(Error::Limit { .. })
         ));
+    }
+
+    /// Written in blocks of any size, every format gives the bytes of the whole write, and
+    /// a binary format's stated length is its real one.
+    #[test]
+    fn blocks_of_any_size_write_the_same_file() {
+        let mut m = walker(37, 5, 60.0, 3, 0.0);
+        m.gap_where(|s| s[0] > 500.0);
+        let w = m.point_count() * 3;
+        for format in [
+            Format::Json,
+            Format::Csv,
+            Format::Trc,
+            Format::Npy,
+            Format::F32,
+        ] {
+            let whole = write(&m, format).unwrap();
+            for block in [1, 2, 5, 36, 37] {
+                let mut wr = frame_writer(format, Shape::of(&m), Default::default()).unwrap();
+                let mut out = Vec::new();
+                wr.head(&mut out);
+                for b in m.positions().chunks(block * w) {
+                    let before = out.len();
+                    wr.frames(b.len() / w, b, &mut out);
+                    assert!(out.len() - before <= b.len() / w * wr.frame_bytes());
+                }
+                wr.tail(&mut out);
+                assert_eq!(out, whole, "{format} in blocks of {block}");
+                if let Some(n) = wr.exact_len() {
+                    assert_eq!(n, out.len() as u64, "{format}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bvh_and_c3d_are_not_point_writers() {
+        let m = walker(3, 1, 60.0, 1, 0.0);
+        for f in [Format::Bvh, Format::C3d] {
+            assert!(frame_writer(f, Shape::of(&m), Default::default()).is_err());
+        }
     }
 
     #[test]

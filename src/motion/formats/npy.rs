@@ -3,6 +3,7 @@
 //! the frame rate is [`DEFAULT_FPS`] unless the caller states one (with a warning from
 //! [`super::read_as`]), points are named `P1…`, and the unit is inferred.
 
+use super::writer::{FrameWriter, Shape};
 use super::{perr, unsettled_unit, Format, Limits, Parsed};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
@@ -144,7 +145,10 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         }
     }
     let names = (1..=points).map(|i| format!("P{i}")).collect();
-    let contradictions = super::infinite_values(&positions).into_iter().collect();
+    // NaN is how an array marks a gap; ±infinity is no position either.
+    let warnings = super::non_finite_warning(super::infinite_samples(&positions))
+        .into_iter()
+        .collect();
     let motion = if points == 0 {
         Motion::without_points(DEFAULT_FPS, unsettled_unit(), frames)?
     } else {
@@ -153,33 +157,55 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     Ok(Parsed {
         motion,
         declared_unit: None,
-        warnings: Vec::new(),
-        contradictions,
+        warnings,
+        contradictions: Vec::new(),
     })
 }
 
-/// Write as a version-1.0 `<f4` C-order array `[frames, points, 3]`, NaN for gaps.
-pub fn write(motion: &Motion) -> Vec<u8> {
-    let dict = format!(
-        "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, 3), }}",
-        motion.frame_count(),
-        motion.point_count()
-    );
-    // Pad so that the data starts on a 64-byte boundary, as NumPy does.
-    let unpadded = MAGIC.len() + 4 + dict.len() + 1;
-    let pad = (64 - unpadded % 64) % 64;
-    let header_len = dict.len() + pad + 1;
-    let mut out = Vec::with_capacity(unpadded + pad + motion.positions().len() * 4);
-    out.extend_from_slice(MAGIC);
-    out.extend_from_slice(&[1, 0]);
-    out.extend_from_slice(&(header_len as u16).to_le_bytes());
-    out.extend_from_slice(dict.as_bytes());
-    out.extend(std::iter::repeat_n(b' ', pad));
-    out.push(b'\n');
-    for v in motion.positions() {
-        out.extend_from_slice(&v.to_le_bytes());
+/// NPY: its header (with the shape), then the values as they come.
+pub struct Writer {
+    shape: Shape,
+    header: Vec<u8>,
+}
+
+impl Writer {
+    pub fn new(shape: Shape) -> Writer {
+        let dict = format!(
+            "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, 3), }}",
+            shape.frames,
+            shape.point_names.len()
+        );
+        // Pad so that the data starts on a 64-byte boundary, as NumPy does.
+        let unpadded = MAGIC.len() + 4 + dict.len() + 1;
+        let pad = (64 - unpadded % 64) % 64;
+        let header_len = dict.len() + pad + 1;
+        let mut header = Vec::with_capacity(unpadded + pad);
+        header.extend_from_slice(MAGIC);
+        header.extend_from_slice(&[1, 0]);
+        header.extend_from_slice(&(header_len as u16).to_le_bytes());
+        header.extend_from_slice(dict.as_bytes());
+        header.extend(std::iter::repeat_n(b' ', pad));
+        header.push(b'\n');
+        Writer { shape, header }
     }
-    out
+}
+
+impl FrameWriter for Writer {
+    fn head(&mut self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.header);
+    }
+
+    fn frames(&mut self, _n: usize, values: &[f32], out: &mut Vec<u8>) {
+        super::rawf32::extend_le(out, values);
+    }
+
+    fn exact_len(&self) -> Option<u64> {
+        Some(self.header.len() as u64 + (self.shape.frames * self.shape.width() * 4) as u64)
+    }
+
+    fn frame_bytes(&self) -> usize {
+        self.shape.width() * 4
+    }
 }
 
 #[cfg(test)]
@@ -235,7 +261,7 @@ mod tests {
         )
         .unwrap()
         .motion;
-        let out = write(&m);
+        let out = super::super::write(&m, super::super::Format::Npy).unwrap();
         assert_eq!((out.len() - 24) % 64, 0);
         assert_eq!(read(&out, &Limits::default()).unwrap().motion, m);
     }

@@ -2,19 +2,46 @@
 //! thing to hand to NumPy (`np.fromfile(..., '<f4').reshape(F, P, 3)`) or a GPU. It has no
 //! header, so the shape travels out of band (the HTTP layer puts it in response headers).
 
-use crate::motion::model::Motion;
+use super::writer::{FrameWriter, Shape};
 
-pub fn write(motion: &Motion) -> Vec<u8> {
-    motion
-        .positions()
-        .iter()
-        .flat_map(|v| v.to_le_bytes())
-        .collect()
+/// Append `values` as little-endian f32.
+pub(crate) fn extend_le(out: &mut Vec<u8>, values: &[f32]) {
+    out.reserve(values.len() * 4);
+    for v in values {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// Bare f32, block by block.
+pub struct Writer {
+    shape: Shape,
+}
+
+impl Writer {
+    pub fn new(shape: Shape) -> Writer {
+        Writer { shape }
+    }
+}
+
+impl FrameWriter for Writer {
+    fn head(&mut self, _out: &mut Vec<u8>) {}
+
+    fn frames(&mut self, _n: usize, values: &[f32], out: &mut Vec<u8>) {
+        extend_le(out, values);
+    }
+
+    fn exact_len(&self) -> Option<u64> {
+        Some((self.shape.frames * self.shape.width() * 4) as u64)
+    }
+
+    fn frame_bytes(&self) -> usize {
+        self.shape.width() * 4
+    }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::motion::model::Motion;
     use crate::motion::units::Unit;
 
     #[test]
@@ -27,7 +54,7 @@ mod tests {
             None,
         )
         .unwrap();
-        let b = write(&m);
+        let b = super::super::write(&m, super::super::Format::F32).unwrap();
         assert_eq!(b.len(), 12);
         assert_eq!(f32::from_le_bytes([b[4], b[5], b[6], b[7]]), -2.0);
     }

@@ -15,13 +15,3 @@ pub(crate) fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> 
         .enumerate()
         .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
 }
-
-/// Append `v` in the shortest form that parses back to the same f32; NaN as `nan_text`.
-pub(crate) fn push_f32(out: &mut String, v: f32, nan_text: &str) {
-    use std::fmt::Write;
-    if v.is_finite() {
-        let _ = write!(out, "{v}");
-    } else {
-        out.push_str(nan_text);
-    }
-}

@@ -4,9 +4,10 @@
 //! Real files disagree with their own headers (a `NumMarkers` of 0 above rows of data, rows
 //! cut short after the last visible marker), so the rows decide and the header only warns.
 
-use std::fmt::Write as _;
+use std::io::Write as _;
 
-use super::text::{as_text, numbered_lines, push_f32};
+use super::text::{as_text, numbered_lines};
+use super::writer::{push_f32, FrameWriter, Shape, TEXT_VALUE_BYTES};
 use super::{perr, unsettled_unit, Format, Limits, Parsed};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
@@ -132,7 +133,10 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     }
 
     let mut positions = vec![f32::NAN; rows.len() * width * 3];
+    // A blank cell is a gap; a cell that reads as NaN or ±infinity is one too, counted.
+    let mut not_finite = 0usize;
     for (f, (n, c)) in rows.iter().enumerate() {
+        let mut last_bad = None;
         for (k, cell) in c.iter().skip(2).enumerate() {
             let cell = cell.trim();
             if cell.is_empty() {
@@ -141,10 +145,14 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
             let v: f32 = cell
                 .parse()
                 .map_err(|_| err(*n, format!("{cell:?} is not a number")))?;
+            if !v.is_finite() && last_bad != Some(k / 3) {
+                last_bad = Some(k / 3);
+                not_finite += 1;
+            }
             positions[f * width * 3 + k] = v;
         }
     }
-    contradictions.extend(super::infinite_values(&positions));
+    warnings.extend(super::non_finite_warning(not_finite));
     let motion = if width == 0 {
         Motion::without_points(rate, unsettled_unit(), rows.len())?
     } else {
@@ -172,43 +180,71 @@ fn uniquify(names: &mut [String]) {
     }
 }
 
-/// Write as TRC. TRC names its unit, so takes in a unit TRC cannot name (the CMU skeleton
-/// unit, say) are converted to millimetres.
-pub fn write(motion: &Motion) -> Vec<u8> {
-    let (unit, scale) = match unit_name(motion.unit.metres_per_unit).as_str() {
-        n @ ("mm" | "cm" | "m") => (n.to_string(), 1.0f32),
-        _ => (
-            "mm".to_string(),
-            (motion.unit.metres_per_unit * 1000.0) as f32,
-        ),
-    };
-    let (frames, points) = (motion.frame_count(), motion.point_count());
-    let fps = motion.fps;
-    let mut out = String::with_capacity(frames * points * 30 + 512);
-    let _ = writeln!(out, "PathFileType\t4\t(X/Y/Z)\tmocapstore.trc");
-    let _ = writeln!(out, "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames");
-    let _ = writeln!(
-        out,
-        "{fps}\t{fps}\t{frames}\t{points}\t{unit}\t{fps}\t1\t{frames}"
-    );
-    out.push_str("Frame#\tTime");
-    for n in &motion.point_names {
-        let _ = write!(out, "\t{n}\t\t");
-    }
-    out.push_str("\n\t");
-    for i in 1..=points {
-        let _ = write!(out, "\tX{i}\tY{i}\tZ{i}");
-    }
-    out.push_str("\n\n");
-    for f in 0..frames {
-        let _ = write!(out, "{}\t{}", f + 1, f as f64 / fps);
-        for v in motion.frame(f) {
-            out.push('\t');
-            push_f32(&mut out, v * scale, "");
+/// TRC row by row.
+pub struct Writer {
+    shape: Shape,
+    /// The unit the file names, and the factor from the take's unit to it.
+    unit: String,
+    scale: f32,
+    written: usize,
+}
+
+impl Writer {
+    pub fn new(shape: Shape) -> Writer {
+        let (unit, scale) = match unit_name(shape.unit.metres_per_unit).as_str() {
+            n @ ("mm" | "cm" | "m") => (n.to_string(), 1.0f32),
+            _ => (
+                "mm".to_string(),
+                (shape.unit.metres_per_unit * 1000.0) as f32,
+            ),
+        };
+        Writer {
+            shape,
+            unit,
+            scale,
+            written: 0,
         }
-        out.push('\n');
     }
-    out.into_bytes()
+}
+
+impl FrameWriter for Writer {
+    fn head(&mut self, out: &mut Vec<u8>) {
+        let (frames, points) = (self.shape.frames, self.shape.point_names.len());
+        let (fps, unit) = (self.shape.fps, &self.unit);
+        let _ = writeln!(out, "PathFileType\t4\t(X/Y/Z)\tmocapstore.trc");
+        let _ = writeln!(out, "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames");
+        let _ = writeln!(
+            out,
+            "{fps}\t{fps}\t{frames}\t{points}\t{unit}\t{fps}\t1\t{frames}"
+        );
+        out.extend_from_slice(b"Frame#\tTime");
+        for n in &self.shape.point_names {
+            let _ = write!(out, "\t{n}\t\t");
+        }
+        out.extend_from_slice(b"\n\t");
+        for i in 1..=points {
+            let _ = write!(out, "\tX{i}\tY{i}\tZ{i}");
+        }
+        out.extend_from_slice(b"\n\n");
+    }
+
+    fn frames(&mut self, n: usize, values: &[f32], out: &mut Vec<u8>) {
+        let w = self.shape.width();
+        for f in 0..n {
+            let at = self.written;
+            self.written += 1;
+            let _ = write!(out, "{}\t{}", at + 1, at as f64 / self.shape.fps);
+            for v in &values[f * w..(f + 1) * w] {
+                out.push(b'\t');
+                push_f32(out, v * self.scale, "");
+            }
+            out.push(b'\n');
+        }
+    }
+
+    fn frame_bytes(&self) -> usize {
+        48 + self.shape.width() * TEXT_VALUE_BYTES
+    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,584 @@
+//! Range answers, written piece by piece: a take's frames in any output format, decoded a
+//! chunk at a time and written as they are decoded, so that what a request holds does not
+//! grow with the take's length.
+//!
+//! # What an answer may hold
+//! Before anything is decoded, [`open`] checks the request (the range, each point named once,
+//! the answer's size against [`Limits::answer_samples`]) and reserves from the server's
+//! answer budget ([`Limits::answer_bytes`], a share per caller) what the answer will hold at
+//! most, computed from the take's chunk index:
+//! - the chunk being decoded, twice (the decoded frames and the decoder's working copy);
+//! - the stored payloads read ahead from the store, at most [`PAYLOAD_BATCH`] (or one chunk,
+//!   if a chunk is larger);
+//! - [`PIECES_IN_FLIGHT`] pieces of output of at most [`PIECE_BYTES`] (or one frame's text,
+//!   if a frame is larger), handed to the connection but not yet written.
+//!
+//! A request over what is free is refused at once (503, `Retry-After`); once open, an answer
+//! keeps within its reservation, and each buffer it holds is counted
+//! ([`super::budget::Reservation::hold`]) so that `/metrics` reports what answers really
+//! hold and the tests check it against what they reserved.
+//!
+//! Short ranges (at most [`CACHED_CHUNKS`] chunks: what the viewer asks for) go through the
+//! server's cache of decoded chunks; longer ones read past it, so a bulk read does not evict
+//! what range requests keep hot.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+
+use bytes::Bytes;
+
+use super::budget::{Budget, Held, Holder, Reservation};
+use super::fetch::{prepare, TimeRange};
+use super::prepared::{Prepared, ReadCaches};
+use super::{blocking, Error, Result};
+use crate::codec::read::Chunk;
+use crate::codec::{self, basis::hex, ChunkSource};
+use crate::limits::Limits;
+use crate::motion::formats::bvh::ChannelWriter;
+use crate::motion::formats::{frame_writer, Format, FrameWriter, Shape};
+use crate::motion::{Unit, UnitSource};
+use crate::store::{ChunkRow, Store};
+
+/// Stored payloads an answer reads ahead in one query, bytes (at least one chunk).
+pub const PAYLOAD_BATCH: u64 = 1 << 20;
+
+/// Output is handed on in pieces of about this many bytes (at least one frame).
+pub const PIECE_BYTES: usize = 256 << 10;
+
+/// Pieces an answer counts as its own after handing them on: the connection's write queue
+/// holds a few before they reach the socket.
+pub const PIECES_IN_FLIGHT: u64 = 4;
+
+/// Room a piece keeps for a format's tail (`]}` and a newline for JSON).
+const TAIL_BYTES: usize = 64;
+
+/// Ranges of at most this many chunks are decoded through the server's chunk cache.
+pub const CACHED_CHUNKS: usize = 8;
+
+/// A range request, parsed: which frames, which points, which format.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RangeRequest {
+    pub range: TimeRange,
+    /// Point names, each once; `None` for every point.
+    pub points: Option<Vec<String>>,
+    pub format: Format,
+}
+
+/// One answer, open: what it holds (for the response's headers) and its pieces, taken with
+/// [`Answer::next`].
+pub struct Answer {
+    pub id: String,
+    pub format: Format,
+    pub start: usize,
+    pub end: usize,
+    pub fps: f64,
+    pub metres_per_unit: f64,
+    /// Points per frame (none for BVH, which answers joint channels).
+    pub points: Option<usize>,
+    /// The answer's length in bytes, where the format fixes it (f32, NPY).
+    pub length: Option<u64>,
+    /// Bytes reserved for it from the server's answer budget.
+    pub reserved: u64,
+    store: Store,
+    caches: Arc<ReadCaches>,
+    prepared: Arc<Prepared>,
+    reservation: Arc<Reservation>,
+    writer: Writer,
+    /// The next chunk to decode, and the end of those the range lies in.
+    next_chunk: usize,
+    last_chunk: usize,
+    cache: bool,
+    /// Stored payloads read ahead, from `next_chunk` on.
+    batch: VecDeque<(ChunkRow, Held)>,
+    /// The decoded frames not yet written.
+    block: Option<Block>,
+    /// Output written but not yet handed on: the head first. Allocated at a piece's full
+    /// size ([`Answer::fresh_piece`]), so that what a piece holds is what was reserved for
+    /// it, not twice that by doubling.
+    pending: Vec<u8>,
+    /// The most bytes a frame takes, and the frames not yet written.
+    frame_bytes: usize,
+    frames_left: usize,
+    tail_done: bool,
+}
+
+/// How an answer turns decoded frames into bytes.
+enum Writer {
+    /// Positions (JSON, CSV, TRC, NPY, f32), of every point or the selected ones.
+    Points {
+        writer: Box<dyn FrameWriter>,
+        selected: Option<Vec<usize>>,
+    },
+    /// BVH: the skeleton's channel values, for codecs that keep them.
+    Channels {
+        writer: ChannelWriter,
+        channels: usize,
+    },
+}
+
+/// Decoded frames of one chunk (the part in the range), and how many are written.
+struct Block {
+    data: Decoded,
+    frames: usize,
+    written: usize,
+    _held: Held,
+}
+
+enum Decoded {
+    Positions(Vec<f32>),
+    Channels(codec::rig::Channels),
+}
+
+/// Check a range request and open its answer, reserving what it will hold from `budget`
+/// for `holder`. Nothing is decoded yet; what cannot be answered is refused here.
+pub async fn open(
+    store: &Store,
+    caches: &Arc<ReadCaches>,
+    budget: &Arc<Budget>,
+    holder: Holder,
+    limits: &Limits,
+    id: &str,
+    req: RangeRequest,
+) -> Result<Answer> {
+    let (prepared, (start, end)) = prepare(store, caches, id, req.range).await?;
+    let header = prepared.reader.header();
+    let width_all = header.points as usize * 3;
+    let chunks = prepared.reader.chunks_for(start..end)?;
+    let metas = &header.chunks[chunks.clone()];
+    // The largest chunk the range lies in, decoded, and the most of it the answer keeps.
+    let chunk_frames = metas.iter().map(|c| c.frames as u64).max().unwrap_or(0);
+    let part_frames = metas
+        .iter()
+        .map(|c| {
+            let r = c.frame_range();
+            (r.end.min(end) - r.start.max(start)) as u64
+        })
+        .max()
+        .unwrap_or(0);
+    let max_payload = metas.iter().map(|c| u64::from(c.len)).max().unwrap_or(0);
+    let all_payloads: u64 = metas.iter().map(|c| u64::from(c.len)).sum();
+    let frames = end - start;
+    let unit = Unit::new(prepared.metres_per_unit, UnitSource::Declared)
+        .map_err(|e| Error::Corrupt(format!("stored take {id}: {e}")))?;
+    let (writer, points, decode_bytes, block_bytes, frame_bytes) = match req.format {
+        Format::Bvh => {
+            if req.points.is_some() {
+                return Err(Error::InvalidRequest(
+                    "BVH output is the whole skeleton: leave out points".into(),
+                ));
+            }
+            let rig = channels_rig(store, &prepared).await?;
+            let channels = rig.channel_count();
+            let writer = ChannelWriter::new(rig.joints().to_vec(), prepared.fps, frames);
+            let frame_bytes = writer.frame_bytes() as u64;
+            // A value and how it was printed (`bvh-lossless`), per channel.
+            let per_frame = channels as u64 * CHANNEL_BYTES;
+            let decode = chunk_frames * (per_frame + width_all as u64 * 4);
+            let w = Writer::Channels { writer, channels };
+            (w, None, decode, part_frames * per_frame, frame_bytes)
+        }
+        format => {
+            let selected = match &req.points {
+                None => None,
+                Some(names) => Some(point_indices(&prepared, names)?),
+            };
+            let names = match &selected {
+                None => prepared.point_names.clone(),
+                Some(ix) => ix
+                    .iter()
+                    .map(|&i| prepared.point_names[i].clone())
+                    .collect(),
+            };
+            let samples = (frames as u64).saturating_mul(names.len() as u64);
+            if let Err(why) = crate::limits::check(
+                "the answer's samples (frames × points)",
+                samples,
+                limits.answer_samples,
+            ) {
+                return Err(Error::InvalidRequest(format!(
+                    "{why}: ask for a shorter range or fewer points"
+                )));
+            }
+            let n = names.len() as u64;
+            let shape = Shape {
+                fps: prepared.fps,
+                unit,
+                point_names: names,
+                frames,
+            };
+            let mut fields = serde_json::Map::new();
+            if format == Format::Json {
+                fields.insert("id".into(), id.into());
+                fields.insert("start".into(), start.into());
+                fields.insert("end".into(), end.into());
+                fields.insert("metres_per_unit".into(), prepared.metres_per_unit.into());
+            }
+            let writer = frame_writer(format, shape, fields)
+                .map_err(|e| Error::Unsatisfiable(e.to_string()))?;
+            let frame_bytes = writer.frame_bytes() as u64;
+            let decode = chunk_frames * width_all as u64 * 4;
+            let w = Writer::Points { writer, selected };
+            (
+                w,
+                Some(n as usize),
+                decode,
+                part_frames * n * 12,
+                frame_bytes,
+            )
+        }
+    };
+    let mut head = Vec::new();
+    let length = match &writer {
+        Writer::Points { writer, .. } => writer.exact_len(),
+        Writer::Channels { .. } => None,
+    };
+    match &writer {
+        Writer::Points { .. } => {}
+        Writer::Channels { writer, .. } => writer.head(&mut head),
+    }
+    let mut writer = writer;
+    if let Writer::Points { writer, .. } = &mut writer {
+        writer.head(&mut head);
+    }
+    // Output in flight: a few pieces, or the whole answer if it is smaller. A piece is a
+    // frame past its size at most (the head is the first piece's start).
+    let piece = (PIECE_BYTES as u64).max(head.len() as u64) + frame_bytes + TAIL_BYTES as u64;
+    let output =
+        (PIECES_IN_FLIGHT * piece).min(head.len() as u64 + frames as u64 * frame_bytes + piece);
+    let payloads = PAYLOAD_BATCH.min(all_payloads).max(max_payload);
+    let bound = 2 * decode_bytes + block_bytes + payloads + output;
+    let mut reservation = budget.reservation(holder);
+    reservation
+        .grow_to(bound)
+        .map_err(|r| Error::Busy(format!("{}; retry shortly", r.reason("range answers"))))?;
+    Ok(Answer {
+        id: id.to_string(),
+        format: req.format,
+        start,
+        end,
+        fps: prepared.fps,
+        metres_per_unit: prepared.metres_per_unit,
+        points,
+        length,
+        reserved: reservation.bytes(),
+        store: store.clone(),
+        caches: caches.clone(),
+        cache: chunks.len() <= CACHED_CHUNKS,
+        next_chunk: chunks.start,
+        last_chunk: chunks.end,
+        prepared,
+        reservation: Arc::new(reservation),
+        writer,
+        batch: VecDeque::new(),
+        block: None,
+        pending: {
+            let room = (frames * frame_bytes as usize).min(PIECE_BYTES);
+            let mut first =
+                Vec::with_capacity(head.len().max(room) + frame_bytes as usize + TAIL_BYTES);
+            first.extend_from_slice(&head);
+            first
+        },
+        frame_bytes: frame_bytes as usize,
+        frames_left: frames,
+        tail_done: false,
+    })
+}
+
+/// Bytes a decoded channel value takes with how it was printed.
+const CHANNEL_BYTES: u64 = 8 + 16;
+
+/// The indices of the named points: a 400 naming the first that is not in the take, or
+/// that is named twice (each repeat would be a whole column more of output).
+fn point_indices(prepared: &Prepared, names: &[String]) -> Result<Vec<usize>> {
+    let mut seen = std::collections::HashSet::with_capacity(names.len());
+    if let Some(twice) = names.iter().find(|n| !seen.insert(n.as_str())) {
+        return Err(Error::InvalidRequest(format!(
+            "point {twice:?} is named more than once in points"
+        )));
+    }
+    prepared.point_indices(names)
+}
+
+/// The skeleton a take's channels decode with, if its codec keeps them; `Unsatisfiable`,
+/// saying why and which codecs would, if not.
+async fn channels_rig(store: &Store, prepared: &Prepared) -> Result<Arc<codec::Rig>> {
+    let header = prepared.reader.header();
+    let keeps = codec::codec(header.codec).is_ok_and(|c| c.codes_channels());
+    let id = &prepared.id;
+    match (keeps, header.rig) {
+        (true, Some(h)) => super::skeletons::load(store, &hex(&h)).await,
+        (true, None) => Err(Error::Corrupt(format!(
+            "stored take {id}: a codec that keeps channels names no skeleton"
+        ))),
+        (false, _) => {
+            let keepers: Vec<String> = codec::available()
+                .into_iter()
+                .filter(|&c| codec::codec(c).is_ok_and(|k| k.codes_channels()))
+                .map(|c| c.to_string())
+                .collect();
+            let why = if !prepared.skeleton {
+                "the take is point data (it has no skeleton)".to_string()
+            } else {
+                format!(
+                    "the take was coded with {}, which keeps joint positions only; codecs \
+                     that keep the animation: {} (ingest with keep=animation, the default for \
+                     skeleton takes)",
+                    header.codec,
+                    keepers.join(", ")
+                )
+            };
+            Err(Error::Unsatisfiable(format!("no BVH for take {id}: {why}")))
+        }
+    }
+}
+
+/// A piece of output that counts as held until the connection has written it.
+struct Piece {
+    data: Vec<u8>,
+    _held: Held,
+}
+
+impl AsRef<[u8]> for Piece {
+    fn as_ref(&self) -> &[u8] {
+        &self.data
+    }
+}
+
+impl Answer {
+    /// Frames in the answer.
+    pub fn frames(&self) -> usize {
+        self.end - self.start
+    }
+
+    /// The next piece of output; `None` once the answer is whole.
+    pub async fn next(&mut self) -> Result<Option<Bytes>> {
+        loop {
+            if self.pending.len() >= PIECE_BYTES {
+                return Ok(Some(self.hand_on()));
+            }
+            if self.block.is_some() {
+                self.write_some();
+                continue;
+            }
+            if self.next_chunk < self.last_chunk {
+                self.decode_next().await?;
+                continue;
+            }
+            if !self.tail_done {
+                self.tail_done = true;
+                if let Writer::Points { writer, .. } = &mut self.writer {
+                    writer.tail(&mut self.pending);
+                }
+            }
+            return Ok((!self.pending.is_empty()).then(|| self.hand_on()));
+        }
+    }
+
+    /// What is pending, as a piece that counts as held until it is written.
+    fn hand_on(&mut self) -> Bytes {
+        let fresh = self.fresh_piece();
+        let data = std::mem::replace(&mut self.pending, fresh);
+        let held = self.reservation.hold(data.capacity() as u64);
+        Bytes::from_owner(Piece { data, _held: held })
+    }
+
+    /// An empty piece with room for what it may hold: a piece's worth, or what is left of
+    /// the answer (and its tail) if that is less.
+    fn fresh_piece(&self) -> Vec<u8> {
+        let room = (self.frames_left * self.frame_bytes).min(PIECE_BYTES);
+        Vec::with_capacity(room + self.frame_bytes + TAIL_BYTES)
+    }
+
+    /// Write frames of the current block until a piece is full or the block is done.
+    fn write_some(&mut self) {
+        let Some(block) = &mut self.block else { return };
+        let (per_frame, width) = match &self.writer {
+            Writer::Points { writer, .. } => (writer.frame_bytes(), self.points.unwrap_or(0) * 3),
+            Writer::Channels { writer, channels } => (writer.frame_bytes(), *channels),
+        };
+        let room = PIECE_BYTES.saturating_sub(self.pending.len());
+        let n = (room / per_frame.max(1)).clamp(1, block.frames - block.written);
+        let (a, b) = (block.written, block.written + n);
+        match (&mut self.writer, &block.data) {
+            (Writer::Points { writer, .. }, Decoded::Positions(v)) => {
+                writer.frames(n, &v[a * width..b * width], &mut self.pending);
+            }
+            (Writer::Channels { writer, .. }, Decoded::Channels(c)) => {
+                writer.frames(&c.values, c.printed.as_ref(), a..b, &mut self.pending);
+            }
+            _ => unreachable!("a block is decoded for its writer"),
+        }
+        block.written = b;
+        self.frames_left -= n;
+        if block.written == block.frames {
+            self.block = None;
+        }
+    }
+
+    /// Decode the part of the next chunk that lies in the range.
+    async fn decode_next(&mut self) -> Result<()> {
+        let i = self.next_chunk;
+        self.next_chunk += 1;
+        let header = self.prepared.reader.header();
+        let r = header.chunks[i].frame_range();
+        let part = r.start.max(self.start)..r.end.min(self.end);
+        let full = r.len() * header.points as usize * 3 * 4;
+        let id = self.id.clone();
+        let selected = match &self.writer {
+            Writer::Points { selected, .. } => Some(selected.clone()),
+            Writer::Channels { .. } => None,
+        };
+        let frames = part.len();
+        let block = match (selected, &self.writer) {
+            (Some(selected), _) => {
+                let cached = self.caches.chunks.get(&id, i);
+                let chunk = match cached {
+                    Some(d) => OneChunk::Decoded(d),
+                    None => OneChunk::Stored(self.payload(i).await?),
+                };
+                let keep = self.cache && matches!(chunk, OneChunk::Stored(_));
+                let working = self.reservation.hold(2 * full as u64);
+                let p = self.prepared.clone();
+                let (data, fresh) = blocking(move || {
+                    let one = One::new(i, chunk, keep);
+                    let data = p.reader.read(part, selected.as_deref(), &one);
+                    (data, one.kept.into_inner().ok().flatten())
+                })
+                .await?;
+                drop(working);
+                if let Some(fresh) = fresh {
+                    self.caches.chunks.insert(&id, i, fresh);
+                }
+                let data = data?;
+                let held = self.reservation.hold(data.capacity() as u64 * 4);
+                Block {
+                    frames,
+                    written: 0,
+                    data: Decoded::Positions(data),
+                    _held: held,
+                }
+            }
+            (None, Writer::Channels { channels, .. }) => {
+                let channels = *channels;
+                let payload = self.payload(i).await?;
+                let working = self
+                    .reservation
+                    .hold(r.len() as u64 * (channels as u64 * CHANNEL_BYTES) + full as u64);
+                let p = self.prepared.clone();
+                let decoded = blocking(move || {
+                    let one = One::new(i, OneChunk::Stored(payload), false);
+                    p.reader.read_channels(part, channels, &one)
+                })
+                .await??;
+                drop(working);
+                let bytes = decoded.values.capacity() * 8
+                    + decoded
+                        .printed
+                        .as_ref()
+                        .map_or(0, |p| p.values.capacity() * 16);
+                let held = self.reservation.hold(bytes as u64);
+                Block {
+                    frames,
+                    written: 0,
+                    data: Decoded::Channels(decoded),
+                    _held: held,
+                }
+            }
+            (None, Writer::Points { .. }) => unreachable!("points writers have a selection"),
+        };
+        self.block = Some(block);
+        Ok(())
+    }
+
+    /// The stored payload of chunk `i` (the next one), reading ahead a batch of payloads
+    /// when none is left.
+    async fn payload(&mut self, i: usize) -> Result<Vec<u8>> {
+        if self.batch.is_empty() {
+            let chunks = &self.prepared.reader.header().chunks;
+            let mut end = i + 1;
+            let mut bytes = u64::from(chunks[i].len);
+            while end < self.last_chunk && bytes + u64::from(chunks[end].len) <= PAYLOAD_BATCH {
+                bytes += u64::from(chunks[end].len);
+                end += 1;
+            }
+            let rows = self.store.chunks(&self.id, i as i64, end as i64).await?;
+            if rows.len() != end - i {
+                // Deleted since its reader was cached: forget it, and say so.
+                self.caches.forget(&self.id);
+                super::fetch::take(&self.store, &self.id).await?;
+                return Err(Error::Internal(format!(
+                    "take {} is missing chunks {i}..{end}",
+                    self.id
+                )));
+            }
+            for row in rows {
+                let held = self.reservation.hold(row.payload.capacity() as u64);
+                self.batch.push_back((row, held));
+            }
+        }
+        match self.batch.pop_front() {
+            Some((row, _held)) if row.idx == i as i64 => Ok(row.payload),
+            _ => Err(Error::Internal(format!(
+                "take {}: chunk {i} was not read in order",
+                self.id
+            ))),
+        }
+    }
+}
+
+/// One chunk as a [`ChunkSource`]: decoded already (from the cache) or its stored payload;
+/// with `keep`, the whole chunk decoded from the payload is kept for the cache.
+struct One {
+    index: usize,
+    chunk: OneChunk,
+    keep: bool,
+    kept: Mutex<Option<Arc<Vec<f32>>>>,
+}
+
+enum OneChunk {
+    Decoded(Arc<Vec<f32>>),
+    Stored(Vec<u8>),
+}
+
+impl One {
+    fn new(index: usize, chunk: OneChunk, keep: bool) -> One {
+        One {
+            index,
+            chunk,
+            keep,
+            kept: Mutex::new(None),
+        }
+    }
+}
+
+impl ChunkSource for One {
+    fn chunk(&self, index: usize) -> codec::Result<Chunk<'_>> {
+        if index != self.index {
+            return Err(codec::Error::Invalid(format!("chunk {index} was not read")));
+        }
+        Ok(match &self.chunk {
+            OneChunk::Decoded(d) => Chunk::Decoded(d.clone()),
+            OneChunk::Stored(p) => Chunk::Stored(p),
+        })
+    }
+
+    fn keeps(&self) -> bool {
+        self.keep
+    }
+
+    fn keep(&self, _index: usize, decoded: Arc<Vec<f32>>) {
+        if let Ok(mut k) = self.kept.lock() {
+            *k = Some(decoded);
+        }
+    }
+}
+
+/// Frames `range` of a take as one buffer: an answer's pieces gathered (for callers that
+/// need the whole range at once, such as tests and small exports).
+pub async fn collect(mut answer: Answer) -> Result<Vec<u8>> {
+    let mut out = Vec::with_capacity(answer.length.unwrap_or(0) as usize);
+    while let Some(piece) = answer.next().await? {
+        out.extend_from_slice(&piece);
+    }
+    Ok(out)
+}
