@@ -13,13 +13,15 @@
 //!
 //! Dependencies point one way, from the top of this list to the bottom:
 //!
-//! - [`http`]: the axum API under `/v1` (`openapi.yaml`), errors as JSON, request budgets,
-//!   metrics, bearer tokens, route scopes, CORS, rate limits and the audit of writes
-//!   ([`http::auth`]). Parses requests into typed values, calls the service, writes
-//!   responses; no math, no SQL.
-//! - [`service`]: use-cases — ingest with per-take codec choice, range reads with caches,
-//!   live streams, library queries, shared-basis training, verify/export/import, tokens and
-//!   the audit log ([`service::access`]). Owns the
+//! - [`http`]: the axum API under `/v1` (`openapi.yaml`), errors as JSON, request bodies
+//!   under the server's budget, metrics, bearer tokens, route scopes, CORS, rate limits and
+//!   the audit of writes ([`http::auth`]), and the connections themselves: caps and
+//!   timeouts ([`http::serve`]). Parses requests into typed values, calls the service,
+//!   writes responses; no math, no SQL.
+//! - [`service`]: use-cases — ingest with per-take codec choice, range answers written a
+//!   chunk at a time ([`service::answer`]), live streams, library queries, shared-basis
+//!   training, verify/export/import, tokens and the audit log ([`service::access`]), and
+//!   the memory requests may hold ([`service::budget`]). Owns the
 //!   typed take record ([`service::take::Take`]) and moves codec work to the blocking pool.
 //! - [`store`]: SQLite (default) and Postgres via sqlx; keeps rows, in one transaction per
 //!   change.

@@ -350,12 +350,12 @@ async fn audit(
 fn holder_of(req: &Request, caller: &Caller) -> Holder {
     match &caller.token {
         Some(t) => Holder::Token(t.id.clone()),
-        None => Holder::Address(peer(req)),
+        None => Holder::address(peer(req)),
     }
 }
 
 /// The client's address (unspecified when the server was not given it, as in unit tests).
-fn peer<T>(req: &axum::http::Request<T>) -> IpAddr {
+pub(super) fn peer<T>(req: &axum::http::Request<T>) -> IpAddr {
     req.extensions()
         .get::<ConnectInfo<SocketAddr>>()
         .map_or(IpAddr::from([0, 0, 0, 0]), |c| c.0.ip())
@@ -373,7 +373,7 @@ impl KeyExtractor for RateKey {
             .extensions()
             .get::<Holder>()
             .cloned()
-            .unwrap_or_else(|| Holder::Address(peer(req))))
+            .unwrap_or_else(|| Holder::address(peer(req))))
     }
 }
 

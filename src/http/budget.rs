@@ -87,7 +87,7 @@ pub async fn hold_body(State(gate): State<BodyGate>, req: Request, next: Next) -
         .extensions()
         .get::<Holder>()
         .cloned()
-        .unwrap_or(Holder::Address([0, 0, 0, 0].into()));
+        .unwrap_or_else(|| Holder::address(super::auth::peer(&req)));
     let mut reserved = gate.budget.reservation(holder);
     // The buffer never grows past what the body may be: declared, or the route's limit.
     let most = declared.unwrap_or(gate.limit) as usize;

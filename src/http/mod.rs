@@ -66,6 +66,9 @@ pub struct Config {
     pub metrics_listen: Option<String>,
 }
 
+/// Connections the `--metrics-listen` address takes at once.
+pub const METRICS_CONNECTIONS: u64 = 16;
+
 /// How often the server renews its streams' leases, finishes idle streams and closes the
 /// takes of streams whose server died.
 pub const MAINTENANCE_PERIOD: Duration = Duration::from_secs(10);
@@ -422,7 +425,13 @@ impl Application {
                 .route("/metrics", get(metrics::render))
                 .with_state(self.state.clone());
             let mut stopped = stopped.clone();
-            let (limits, m) = (self.state.limits, self.state.metrics.clone());
+            // A scraper or two: a few connections, within the file budget the defaults keep.
+            let limits = Limits {
+                connections: METRICS_CONNECTIONS,
+                connections_per_address: METRICS_CONNECTIONS,
+                ..self.state.limits
+            };
+            let m = self.state.metrics.clone();
             tokio::spawn(serve::serve(l, router, limits, m, async move {
                 let _ = stopped.wait_for(|s| *s).await;
             }))

@@ -15,20 +15,25 @@
 //!   of an answer for that long is closed (its answer's memory freed).
 //!
 //! A body that stops arriving is the body gate's to time out ([`super::budget`], 408),
-//! since only it knows that a request is waiting for one.
+//! since only it knows that a request is waiting for one. Addresses are counted as
+//! [`Holder::address`] counts them (an IPv6 client by its /64).
+//!
+//! HTTP/1.1 only. HTTP/2 over plain TCP (prior knowledge) is spoken by no browser and few
+//! clients; its streams would let one connection hold many answers past the connection cap,
+//! and its flow control can stall an answer where the socket never blocks, out of the send
+//! timeout's sight. A TLS-terminating proxy speaks HTTP/2 to clients and HTTP/1.1 here.
 //!
 //! Why not `axum::serve`: it sets no timer, so hyper applies none of these, and it has no
 //! cap: 1,100 idle sockets exhausted a 1,024-file limit (`accept error: Too many open
 //! files`) and valid requests timed out.
 
-use std::collections::HashMap;
 use std::convert::Infallible;
 use std::future::Future;
 use std::io;
 use std::net::{IpAddr, SocketAddr};
 use std::pin::{pin, Pin};
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 
@@ -37,8 +42,8 @@ use axum::extract::ConnectInfo;
 use axum::http::{Request, Response};
 use axum::Router;
 use hyper::body::Incoming;
-use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
-use hyper_util::server::conn::auto::Builder;
+use hyper::server::conn::http1;
+use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::server::graceful::GracefulShutdown;
 use hyper_util::service::TowerToHyperService;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
@@ -48,13 +53,11 @@ use tower::Service;
 
 use super::metrics::Metrics;
 use crate::limits::{Limits, RETRY_AFTER_S};
+use crate::service::budget::{Holder, Share, Shares};
 
 /// Refusals (503s to connections past the cap) written at once; past it a connection is
 /// closed unanswered, so that refusing cannot itself hold many sockets.
 pub const REFUSING_AT_ONCE: usize = 64;
-
-/// HTTP/2 requests one connection may have in progress at once.
-pub const H2_STREAMS: u32 = 32;
 
 /// Why a connection was closed by the server.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -83,11 +86,10 @@ pub async fn serve(
     metrics: Arc<Metrics>,
     shutdown: impl Future<Output = ()> + Send,
 ) -> io::Result<()> {
-    let gate = Arc::new(Gate {
+    let gate = Gate {
         slots: Arc::new(Semaphore::new(limits.connections.max(1) as usize)),
-        per_address: Mutex::new(HashMap::new()),
-        most_per_address: limits.connections_per_address.max(1) as usize,
-    });
+        per_address: Shares::new(limits.connections_per_address as usize),
+    };
     let refusing = Arc::new(Semaphore::new(REFUSING_AT_ONCE));
     let graceful = GracefulShutdown::new();
     let mut shutdown = pin!(shutdown);
@@ -136,48 +138,31 @@ pub async fn serve(
     Ok(())
 }
 
-/// The connection cap: a permit per connection, and a count per address.
+/// The connection cap: a permit per connection, and a share per address.
 struct Gate {
     slots: Arc<Semaphore>,
-    per_address: Mutex<HashMap<IpAddr, usize>>,
-    most_per_address: usize,
+    per_address: Shares,
 }
 
 /// A connection's place under the cap, given back when it closes.
 struct Slot {
-    gate: Arc<Gate>,
-    address: IpAddr,
+    _share: Share,
     _permit: OwnedSemaphorePermit,
 }
 
-impl Drop for Slot {
-    fn drop(&mut self) {
-        let mut by = self.gate.per_address.lock().expect("connections lock");
-        if let Some(n) = by.get_mut(&self.address) {
-            *n -= 1;
-            if *n == 0 {
-                by.remove(&self.address);
-            }
-        }
-    }
-}
-
 impl Gate {
-    fn admit(self: &Arc<Self>, address: IpAddr) -> Result<Slot, &'static str> {
-        let mut by = self.per_address.lock().expect("connections lock");
-        let n = by.get(&address).copied().unwrap_or(0);
-        if n >= self.most_per_address {
-            return Err("this address has as many connections open as the server allows one");
-        }
+    fn admit(&self, address: IpAddr) -> Result<Slot, &'static str> {
+        let share = self
+            .per_address
+            .take(&Holder::address(address))
+            .ok_or("this address has as many connections open as the server allows one")?;
         let permit = self
             .slots
             .clone()
             .try_acquire_owned()
             .map_err(|_| "the server has as many connections open as it allows")?;
-        by.insert(address, n + 1);
         Ok(Slot {
-            gate: self.clone(),
-            address,
+            _share: share,
             _permit: permit,
         })
     }
@@ -228,19 +213,13 @@ async fn connection(
         peer,
         activity: activity.clone(),
     });
-    let mut builder = Builder::new(TokioExecutor::new());
-    builder
-        .http1()
+    let conn = http1::Builder::new()
         .timer(TokioTimer::new())
         // The watchdog below times headers, so that idle time between requests is told
         // apart from a request's headers coming slowly.
-        .header_read_timeout(None);
-    builder
-        .http2()
-        .timer(TokioTimer::new())
-        .max_concurrent_streams(H2_STREAMS);
-    let conn = builder.serve_connection_with_upgrades(io, service);
-    let conn = watcher.watch(conn.into_owned());
+        .header_read_timeout(None)
+        .serve_connection(io, service);
+    let conn = watcher.watch(conn);
     tokio::select! {
         r = conn => {
             if let Err(e) = r {
@@ -557,11 +536,10 @@ mod tests {
 
     #[test]
     fn the_gate_caps_connections_in_all_and_per_address() {
-        let gate = Arc::new(Gate {
+        let gate = Gate {
             slots: Arc::new(Semaphore::new(3)),
-            per_address: Mutex::new(HashMap::new()),
-            most_per_address: 2,
-        });
+            per_address: Shares::new(2),
+        };
         let a = IpAddr::from([10, 0, 0, 1]);
         let b = IpAddr::from([10, 0, 0, 2]);
         let s1 = gate.admit(a).unwrap();
@@ -571,6 +549,14 @@ mod tests {
         assert!(gate.admit(b).is_err(), "in all");
         drop(s1);
         assert!(gate.admit(b).is_ok());
-        assert!(gate.per_address.lock().unwrap().get(&a) == Some(&1));
+        // An IPv6 client is one whatever address of its /64 it comes from.
+        let v6 = |last: u16| IpAddr::from([0x2001, 0xdb8, 0, 1, 0, 0, 0, last]);
+        let gate = Gate {
+            slots: Arc::new(Semaphore::new(10)),
+            per_address: Shares::new(2),
+        };
+        let _x = gate.admit(v6(1)).unwrap();
+        let _y = gate.admit(v6(2)).unwrap();
+        assert!(gate.admit(v6(3)).is_err());
     }
 }

@@ -272,7 +272,8 @@ struct Watching {
 }
 
 /// How often a watch asks again whether its caller may still watch: a revoked or expired
-/// token, or a take moved out of the token's libraries, ends it within this time.
+/// token, or a take moved out of the token's libraries, ends it within this time and
+/// [`crate::service::access::RECHECK_REUSE`].
 pub const WATCH_RECHECK: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// `GET /v1/streams/{id}/events`: an open stream's frames as they arrive, as server-sent
@@ -317,19 +318,21 @@ pub async fn events(
                 Next::Skipped(n) => json_event("skipped", &serde_json::json!({ "appends": n })),
                 Next::End(reason) => return Some((end_event(&reason), None)),
                 Next::Recheck => {
+                    use crate::service::Error as E;
                     let s = &w.state;
-                    match s.auth.recheck(&s.store, &w.caller, &w.id).await {
+                    let why = match s.auth.recheck(&s.store, &w.caller, &w.id).await {
                         Ok(()) => continue,
-                        Err(e) => {
-                            let why = match e {
-                                crate::service::Error::NotFound(_) => {
-                                    "the take is no longer in this token's libraries".to_string()
-                                }
-                                e => e.to_string(),
-                            };
-                            return Some((end_event(&why), None));
+                        Err(E::NotFound(_)) => {
+                            "the take is no longer in this token's libraries".to_string()
                         }
-                    }
+                        Err(e @ E::Unauthorized(_)) => e.to_string(),
+                        Err(e) => {
+                            // The store could not be asked: ask again at the next tick.
+                            tracing::warn!(stream = %w.id, error = %e, "rechecking a watcher failed");
+                            continue;
+                        }
+                    };
+                    return Some((end_event(&why), None));
                 }
             };
             return Some((event, Some(w)));

@@ -30,6 +30,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::budget::Holder;
 use super::{now_ms, Error, Result};
 use crate::limits::{
     AUDIT_FIELD_BYTES, AUDIT_REFUSED_KEYS, MAX_TOKEN_LIBRARIES, TOKEN_CACHE, TOKEN_CACHE_ENTRIES,
@@ -404,17 +405,6 @@ struct Counted {
 
 const MINUTE_MS: i64 = 60_000;
 
-/// The unit refusals are counted by: the address, or for IPv6 its /64.
-fn counted_as(address: IpAddr) -> String {
-    match address {
-        IpAddr::V4(a) => a.to_string(),
-        IpAddr::V6(a) => {
-            let s = a.segments();
-            format!("{:x}:{:x}:{:x}:{:x}::/64", s[0], s[1], s[2], s[3])
-        }
-    }
-}
-
 impl AuditLog {
     /// Record a request: a row now if it changed something (2xx), else a count.
     pub async fn note(&self, store: &Store, a: Attempt<'_>) -> Result<()> {
@@ -431,7 +421,7 @@ impl AuditLog {
         let now = now_ms();
         let who = match a.caller {
             Some(t) => format!("token {}", t.id),
-            None => counted_as(a.address),
+            None => Holder::address(a.address).to_string(),
         };
         let mut key = CountKey {
             minute: now - now.rem_euclid(MINUTE_MS),
@@ -474,21 +464,34 @@ impl AuditLog {
                 .collect()
         };
         let n = done.len();
-        for (key, Counted { mut first, count }) in done {
-            first.count = count;
-            first.detail = clip(&format!(
-                "{count} request(s) from {} ended {} in the minute from {} (ms since the \
+        let mut done = done.into_iter();
+        while let Some((key, counted)) = done.next() {
+            let mut row = counted.first.clone();
+            row.count = counted.count;
+            row.detail = clip(&format!(
+                "{} request(s) from {} ended {} in the minute from {} (ms since the \
                  epoch); the target is the first's{}",
+                counted.count,
                 key.who,
                 key.status,
                 key.minute,
-                if first.detail.is_empty() {
+                if counted.first.detail.is_empty() {
                     String::new()
                 } else {
-                    format!("; {}", first.detail)
+                    format!("; {}", counted.first.detail)
                 }
             ));
-            store.audit(&first).await?;
+            if let Err(e) = store.audit(&row).await {
+                // Not written: counted again, and written at the next flush.
+                let mut counts = self.counts.lock().expect("audit lock");
+                for (k, c) in std::iter::once((key, counted)).chain(done) {
+                    counts
+                        .entry(k)
+                        .and_modify(|now| now.count += c.count)
+                        .or_insert(c);
+                }
+                return Err(e.into());
+            }
         }
         Ok(n)
     }
@@ -504,6 +507,11 @@ impl AuditLog {
 pub async fn audit_log(store: &Store, before: Option<i64>, limit: usize) -> Result<Vec<AuditRow>> {
     Ok(store.audit_log(before, limit).await?)
 }
+
+/// How long a [`Authenticator::recheck`] that said yes is taken as said: half the time a
+/// revocation may take to reach a server, so that a watch a caller may no longer see ends
+/// within [`TOKEN_CACHE`] of the change (a watch asks every second).
+pub const RECHECK_REUSE: std::time::Duration = std::time::Duration::from_millis(1_000);
 
 /// A looked-up secret, parsed once: the caller it makes and when that stops, or none.
 type Looked = Option<Arc<Known>>;
@@ -526,6 +534,10 @@ pub struct Authenticator {
     lookups: Mutex<HashMap<[u8; 32], (Instant, Looked)>>,
     /// Token id → when this server last wrote its `last_used_at`.
     touched: Mutex<HashMap<String, Instant>>,
+    /// (token id, take id) → when a [`Authenticator::recheck`] last found the caller may
+    /// still read the take: the watchers of one stream with one token cost one lookup a
+    /// period, not one each.
+    rechecked: Mutex<HashMap<(Option<String>, String), Instant>>,
 }
 
 impl Default for Authenticator {
@@ -534,6 +546,7 @@ impl Default for Authenticator {
             required: Mutex::new(None),
             lookups: Mutex::new(HashMap::new()),
             touched: Mutex::new(HashMap::new()),
+            rechecked: Mutex::new(HashMap::new()),
         }
     }
 }
@@ -635,8 +648,30 @@ impl Authenticator {
     /// still valid (not revoked, not expired, read afresh from the store), the server still
     /// without tokens for a caller who came without one, and the take still in the
     /// token's libraries. What a long-lived answer (a stream's watch) asks again as it goes;
-    /// the error says why not.
+    /// the error says why not (`Unauthorized`, `NotFound`), or that the store could not be
+    /// asked. A yes is remembered for [`RECHECK_REUSE`].
     pub async fn recheck(&self, store: &Store, caller: &Caller, id: &str) -> Result<()> {
+        let key = (caller.token.as_ref().map(|t| t.id.clone()), id.to_string());
+        let fresh = |at: &Instant| at.elapsed() < RECHECK_REUSE;
+        if self
+            .rechecked
+            .lock()
+            .expect("auth cache")
+            .get(&key)
+            .is_some_and(fresh)
+        {
+            return Ok(());
+        }
+        self.recheck_now(store, caller, id).await?;
+        let mut rechecked = self.rechecked.lock().expect("auth cache");
+        if rechecked.len() >= TOKEN_CACHE_ENTRIES {
+            rechecked.clear();
+        }
+        rechecked.insert(key, Instant::now());
+        Ok(())
+    }
+
+    async fn recheck_now(&self, store: &Store, caller: &Caller, id: &str) -> Result<()> {
         match &caller.token {
             None => {
                 if store.any_token().await? {

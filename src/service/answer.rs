@@ -142,7 +142,6 @@ pub async fn open(
 ) -> Result<Answer> {
     let (prepared, (start, end)) = prepare(store, caches, id, req.range).await?;
     let header = prepared.reader.header();
-    let width_all = header.points as usize * 3;
     let chunks = prepared.reader.chunks_for(start..end)?;
     let metas = &header.chunks[chunks.clone()];
     // The largest chunk the range lies in, decoded, and the most of it the answer keeps.
@@ -158,88 +157,46 @@ pub async fn open(
     let max_payload = metas.iter().map(|c| u64::from(c.len)).max().unwrap_or(0);
     let all_payloads: u64 = metas.iter().map(|c| u64::from(c.len)).sum();
     let frames = end - start;
-    let unit = Unit::new(prepared.metres_per_unit, UnitSource::Declared)
-        .map_err(|e| Error::Corrupt(format!("stored take {id}: {e}")))?;
-    let (writer, points, decode_bytes, block_bytes, frame_bytes) = match req.format {
+    let Plan {
+        mut writer,
+        points,
+        decode_bytes,
+        block_bytes,
+        frame_bytes,
+    } = match req.format {
         Format::Bvh => {
             if req.points.is_some() {
                 return Err(Error::InvalidRequest(
                     "BVH output is the whole skeleton: leave out points".into(),
                 ));
             }
+            // As many samples as the skeleton's joints and End Sites would be as points.
+            check_size(frames, prepared.point_names.len(), limits)?;
             let rig = channels_rig(store, &prepared).await?;
-            let channels = rig.channel_count();
-            let writer = ChannelWriter::new(rig.joints().to_vec(), prepared.fps, frames);
-            let frame_bytes = writer.frame_bytes() as u64;
-            // A value and how it was printed (`bvh-lossless`), per channel.
-            let per_frame = channels as u64 * CHANNEL_BYTES;
-            let decode = chunk_frames * (per_frame + width_all as u64 * 4);
-            let w = Writer::Channels { writer, channels };
-            (w, None, decode, part_frames * per_frame, frame_bytes)
+            Plan::channels(&rig, &prepared, frames, chunk_frames, part_frames)
         }
         format => {
-            let selected = match &req.points {
-                None => None,
-                Some(names) => Some(point_indices(&prepared, names)?),
+            let span = Span {
+                id,
+                start,
+                end,
+                chunk_frames,
+                part_frames,
             };
-            let names = match &selected {
-                None => prepared.point_names.clone(),
-                Some(ix) => ix
-                    .iter()
-                    .map(|&i| prepared.point_names[i].clone())
-                    .collect(),
-            };
-            let samples = (frames as u64).saturating_mul(names.len() as u64);
-            if let Err(why) = crate::limits::check(
-                "the answer's samples (frames × points)",
-                samples,
-                limits.answer_samples,
-            ) {
-                return Err(Error::InvalidRequest(format!(
-                    "{why}: ask for a shorter range or fewer points"
-                )));
-            }
-            let n = names.len() as u64;
-            let shape = Shape {
-                fps: prepared.fps,
-                unit,
-                point_names: names,
-                frames,
-            };
-            let mut fields = serde_json::Map::new();
-            if format == Format::Json {
-                fields.insert("id".into(), id.into());
-                fields.insert("start".into(), start.into());
-                fields.insert("end".into(), end.into());
-                fields.insert("metres_per_unit".into(), prepared.metres_per_unit.into());
-            }
-            let writer = frame_writer(format, shape, fields)
-                .map_err(|e| Error::Unsatisfiable(e.to_string()))?;
-            let frame_bytes = writer.frame_bytes() as u64;
-            let decode = chunk_frames * width_all as u64 * 4;
-            let w = Writer::Points { writer, selected };
-            (
-                w,
-                Some(n as usize),
-                decode,
-                part_frames * n * 12,
-                frame_bytes,
-            )
+            Plan::points(&prepared, format, req.points.as_deref(), limits, &span)?
         }
     };
     let mut head = Vec::new();
-    let length = match &writer {
-        Writer::Points { writer, .. } => writer.exact_len(),
-        Writer::Channels { .. } => None,
+    let length = match &mut writer {
+        Writer::Points { writer, .. } => {
+            writer.head(&mut head);
+            writer.exact_len()
+        }
+        Writer::Channels { writer, .. } => {
+            writer.head(&mut head);
+            None
+        }
     };
-    match &writer {
-        Writer::Points { .. } => {}
-        Writer::Channels { writer, .. } => writer.head(&mut head),
-    }
-    let mut writer = writer;
-    if let Writer::Points { writer, .. } = &mut writer {
-        writer.head(&mut head);
-    }
     // Output in flight: a few pieces, or the whole answer if it is smaller. A piece is a
     // frame past its size at most (the head is the first piece's start).
     let piece = (PIECE_BYTES as u64).max(head.len() as u64) + frame_bytes + TAIL_BYTES as u64;
@@ -282,6 +239,108 @@ pub async fn open(
         frames_left: frames,
         tail_done: false,
     })
+}
+
+/// Where an answer lies in its take, for [`Plan::points`].
+struct Span<'a> {
+    id: &'a str,
+    start: usize,
+    end: usize,
+    /// The frames of the largest chunk the range lies in, and the most of one in the range.
+    chunk_frames: u64,
+    part_frames: u64,
+}
+
+/// How an answer will be written, and what its decoding holds at most.
+struct Plan {
+    writer: Writer,
+    points: Option<usize>,
+    /// One chunk decoded, and the part of it the answer keeps, bytes.
+    decode_bytes: u64,
+    block_bytes: u64,
+    /// The most bytes one frame of output takes.
+    frame_bytes: u64,
+}
+
+impl Plan {
+    /// Positions of every point or of the named ones, checked against the answer limit.
+    fn points(
+        prepared: &Prepared,
+        format: Format,
+        names: Option<&[String]>,
+        limits: &Limits,
+        span: &Span<'_>,
+    ) -> Result<Plan> {
+        let selected = names.map(|n| point_indices(prepared, n)).transpose()?;
+        let names: Vec<String> = match &selected {
+            None => prepared.point_names.clone(),
+            Some(ix) => ix
+                .iter()
+                .map(|&i| prepared.point_names[i].clone())
+                .collect(),
+        };
+        let frames = span.end - span.start;
+        check_size(frames, names.len(), limits)?;
+        let n = names.len();
+        let unit = Unit::new(prepared.metres_per_unit, UnitSource::Declared)
+            .map_err(|e| Error::Corrupt(format!("stored take {}: {e}", span.id)))?;
+        let shape = Shape {
+            fps: prepared.fps,
+            unit,
+            point_names: names,
+            frames,
+        };
+        let mut fields = serde_json::Map::new();
+        if format == Format::Json {
+            fields.insert("id".into(), span.id.into());
+            fields.insert("start".into(), span.start.into());
+            fields.insert("end".into(), span.end.into());
+            fields.insert("metres_per_unit".into(), prepared.metres_per_unit.into());
+        }
+        let writer =
+            frame_writer(format, shape, fields).map_err(|e| Error::Unsatisfiable(e.to_string()))?;
+        Ok(Plan {
+            frame_bytes: writer.frame_bytes() as u64,
+            writer: Writer::Points { writer, selected },
+            points: Some(n),
+            decode_bytes: span.chunk_frames * prepared.point_names.len() as u64 * 12,
+            block_bytes: span.part_frames * n as u64 * 12,
+        })
+    }
+
+    /// A skeleton's channels, as BVH.
+    fn channels(
+        rig: &codec::Rig,
+        prepared: &Prepared,
+        frames: usize,
+        chunk_frames: u64,
+        part_frames: u64,
+    ) -> Plan {
+        let channels = rig.channel_count();
+        let writer = ChannelWriter::new(rig.joints().to_vec(), prepared.fps, frames);
+        // A value and how it was printed (`bvh-lossless`), per channel; and the positions
+        // a decoder may work through.
+        let per_frame = channels as u64 * CHANNEL_BYTES;
+        let positions = prepared.point_names.len() as u64 * 12;
+        Plan {
+            frame_bytes: writer.frame_bytes() as u64,
+            writer: Writer::Channels { writer, channels },
+            points: None,
+            decode_bytes: chunk_frames * (per_frame + positions),
+            block_bytes: part_frames * per_frame,
+        }
+    }
+}
+
+/// An answer of `frames` of `points` within [`Limits::answer_samples`], or a 400 saying so.
+fn check_size(frames: usize, points: usize, limits: &Limits) -> Result<()> {
+    let samples = (frames as u64).saturating_mul(points as u64);
+    crate::limits::check(
+        "the answer's samples (frames × points)",
+        samples,
+        limits.answer_samples,
+    )
+    .map_err(|why| Error::InvalidRequest(format!("{why}: ask for a shorter range or fewer points")))
 }
 
 /// Bytes a decoded channel value takes with how it was printed.
@@ -429,23 +488,30 @@ impl Answer {
             Writer::Channels { .. } => None,
         };
         let frames = part.len();
+        debug_assert!(frames > 0, "a chunk the range lies in holds some of it");
+        // What decoding holds (the payload, the chunk decoded, the decoder's copy) is counted
+        // until the decode ends, even if this answer is dropped meanwhile (its client went
+        // away): the blocking pool finishes the work, and its memory stays reserved.
         let block = match (selected, &self.writer) {
             (Some(selected), _) => {
                 let cached = self.caches.chunks.get(&id, i);
-                let chunk = match cached {
-                    Some(d) => OneChunk::Decoded(d),
-                    None => OneChunk::Stored(self.payload(i).await?),
+                let (chunk, payload_held) = match cached {
+                    Some(d) => (OneChunk::Decoded(d), None),
+                    None => {
+                        let (payload, held) = self.payload(i).await?;
+                        (OneChunk::Stored(payload), Some(held))
+                    }
                 };
                 let keep = self.cache && matches!(chunk, OneChunk::Stored(_));
                 let working = self.reservation.hold(2 * full as u64);
                 let p = self.prepared.clone();
                 let (data, fresh) = blocking(move || {
+                    let _held = (working, payload_held);
                     let one = One::new(i, chunk, keep);
                     let data = p.reader.read(part, selected.as_deref(), &one);
                     (data, one.kept.into_inner().ok().flatten())
                 })
                 .await?;
-                drop(working);
                 if let Some(fresh) = fresh {
                     self.caches.chunks.insert(&id, i, fresh);
                 }
@@ -460,17 +526,17 @@ impl Answer {
             }
             (None, Writer::Channels { channels, .. }) => {
                 let channels = *channels;
-                let payload = self.payload(i).await?;
+                let (payload, payload_held) = self.payload(i).await?;
                 let working = self
                     .reservation
                     .hold(r.len() as u64 * (channels as u64 * CHANNEL_BYTES) + full as u64);
                 let p = self.prepared.clone();
                 let decoded = blocking(move || {
+                    let _held = (working, payload_held);
                     let one = One::new(i, OneChunk::Stored(payload), false);
                     p.reader.read_channels(part, channels, &one)
                 })
                 .await??;
-                drop(working);
                 let bytes = decoded.values.capacity() * 8
                     + decoded
                         .printed
@@ -490,9 +556,9 @@ impl Answer {
         Ok(())
     }
 
-    /// The stored payload of chunk `i` (the next one), reading ahead a batch of payloads
-    /// when none is left.
-    async fn payload(&mut self, i: usize) -> Result<Vec<u8>> {
+    /// The stored payload of chunk `i` (the next one), and what counts it as held, reading
+    /// ahead a batch of payloads when none is left.
+    async fn payload(&mut self, i: usize) -> Result<(Vec<u8>, Held)> {
         if self.batch.is_empty() {
             let chunks = &self.prepared.reader.header().chunks;
             let mut end = i + 1;
@@ -517,7 +583,7 @@ impl Answer {
             }
         }
         match self.batch.pop_front() {
-            Some((row, _held)) if row.idx == i as i64 => Ok(row.payload),
+            Some((row, held)) if row.idx == i as i64 => Ok((row.payload, held)),
             _ => Err(Error::Internal(format!(
                 "take {}: chunk {i} was not read in order",
                 self.id

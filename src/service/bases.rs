@@ -66,44 +66,6 @@ pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<BasisRow> {
         .ok_or_else(|| Error::NotFound(format!("basis {id}")))
 }
 
-/// The bases of `rows` a grant reaches, as it may see them. Over every library: all, as
-/// stored. Limited to libraries: those that takes of its libraries use or were trained
-/// from, with `used_by` counting only those takes and the provenance's takes (and their
-/// frame total) only those in its libraries — what another library holds stays unsaid.
-async fn scoped(store: &Store, rows: Vec<BasisRow>, grant: &Grant) -> Result<Vec<BasisRow>> {
-    let Some(within) = grant.within() else {
-        return Ok(rows);
-    };
-    let uses = store.basis_use_within(&within).await?;
-    let mut out = Vec::with_capacity(rows.len());
-    for mut row in rows {
-        let trained: Vec<String> = row.provenance["takes"]
-            .as_array()
-            .map(|a| {
-                a.iter()
-                    .filter_map(|v| v.as_str().map(str::to_string))
-                    .collect()
-            })
-            .unwrap_or_default();
-        let visible = store.take_frames_within(&trained, &within).await?;
-        let used = uses.get(&row.id).copied().unwrap_or(0);
-        if used == 0 && visible.is_empty() {
-            continue;
-        }
-        row.used_by = used;
-        if !trained.is_empty() {
-            let mine: Vec<&String> = trained
-                .iter()
-                .filter(|t| visible.contains_key(*t))
-                .collect();
-            row.provenance["takes"] = serde_json::json!(mine);
-            row.provenance["frames"] = serde_json::json!(visible.values().sum::<i64>());
-        }
-        out.push(row);
-    }
-    Ok(out)
-}
-
 /// Delete a basis no take references.
 pub async fn delete(store: &Store, id: &str) -> Result<()> {
     match store.delete_basis(id).await? {
@@ -114,3 +76,69 @@ pub async fn delete(store: &Store, id: &str) -> Result<()> {
         ))),
     }
 }
+
+/// The bases of `rows` a grant reaches, as it may see them. Over every library: all, as
+/// stored. Limited to libraries: those that takes of its libraries use or were trained
+/// from, with `used_by` counting only those takes, and a provenance that says nothing of
+/// another library: its takes (and their frame total) only those in the grant's libraries,
+/// and of the rest only how it was trained ([`SETTINGS`]), not what it measured on the
+/// whole selection (samples, clips, sizes, objective).
+async fn scoped(store: &Store, rows: Vec<BasisRow>, grant: &Grant) -> Result<Vec<BasisRow>> {
+    let Some(within) = grant.within() else {
+        return Ok(rows);
+    };
+    let uses = store.basis_use_within(&within).await?;
+    let trained = |row: &BasisRow| -> Vec<String> {
+        row.provenance["takes"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|v| v.as_str().map(str::to_string))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    // One lookup for every basis's takes, not one per basis.
+    let mut all: Vec<String> = rows.iter().flat_map(trained).collect();
+    all.sort();
+    all.dedup();
+    let visible = store.take_frames_within(&all, &within).await?;
+    let mut out = Vec::with_capacity(rows.len());
+    for mut row in rows {
+        let takes: Vec<String> = trained(&row)
+            .into_iter()
+            .filter(|t| visible.contains_key(t))
+            .collect();
+        let used = uses.get(&row.id).copied().unwrap_or(0);
+        if used == 0 && takes.is_empty() {
+            continue;
+        }
+        row.used_by = used;
+        let frames: i64 = takes.iter().map(|t| visible[t]).sum();
+        let mut provenance = serde_json::Map::new();
+        for key in SETTINGS {
+            if let Some(v) = row.provenance.get(*key) {
+                provenance.insert((*key).to_string(), v.clone());
+            }
+        }
+        if row.provenance.get("takes").is_some() {
+            provenance.insert("takes".into(), serde_json::json!(takes));
+            provenance.insert("frames".into(), serde_json::json!(frames));
+        }
+        row.provenance = serde_json::Value::Object(provenance);
+        out.push(row);
+    }
+    Ok(out)
+}
+
+/// The fields of a basis's provenance that say how it was trained, not what it measured on
+/// its takes: what a token limited to some of those takes' libraries is shown.
+const SETTINGS: &[&str] = &[
+    "algorithm",
+    "sparsity",
+    "max_iterations",
+    "tolerance",
+    "rank",
+    "k",
+    "bound_mm",
+];

@@ -35,10 +35,25 @@ pub enum Holder {
     Address(IpAddr),
 }
 
+impl Holder {
+    /// A caller without a token, by its address: an IPv6 client by its /64 (the block one
+    /// client holds and can pick any address of), an IPv4 client by its address.
+    pub fn address(ip: IpAddr) -> Holder {
+        Holder::Address(match ip {
+            IpAddr::V4(_) => ip,
+            IpAddr::V6(a) => {
+                let s = a.segments();
+                IpAddr::from([s[0], s[1], s[2], s[3], 0, 0, 0, 0])
+            }
+        })
+    }
+}
+
 impl std::fmt::Display for Holder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Holder::Token(id) => write!(f, "token {id}"),
+            Holder::Address(a @ IpAddr::V6(_)) => write!(f, "address {a}/64"),
             Holder::Address(a) => write!(f, "address {a}"),
         }
     }
@@ -139,6 +154,7 @@ impl Budget {
             budget: self.clone(),
             holder,
             units: 0,
+            whole: false,
             permits: None,
             held: AtomicU64::new(0),
             peak: AtomicU64::new(0),
@@ -157,6 +173,9 @@ pub struct Reservation {
     budget: Arc<Budget>,
     holder: Holder,
     units: u64,
+    /// It asked for more than the whole budget and holds all of it (see
+    /// [`Reservation::grow_to`]): what it holds may pass what it reserved.
+    whole: bool,
     permits: Option<OwnedSemaphorePermit>,
     /// What its owner holds now (the sum of its live [`Held`]), and the most it held.
     held: AtomicU64,
@@ -180,10 +199,13 @@ impl Reservation {
     }
 
     /// Reserve room for `bytes` in all (not more): refused at once when the server or this
-    /// holder has not got it; a reservation never waits.
+    /// holder has not got it; a reservation never waits. A reservation larger than the
+    /// whole budget takes the whole budget: it runs alone, or not at all.
     pub fn grow_to(&mut self, bytes: u64) -> Result<(), Refused> {
-        let want = bytes.div_ceil(UNIT);
+        let want = bytes.div_ceil(UNIT).min(self.budget.total_units);
+        let whole = bytes.div_ceil(UNIT) > self.budget.total_units;
         if want <= self.units {
+            self.whole |= whole;
             return Ok(());
         }
         let more = want - self.units;
@@ -211,6 +233,7 @@ impl Reservation {
             None => self.permits = Some(p),
         }
         self.units = want;
+        self.whole |= whole;
         by.insert(self.holder.clone(), mine + more);
         Ok(())
     }
@@ -221,7 +244,7 @@ impl Reservation {
     pub fn hold(self: &Arc<Self>, bytes: u64) -> Held {
         let now = self.held.fetch_add(bytes, Ordering::Relaxed) + bytes;
         debug_assert!(
-            now <= self.bytes(),
+            self.whole || now <= self.bytes(),
             "{} holds {now} bytes of the {} it reserved",
             self.holder,
             self.bytes()
@@ -369,6 +392,23 @@ mod tests {
         assert!(matches!(second.grow_to(UNIT), Err(Refused::Share { .. })));
         drop(big);
         second.grow_to(UNIT).unwrap();
+    }
+
+    #[test]
+    fn a_reservation_past_the_whole_budget_runs_alone() {
+        let b = Arc::new(Budget::new(100 * UNIT, 40 * UNIT));
+        let mut small = b.reservation(who(2));
+        small.grow_to(UNIT).unwrap();
+        let mut huge = b.reservation(who(1));
+        assert!(matches!(
+            huge.grow_to(500 * UNIT),
+            Err(Refused::Full { .. })
+        ));
+        drop(small);
+        huge.grow_to(500 * UNIT).unwrap();
+        assert_eq!(b.reserved_bytes(), 100 * UNIT);
+        let huge = Arc::new(huge);
+        let _h = huge.hold(300 * UNIT); // it may hold more than the budget: it is alone
     }
 
     #[test]

@@ -50,7 +50,6 @@ pub enum Store {
     Postgres(PgPool),
 }
 
-/// Run `$body` with `$pool` bound to whichever pool the store holds.
 /// A transaction that writes. On SQLite it takes the write lock when it begins (`BEGIN
 /// IMMEDIATE`), waiting for it under the busy timeout: a deferred transaction that reads and
 /// then writes fails at once (`SQLITE_BUSY_SNAPSHOT`, "database is locked") when another
@@ -83,6 +82,7 @@ pub(crate) fn marks(from: usize, n: usize) -> String {
         .join(", ")
 }
 
+/// Run `$body` with `$pool` bound to whichever pool the store holds.
 macro_rules! dispatch {
     ($store:expr, $pool:ident => $body:expr) => {
         match $store {

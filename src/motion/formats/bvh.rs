@@ -399,6 +399,12 @@ pub fn write_skeleton(s: &Skeleton, fps: f64) -> Vec<u8> {
     out
 }
 
+/// The most characters one channel value takes as written: as printed in the file, 18
+/// digits after up to 400 zeros (the exponents a lossless bitstream keeps) with a sign and a
+/// point; an f64 in `Display` form, 328 at most (the smallest subnormal); a verbatim token,
+/// at most 256 (what `bvh-lossless` keeps).
+pub const MAX_VALUE_CHARS: usize = 422;
+
 /// BVH block by block: the hierarchy and the `MOTION` header (which states the frame
 /// count), then a line of channel values per frame.
 pub struct ChannelWriter {
@@ -460,11 +466,10 @@ impl ChannelWriter {
         out.extend_from_slice(text.as_bytes());
     }
 
-    /// The most bytes one frame takes: a printed value is at most 24 characters and its
-    /// separator (an f64 in its shortest form), a verbatim token at most what a BVH reader
-    /// accepts as one.
+    /// The most bytes one frame takes: [`MAX_VALUE_CHARS`] and a separator per channel,
+    /// and the line's end.
     pub fn frame_bytes(&self) -> usize {
-        self.channels * 25 + 1
+        self.channels * (MAX_VALUE_CHARS + 1) + 1
     }
 }
 
@@ -548,6 +553,48 @@ mod tests {
         assert_eq!(again.skeleton, m.skeleton);
         assert_eq!(again.point_names, m.point_names);
         assert!((again.fps - m.fps).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_frame_of_the_longest_values_fits_the_writers_bound() {
+        let p = read(TOY.as_bytes(), &Limits::default()).unwrap();
+        let joints = p.motion.skeleton.unwrap().joints;
+        let w = ChannelWriter::new(joints, 30.0, 1);
+        let values = [
+            -5e-324,
+            f64::MAX,
+            f64::MIN,
+            -2.2250738585072014e-308,
+            1e-7,
+            0.0,
+            1.0,
+            2.0,
+            3.0,
+        ];
+        let mut out = Vec::new();
+        w.frames(&values, None, 0..1, &mut out);
+        assert!(
+            out.len() <= w.frame_bytes(),
+            "{} > {}",
+            out.len(),
+            w.frame_bytes()
+        );
+        // As printed: a verbatim token as long as a lossless bitstream keeps, and the most
+        // zeros one keeps before 18 digits.
+        let mut printed = PrintedValues::default();
+        printed.push_token(&"9".repeat(256));
+        printed.push_token(&format!("-0.{}123456789012345678", "0".repeat(399)));
+        for _ in 0..7 {
+            printed.push_token("1.5");
+        }
+        let mut out = Vec::new();
+        w.frames(&values, Some(&printed), 0..1, &mut out);
+        assert!(
+            out.len() <= w.frame_bytes(),
+            "{} > {}",
+            out.len(),
+            w.frame_bytes()
+        );
     }
 
     #[test]

@@ -391,6 +391,17 @@ mod tests {
     fn blocks_of_any_size_write_the_same_file() {
         let mut m = walker(37, 5, 60.0, 3, 0.0);
         m.gap_where(|s| s[0] > 500.0);
+        // The longest values as text: the extremes of f32, printed without an exponent.
+        let mut v = m.positions().to_vec();
+        v[..6].copy_from_slice(&[
+            -f32::from_bits(1),
+            f32::MAX,
+            f32::MIN,
+            -1.1754944e-38,
+            1e-7,
+            -3.4e38,
+        ]);
+        let m = Motion::new(m.fps, m.unit.clone(), m.point_names.clone(), v, None).unwrap();
         let w = m.point_count() * 3;
         for format in [
             Format::Json,

@@ -54,9 +54,10 @@ pub trait FrameWriter: Send + Sync {
     fn frame_bytes(&self) -> usize;
 }
 
-/// The most bytes a coordinate takes as text: the shortest f32 that parses back
-/// (`-1.1754944e-38`: 14 characters) and its separator.
-pub(crate) const TEXT_VALUE_BYTES: usize = 16;
+/// The most bytes a coordinate takes as text, and its separator. Values are printed with
+/// Rust's `Display` (the shortest digits that parse back, never an exponent), so the
+/// longest is the smallest subnormal, `-0.` and 45 digits: 48 characters.
+pub(crate) const TEXT_VALUE_BYTES: usize = 49;
 
 /// Append `v` in the shortest form that parses back to the same f32; NaN as `nan_text`.
 pub(crate) fn push_f32(out: &mut Vec<u8>, v: f32, nan_text: &str) {
