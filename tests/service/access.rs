@@ -4,6 +4,7 @@
 //! and recover.
 
 use crate::common;
+use common::token;
 
 use std::collections::BTreeSet;
 
@@ -71,21 +72,6 @@ impl Secrets {
             &self.expired,
         ]
     }
-}
-
-async fn token(store: &Store, name: &str, scope: &str, libraries: Option<&[&str]>) -> String {
-    access::create_token(
-        store,
-        TokenRequest {
-            name: name.into(),
-            scope: scope.into(),
-            libraries: libraries.map(|l| l.iter().map(|s| s.to_string()).collect()),
-            expires_at: None,
-        },
-    )
-    .await
-    .unwrap()
-    .secret
 }
 
 async fn tokens(store: &Store) -> Secrets {
