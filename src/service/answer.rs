@@ -77,8 +77,6 @@ pub struct Answer {
     pub points: Option<usize>,
     /// The answer's length in bytes, where the format fixes it (f32, NPY).
     pub length: Option<u64>,
-    /// Bytes reserved for it from the server's answer budget.
-    pub reserved: u64,
     store: Store,
     caches: Arc<ReadCaches>,
     prepared: Arc<Prepared>,
@@ -217,7 +215,6 @@ pub async fn open(
         metres_per_unit: prepared.metres_per_unit,
         points,
         length,
-        reserved: reservation.bytes(),
         store: store.clone(),
         caches: caches.clone(),
         cache: chunks.len() <= CACHED_CHUNKS,
@@ -637,14 +634,4 @@ impl ChunkSource for One {
             *k = Some(decoded);
         }
     }
-}
-
-/// Frames `range` of a take as one buffer: an answer's pieces gathered (for callers that
-/// need the whole range at once, such as tests and small exports).
-pub async fn collect(mut answer: Answer) -> Result<Vec<u8>> {
-    let mut out = Vec::with_capacity(answer.length.unwrap_or(0) as usize);
-    while let Some(piece) = answer.next().await? {
-        out.extend_from_slice(&piece);
-    }
-    Ok(out)
 }

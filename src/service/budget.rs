@@ -157,7 +157,6 @@ impl Budget {
             whole: false,
             permits: None,
             held: AtomicU64::new(0),
-            peak: AtomicU64::new(0),
         }
     }
 
@@ -177,20 +176,14 @@ pub struct Reservation {
     /// [`Reservation::grow_to`]): what it holds may pass what it reserved.
     whole: bool,
     permits: Option<OwnedSemaphorePermit>,
-    /// What its owner holds now (the sum of its live [`Held`]), and the most it held.
+    /// What its owner holds now (the sum of its live [`Held`]).
     held: AtomicU64,
-    peak: AtomicU64,
 }
 
 impl Reservation {
     /// Bytes reserved.
     pub fn bytes(&self) -> u64 {
         self.units * UNIT
-    }
-
-    /// The most this reservation's owner held at once.
-    pub fn peak(&self) -> u64 {
-        self.peak.load(Ordering::Relaxed)
     }
 
     /// What this reservation's owner holds now.
@@ -249,7 +242,6 @@ impl Reservation {
             self.holder,
             self.bytes()
         );
-        self.peak.fetch_max(now, Ordering::Relaxed);
         self.budget.add_held(bytes);
         self.budget.one_peak.fetch_max(now, Ordering::Relaxed);
         Held {
@@ -436,7 +428,7 @@ mod tests {
         let s = Arc::new(s);
         let z = s.hold(3000);
         assert_eq!(b.held(), (7000, 9000, 9000));
-        assert_eq!((r.peak(), r.holding()), (9000, 4000));
+        assert_eq!(r.holding(), 4000);
         // A guard keeps its reservation (and so the budget's room) until it goes.
         drop(r);
         assert_eq!(b.reserved_bytes(), 13 * UNIT);

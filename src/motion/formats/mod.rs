@@ -437,6 +437,31 @@ mod tests {
         }
     }
 
+    /// A coordinate that is not a finite number is a missing sample, counted in a warning,
+    /// in every point format a strict read takes (the C3D case is in `c3d`'s tests; JSON
+    /// has no such numbers, and one past f32 is a parse error there).
+    #[test]
+    fn non_finite_coordinates_are_counted_gaps_in_trc_and_npy() {
+        let trc =
+            "PathFileType\t4\t(X/Y/Z)\tx.trc\nDataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\n\
+                   100\t100\t2\t2\tmm\nFrame#\tTime\tA\t\t\tB\t\t\n\t\tX1\tY1\tZ1\tX2\tY2\tZ2\n\n\
+                   1\t0.00\t1\t2\t3\tNaN\tNaN\tNaN\n2\t0.01\t7\t8\tinf\t4\t5\t6\n";
+        let mut npy = write(&walker(2, 2, 60.0, 1, 0.0), Format::Npy).unwrap();
+        let at = npy.len() - 4 * 3 * 2 * 2;
+        npy[at..at + 4].copy_from_slice(&f32::NEG_INFINITY.to_le_bytes());
+        for (bytes, gaps, counted) in [(trc.as_bytes(), 2, 2), (&npy[..], 1, 1)] {
+            let l = read(bytes, &ReadOptions::default()).unwrap();
+            assert_eq!(l.motion.gap_count(), gaps, "{}", l.format);
+            let want = format!("{counted} samples have coordinates that are not finite");
+            assert!(
+                l.warnings.iter().any(|w| w.starts_with(&want)),
+                "{}: {:?}",
+                l.format,
+                l.warnings
+            );
+        }
+    }
+
     #[test]
     fn format_names_parse() {
         assert_eq!("NPY".parse::<Format>().unwrap(), Format::Npy);
