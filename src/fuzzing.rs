@@ -19,6 +19,7 @@ fn limits() -> Limits {
         max_frames: 100_000,
         max_samples: 1_000_000,
         max_depth: 512,
+        max_analog_samples: 1_000_000,
     }
 }
 

@@ -114,6 +114,10 @@ pub struct Limits {
     /// Nesting depth of a BVH hierarchy (root = 1). Parsers never recurse on it; the bound
     /// only keeps absurd files out.
     pub hierarchy_depth: u64,
+    /// Analog values (rows × channels) of one take. Held as 4-byte integers or floats while
+    /// a take is read and coded, so the default bounds that to 400 MB; a 512 MiB upload of
+    /// 16-bit values could declare 268 M.
+    pub analog_samples: u64,
     /// Points in one live stream. A stream holds a spatial basis of 3 × points² values and
     /// an encoder state, so this bounds the memory of each open stream.
     pub stream_points: u64,
@@ -176,6 +180,7 @@ impl Default for Limits {
             frames: 20_000_000,
             samples: 200_000_000,
             hierarchy_depth: 512,
+            analog_samples: 100_000_000,
             stream_points: 1_000,
             open_streams: 32,
             stream_chunk_samples: 2_000_000,

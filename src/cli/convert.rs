@@ -14,7 +14,7 @@ pub struct ConvertArgs {
     input: PathBuf,
     /// Output file.
     output: PathBuf,
-    /// Output format (bvh, trc, json, npy, csv, f32); default: from OUTPUT's extension.
+    /// Output format (bvh, trc, c3d, json, npy, csv, f32); default: from OUTPUT's extension.
     #[arg(long)]
     to: Option<Format>,
     #[command(flatten)]
@@ -46,7 +46,18 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
     let input = args.input.display();
     let bytes = std::fs::read(&args.input).map_err(|e| format!("{input}: {e}"))?;
     let loaded = formats::read(&bytes, &options).map_err(|e| format!("{input}: {e}"))?;
-    let out = formats::write(&loaded.motion, format).map_err(|e| format!("{input}: {e}"))?;
+    let out = if format == Format::C3d {
+        // Everything the input held: analog channels, events and parameters too.
+        formats::c3d::write::write(&formats::c3d::write::Out {
+            motion: &loaded.motion,
+            analog: loaded.extras.analog.as_ref(),
+            parameters: loaded.extras.parameters.as_ref(),
+            first_frame: 1,
+        })
+    } else {
+        formats::write(&loaded.motion, format)
+    }
+    .map_err(|e| format!("{input}: {e}"))?;
     // Write beside the target and rename, so a failure never leaves half a file.
     let tmp = args.output.with_extension("partial");
     std::fs::write(&tmp, out).map_err(|e| format!("{}: {e}", tmp.display()))?;

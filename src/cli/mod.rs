@@ -130,6 +130,9 @@ struct LimitArgs {
     /// Nesting depth of a BVH hierarchy.
     #[arg(long, env = "MOCAP_MAX_DEPTH", default_value_t = d().hierarchy_depth)]
     max_depth: u64,
+    /// Analog values (rows × channels) in one take.
+    #[arg(long, env = "MOCAP_MAX_ANALOG_SAMPLES", default_value_t = d().analog_samples)]
+    max_analog_samples: u64,
     /// Points in one live stream (each open stream holds 3 × points² basis values).
     #[arg(long, env = "MOCAP_MAX_STREAM_POINTS", default_value_t = d().stream_points)]
     max_stream_points: u64,
@@ -230,6 +233,7 @@ impl LimitArgs {
             frames: self.max_frames,
             samples: self.max_samples,
             hierarchy_depth: self.max_depth,
+            analog_samples: self.max_analog_samples,
             stream_points: self.max_stream_points,
             open_streams: self.max_open_streams,
             requests_per_s: self.requests_per_s,

@@ -26,6 +26,10 @@ pub enum CodecId {
     BvhLossless = 9,
     /// A skeleton's rotations, error-bounded on the FK positions.
     Rot = 10,
+    /// Analog channels, exactly as stored ([`super::analog`]).
+    AnalogLossless = 11,
+    /// Analog channels, each within its bound in its own unit.
+    AnalogBounded = 12,
 }
 
 impl CodecId {
@@ -42,6 +46,14 @@ impl CodecId {
         CodecId::Rot,
     ];
 
+    /// The codecs of analog channels: never candidates for a take's points.
+    pub const ANALOG: [CodecId; 2] = [CodecId::AnalogLossless, CodecId::AnalogBounded];
+
+    /// Whether this codec codes analog channels rather than points.
+    pub fn is_analog(self) -> bool {
+        CodecId::ANALOG.contains(&self)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             CodecId::Raw => "raw",
@@ -54,11 +66,16 @@ impl CodecId {
             CodecId::MdttShared => "mdtt-shared",
             CodecId::BvhLossless => "bvh-lossless",
             CodecId::Rot => "rot",
+            CodecId::AnalogLossless => "analog-lossless",
+            CodecId::AnalogBounded => "analog-bounded",
         }
     }
 
     pub fn from_byte(b: u8) -> Option<CodecId> {
-        CodecId::ALL.into_iter().find(|c| *c as u8 == b)
+        CodecId::ALL
+            .into_iter()
+            .chain(CodecId::ANALOG)
+            .find(|c| *c as u8 == b)
     }
 
     /// How many frames a decoder must see before it can emit the first one.
@@ -68,7 +85,9 @@ impl CodecId {
             | CodecId::Quant
             | CodecId::LsdtFrame
             | CodecId::BvhLossless
-            | CodecId::Rot => Latency::Frame,
+            | CodecId::Rot
+            | CodecId::AnalogLossless
+            | CodecId::AnalogBounded => Latency::Frame,
             CodecId::LsdtClip => Latency::Clip,
             CodecId::Mdtt | CodecId::MdttShared | CodecId::Spca | CodecId::Pga => Latency::Sequence,
         }
@@ -86,6 +105,7 @@ impl FromStr for CodecId {
     fn from_str(s: &str) -> Result<Self> {
         CodecId::ALL
             .into_iter()
+            .chain(CodecId::ANALOG)
             .find(|c| c.name().eq_ignore_ascii_case(s.trim()))
             .ok_or_else(|| {
                 let names: Vec<_> = CodecId::ALL.iter().map(|c| c.name()).collect();

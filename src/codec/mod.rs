@@ -17,6 +17,8 @@
 //! - [`pga`]: principal geodesics of rotations with IK (Tournier et al. 2009).
 //! - [`spca`]: segments, torso normalisation, PCA and key-framed splines (Liu & McMillan
 //!   2006).
+//! - [`analog`]: analog channels (force plates, EMG) by linear prediction, lossless or
+//!   bounded per channel.
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
 //! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
 //!   that code channel values.
@@ -24,6 +26,7 @@
 //!   the above. [`segment`]: PPCA motion segmentation (Barbič et al. 2004), for `spca` and
 //!   `mdtt`'s adaptive clips.
 
+pub mod analog;
 pub mod basis;
 pub mod bvh_lossless;
 pub mod container;
@@ -278,6 +281,9 @@ pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
         CodecId::Rot => Ok(&rot::Rot),
         CodecId::Pga => Ok(&pga::Pga),
         CodecId::Spca => Ok(&spca::Spca),
+        CodecId::AnalogLossless | CodecId::AnalogBounded => Err(Error::Invalid(format!(
+            "{id} codes analog channels, not points"
+        ))),
     }
 }
 

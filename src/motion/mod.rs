@@ -1,8 +1,10 @@
 //! The motion model and everything that reads, writes or measures it. Pure: bytes and
 //! numbers in, bytes and numbers out; no files, no async, no database.
 
+pub mod analog;
 pub mod decimal;
 pub mod error;
+pub mod events;
 pub mod format;
 pub mod formats;
 pub mod layout;

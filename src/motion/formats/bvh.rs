@@ -228,6 +228,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         declared_unit: None,
         warnings,
         contradictions,
+        extras: Default::default(),
     })
 }
 

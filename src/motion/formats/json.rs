@@ -68,6 +68,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         // JSON has no NaN or infinity, and serde refuses a number past f32 as out of
         // range: what parses is finite.
         contradictions: Vec::new(),
+        extras: Default::default(),
     })
 }
 

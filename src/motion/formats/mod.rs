@@ -31,6 +31,8 @@ pub struct Limits {
     pub max_samples: u64,
     /// Nesting depth of a skeleton hierarchy (root = 1).
     pub max_depth: u64,
+    /// Analog rows × channels.
+    pub max_analog_samples: u64,
 }
 
 impl Default for Limits {
@@ -49,6 +51,7 @@ impl From<&crate::limits::Limits> for Limits {
             max_frames: l.frames,
             max_samples: l.samples,
             max_depth: l.hierarchy_depth,
+            max_analog_samples: l.analog_samples,
         }
     }
 }
@@ -102,6 +105,16 @@ pub struct Loaded {
     pub motion: Motion,
     pub format: Format,
     pub warnings: Vec<String>,
+    pub extras: Extras,
+}
+
+/// What a file holds beside its points: C3D's analog channels, events and parameter
+/// section. Other formats have none.
+#[derive(Debug, Clone, Default)]
+pub struct Extras {
+    pub analog: Option<super::analog::Analog>,
+    pub events: Vec<super::events::Event>,
+    pub parameters: Option<c3d::params::Parameters>,
 }
 
 /// What a format reader returns before units are settled.
@@ -114,6 +127,7 @@ pub(crate) struct Parsed {
     /// Where the data contradicts the file's own header or physical sense: refused unless
     /// the reader is lenient, then kept as warnings (with the bad samples as gaps).
     pub contradictions: Vec<String>,
+    pub extras: Extras,
 }
 
 /// Samples (point triples) with an infinite coordinate (or one that overflowed f32): never
@@ -205,6 +219,7 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         declared_unit,
         mut warnings,
         mut contradictions,
+        extras,
     } = parsed;
     motion.unit = settle_unit(&motion, declared_unit, options.unit, &mut warnings)?;
     // Beyond-scale samples: finite, but farther from the origin than any capture volume.
@@ -252,6 +267,7 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         motion,
         format,
         warnings,
+        extras,
     })
 }
 
@@ -370,6 +386,7 @@ mod tests {
             max_frames: 5,
             max_samples: 6,
             max_depth: 4,
+            max_analog_samples: 10,
         };
         assert!(l.check_bytes(11).is_err());
         assert!(l.check_shape(5, 2).is_err()); // 10 samples

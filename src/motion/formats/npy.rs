@@ -159,6 +159,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         declared_unit: None,
         warnings,
         contradictions: Vec::new(),
+        extras: Default::default(),
     })
 }
 

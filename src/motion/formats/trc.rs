@@ -163,6 +163,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         declared_unit: unit,
         warnings,
         contradictions,
+        extras: Default::default(),
     })
 }
 

@@ -1,23 +1,29 @@
 //! C3D: the biomechanics binary format (a 512-byte header block, a parameter section of
 //! groups and typed parameters, then frames of points and analog samples).
 //!
-//! We read point data only; analog samples are measured so they can be skipped, never
-//! interpreted. Supported: Intel (IEEE LE), DEC (VAX F-float, LE integers) and SGI/MIPS
+//! Everything is read: points, analog channels (values exactly as stored, with their
+//! scale and offset: [`crate::motion::analog`]), events (`EVENT`) and the whole parameter
+//! section as a typed tree ([`params`]), so that a file can be archived and written back
+//! ([`write`]). Supported: Intel (IEEE LE), DEC (VAX F-float, LE integers) and SGI/MIPS
 //! (IEEE BE) processor types; integer storage with `POINT:SCALE` and float storage;
 //! `TRIAL:ACTUAL_START_FIELD/END_FIELD` for files longer than 65535 frames; residual < 0
-//! as a missing sample.
+//! as a missing sample; `ANALOG:FORMAT UNSIGNED`.
 //!
 //! Why not the `c3dio` crate: on this project's corpus it refuses 9 files that ezc3d reads
 //! (force-plate and analog parameter checks that fail on real files, `POINT:UNITS` treated
 //! as mandatory) and has no DEC/SGI float path we could verify; reading points needs a
 //! fraction of what it does, so we keep a small reader we can test against the manifest.
 
-use std::collections::HashMap;
+pub mod params;
+pub mod write;
 
-use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use super::{perr, unsettled_unit, Extras, Format, Limits, Parsed};
+use crate::motion::analog::{self, Analog, Samples};
 use crate::motion::error::{Error, Location, Result};
+use crate::motion::events::Event;
 use crate::motion::model::Motion;
 use crate::motion::units::parse_unit;
+use params::Parameters;
 
 const BLOCK: usize = 512;
 const FMT: Format = Format::C3d;
@@ -28,7 +34,7 @@ fn err(offset: usize, reason: impl Into<String>) -> Error {
 
 /// Byte order and float encoding, from the parameter section's processor byte.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Processor {
+pub(crate) enum Processor {
     Intel,
     Dec,
     Mips,
@@ -76,168 +82,6 @@ fn dec_f32(b: [u8; 4]) -> f32 {
     ieee / 4.0
 }
 
-/// A parameter's raw data with the processor needed to decode it.
-#[derive(Debug, Clone)]
-struct Param {
-    kind: i8,
-    dims: Vec<usize>,
-    data_at: usize,
-    len: usize,
-}
-
-struct Params<'a> {
-    bytes: &'a [u8],
-    proc: Processor,
-    map: HashMap<(String, String), Param>,
-}
-
-impl Params<'_> {
-    fn get(&self, group: &str, name: &str) -> Option<&Param> {
-        self.map.get(&(group.to_string(), name.to_string()))
-    }
-
-    fn data(&self, p: &Param) -> &[u8] {
-        &self.bytes[p.data_at..p.data_at + p.len]
-    }
-
-    /// First value as a number, whatever the stored type.
-    fn number(&self, group: &str, name: &str) -> Option<f64> {
-        let p = self.get(group, name)?;
-        let d = self.data(p);
-        match p.kind {
-            1 if !d.is_empty() => Some(f64::from(d[0])),
-            2 if d.len() >= 2 => Some(f64::from(self.proc.i16(d))),
-            4 if d.len() >= 4 => Some(f64::from(self.proc.f32(d))),
-            _ => None,
-        }
-    }
-
-    /// 16-bit integers, read unsigned (counts in C3D overflow i16 long before u16).
-    fn u16s(&self, group: &str, name: &str) -> Option<Vec<u16>> {
-        let p = self.get(group, name)?;
-        if p.kind != 2 {
-            return None;
-        }
-        Some(
-            self.data(p)
-                .chunks_exact(2)
-                .map(|c| self.proc.u16(c))
-                .collect(),
-        )
-    }
-
-    /// A character parameter as strings: dims `[len, count]` (or `[len]` for one string).
-    fn strings(&self, group: &str, name: &str) -> Option<Vec<String>> {
-        let p = self.get(group, name)?;
-        if p.kind != -1 {
-            return None;
-        }
-        let d = self.data(p);
-        let width = p.dims.first().copied().unwrap_or(d.len()).max(1);
-        Some(
-            d.chunks(width)
-                .map(|c| {
-                    String::from_utf8_lossy(c)
-                        .trim_matches(|ch: char| ch == '\0' || ch.is_whitespace())
-                        .to_string()
-                })
-                .collect(),
-        )
-    }
-}
-
-/// Parse the parameter section starting at `start`. `end` bounds it (the data section's
-/// start): some writers leave a bogus "next" offset on the last parameter, which we take as
-/// the end of the list rather than follow into the point data.
-fn parse_params(bytes: &[u8], start: usize, end: usize, proc: Processor) -> Result<Params<'_>> {
-    let mut group_names: HashMap<i8, String> = HashMap::new();
-    let mut raw: Vec<(i8, String, Param)> = Vec::new();
-    let mut pos = start + 4;
-    loop {
-        if pos + 2 > bytes.len() {
-            return Err(err(pos, "parameter section runs past the end of the file"));
-        }
-        let name_len = (bytes[pos] as i8).unsigned_abs() as usize;
-        let id = bytes[pos + 1] as i8;
-        if name_len == 0 || id == 0 {
-            break;
-        }
-        let name_end = pos + 2 + name_len;
-        if name_end + 2 > bytes.len() {
-            return Err(err(pos, "parameter name runs past the end of the file"));
-        }
-        let name = String::from_utf8_lossy(&bytes[pos + 2..name_end])
-            .trim()
-            .to_ascii_uppercase();
-        let next_field = name_end;
-        let next = proc.i16(&bytes[next_field..]);
-        let body = next_field + 2;
-        if id < 0 {
-            group_names.insert(-id, name);
-        } else {
-            if body + 2 > bytes.len() {
-                return Err(err(pos, format!("parameter {name} is cut off")));
-            }
-            let kind = bytes[body] as i8;
-            let ndims = bytes[body + 1] as usize;
-            let dims_end = body + 2 + ndims;
-            if dims_end > bytes.len() {
-                return Err(err(
-                    body,
-                    format!("parameter {name} dimensions are cut off"),
-                ));
-            }
-            let dims: Vec<usize> = bytes[body + 2..dims_end]
-                .iter()
-                .map(|&d| d as usize)
-                .collect();
-            let elem: usize = match kind {
-                -1 | 1 => 1,
-                2 => 2,
-                4 => 4,
-                k => return Err(err(body, format!("parameter {name} has unknown type {k}"))),
-            };
-            let len = dims
-                .iter()
-                .try_fold(elem, |acc, &d| acc.checked_mul(d))
-                .filter(|&len| dims_end + len <= bytes.len());
-            let Some(len) = len else {
-                return Err(err(
-                    dims_end,
-                    format!("parameter {name} data runs past the end"),
-                ));
-            };
-            raw.push((
-                id,
-                name,
-                Param {
-                    kind,
-                    dims,
-                    data_at: dims_end,
-                    len,
-                },
-            ));
-        }
-        if next <= 0 {
-            break;
-        }
-        let np = next_field + next as usize;
-        if np >= end {
-            break;
-        }
-        pos = np;
-    }
-    let mut map = HashMap::new();
-    for (id, name, p) in raw {
-        let group = group_names
-            .get(&id)
-            .cloned()
-            .unwrap_or_else(|| format!("#{id}"));
-        map.entry((group, name)).or_insert(p);
-    }
-    Ok(Params { bytes, proc, map })
-}
-
 pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     if bytes.len() < BLOCK {
         return Err(err(
@@ -269,7 +113,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     })?;
     let h = |word: usize| proc.u16(&bytes[(word - 1) * 2..]);
     let header_points = h(2) as usize;
-    let analog_per_frame = h(3) as usize;
+    let analog_words = h(3) as usize;
     let first = h(4) as usize;
     let last = h(5) as usize;
     let header_scale = proc.f32(&bytes[12..16]);
@@ -280,7 +124,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         Some(d) if d > pstart => d.min(bytes.len()),
         _ => bytes.len(),
     };
-    let params = parse_params(bytes, pstart, params_end, proc)?;
+    let params = Parameters::parse(bytes, pstart, params_end, proc)?;
     let mut warnings = Vec::new();
     let mut contradictions = Vec::new();
 
@@ -338,7 +182,20 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         .map(|b| b * BLOCK)
         .ok_or_else(|| err(16, "data start block is 0"))?;
 
-    let frame_bytes = (points * 4 + analog_per_frame) * value_size;
+    let analog_words = analog_words_per_frame(
+        &params,
+        analog_words,
+        h(10) as usize,
+        AnalogCheck {
+            rate,
+            points,
+            frames,
+            value_size,
+            data_bytes: bytes.len().saturating_sub(data_start),
+        },
+        &mut warnings,
+    );
+    let frame_bytes = (points * 4 + analog_words) * value_size;
     let available = bytes
         .len()
         .saturating_sub(data_start)
@@ -376,7 +233,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         }
     };
 
-    let names = point_names(&params, points);
+    let names = labels(&params, "POINT", points, "P");
     let abs_scale = scale.abs();
     let mut positions = vec![f32::NAN; frames * points * 3];
     // Samples whose residual says valid but whose numbers are not finite (Vicon writes NaN
@@ -410,42 +267,285 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
         }
     }
     warnings.extend(super::non_finite_warning(not_finite));
+    let analog = read_analog(
+        &params,
+        AnalogLayout {
+            words: analog_words,
+            float,
+            proc,
+            frames,
+            frame_bytes,
+            at: data_start + points * 4 * value_size,
+            value_size,
+            rate,
+        },
+        bytes,
+        limits,
+        &mut warnings,
+    )?;
     let motion = if points == 0 {
         Motion::without_points(rate, unsettled_unit(), frames)?
     } else {
         Motion::new(rate, unsettled_unit(), names, positions, None)?
     };
+    let events = events(&params, &mut warnings);
     Ok(Parsed {
         motion,
         declared_unit: unit,
         warnings,
         contradictions,
+        extras: Extras {
+            analog,
+            events,
+            parameters: Some(params),
+        },
     })
 }
 
-/// Labels from POINT:LABELS, LABELS2, … ; blank or repeated labels get a unique name.
-fn point_names(params: &Params<'_>, points: usize) -> Vec<String> {
-    let mut labels = params.strings("POINT", "LABELS").unwrap_or_default();
-    for k in 2.. {
-        match params.strings("POINT", &format!("LABELS{k}")) {
-            Some(more) => labels.extend(more),
-            None => break,
+/// What decides how many analog values a frame holds, beside the header.
+struct AnalogCheck {
+    rate: f64,
+    points: usize,
+    frames: usize,
+    value_size: usize,
+    data_bytes: usize,
+}
+
+/// Analog values per frame. The standard's header word 3 holds it (channels × samples
+/// per frame), but some writers (MotionMonitor) put the channel count there and the
+/// samples per frame in word 10: where `ANALOG:USED` × word 10 (or × `ANALOG:RATE /
+/// POINT:RATE`) is the count that fills the data section and word 3 is not, that count is
+/// used, with a warning — as ezc3d reads such files.
+fn analog_words_per_frame(
+    params: &Parameters,
+    header_words: usize,
+    header_per_frame: usize,
+    c: AnalogCheck,
+    warnings: &mut Vec<String>,
+) -> usize {
+    let used = params
+        .u16s("ANALOG", "USED")
+        .and_then(|v| v.first().copied())
+        .map_or(0, usize::from);
+    if used == 0 || c.frames == 0 || header_words == used * header_per_frame.max(1) {
+        return header_words;
+    }
+    let fits = |words: usize| {
+        let need = (c.points * 4 + words)
+            .saturating_mul(c.value_size)
+            .saturating_mul(c.frames);
+        need <= c.data_bytes && c.data_bytes - need < BLOCK + (c.points * 4 + words) * c.value_size
+    };
+    if fits(header_words) {
+        return header_words;
+    }
+    let by_rate = params
+        .number("ANALOG", "RATE")
+        .map(|r| r / c.rate)
+        .filter(|k| k.is_finite() && *k >= 1.0 && (k - k.round()).abs() < 1e-6)
+        .map(|k| k.round() as usize);
+    for per_frame in [Some(header_per_frame).filter(|&k| k > 0), by_rate]
+        .into_iter()
+        .flatten()
+    {
+        let words = used * per_frame;
+        if fits(words) {
+            warnings.push(format!(
+                "header word 3 says {header_words} analog values per frame; the data holds \
+                 {used} channels × {per_frame} samples ({words}), which are read"
+            ));
+            return words;
         }
     }
-    let mut names: Vec<String> = Vec::with_capacity(points);
-    for i in 0..points {
+    header_words
+}
+
+/// Where a file's analog values lie: `words` per frame after the points, from `at`.
+struct AnalogLayout {
+    words: usize,
+    float: bool,
+    proc: Processor,
+    frames: usize,
+    frame_bytes: usize,
+    at: usize,
+    value_size: usize,
+    rate: f64,
+}
+
+/// The analog channels of a file, if it has any: `ANALOG:USED` channels, the header's
+/// analog words per frame divided among them (`ANALOG:RATE / POINT:RATE` where the header
+/// has none), values exactly as stored.
+fn read_analog(
+    params: &Parameters,
+    l: AnalogLayout,
+    bytes: &[u8],
+    limits: &Limits,
+    warnings: &mut Vec<String>,
+) -> Result<Option<Analog>> {
+    let used = params
+        .u16s("ANALOG", "USED")
+        .and_then(|v| v.first().copied())
+        .map_or(0, usize::from);
+    if l.words == 0 || used == 0 {
+        if l.words > 0 {
+            warnings.push(format!(
+                "{} analog values per frame but ANALOG:USED is 0; analog data not kept",
+                l.words
+            ));
+        }
+        return Ok(None);
+    }
+    if !l.words.is_multiple_of(used) {
+        return Err(err(
+            4,
+            format!(
+                "{} analog values per frame do not divide among ANALOG:USED {used} channels",
+                l.words
+            ),
+        ));
+    }
+    let per_frame = l.words / used;
+    if let Some(r) = params.number("ANALOG", "RATE") {
+        let stated = r / l.rate;
+        if (stated - per_frame as f64).abs() > 1e-3 * per_frame as f64 {
+            warnings.push(format!(
+                "ANALOG:RATE {r} is not {per_frame} × the point rate {}; the header's {per_frame} \
+                 samples per frame are used",
+                l.rate
+            ));
+        }
+    }
+    let rows = l.frames * per_frame;
+    let total = (rows as u64).saturating_mul(used as u64);
+    if total > limits.max_analog_samples {
+        return Err(Error::Limit {
+            what: "analog sample count (rows × channels)",
+            actual: total,
+            limit: limits.max_analog_samples,
+        });
+    }
+    let unsigned = params
+        .strings("ANALOG", "FORMAT")
+        .and_then(|v| v.into_iter().next())
+        .is_some_and(|f| f.eq_ignore_ascii_case("UNSIGNED"));
+    let names = labels(params, "ANALOG", used, "A");
+    let descriptions = params.strings_continued("ANALOG", "DESCRIPTIONS");
+    let units = params.strings_continued("ANALOG", "UNITS");
+    let scales = params.numbers_continued("ANALOG", "SCALE");
+    let offsets: Vec<i32> = {
+        let raw = params.numbers_continued("ANALOG", "OFFSET");
+        raw.into_iter()
+            .map(|o| {
+                let o = o as i32;
+                if unsigned && o < 0 {
+                    o + 65_536
+                } else {
+                    o
+                }
+            })
+            .collect()
+    };
+    let gen_scale = params.number("ANALOG", "GEN_SCALE").unwrap_or(1.0) as f32;
+    let channels = names
+        .into_iter()
+        .enumerate()
+        .map(|(i, label)| analog::Channel {
+            label,
+            description: descriptions.get(i).cloned().unwrap_or_default(),
+            unit: units.get(i).cloned().unwrap_or_default(),
+            scale: scales.get(i).map_or(1.0, |&s| s as f32),
+            offset: offsets.get(i).copied().unwrap_or(0),
+        })
+        .collect();
+    let n = rows * used;
+    let word = |f: usize, k: usize| &bytes[l.at + f * l.frame_bytes + k * l.value_size..];
+    let samples = if l.float {
+        let mut v = Vec::with_capacity(n);
+        for f in 0..l.frames {
+            v.extend((0..l.words).map(|k| l.proc.f32(word(f, k))));
+        }
+        Samples::Float(v)
+    } else {
+        let mut v = Vec::with_capacity(n);
+        for f in 0..l.frames {
+            v.extend((0..l.words).map(|k| {
+                let w = word(f, k);
+                if unsigned {
+                    i32::from(l.proc.u16(w))
+                } else {
+                    i32::from(l.proc.i16(w))
+                }
+            }));
+        }
+        Samples::Int {
+            values: v,
+            unsigned,
+        }
+    };
+    Ok(Some(Analog::new(per_frame, gen_scale, channels, samples)?))
+}
+
+/// `base`, or `base_2`, `base_3`… if taken.
+fn unique(taken: &[String], base: &str) -> String {
+    let mut name = base.to_string();
+    let mut k = 2;
+    while taken.contains(&name) {
+        name = format!("{base}_{k}");
+        k += 1;
+    }
+    name
+}
+
+/// `EVENT:USED` events: contexts, labels, descriptions, subjects and times (`TIMES` is
+/// `2 × n`: minutes, seconds).
+fn events(params: &Parameters, warnings: &mut Vec<String>) -> Vec<Event> {
+    let used = params
+        .u16s("EVENT", "USED")
+        .and_then(|v| v.first().copied())
+        .map_or(0, usize::from);
+    if used == 0 {
+        return Vec::new();
+    }
+    let times = params
+        .get("EVENT", "TIMES")
+        .map(|p| p.numbers())
+        .unwrap_or_default();
+    let contexts = params.strings_continued("EVENT", "CONTEXTS");
+    let labels = params.strings_continued("EVENT", "LABELS");
+    let descriptions = params.strings_continued("EVENT", "DESCRIPTIONS");
+    let subjects = params.strings_continued("EVENT", "SUBJECTS");
+    if times.len() < used * 2 {
+        warnings.push(format!(
+            "EVENT:USED is {used} but EVENT:TIMES holds {} times; the rest are not events",
+            times.len() / 2
+        ));
+    }
+    let text = |v: &[String], i: usize| v.get(i).cloned().unwrap_or_default();
+    (0..used.min(times.len() / 2))
+        .map(|i| Event {
+            context: text(&contexts, i),
+            label: text(&labels, i),
+            time_s: times[2 * i] * 60.0 + times[2 * i + 1],
+            description: text(&descriptions, i),
+            subject: text(&subjects, i),
+        })
+        .collect()
+}
+
+/// The first `n` labels of `group:LABELS`, `LABELS2`, …, as names: a blank one becomes
+/// `{prefix}{i}` (1-based) and a repeated one gets `_2`, `_3`…, so that every point and
+/// channel can be asked for by name. The writer uses the same rule to tell whether the
+/// upload's labels still name what it writes.
+pub(crate) fn labels(params: &Parameters, group: &str, n: usize, prefix: &str) -> Vec<String> {
+    let labels = params.strings_continued(group, "LABELS");
+    let mut names: Vec<String> = Vec::with_capacity(n);
+    for i in 0..n {
         let base = labels
             .get(i)
             .filter(|s| !s.is_empty())
             .cloned()
-            .unwrap_or_else(|| format!("P{}", i + 1));
-        let mut name = base.clone();
-        let mut k = 2;
-        while names.contains(&name) {
-            name = format!("{base}_{k}");
-            k += 1;
-        }
-        names.push(name);
+            .unwrap_or_else(|| format!("{prefix}{}", i + 1));
+        names.push(unique(&names, &base));
     }
     names
 }

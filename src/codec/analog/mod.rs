@@ -1,0 +1,810 @@
+//! `analog-lossless` and `analog-bounded`: a take's analog channels (force plates, EMG)
+//! coded per channel by linear prediction ([`lpc`]) with residuals through the adaptive
+//! range coder the point codecs use — FLAC's design, with an adaptive entropy stage in
+//! place of Rice codes.
+//!
+//! The container is the point codecs' ([`Container`]): `points` counts channels, `frames`
+//! are point frames, and the chunks cover the same frame ranges as the take's point chunks,
+//! so a time range decodes only its own chunks of both. The header's params say how values
+//! were stored ([`Layout`]); a chunk holds each channel in turn, its rows
+//! `first_frame × per_frame ..` coded independently of every other chunk.
+//!
+//! Lossless codes the stored values exactly: 16-bit integers as they are, floats as
+//! integers where every value in the chunk is one, and otherwise as their bit patterns in
+//! an order-preserving integer map (so that nearby floats are nearby integers). Bounded
+//! quantises each channel to a step of twice its bound (in stored units), which keeps every
+//! value within the bound, then codes the step indices losslessly; a channel whose bound
+//! is below one stored step is coded losslessly.
+
+pub mod lpc;
+
+use super::container::{verify_chunk, ChunkMeta, Container, Header};
+use super::entropy::ints::{magnitude_context, IntModel};
+use super::entropy::io::{code_residual, Io};
+use super::entropy::rangecoder::{Decoder as RangeDecoder, Encoder as RangeEncoder};
+use super::entropy::{get_varint, put_varint, unzigzag, zigzag};
+use super::error::{malformed, Error, Result};
+use super::id::CodecId;
+use super::wire::{Reader, Writer};
+use crate::motion::analog::{Analog, Channel, Samples};
+use lpc::Predictor;
+
+const PARAMS_VERSION: u8 = 1;
+/// Residual contexts, by the bit length of a running mean of recent residuals.
+const CONTEXTS: usize = 24;
+
+/// How the values were stored and how each channel was coded: the header's params.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layout {
+    pub per_frame: usize,
+    pub storage: Storage,
+    pub gen_scale: f32,
+    pub channels: Vec<Channel>,
+    /// Per channel, the quantiser step in stored units (`None`: lossless).
+    pub steps: Vec<Option<f64>>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Storage {
+    Signed,
+    Unsigned,
+    Float,
+}
+
+impl Storage {
+    fn of(s: &Samples) -> Storage {
+        match s {
+            Samples::Int {
+                unsigned: false, ..
+            } => Storage::Signed,
+            Samples::Int { unsigned: true, .. } => Storage::Unsigned,
+            Samples::Float(_) => Storage::Float,
+        }
+    }
+
+    fn byte(self) -> u8 {
+        self as u8
+    }
+
+    fn from_byte(b: u8) -> Option<Storage> {
+        [Storage::Signed, Storage::Unsigned, Storage::Float]
+            .into_iter()
+            .find(|s| *s as u8 == b)
+    }
+}
+
+fn put_str(w: &mut Writer, s: &str) {
+    let mut b = Vec::new();
+    put_varint(&mut b, s.len() as u64);
+    w.bytes(&b).bytes(s.as_bytes());
+}
+
+impl Layout {
+    fn to_bytes(&self) -> Vec<u8> {
+        let mut w = Writer::new();
+        let mut v = vec![PARAMS_VERSION];
+        put_varint(&mut v, self.per_frame as u64);
+        v.push(self.storage.byte());
+        w.bytes(&v).f32(self.gen_scale);
+        let mut n = Vec::new();
+        put_varint(&mut n, self.channels.len() as u64);
+        w.bytes(&n);
+        for (c, step) in self.channels.iter().zip(&self.steps) {
+            put_str(&mut w, &c.label);
+            put_str(&mut w, &c.description);
+            put_str(&mut w, &c.unit);
+            w.f32(c.scale);
+            let mut o = Vec::new();
+            put_varint(&mut o, u64::from(zigzag(c.offset)));
+            w.bytes(&o).f64(step.unwrap_or(0.0));
+        }
+        w.0
+    }
+
+    fn parse(b: &[u8], channels: usize) -> Result<Layout> {
+        let mut r = Reader::new(b);
+        let version = r.u8()?;
+        if version != PARAMS_VERSION {
+            return Err(Error::Unsupported(format!(
+                "analog params version {version}"
+            )));
+        }
+        let varint = |r: &mut Reader<'_>| -> Result<u64> {
+            let rest = &b[r.position()..];
+            let mut pos = 0;
+            let v = get_varint(rest, &mut pos).ok_or_else(|| malformed("analog params varint"))?;
+            r.take(pos)?;
+            Ok(v)
+        };
+        let per_frame = varint(&mut r)?;
+        if per_frame == 0 || per_frame > 1 << 16 {
+            return Err(malformed(format!("{per_frame} analog samples per frame")));
+        }
+        let storage = Storage::from_byte(r.u8()?).ok_or_else(|| malformed("analog storage"))?;
+        let gen_scale = r.f32()?;
+        if varint(&mut r)? != channels as u64 {
+            return Err(malformed("analog channel count disagrees with the header"));
+        }
+        let mut out = Vec::with_capacity(channels.min(b.len()));
+        let mut steps = Vec::with_capacity(channels.min(b.len()));
+        for _ in 0..channels {
+            let mut s = || -> Result<String> {
+                let n = varint(&mut r)?;
+                let n = usize::try_from(n).map_err(|_| malformed("analog label length"))?;
+                Ok(String::from_utf8_lossy(r.take(n)?).into_owned())
+            };
+            let (label, description, unit) = (s()?, s()?, s()?);
+            let scale = r.f32()?;
+            let offset =
+                unzigzag(u32::try_from(varint(&mut r)?).map_err(|_| malformed("analog offset"))?);
+            let step = r.f64()?;
+            if !(step.is_finite() && step >= 0.0) {
+                return Err(malformed("analog step"));
+            }
+            out.push(Channel {
+                label,
+                description,
+                unit,
+                scale,
+                offset,
+            });
+            steps.push((step > 0.0).then_some(step));
+        }
+        if r.position() != b.len() {
+            return Err(malformed("trailing bytes in analog params"));
+        }
+        Ok(Layout {
+            per_frame: per_frame as usize,
+            storage,
+            gen_scale,
+            channels: out,
+            steps,
+        })
+    }
+
+    /// Channel `c`'s factor from stored units to its unit.
+    fn factor(&self, c: usize) -> f64 {
+        (f64::from(self.channels[c].scale) * f64::from(self.gen_scale)).abs()
+    }
+}
+
+/// What encoding gave: the container and, per channel, the largest error in its unit.
+pub struct Encoded {
+    pub container: Container,
+    pub max_error: Vec<f64>,
+}
+
+/// Encode `analog` (of a take at `fps`) in chunks of `chunk_frames` point frames each
+/// (their sum is the take's frames), each channel within `bounds[c]` of its unit, or
+/// losslessly where `bounds` is empty or a channel's bound is `None`.
+pub fn encode(
+    analog: &Analog,
+    fps: f64,
+    chunk_frames: &[usize],
+    bounds: &[Option<f64>],
+) -> Result<Encoded> {
+    let n = analog.channel_count();
+    let frames = analog.frames();
+    if chunk_frames.iter().sum::<usize>() != frames || chunk_frames.contains(&0) {
+        return Err(Error::Invalid(format!(
+            "analog chunks of {chunk_frames:?} frames do not tile {frames} frames"
+        )));
+    }
+    if !bounds.is_empty() && bounds.len() != n {
+        return Err(Error::Invalid(format!(
+            "{} bounds for {n} channels",
+            bounds.len()
+        )));
+    }
+    let storage = Storage::of(&analog.samples);
+    let mut layout = Layout {
+        per_frame: analog.per_frame,
+        storage,
+        gen_scale: analog.gen_scale,
+        channels: analog.channels.clone(),
+        steps: vec![None; n],
+    };
+    for (c, b) in bounds.iter().enumerate() {
+        if let Some(b) = *b {
+            if !(b.is_finite() && b > 0.0) {
+                return Err(Error::Invalid(format!(
+                    "analog bound {b} of {:?} is not a positive number",
+                    analog.channels[c].label
+                )));
+            }
+            let factor = layout.factor(c);
+            let delta = if factor > 0.0 { b / factor } else { 0.0 };
+            layout.steps[c] = match storage {
+                // An integer step 2d + 1 keeps every value within d stored units.
+                Storage::Signed | Storage::Unsigned => {
+                    let d = delta.floor();
+                    (d >= 1.0).then_some(2.0 * d.min(32_767.0) + 1.0)
+                }
+                // A hair inside twice the bound: the reconstruction rounds to f32.
+                Storage::Float => (delta.is_finite() && delta > 0.0).then_some(2.0 * delta * 0.999),
+            };
+        }
+    }
+    let codec = if layout.steps.iter().any(Option::is_some) {
+        CodecId::AnalogBounded
+    } else {
+        CodecId::AnalogLossless
+    };
+    let mut metas = Vec::with_capacity(chunk_frames.len());
+    let mut payloads = Vec::with_capacity(chunk_frames.len());
+    let mut max_error = vec![0.0f64; n];
+    let mut first = 0usize;
+    for &f in chunk_frames {
+        let rows = analog.per_frame * f;
+        let r0 = first * analog.per_frame;
+        let mut enc = RangeEncoder::new();
+        for (c, err) in max_error.iter_mut().enumerate() {
+            let column: Vec<f64> = (r0..r0 + rows)
+                .map(|r| analog.samples.get(r * n + c))
+                .collect();
+            let mut column_io = Column::from_values(&layout, c, &analog.samples, r0, rows);
+            code_column(&mut enc, &layout, c, &mut column_io)?;
+            let decoded = column_io.values(&layout, c)?;
+            let factor = layout.factor(c);
+            for (i, a) in column.iter().enumerate() {
+                let b = decoded.get(i);
+                let e = if a.is_nan() && b.is_nan() {
+                    0.0
+                } else {
+                    (a - b).abs() * factor
+                };
+                *err = err.max(e);
+            }
+        }
+        let bytes = enc.finish();
+        metas.push(ChunkMeta {
+            first_frame: first as u32,
+            frames: f as u32,
+            len: bytes.len() as u32,
+            crc32c: crc32c::crc32c(&bytes),
+        });
+        payloads.push(bytes);
+        first += f;
+    }
+    for (c, e) in max_error.iter().enumerate() {
+        if let Some(b) = bounds.get(c).copied().flatten() {
+            if *e > b {
+                return Err(Error::BoundMissed {
+                    codec: codec.to_string(),
+                    detail: format!(
+                        "channel {:?}: {e} over its bound {b}",
+                        analog.channels[c].label
+                    ),
+                });
+            }
+        } else if *e != 0.0 {
+            return Err(Error::BoundMissed {
+                codec: codec.to_string(),
+                detail: format!("channel {:?} not lossless", analog.channels[c].label),
+            });
+        }
+    }
+    let header = Header {
+        codec,
+        frames: frames as u32,
+        points: n as u32,
+        fps,
+        metres_per_unit: 1.0,
+        params: layout.to_bytes(),
+        basis: None,
+        rig: None,
+        chunks: metas,
+    };
+    Ok(Encoded {
+        container: Container {
+            header,
+            chunks: payloads,
+        },
+        max_error,
+    })
+}
+
+/// How one channel of one chunk is held while it is coded: as integers (stored integers,
+/// integral floats, or quantiser indices) or as the ordered bit patterns of floats.
+struct Column {
+    mode: Mode,
+    x: Vec<i64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    /// The stored values are these integers.
+    Exact = 0,
+    /// Float bit patterns, order-preserving.
+    Bits = 1,
+    /// Quantiser indices: the value is index × step.
+    Steps = 2,
+}
+
+/// f32 bits to an integer that orders as the floats do (negative floats reversed).
+fn ordered(v: f32) -> i64 {
+    let b = v.to_bits();
+    let u = if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    };
+    i64::from(u) - (1 << 31)
+}
+
+fn unordered(x: i64) -> Option<f32> {
+    let u = u32::try_from(x + (1 << 31)).ok()?;
+    let b = if u & 0x8000_0000 != 0 {
+        u & 0x7FFF_FFFF
+    } else {
+        !u
+    };
+    Some(f32::from_bits(b))
+}
+
+impl Column {
+    fn from_values(layout: &Layout, c: usize, s: &Samples, r0: usize, rows: usize) -> Column {
+        let n = layout.channels.len();
+        let at = |r: usize| (r0 + r) * n + c;
+        match (s, layout.steps[c]) {
+            (Samples::Int { values, .. }, None) => Column {
+                mode: Mode::Exact,
+                x: (0..rows).map(|r| i64::from(values[at(r)])).collect(),
+            },
+            (Samples::Int { values, .. }, Some(step)) => {
+                let q = step as i64;
+                let d = (q - 1) / 2;
+                Column {
+                    mode: Mode::Steps,
+                    x: (0..rows)
+                        .map(|r| (i64::from(values[at(r)]) + d).div_euclid(q))
+                        .collect(),
+                }
+            }
+            (Samples::Float(v), step) => {
+                let vals: Vec<f32> = (0..rows).map(|r| v[at(r)]).collect();
+                if let Some(step) = step {
+                    let x: Option<Vec<i64>> = vals
+                        .iter()
+                        .map(|&f| {
+                            let k = (f64::from(f) / step).round();
+                            let back = (k * step) as f32;
+                            (k.abs() < 2f64.powi(52)
+                                && f64::from((back - f).abs()) <= step / 2.0 / 0.999)
+                                .then_some(k as i64)
+                        })
+                        .collect();
+                    if let Some(x) = x {
+                        return Column {
+                            mode: Mode::Steps,
+                            x,
+                        };
+                    }
+                }
+                let integral = vals
+                    .iter()
+                    .all(|&f| f.abs() < 16_777_216.0 && (f as i32 as f32).to_bits() == f.to_bits());
+                if integral {
+                    Column {
+                        mode: Mode::Exact,
+                        x: vals.iter().map(|&f| i64::from(f as i32)).collect(),
+                    }
+                } else {
+                    Column {
+                        mode: Mode::Bits,
+                        x: vals.iter().map(|&f| ordered(f)).collect(),
+                    }
+                }
+            }
+        }
+    }
+
+    /// The stored values the column decodes to, checked against the storage.
+    fn values(&self, layout: &Layout, c: usize) -> Result<Stored> {
+        let bad = || malformed(format!("analog channel {c} decodes outside its storage"));
+        let step = || layout.steps[c].ok_or_else(bad);
+        Ok(match (self.mode, layout.storage) {
+            (Mode::Exact, Storage::Float) => Stored::Float(
+                self.x
+                    .iter()
+                    .map(|&x| (x.abs() <= 1 << 24).then_some(x as f32).ok_or_else(bad))
+                    .collect::<Result<_>>()?,
+            ),
+            (Mode::Bits, Storage::Float) => Stored::Float(
+                self.x
+                    .iter()
+                    .map(|&x| unordered(x).ok_or_else(bad))
+                    .collect::<Result<_>>()?,
+            ),
+            (Mode::Steps, Storage::Float) => {
+                let step = step()?;
+                Stored::Float(self.x.iter().map(|&x| (x as f64 * step) as f32).collect())
+            }
+            (Mode::Bits, _) => return Err(bad()),
+            (mode, storage) => {
+                let range = if storage == Storage::Unsigned {
+                    0..=65_535i64
+                } else {
+                    -32_768..=32_767i64
+                };
+                let q = if mode == Mode::Steps {
+                    step()? as i64
+                } else {
+                    1
+                };
+                Stored::Int(
+                    self.x
+                        .iter()
+                        .map(|&x| {
+                            let v = x.checked_mul(q).ok_or_else(bad)?;
+                            // A quantised value may overshoot the 16-bit range by < step.
+                            let v = if q > 1 {
+                                v.clamp(*range.start(), *range.end())
+                            } else {
+                                v
+                            };
+                            if range.contains(&v) {
+                                Ok(v as i32)
+                            } else {
+                                Err(bad())
+                            }
+                        })
+                        .collect::<Result<_>>()?,
+                )
+            }
+        })
+    }
+}
+
+/// One channel's decoded stored values.
+enum Stored {
+    Int(Vec<i32>),
+    Float(Vec<f32>),
+}
+
+impl Stored {
+    fn get(&self, i: usize) -> f64 {
+        match self {
+            Stored::Int(v) => f64::from(v[i]),
+            Stored::Float(v) => f64::from(v[i]),
+        }
+    }
+}
+
+/// Code one channel of one chunk, written once for both directions ([`Io`]): the mode,
+/// the predictor, the warm-up values and the residuals. On decode, `col` is filled.
+fn code_column<I: Io>(io: &mut I, layout: &Layout, c: usize, col: &mut Column) -> Result<()> {
+    let rows = col.x.len();
+    let mode = io.raw(col.mode as u32, 2);
+    col.mode = match mode {
+        0 => Mode::Exact,
+        1 if layout.storage == Storage::Float => Mode::Bits,
+        2 if layout.steps[c].is_some() => Mode::Steps,
+        _ => return Err(malformed(format!("analog channel {c}: mode {mode}"))),
+    };
+    let chosen = if io.encoding() {
+        Some(lpc::choose(&col.x).0)
+    } else {
+        None
+    };
+    let predictor = code_predictor(io, chosen.as_ref())?;
+    if predictor.order() > rows {
+        return Err(malformed(format!(
+            "analog channel {c}: order past the chunk"
+        )));
+    }
+    let mut warm = IntModel::default();
+    let mut prev = 0i64;
+    for t in 0..predictor.order() {
+        let d = code_residual(io, &mut warm, col.x[t].wrapping_sub(prev))?;
+        col.x[t] = prev.wrapping_add(d);
+        prev = col.x[t];
+    }
+    let mut models = vec![IntModel::default(); CONTEXTS];
+    // A running mean of |residual| × 16: the context is its size.
+    let mut mean16: u64 = 16;
+    for t in predictor.order()..rows {
+        let p = predictor.predict(&col.x, t);
+        let ctx = magnitude_context((mean16 >> 4).min(i32::MAX as u64) as i32, CONTEXTS);
+        let r = code_residual(io, &mut models[ctx], col.x[t].wrapping_sub(p))?;
+        col.x[t] = p.wrapping_add(r);
+        mean16 = mean16 - (mean16 >> 4) + r.unsigned_abs().min(1 << 40);
+    }
+    Ok(())
+}
+
+fn code_predictor<I: Io>(io: &mut I, p: Option<&Predictor>) -> Result<Predictor> {
+    let lpc = io.raw(u32::from(matches!(p, Some(Predictor::Lpc { .. }))), 1) == 1;
+    if !lpc {
+        let order = io.raw(p.map_or(0, |p| p.order() as u32), 3) as usize;
+        if order > 4 {
+            return Err(malformed("fixed predictor order over 4"));
+        }
+        return Ok(Predictor::Fixed(order));
+    }
+    let (shift, coeffs) = match p {
+        Some(Predictor::Lpc { shift, coeffs }) => (*shift, coeffs.clone()),
+        _ => (0, Vec::new()),
+    };
+    let order = io.raw(coeffs.len().saturating_sub(1) as u32, 5) as usize + 1;
+    let shift = io.raw(shift, 5);
+    if shift > lpc::MAX_SHIFT {
+        return Err(malformed("LPC shift"));
+    }
+    let mut m = IntModel::default();
+    let mut out = Vec::with_capacity(order);
+    for i in 0..order {
+        let c = io.int(&mut m, coeffs.get(i).copied().unwrap_or(0));
+        if c.unsigned_abs() >= 1 << (lpc::PRECISION - 1) {
+            return Err(malformed("LPC coefficient past its precision"));
+        }
+        out.push(c);
+    }
+    Ok(Predictor::Lpc { shift, coeffs: out })
+}
+
+/// Decodes the chunks of one analog container.
+#[derive(Debug, Clone)]
+pub struct Decoder {
+    header: Header,
+    layout: Layout,
+}
+
+impl Decoder {
+    pub fn new(header: Header) -> Result<Decoder> {
+        if !matches!(
+            header.codec,
+            CodecId::AnalogLossless | CodecId::AnalogBounded
+        ) {
+            return Err(Error::Invalid(format!(
+                "{} does not code analog channels",
+                header.codec
+            )));
+        }
+        let layout = Layout::parse(&header.params, header.points as usize)?;
+        Ok(Decoder { header, layout })
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    pub fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    /// Chunk `index`'s stored values, `rows × channels`, checked against its index entry.
+    pub fn decode_chunk(&self, index: usize, payload: &[u8]) -> Result<Samples> {
+        let meta = self
+            .header
+            .chunks
+            .get(index)
+            .ok_or_else(|| malformed(format!("no analog chunk {index}")))?;
+        verify_chunk(meta, payload, index)?;
+        let n = self.layout.channels.len();
+        let rows = meta.frames as usize * self.layout.per_frame;
+        let mut dec = RangeDecoder::new(payload);
+        let mut out = match self.layout.storage {
+            Storage::Float => Samples::Float(vec![0.0; rows * n]),
+            s => Samples::Int {
+                values: vec![0; rows * n],
+                unsigned: s == Storage::Unsigned,
+            },
+        };
+        for c in 0..n {
+            let mut col = Column {
+                mode: Mode::Exact,
+                x: vec![0; rows],
+            };
+            code_column(&mut dec, &self.layout, c, &mut col)?;
+            if dec.overran() {
+                return Err(malformed(format!("analog chunk {index} is cut short")));
+            }
+            match (col.values(&self.layout, c)?, &mut out) {
+                (Stored::Float(v), Samples::Float(o)) => v
+                    .into_iter()
+                    .enumerate()
+                    .for_each(|(r, x)| o[r * n + c] = x),
+                (Stored::Int(v), Samples::Int { values: o, .. }) => v
+                    .into_iter()
+                    .enumerate()
+                    .for_each(|(r, x)| o[r * n + c] = x),
+                _ => return Err(malformed("analog chunk of the wrong storage")),
+            }
+        }
+        Ok(out)
+    }
+
+    /// An [`Analog`] of decoded stored values (of whole chunks, or a range of them).
+    pub fn analog(&self, samples: Samples) -> Result<Analog> {
+        Analog::new(
+            self.layout.per_frame,
+            self.layout.gen_scale,
+            self.layout.channels.clone(),
+            samples,
+        )
+        .map_err(|e| malformed(e.to_string()))
+    }
+
+    /// Decode chunks `range` (payloads in order) and join them.
+    pub fn decode_chunks<'a>(
+        &self,
+        first: usize,
+        payloads: impl IntoIterator<Item = &'a [u8]>,
+    ) -> Result<Samples> {
+        let mut joined: Option<Samples> = None;
+        for (i, p) in payloads.into_iter().enumerate() {
+            let s = self.decode_chunk(first + i, p)?;
+            joined = Some(match (joined, s) {
+                (None, s) => s,
+                (Some(Samples::Float(mut a)), Samples::Float(b)) => {
+                    a.extend(b);
+                    Samples::Float(a)
+                }
+                (
+                    Some(Samples::Int {
+                        mut values,
+                        unsigned,
+                    }),
+                    Samples::Int { values: b, .. },
+                ) => {
+                    values.extend(b);
+                    Samples::Int { values, unsigned }
+                }
+                _ => return Err(malformed("analog chunks of different storage")),
+            });
+        }
+        Ok(joined.unwrap_or(match self.layout.storage {
+            Storage::Float => Samples::Float(Vec::new()),
+            s => Samples::Int {
+                values: Vec::new(),
+                unsigned: s == Storage::Unsigned,
+            },
+        }))
+    }
+}
+
+/// Decode a whole analog container.
+pub fn decode_all(c: &Container) -> Result<Analog> {
+    let d = Decoder::new(c.header.clone())?;
+    let s = d.decode_chunks(0, c.chunks.iter().map(Vec::as_slice))?;
+    d.analog(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn channel(label: &str, scale: f32, offset: i32) -> Channel {
+        Channel {
+            label: label.into(),
+            description: "test".into(),
+            unit: "N".into(),
+            scale,
+            offset,
+        }
+    }
+
+    /// Two channels at 10 samples per frame: a force-like smooth signal and noisy EMG.
+    fn signal(frames: usize, float: bool) -> Analog {
+        let per_frame = 10;
+        let rows = frames * per_frame;
+        let mut seed = 7u64;
+        let mut noise = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 33) as f64 / (1u64 << 31) as f64) - 0.5
+        };
+        let mut v = Vec::with_capacity(rows * 2);
+        for r in 0..rows {
+            let t = r as f64 / 1000.0;
+            let force = 8000.0 * (t * 3.0).sin().max(0.0) + 40.0 * noise();
+            let emg = 300.0 * noise() * (1.0 + (t * 5.0).sin());
+            v.push(force);
+            v.push(emg);
+        }
+        let samples = if float {
+            Samples::Float(v.iter().map(|&x| (x * 0.01) as f32).collect())
+        } else {
+            Samples::Int {
+                values: v.iter().map(|&x| x.round() as i32).collect(),
+                unsigned: false,
+            }
+        };
+        Analog::new(
+            per_frame,
+            0.5,
+            vec![channel("Fz1", 0.25, 3), channel("EMG1", 0.001, -2)],
+            samples,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn lossless_round_trips_integers_and_floats() {
+        for float in [false, true] {
+            let a = signal(300, float);
+            let e = encode(&a, 100.0, &[128, 128, 44], &[]).unwrap();
+            assert_eq!(e.container.header.codec, CodecId::AnalogLossless);
+            assert_eq!(e.max_error, [0.0, 0.0]);
+            let bytes = e.container.to_bytes();
+            let back = Container::parse(&bytes, &Default::default()).unwrap();
+            assert_eq!(decode_all(&back).unwrap(), a);
+            if !float {
+                // 16-bit values, predicted: well under their 2 bytes each.
+                assert!(bytes.len() < a.raw_bytes() * 3 / 4, "{} bytes", bytes.len());
+            }
+        }
+    }
+
+    #[test]
+    fn a_range_is_the_rows_of_the_whole() {
+        let a = signal(300, false);
+        let e = encode(&a, 100.0, &[100, 100, 100], &[]).unwrap();
+        let d = Decoder::new(e.container.header.clone()).unwrap();
+        let mid = d
+            .decode_chunks(1, [e.container.chunks[1].as_slice()])
+            .unwrap();
+        assert_eq!(d.analog(mid).unwrap(), a.slice_frames(100, 200));
+    }
+
+    #[test]
+    fn bounded_keeps_every_value_within_its_channels_bound() {
+        for float in [false, true] {
+            let a = signal(200, float);
+            let bounds = [Some(2.0), None];
+            let lossless = encode(&a, 100.0, &[200], &[]).unwrap();
+            let e = encode(&a, 100.0, &[200], &bounds).unwrap();
+            assert_eq!(e.container.header.codec, CodecId::AnalogBounded);
+            let back = decode_all(&e.container).unwrap();
+            let mut worst: f64 = 0.0;
+            for r in 0..a.rows() {
+                worst = worst.max((a.value(r, 0) - back.value(r, 0)).abs());
+                assert_eq!(a.value(r, 1), back.value(r, 1));
+            }
+            assert!(worst <= 2.0 && worst > 0.1, "{worst}");
+            assert!((e.max_error[0] - worst).abs() < 1e-9);
+            assert!(e.container.stored_bytes() < lossless.container.stored_bytes());
+        }
+    }
+
+    #[test]
+    fn damaged_chunks_give_errors_not_panics() {
+        let a = signal(50, true);
+        let e = encode(&a, 100.0, &[50], &[]).unwrap();
+        let d = Decoder::new(e.container.header.clone()).unwrap();
+        let good = &e.container.chunks[0];
+        assert!(d.decode_chunk(0, &good[..good.len() / 2]).is_err());
+        // With its checksum fixed, altered bytes must still decode safely.
+        let mut h = e.container.header.clone();
+        for i in 0..good.len().min(64) {
+            let mut b = good.clone();
+            b[i] ^= 0x3C;
+            h.chunks[0].crc32c = crc32c::crc32c(&b);
+            let d = Decoder::new(h.clone()).unwrap();
+            let _ = d.decode_chunk(0, &b);
+        }
+        for cut in 0..e.container.header.params.len() {
+            let _ = Layout::parse(&e.container.header.params[..cut], 2);
+        }
+    }
+
+    #[test]
+    fn ordered_float_bits_round_trip_and_keep_order() {
+        let v = [
+            -3.5f32,
+            -0.0,
+            0.0,
+            1e-30,
+            2.0,
+            f32::NAN,
+            f32::INFINITY,
+            -f32::MAX,
+        ];
+        for &x in &v {
+            assert_eq!(unordered(ordered(x)).unwrap().to_bits(), x.to_bits());
+        }
+        assert!(ordered(-3.5) < ordered(-0.0) && ordered(0.0) < ordered(2.0));
+    }
+}
