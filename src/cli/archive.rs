@@ -197,7 +197,22 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
         let stem = format!("{folder}/{}__{}", safe(&t.take.name), t.take.id);
         let bitstream = format!("{stem}.mcst");
         let file = format!("{stem}.{}", t.format.name());
-        for (rel, bytes) in [(&bitstream, t.container.to_bytes()), (&file, t.file)] {
+        let analog = t.analog.as_ref().map(|_| format!("{stem}.analog.mcst"));
+        let parameters = t
+            .parameters
+            .as_ref()
+            .map(|_| format!("{stem}.parameters.zst"));
+        let mut files = vec![
+            (bitstream.clone(), t.container.to_bytes()),
+            (file.clone(), t.file),
+        ];
+        if let (Some(rel), Some(c)) = (&analog, &t.analog) {
+            files.push((rel.clone(), c.to_bytes()));
+        }
+        if let (Some(rel), Some(p)) = (&parameters, t.parameters) {
+            files.push((rel.clone(), p));
+        }
+        for (rel, bytes) in files {
             let p = dir.join(rel);
             std::fs::write(&p, bytes).map_err(|e| io(&p, e))?;
         }
@@ -221,6 +236,8 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
             take: t.take,
             bitstream,
             file,
+            analog,
+            parameters,
         };
         lines += &serde_json::to_string(&line).map_err(|e| e.to_string())?;
         lines.push('\n');
@@ -281,7 +298,11 @@ async fn import_all(args: &ImportArgs) -> Result<(usize, usize), String> {
             None => None,
         };
         let bitstream = read(&line.bitstream)?;
-        match archive::import_take(&store, &line, bitstream, bases, skeleton).await {
+        let beside = archive::Beside {
+            analog: line.analog.as_deref().map(read).transpose()?,
+            parameters: line.parameters.as_deref().map(read).transpose()?,
+        };
+        match archive::import_take(&store, &line, bitstream, bases, skeleton, beside).await {
             Ok(Imported::Stored) => stored += 1,
             Ok(Imported::AlreadyStored) => already += 1,
             Err(e) => return Err(format!("{} (take {}): {e}", line.bitstream, line.take.id)),

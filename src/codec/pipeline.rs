@@ -188,6 +188,47 @@ fn encode_checked(
     })
 }
 
+/// The point container of a take with no points (analog channels only): a `raw` container
+/// of `frames` frames of no points, in chunks of [`super::default_chunk_frames`] frames, so
+/// that the take reads like any other and its analog chunks have ranges to align with.
+pub fn encode_no_points(frames: usize, fps: f64, metres_per_unit: f64) -> Result<Encoded> {
+    if frames == 0 {
+        return Err(Error::Invalid("nothing to encode: no frames".into()));
+    }
+    let per = super::default_chunk_frames(fps);
+    let chunks = (0..frames)
+        .step_by(per)
+        .map(|f0| super::ChunkOut {
+            frames: per.min(frames - f0),
+            bytes: Vec::new(),
+        })
+        .collect();
+    let (metas, payloads, _) = pack_chunks(chunks, None, 0);
+    let container = Container {
+        header: Header {
+            codec: CodecId::Raw,
+            frames: frames as u32,
+            points: 0,
+            fps,
+            metres_per_unit,
+            params: Vec::new(),
+            basis: None,
+            rig: None,
+            chunks: metas,
+        },
+        chunks: payloads,
+    };
+    let decoded = decode_all_with(&container, Shared::default())?;
+    Ok(Encoded {
+        stored_bytes: container.stored_bytes(),
+        container,
+        stats: metrics::Accumulator::new(0).finish(1.0),
+        decoded_digest: decoded_digest(&decoded),
+        rig: None,
+        series: ErrorSeries::of(&[], &[], 0, 1, 1.0),
+    })
+}
+
 /// The basis codec `c` needs, checked against the take; `None` for codecs that use none.
 pub(crate) fn usable_basis<'a>(
     c: &dyn Codec,

@@ -169,6 +169,8 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
         .route("/v1/streams/{id}/finish", post(streams::finish.layer(json)))
         .route("/v1/sequences/{id}/frames", get(sequences::frames))
         .route("/v1/sequences/{id}/errors", get(sequences::errors))
+        .route("/v1/sequences/{id}/analog", get(sequences::analog))
+        .route("/v1/sequences/{id}/parameters", get(sequences::parameters))
         .route(
             "/v1/tokens",
             get(tokens::list).post(tokens::create.layer(json_tokens)),

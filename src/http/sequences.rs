@@ -19,6 +19,7 @@ use crate::limits::Limits;
 use crate::motion::formats::{self, Format};
 use crate::motion::units::parse_unit;
 use crate::service::access::{self, Caller};
+use crate::service::analog;
 use crate::service::answer::{self, RangeRequest};
 use crate::service::budget::Holder;
 use crate::service::choose::{CodecRequest, Keep};
@@ -41,6 +42,9 @@ pub struct IngestQuery {
     /// The torso points for `spca`: origin, left shoulder, right shoulder, by name.
     torso: Option<String>,
     lenient: Option<bool>,
+    /// Bounds on analog channels, each in its own unit: `0.5`, or `Fz1=0.5,EMG1=1e-6`
+    /// (`*=` for the rest). None: analog values are kept exactly.
+    analog_bound: Option<String>,
 }
 
 /// Format named by `Content-Type` (e.g. `application/x-bvh`, `text/x-trc`), used only when
@@ -88,6 +92,7 @@ impl IngestQuery {
         self.latency = self.latency.or_else(|| get("latency"));
         self.keep = self.keep.or_else(|| get("keep"));
         self.torso = self.torso.or_else(|| get("torso"));
+        self.analog_bound = self.analog_bound.or_else(|| get("analog-bound"));
         if self.fps.is_none() {
             self.fps = num("fps")?;
         }
@@ -119,8 +124,23 @@ impl IngestQuery {
             ErrorBound::from_request(self.max_error_mm, self.mean_error_mm).map_err(|e| bad(&e))?;
         let codec = match self.codec.as_deref().map(str::trim) {
             None | Some("") | Some("auto") => CodecRequest::Auto,
-            Some(c) => CodecRequest::Only(c.parse::<CodecId>().map_err(|e| bad(&e))?),
+            Some(c) => match c.parse::<CodecId>().map_err(|e| bad(&e))? {
+                c if c.is_analog() => {
+                    return Err(ApiError::bad_request(format!(
+                        "{c} codes analog channels, not points: it is chosen for them (state \
+                         analog_bound for analog-bounded)"
+                    )))
+                }
+                c => CodecRequest::Only(c),
+            },
         };
+        let analog_bounds = self
+            .analog_bound
+            .as_deref()
+            .map(str::parse)
+            .transpose()
+            .map_err(|e: String| ApiError::bad_request(format!("analog_bound: {e}")))?
+            .unwrap_or_default();
         let latency = match self.latency.as_deref() {
             None => Latency::Sequence,
             Some(l) => l.parse::<Latency>().map_err(|e| bad(&e))?,
@@ -169,6 +189,7 @@ impl IngestQuery {
             format_hint: None,
             lenient: self.lenient.unwrap_or(false),
             hints,
+            analog_bounds,
         })
     }
 }
@@ -310,6 +331,32 @@ pub async fn frames(
     let Query(q) = query?;
     access::check_take(&state.store, &caller.grant, &id).await?;
     let request = frames_request(q)?;
+    if request.format == Format::C3d {
+        if request.points.is_some() {
+            return Err(ApiError::bad_request(
+                "C3D output is the whole take (points, analog, parameters): leave out points",
+            ));
+        }
+        let f = analog::c3d_file(
+            &state.store,
+            &state.answers,
+            holder,
+            &state.limits,
+            &id,
+            request.range,
+        )
+        .await?;
+        let mut headers = HeaderMap::new();
+        let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
+        headers.insert("x-frames", hv(f.frames.to_string()));
+        headers.insert("x-start-frame", hv(f.start_frame.to_string()));
+        headers.insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/octet-stream"),
+        );
+        drop(f.reservation);
+        return Ok((headers, f.bytes).into_response());
+    }
     let mut a = answer::open(
         &state.store,
         &state.caches,
@@ -360,4 +407,85 @@ pub async fn frames(
     });
     let body = futures_util::stream::iter(first.map(Ok)).chain(rest);
     Ok((headers, Body::from_stream(body)).into_response())
+}
+
+#[derive(Deserialize)]
+pub struct AnalogQuery {
+    start: Option<usize>,
+    end: Option<usize>,
+    t0: Option<f64>,
+    t1: Option<f64>,
+    /// Channel labels, comma-separated; all when absent.
+    channels: Option<String>,
+    format: Option<String>,
+}
+
+/// `GET /v1/sequences/{id}/analog`: analog channels over a range, in their units.
+pub async fn analog(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
+    Path(id): Path<String>,
+    query: Result<Query<AnalogQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query?;
+    access::check_take(&state.store, &caller.grant, &id).await?;
+    let frames = frames_request(FramesQuery {
+        start: q.start,
+        end: q.end,
+        t0: q.t0,
+        t1: q.t1,
+        points: None,
+        format: q.format.clone(),
+    })?;
+    let labels: Vec<String> = q
+        .channels
+        .map(|c| c.split(',').map(|l| l.trim().to_string()).collect())
+        .unwrap_or_default();
+    let a = analog::answer(
+        &state.store,
+        &state.answers,
+        holder,
+        &state.limits,
+        &id,
+        frames.range,
+        &labels,
+    )
+    .await?;
+    let format = frames.format;
+    let content_type = match format {
+        Format::Json => "application/json",
+        Format::Csv => "text/csv",
+        _ => "application/octet-stream",
+    };
+    let body = formats::columns::write(
+        &formats::columns::Columns {
+            rate: a.rate,
+            t0: a.t0,
+            columns: &a.columns,
+            values: &a.values,
+        },
+        format,
+    )
+    .map_err(|e| ApiError::bad_request(e.to_string()))?;
+    let mut headers = HeaderMap::new();
+    let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
+    headers.insert("x-start-frame", hv(a.start_frame.to_string()));
+    headers.insert("x-frames", hv(a.frames.to_string()));
+    headers.insert("x-rate", hv(a.rate.to_string()));
+    headers.insert("x-channels", hv(a.columns.len().to_string()));
+    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    Ok((headers, body).into_response())
+}
+
+/// `GET /v1/sequences/{id}/parameters`: the uploaded file's parameter section as a typed
+/// tree (groups of typed, dimensioned parameters), with its force plates read out.
+pub async fn parameters(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    access::check_take(&state.store, &caller.grant, &id).await?;
+    let view = analog::parameters_view(&state.store, &id).await?;
+    Ok(Json(view).into_response())
 }

@@ -234,16 +234,21 @@ pub struct ExportedTake {
     pub skeleton: Option<Arc<Rig>>,
     pub format: Format,
     pub file: Vec<u8>,
+    /// The analog channels' container, if the take has any.
+    pub analog: Option<Container>,
+    /// The file's parameters as stored (a zstd C3D parameter section), if it had any.
+    pub parameters: Option<Vec<u8>>,
 }
 
 /// The open format a take's frames are written back to: its own where we write it, else the
-/// closest that keeps names, units and gaps (C3D → TRC; BVH → BVH when its codec kept the
-/// channel values, else JSON positions).
+/// closest that keeps names, units and gaps (C3D with its analog channels, events and
+/// parameters; BVH → BVH when its codec kept the channel values, else JSON positions).
 pub fn export_format(source_format: &str, codec: CodecId) -> Format {
     let keeps_channels = codec::codec(codec).is_ok_and(|c| c.codes_channels());
     match source_format {
         "bvh" if keeps_channels => Format::Bvh,
-        "trc" | "c3d" => Format::Trc,
+        "c3d" => Format::C3d,
+        "trc" => Format::Trc,
         "npy" => Format::Npy,
         _ => Format::Json,
     }
@@ -279,8 +284,34 @@ pub async fn export_take(store: &Store, take: Take) -> Result<ExportedTake> {
         take.meta.unit.clone(),
         take.fps,
     );
+    // What is kept beside the points: the analog container and the parameters as stored.
+    let analog = match super::analog::decoder(store, &take.id).await? {
+        Some(d) => {
+            let n = d.header().chunks.len() as i64;
+            let chunks = store.analog_chunks(&take.id, 0, n).await?;
+            Some(Container {
+                header: d.header().clone(),
+                chunks: chunks.into_iter().map(|c| c.payload).collect(),
+            })
+        }
+        None => None,
+    };
+    let parameters = store.parameters(&take.id).await?;
+    let tree = parameters
+        .as_ref()
+        .map(|p| super::analog::parameters_of(&take.id, p))
+        .transpose()?;
+    let c3d_take = take.clone();
+    let analog_copy = analog.clone();
     let (container, file) = blocking(move || -> Result<(Container, Vec<u8>)> {
-        let file = if format == Format::Bvh {
+        let file = if format == Format::C3d {
+            let frames = codec::decode_all_with(&container, shared)?;
+            let analog = analog_copy
+                .as_ref()
+                .map(codec::analog::decode_all)
+                .transpose()?;
+            super::analog::c3d(&c3d_take, frames, 0, analog, tree)?
+        } else if format == Format::Bvh {
             let frames = container.header.frames as usize;
             let source = codec::Stored::new(0, container.chunks.iter().map(Vec::as_slice));
             super::fetch::bvh_of(&container.header, shared, &source, 0..frames)?
@@ -299,6 +330,8 @@ pub async fn export_take(store: &Store, take: Take) -> Result<ExportedTake> {
         skeleton,
         format,
         file,
+        analog,
+        parameters: parameters.map(|p| p.payload),
     })
 }
 
@@ -314,6 +347,20 @@ pub struct ManifestLine {
     pub file: String,
     /// Ids of the bases the bitstream names (files `bases/<id>.mcsb`).
     pub bases: Vec<String>,
+    /// The analog channels' bitstream, relative to the export folder.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub analog: Option<String>,
+    /// The file's parameters as stored (zstd of a C3D parameter section).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parameters: Option<String>,
+}
+
+/// What an export keeps beside a take's point bitstream: its analog bitstream and its
+/// file's parameters, as the files hold them.
+#[derive(Debug, Clone, Default)]
+pub struct Beside {
+    pub analog: Option<Vec<u8>>,
+    pub parameters: Option<Vec<u8>>,
 }
 
 /// What [`import_take`] did.
@@ -334,6 +381,7 @@ pub async fn import_take(
     bitstream: Vec<u8>,
     bases: Vec<BasisRow>,
     skeleton: Option<Vec<u8>>,
+    beside: Beside,
 ) -> Result<Imported> {
     if store.exists(&line.take.id).await? {
         return Ok(Imported::AlreadyStored);
@@ -431,6 +479,44 @@ pub async fn import_take(
             store.insert_basis(row).await?;
         }
     }
+    let invalid = |what: &str, e: &dyn std::fmt::Display| {
+        Error::InvalidRequest(format!("{what} of {}: {e}", line.take.id))
+    };
+    let analog = match (beside.analog, &line.take.meta.analog) {
+        (None, None) => None,
+        (Some(bytes), Some(meta)) => {
+            let c = Container::parse(&bytes, &codec::Limits::default())
+                .map_err(|e| invalid("analog bitstream", &e))?;
+            if c.header.frames as usize != line.take.frames || c.header.codec != meta.codec {
+                return Err(invalid(
+                    "analog bitstream",
+                    &"does not match its manifest line",
+                ));
+            }
+            let c = blocking(move || codec::analog::decode_all(&c).map(|_| c))
+                .await?
+                .map_err(|e| invalid("analog bitstream", &e))?;
+            Some(super::analog::rows(&c, meta))
+        }
+        _ => {
+            return Err(invalid(
+                "analog bitstream",
+                &"the manifest line and the export disagree on whether there is one",
+            ))
+        }
+    };
+    let parameters = match beside.parameters {
+        Some(payload) => {
+            let row = crate::store::ParametersRow {
+                format: super::analog::PARAMETERS_FORMAT.into(),
+                payload,
+            };
+            super::analog::parameters_of(&line.take.id, &row)
+                .map_err(|e| invalid("parameters", &e))?;
+            Some(row)
+        }
+        None => None,
+    };
     let chunks = super::ingest::chunk_rows(&container);
     let mut take = line.take.clone();
     take.header = container.header.to_bytes();
@@ -443,6 +529,8 @@ pub async fn import_take(
             skeleton: skeleton.map(|(_, row)| row),
             // An export holds the bitstream, not the original: no series to measure.
             errors: None,
+            analog,
+            parameters,
         })
         .await?;
     Ok(Imported::Stored)

@@ -157,6 +157,28 @@ pub struct Decision {
     pub pruned: Vec<super::history::Pruned>,
 }
 
+/// The decision for a take with no points (analog channels only): its empty point
+/// container is `raw` of `stored_bytes`, and nothing competed.
+pub fn no_points(stored_bytes: usize) -> Decision {
+    Decision {
+        winner: CodecId::Raw,
+        reason: "the take has no points (analog channels only): its point container is an \
+                 empty raw one"
+            .into(),
+        tried: vec![Tried {
+            codec: CodecId::Raw,
+            stored_bytes: Some(stored_bytes),
+            max_mm: Some(0.0),
+            mean_mm: Some(0.0),
+            encode_ms: 0.0,
+            error: None,
+        }],
+        skipped: Vec::new(),
+        keep: None,
+        pruned: Vec::new(),
+    }
+}
+
 /// Pick the smallest successful candidate; `None` if every one failed.
 pub fn decide(tried: Vec<Tried>, skipped: Vec<Skipped>, bound: &str) -> Option<Decision> {
     let mut ok: Vec<&Tried> = tried.iter().filter(|t| t.stored_bytes.is_some()).collect();

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::analog::{self, AnalogBounds};
 use super::choose::{self, CodecRequest, Decision, Keep, Tried};
 use super::history::{self, Histories};
 use super::skeletons;
@@ -38,6 +39,8 @@ pub struct IngestRequest {
     pub lenient: bool,
     /// What the request said about the take's points (its torso, for `spca`).
     pub hints: Hints,
+    /// Bounds on the analog channels, each in its own unit; none: kept exactly.
+    pub analog_bounds: AnalogBounds,
 }
 
 /// How a take is to be coded: the codec asked for (or auto), its bound and latency, what a
@@ -68,6 +71,9 @@ pub struct IngestReport {
     pub rms_mm: f64,
     pub kg_percent: f64,
     pub decision: Decision,
+    /// The analog channels' coding, if the take has any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub analog: Option<analog::AnalogMeta>,
     pub warnings: Vec<String>,
 }
 
@@ -92,12 +98,22 @@ pub async fn ingest(
     })
     .await??;
     let motion = Arc::new(loaded.motion);
-    if motion.point_count() == 0 || motion.frame_count() == 0 || motion.gap_fraction() >= 1.0 {
+    let extras = loaded.extras;
+    let analog_only = motion.point_count() == 0 && extras.analog.is_some();
+    if motion.frame_count() == 0
+        || !analog_only && (motion.point_count() == 0 || motion.gap_fraction() >= 1.0)
+    {
         return Err(Error::Unsatisfiable(format!(
-            "the take has no point samples to store ({} points, {} frames)",
+            "the take has no point samples to store ({} points, {} frames) and no analog \
+             channels",
             motion.point_count(),
             motion.frame_count()
         )));
+    }
+    if extras.analog.is_none() && !req.analog_bounds.is_empty() {
+        return Err(Error::InvalidRequest(
+            "analog_bound was given but the take has no analog channels".into(),
+        ));
     }
     // Points the request named must be the take's: a 400 naming the point, not a codec
     // that quietly sits out.
@@ -112,7 +128,35 @@ pub async fn ingest(
         keep: req.keep,
         hints: req.hints.clone(),
     };
-    let (decision, enc) = encode_best(store, motion.clone(), &layout, &coding, histories).await?;
+    let (decision, enc) = if analog_only {
+        let enc = codec::pipeline::encode_no_points(
+            motion.frame_count(),
+            motion.fps,
+            motion.unit.metres_per_unit,
+        )?;
+        (choose::no_points(enc.stored_bytes), enc)
+    } else {
+        encode_best(store, motion.clone(), &layout, &coding, histories).await?
+    };
+    // Analog chunks cover the frames the point chunks do, so a range reads its own of both.
+    let analog = match extras.analog {
+        Some(a) => {
+            let chunk_frames = enc
+                .container
+                .header
+                .chunks
+                .iter()
+                .map(|c| c.frames as usize)
+                .collect();
+            Some(analog::code(Arc::new(a), motion.fps, chunk_frames, &req.analog_bounds).await?)
+        }
+        None => None,
+    };
+    let parameters = extras
+        .parameters
+        .as_ref()
+        .map(analog::parameters_row)
+        .transpose()?;
 
     let m = &motion;
     let meta = TakeMeta {
@@ -123,6 +167,8 @@ pub async fn ingest(
         decoded_blake3: Some(enc.decoded_digest.clone()),
         interrupted: None,
         reencoded_from: None,
+        events: extras.events,
+        analog: analog.as_ref().map(|a| a.meta.clone()),
     };
     let format = loaded.format.name();
     let mut take = Take::new(
@@ -137,6 +183,12 @@ pub async fn ingest(
     take.set_frames(m.frame_count());
     take.header = enc.container.header.to_bytes();
     take.set_measured(enc.stored_bytes, &enc.stats);
+    if let Some(a) = &analog {
+        take.add_beside(a.meta.raw_bytes, a.meta.stored_bytes);
+    }
+    if let Some(p) = &parameters {
+        take.add_beside(0, p.payload.len() as u64);
+    }
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
     // The rig the encoder built when the codec keeps channels; built here otherwise.
     let skeleton = match (&enc.rig, &m.skeleton) {
@@ -152,9 +204,15 @@ pub async fn ingest(
             basis,
             skeleton,
             errors: Some(enc.series.to_bytes()),
+            analog: analog.as_ref().map(|a| analog::rows(&a.container, &a.meta)),
+            parameters,
         })
         .await?;
-    let (raw_bytes, ratio) = (take.raw_bytes as usize, take.ratio);
+    let (raw_bytes, stored_bytes, ratio) = (
+        take.raw_bytes as usize,
+        take.stored_bytes as usize,
+        take.ratio,
+    );
     Ok(IngestReport {
         id: take.id.clone(),
         name: take.name.clone(),
@@ -163,13 +221,14 @@ pub async fn ingest(
         points: m.point_count(),
         fps: m.fps,
         raw_bytes,
-        stored_bytes: enc.stored_bytes,
+        stored_bytes,
         ratio,
         max_mm: enc.stats.max_mm,
         mean_mm: enc.stats.mean_mm,
         rms_mm: enc.stats.rms_mm,
         kg_percent: take.kg_percent,
         decision,
+        analog: analog.map(|a| a.meta),
         warnings: loaded.warnings,
     })
 }

@@ -20,6 +20,7 @@
 //! - [`take`]: a stored take as a typed record, parsed from its row once.
 
 pub mod access;
+pub mod analog;
 pub mod answer;
 pub mod archive;
 pub mod bases;

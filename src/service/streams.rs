@@ -462,6 +462,8 @@ impl Streams {
             decoded_blake3: None,
             interrupted: None,
             reencoded_from: None,
+            events: Vec::new(),
+            analog: None,
         };
         let mut take = Take::new(
             &plan.label,
@@ -482,6 +484,8 @@ impl Streams {
                 basis: basis.as_ref().map(|b| b.id()),
                 skeleton: None,
                 errors: None,
+                analog: None,
+                parameters: None,
             })
             .await?;
         let live = Live {

@@ -76,6 +76,12 @@ pub struct TakeMeta {
     /// The codec a finished stream was coded with live, before it was re-encoded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reencoded_from: Option<CodecId>,
+    /// Events marked in the file (C3D's `EVENT` group): gait events, triggers.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub events: Vec<crate::motion::events::Event>,
+    /// The take's analog channels, how they were coded and what that cost.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub analog: Option<super::analog::AnalogMeta>,
 }
 
 /// Who a new take is and where it goes: what a client names.
@@ -284,6 +290,14 @@ impl Take {
         self.duration_s = frames as f64 / self.fps;
     }
 
+    /// Count what is stored beside the points (analog channels, the file's parameters) in
+    /// the take's sizes and ratio: raw counts every sample that was uploaded.
+    pub fn add_beside(&mut self, raw_bytes: u64, stored_bytes: u64) {
+        self.raw_bytes += raw_bytes;
+        self.stored_bytes += stored_bytes;
+        self.ratio = self.raw_bytes as f64 / self.stored_bytes.max(1) as f64;
+    }
+
     /// Set what was measured on the stored coding: sizes, the ratio, the errors.
     pub fn set_measured(
         &mut self,
@@ -395,6 +409,8 @@ mod tests {
                 decoded_blake3: Some("00".into()),
                 interrupted: None,
                 reencoded_from: None,
+                events: Vec::new(),
+                analog: None,
             },
             created_at: 1,
             header: vec![1, 2, 3],

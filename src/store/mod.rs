@@ -22,8 +22,10 @@ use sqlx::sqlite::{
 };
 use sqlx::Row;
 
-pub use query::{Cursor, Filter, SortKey, StatRow, Totals};
-pub use rows::{disk_bytes, ChunkEntry, ChunkRow, NewTake, TakeRow, TakeTotals};
+pub use query::{Cursor, Filter, Part, SortKey, StatRow, Totals};
+pub use rows::{
+    disk_bytes, AnalogRows, ChunkEntry, ChunkRow, NewTake, ParametersRow, TakeRow, TakeTotals,
+};
 
 /// Errors of the store layer.
 #[derive(Debug, thiserror::Error)]
@@ -170,6 +172,33 @@ impl Store {
                     .bind(e)
                     .execute(&mut *tx)
                     .await?;
+            }
+            if let Some(a) = &s.analog {
+                sqlx::query(
+                    "INSERT INTO take_analog (sequence_id, header, raw_bytes, stored_bytes) \
+                     VALUES ($1, $2, $3, $4)",
+                )
+                .bind(&s.id)
+                .bind(&a.header)
+                .bind(a.raw_bytes)
+                .bind(a.stored_bytes)
+                .execute(&mut *tx)
+                .await?;
+                for c in &a.chunks {
+                    bind_chunk(sqlx::query(INSERT_ANALOG_CHUNK), &s.id, c)
+                        .execute(&mut *tx)
+                        .await?;
+                }
+            }
+            if let Some(p) = &s.parameters {
+                sqlx::query(
+                    "INSERT INTO take_parameters (sequence_id, format, payload) VALUES ($1, $2, $3)",
+                )
+                .bind(&s.id)
+                .bind(&p.format)
+                .bind(&p.payload)
+                .execute(&mut *tx)
+                .await?;
             }
             tx.commit().await?;
             Ok(())
@@ -382,6 +411,63 @@ impl Store {
         })
     }
 
+    /// A take's analog header and its raw and stored sizes; `None` if it has no analog
+    /// channels.
+    pub async fn analog(&self, id: &str) -> Result<Option<AnalogRows>> {
+        dispatch!(self, pool => {
+            let row = sqlx::query(
+                "SELECT header, raw_bytes, stored_bytes FROM take_analog WHERE sequence_id = $1",
+            )
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+            row.map(|r| {
+                Ok(AnalogRows {
+                    header: r.try_get("header")?,
+                    raw_bytes: r.try_get("raw_bytes")?,
+                    stored_bytes: r.try_get("stored_bytes")?,
+                    chunks: Vec::new(),
+                })
+            })
+            .transpose()
+        })
+    }
+
+    /// Analog chunks `first..end` (indices) of a take, checked against their CRC-32C.
+    pub async fn analog_chunks(&self, id: &str, first: i64, end: i64) -> Result<Vec<ChunkRow>> {
+        dispatch!(self, pool => {
+            let rows = sqlx::query(
+                "SELECT idx, first_frame, frames, crc32c, payload FROM analog_chunks \
+                 WHERE sequence_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
+            )
+            .bind(id)
+            .bind(first)
+            .bind(end)
+            .fetch_all(pool)
+            .await?;
+            rows.iter().map(rows::chunk_from_row).collect()
+        })
+    }
+
+    /// The parameters a take's file carried; `None` if it carried none.
+    pub async fn parameters(&self, id: &str) -> Result<Option<ParametersRow>> {
+        dispatch!(self, pool => {
+            let row = sqlx::query(
+                "SELECT format, payload FROM take_parameters WHERE sequence_id = $1",
+            )
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+            row.map(|r| {
+                Ok(ParametersRow {
+                    format: r.try_get("format")?,
+                    payload: r.try_get("payload")?,
+                })
+            })
+            .transpose()
+        })
+    }
+
     /// Whether a take exists (one indexed lookup).
     pub async fn exists(&self, id: &str) -> Result<bool> {
         dispatch!(self, pool => {
@@ -488,6 +574,9 @@ impl Store {
 
 const INSERT_CHUNK: &str = "INSERT INTO chunks (sequence_id, idx, first_frame, frames, crc32c, \
     payload) VALUES ($1, $2, $3, $4, $5, $6)";
+
+const INSERT_ANALOG_CHUNK: &str = "INSERT INTO analog_chunks (sequence_id, idx, first_frame, \
+    frames, crc32c, payload) VALUES ($1, $2, $3, $4, $5, $6)";
 
 /// Bind a chunk's columns, in [`INSERT_CHUNK`] order, to a query of either backend.
 fn bind_chunk<'q, DB: sqlx::Database>(
@@ -610,7 +699,15 @@ impl Store {
         let sql = format!(
             "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, \
              max_mm, id, name, layout, source_format, meta, skeleton_id, \
-             (SELECT COUNT(*) FROM chunks c WHERE c.sequence_id = sequences.id) AS chunk_rows, \
+             (SELECT COUNT(*) FROM chunks c WHERE c.sequence_id = sequences.id) \
+              + (SELECT COUNT(*) FROM analog_chunks c WHERE c.sequence_id = sequences.id) \
+              AS chunk_rows, \
+             (SELECT a.raw_bytes FROM take_analog a WHERE a.sequence_id = sequences.id) \
+              AS analog_raw_bytes, \
+             (SELECT a.stored_bytes FROM take_analog a WHERE a.sequence_id = sequences.id) \
+              AS analog_stored_bytes, \
+             (SELECT CAST(LENGTH(p.payload) AS BIGINT) FROM take_parameters p \
+              WHERE p.sequence_id = sequences.id) AS parameters_bytes, \
              (SELECT COALESCE(SUM(LENGTH(t.tag) + LENGTH(t.sequence_id)), 0) \
               FROM sequence_tags t WHERE t.sequence_id = sequences.id) AS tag_bytes \
              FROM sequences {}",
@@ -647,6 +744,15 @@ impl Store {
                         stored_bytes,
                         mean_mm: r.try_get("mean_mm")?,
                         max_mm: r.try_get("max_mm")?,
+                        analog_raw_bytes: r
+                            .try_get::<Option<i64>, _>("analog_raw_bytes")?
+                            .unwrap_or(0),
+                        analog_stored_bytes: r
+                            .try_get::<Option<i64>, _>("analog_stored_bytes")?
+                            .unwrap_or(0),
+                        parameters_bytes: r
+                            .try_get::<Option<i64>, _>("parameters_bytes")?
+                            .unwrap_or(0),
                     })
                 })
                 .collect()

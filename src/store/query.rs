@@ -219,6 +219,28 @@ pub struct Totals {
     /// Percentiles of the per-take max error.
     pub max_mm_p50: f64,
     pub max_mm_p95: f64,
+    /// The takes' points alone (raw: 12 bytes a sample; stored: their containers).
+    pub points: Part,
+    /// Their analog channels alone (raw: the bytes the files stored them in).
+    pub analog: Part,
+    /// Their files' parameter sections, compressed: stored, not part of either ratio.
+    pub parameters_bytes: i64,
+}
+
+/// Sizes of one part of the takes: what was uploaded, what is stored, and the ratio.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Part {
+    pub raw_bytes: i64,
+    pub stored_bytes: i64,
+    pub ratio: f64,
+}
+
+impl Part {
+    fn finish(&mut self) {
+        if self.stored_bytes > 0 {
+            self.ratio = self.raw_bytes as f64 / self.stored_bytes as f64;
+        }
+    }
 }
 
 /// One take's numbers, enough to aggregate.
@@ -234,6 +256,9 @@ pub struct StatRow {
     pub disk_bytes: i64,
     pub mean_mm: f64,
     pub max_mm: f64,
+    pub analog_raw_bytes: i64,
+    pub analog_stored_bytes: i64,
+    pub parameters_bytes: i64,
 }
 
 pub fn totals<'a>(rows: impl Iterator<Item = &'a StatRow>) -> Totals {
@@ -250,6 +275,11 @@ pub fn totals<'a>(rows: impl Iterator<Item = &'a StatRow>) -> Totals {
         t.raw_bytes += r.raw_bytes;
         t.stored_bytes += r.stored_bytes;
         t.disk_bytes += r.disk_bytes;
+        t.analog.raw_bytes += r.analog_raw_bytes;
+        t.analog.stored_bytes += r.analog_stored_bytes;
+        t.parameters_bytes += r.parameters_bytes;
+        t.points.raw_bytes += r.raw_bytes - r.analog_raw_bytes;
+        t.points.stored_bytes += r.stored_bytes - r.analog_stored_bytes - r.parameters_bytes;
         let n = (r.frames * r.points) as f64;
         t.mean_mm += r.mean_mm * n;
         samples += n;
@@ -265,6 +295,8 @@ pub fn totals<'a>(rows: impl Iterator<Item = &'a StatRow>) -> Totals {
     if t.stored_bytes > 0 {
         t.ratio = t.raw_bytes as f64 / t.stored_bytes as f64;
     }
+    t.points.finish();
+    t.analog.finish();
     maxes.sort_by(f64::total_cmp);
     let pct = |p: f64| {
         if maxes.is_empty() {
@@ -329,11 +361,19 @@ mod tests {
             disk_bytes: frames * 15,
             mean_mm: mean,
             max_mm: max,
+            analog_raw_bytes: frames * 20,
+            analog_stored_bytes: frames * 2,
+            parameters_bytes: 100,
         };
         let rows = [row(100, 1.0, 2.0), row(300, 2.0, 4.0)];
         let t = totals(rows.iter());
         assert_eq!((t.takes, t.frames), (2, 400));
         assert!((t.mean_mm - 1.75).abs() < 1e-12);
         assert_eq!((t.max_mm, t.ratio, t.disk_ratio), (4.0, 10.0, 8.0));
+        // The split: analog, parameters, and the points as the rest.
+        assert_eq!((t.analog.raw_bytes, t.analog.stored_bytes), (8000, 800));
+        assert_eq!(t.parameters_bytes, 200);
+        assert_eq!((t.points.raw_bytes, t.points.stored_bytes), (40_000, 3800));
+        assert_eq!(t.analog.ratio, 10.0);
     }
 }

@@ -111,6 +111,26 @@ pub struct NewTake {
     pub skeleton: Option<super::SkeletonRow>,
     /// The take's error over time (`motion::metrics::ErrorSeries` bytes), if measured.
     pub errors: Option<Vec<u8>>,
+    /// Its analog channels, if it has any.
+    pub analog: Option<AnalogRows>,
+    /// The uploaded file's parameters, if its format has any.
+    pub parameters: Option<ParametersRow>,
+}
+
+/// A take's analog channels as stored: their container header, its sizes, its chunks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnalogRows {
+    pub header: Vec<u8>,
+    pub raw_bytes: i64,
+    pub stored_bytes: i64,
+    pub chunks: Vec<ChunkRow>,
+}
+
+/// The parameters an uploaded file carried, in a stated `format`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParametersRow {
+    pub format: String,
+    pub payload: Vec<u8>,
 }
 
 impl std::ops::Deref for NewTake {

@@ -21,7 +21,7 @@ pub mod lpc;
 use super::container::{verify_chunk, ChunkMeta, Container, Header};
 use super::entropy::ints::{magnitude_context, IntModel};
 use super::entropy::io::{code_residual, Io};
-use super::entropy::rangecoder::{Decoder as RangeDecoder, Encoder as RangeEncoder};
+use super::entropy::rangecoder::{Bit, Decoder as RangeDecoder, Encoder as RangeEncoder};
 use super::entropy::{get_varint, put_varint, unzigzag, zigzag};
 use super::error::{malformed, Error, Result};
 use super::id::CodecId;
@@ -243,6 +243,37 @@ pub fn encode(
                 .map(|r| analog.samples.get(r * n + c))
                 .collect();
             let mut column_io = Column::from_values(&layout, c, &analog.samples, r0, rows);
+            if column_io.mode == Mode::Bits {
+                // Floats off any grid: predicted bit patterns, or their fields, whichever
+                // codes smaller.
+                let fields = Column {
+                    mode: Mode::Fields,
+                    x: column_io
+                        .x
+                        .iter()
+                        .map(|&x| i64::from(unordered(x).map_or(0, f32::to_bits)))
+                        .collect(),
+                    quantum: 0.0,
+                    off_grid: Vec::new(),
+                };
+                let size = |col: &Column| -> Result<usize> {
+                    let mut e = RangeEncoder::new();
+                    code_column(
+                        &mut e,
+                        &layout,
+                        c,
+                        &mut Column {
+                            x: col.x.clone(),
+                            off_grid: Vec::new(),
+                            ..*col
+                        },
+                    )?;
+                    Ok(e.finish().len())
+                };
+                if size(&fields)? < size(&column_io)? {
+                    column_io = fields;
+                }
+            }
             code_column(&mut enc, &layout, c, &mut column_io)?;
             let decoded = column_io.values(&layout, c)?;
             let factor = layout.factor(c);
@@ -309,6 +340,10 @@ pub fn encode(
 struct Column {
     mode: Mode,
     x: Vec<i64>,
+    /// The grid step of [`Mode::Grid`].
+    quantum: f64,
+    /// [`Mode::Grid`]'s values off the grid: (row, f32 bits).
+    off_grid: Vec<(usize, u32)>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -319,6 +354,95 @@ enum Mode {
     Bits = 1,
     /// Quantiser indices: the value is index × step.
     Steps = 2,
+    /// Floats that all lie on one grid (ADC integers times a scale, as float-format files
+    /// store them): the value is index × quantum, reproduced to the bit.
+    Grid = 3,
+    /// Floats that are noise to a predictor (filtered EMG crossing zero): sign, exponent
+    /// (from the previous one) and mantissa coded apart.
+    Fields = 4,
+}
+
+/// A [`Mode::Fields`] column: per value, its sign (in the context of the previous sign),
+/// its exponent as a step from the previous one, and its 23 mantissa bits as they are.
+fn code_fields<I: Io>(io: &mut I, col: &mut Column) -> Result<()> {
+    let mut sign = [Bit::default(); 2];
+    let mut steps = vec![IntModel::default(); 3];
+    let (mut prev_sign, mut prev_exp, mut prev_step) = (0usize, 127i64, 0i64);
+    for x in col.x.iter_mut() {
+        let b = *x as u32;
+        let s = io.bit(&mut sign[prev_sign], b >> 31 == 1);
+        let ctx = prev_step.unsigned_abs().min(2) as usize;
+        let step = code_residual(io, &mut steps[ctx], i64::from((b >> 23) & 0xff) - prev_exp)?;
+        let e = prev_exp + step;
+        if !(0..=255).contains(&e) {
+            return Err(malformed("float exponent out of range"));
+        }
+        let m = io.raw(b & 0x7f_ffff, 23);
+        *x = i64::from((u32::from(s) << 31) | ((e as u32) << 23) | m);
+        (prev_sign, prev_exp, prev_step) = (usize::from(s), e, step);
+    }
+    Ok(())
+}
+
+/// Values off a channel's grid a chunk may hold (per mille of its values, plus a few): a
+/// filtered tail or a glitch should not cost a grid its chunk.
+const OFF_GRID_PER_MILLE: usize = 20;
+
+/// The grid the values of `vals` lie on (ADC integers times a scale, as float-format files
+/// store them): its step, the index of every value (the nearest one for a value off it)
+/// and the values off it (index, bits), if at most [`OFF_GRID_PER_MILLE`] are. The step is
+/// the floating-point GCD (exact for exact multiples) of the first values, or of them all.
+fn grid(vals: &[f32]) -> Option<(f64, Vec<i64>, Vec<(usize, u32)>)> {
+    let gcd_of = |it: &mut dyn Iterator<Item = &f32>| -> Option<f64> {
+        let mut q = 0f64;
+        for &v in it {
+            let a = f64::from(v).abs();
+            if a == 0.0 || !a.is_finite() {
+                continue;
+            }
+            q = if q == 0.0 { a } else { gcd(q, a) };
+            if q < 1e-30 {
+                return None;
+            }
+        }
+        (q > 0.0).then_some(q)
+    };
+    let allowed = vals.len() * OFF_GRID_PER_MILLE / 1000 + 2;
+    let fit = |q: f64| -> Option<(f64, Vec<i64>, Vec<(usize, u32)>)> {
+        let mut x = Vec::with_capacity(vals.len());
+        let mut off = Vec::new();
+        let mut prev = 0i64;
+        for (i, &v) in vals.iter().enumerate() {
+            let k = (f64::from(v) / q).round();
+            let on = k.is_finite() && k.abs() < 2_147_483_648.0;
+            let ki = if on { k as i64 } else { prev };
+            if !(on && ((k * q) as f32).to_bits() == v.to_bits()) {
+                off.push((i, v.to_bits()));
+                if off.len() > allowed {
+                    return None;
+                }
+            }
+            x.push(ki);
+            prev = ki;
+        }
+        Some((q, x, off))
+    };
+    let prefix = gcd_of(&mut vals.iter().take(256));
+    prefix
+        .and_then(fit)
+        .or_else(|| gcd_of(&mut vals.iter()).and_then(fit))
+}
+
+/// The GCD of two positive floats by Euclid's remainders (exact in floating point), stopping
+/// where the remainder is negligible.
+fn gcd(a: f64, b: f64) -> f64 {
+    let (mut a, mut b) = if a >= b { (a, b) } else { (b, a) };
+    while b > a * 1e-12 {
+        let r = a % b;
+        a = b;
+        b = r;
+    }
+    a
 }
 
 /// f32 bits to an integer that orders as the floats do (negative floats reversed).
@@ -350,6 +474,8 @@ impl Column {
             (Samples::Int { values, .. }, None) => Column {
                 mode: Mode::Exact,
                 x: (0..rows).map(|r| i64::from(values[at(r)])).collect(),
+                quantum: 0.0,
+                off_grid: Vec::new(),
             },
             (Samples::Int { values, .. }, Some(step)) => {
                 let q = step as i64;
@@ -359,6 +485,8 @@ impl Column {
                     x: (0..rows)
                         .map(|r| (i64::from(values[at(r)]) + d).div_euclid(q))
                         .collect(),
+                    quantum: 0.0,
+                    off_grid: Vec::new(),
                 }
             }
             (Samples::Float(v), step) => {
@@ -378,6 +506,8 @@ impl Column {
                         return Column {
                             mode: Mode::Steps,
                             x,
+                            quantum: 0.0,
+                            off_grid: Vec::new(),
                         };
                     }
                 }
@@ -388,11 +518,22 @@ impl Column {
                     Column {
                         mode: Mode::Exact,
                         x: vals.iter().map(|&f| i64::from(f as i32)).collect(),
+                        quantum: 0.0,
+                        off_grid: Vec::new(),
+                    }
+                } else if let Some((q, x, off_grid)) = grid(&vals) {
+                    Column {
+                        mode: Mode::Grid,
+                        x,
+                        quantum: q,
+                        off_grid,
                     }
                 } else {
                     Column {
                         mode: Mode::Bits,
                         x: vals.iter().map(|&f| ordered(f)).collect(),
+                        quantum: 0.0,
+                        off_grid: Vec::new(),
                     }
                 }
             }
@@ -410,6 +551,13 @@ impl Column {
                     .map(|&x| (x.abs() <= 1 << 24).then_some(x as f32).ok_or_else(bad))
                     .collect::<Result<_>>()?,
             ),
+            (Mode::Fields, Storage::Float) => Stored::Float(
+                self.x
+                    .iter()
+                    .map(|&x| u32::try_from(x).map(f32::from_bits).map_err(|_| bad()))
+                    .collect::<Result<_>>()?,
+            ),
+            (Mode::Fields, _) => return Err(bad()),
             (Mode::Bits, Storage::Float) => Stored::Float(
                 self.x
                     .iter()
@@ -420,6 +568,15 @@ impl Column {
                 let step = step()?;
                 Stored::Float(self.x.iter().map(|&x| (x as f64 * step) as f32).collect())
             }
+            (Mode::Grid, Storage::Float) => {
+                let q = self.quantum;
+                let mut v: Vec<f32> = self.x.iter().map(|&x| (x as f64 * q) as f32).collect();
+                for &(i, bits) in &self.off_grid {
+                    *v.get_mut(i).ok_or_else(bad)? = f32::from_bits(bits);
+                }
+                Stored::Float(v)
+            }
+            (Mode::Grid, _) => return Err(bad()),
             (Mode::Bits, _) => return Err(bad()),
             (mode, storage) => {
                 let range = if storage == Storage::Unsigned {
@@ -475,13 +632,27 @@ impl Stored {
 /// the predictor, the warm-up values and the residuals. On decode, `col` is filled.
 fn code_column<I: Io>(io: &mut I, layout: &Layout, c: usize, col: &mut Column) -> Result<()> {
     let rows = col.x.len();
-    let mode = io.raw(col.mode as u32, 2);
+    let mode = io.raw(col.mode as u32, 3);
     col.mode = match mode {
         0 => Mode::Exact,
         1 if layout.storage == Storage::Float => Mode::Bits,
         2 if layout.steps[c].is_some() => Mode::Steps,
+        3 if layout.storage == Storage::Float => Mode::Grid,
+        4 if layout.storage == Storage::Float => Mode::Fields,
         _ => return Err(malformed(format!("analog channel {c}: mode {mode}"))),
     };
+    if col.mode == Mode::Fields {
+        return code_fields(io, col);
+    }
+    if col.mode == Mode::Grid {
+        let bits = col.quantum.to_bits();
+        let hi = io.raw((bits >> 32) as u32, 32);
+        let lo = io.raw(bits as u32, 32);
+        col.quantum = f64::from_bits((u64::from(hi) << 32) | u64::from(lo));
+        if !(col.quantum.is_finite() && col.quantum > 0.0) {
+            return Err(malformed(format!("analog channel {c}: grid step")));
+        }
+    }
     let chosen = if io.encoding() {
         Some(lpc::choose(&col.x).0)
     } else {
@@ -509,6 +680,30 @@ fn code_column<I: Io>(io: &mut I, layout: &Layout, c: usize, col: &mut Column) -
         let r = code_residual(io, &mut models[ctx], col.x[t].wrapping_sub(p))?;
         col.x[t] = p.wrapping_add(r);
         mean16 = mean16 - (mean16 >> 4) + r.unsigned_abs().min(1 << 40);
+    }
+    if col.mode == Mode::Grid {
+        // The values off the grid: how many, then each as a row step and its bits.
+        let mut m = IntModel::default();
+        let n = code_residual(io, &mut m, col.off_grid.len() as i64)?;
+        if !(0..=rows as i64).contains(&n) {
+            return Err(malformed(format!(
+                "analog channel {c}: {n} values off its grid"
+            )));
+        }
+        let mut off = Vec::with_capacity(n as usize);
+        let mut last = 0usize;
+        for k in 0..n as usize {
+            let (row, bits) = col.off_grid.get(k).copied().unwrap_or((0, 0));
+            let step = code_residual(io, &mut m, (row - last.min(row)) as i64)?;
+            let row = last
+                .checked_add(usize::try_from(step).map_err(|_| malformed("off-grid row"))?)
+                .filter(|&r| r < rows)
+                .ok_or_else(|| malformed(format!("analog channel {c}: off-grid row")))?;
+            let bits = io.raw(bits, 32);
+            off.push((row, bits));
+            last = row;
+        }
+        col.off_grid = off;
     }
     Ok(())
 }
@@ -595,6 +790,8 @@ impl Decoder {
             let mut col = Column {
                 mode: Mode::Exact,
                 x: vec![0; rows],
+                quantum: 0.0,
+                off_grid: Vec::new(),
             };
             code_column(&mut dec, &self.layout, c, &mut col)?;
             if dec.overran() {
@@ -788,6 +985,54 @@ mod tests {
         for cut in 0..e.container.header.params.len() {
             let _ = Layout::parse(&e.container.header.params[..cut], 2);
         }
+    }
+
+    #[test]
+    fn floats_on_a_grid_are_coded_as_its_indices() {
+        let q = 10.0 / 32768.0;
+        let v: Vec<f32> = (0..500)
+            .map(|i| ((i as f64 * 0.05).sin() * 3000.0).round() * q)
+            .map(|x| x as f32)
+            .collect();
+        assert_eq!(grid(&v).map(|g| (g.0, g.2.len())), Some((q, 0)));
+        let a = Analog::new(
+            1,
+            1.0,
+            vec![channel("Pin1", 1.0, 0)],
+            Samples::Float(v.clone()),
+        )
+        .unwrap();
+        let e = encode(&a, 100.0, &[500], &[]).unwrap();
+        assert_eq!(decode_all(&e.container).unwrap(), a);
+        // As ints it costs what the ADC integers would, far under their float bits.
+        assert!(
+            e.container.stored_bytes() < 500,
+            "{}",
+            e.container.stored_bytes()
+        );
+        assert!(grid(&[0.1, 0.3, 1e-7]).is_none_or(|g| g.2.len() > 0));
+        // A few values off the grid (a filtered tail) are kept as they are.
+        let mut w = v.clone();
+        w[497] = 1.234_567e-3;
+        w[499] = f32::NAN;
+        let g = grid(&w).unwrap();
+        assert_eq!(
+            (g.0, g.2.iter().map(|o| o.0).collect::<Vec<_>>()),
+            (q, vec![497, 499])
+        );
+        let a = Analog::new(
+            1,
+            1.0,
+            vec![channel("Pin1", 1.0, 0)],
+            Samples::Float(w.clone()),
+        )
+        .unwrap();
+        let e = encode(&a, 100.0, &[500], &[]).unwrap();
+        let back = decode_all(&e.container).unwrap();
+        let (Samples::Float(b), Samples::Float(w)) = (&back.samples, &a.samples) else {
+            unreachable!()
+        };
+        assert!(b.iter().zip(w).all(|(x, y)| x.to_bits() == y.to_bits()));
     }
 
     #[test]

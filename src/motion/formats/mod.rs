@@ -11,6 +11,7 @@ use super::units::{Unit, UnitSource};
 
 pub mod bvh;
 pub mod c3d;
+pub mod columns;
 pub mod csv;
 pub mod json;
 pub mod npy;
