@@ -277,7 +277,6 @@ async fn ingest_fetch_and_errors_on_every_backend() {
             ("latency=soon", bvh.clone(), 400),
             ("unit=furlong", bvh.clone(), 400),
             ("fps=0", bvh.clone(), 400),
-            ("", corpus_bytes("c3d/btkdata__others__1123x01EMG.c3d"), 409),
             ("", vec![0u8; 9 << 20], 413),
         ] {
             let (status, body) = srv.post(query, body).await;

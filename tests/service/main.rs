@@ -8,6 +8,7 @@ mod common;
 mod access;
 mod archive;
 mod bases;
+mod c3d;
 mod choice;
 mod cli;
 mod hostile;

@@ -52,6 +52,8 @@ fn take(id: &str, n: usize) -> NewTake {
         basis: None,
         skeleton: None,
         errors: None,
+        analog: None,
+        parameters: None,
     }
 }
 

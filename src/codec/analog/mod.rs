@@ -388,11 +388,14 @@ fn code_fields<I: Io>(io: &mut I, col: &mut Column) -> Result<()> {
 /// filtered tail or a glitch should not cost a grid its chunk.
 const OFF_GRID_PER_MILLE: usize = 20;
 
+/// A grid's step, each value's index on it, and the values off it (row, f32 bits).
+type Grid = (f64, Vec<i64>, Vec<(usize, u32)>);
+
 /// The grid the values of `vals` lie on (ADC integers times a scale, as float-format files
 /// store them): its step, the index of every value (the nearest one for a value off it)
 /// and the values off it (index, bits), if at most [`OFF_GRID_PER_MILLE`] are. The step is
 /// the floating-point GCD (exact for exact multiples) of the first values, or of them all.
-fn grid(vals: &[f32]) -> Option<(f64, Vec<i64>, Vec<(usize, u32)>)> {
+fn grid(vals: &[f32]) -> Option<Grid> {
     let gcd_of = |it: &mut dyn Iterator<Item = &f32>| -> Option<f64> {
         let mut q = 0f64;
         for &v in it {
@@ -408,7 +411,7 @@ fn grid(vals: &[f32]) -> Option<(f64, Vec<i64>, Vec<(usize, u32)>)> {
         (q > 0.0).then_some(q)
     };
     let allowed = vals.len() * OFF_GRID_PER_MILLE / 1000 + 2;
-    let fit = |q: f64| -> Option<(f64, Vec<i64>, Vec<(usize, u32)>)> {
+    let fit = |q: f64| -> Option<Grid> {
         let mut x = Vec::with_capacity(vals.len());
         let mut off = Vec::new();
         let mut prev = 0i64;
@@ -1010,7 +1013,7 @@ mod tests {
             "{}",
             e.container.stored_bytes()
         );
-        assert!(grid(&[0.1, 0.3, 1e-7]).is_none_or(|g| g.2.len() > 0));
+        assert!(grid(&[0.1, 0.3, 1e-7]).is_none_or(|g| !g.2.is_empty()));
         // A few values off the grid (a filtered tail) are kept as they are.
         let mut w = v.clone();
         w[497] = 1.234_567e-3;

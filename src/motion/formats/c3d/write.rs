@@ -152,9 +152,7 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
     // repeated labels, and bytes that are not UTF-8, come back as they were).
     if super::labels(&p, "POINT", points, "P") != m.point_names {
         set_continued(&mut p, "POINT", "LABELS", string_lists(&m.point_names));
-        for name in ["DESCRIPTIONS"] {
-            p.remove("POINT", name);
-        }
+        p.remove("POINT", "DESCRIPTIONS");
     }
     if frames > 65_535 || out.first_frame > 65_535 {
         let pair = |v: usize| Values::Int(vec![v as u16 as i16, (v >> 16) as u16 as i16]);
