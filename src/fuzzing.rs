@@ -39,6 +39,20 @@ pub fn read(format: Format, data: &[u8]) {
                 Format::Trc
             };
             let _ = formats::write(&l.motion, out);
+            if format == Format::C3d {
+                // A C3D read whole is written whole, and that file reads again.
+                let written = formats::c3d::write::write(&formats::c3d::write::Out {
+                    motion: &l.motion,
+                    analog: l.extras.analog.as_ref(),
+                    parameters: l.extras.parameters.as_ref(),
+                    first_frame: 1,
+                });
+                if let Ok(b) = written {
+                    let back = formats::read_as(Format::C3d, &b, &ReadOptions::default())
+                        .expect("a C3D we wrote reads back");
+                    assert_eq!(back.motion.frame_count(), l.motion.frame_count());
+                }
+            }
         }
     }
 }
@@ -73,6 +87,64 @@ fn basis_for(kind: BasisKind, points: usize) -> Option<Arc<Basis>> {
         return Some(b.clone());
     }
     (kind == BasisKind::Lsdt).then(|| Arc::new(dct_basis(points)))
+}
+
+/// The analog codecs' chunk decoder. `data`: channels (byte 0, 1..=16), frames (byte 1,
+/// 1..=256), the parameter length (u16 LE), the parameters, then one chunk payload; the
+/// header around them is made valid so that mutations reach the parameter parser and the
+/// chunk decoder.
+pub fn decode_analog(data: &[u8]) {
+    if data.len() < 4 {
+        return;
+    }
+    let channels = u32::from(data[0] % 16) + 1;
+    let frames = u32::from(data[1]) + 1;
+    let plen = usize::from(u16::from_le_bytes([data[2], data[3]]));
+    let Some(params) = data.get(4..4 + plen) else {
+        return;
+    };
+    let payload = &data[4 + plen..];
+    for codec in CodecId::ANALOG {
+        let header = Header {
+            codec,
+            frames,
+            points: channels,
+            fps: 60.0,
+            metres_per_unit: 1.0,
+            params: params.to_vec(),
+            basis: None,
+            rig: None,
+            chunks: vec![ChunkMeta {
+                first_frame: 0,
+                frames,
+                len: payload.len() as u32,
+                crc32c: crc32c::crc32c(payload),
+            }],
+        };
+        if let Ok(d) = codec::analog::Decoder::new(header) {
+            // Per frame at most 64 Ki samples of 16 channels: bounded by the fuzzer's limits.
+            if d.layout().per_frame <= 4096 {
+                if let Ok(s) = d.decode_chunk(0, payload) {
+                    assert_eq!(
+                        s.len(),
+                        frames as usize * d.layout().per_frame * channels as usize
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// A stored parameter section ([`formats::c3d::params::Parameters::from_section`]): what
+/// parses is written again and reads back the same.
+pub fn c3d_parameters(data: &[u8]) {
+    use formats::c3d::params::Parameters;
+    if let Ok(p) = Parameters::from_section(data) {
+        if let Ok(again) = p.to_section() {
+            let back = Parameters::from_section(&again).expect("a section we wrote parses");
+            assert_eq!(back.groups.len(), p.groups.len());
+        }
+    }
 }
 
 /// One codec's chunk decoder. `data`: points (byte 0, 1..=16), frames (byte 1, 1..=256),

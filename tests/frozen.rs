@@ -20,7 +20,8 @@ use mocapstore::codec::lsdt::{clip, frame};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::pga::encode::{Directions, Options, Take};
 use mocapstore::codec::{self, Basis, CodecId, Container, ErrorBound, Header, Limits};
-use mocapstore::motion::synthetic::{two_behaviours, walker};
+use mocapstore::motion::analog::Samples;
+use mocapstore::motion::synthetic::{force_and_emg, two_behaviours, walker};
 use mocapstore::motion::Motion;
 
 fn dir() -> PathBuf {
@@ -33,10 +34,21 @@ fn digest(frames: &[f32]) -> String {
     blake3::hash(&bytes).to_hex()[..32].to_string()
 }
 
+/// An analog container's stored values, as f32 (16-bit integers are exact in one).
+fn decode_analog(c: &Container) -> Vec<f32> {
+    match codec::analog::decode_all(c).unwrap().samples {
+        Samples::Int { values, .. } => values.iter().map(|&v| v as f32).collect(),
+        Samples::Float(v) => v,
+    }
+}
+
 fn decode_file(path: &Path) -> Vec<f32> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let c = Container::parse(&bytes, &Limits::default())
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    if c.header.codec.is_analog() {
+        return decode_analog(&c);
+    }
     let basis = c.header.basis.map(|h| {
         let id = codec::basis::hex(&h);
         let b = std::fs::read(dir().join("bases").join(format!("{id}.mcsb")))
@@ -88,6 +100,9 @@ const REQUIRED: &[&str] = &[
     "pga-v1-canonical",
     "spca-v1",
     "spca-v1-torso",
+    "analog-lossless-v1-int",
+    "analog-lossless-v1-float",
+    "analog-bounded-v1-int",
 ];
 
 #[test]
@@ -328,6 +343,50 @@ fn freeze_current_bitstreams() {
         };
         let decoded = codec::decode_all_with(&c, shared).unwrap();
         index.push_str(&format!("{file} {} {what}\n", digest(&decoded)));
+        eprintln!("froze {file}");
+    }
+    // The analog codecs: a force plate and EMG as ADC integers and as floats (on a grid,
+    // and not), and within bounds.
+    let analog = [
+        (
+            "analog-lossless-v1-int",
+            force_and_emg(60, 10, 3, "int"),
+            vec![],
+        ),
+        (
+            "analog-lossless-v1-float",
+            force_and_emg(60, 10, 3, "float"),
+            vec![],
+        ),
+        (
+            "analog-bounded-v1-int",
+            force_and_emg(60, 10, 3, "int"),
+            vec![
+                Some(2.0),
+                Some(2.0),
+                Some(5.0),
+                None,
+                None,
+                None,
+                Some(0.01),
+                None,
+            ],
+        ),
+    ];
+    for (name, a, bounds) in analog {
+        let file = format!("{name}.mcst");
+        if index.lines().any(|l| l.starts_with(&format!("{file} "))) {
+            continue;
+        }
+        let c = codec::analog::encode(&a, 100.0, &[32, 28], &bounds)
+            .unwrap()
+            .container;
+        std::fs::write(dir().join(&file), c.to_bytes()).unwrap();
+        let what = format!(
+            "{}, 8 channels (force plate, EMG) × 600 rows",
+            c.header.codec
+        );
+        index.push_str(&format!("{file} {} {what}\n", digest(&decode_analog(&c))));
         eprintln!("froze {file}");
     }
     std::fs::write(dir().join("index.txt"), index).unwrap();

@@ -22,6 +22,8 @@ fn run(target: &str, data: &[u8]) {
         "decode_mdtt_shared" => fuzzing::decode(CodecId::MdttShared, data),
         "decode_lsdt_clip" => fuzzing::decode(CodecId::LsdtClip, data),
         "decode_lsdt_frame" => fuzzing::decode(CodecId::LsdtFrame, data),
+        "decode_analog" => fuzzing::decode_analog(data),
+        "c3d_parameters" => fuzzing::c3d_parameters(data),
         "container" => fuzzing::container(data),
         "requests" => fuzzing::requests(data),
         other => panic!("no fuzz target {other}: add it here and to fuzz/"),
@@ -37,7 +39,7 @@ fn every_fuzz_target_is_known_here() {
         run(&name, b"");
         n += 1;
     }
-    assert_eq!(n, 13);
+    assert_eq!(n, 15);
 }
 
 #[test]

@@ -213,6 +213,82 @@ pub fn two_behaviours() -> Motion {
     Motion::new(m.fps, m.unit, m.point_names.clone(), x, None).unwrap()
 }
 
+/// Analog channels as a lab records them, `frames × per_frame` rows: a force plate's six
+/// channels (a vertical force of steps on ADC noise, shears and moments following it) and
+/// two EMG channels (bursts of noise). `storage`: `"int"` (signed 16-bit ADC values),
+/// `"float"` (floats on an ADC grid, as float-format files store them, the EMG computed:
+/// on no grid). Deterministic in `seed`.
+pub fn force_and_emg(
+    frames: usize,
+    per_frame: usize,
+    seed: u64,
+    storage: &str,
+) -> crate::motion::analog::Analog {
+    use crate::motion::analog::{Analog, Channel, Samples};
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut noise = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let rate = 100.0 * per_frame as f64;
+    let labels = ["Fx1", "Fy1", "Fz1", "Mx1", "My1", "Mz1", "EMG1", "EMG2"];
+    let units = ["N", "N", "N", "Nmm", "Nmm", "Nmm", "V", "V"];
+    let rows = frames * per_frame;
+    let mut adc = Vec::with_capacity(rows * labels.len());
+    for r in 0..rows {
+        let t = r as f64 / rate;
+        let stance = ((t * 0.9).fract() < 0.6) as u8 as f64;
+        let fz = stance * 2400.0 * (std::f64::consts::PI * (t * 0.9).fract() / 0.6).sin();
+        let burst = 1.0 + 4.0 * ((t * 0.9).fract() < 0.2) as u8 as f64;
+        let row = [
+            0.08 * fz + 3.0 * noise(),
+            -0.05 * fz + 3.0 * noise(),
+            fz + 3.0 * noise(),
+            12.0 * fz.sqrt() + 5.0 * noise(),
+            -9.0 * fz.sqrt() + 5.0 * noise(),
+            4.0 * noise(),
+            300.0 * burst * noise(),
+            200.0 * burst * noise(),
+        ];
+        adc.extend(row.iter().map(|v| v.round().clamp(-32768.0, 32767.0)));
+    }
+    let channels: Vec<Channel> = labels
+        .iter()
+        .zip(units)
+        .map(|(l, u)| Channel {
+            label: l.to_string(),
+            description: String::new(),
+            unit: u.to_string(),
+            scale: if u == "V" { 1.0e-4 } else { 0.5 },
+            offset: 0,
+        })
+        .collect();
+    let samples = if storage == "float" {
+        let q = 10.0 / 32768.0;
+        Samples::Float(
+            adc.iter()
+                .enumerate()
+                .map(|(i, &v)| {
+                    if i % labels.len() >= 6 {
+                        // EMG as filtered floats: on no grid.
+                        (v * 1.0e-6 * (1.0 + 0.1 * (i as f64).sin())) as f32
+                    } else {
+                        (v * q) as f32
+                    }
+                })
+                .collect(),
+        )
+    } else {
+        Samples::Int {
+            values: adc.iter().map(|&v| v as i32).collect(),
+            unsigned: false,
+        }
+    };
+    Analog::new(per_frame, 1.0, channels, samples).expect("a whole number of frames")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
