@@ -78,6 +78,7 @@ def pyc3d_read(path):
             "point_labels": [s.strip() for s in r.point_labels],
             "analog_labels": [s.strip() for s in r.analog_labels] if used else [],
             "point_rate": float(r.point_rate),
+            "first_frame": int(r.first_frame),
             "analog_rate": float(r.analog_rate) if used else None,
             "xyz": xyz,
             "valid": valid,
@@ -129,6 +130,7 @@ def ezc3d_read(path):
         "point_labels": [s.strip() for s in val("POINT", "LABELS", [])][: pts.shape[1]],
         "analog_labels": [s.strip() for s in val("ANALOG", "LABELS", [])][:used] if used else [],
         "point_rate": float(np.atleast_1d(val("POINT", "RATE"))[0]),
+        "first_frame": int(c["header"]["points"]["first_frame"]),
         "analog_rate": float(np.atleast_1d(val("ANALOG", "RATE"))[0]) if used else None,
         "xyz": xyz,
         "valid": ~np.isnan(xyz).any(axis=2),
@@ -147,6 +149,9 @@ def compare(a, b, args, reader, problems):
     f0, f1 = args.frames or (0, a["xyz"].shape[0])
     if a["point_labels"] != b["point_labels"]:
         say(f"point labels differ: {a['point_labels'][:5]}… vs {b['point_labels'][:5]}…")
+    # The first frame's number: where the events' trial times fall (a range starts later).
+    if a["first_frame"] + f0 != b["first_frame"] and a["xyz"].size:
+        say(f"first frame {a['first_frame'] + f0} vs {b['first_frame']}")
     if abs(a["point_rate"] - b["point_rate"]) > 1e-3 and a["xyz"].size:
         say(f"point rate {a['point_rate']} vs {b['point_rate']}")
     xa, xb = a["xyz"][f0:f1], b["xyz"]

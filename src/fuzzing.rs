@@ -45,7 +45,7 @@ pub fn read(format: Format, data: &[u8]) {
                     motion: &l.motion,
                     analog: l.extras.analog.as_ref(),
                     parameters: l.extras.parameters.as_ref(),
-                    first_frame: 1,
+                    first_frame: l.extras.first_frame.unwrap_or(1),
                 });
                 if let Ok(b) = written {
                     let back = formats::read_as(Format::C3d, &b, &ReadOptions::default())

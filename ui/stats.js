@@ -89,6 +89,9 @@ export async function statsPage(main) {
   main.append(
     el('h1', {}, 'Statistics'),
     el('p', {}, `${t.takes} takes, ${fmt.num(t.hours, 2)} hours, ${bytes(t.stored_bytes)} stored for ${bytes(t.raw_bytes)} raw: ratio ${fmt.num(t.ratio, 1)}; largest error ${fmt.num(t.max_mm, 3)} mm (p95 of takes ${fmt.num(t.max_mm_p95, 3)} mm).`),
+    el('p', { class: 'split' }, `Points: ${bytes(t.points?.stored_bytes ?? 0)} stored for ${bytes(t.points?.raw_bytes ?? 0)} raw (ratio ${fmt.num(t.points?.ratio ?? 0, 1)}). `,
+      `Analog channels: ${bytes(t.analog?.stored_bytes ?? 0)} stored for ${bytes(t.analog?.raw_bytes ?? 0)} raw as the files held them (ratio ${fmt.num(t.analog?.ratio ?? 0, 1)}). `,
+      `C3D parameters: ${bytes(t.parameters_bytes ?? 0)}.`),
     el('div', { class: 'charts' },
       bars('Stored against raw, by library', rows(stats.by_library), sizes),
       bars('Stored against raw, by codec', rows(stats.by_codec), sizes),

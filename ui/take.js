@@ -81,8 +81,19 @@ export async function takePage(main, id, params) {
     ['max / mean error', `${fmt.num(take.max_mm, 3)} / ${fmt.num(take.mean_mm, 3)} mm`],
     ['stored', `${take.stored_bytes} bytes of ${take.raw_bytes} raw`],
   ];
+  const analog = take.meta?.analog;
+  if (analog) {
+    facts.push(
+      ['analog channels', `${analog.channels.length} at ${fmt.num(analog.rate, 1)} Hz (${analog.channels.map((c) => c.unit ? `${c.label} ${c.unit}` : c.label).join(', ')})`],
+      ['analog codec', `${analog.codec}: ${analog.stored_bytes} bytes of ${analog.raw_bytes} raw (ratio ${fmt.num(analog.ratio, 1)})`],
+      ['points alone', `${take.stored_bytes - analog.stored_bytes} bytes of ${take.raw_bytes - analog.raw_bytes} raw, with the file's parameters`],
+    );
+  }
+  const events = take.meta?.events ?? [];
+  if (events.length) facts.push(['events', events.map((e) => `${e.context} ${e.label} ${fmt.num(e.time_s, 2)} s`.trim()).join('; ')]);
   main.append(el('h2', {}, 'Take'), el('div', { class: 'scroll' }, el('table', { class: 'facts' }, el('tbody', {}, ...facts.map(([k, v]) => el('tr', {}, el('th', { scope: 'row' }, k), el('td', {}, v)))))));
   const d = take.meta?.decision;
+  if (analog) main.append(el('p', { class: 'reason analog-reason' }, `Analog: ${analog.reason}`));
   if (d) {
     main.append(
       el('h2', {}, 'Codec decision'),
@@ -103,11 +114,16 @@ export async function takePage(main, id, params) {
   const frameRange = ([a, b]) => [Math.floor(a * fps + 1e-6), Math.min(total, Math.floor(b * fps + 1e-6) + 1)];
   const formats = ['json', 'csv', 'trc', 'npy', 'f32'];
   if (take.source_format === 'bvh') formats.unshift('bvh');
+  if (take.source_format === 'c3d') formats.unshift('c3d');
   main.append(el('h2', {}, 'Download'), el('p', {}, 'The loop range (or the whole take): ',
     ...formats.map((f) => el('button', { class: 'download', onclick: () => {
       const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];
       download(`/v1/sequences/${encodeURIComponent(id)}/frames?start=${a}&end=${b}&format=${f}`, `${take.name || take.id}_${a}-${b}.${f}`).catch(showError);
-    } }, f.toUpperCase()))));
+    } }, f.toUpperCase())),
+    ...(analog ? [el('button', { class: 'download analog', onclick: () => {
+      const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];
+      download(`/v1/sequences/${encodeURIComponent(id)}/analog?start=${a}&end=${b}&format=csv`, `${take.name || take.id}_analog_${a}-${b}.csv`).catch(showError);
+    } }, 'ANALOG CSV')] : [])));
 
   // --- what compression did: the error second by second against the bound
   try {
@@ -116,6 +132,8 @@ export async function takePage(main, id, params) {
   } catch (err) {
     chart.replaceChildren(el('p', { class: 'muted' }, `No error chart: ${err.message}`));
   }
+  // The file's events (foot strikes, foot offs) on the same timeline; a click seeks there.
+  if (events.length) chart.append(eventStrip(events, total, fps, (f) => transport.jump(f / fps)));
 
   await transport.seek(transport.t);
   return () => {
@@ -124,6 +142,30 @@ export async function takePage(main, id, params) {
     player.dispose();
   };
 
+}
+
+/**
+ * Events as ticks on the take's timeline (the error chart's x axis), each named by its
+ * context and label; a click on one seeks to it.
+ */
+function eventStrip(events, total, fps, seek) {
+  const W = 1000, H = 34, L = 48, R = 8;
+  const x = (f) => L + ((W - L - R) * f) / Math.max(1, total - 1);
+  const s = svg('svg', { viewBox: `0 0 ${W} ${H}`, class: 'events', role: 'img',
+    'aria-label': `${events.length} events: ${events.map((e) => `${e.context} ${e.label} at ${e.time_s.toFixed(2)} s`).join(', ')}` });
+  const colour = (c) => (/left/i.test(c) ? '#1f5fbf' : /right/i.test(c) ? '#c0392b' : '#2e8b57');
+  events.forEach((e, i) => {
+    // The take's frame of the event (the file's times are on the trial's clock).
+    const f = Math.min(total - 1, Math.max(0, e.frame ?? Math.round(e.time_s * fps)));
+    const g = svg('g', { class: 'event', cursor: 'pointer' });
+    g.append(svg('line', { x1: x(f), x2: x(f), y1: 2, y2: 20, stroke: colour(e.context), 'stroke-width': 2 }));
+    const t = svg('text', { x: x(f) + 3, y: i % 2 ? 31 : 14, 'font-size': 10, fill: colour(e.context) });
+    t.textContent = `${e.context ? e.context[0] : ''} ${e.label}`.trim();
+    g.append(t, svg('title', {}, `${e.context} ${e.label} at ${e.time_s.toFixed(3)} s`));
+    g.addEventListener('click', () => seek(f));
+    s.append(g);
+  });
+  return s;
 }
 
 /**

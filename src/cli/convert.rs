@@ -52,7 +52,7 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
             motion: &loaded.motion,
             analog: loaded.extras.analog.as_ref(),
             parameters: loaded.extras.parameters.as_ref(),
-            first_frame: 1,
+            first_frame: loaded.extras.first_frame.unwrap_or(1),
         })
     } else {
         formats::write(&loaded.motion, format)

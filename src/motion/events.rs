@@ -3,13 +3,15 @@
 
 use serde::{Deserialize, Serialize};
 
-/// One event. `time_s` is seconds from the take's first frame's clock (C3D's
-/// `EVENT:TIMES` minutes × 60 + seconds, as the file states it).
+/// One event. `time_s` is the time the file states (C3D's `EVENT:TIMES`, minutes × 60 +
+/// seconds, on the trial's clock: frame `n` of the trial is at `(n − 1) / rate`); `frame`
+/// is the take's frame it falls on (0 is the take's first; it may lie outside the take).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Event {
     pub context: String,
     pub label: String,
     pub time_s: f64,
+    pub frame: i64,
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub description: String,
     #[serde(default, skip_serializing_if = "String::is_empty")]

@@ -325,7 +325,7 @@ pub fn c3d(
         motion: &motion,
         analog: analog.as_ref(),
         parameters: parameters.as_ref(),
-        first_frame: start + 1,
+        first_frame: take.meta.first_frame.unwrap_or(1) + start,
     })
     .map_err(|e| Error::Unsatisfiable(e.to_string()))
 }

@@ -168,6 +168,7 @@ pub async fn ingest(
         interrupted: None,
         reencoded_from: None,
         events: extras.events,
+        first_frame: extras.first_frame,
         analog: analog.as_ref().map(|a| a.meta.clone()),
     };
     let format = loaded.format.name();

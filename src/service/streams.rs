@@ -463,6 +463,7 @@ impl Streams {
             interrupted: None,
             reencoded_from: None,
             events: Vec::new(),
+            first_frame: None,
             analog: None,
         };
         let mut take = Take::new(

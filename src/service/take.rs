@@ -79,6 +79,10 @@ pub struct TakeMeta {
     /// Events marked in the file (C3D's `EVENT` group): gait events, triggers.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub events: Vec<crate::motion::events::Event>,
+    /// The trial frame number of the take's first frame, where its file states one (C3D):
+    /// what a C3D written back starts at, so that its events fall where they did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first_frame: Option<usize>,
     /// The take's analog channels, how they were coded and what that cost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analog: Option<super::analog::AnalogMeta>,

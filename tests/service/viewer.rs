@@ -332,6 +332,13 @@ fn corpus_bytes(rel: &str) -> Vec<u8> {
 }
 
 /// Upload corpus file `rel` with `query`; the stored take's report.
+/// The frame of take `id`'s first event, as the page rounds it.
+async fn fp_events(srv: &common::Server, id: &str) -> i64 {
+    let (_, take) = srv.get_json(&format!("/v1/sequences/{id}")).await;
+    let f = take["meta"]["events"][0]["frame"].as_i64().unwrap();
+    f.clamp(0, take["frames"].as_i64().unwrap() - 1)
+}
+
 async fn stored(srv: &common::Server, query: &str, rel: &str) -> Value {
     let (status, take) = srv.post(query, corpus_bytes(rel)).await;
     assert_eq!(status, 201, "{rel}: {take}");
@@ -556,6 +563,18 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
         let codecs = stats["by_codec"].as_object().unwrap().len();
         let takes = stats["total"]["takes"].as_u64().unwrap();
         assert_eq!(drawn, json!([codecs, takes]), "{stats}");
+        // Points and analog channels apart (the gait take has 28 channels).
+        let split = browser
+            .js(
+                "return document.querySelector('p.split')?.textContent || '';",
+                json!([]),
+            )
+            .await;
+        assert!(
+            split.as_str().unwrap().contains("Analog channels")
+                && !split.as_str().unwrap().contains("Analog channels: 0 B"),
+            "{split}"
+        );
         browser.screenshot("stats").await;
         assert_eq!(unnamed_controls(&browser).await, json!([]));
         assert!(browser.console_errors().await.is_empty());
@@ -613,6 +632,52 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
             labels.len()
         );
         browser.screenshot("take-labels").await;
+        assert!(browser.console_errors().await.is_empty());
+
+        // A C3D's events on the timeline (12 foot strikes and foot offs), its analog
+        // channels among the facts; a click on an event seeks to it.
+        let fp = stored(
+            &srv,
+            "name=flatfoot&codec=quant",
+            "c3d/btkdata__PiG__PiG_Motion-FlatFoot-Full.c3d",
+        )
+        .await;
+        let fp_id = fp["id"].as_str().unwrap();
+        let events = browser
+            .visit(
+                &format!("{}/#/take/{fp_id}", srv.base),
+                "the events strip",
+                "const e = document.querySelectorAll('svg.events g.event'); return e.length > 0 && e.length;",
+            )
+            .await;
+        assert_eq!(events, 12);
+        let facts = browser
+            .js(
+                "return document.querySelector('table.facts').textContent;",
+                json!([]),
+            )
+            .await;
+        assert!(
+            facts.as_str().unwrap().contains("analog channels")
+                && facts.as_str().unwrap().contains("analog-lossless"),
+            "{facts}"
+        );
+        let first = &fp_events(&srv, fp_id).await;
+        browser
+            .js(
+                "document.querySelectorAll('svg.events g.event')[0].dispatchEvent(new MouseEvent('click', { bubbles: true })); return true;",
+                json!([]),
+            )
+            .await;
+        browser
+            .until(
+                "the event's frame",
+                &format!(
+                    "return document.querySelector('canvas.view').dataset.frame === '{first}';"
+                ),
+            )
+            .await;
+        browser.screenshot("take-events").await;
         assert!(browser.console_errors().await.is_empty());
 
         // Phone-sized: the take page still fits.

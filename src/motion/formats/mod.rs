@@ -113,6 +113,9 @@ pub struct Loaded {
 /// section. Other formats have none.
 #[derive(Debug, Clone, Default)]
 pub struct Extras {
+    /// The trial frame number of the take's first frame (C3D's header or
+    /// `TRIAL:ACTUAL_START_FIELD`); `None` where the format has none (then 1).
+    pub first_frame: Option<usize>,
     pub analog: Option<super::analog::Analog>,
     pub events: Vec<super::events::Event>,
     pub parameters: Option<c3d::params::Parameters>,

@@ -288,13 +288,17 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     } else {
         Motion::new(rate, unsettled_unit(), names, positions, None)?
     };
-    let events = events(&params, &mut warnings);
+    let first_frame = field("ACTUAL_START_FIELD")
+        .filter(|&f| f >= 1)
+        .unwrap_or(first.max(1));
+    let events = events(&params, rate, first_frame, &mut warnings);
     Ok(Parsed {
         motion,
         declared_unit: unit,
         warnings,
         contradictions,
         extras: Extras {
+            first_frame: Some(first_frame),
             analog,
             events,
             parameters: Some(params),
@@ -498,7 +502,7 @@ fn unique(taken: &[String], base: &str) -> String {
 
 /// `EVENT:USED` events: contexts, labels, descriptions, subjects and times (`TIMES` is
 /// `2 × n`: minutes, seconds).
-fn events(params: &Parameters, warnings: &mut Vec<String>) -> Vec<Event> {
+fn events(params: &Parameters, rate: f64, first: usize, warnings: &mut Vec<String>) -> Vec<Event> {
     let used = params
         .u16s("EVENT", "USED")
         .and_then(|v| v.first().copied())
@@ -522,12 +526,17 @@ fn events(params: &Parameters, warnings: &mut Vec<String>) -> Vec<Event> {
     }
     let text = |v: &[String], i: usize| v.get(i).cloned().unwrap_or_default();
     (0..used.min(times.len() / 2))
-        .map(|i| Event {
-            context: text(&contexts, i),
-            label: text(&labels, i),
-            time_s: times[2 * i] * 60.0 + times[2 * i + 1],
-            description: text(&descriptions, i),
-            subject: text(&subjects, i),
+        .map(|i| {
+            let time_s = times[2 * i] * 60.0 + times[2 * i + 1];
+            let trial_frame = (time_s * rate).round().clamp(-1e15, 1e15) as i64 + 1;
+            Event {
+                context: text(&contexts, i),
+                label: text(&labels, i),
+                time_s,
+                frame: trial_frame - first as i64,
+                description: text(&descriptions, i),
+                subject: text(&subjects, i),
+            }
         })
         .collect()
 }
