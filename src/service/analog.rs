@@ -127,6 +127,7 @@ pub async fn code(
     bounds: &AnalogBounds,
 ) -> Result<Coded> {
     let per_channel = bounds.per_channel(&analog)?;
+    let chunk_frames = analog::chunk_frames(&chunk_frames, analog.per_frame);
     let bounded = per_channel.iter().any(Option::is_some);
     blocking(move || -> Result<Coded> {
         let t0 = std::time::Instant::now();

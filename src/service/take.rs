@@ -413,6 +413,7 @@ mod tests {
                 decoded_blake3: Some("00".into()),
                 interrupted: None,
                 reencoded_from: None,
+                first_frame: None,
                 events: Vec::new(),
                 analog: None,
             },

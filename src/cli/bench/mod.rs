@@ -1,5 +1,6 @@
 //! `mocapstore bench`: compression ratio, errors and speed of codecs on real files.
 
+mod analog;
 mod lossless;
 mod plot;
 
@@ -71,6 +72,10 @@ pub struct BenchArgs {
     /// BVH files, file by file.
     #[arg(long)]
     lossless: bool,
+    /// Instead of codecs, compare `analog-lossless` with flac -8 (per channel, integer
+    /// files) and xz -9 of the analog block, on the C3D files, file by file.
+    #[arg(long)]
+    analog: bool,
 }
 
 /// One (file, codec, bound) measurement.
@@ -417,6 +422,9 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     }
     if args.lossless {
         return lossless::run(&files, &args.out);
+    }
+    if args.analog {
+        return analog::run(&files, &args.out);
     }
     let mut takes = Vec::new();
     for path in &files {
