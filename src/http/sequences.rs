@@ -354,8 +354,8 @@ pub async fn frames(
             header::CONTENT_TYPE,
             HeaderValue::from_static("application/octet-stream"),
         );
-        drop(f.reservation);
-        return Ok((headers, f.bytes).into_response());
+        headers.insert(header::CONTENT_LENGTH, hv(f.bytes.len().to_string()));
+        return Ok((headers, held_body(f.bytes, f.reservation)).into_response());
     }
     let mut a = answer::open(
         &state.store,
@@ -430,6 +430,13 @@ pub async fn analog(
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
     access::check_take(&state.store, &caller.grant, &id).await?;
+    if let Some(f) = q.format.as_deref() {
+        if !matches!(f, "json" | "csv" | "npy" | "f32") {
+            return Err(ApiError::bad_request(format!(
+                "analog channels are answered as json, csv, npy or f32, not {f:?}"
+            )));
+        }
+    }
     let frames = frames_request(FramesQuery {
         start: q.start,
         end: q.end,
@@ -475,7 +482,27 @@ pub async fn analog(
     headers.insert("x-rate", hv(a.rate.to_string()));
     headers.insert("x-channels", hv(a.columns.len().to_string()));
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
-    Ok((headers, body).into_response())
+    headers.insert(header::CONTENT_LENGTH, hv(body.len().to_string()));
+    Ok((headers, held_body(body, a.reservation)).into_response())
+}
+
+/// A body of `bytes` that keeps `reservation` (what it holds of the answer budget) until
+/// it has been handed to the connection whole.
+fn held_body(bytes: Vec<u8>, reservation: crate::service::budget::Reservation) -> Body {
+    let state = (Some(Bytes::from(bytes)), Some(reservation));
+    Body::from_stream(futures_util::stream::unfold(
+        state,
+        |(bytes, reservation)| async move {
+            match bytes {
+                Some(b) => Some((Ok::<_, std::io::Error>(b), (None, reservation))),
+                // Asked for more: the bytes are written; the reservation goes.
+                None => {
+                    drop(reservation);
+                    None
+                }
+            }
+        },
+    ))
 }
 
 /// `GET /v1/sequences/{id}/parameters`: the uploaded file's parameter section as a typed

@@ -6,11 +6,11 @@ use std::collections::BTreeMap;
 use std::str::FromStr;
 use std::sync::Arc;
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use super::budget::{Budget, Holder, Reservation};
 use super::fetch::TimeRange;
-use super::take::Take;
+use super::take::{AnalogMeta, ChannelMeta, Take};
 use super::{blocking, Error, Result};
 use crate::codec::analog::{self, Decoder};
 use crate::codec::{CodecId, Container, Header};
@@ -80,36 +80,6 @@ impl FromStr for AnalogBounds {
         }
         Ok(b)
     }
-}
-
-/// One analog channel as a take's metadata shows it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ChannelMeta {
-    pub label: String,
-    pub unit: String,
-    #[serde(default, skip_serializing_if = "String::is_empty")]
-    pub description: String,
-    /// The bound it was coded within, in its unit (`None`: exactly).
-    pub bound: Option<f64>,
-    /// The largest error measured, in its unit.
-    pub max_error: f64,
-}
-
-/// A take's analog channels: how they were coded and why, and what that cost.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct AnalogMeta {
-    pub codec: CodecId,
-    pub rate: f64,
-    pub samples_per_frame: usize,
-    pub channels: Vec<ChannelMeta>,
-    /// Bytes the uploaded file held them in (2 per 16-bit value, 4 per float).
-    pub raw_bytes: u64,
-    pub stored_bytes: u64,
-    pub ratio: f64,
-    /// Each codec tried and its size.
-    pub tried: Vec<(CodecId, u64)>,
-    pub reason: String,
-    pub encode_ms: f64,
 }
 
 /// Analog channels coded for storage: the winner and its metadata.
@@ -209,7 +179,7 @@ pub fn rows(c: &Container, meta: &AnalogMeta) -> AnalogRows {
         header: c.header.to_bytes(),
         raw_bytes: meta.raw_bytes as i64,
         stored_bytes: meta.stored_bytes as i64,
-        chunks: super::ingest::chunk_rows(c),
+        chunks: super::take::chunk_rows(c),
     }
 }
 
@@ -326,7 +296,7 @@ pub fn c3d(
         motion: &motion,
         analog: analog.as_ref(),
         parameters: parameters.as_ref(),
-        first_frame: take.meta.first_frame.unwrap_or(1) + start,
+        first_frame: take.meta.first_frame.unwrap_or(1).saturating_add(start),
     })
     .map_err(|e| Error::Unsatisfiable(e.to_string()))
 }
@@ -575,10 +545,69 @@ pub fn force_platforms(p: &Parameters) -> Vec<ForcePlatform> {
         .collect()
 }
 
-/// What `GET …/parameters` shows: the tree and the force plates read from it.
+/// The subjects a file names (`SUBJECTS`): each name, its marker set, and whether its
+/// point labels carry the name as a prefix.
+#[derive(Debug, Clone, Serialize)]
+pub struct Subject {
+    pub name: String,
+    pub marker_set: String,
+    pub uses_prefixes: bool,
+}
+
+/// The subjects a parameter tree names.
+pub fn subjects(p: &Parameters) -> Vec<Subject> {
+    let names = p.strings_continued("SUBJECTS", "NAMES");
+    let sets = p.strings_continued("SUBJECTS", "MARKER_SETS");
+    let prefixes = p
+        .number("SUBJECTS", "USES_PREFIXES")
+        .is_some_and(|v| v != 0.0);
+    names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| !n.is_empty())
+        .map(|(i, n)| Subject {
+            name: n.clone(),
+            marker_set: sets.get(i).cloned().unwrap_or_default(),
+            uses_prefixes: prefixes,
+        })
+        .collect()
+}
+
+/// What `TRIAL` says of the capture: the trial frames the file holds and the cameras' rate.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Trial {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub actual_start_field: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub actual_end_field: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_rate: Option<f64>,
+}
+
+/// The trial a parameter tree describes.
+pub fn trial(p: &Parameters) -> Trial {
+    let field = |name: &str| {
+        p.u16s("TRIAL", name).and_then(|v| match v.as_slice() {
+            [lo, hi, ..] => Some(u64::from(*lo) + (u64::from(*hi) << 16)),
+            [lo] => Some(u64::from(*lo)),
+            [] => None,
+        })
+    };
+    Trial {
+        actual_start_field: field("ACTUAL_START_FIELD"),
+        actual_end_field: field("ACTUAL_END_FIELD"),
+        camera_rate: p.number("TRIAL", "CAMERA_RATE").filter(|r| r.is_finite()),
+    }
+}
+
+/// What `GET …/parameters` shows: the tree, and what the well-known groups say read out
+/// (force plates, subjects, trial; `POINT`, `ANALOG` and `EVENT` are the take's own
+/// points, channels and events).
 #[derive(Debug, Clone, Serialize)]
 pub struct ParametersView {
     pub force_platforms: Vec<ForcePlatform>,
+    pub subjects: Vec<Subject>,
+    pub trial: Trial,
     #[serde(flatten)]
     pub parameters: Parameters,
 }
@@ -592,6 +621,8 @@ pub async fn parameters_view(store: &Store, id: &str) -> Result<ParametersView> 
     })?;
     Ok(ParametersView {
         force_platforms: force_platforms(&p),
+        subjects: subjects(&p),
+        trial: trial(&p),
         parameters: p,
     })
 }

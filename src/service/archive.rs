@@ -517,7 +517,7 @@ pub async fn import_take(
         }
         None => None,
     };
-    let chunks = super::ingest::chunk_rows(&container);
+    let chunks = super::take::chunk_rows(&container);
     let mut take = line.take.clone();
     take.header = container.header.to_bytes();
     take.live_until = None;

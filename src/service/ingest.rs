@@ -15,7 +15,7 @@ use super::{blocking, Error, Result};
 use crate::codec::{self, CodecId, Encoded, ErrorBound, Hints, Latency};
 use crate::motion::formats::{self, Format, Limits, ReadOptions};
 use crate::motion::Motion;
-use crate::store::{ChunkRow, NewTake, Store};
+use crate::store::{NewTake, Store};
 
 /// An upload and what the user asked of it.
 #[derive(Debug, Clone)]
@@ -73,7 +73,7 @@ pub struct IngestReport {
     pub decision: Decision,
     /// The analog channels' coding, if the take has any.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub analog: Option<analog::AnalogMeta>,
+    pub analog: Option<super::take::AnalogMeta>,
     pub warnings: Vec<String>,
 }
 
@@ -152,17 +152,23 @@ pub async fn ingest(
         }
         None => None,
     };
-    let parameters = extras
-        .parameters
-        .as_ref()
-        .map(analog::parameters_row)
-        .transpose()?;
+    // Parameters C3D cannot hold again (an entry past an i16 offset, a name of 128 bytes)
+    // are dropped with a warning rather than refuse the take.
+    let mut warnings = loaded.warnings;
+    let parameters = match extras.parameters.as_ref().map(analog::parameters_row) {
+        Some(Ok(row)) => Some(row),
+        Some(Err(e)) => {
+            warnings.push(format!("{e}; the parameter section is not kept"));
+            None
+        }
+        None => None,
+    };
 
     let m = &motion;
     let meta = TakeMeta {
         point_names: m.point_names.clone(),
         unit: m.unit.clone(),
-        warnings: loaded.warnings.clone(),
+        warnings: warnings.clone(),
         decision: decision.clone(),
         decoded_blake3: Some(enc.decoded_digest.clone()),
         interrupted: None,
@@ -201,7 +207,7 @@ pub async fn ingest(
     store
         .insert(&NewTake {
             row: take.to_row()?,
-            chunks: chunk_rows(&enc.container),
+            chunks: super::take::chunk_rows(&enc.container),
             basis,
             skeleton,
             errors: Some(enc.series.to_bytes()),
@@ -230,7 +236,7 @@ pub async fn ingest(
         kg_percent: take.kg_percent,
         decision,
         analog: analog.map(|a| a.meta),
-        warnings: loaded.warnings,
+        warnings,
     })
 }
 
@@ -373,21 +379,4 @@ pub async fn encode_best(
         .find(|(c, _)| *c == decision.winner)
         .expect("the winner was encoded");
     Ok((decision, enc))
-}
-
-/// A container's chunks as rows to store.
-pub fn chunk_rows(c: &codec::Container) -> Vec<ChunkRow> {
-    c.header
-        .chunks
-        .iter()
-        .zip(&c.chunks)
-        .enumerate()
-        .map(|(i, (meta, payload))| ChunkRow {
-            idx: i as i64,
-            first_frame: i64::from(meta.first_frame),
-            frames: i64::from(meta.frames),
-            crc32c: meta.crc32c,
-            payload: payload.clone(),
-        })
-        .collect()
 }

@@ -850,7 +850,7 @@ async fn reencode_take(store: &Store, take: &Take, positions: Vec<f32>) -> Resul
     new.meta.decoded_blake3 = Some(enc.decoded_digest.clone());
     new.meta.reencoded_from = Some(take.codec);
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
-    let chunks = super::ingest::chunk_rows(&enc.container);
+    let chunks = super::take::chunk_rows(&enc.container);
     store
         .update_encoding(&new.to_row()?, &chunks, true, basis.as_deref())
         .await?;

@@ -85,7 +85,7 @@ pub struct TakeMeta {
     pub first_frame: Option<usize>,
     /// The take's analog channels, how they were coded and what that cost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub analog: Option<super::analog::AnalogMeta>,
+    pub analog: Option<AnalogMeta>,
 }
 
 /// Who a new take is and where it goes: what a client names.
@@ -320,6 +320,53 @@ impl Take {
             0.0
         };
     }
+}
+
+/// One analog channel as a take's metadata shows it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelMeta {
+    pub label: String,
+    pub unit: String,
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub description: String,
+    /// The bound it was coded within, in its unit (`None`: exactly).
+    pub bound: Option<f64>,
+    /// The largest error measured, in its unit.
+    pub max_error: f64,
+}
+
+/// A take's analog channels: how they were coded and why, and what that cost.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AnalogMeta {
+    pub codec: CodecId,
+    pub rate: f64,
+    pub samples_per_frame: usize,
+    pub channels: Vec<ChannelMeta>,
+    /// Bytes the uploaded file held them in (2 per 16-bit value, 4 per float).
+    pub raw_bytes: u64,
+    pub stored_bytes: u64,
+    pub ratio: f64,
+    /// Each codec tried and its size.
+    pub tried: Vec<(CodecId, u64)>,
+    pub reason: String,
+    pub encode_ms: f64,
+}
+
+/// A container's chunks as rows to store.
+pub fn chunk_rows(c: &crate::codec::Container) -> Vec<crate::store::ChunkRow> {
+    c.header
+        .chunks
+        .iter()
+        .zip(&c.chunks)
+        .enumerate()
+        .map(|(i, (meta, payload))| crate::store::ChunkRow {
+            idx: i as i64,
+            first_frame: i64::from(meta.first_frame),
+            frames: i64::from(meta.frames),
+            crc32c: meta.crc32c,
+            payload: payload.clone(),
+        })
+        .collect()
 }
 
 /// An [`ErrorBound`] as the stored columns' fields: `max_bound_mm`, `mean_bound_mm` (absent

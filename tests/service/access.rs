@@ -210,6 +210,15 @@ fn cases() -> Vec<Case> {
         c(Method::DELETE, "/v1/sequences/{id}", "admin", true, 204),
         c(Method::GET, "/v1/sequences/{id}/frames", "read", true, 200),
         c(Method::GET, "/v1/sequences/{id}/errors", "read", true, 200),
+        // The matrix's take is no C3D: no analog channels, no parameters (409).
+        c(Method::GET, "/v1/sequences/{id}/analog", "read", true, 409),
+        c(
+            Method::GET,
+            "/v1/sequences/{id}/parameters",
+            "read",
+            true,
+            409,
+        ),
         c(Method::GET, "/v1/stats", "read", false, 200),
         c(Method::GET, "/v1/bases", "read", false, 200),
         c(Method::POST, "/v1/bases", "admin", false, 400),
@@ -284,6 +293,13 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
         ("GET", "/v1/sequences/{id}/errors") => {
             (format!("/v1/sequences/{}/errors", take().await), Body::None)
         }
+        ("GET", "/v1/sequences/{id}/analog") => {
+            (format!("/v1/sequences/{}/analog", take().await), Body::None)
+        }
+        ("GET", "/v1/sequences/{id}/parameters") => (
+            format!("/v1/sequences/{}/parameters", take().await),
+            Body::None,
+        ),
         ("POST", "/v1/bases") => (
             "/v1/bases".into(),
             Body::Json(json!({"library": "no such library"})),

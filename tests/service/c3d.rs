@@ -310,6 +310,7 @@ async fn analog_bounds_and_analog_only_files() {
         .unwrap()
         .iter()
         .any(|g| g["name"] == "FORCE_PLATFORM"));
+    assert!(p["subjects"].is_array() && p["trial"].is_object(), "{p}");
 
     // Statistics split points and analog.
     let (status, stats) = srv.get_json("/v1/stats").await;

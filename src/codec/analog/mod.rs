@@ -414,7 +414,7 @@ fn code_fields<I: Io>(io: &mut I, col: &mut Column) -> Result<()> {
         let s = io.bit(&mut sign[prev_sign], b >> 31 == 1);
         let ctx = prev_step.unsigned_abs().min(2) as usize;
         let step = code_residual(io, &mut steps[ctx], i64::from((b >> 23) & 0xff) - prev_exp)?;
-        let e = prev_exp + step;
+        let e = prev_exp.wrapping_add(step);
         if !(0..=255).contains(&e) {
             return Err(malformed("float exponent out of range"));
         }
@@ -617,7 +617,7 @@ fn ordered(v: f32) -> i64 {
 }
 
 fn unordered(x: i64) -> Option<f32> {
-    let u = u32::try_from(x + (1 << 31)).ok()?;
+    let u = u32::try_from(x.checked_add(1 << 31)?).ok()?;
     let b = if u & 0x8000_0000 != 0 {
         u & 0x7FFF_FFFF
     } else {
@@ -708,7 +708,11 @@ impl Column {
             (Mode::Exact, Storage::Float) => Stored::Float(
                 self.x
                     .iter()
-                    .map(|&x| (x.abs() <= 1 << 24).then_some(x as f32).ok_or_else(bad))
+                    .map(|&x| {
+                        (x.unsigned_abs() <= 1 << 24)
+                            .then_some(x as f32)
+                            .ok_or_else(bad)
+                    })
                     .collect::<Result<_>>()?,
             ),
             (Mode::Fields, Storage::Float) => Stored::Float(
@@ -934,6 +938,19 @@ impl Decoder {
             )));
         }
         let layout = Layout::parse(&header.params, header.points as usize)?;
+        // What decoding may allocate: every value of the take (decode_all), bounded as the
+        // service bounds what it reads ([`crate::limits::Limits::analog_samples`]).
+        let values = u64::from(header.frames)
+            .saturating_mul(layout.per_frame as u64)
+            .saturating_mul(u64::from(header.points));
+        let limit = crate::limits::Limits::default().analog_samples;
+        if values > limit {
+            return Err(Error::Limit {
+                what: "analog values (frames × samples per frame × channels)",
+                actual: values,
+                limit,
+            });
+        }
         Ok(Decoder { header, layout })
     }
 
@@ -1172,6 +1189,11 @@ mod tests {
         for cut in 0..e.container.header.params.len() {
             let _ = Layout::parse(&e.container.header.params[..cut], 2);
         }
+        // A header that declares more values than a take may hold is refused before any
+        // of them is allocated.
+        let mut huge = e.container.header.clone();
+        huge.frames = u32::MAX;
+        assert!(matches!(Decoder::new(huge), Err(Error::Limit { .. })));
     }
 
     #[test]

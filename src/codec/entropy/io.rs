@@ -76,7 +76,7 @@ impl Io for Dry {
 /// A residual: small ones through the adaptive model, the rare huge one escaped to 64 raw
 /// bits.
 pub fn code_residual<I: Io>(io: &mut I, model: &mut IntModel, r: i64) -> Result<i64> {
-    let small = r.abs() < BIG;
+    let small = r.unsigned_abs() < BIG as u64;
     let v = io.int(model, if small { r as i32 } else { i32::MAX });
     if v != i32::MAX {
         return Ok(i64::from(v));

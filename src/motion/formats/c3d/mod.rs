@@ -120,10 +120,12 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     let header_data_start = h(9) as usize;
     let header_rate = proc.f32(&bytes[20..24]);
 
+    // A parameter section is at most 255 blocks (its block count is a byte).
     let params_end = match header_data_start.checked_sub(1).map(|b| b * BLOCK) {
         Some(d) if d > pstart => d.min(bytes.len()),
         _ => bytes.len(),
-    };
+    }
+    .min(pstart + 255 * BLOCK);
     let params = Parameters::parse(bytes, pstart, params_end, proc)?;
     let mut warnings = Vec::new();
     let mut contradictions = Vec::new();
@@ -175,7 +177,10 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     let data_block = if header_data_start > 0 {
         header_data_start
     } else {
-        params.number("POINT", "DATA_START").unwrap_or(0.0) as usize
+        params
+            .number("POINT", "DATA_START")
+            .unwrap_or(0.0)
+            .clamp(0.0, 65_535.0) as usize
     };
     let data_start = data_block
         .checked_sub(1)
@@ -331,14 +336,14 @@ fn analog_words_per_frame(
         .u16s("ANALOG", "USED")
         .and_then(|v| v.first().copied())
         .map_or(0, usize::from);
-    if used == 0 || c.frames == 0 || header_words == used * header_per_frame.max(1) {
+    if used == 0 || c.frames == 0 || Some(header_words) == used.checked_mul(header_per_frame.max(1))
+    {
         return header_words;
     }
     let fits = |words: usize| {
-        let need = (c.points * 4 + words)
-            .saturating_mul(c.value_size)
-            .saturating_mul(c.frames);
-        need <= c.data_bytes && c.data_bytes - need < BLOCK + (c.points * 4 + words) * c.value_size
+        let frame = (c.points * 4 + words) * c.value_size;
+        let need = frame.saturating_mul(c.frames);
+        need <= c.data_bytes && c.data_bytes - need < BLOCK + frame
     };
     if fits(header_words) {
         return header_words;
@@ -346,14 +351,15 @@ fn analog_words_per_frame(
     let by_rate = params
         .number("ANALOG", "RATE")
         .map(|r| r / c.rate)
-        .filter(|k| k.is_finite() && *k >= 1.0 && (k - k.round()).abs() < 1e-6)
+        .filter(|k| k.is_finite() && *k >= 1.0 && *k <= 65_535.0 && (k - k.round()).abs() < 1e-6)
         .map(|k| k.round() as usize);
     for per_frame in [Some(header_per_frame).filter(|&k| k > 0), by_rate]
         .into_iter()
         .flatten()
     {
+        // A frame holds at most 65535 analog words (the header's 16-bit count).
         let words = used * per_frame;
-        if fits(words) {
+        if words <= 65_535 && fits(words) {
             warnings.push(format!(
                 "header word 3 says {header_words} analog values per frame; the data holds \
                  {used} channels × {per_frame} samples ({words}), which are read"
@@ -525,7 +531,16 @@ fn events(params: &Parameters, rate: f64, first: usize, warnings: &mut Vec<Strin
         ));
     }
     let text = |v: &[String], i: usize| v.get(i).cloned().unwrap_or_default();
+    let not_finite = (0..used.min(times.len() / 2))
+        .filter(|&i| !(times[2 * i] * 60.0 + times[2 * i + 1]).is_finite())
+        .count();
+    if not_finite > 0 {
+        warnings.push(format!(
+            "{not_finite} events have a time that is not a number; they are left out"
+        ));
+    }
     (0..used.min(times.len() / 2))
+        .filter(|&i| (times[2 * i] * 60.0 + times[2 * i + 1]).is_finite())
         .map(|i| {
             let time_s = times[2 * i] * 60.0 + times[2 * i + 1];
             let trial_frame = (time_s * rate).round().clamp(-1e15, 1e15) as i64 + 1;

@@ -136,7 +136,7 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
         .max(f32::MIN_POSITIVE);
     let scale = -old_scale;
     let rate = m.fps as f32;
-    let last = out.first_frame + frames.saturating_sub(1);
+    let last = out.first_frame.saturating_add(frames.saturating_sub(1));
     p.set("POINT", int("USED", points as u16 as i16));
     p.set("POINT", float("SCALE", scale));
     p.set("POINT", float("RATE", rate));
@@ -154,7 +154,7 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
         set_continued(&mut p, "POINT", "LABELS", string_lists(&m.point_names));
         p.remove("POINT", "DESCRIPTIONS");
     }
-    if frames > 65_535 || out.first_frame > 65_535 {
+    if last > 65_535 {
         let pair = |v: usize| Values::Int(vec![v as u16 as i16, (v >> 16) as u16 as i16]);
         p.set(
             "TRIAL",
@@ -349,5 +349,19 @@ mod tests {
         assert!((back.extras.events[0].time_s - 0.04).abs() < 1e-6);
         let bp = back.extras.parameters.unwrap();
         assert_eq!(bp.number("FORCE_PLATFORM", "USED"), Some(1.0));
+
+        // A take that ends past frame 65535 of its trial keeps every frame and its start.
+        let late = write(&Out {
+            motion: &m,
+            analog: Some(&a),
+            parameters: Some(&params),
+            first_frame: 65_534,
+        })
+        .unwrap();
+        let back = read_as(Format::C3d, &late, &ReadOptions::default()).unwrap();
+        assert_eq!(back.motion.frame_count(), 4);
+        assert_eq!(back.extras.first_frame, Some(65_534));
+        // The event at 0.04 s of the trial lies far before this take's first frame.
+        assert!(back.extras.events[0].frame < 0);
     }
 }
