@@ -4,31 +4,15 @@
 //! (rows of 16-bit integers or floats), file by file, with encode and decode speed. `flac`
 //! and `xz` are the system's programs (a missing one is reported as –).
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitCode, Stdio};
+use std::process::ExitCode;
 use std::time::Instant;
+
+use super::lossless::external;
 
 use mocapstore::codec::analog;
 use mocapstore::motion::analog::{Analog, Samples};
 use mocapstore::motion::formats::{self, Format, ReadOptions};
-
-/// Bytes of `data` through an external compressor, or `None` if it cannot be run.
-fn external(program: &str, args: &[&str], data: &[u8]) -> Option<usize> {
-    let mut child = Command::new(program)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .ok()?;
-    let mut stdin = child.stdin.take()?;
-    let input = data.to_vec();
-    let writer = std::thread::spawn(move || stdin.write_all(&input));
-    let out = child.wait_with_output().ok()?;
-    writer.join().ok()?.ok()?;
-    out.status.success().then_some(out.stdout.len())
-}
 
 /// The analog block as the file held it: rows of channels, 16-bit or f32, little-endian.
 fn block(a: &Analog) -> Vec<u8> {

@@ -12,7 +12,7 @@ use mocapstore::codec::{self, CodecId, ErrorBound};
 use mocapstore::motion::formats::{self, Format};
 
 /// Bytes of `data` through an external compressor, or `None` if it cannot be run.
-fn external(program: &str, args: &[&str], data: &[u8]) -> Option<usize> {
+pub(super) fn external(program: &str, args: &[&str], data: &[u8]) -> Option<usize> {
     let mut child = Command::new(program)
         .args(args)
         .stdin(Stdio::piped())
