@@ -301,19 +301,25 @@ pub fn c3d(
     .map_err(|e| Error::Unsatisfiable(e.to_string()))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
+/// What every read of a take's analog starts from: the take, its analog decoder (`None`
+/// without analog channels) and the range resolved against the take's frames.
+struct Opened {
+    take: Take,
+    decoder: Option<Decoder>,
+    start: usize,
+    end: usize,
+}
 
-    #[test]
-    fn bounds_parse() {
-        let b: AnalogBounds = "0.5".parse().unwrap();
-        assert_eq!(b.all, Some(0.5));
-        let b: AnalogBounds = "*=0.01, Fz1=2".parse().unwrap();
-        assert_eq!((b.all, b.by_label["Fz1"]), (Some(0.01), 2.0));
-        assert!("Fz1=-1".parse::<AnalogBounds>().is_err());
-        assert!("x".parse::<AnalogBounds>().is_err());
-    }
+async fn open(store: &Store, id: &str, range: TimeRange) -> Result<Opened> {
+    let take = super::fetch::take(store, id).await?;
+    let (start, end) = range.resolve(take.frames, take.fps)?;
+    let decoder = decoder(store, id).await?;
+    Ok(Opened {
+        take,
+        decoder,
+        start,
+        end,
+    })
 }
 
 /// An analog answer: the values of some channels over a range, in their units.
@@ -342,11 +348,13 @@ pub async fn answer(
     range: TimeRange,
     labels: &[String],
 ) -> Result<AnalogAnswer> {
-    let take = super::fetch::take(store, id).await?;
-    let d = decoder(store, id)
-        .await?
-        .ok_or_else(|| Error::Unsatisfiable(format!("take {id} has no analog channels")))?;
-    let (start, end) = range.resolve(take.frames, take.fps)?;
+    let Opened {
+        take,
+        decoder: d,
+        start,
+        end,
+    } = open(store, id, range).await?;
+    let d = d.ok_or_else(|| Error::Unsatisfiable(format!("take {id} has no analog channels")))?;
     let layout = d.layout();
     let per_frame = layout.per_frame;
     let channels = labels_to_indices(&layout.channels, labels)?;
@@ -426,15 +434,18 @@ pub async fn c3d_file(
     id: &str,
     range: TimeRange,
 ) -> Result<C3dFile> {
-    let take = super::fetch::take(store, id).await?;
+    let Opened {
+        take,
+        decoder: d,
+        start,
+        end,
+    } = open(store, id, range).await?;
     if take.is_live() {
         return Err(Error::Unsatisfiable(format!(
             "take {id} is being streamed; C3D is written once it is finished"
         )));
     }
-    let (start, end) = range.resolve(take.frames, take.fps)?;
     let frames = end - start;
-    let d = decoder(store, id).await?;
     let words = d
         .as_ref()
         .map_or(0, |d| d.layout().channels.len() * d.layout().per_frame);
@@ -625,4 +636,19 @@ pub async fn parameters_view(store: &Store, id: &str) -> Result<ParametersView> 
         trial: trial(&p),
         parameters: p,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounds_parse() {
+        let b: AnalogBounds = "0.5".parse().unwrap();
+        assert_eq!(b.all, Some(0.5));
+        let b: AnalogBounds = "*=0.01, Fz1=2".parse().unwrap();
+        assert_eq!((b.all, b.by_label["Fz1"]), (Some(0.01), 2.0));
+        assert!("Fz1=-1".parse::<AnalogBounds>().is_err());
+        assert!("x".parse::<AnalogBounds>().is_err());
+    }
 }

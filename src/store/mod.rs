@@ -397,16 +397,32 @@ impl Store {
 
     /// Chunks `first..end` (indices) of a take, checked against their CRC-32C.
     pub async fn chunks(&self, id: &str, first: i64, end: i64) -> Result<Vec<ChunkRow>> {
+        self.chunk_range(
+            "SELECT idx, first_frame, frames, crc32c, payload FROM chunks \
+             WHERE sequence_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
+            id,
+            first,
+            end,
+        )
+        .await
+    }
+
+    /// Chunks `first..end` of one take from `select` (the points' or the analog channels'
+    /// table: the same columns), each checked against its CRC-32C.
+    async fn chunk_range(
+        &self,
+        select: &'static str,
+        id: &str,
+        first: i64,
+        end: i64,
+    ) -> Result<Vec<ChunkRow>> {
         dispatch!(self, pool => {
-            let rows = sqlx::query(
-                "SELECT idx, first_frame, frames, crc32c, payload FROM chunks \
-                 WHERE sequence_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
-            )
-            .bind(id)
-            .bind(first)
-            .bind(end)
-            .fetch_all(pool)
-            .await?;
+            let rows = sqlx::query(select)
+                .bind(id)
+                .bind(first)
+                .bind(end)
+                .fetch_all(pool)
+                .await?;
             rows.iter().map(rows::chunk_from_row).collect()
         })
     }
@@ -435,18 +451,14 @@ impl Store {
 
     /// Analog chunks `first..end` (indices) of a take, checked against their CRC-32C.
     pub async fn analog_chunks(&self, id: &str, first: i64, end: i64) -> Result<Vec<ChunkRow>> {
-        dispatch!(self, pool => {
-            let rows = sqlx::query(
-                "SELECT idx, first_frame, frames, crc32c, payload FROM analog_chunks \
-                 WHERE sequence_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
-            )
-            .bind(id)
-            .bind(first)
-            .bind(end)
-            .fetch_all(pool)
-            .await?;
-            rows.iter().map(rows::chunk_from_row).collect()
-        })
+        self.chunk_range(
+            "SELECT idx, first_frame, frames, crc32c, payload FROM analog_chunks \
+             WHERE sequence_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
+            id,
+            first,
+            end,
+        )
+        .await
     }
 
     /// The parameters a take's file carried; `None` if it carried none.
