@@ -556,6 +556,10 @@ impl Answer {
     /// The stored payload of chunk `i` (the next one), and what counts it as held, reading
     /// ahead a batch of payloads when none is left.
     async fn payload(&mut self, i: usize) -> Result<(Vec<u8>, Held)> {
+        // Payloads read ahead of chunks that came from the cache instead are not needed.
+        while self.batch.front().is_some_and(|(r, _)| r.idx < i as i64) {
+            self.batch.pop_front();
+        }
         if self.batch.is_empty() {
             let chunks = &self.prepared.reader.header().chunks;
             let mut end = i + 1;
