@@ -17,6 +17,7 @@ use super::AppState;
 use crate::codec::{CodecId, ErrorBound, Hints, Latency};
 use crate::limits::Limits;
 use crate::motion::formats::{self, Format};
+use crate::motion::transform::Options;
 use crate::motion::units::parse_unit;
 use crate::service::access::{self, Caller};
 use crate::service::analog;
@@ -274,7 +275,7 @@ pub async fn errors(
     Ok(Json(fetch::errors(&state.store, &id).await?).into_response())
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, Default)]
 pub struct FramesQuery {
     start: Option<usize>,
     end: Option<usize>,
@@ -282,9 +283,17 @@ pub struct FramesQuery {
     t1: Option<f64>,
     points: Option<String>,
     format: Option<String>,
+    /// Output frame rate (resampling).
+    fps: Option<f64>,
+    /// keep, in-place or extract.
+    root: Option<String>,
+    /// y or z.
+    up: Option<String>,
+    /// mm, cm, m, in, …
+    unit: Option<String>,
 }
 
-/// A range request's query as the range, output format and points it asks for.
+/// A range request's query as the range, output format, points and transforms it asks for.
 pub fn frames_request(q: FramesQuery) -> Result<RangeRequest, ApiError> {
     let range = match (q.start, q.end, q.t0, q.t1) {
         (None, None, None, None) => TimeRange::All,
@@ -314,10 +323,29 @@ pub fn frames_request(q: FramesQuery) -> Result<RangeRequest, ApiError> {
             "BVH output is the whole skeleton: leave out points",
         ));
     }
+    let bad = |e: String| ApiError::bad_request(e);
+    let transform = Options {
+        fps: q.fps,
+        root: q
+            .root
+            .as_deref()
+            .map(str::parse)
+            .transpose()
+            .map_err(bad)?
+            .unwrap_or_default(),
+        up: q.up.as_deref().map(str::parse).transpose().map_err(bad)?,
+        metres_per_unit: q
+            .unit
+            .as_deref()
+            .map(parse_unit)
+            .transpose()
+            .map_err(|e| ApiError::bad_request(e.to_string()))?,
+    };
     Ok(RangeRequest {
         range,
         format,
         points,
+        transform,
     })
 }
 
@@ -335,6 +363,12 @@ pub async fn frames(
         if request.points.is_some() {
             return Err(ApiError::bad_request(
                 "C3D output is the whole take (points, analog, parameters): leave out points",
+            ));
+        }
+        if !request.transform.is_identity() {
+            return Err(ApiError::bad_request(
+                "C3D output is the take as stored: fps, root, up and unit apply to the other \
+                 formats (json, csv, trc, npy, f32, bvh, glb, gltf)",
             ));
         }
         let f = analog::c3d_file(
@@ -370,11 +404,13 @@ pub async fn frames(
     state
         .metrics
         .decoded(a.frames(), a.frames() * a.points.unwrap_or(0) * 12);
+    let frames_out = a.frames_out;
     let mut headers = HeaderMap::new();
     let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
-    headers.insert("x-frames", hv(a.frames().to_string()));
+    headers.insert("x-frames", hv(frames_out.to_string()));
     headers.insert("x-start-frame", hv(a.start.to_string()));
     headers.insert("x-fps", hv(a.fps.to_string()));
+    headers.insert("x-source-fps", hv(a.source_fps.to_string()));
     if let Some(points) = a.points {
         headers.insert("x-points", hv(points.to_string()));
         headers.insert("x-metres-per-unit", hv(a.metres_per_unit.to_string()));
@@ -383,7 +419,8 @@ pub async fn frames(
         headers.insert(header::CONTENT_LENGTH, hv(n.to_string()));
     }
     let content_type = match a.format {
-        Format::Json => "application/json",
+        Format::Json | Format::Gltf => "application/json",
+        Format::Glb => "model/gltf-binary",
         Format::Csv => "text/csv",
         Format::Trc | Format::Bvh => "text/plain",
         _ => "application/octet-stream",
@@ -442,8 +479,8 @@ pub async fn analog(
         end: q.end,
         t0: q.t0,
         t1: q.t1,
-        points: None,
         format: q.format.clone(),
+        ..FramesQuery::default()
     })?;
     let labels: Vec<String> = q
         .channels

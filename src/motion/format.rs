@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 /// A format name we do not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown format {0:?} (bvh, c3d, trc, json, npy, csv, f32)")]
+#[error("unknown format {0:?} (bvh, c3d, trc, json, npy, csv, f32, glb, gltf)")]
 pub struct UnknownFormat(pub String);
 
 /// A file format we read and/or write.
@@ -24,6 +24,10 @@ pub enum Format {
     Csv,
     /// Bare little-endian f32, `frames × points × 3`; write only (it has no header).
     F32,
+    /// Binary glTF 2.0; write only.
+    Glb,
+    /// glTF 2.0 as JSON, its buffer embedded; write only.
+    Gltf,
 }
 
 impl Format {
@@ -36,6 +40,8 @@ impl Format {
             Format::Npy => "npy",
             Format::Csv => "csv",
             Format::F32 => "f32",
+            Format::Glb => "glb",
+            Format::Gltf => "gltf",
         }
     }
 
@@ -46,7 +52,7 @@ impl Format {
     }
 
     pub fn can_read(self) -> bool {
-        !matches!(self, Format::Csv | Format::F32)
+        !matches!(self, Format::Csv | Format::F32 | Format::Glb | Format::Gltf)
     }
 }
 
@@ -67,6 +73,8 @@ impl FromStr for Format {
             "npy" => Format::Npy,
             "csv" => Format::Csv,
             "f32" | "bin" | "raw" => Format::F32,
+            "glb" => Format::Glb,
+            "gltf" => Format::Gltf,
             other => return Err(UnknownFormat(other.to_string())),
         })
     }

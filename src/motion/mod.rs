@@ -13,6 +13,7 @@ pub mod model;
 pub mod rotation;
 pub mod skeleton;
 pub mod synthetic;
+pub mod transform;
 pub mod units;
 
 pub use error::{Error, Location, Result};

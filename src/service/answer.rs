@@ -30,12 +30,14 @@ use bytes::Bytes;
 use super::budget::{Budget, Held, Holder, Reservation};
 use super::fetch::{prepare, TimeRange};
 use super::prepared::{Prepared, ReadCaches};
+use super::shape::Shaper;
 use super::{blocking, Error, Result};
 use crate::codec::read::Chunk;
 use crate::codec::{self, basis::hex, ChunkSource};
 use crate::limits::Limits;
 use crate::motion::formats::bvh::ChannelWriter;
 use crate::motion::formats::{frame_writer, Format, FrameWriter, Shape};
+use crate::motion::transform::{Options, Up};
 use crate::motion::{Unit, UnitSource};
 use crate::store::{ChunkRow, Store};
 
@@ -55,13 +57,15 @@ const TAIL_BYTES: usize = 64;
 /// Ranges of at most this many chunks are decoded through the server's chunk cache.
 pub const CACHED_CHUNKS: usize = 8;
 
-/// A range request, parsed: which frames, which points, which format.
+/// A range request, parsed: which frames, which points, which format, which transforms.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RangeRequest {
     pub range: TimeRange,
     /// Point names, each once; `None` for every point.
     pub points: Option<Vec<String>>,
     pub format: Format,
+    /// Frame rate, root motion, up axis and unit of the answer ([`super::shape`]).
+    pub transform: Options,
 }
 
 /// One answer, open: what it holds (for the response's headers) and its pieces, taken with
@@ -71,7 +75,11 @@ pub struct Answer {
     pub format: Format,
     pub start: usize,
     pub end: usize,
+    /// The answer's frames (the range's, or as many as resampling gives) and their rate.
+    pub frames_out: usize,
     pub fps: f64,
+    /// The take's own rate.
+    pub source_fps: f64,
     pub metres_per_unit: f64,
     /// Points per frame (none for BVH, which answers joint channels).
     pub points: Option<usize>,
@@ -82,6 +90,8 @@ pub struct Answer {
     prepared: Arc<Prepared>,
     reservation: Arc<Reservation>,
     writer: Writer,
+    /// The transforms between decoder and writer; `None` when none is asked for.
+    shaper: Option<Shaper>,
     /// The next chunk to decode, and the end of those the range lies in.
     next_chunk: usize,
     last_chunk: usize,
@@ -112,6 +122,79 @@ enum Writer {
         writer: ChannelWriter,
         channels: usize,
     },
+    /// glTF: the whole answer is gathered (a glTF's accessors run channel by channel, not
+    /// frame by frame), then written at the end.
+    Whole(Whole),
+}
+
+/// A glTF answer being gathered: shaped frames of positions or channels.
+struct Whole {
+    format: Format,
+    /// `Some` for a skeleton's channels, `None` for points.
+    joints: Option<Vec<crate::motion::skeleton::Joint>>,
+    names: Vec<String>,
+    values: Vec<f64>,
+    frames: usize,
+    extras: serde_json::Value,
+    name: String,
+    fps: f64,
+    _held: Option<Held>,
+}
+
+/// What a glTF is written from, owned (it is written on the blocking pool).
+struct GltfFile {
+    format: Format,
+    joints: Option<Vec<crate::motion::skeleton::Joint>>,
+    names: Vec<String>,
+    values: Vec<f64>,
+    frames: usize,
+    fps: f64,
+    name: String,
+    extras: serde_json::Value,
+}
+
+impl Whole {
+    /// The gathered frames, taken, with what the file needs.
+    fn file(&mut self) -> GltfFile {
+        GltfFile {
+            format: self.format,
+            joints: self.joints.clone(),
+            names: self.names.clone(),
+            values: std::mem::take(&mut self.values),
+            frames: self.frames,
+            fps: self.fps,
+            name: self.name.clone(),
+            extras: self.extras.clone(),
+        }
+    }
+}
+
+impl GltfFile {
+    fn write(self) -> Vec<u8> {
+        use crate::motion::formats::gltf::{self, Figure, Scene};
+        let figure = match &self.joints {
+            Some(joints) => Figure::Skeleton {
+                joints,
+                values: &self.values,
+            },
+            None => Figure::Markers {
+                names: &self.names,
+                positions: &self.values,
+            },
+        };
+        let scene = Scene {
+            name: &self.name,
+            figure,
+            frames: self.frames,
+            fps: self.fps,
+            extras: self.extras.clone(),
+        };
+        if self.format == Format::Gltf {
+            gltf::gltf(&scene)
+        } else {
+            gltf::glb(&scene)
+        }
+    }
 }
 
 /// Decoded frames of one chunk (the part in the range), and how many are written.
@@ -155,12 +238,39 @@ pub async fn open(
     let max_payload = metas.iter().map(|c| u64::from(c.len)).max().unwrap_or(0);
     let all_payloads: u64 = metas.iter().map(|c| u64::from(c.len)).sum();
     let frames = end - start;
+    let mut transform = req.transform;
+    super::shape::check(&transform)?;
+    if matches!(req.format, Format::Glb | Format::Gltf) {
+        // glTF is metres and +Y up, whatever the take's.
+        if transform.metres_per_unit.is_some_and(|m| m != 1.0) {
+            return Err(Error::InvalidRequest(
+                "glTF is in metres: leave out unit".into(),
+            ));
+        }
+        if transform.up == Some(Up::Z) {
+            return Err(Error::InvalidRequest("glTF is +Y up: leave out up".into()));
+        }
+        transform.metres_per_unit = Some(1.0);
+        transform.up = Some(Up::Y);
+    }
+    let frames_out = super::shape::frames_out(&prepared, &transform, frames);
+    // Resampling up makes a block of output frames from a block of decoded ones.
+    let grow = |n: u64| (n as f64 * frames_out as f64 / frames.max(1) as f64).ceil() as u64 + 2;
+    let span = Span {
+        id,
+        start,
+        end,
+        frames: frames_out,
+        chunk_frames,
+        part_frames,
+    };
     let Plan {
         mut writer,
         points,
         decode_bytes,
         block_bytes,
         frame_bytes,
+        shaper,
     } = match req.format {
         Format::Bvh => {
             if req.points.is_some() {
@@ -169,19 +279,94 @@ pub async fn open(
                 ));
             }
             // As many samples as the skeleton's joints and End Sites would be as points.
-            check_size(frames, prepared.point_names.len(), limits)?;
+            check_size(frames_out, prepared.point_names.len(), limits)?;
             let rig = channels_rig(store, &prepared).await?;
-            Plan::channels(&rig, &prepared, frames, chunk_frames, part_frames)
-        }
-        format => {
-            let span = Span {
-                id,
-                start,
-                end,
+            let shaper = (!transform.is_identity())
+                .then(|| Shaper::channels(&prepared, rig.joints(), &transform, frames))
+                .transpose()?;
+            Plan::channels(
+                &rig,
+                &prepared,
+                shaper,
+                frames_out,
                 chunk_frames,
-                part_frames,
+                grow(part_frames),
+            )
+        }
+        Format::Glb | Format::Gltf => {
+            if req.points.is_some() {
+                return Err(Error::InvalidRequest(
+                    "glTF output is the whole take: leave out points".into(),
+                ));
+            }
+            check_size(frames_out, prepared.point_names.len(), limits)?;
+            let keeps =
+                codec::codec(prepared.reader.header().codec).is_ok_and(|c| c.codes_channels());
+            let shaper = if keeps {
+                let rig = channels_rig(store, &prepared).await?;
+                Shaper::channels(&prepared, rig.joints(), &transform, frames)?
+            } else {
+                Shaper::points(&prepared, &transform, frames, None)?
             };
-            Plan::points(&prepared, format, req.points.as_deref(), limits, &span)?
+            let nodes = shaper
+                .joints()
+                .map_or(shaper.width() / 3, <[crate::motion::skeleton::Joint]>::len);
+            let file = crate::motion::formats::gltf::glb_len_bound(frames_out, nodes);
+            let gathered = frames_out as u64 * shaper.width() as u64 * 8;
+            if file.saturating_mul(2) + gathered > limits.answer_bytes {
+                return Err(Error::InvalidRequest(format!(
+                    "a glTF of {frames_out} frames of {nodes} nodes takes about {} bytes to \
+                     build, over the limit of {} for one answer; ask for a shorter range or a \
+                     lower fps",
+                    file * 2 + gathered,
+                    limits.answer_bytes
+                )));
+            }
+            Plan::whole(
+                &prepared,
+                req.format,
+                shaper,
+                frames_out,
+                &span,
+                file + gathered,
+            )
+        }
+        format if transform.is_identity() => Plan::points(
+            &prepared,
+            format,
+            req.points.as_deref(),
+            limits,
+            &span,
+            None,
+        )?,
+        format => {
+            let selected = req
+                .points
+                .as_deref()
+                .map(|n| point_indices(&prepared, n))
+                .transpose()?;
+            let shaper = Shaper::points(&prepared, &transform, frames, selected)?;
+            let names = shaper.point_names(&prepared);
+            let span = Span {
+                chunk_frames: grow(chunk_frames),
+                part_frames: grow(part_frames),
+                ..span
+            };
+            let mut plan = Plan::points(
+                &prepared,
+                format,
+                Some(&names),
+                limits,
+                &span,
+                Some(&transform),
+            )?;
+            // Every point is decoded (root motion follows the root) and the asked-for kept.
+            if let Writer::Points { selected, .. } = &mut plan.writer {
+                *selected = None;
+            }
+            plan.decode_bytes = chunk_frames * prepared.point_names.len() as u64 * 12 * 3;
+            plan.shaper = Some(shaper);
+            plan
         }
     };
     let mut head = Vec::new();
@@ -194,25 +379,37 @@ pub async fn open(
             writer.head(&mut head);
             None
         }
+        Writer::Whole(_) => None,
     };
     // Output in flight: a few pieces, or the whole answer if it is smaller. A piece is a
     // frame past its size at most (the head is the first piece's start).
     let piece = (PIECE_BYTES as u64).max(head.len() as u64) + frame_bytes + TAIL_BYTES as u64;
     let output =
-        (PIECES_IN_FLIGHT * piece).min(head.len() as u64 + frames as u64 * frame_bytes + piece);
+        (PIECES_IN_FLIGHT * piece).min(head.len() as u64 + frames_out as u64 * frame_bytes + piece);
     let payloads = PAYLOAD_BATCH.min(all_payloads).max(max_payload);
     let bound = 2 * decode_bytes + block_bytes + payloads + output;
     let mut reservation = budget.reservation(holder);
     reservation
         .grow_to(bound)
         .map_err(|r| Error::Busy(format!("{}; retry shortly", r.reason("range answers"))))?;
+    let reservation = Arc::new(reservation);
+    if let Writer::Whole(w) = &mut writer {
+        // What gathering holds, counted from the start: it is the answer's bulk.
+        w._held = Some(reservation.hold(block_bytes));
+    }
+    let fps = transform.fps.unwrap_or(prepared.fps);
+    let metres_per_unit = transform
+        .metres_per_unit
+        .unwrap_or(prepared.metres_per_unit);
     Ok(Answer {
         id: id.to_string(),
         format: req.format,
         start,
         end,
-        fps: prepared.fps,
-        metres_per_unit: prepared.metres_per_unit,
+        frames_out,
+        fps,
+        source_fps: prepared.fps,
+        metres_per_unit,
         points,
         length,
         store: store.clone(),
@@ -221,19 +418,20 @@ pub async fn open(
         next_chunk: chunks.start,
         last_chunk: chunks.end,
         prepared,
-        reservation: Arc::new(reservation),
+        reservation,
         writer,
+        shaper,
         batch: VecDeque::new(),
         block: None,
         pending: {
-            let room = (frames * frame_bytes as usize).min(PIECE_BYTES);
+            let room = (frames_out * frame_bytes as usize).min(PIECE_BYTES);
             let mut first =
                 Vec::with_capacity(head.len().max(room) + frame_bytes as usize + TAIL_BYTES);
             first.extend_from_slice(&head);
             first
         },
         frame_bytes: frame_bytes as usize,
-        frames_left: frames,
+        frames_left: frames_out,
         tail_done: false,
     })
 }
@@ -243,6 +441,8 @@ struct Span<'a> {
     id: &'a str,
     start: usize,
     end: usize,
+    /// The answer's frames: `end - start`, or as many as resampling makes of them.
+    frames: usize,
     /// The frames of the largest chunk the range lies in, and the most of one in the range.
     chunk_frames: u64,
     part_frames: u64,
@@ -257,32 +457,43 @@ struct Plan {
     block_bytes: u64,
     /// The most bytes one frame of output takes.
     frame_bytes: u64,
+    shaper: Option<Shaper>,
 }
 
 impl Plan {
     /// Positions of every point or of the named ones, checked against the answer limit.
+    /// With `shaped` (the transforms asked for), `names` are the shaped frame's points and
+    /// the answer's rate and unit are the transforms'.
     fn points(
         prepared: &Prepared,
         format: Format,
         names: Option<&[String]>,
         limits: &Limits,
         span: &Span<'_>,
+        shaped: Option<&Options>,
     ) -> Result<Plan> {
-        let selected = names.map(|n| point_indices(prepared, n)).transpose()?;
-        let names: Vec<String> = match &selected {
-            None => prepared.point_names.clone(),
-            Some(ix) => ix
-                .iter()
-                .map(|&i| prepared.point_names[i].clone())
-                .collect(),
+        let (selected, names) = match (shaped, names) {
+            (Some(_), Some(n)) => (None, n.to_vec()),
+            (_, None) => (None, prepared.point_names.clone()),
+            (None, Some(n)) => {
+                let ix = point_indices(prepared, n)?;
+                let names = ix
+                    .iter()
+                    .map(|&i| prepared.point_names[i].clone())
+                    .collect();
+                (Some(ix), names)
+            }
         };
-        let frames = span.end - span.start;
+        let frames = span.frames;
         check_size(frames, names.len(), limits)?;
         let n = names.len();
-        let unit = Unit::new(prepared.metres_per_unit, UnitSource::Declared)
+        let metres_per_unit = shaped
+            .and_then(|o| o.metres_per_unit)
+            .unwrap_or(prepared.metres_per_unit);
+        let unit = Unit::new(metres_per_unit, UnitSource::Declared)
             .map_err(|e| Error::Corrupt(format!("stored take {}: {e}", span.id)))?;
         let shape = Shape {
-            fps: prepared.fps,
+            fps: shaped.and_then(|o| o.fps).unwrap_or(prepared.fps),
             unit,
             point_names: names,
             frames,
@@ -292,7 +503,7 @@ impl Plan {
             fields.insert("id".into(), span.id.into());
             fields.insert("start".into(), span.start.into());
             fields.insert("end".into(), span.end.into());
-            fields.insert("metres_per_unit".into(), prepared.metres_per_unit.into());
+            fields.insert("metres_per_unit".into(), metres_per_unit.into());
         }
         let writer =
             frame_writer(format, shape, fields).map_err(|e| Error::Unsatisfiable(e.to_string()))?;
@@ -302,19 +513,26 @@ impl Plan {
             points: Some(n),
             decode_bytes: span.chunk_frames * prepared.point_names.len() as u64 * 12,
             block_bytes: span.part_frames * n as u64 * 12,
+            shaper: None,
         })
     }
 
-    /// A skeleton's channels, as BVH.
+    /// A skeleton's channels, as BVH (shaped by `shaper` when transforms are asked for).
     fn channels(
         rig: &codec::Rig,
         prepared: &Prepared,
+        shaper: Option<Shaper>,
         frames: usize,
         chunk_frames: u64,
         part_frames: u64,
     ) -> Plan {
         let channels = rig.channel_count();
-        let writer = ChannelWriter::new(rig.joints().to_vec(), prepared.fps, frames);
+        let (joints, fps) = match &shaper {
+            Some(s) => (s.joints().unwrap_or(rig.joints()).to_vec(), s.fps(prepared)),
+            None => (rig.joints().to_vec(), prepared.fps),
+        };
+        let out_channels: u64 = joints.iter().map(|j| j.channels.len() as u64).sum();
+        let writer = ChannelWriter::new(joints, fps, frames);
         // A value and how it was printed (`bvh-lossless`), per channel; and the positions
         // a decoder may work through.
         let per_frame = channels as u64 * CHANNEL_BYTES;
@@ -324,7 +542,49 @@ impl Plan {
             writer: Writer::Channels { writer, channels },
             points: None,
             decode_bytes: chunk_frames * (per_frame + positions),
-            block_bytes: part_frames * per_frame,
+            block_bytes: part_frames * out_channels.max(channels as u64) * CHANNEL_BYTES,
+            shaper,
+        }
+    }
+
+    /// A glTF of the shaped frames, gathered whole; `bytes` is what gathering and writing
+    /// hold.
+    fn whole(
+        prepared: &Prepared,
+        format: Format,
+        shaper: Shaper,
+        frames: usize,
+        span: &Span<'_>,
+        bytes: u64,
+    ) -> Plan {
+        let header = prepared.reader.header();
+        let in_width = prepared.point_names.len() as u64 * 12;
+        let whole = Whole {
+            format,
+            joints: shaper.joints().map(<[_]>::to_vec),
+            names: shaper.point_names(prepared),
+            values: Vec::new(),
+            frames,
+            extras: serde_json::json!({
+                "mocapstore": {
+                    "id": prepared.id,
+                    "codec": header.codec.to_string(),
+                    "bound": prepared.bound,
+                }
+            }),
+            name: prepared.name.clone(),
+            fps: shaper.fps(prepared),
+            _held: None,
+        };
+        Plan {
+            writer: Writer::Whole(whole),
+            points: None,
+            // A chunk decoded as positions (or channels, which take fewer bytes than the
+            // positions a skeleton decoder works through).
+            decode_bytes: span.chunk_frames * in_width * 2,
+            block_bytes: bytes,
+            frame_bytes: 0,
+            shaper: Some(shaper),
         }
     }
 }
@@ -422,8 +682,16 @@ impl Answer {
             }
             if !self.tail_done {
                 self.tail_done = true;
-                if let Writer::Points { writer, .. } = &mut self.writer {
-                    writer.tail(&mut self.pending);
+                match &mut self.writer {
+                    Writer::Points { writer, .. } => writer.tail(&mut self.pending),
+                    Writer::Whole(w) => {
+                        let file = w.file();
+                        let bytes = blocking(move || file.write()).await?;
+                        // The file is held as the piece it is handed on in from now.
+                        w._held = None;
+                        self.pending = bytes;
+                    }
+                    Writer::Channels { .. } => {}
                 }
             }
             return Ok((!self.pending.is_empty()).then(|| self.hand_on()));
@@ -450,7 +718,8 @@ impl Answer {
         let Some(block) = &mut self.block else { return };
         let (per_frame, width) = match &self.writer {
             Writer::Points { writer, .. } => (writer.frame_bytes(), self.points.unwrap_or(0) * 3),
-            Writer::Channels { writer, channels } => (writer.frame_bytes(), *channels),
+            Writer::Channels { writer, .. } => (writer.frame_bytes(), writer.channels()),
+            Writer::Whole(_) => unreachable!("a glTF answer is gathered, not written in blocks"),
         };
         let room = PIECE_BYTES.saturating_sub(self.pending.len());
         let n = (room / per_frame.max(1)).clamp(1, block.frames - block.written);
@@ -480,17 +749,24 @@ impl Answer {
         let part = r.start.max(self.start)..r.end.min(self.end);
         let full = r.len() * header.points as usize * 3 * 4;
         let id = self.id.clone();
-        let selected = match &self.writer {
-            Writer::Points { selected, .. } => Some(selected.clone()),
-            Writer::Channels { .. } => None,
+        // Positions (of the selected points, or all when shaped), or channels (how many).
+        let selected = match (&self.writer, &self.shaper) {
+            (Writer::Points { selected, .. }, _) => Some(selected.clone()),
+            (Writer::Whole(_), Some(Shaper::Points { .. })) => Some(None),
+            _ => None,
+        };
+        let channels = match (&self.writer, &self.shaper) {
+            (Writer::Channels { channels, .. }, _) => *channels,
+            (_, Some(Shaper::Channels { pose, .. })) => pose.channels_in(),
+            _ => 0,
         };
         let frames = part.len();
         debug_assert!(frames > 0, "a chunk the range lies in holds some of it");
         // What decoding holds (the payload, the chunk decoded, the decoder's copy) is counted
         // until the decode ends, even if this answer is dropped meanwhile (its client went
         // away): the blocking pool finishes the work, and its memory stays reserved.
-        let block = match (selected, &self.writer) {
-            (Some(selected), _) => {
+        let block = match selected {
+            Some(selected) => {
                 let cached = self.caches.chunks.get(&id, i);
                 let (chunk, payload_held) = match cached {
                     Some(d) => (OneChunk::Decoded(d), None),
@@ -512,7 +788,13 @@ impl Answer {
                 if let Some(fresh) = fresh {
                     self.caches.chunks.insert(&id, i, fresh);
                 }
-                let data = data?;
+                let mut data = data?;
+                let mut frames = frames;
+                if let Some(shaper) = &mut self.shaper {
+                    let source = data;
+                    data = shaper.positions(&source);
+                    frames = data.len() / shaper.width().max(1);
+                }
                 let held = self.reservation.hold(data.capacity() as u64 * 4);
                 Block {
                     frames,
@@ -521,8 +803,7 @@ impl Answer {
                     _held: held,
                 }
             }
-            (None, Writer::Channels { channels, .. }) => {
-                let channels = *channels;
+            None => {
                 let (payload, payload_held) = self.payload(i).await?;
                 let working = self
                     .reservation
@@ -534,6 +815,16 @@ impl Answer {
                     p.reader.read_channels(part, channels, &one)
                 })
                 .await??;
+                let mut decoded = decoded;
+                let mut frames = frames;
+                if let Some(shaper) = &mut self.shaper {
+                    let values = shaper.channel_values(&decoded.values);
+                    frames = values.len() / shaper.width().max(1);
+                    decoded = codec::rig::Channels {
+                        values,
+                        printed: None,
+                    };
+                }
                 let bytes = decoded.values.capacity() * 8
                     + decoded
                         .printed
@@ -547,9 +838,19 @@ impl Answer {
                     _held: held,
                 }
             }
-            (None, Writer::Points { .. }) => unreachable!("points writers have a selection"),
         };
-        self.block = Some(block);
+        if let Writer::Whole(w) = &mut self.writer {
+            // Gathered: counted in the reservation's gathering share from the start.
+            match block.data {
+                Decoded::Positions(v) => w.values.extend(v.iter().map(|&x| f64::from(x))),
+                Decoded::Channels(c) => w.values.extend_from_slice(&c.values),
+            }
+            self.frames_left = self.frames_left.saturating_sub(block.frames);
+            return Ok(());
+        }
+        if block.frames > 0 {
+            self.block = Some(block);
+        }
         Ok(())
     }
 

@@ -176,6 +176,7 @@ pub async fn ingest(
         events: extras.events,
         first_frame: extras.first_frame,
         analog: analog.as_ref().map(|a| a.meta.clone()),
+        up: crate::motion::transform::infer_up(m.positions(), m.point_count()),
     };
     let format = loaded.format.name();
     let mut take = Take::new(

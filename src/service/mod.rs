@@ -32,6 +32,7 @@ pub mod ingest;
 pub mod jobs;
 pub mod library;
 pub mod prepared;
+pub mod shape;
 pub mod skeletons;
 pub mod streams;
 pub mod take;

@@ -22,6 +22,11 @@ pub struct Prepared {
     pub frames: usize,
     /// Whether the take has a skeleton (a BVH take), whatever its codec keeps.
     pub skeleton: bool,
+    /// What a file written of it names (glTF's extras): the take's name and bound.
+    pub name: String,
+    pub bound: crate::codec::ErrorBound,
+    /// The stored coordinates' up axis, where the take's record keeps it.
+    pub up: Option<crate::motion::transform::Up>,
 }
 
 impl Prepared {
@@ -37,6 +42,9 @@ impl Prepared {
             metres_per_unit: take.metres_per_unit,
             frames: take.frames,
             skeleton: take.skeleton.is_some(),
+            name: take.name.clone(),
+            bound: take.bound,
+            up: take.meta.up,
         })
     }
 
@@ -216,6 +224,9 @@ mod tests {
             metres_per_unit: 0.001,
             frames: 20,
             skeleton: false,
+            name: id.into(),
+            bound: ErrorBound::max(1.0),
+            up: None,
         })
     }
 

@@ -465,6 +465,7 @@ impl Streams {
             events: Vec::new(),
             first_frame: None,
             analog: None,
+            up: None,
         };
         let mut take = Take::new(
             &plan.label,

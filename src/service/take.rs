@@ -86,6 +86,11 @@ pub struct TakeMeta {
     /// The take's analog channels, how they were coded and what that cost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analog: Option<AnalogMeta>,
+    /// The axis that points up in the stored coordinates, inferred from the figure when it
+    /// was ingested (what `up=` turns from). Absent for takes stored before it was kept and
+    /// for live ones: then read paths infer it from the frames they decode.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up: Option<crate::motion::transform::Up>,
 }
 
 /// Who a new take is and where it goes: what a client names.
@@ -463,6 +468,7 @@ mod tests {
                 first_frame: None,
                 events: Vec::new(),
                 analog: None,
+                up: Some(crate::motion::transform::Up::Z),
             },
             created_at: 1,
             header: vec![1, 2, 3],

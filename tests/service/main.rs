@@ -20,4 +20,5 @@ mod robustness;
 mod skeletons;
 mod store;
 mod streams;
+mod transforms;
 mod viewer;

@@ -158,7 +158,9 @@ async fn long_reads_over_cached_chunks_are_whole() {
     let (status, _, before) = srv.get(&whole).await;
     assert_eq!(status, 200);
     let (status, _, _) = srv
-        .get(&format!("/v1/sequences/{id}/frames?start=700&end=900&format=f32"))
+        .get(&format!(
+            "/v1/sequences/{id}/frames?start=700&end=900&format=f32"
+        ))
         .await;
     assert_eq!(status, 200);
     let (status, _, after) = srv.get(&whole).await;

@@ -427,6 +427,11 @@ impl ChannelWriter {
         }
     }
 
+    /// Channel values a frame has.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
     pub fn head(&self, out: &mut Vec<u8>) {
         let mut text = String::from("HIERARCHY\n");
         if !self.joints.is_empty() {

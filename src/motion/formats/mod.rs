@@ -13,6 +13,7 @@ pub mod bvh;
 pub mod c3d;
 pub mod columns;
 pub mod csv;
+pub mod gltf;
 pub mod json;
 pub mod npy;
 pub mod rawf32;
@@ -212,7 +213,7 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         Format::Trc => trc::read(bytes, limits)?,
         Format::Json => json::read(bytes, limits)?,
         Format::Npy => npy::read(bytes, limits)?,
-        Format::Csv | Format::F32 => {
+        Format::Csv | Format::F32 | Format::Glb | Format::Gltf => {
             return Err(Error::Unsupported(format!(
                 "{format} is an output format only"
             )))
@@ -312,7 +313,8 @@ fn settle_unit(
 
 /// The writer of `format` for an answer of `shape`; `fields` are extra top-level members
 /// of a JSON answer (which take, which frames), ignored by readers. BVH is written from
-/// joint channels ([`bvh::ChannelWriter`]) and C3D not at all: both are refused.
+/// joint channels ([`bvh::ChannelWriter`]), C3D and glTF whole ([`c3d::write`],
+/// [`gltf`]): they are refused here.
 pub fn frame_writer(
     format: Format,
     shape: Shape,
@@ -329,10 +331,10 @@ pub fn frame_writer(
                 "BVH is written from a skeleton's channels, not from points".into(),
             ))
         }
-        Format::C3d => {
-            return Err(Error::Unsupported(
-                "writing C3D is not supported yet".into(),
-            ))
+        Format::C3d | Format::Glb | Format::Gltf => {
+            return Err(Error::Unsupported(format!(
+                "{format} is written whole, not frame by frame"
+            )))
         }
     })
 }
@@ -451,9 +453,9 @@ mod tests {
     }
 
     #[test]
-    fn bvh_and_c3d_are_not_point_writers() {
+    fn bvh_c3d_and_gltf_are_not_frame_writers() {
         let m = walker(3, 1, 60.0, 1, 0.0);
-        for f in [Format::Bvh, Format::C3d] {
+        for f in [Format::Bvh, Format::C3d, Format::Glb, Format::Gltf] {
             assert!(frame_writer(f, Shape::of(&m), Default::default()).is_err());
         }
     }

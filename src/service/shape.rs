@@ -1,0 +1,253 @@
+//! The transforms a range answer asks for ([`Options`]: frame rate, root motion, up axis,
+//! unit), applied to each decoded block on its way to the writer. The math is in
+//! [`crate::motion::transform`]; this holds the state one answer carries between blocks
+//! and decides which transform a take can take.
+
+use super::prepared::Prepared;
+use super::{Error, Result};
+use crate::motion::skeleton::Joint;
+use crate::motion::transform::channels::Channels;
+use crate::motion::transform::pose::{PointPose, SkeletonPose};
+use crate::motion::transform::resample::{output_frames, Positions, Resampler};
+use crate::motion::transform::{infer_up, Options, Root, Up, ROOT_MOTION};
+
+/// The highest frame rate an answer may ask for: a resampled answer is still bounded by the
+/// answer limits, but a rate past any capture system's is a mistake, not a request.
+pub const MAX_FPS: f64 = 10_000.0;
+
+/// The transforms of one answer, and the state they keep between blocks.
+pub enum Shaper {
+    /// Positions: all the take's points are decoded (root motion follows the root even
+    /// when it is not asked for), transformed, then the asked-for ones kept.
+    Points {
+        options: Options,
+        resampler: Option<Resampler<Positions>>,
+        /// Built at the first block when the take's record has no up axis (inferred from
+        /// the frames then).
+        pose: Option<PointPose>,
+        points: usize,
+        root_point: Option<usize>,
+        metres_per_unit: f64,
+        /// Indices into the transformed frame's points.
+        selected: Vec<usize>,
+    },
+    /// A skeleton's channel values.
+    Channels {
+        fps: Option<f64>,
+        resampler: Option<Resampler<Channels>>,
+        pose: SkeletonPose,
+    },
+}
+
+/// Checks the options every answer shares: a positive rate within [`MAX_FPS`], a positive
+/// unit.
+pub fn check(options: &Options) -> Result<()> {
+    if let Some(fps) = options.fps {
+        if !(fps.is_finite() && fps > 0.0 && fps <= MAX_FPS) {
+            return Err(Error::InvalidRequest(format!(
+                "fps must be above 0 and at most {MAX_FPS}, got {fps}"
+            )));
+        }
+    }
+    if let Some(m) = options.metres_per_unit {
+        if !(m.is_finite() && m > 0.0) {
+            return Err(Error::InvalidRequest(format!(
+                "unit must be positive, got {m} m"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Frames an answer of `frames` source frames has after `options`.
+pub fn frames_out(prepared: &Prepared, options: &Options, frames: usize) -> usize {
+    match options.fps {
+        Some(fps) if fps != prepared.fps => output_frames(frames, prepared.fps, fps),
+        _ => frames,
+    }
+}
+
+fn resampler<I: crate::motion::transform::resample::Interpolant>(
+    interp: I,
+    prepared: &Prepared,
+    options: &Options,
+    frames: usize,
+) -> Option<Resampler<I>> {
+    match options.fps {
+        Some(fps) if fps != prepared.fps => Some(Resampler::new(interp, frames, prepared.fps, fps)),
+        _ => None,
+    }
+}
+
+impl Shaper {
+    /// The shaper of positions of `frames` source frames, keeping the points `selected`
+    /// (all when `None`; with `root=extract`, `root_motion` is kept as well).
+    pub fn points(
+        prepared: &Prepared,
+        options: &Options,
+        frames: usize,
+        selected: Option<Vec<usize>>,
+    ) -> Result<Shaper> {
+        check(options)?;
+        let points = prepared.point_names.len();
+        // A skeleton take's root joint is its first point.
+        let root_point = prepared.skeleton.then_some(0);
+        let pose = |up| {
+            PointPose::new(options, points, root_point, up, prepared.metres_per_unit)
+                .map_err(Error::InvalidRequest)
+        };
+        // Refused options are refused now, whatever the axis turns out to be.
+        let probe = pose(prepared.up.unwrap_or(Up::Y))?;
+        let extract = options.root == Root::Extract;
+        let mut selected = selected.unwrap_or_else(|| (0..points).collect());
+        if extract {
+            selected.push(points);
+        }
+        Ok(Shaper::Points {
+            options: *options,
+            resampler: resampler(Positions { points }, prepared, options, frames),
+            pose: prepared.up.map(|_| probe),
+            points,
+            root_point,
+            metres_per_unit: prepared.metres_per_unit,
+            selected,
+        })
+    }
+
+    /// The names of the points a shaped frame holds.
+    pub fn point_names(&self, prepared: &Prepared) -> Vec<String> {
+        match self {
+            Shaper::Points {
+                selected, points, ..
+            } => selected
+                .iter()
+                .map(|&i| {
+                    if i == *points {
+                        ROOT_MOTION.to_string()
+                    } else {
+                        prepared.point_names[i].clone()
+                    }
+                })
+                .collect(),
+            Shaper::Channels { .. } => Vec::new(),
+        }
+    }
+
+    /// The shaper of a skeleton's channels (`joints`) of `frames` source frames. A take
+    /// whose record has no up axis is taken as Y-up (BVH's).
+    pub fn channels(
+        prepared: &Prepared,
+        joints: &[Joint],
+        options: &Options,
+        frames: usize,
+    ) -> Result<Shaper> {
+        check(options)?;
+        let pose = SkeletonPose::new(
+            options,
+            joints,
+            prepared.up.unwrap_or(Up::Y),
+            prepared.metres_per_unit,
+        )
+        .map_err(Error::Unsatisfiable)?;
+        Ok(Shaper::Channels {
+            fps: options.fps,
+            resampler: resampler(Channels::new(joints), prepared, options, frames),
+            pose,
+        })
+    }
+
+    /// The rate of shaped frames.
+    pub fn fps(&self, prepared: &Prepared) -> f64 {
+        match self {
+            Shaper::Points { options, .. } => options.fps,
+            Shaper::Channels { fps, .. } => *fps,
+        }
+        .unwrap_or(prepared.fps)
+    }
+
+    /// The skeleton a shaped frame's channels are of (`None` for positions).
+    pub fn joints(&self) -> Option<&[Joint]> {
+        match self {
+            Shaper::Channels { pose, .. } => Some(pose.joints()),
+            Shaper::Points { .. } => None,
+        }
+    }
+
+    /// Values a shaped frame holds.
+    pub fn width(&self) -> usize {
+        match self {
+            Shaper::Points { selected, .. } => selected.len() * 3,
+            Shaper::Channels { pose, .. } => pose.channels_out(),
+        }
+    }
+
+    /// Decoded positions of whole source frames (every point of the take) to shaped ones,
+    /// as many frames as are ready.
+    pub fn positions(&mut self, decoded: &[f32]) -> Vec<f32> {
+        let Shaper::Points {
+            options,
+            resampler,
+            pose,
+            points,
+            root_point,
+            metres_per_unit,
+            selected,
+        } = self
+        else {
+            unreachable!("a positions block is shaped by a points shaper")
+        };
+        let w = *points * 3;
+        let pose = pose.get_or_insert_with(|| {
+            let up = infer_up(decoded, *points).unwrap_or(Up::Y);
+            PointPose::new(options, *points, *root_point, up, *metres_per_unit)
+                .expect("the options were checked when the answer opened")
+        });
+        let src: Vec<f64> = decoded.iter().map(|&v| f64::from(v)).collect();
+        let frames = match resampler {
+            Some(r) => {
+                let mut out = Vec::with_capacity(r.most_out_of(src.len() / w.max(1)) * w);
+                r.push(&src, &mut out);
+                out
+            }
+            None => src,
+        };
+        let wo = pose.points_out() * 3;
+        let mut shaped = Vec::with_capacity(frames.len() / w.max(1) * wo);
+        let mut out = Vec::with_capacity(selected.len() * 3 * frames.len() / w.max(1));
+        for f in frames.chunks_exact(w.max(1)) {
+            shaped.clear();
+            pose.frame(f, &mut shaped);
+            for &p in selected.iter() {
+                out.extend(shaped[p * 3..p * 3 + 3].iter().map(|&v| v as f32));
+            }
+        }
+        out
+    }
+
+    /// Decoded channel values of whole source frames to shaped ones, as many frames as
+    /// are ready.
+    pub fn channel_values(&mut self, decoded: &[f64]) -> Vec<f64> {
+        let Shaper::Channels {
+            resampler, pose, ..
+        } = self
+        else {
+            unreachable!("a channels block is shaped by a channels shaper")
+        };
+        let resampled;
+        let frames = match resampler {
+            Some(r) => {
+                let mut out = Vec::new();
+                r.push(decoded, &mut out);
+                resampled = out;
+                &resampled[..]
+            }
+            None => decoded,
+        };
+        let w = pose.channels_in().max(1);
+        let mut out = Vec::with_capacity(frames.len() / w * pose.channels_out());
+        for f in frames.chunks_exact(w) {
+            pose.frame(f, &mut out);
+        }
+        out
+    }
+}
