@@ -136,7 +136,13 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
         .max(f32::MIN_POSITIVE);
     let scale = -old_scale;
     let rate = m.fps as f32;
-    let last = out.first_frame.saturating_add(frames.saturating_sub(1));
+    // Readers count last − first + 1 frames: a take of none ends the frame before it starts.
+    let first_frame = if frames == 0 {
+        out.first_frame.max(1)
+    } else {
+        out.first_frame
+    };
+    let last = (first_frame + frames).saturating_sub(1);
     p.set("POINT", int("USED", points as u16 as i16));
     p.set("POINT", float("SCALE", scale));
     p.set("POINT", float("RATE", rate));
@@ -158,7 +164,7 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
         let pair = |v: usize| Values::Int(vec![v as u16 as i16, (v >> 16) as u16 as i16]);
         p.set(
             "TRIAL",
-            Parameter::new("ACTUAL_START_FIELD", vec![2], pair(out.first_frame)),
+            Parameter::new("ACTUAL_START_FIELD", vec![2], pair(first_frame)),
         );
         p.set(
             "TRIAL",
@@ -228,7 +234,7 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
     };
     word(&mut b, 2, points as u16);
     word(&mut b, 3, analog_words as u16);
-    word(&mut b, 4, out.first_frame.min(65_535) as u16);
+    word(&mut b, 4, first_frame.min(65_535) as u16);
     word(&mut b, 5, last.min(65_535) as u16);
     word(&mut b, 6, 10);
     b[12..16].copy_from_slice(&scale.to_le_bytes());
