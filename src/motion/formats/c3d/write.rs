@@ -234,8 +234,18 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
     };
     word(&mut b, 2, points as u16);
     word(&mut b, 3, analog_words as u16);
-    word(&mut b, 4, first_frame.min(65_535) as u16);
-    word(&mut b, 5, last.min(65_535) as u16);
+    // Past 65535 the header's words are clamped (TRIAL holds the frames); no frames at
+    // all stay 1..0 there, whatever the first frame, so that they count none.
+    let (head_first, head_last) = if frames == 0 {
+        (
+            first_frame.clamp(1, 65_535),
+            first_frame.clamp(1, 65_535) - 1,
+        )
+    } else {
+        (first_frame.min(65_535), last.min(65_535))
+    };
+    word(&mut b, 4, head_first as u16);
+    word(&mut b, 5, head_last as u16);
     word(&mut b, 6, 10);
     b[12..16].copy_from_slice(&scale.to_le_bytes());
     word(&mut b, 9, data_start as u16);
