@@ -5,6 +5,7 @@
 
 import * as THREE from '/ui/vendor/three/three.module.js';
 import { OrbitControls } from '/ui/vendor/three/OrbitControls.js';
+import { GLTFLoader } from '/ui/vendor/three/GLTFLoader.js';
 
 /** Figure colours, in order; the first is the single-take colour. */
 export const COLOURS = ['#1f5fbf', '#c0392b', '#1e8449', '#8e44ad', '#d35400', '#117a8b'];
@@ -122,6 +123,52 @@ class Figure {
   show(xyz) {
     this.set(xyz);
     this.player.draw();
+  }
+}
+
+/**
+ * A glTF the server wrote, played as three.js's GLTFLoader reads it (what Blender and
+ * game engines will see): each node shows the file's gizmo mesh, its animation driven to
+ * the player's time. Set beside the native figure, `offset` metres along X.
+ */
+export class GltfFigure {
+  /** Parsed from `bytes` (a GLB); resolves once loaded. */
+  static async load(player, bytes, offset) {
+    const gltf = await new GLTFLoader().parseAsync(bytes, '');
+    return new GltfFigure(player, gltf, offset);
+  }
+
+  constructor(player, gltf, offset) {
+    this.player = player;
+    this.gltf = gltf;
+    this.group = new THREE.Group();
+    this.group.position.x = offset;
+    this.group.add(gltf.scene);
+    // Each node shows the file's own gizmo mesh, lit by a light of the page's.
+    this.group.add(new THREE.HemisphereLight(0xffffff, 0x666666, 3));
+    this.mixer = new THREE.AnimationMixer(gltf.scene);
+    for (const clip of gltf.animations) this.mixer.clipAction(clip).play();
+    player.scene.add(this.group);
+  }
+
+  /** Show the animation at `t` seconds from its start. */
+  at(t) {
+    this.mixer.setTime(Math.max(0, t));
+    this.player.draw();
+  }
+
+  /** World position (metres) of the node named `name` now, or null. */
+  position(name) {
+    // The loader names objects after their nodes, as animation bindings spell them.
+    const n = this.gltf.scene.getObjectByName(THREE.PropertyBinding.sanitizeNodeName(name));
+    if (!n) return null;
+    this.group.updateMatrixWorld(true);
+    const v = new THREE.Vector3().setFromMatrixPosition(n.matrixWorld);
+    return [v.x - this.group.position.x, v.y, v.z];
+  }
+
+  dispose() {
+    this.player.scene.remove(this.group);
   }
 }
 

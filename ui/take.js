@@ -2,11 +2,11 @@
 // frames fetched one second at a time as the playhead moves (so an hour-long take opens as
 // fast as a short one); the take's numbers, its codec decision, and downloads of the range.
 
-import { download, json } from './api.js';
+import { download, json, request } from './api.js';
 import { el, fmt, svg } from './dom.js';
 import { showError } from './app.js';
 import { shapeOf, TakeFrames } from './frames.js';
-import { Player } from './player.js';
+import { Player, GltfFigure } from './player.js';
 import { Transport } from './transport.js';
 
 export async function takePage(main, id, params) {
@@ -32,7 +32,9 @@ export async function takePage(main, id, params) {
   let framed = false;
   let moveMarker = () => {};
 
+  let glb = null;
   async function show(t) {
+    glb?.at(t);
     const f = frames.frameAt(t);
     moveMarker(f);
     const xyz = await frames.at(f);
@@ -112,14 +114,44 @@ export async function takePage(main, id, params) {
   }
   /** Seconds [a, b] as frames [start, end). */
   const frameRange = ([a, b]) => [Math.floor(a * fps + 1e-6), Math.min(total, Math.floor(b * fps + 1e-6) + 1)];
-  const formats = ['json', 'csv', 'trc', 'npy', 'f32'];
+  const formats = ['glb', 'gltf', 'c3d', 'json', 'csv', 'trc', 'npy', 'f32'];
   if (take.source_format === 'bvh') formats.unshift('bvh');
-  if (take.source_format === 'c3d') formats.unshift('c3d');
-  main.append(el('h2', {}, 'Download'), el('p', {}, 'The loop range (or the whole take): ',
+  // The transforms every format takes on the way out (glTF is always metres, +Y up).
+  const outFps = el('input', { type: 'number', min: '1', max: '10000', step: 'any', placeholder: String(fmt.num(fps, 2)), class: 'out-fps', title: 'frame rate of the file (resampled)' });
+  const pick = (cls, title, options) => el('select', { class: cls, title },
+    ...options.map(([v, label]) => el('option', { value: v }, label)));
+  const root = pick('out-root', 'root motion', [['keep', 'root: as captured'], ['in-place', 'root: in place'], ['extract', 'root: extracted']]);
+  const up = pick('out-up', 'up axis', [['', 'up: as stored'], ['y', 'up: +Y'], ['z', 'up: +Z']]);
+  const unit = pick('out-unit', 'unit', [['', 'unit: as stored'], ['mm', 'mm'], ['cm', 'cm'], ['m', 'm'], ['in', 'in']]);
+  if (!take.skeleton) root.disabled = true;
+  /** The query of the chosen transforms (those that apply to format `f`). */
+  const transforms = (f) => {
+    const q = [];
+    if (outFps.value) q.push(`fps=${encodeURIComponent(outFps.value)}`);
+    if (root.value !== 'keep') q.push(`root=${root.value}`);
+    if (f !== 'glb' && f !== 'gltf') {
+      if (up.value) q.push(`up=${up.value}`);
+      if (unit.value) q.push(`unit=${unit.value}`);
+    }
+    return q.map((x) => `&${x}`).join('');
+  };
+  main.append(el('h2', {}, 'Download'), el('p', { class: 'transforms' }, outFps, ' fps ', root, up, unit),
+    el('p', {}, 'The loop range (or the whole take): ',
     ...formats.map((f) => el('button', { class: 'download', onclick: () => {
       const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];
-      download(`/v1/sequences/${encodeURIComponent(id)}/frames?start=${a}&end=${b}&format=${f}`, `${take.name || take.id}_${a}-${b}.${f}`).catch(showError);
+      download(`/v1/sequences/${encodeURIComponent(id)}/frames?start=${a}&end=${b}&format=${f}${transforms(f)}`, `${take.name || take.id}_${a}-${b}.${f}`).catch(showError);
     } }, f.toUpperCase())),
+    el('button', { class: 'open-glb', title: 'load the GLB the server writes (three.js GLTFLoader) beside the figure', onclick: async () => {
+      try {
+        glb?.dispose();
+        const r = await request(`/v1/sequences/${encodeURIComponent(id)}/frames?format=glb${transforms('glb')}`);
+        glb = await GltfFigure.load(player, await r.arrayBuffer(), 1.0);
+        window.mocapstoreGlb = glb; // for tests: the loaded glTF's node positions
+        glb.at(transport.t);
+      } catch (e) {
+        showError(e);
+      }
+    } }, 'Open GLB beside'),
     ...(analog ? [el('button', { class: 'download analog', onclick: () => {
       const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];
       download(`/v1/sequences/${encodeURIComponent(id)}/analog?start=${a}&end=${b}&format=csv`, `${take.name || take.id}_analog_${a}-${b}.csv`).catch(showError);

@@ -6,7 +6,10 @@ use std::process::ExitCode;
 use clap::Args;
 
 use super::ReadArgs;
+use mocapstore::motion::analog::per_frame_at;
 use mocapstore::motion::formats::{self, Format};
+use mocapstore::motion::transform::{whole, Options, Root, Up};
+use mocapstore::motion::units::parse_unit;
 
 #[derive(Args)]
 pub struct ConvertArgs {
@@ -14,11 +17,25 @@ pub struct ConvertArgs {
     input: PathBuf,
     /// Output file.
     output: PathBuf,
-    /// Output format (bvh, trc, c3d, json, npy, csv, f32); default: from OUTPUT's extension.
+    /// Output format (bvh, trc, c3d, json, npy, csv, f32, glb, gltf); default: from
+    /// OUTPUT's extension.
     #[arg(long)]
     to: Option<Format>,
     #[command(flatten)]
     read: ReadArgs,
+    /// Resample to this frame rate (the input's rate is --fps, for files that lack one).
+    #[arg(long)]
+    out_fps: Option<f64>,
+    /// Root motion: keep, in-place or extract.
+    #[arg(long, default_value = "keep")]
+    root: Root,
+    /// Up axis of the output (y or z); glTF is always y.
+    #[arg(long)]
+    up: Option<Up>,
+    /// Unit of the output (mm, cm, m, in, ft, cmu or metres per unit); glTF is always m.
+    /// (The input's unit is --unit.)
+    #[arg(long)]
+    out_unit: Option<String>,
 }
 
 pub fn run(args: &ConvertArgs) -> ExitCode {
@@ -46,16 +63,56 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
     let input = args.input.display();
     let bytes = std::fs::read(&args.input).map_err(|e| format!("{input}: {e}"))?;
     let loaded = formats::read(&bytes, &options).map_err(|e| format!("{input}: {e}"))?;
-    let out = if format == Format::C3d {
-        // Everything the input held: analog channels, events and parameters too.
+    let mut transform = Options {
+        fps: args.out_fps,
+        root: args.root,
+        up: args.up,
+        metres_per_unit: args
+            .out_unit
+            .as_deref()
+            .map(parse_unit)
+            .transpose()
+            .map_err(|e| format!("--out-unit: {e}"))?,
+    };
+    let gltf = matches!(format, Format::Glb | Format::Gltf);
+    if gltf {
+        if transform.metres_per_unit.is_some_and(|m| m != 1.0) || transform.up == Some(Up::Z) {
+            return Err("glTF is in metres and +Y up: leave out --out-unit and --up".into());
+        }
+        transform.metres_per_unit = Some(1.0);
+        transform.up = Some(Up::Y);
+    }
+    let motion = whole::apply(&loaded.motion, &transform).map_err(|e| format!("{input}: {e}"))?;
+    let out = if gltf {
+        let name = args
+            .input
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().to_string());
+        Ok(formats::gltf::of_motion(
+            &motion,
+            &name,
+            format == Format::Glb,
+            serde_json::json!({ "mocapstore": { "source": name } }),
+        ))
+    } else if format == Format::C3d {
+        // Everything the input held: analog channels, events and parameters too (analog
+        // keeps its rate: resampled, it must be a whole number of samples a frame).
+        let analog = match &loaded.extras.analog {
+            Some(a) if motion.fps != loaded.motion.fps => {
+                let k = per_frame_at(a.per_frame, loaded.motion.fps, motion.fps)
+                    .map_err(|e| format!("{input}: {e}"))?;
+                Some(a.with_per_frame(k, motion.frame_count()))
+            }
+            other => other.clone(),
+        };
         formats::c3d::write::write(&formats::c3d::write::Out {
-            motion: &loaded.motion,
-            analog: loaded.extras.analog.as_ref(),
+            motion: &motion,
+            analog: analog.as_ref(),
             parameters: loaded.extras.parameters.as_ref(),
             first_frame: loaded.extras.first_frame.unwrap_or(1),
         })
     } else {
-        formats::write(&loaded.motion, format)
+        formats::write(&motion, format)
     }
     .map_err(|e| format!("{input}: {e}"))?;
     // Write beside the target and rename, so a failure never leaves half a file.

@@ -359,38 +359,6 @@ pub async fn frames(
     let Query(q) = query?;
     access::check_take(&state.store, &caller.grant, &id).await?;
     let request = frames_request(q)?;
-    if request.format == Format::C3d {
-        if request.points.is_some() {
-            return Err(ApiError::bad_request(
-                "C3D output is the whole take (points, analog, parameters): leave out points",
-            ));
-        }
-        if !request.transform.is_identity() {
-            return Err(ApiError::bad_request(
-                "C3D output is the take as stored: fps, root, up and unit apply to the other \
-                 formats (json, csv, trc, npy, f32, bvh, glb, gltf)",
-            ));
-        }
-        let f = analog::c3d_file(
-            &state.store,
-            &state.answers,
-            holder,
-            &state.limits,
-            &id,
-            request.range,
-        )
-        .await?;
-        let mut headers = HeaderMap::new();
-        let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
-        headers.insert("x-frames", hv(f.frames.to_string()));
-        headers.insert("x-start-frame", hv(f.start_frame.to_string()));
-        headers.insert(
-            header::CONTENT_TYPE,
-            HeaderValue::from_static("application/octet-stream"),
-        );
-        headers.insert(header::CONTENT_LENGTH, hv(f.bytes.len().to_string()));
-        return Ok((headers, held_body(f.bytes, f.reservation)).into_response());
-    }
     let mut a = answer::open(
         &state.store,
         &state.caches,
@@ -421,6 +389,7 @@ pub async fn frames(
     let content_type = match a.format {
         Format::Json | Format::Gltf => "application/json",
         Format::Glb => "model/gltf-binary",
+        Format::C3d => "application/octet-stream",
         Format::Csv => "text/csv",
         Format::Trc | Format::Bvh => "text/plain",
         _ => "application/octet-stream",

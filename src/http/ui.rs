@@ -49,6 +49,9 @@ static ASSETS: &[Asset] = &[
     asset!("vendor/three/three.module.js", JS),
     asset!("vendor/three/three.core.js", JS),
     asset!("vendor/three/OrbitControls.js", JS),
+    asset!("vendor/three/GLTFLoader.js", JS),
+    asset!("vendor/three/BufferGeometryUtils.js", JS),
+    asset!("vendor/three/SkeletonUtils.js", JS),
     asset!("vendor/three/LICENSE", "text/plain; charset=utf-8"),
 ];
 

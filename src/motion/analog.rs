@@ -78,6 +78,24 @@ impl Samples {
     }
 }
 
+/// Analog rows in a frame at `fps` of channels sampled `per_frame` times a frame at
+/// `take_fps`: the analog rate over `fps`, which C3D needs whole; why not, when it is not.
+pub fn per_frame_at(per_frame: usize, take_fps: f64, fps: f64) -> Result<usize, String> {
+    if fps == take_fps {
+        return Ok(per_frame);
+    }
+    let rate = per_frame as f64 * take_fps;
+    let k = rate / fps;
+    if (k - k.round()).abs() < 1e-6 && k.round() >= 1.0 {
+        Ok(k.round() as usize)
+    } else {
+        Err(format!(
+            "the analog channels run at {rate} Hz, which is not a whole number of samples a \
+             frame at {fps} fps; ask for a rate that divides it"
+        ))
+    }
+}
+
 /// A take's analog channels.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Analog {
@@ -174,6 +192,35 @@ impl Analog {
         }
     }
 
+    /// The same rows as `frames` frames of `per_frame` rows each: the channels of a take
+    /// resampled to another frame rate, at their own rate. Rows past the frames are left
+    /// out; a last frame that reaches past the rows holds the last row (a resampled take's
+    /// last frame may end after its source's last sample).
+    pub fn with_per_frame(&self, per_frame: usize, frames: usize) -> Analog {
+        let want = per_frame * frames;
+        let have = want.min(self.rows());
+        let n = self.channels.len();
+        let mut samples = self.samples.rows(n, 0, have);
+        if have < want && have > 0 {
+            fn pad<T: Copy>(v: &mut Vec<T>, n: usize, have: usize, want: usize) {
+                let last = v[(have - 1) * n..have * n].to_vec();
+                for _ in have..want {
+                    v.extend_from_slice(&last);
+                }
+            }
+            match &mut samples {
+                Samples::Int { values, .. } => pad(values, n, have, want),
+                Samples::Float(v) => pad(v, n, have, want),
+            }
+        }
+        Analog {
+            per_frame,
+            gen_scale: self.gen_scale,
+            channels: self.channels.clone(),
+            samples,
+        }
+    }
+
     /// Bytes the values took where they came from ([`Samples::stored_width`]).
     pub fn raw_bytes(&self) -> usize {
         self.samples.len() * self.samples.stored_width()
@@ -183,6 +230,37 @@ impl Analog {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frames_of_other_rates_hold_the_same_rows() {
+        let a = Analog {
+            per_frame: 2,
+            gen_scale: 1.0,
+            channels: vec![Channel {
+                label: "a".into(),
+                description: String::new(),
+                unit: "V".into(),
+                scale: 1.0,
+                offset: 0,
+            }],
+            samples: Samples::Int {
+                values: (0..10).collect(),
+                unsigned: false,
+            },
+        };
+        let b = a.with_per_frame(4, 2);
+        assert_eq!(b.samples.len(), 8);
+        assert_eq!(b.frames(), 2);
+        let c = a.with_per_frame(4, 3);
+        let want: Vec<i32> = (0..10).chain([9, 9]).collect();
+        assert_eq!(
+            c.samples,
+            Samples::Int {
+                values: want,
+                unsigned: false
+            }
+        );
+    }
 
     fn ch(label: &str, scale: f32, offset: i32) -> Channel {
         Channel {

@@ -124,7 +124,7 @@ enum Writer {
     },
     /// glTF: the whole answer is gathered (a glTF's accessors run channel by channel, not
     /// frame by frame), then written at the end.
-    Whole(Whole),
+    Whole(Box<Whole>),
 }
 
 /// A glTF answer being gathered: shaped frames of positions or channels.
@@ -138,7 +138,18 @@ struct Whole {
     extras: serde_json::Value,
     name: String,
     fps: f64,
+    /// For C3D: the take's analog channels, parameters and trial frames.
+    c3d: Option<C3dParts>,
     _held: Option<Held>,
+}
+
+/// What a C3D answer writes beside the points.
+struct C3dParts {
+    /// The analog decoder, and the analog rows a written frame holds (the take's, or as
+    /// many as fall in a resampled frame).
+    analog: Option<(codec::analog::Decoder, usize)>,
+    first_frame: usize,
+    metres_per_unit: f64,
 }
 
 /// What a glTF is written from, owned (it is written on the blocking pool).
@@ -293,6 +304,72 @@ pub async fn open(
                 grow(part_frames),
             )
         }
+        Format::C3d => {
+            if req.points.is_some() {
+                return Err(Error::InvalidRequest(
+                    "C3D output is the whole take (points, analog, parameters): leave out \
+                     points"
+                        .into(),
+                ));
+            }
+            let take = super::fetch::take(store, id).await?;
+            if take.is_live() {
+                return Err(Error::Unsatisfiable(format!(
+                    "take {id} is being streamed; C3D is written once it is finished"
+                )));
+            }
+            let shaper = Shaper::points(&prepared, &transform, frames, None)?;
+            let decoder = super::analog::decoder(store, id).await?;
+            let analog = match decoder {
+                None => None,
+                Some(d) => {
+                    let per_frame = crate::motion::analog::per_frame_at(
+                        d.layout().per_frame,
+                        prepared.fps,
+                        transform.fps.unwrap_or(prepared.fps),
+                    )
+                    .map_err(Error::InvalidRequest)?;
+                    Some((d, per_frame))
+                }
+            };
+            let words = analog
+                .as_ref()
+                .map_or(0, |(d, k)| d.layout().channels.len() * k);
+            let points_out = shaper.width() / 3;
+            let file = crate::motion::formats::c3d::write::data_len(frames_out, points_out, words)
+                + 256 * 512;
+            if file > limits.answer_bytes {
+                return Err(Error::InvalidRequest(format!(
+                    "a C3D of {frames_out} frames is about {file} bytes, over the limit of {} \
+                     for one answer; ask for a shorter range",
+                    limits.answer_bytes
+                )));
+            }
+            // Gathered positions (f64), the decoded analog (whole chunks) and the file.
+            let gathered = frames_out as u64 * points_out as u64 * 24;
+            let analog_bytes = frames as u64 * words as u64 * 8 * 2;
+            let first = take.meta.first_frame.unwrap_or(1) + start;
+            let c3d = C3dParts {
+                analog,
+                // The trial frame of the first frame written, at the answer's rate.
+                first_frame: match transform.fps {
+                    Some(fps) => ((first - 1) as f64 * fps / prepared.fps).round() as usize + 1,
+                    None => first,
+                },
+                metres_per_unit: transform
+                    .metres_per_unit
+                    .unwrap_or(prepared.metres_per_unit),
+            };
+            Plan::whole(
+                &prepared,
+                req.format,
+                shaper,
+                frames_out,
+                &span,
+                file + gathered + analog_bytes,
+                Some(c3d),
+            )
+        }
         Format::Glb | Format::Gltf => {
             if req.points.is_some() {
                 return Err(Error::InvalidRequest(
@@ -329,6 +406,7 @@ pub async fn open(
                 frames_out,
                 &span,
                 file + gathered,
+                None,
             )
         }
         format if transform.is_identity() => Plan::points(
@@ -556,6 +634,7 @@ impl Plan {
         frames: usize,
         span: &Span<'_>,
         bytes: u64,
+        c3d: Option<C3dParts>,
     ) -> Plan {
         let header = prepared.reader.header();
         let in_width = prepared.point_names.len() as u64 * 12;
@@ -574,10 +653,11 @@ impl Plan {
             }),
             name: prepared.name.clone(),
             fps: shaper.fps(prepared),
+            c3d,
             _held: None,
         };
         Plan {
-            writer: Writer::Whole(whole),
+            writer: Writer::Whole(Box::new(whole)),
             points: None,
             // A chunk decoded as positions (or channels, which take fewer bytes than the
             // positions a skeleton decoder works through).
@@ -684,6 +764,13 @@ impl Answer {
                 self.tail_done = true;
                 match &mut self.writer {
                     Writer::Points { writer, .. } => writer.tail(&mut self.pending),
+                    Writer::Whole(w) if w.c3d.is_some() => {
+                        let bytes = self.c3d_file().await?;
+                        if let Writer::Whole(w) = &mut self.writer {
+                            w._held = None;
+                        }
+                        self.pending = bytes;
+                    }
                     Writer::Whole(w) => {
                         let file = w.file();
                         let bytes = blocking(move || file.write()).await?;
@@ -852,6 +939,47 @@ impl Answer {
             self.block = Some(block);
         }
         Ok(())
+    }
+
+    /// The C3D file of a gathered answer: its points, the take's analog channels over the
+    /// range (in frames of the answer's rate), events and parameters.
+    async fn c3d_file(&mut self) -> Result<Vec<u8>> {
+        let Writer::Whole(w) = &mut self.writer else {
+            unreachable!("a C3D answer is gathered")
+        };
+        let parts = w.c3d.take().expect("a C3D answer has its parts");
+        let values = std::mem::take(&mut w.values);
+        let (names, fps, frames) = (w.names.clone(), w.fps, w.frames);
+        let analog = match &parts.analog {
+            None => None,
+            Some((d, per_frame)) => {
+                let a =
+                    super::analog::range_of(&self.store, &self.id, d, self.start, self.end).await?;
+                Some(a.with_per_frame(*per_frame, frames))
+            }
+        };
+        let parameters = super::analog::parameters(&self.store, &self.id).await?;
+        let id = self.id.clone();
+        blocking(move || -> Result<Vec<u8>> {
+            use crate::motion::formats::c3d::write;
+            let unit = Unit::new(parts.metres_per_unit, UnitSource::Declared)
+                .map_err(|e| Error::Corrupt(format!("take {id}: {e}")))?;
+            let points: Vec<f32> = values.iter().map(|&v| v as f32).collect();
+            let motion = if names.is_empty() {
+                crate::motion::Motion::without_points(fps, unit, frames)
+            } else {
+                crate::motion::Motion::new(fps, unit, names, points, None)
+            }
+            .map_err(|e| Error::Corrupt(format!("take {id}: {e}")))?;
+            write::write(&write::Out {
+                motion: &motion,
+                analog: analog.as_ref(),
+                parameters: parameters.as_ref(),
+                first_frame: parts.first_frame,
+            })
+            .map_err(|e| Error::Unsatisfiable(e.to_string()))
+        })
+        .await?
     }
 
     /// The stored payload of chunk `i` (the next one), and what counts it as held, reading

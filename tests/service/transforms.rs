@@ -44,6 +44,15 @@ fn samples(body: &[u8]) -> (Vec<String>, Frames) {
     (names, frames)
 }
 
+/// The corpus file `rel` stored with `query`: its id and ingest report.
+async fn ingest(srv: &common::Server, root: &Path, rel: &str, query: &str) -> (String, Value) {
+    let (status, report) = srv
+        .post(query, std::fs::read(root.join(rel)).unwrap())
+        .await;
+    assert_eq!(status, 201, "{rel}: {report}");
+    (report["id"].as_str().unwrap().to_string(), report)
+}
+
 fn header(h: &reqwest::header::HeaderMap, name: &str) -> String {
     h.get(name).unwrap().to_str().unwrap().to_string()
 }
@@ -73,10 +82,7 @@ async fn resampling_root_motion_axes_and_units() {
     let srv = common::start(t.store.clone(), 64 << 20).await;
 
     // A CMU take at 120 fps.
-    let bvh = std::fs::read(root.join("bvh/cmu/131_01.bvh")).unwrap();
-    let (status, report) = srv.post("name=cmu", bvh).await;
-    assert_eq!(status, 201, "{report}");
-    let id = report["id"].as_str().unwrap().to_string();
+    let (id, report) = ingest(&srv, &root, "bvh/cmu/131_01.bvh", "name=cmu").await;
     let (status, _, body) = srv.get(&format!("/v1/sequences/{id}/frames")).await;
     assert_eq!(status, 200);
     let (names, full) = samples(&body);
@@ -191,10 +197,7 @@ async fn resampling_root_motion_axes_and_units() {
         .get(&format!("/v1/sequences/{id}/frames?format=glb&unit=mm"))
         .await;
     assert_eq!(status, 400);
-    let trc = std::fs::read(root.join("trc/MOTEK__T.trc")).unwrap();
-    let (status, report) = srv.post("name=markers", trc).await;
-    assert_eq!(status, 201, "{report}");
-    let markers = report["id"].as_str().unwrap();
+    let (markers, _) = ingest(&srv, &root, "trc/MOTEK__T.trc", "name=markers").await;
     let (status, _, body) = srv
         .get(&format!("/v1/sequences/{markers}/frames?root=in-place"))
         .await;
@@ -212,10 +215,13 @@ async fn up_and_down_again_through_the_service() {
     };
     let t = common::sqlite().await;
     let srv = common::start(t.store.clone(), 64 << 20).await;
-    let bvh = std::fs::read(root.join("bvh/bandai/dataset-1_bow_active_001.bvh")).unwrap();
-    let (status, first) = srv.post("name=bow", bvh).await;
-    assert_eq!(status, 201, "{first}");
-    let id = first["id"].as_str().unwrap();
+    let (id, first) = ingest(
+        &srv,
+        &root,
+        "bvh/bandai/dataset-1_bow_active_001.bvh",
+        "name=bow",
+    )
+    .await;
     let (_, _, body) = srv.get(&format!("/v1/sequences/{id}/frames")).await;
     let (_, original) = samples(&body);
     let unit = mpu(&body);
@@ -403,6 +409,211 @@ async fn gltf_reads_back_in_independent_readers() {
     }
     let _ = std::fs::remove_dir_all(&dir);
     eprintln!("{checked} takes as glTF checked");
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// py-c3d's and ezc3d's reading of a C3D we wrote against our JSON answer of the same take
+/// (scripts/c3d-check.py).
+fn check_c3d(python: &Path, c3d: &[u8], json: &[u8], tol: f64, tag: &str) -> Value {
+    let dir = std::env::temp_dir();
+    let stem = format!("mocapstore-c3dout-{}-{tag}", std::process::id());
+    let (c, j) = (
+        dir.join(format!("{stem}.c3d")),
+        dir.join(format!("{stem}.json")),
+    );
+    std::fs::write(&c, c3d).unwrap();
+    std::fs::write(&j, json).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/c3d-check.py");
+    let o = std::process::Command::new(python)
+        .arg(script)
+        .arg(&c)
+        .arg(&j)
+        .args(["--tol", &tol.to_string()])
+        .output()
+        .unwrap();
+    let _ = (std::fs::remove_file(&c), std::fs::remove_file(&j));
+    serde_json::from_slice(o.stdout.trim_ascii()).unwrap_or_else(|_| {
+        panic!(
+            "c3d-check.py said {} {}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        )
+    })
+}
+
+/// C3D out of every kind of take, through the one read path: every corpus TRC, BVH takes
+/// (joints and End Sites as points) and a C3D resampled with its analog channels: py-c3d
+/// and ezc3d read the labels, rate, frame count and positions of our own JSON answer of
+/// the same request, and missing samples where it has none.
+#[tokio::test(flavor = "multi_thread")]
+async fn c3d_out_of_every_kind_of_take() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let Some(python) = common::python() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let mut cases: Vec<(PathBuf, &str)> = std::fs::read_dir(root.join("trc"))
+        .unwrap()
+        .map(|e| (e.unwrap().path(), ""))
+        .collect();
+    cases.sort();
+    cases.push((root.join("bvh/cmu/131_01.bvh"), "&end=300"));
+    cases.push((root.join("bvh/misc/vicon.bvh"), "&root=in-place&unit=m"));
+    cases.push((root.join("c3d/btkdata__others__Gait.c3d"), "&fps=50"));
+    let mut checked = 0;
+    for (path, query) in &cases {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let (status, report) = srv.post("lenient=true", std::fs::read(path).unwrap()).await;
+        if status != 201 {
+            // A corpus file our reader refuses (an empty TRC): nothing to write back.
+            assert!(status == 422 || status == 400, "{name}: {status} {report}");
+            eprintln!("{name}: not stored ({report})");
+            continue;
+        }
+        let id = report["id"].as_str().unwrap().to_string();
+        let (status, _, c3d) = srv
+            .get(&format!("/v1/sequences/{id}/frames?format=c3d{query}"))
+            .await;
+        assert_eq!(status, 200, "{name}: {}", String::from_utf8_lossy(&c3d));
+        let (status, _, json) = srv
+            .get(&format!("/v1/sequences/{id}/frames?format=json{query}"))
+            .await;
+        assert_eq!(status, 200, "{name}");
+        // Both hold the same f32 values (the C3D's in mm where the take's unit has no C3D
+        // name): within an f32's rounding of a few metres.
+        let v = check_c3d(&python, &c3d, &json, 1e-5, &checked.to_string());
+        assert_eq!(v["ok"], true, "{name}{query}: {v}");
+        checked += 1;
+    }
+    assert!(checked >= 10, "{checked}");
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// `mocapstore convert` takes the same transforms: a CMU take to GLB at 30 fps in place
+/// (pygltflib's evaluation: 249 frames, the root's horizontal path zero), a C3D with force
+/// plates to C3D at half its rate (the analog channels keep theirs: twice the samples a
+/// frame), and a clear error for a rate its analog cannot divide into.
+#[test]
+fn convert_takes_the_same_transforms() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("mocapstore-convert-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let glb = dir.join("walk.glb");
+    let bvh = root.join("bvh/cmu/131_01.bvh");
+    let (ok, _, err) = common::mocapstore(&[
+        "convert",
+        bvh.to_str().unwrap(),
+        glb.to_str().unwrap(),
+        "--out-fps",
+        "30",
+        "--root",
+        "in-place",
+    ]);
+    assert!(ok, "{err}");
+    if let Some(python) = common::python() {
+        let ev = evaluate(&python, &glb);
+        assert_eq!(ev["frames"], 249);
+        for f in ev["positions"].as_array().unwrap() {
+            let hips = f[0].as_array().unwrap();
+            assert!(hips[0].as_f64().unwrap().abs() < 1e-6, "{hips:?}");
+            assert!(hips[2].as_f64().unwrap().abs() < 1e-6, "{hips:?}");
+        }
+    }
+    if let Some(m) = node_modules() {
+        assert_eq!(validate(&m, &glb)["errors"], 0);
+    }
+    let gait = root.join("c3d/btkdata__others__Gait.c3d");
+    let source =
+        mocapstore::motion::formats::read(&std::fs::read(&gait).unwrap(), &Default::default())
+            .unwrap();
+    let half = source.motion.fps / 2.0;
+    let out = dir.join("gait.c3d");
+    let (ok, _, err) = common::mocapstore(&[
+        "convert",
+        gait.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--out-fps",
+        &half.to_string(),
+    ]);
+    assert!(ok, "{err}");
+    let back =
+        mocapstore::motion::formats::read(&std::fs::read(&out).unwrap(), &Default::default())
+            .unwrap();
+    assert_eq!(back.motion.fps, half);
+    let (a, b) = (
+        source.extras.analog.as_ref().unwrap(),
+        back.extras.analog.as_ref().unwrap(),
+    );
+    assert_eq!(b.per_frame, a.per_frame * 2);
+    assert_eq!(b.frames(), back.motion.frame_count());
+    let (ok, _, err) = common::mocapstore(&[
+        "convert",
+        gait.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--out-fps",
+        "7",
+    ]);
+    assert!(
+        !ok && err.contains("not a whole number of samples"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `assimp info` (Debian's assimp-utils; `.ci/run` installs it and sets
+/// `MOCAP_TEST_ASSIMP=1`) opens the GLB and the BVH the service writes of a skeleton take,
+/// resampled and in place, and finds its nodes and one animation.
+#[tokio::test(flavor = "multi_thread")]
+async fn assimp_opens_the_glb_and_bvh_exports() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    if std::env::var("MOCAP_TEST_ASSIMP").is_err() {
+        return;
+    }
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let (id, _) = ingest(&srv, &root, "bvh/cmu/131_01.bvh", "name=cmu").await;
+    let dir = std::env::temp_dir().join(format!("mocapstore-assimp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for format in ["glb", "bvh"] {
+        let (status, _, body) = srv
+            .get(&format!(
+                "/v1/sequences/{id}/frames?format={format}&fps=30&root=in-place"
+            ))
+            .await;
+        assert_eq!(status, 200, "{format}");
+        let file = dir.join(format!("take.{format}"));
+        std::fs::write(&file, &body).unwrap();
+        let o = std::process::Command::new("assimp")
+            .arg("info")
+            .arg(&file)
+            .output()
+            .expect("MOCAP_TEST_ASSIMP is set: assimp must be installed");
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success(),
+            "assimp info {format}: {text} {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let count = |what: &str| {
+            text.lines()
+                .find(|l| l.trim_start().starts_with(what))
+                .and_then(|l| l.split(':').nth(1))
+                .and_then(|v| v.trim().parse::<u64>().ok())
+                .unwrap_or_else(|| panic!("{format}: no {what:?} in {text}"))
+        };
+        assert_eq!(count("Animations"), 1, "{format}: {text}");
+        assert!(count("Nodes") >= 31, "{format}: {text}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
     srv.stop().await;
     t.finish().await;
 }

@@ -1039,3 +1039,68 @@ async fn the_compare_page_keeps_takes_in_step() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// The take page opens the GLB it would download (three.js's GLTFLoader, as Blender and
+/// web players read it) beside the figure, without console errors; at t = 1 s a joint of
+/// the loaded glTF stands where the service's own positions put it.
+#[tokio::test]
+async fn the_take_page_opens_the_glb_it_would_download() {
+    let Some(browser) = Browser::with_corpus().await else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let bvh = stored(&srv, "name=131_02&max_error_mm=1", "bvh/cmu/131_02.bvh").await;
+    let id = bvh["id"].as_str().unwrap().to_string();
+    browser
+        .visit(
+            &format!("{}/#/take/{id}", srv.base),
+            "the first frame",
+            "return document.querySelector('canvas.view')?.dataset.frame === '0';",
+        )
+        .await;
+    browser.click("button.open-glb").await;
+    browser
+        .until("the GLB loaded", "return !!window.mocapstoreGlb;")
+        .await;
+    // The service's own positions of the first frame at or after 1 s, and its time.
+    let (status, _, body) = srv
+        .get(&format!(
+            "/v1/sequences/{id}/frames?unit=m&up=y&t0=1&t1=1.02&points=LeftWrist"
+        ))
+        .await;
+    assert_eq!(status, 200);
+    let v: Value = serde_json::from_slice(&body).unwrap();
+    let t1 = v["start"].as_f64().unwrap() / v["fps"].as_f64().unwrap();
+    assert!((1.0..1.01).contains(&t1), "{t1}");
+    let at = browser
+        .js(
+            "window.mocapstoreGlb.at(arguments[0]); return window.mocapstoreGlb.position('LeftWrist');",
+            json!([t1]),
+        )
+        .await;
+    let at: Vec<f64> = at
+        .as_array()
+        .unwrap_or_else(|| panic!("no LeftWrist node: {at}"))
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let want: Vec<f64> = v["frames"][0][0]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    let d =
+        ((at[0] - want[0]).powi(2) + (at[1] - want[1]).powi(2) + (at[2] - want[2]).powi(2)).sqrt();
+    // The same frame: glTF's f32 keys composed down the chain against the decoded
+    // positions, well within the bound (1 mm).
+    assert!(
+        d < 1e-3,
+        "LeftWrist at 1 s: glTF {at:?}, service {want:?}: {d} m apart"
+    );
+    assert!(browser.console_errors().await.is_empty());
+    browser.quit().await;
+    srv.stop().await;
+    t.finish().await;
+}

@@ -1,6 +1,7 @@
 //! glTF 2.0 out: a binary `.glb`, or a `.gltf` (JSON with its buffer embedded as a data
-//! URI), holding the take as nodes and one animation. No mesh: Blender, Godot, Unreal,
-//! Unity (glTFast) and three.js all import node animation without one.
+//! URI), holding the take as nodes and one animation. Every node carries one small shared
+//! mesh (an octahedron 3 cm across), so that a viewer shows the joints or markers at once
+//! and importers that refuse a scene without meshes or materials (assimp) open it.
 //!
 //! - **A skeleton take** is one node per joint and End Site (names kept, parents as in the
 //!   file), resting at its offset. The animation has a rotation channel (unit quaternions,
@@ -47,11 +48,42 @@ pub struct Scene<'a> {
     pub extras: Value,
 }
 
+/// A whole take as glTF (`binary`: GLB), named `name`; it must be in metres and +Y up
+/// already ([`crate::motion::transform::whole::apply`] with those).
+pub fn of_motion(m: &crate::motion::Motion, name: &str, binary: bool, extras: Value) -> Vec<u8> {
+    let positions: Vec<f64>;
+    let figure = match &m.skeleton {
+        Some(s) => Figure::Skeleton {
+            joints: &s.joints,
+            values: &s.values,
+        },
+        None => {
+            positions = m.positions().iter().map(|&v| f64::from(v)).collect();
+            Figure::Markers {
+                names: &m.point_names,
+                positions: &positions,
+            }
+        }
+    };
+    let scene = Scene {
+        name,
+        figure,
+        frames: m.frame_count(),
+        fps: m.fps,
+        extras,
+    };
+    if binary {
+        glb(&scene)
+    } else {
+        gltf(&scene)
+    }
+}
+
 /// Bytes of a GLB of `scene`, in all: for sizes checked before anything is built.
 pub fn glb_len_bound(frames: usize, nodes: usize) -> u64 {
     // Times, and per node a translation (12 bytes), a rotation (16) or a scale (12) a
-    // frame; the JSON is a few hundred bytes a node.
-    frames as u64 * (4 + nodes as u64 * 40) + nodes as u64 * 1024 + 4096
+    // frame; the JSON is a few hundred bytes a node; the gizmo a few hundred bytes.
+    frames as u64 * (4 + nodes as u64 * 40) + nodes as u64 * 1024 + 8192
 }
 
 /// The binary glTF (`.glb`) of `scene`.
@@ -90,6 +122,52 @@ struct Buffer {
 }
 
 impl Buffer {
+    /// The gizmo every node shows: an octahedron of `radius` metres (positions and
+    /// indices, in views for vertex data), its material and its mesh; the mesh's index.
+    fn gizmo(&mut self, radius: f32) -> (Value, Value) {
+        let r = radius;
+        let vertices = [
+            r, 0.0, 0.0, -r, 0.0, 0.0, 0.0, r, 0.0, 0.0, -r, 0.0, 0.0, 0.0, r, 0.0, 0.0, -r,
+        ];
+        let position = self.accessor("VEC3", 3, &vertices, true);
+        self.views[self.accessors[position]["bufferView"].as_u64().unwrap_or(0) as usize]
+            ["target"] = json!(34962);
+        // Eight faces, counter-clockwise seen from outside.
+        let faces: [u16; 24] = [
+            0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4, 2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5,
+        ];
+        let offset = self.bin.len();
+        for i in faces {
+            self.bin.extend_from_slice(&i.to_le_bytes());
+        }
+        self.views.push(json!({
+            "buffer": 0,
+            "byteOffset": offset,
+            "byteLength": faces.len() * 2,
+            "target": 34963,
+        }));
+        self.accessors.push(json!({
+            "bufferView": self.views.len() - 1,
+            "componentType": 5123,
+            "count": faces.len(),
+            "type": "SCALAR",
+        }));
+        let indices = self.accessors.len() - 1;
+        let material = json!({
+            "name": "joint",
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [0.12, 0.37, 0.75, 1.0],
+                "metallicFactor": 0.0,
+                "roughnessFactor": 1.0,
+            },
+        });
+        let mesh = json!({
+            "name": "joint",
+            "primitives": [{ "attributes": { "POSITION": position }, "indices": indices, "material": 0 }],
+        });
+        (material, mesh)
+    }
+
     /// One accessor of `kind` ("SCALAR", "VEC3", "VEC4") over `values` (f32), in a view
     /// of its own; with min/max when `bounds`.
     fn accessor(&mut self, kind: &str, width: usize, values: &[f32], bounds: bool) -> usize {
@@ -231,6 +309,11 @@ fn build(scene: &Scene<'_>, embed: Option<()>) -> (Value, Vec<u8>) {
             (0..points).collect()
         }
     };
+    // The shared gizmo, after the animation's data (the times stay accessor 0).
+    let (material, mesh) = buf.gizmo(0.015);
+    for node in &mut nodes {
+        node["mesh"] = json!(0);
+    }
     let mut buffer = json!({ "byteLength": buf.bin.len() });
     if embed.is_some() {
         buffer["uri"] = json!(format!(
@@ -243,16 +326,16 @@ fn build(scene: &Scene<'_>, embed: Option<()>) -> (Value, Vec<u8>) {
         "scene": 0,
         "scenes": [{ "name": scene.name, "nodes": roots, "extras": scene.extras }],
         "nodes": nodes,
+        "meshes": [mesh],
+        "materials": [material],
     });
     if !channels.is_empty() {
         doc["animations"] =
             json!([{ "name": scene.name, "samplers": samplers, "channels": channels }]);
     }
-    if !buf.bin.is_empty() {
-        doc["buffers"] = json!([buffer]);
-        doc["bufferViews"] = json!(buf.views);
-        doc["accessors"] = json!(buf.accessors);
-    }
+    doc["buffers"] = json!([buffer]);
+    doc["bufferViews"] = json!(buf.views);
+    doc["accessors"] = json!(buf.accessors);
     (doc, buf.bin)
 }
 

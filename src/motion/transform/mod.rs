@@ -8,6 +8,7 @@
 pub mod channels;
 pub mod pose;
 pub mod resample;
+pub mod whole;
 
 use std::fmt;
 use std::str::FromStr;

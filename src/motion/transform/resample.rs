@@ -32,14 +32,15 @@ pub trait Interpolant {
 }
 
 /// Source frames per output frame, `from / to`, snapped to a fraction `p / q` (q ≤ 16) when
-/// it lies within 1e-5 of one: a rate read from a frame time printed to a few decimals
-/// (CMU's 0.0083333 s is 120.00048 fps) is the round rate it was written for, so 120 → 30
-/// fps keeps every fourth frame instead of drifting off them by 4e-6 frames a frame.
+/// it lies within 1e-4 (relative) of one: a rate read from a frame time printed to a few
+/// decimals (CMU's 0.0083333 s is 120.00048 fps; 0.008333 s, six decimals, 120.0048) is
+/// the round rate it was written for, so 120 → 30 fps keeps every fourth frame instead of
+/// drifting off them. Real rates that differ (29.97 against 30: 1e-3) are not snapped.
 pub fn grid_step(from: f64, to: f64) -> f64 {
     let step = from / to;
     for q in 1..=16u32 {
         let p = (step * f64::from(q)).round();
-        if p >= 1.0 && (step - p / f64::from(q)).abs() <= 1e-5 * step {
+        if p >= 1.0 && (step - p / f64::from(q)).abs() <= 1e-4 * step {
             return p / f64::from(q);
         }
     }
@@ -251,6 +252,7 @@ mod tests {
         assert_eq!(grid_step(1.0 / 0.00833333, 30.0), 4.0);
         assert_eq!(grid_step(1.0 / 0.0333333, 120.0), 0.25);
         assert_eq!(grid_step(120.0, 100.0), 1.2);
+        assert_eq!(grid_step(1.0 / 0.008333, 60.0), 2.0);
         assert_eq!(grid_step(29.97, 30.0), 29.97 / 30.0);
         assert_eq!(output_frames(994, 1.0 / 0.00833333, 30.0), 249);
     }

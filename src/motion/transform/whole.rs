@@ -1,0 +1,115 @@
+//! The transforms on a whole take in memory (`mocapstore convert`): the same resampler and
+//! poses the read path streams blocks through, run over every frame at once.
+
+use super::channels::Channels;
+use super::pose::{PointPose, SkeletonPose};
+use super::resample::{Positions, Resampler};
+use super::{infer_up, Options, Root, Up, ROOT_MOTION};
+use crate::motion::skeleton::Skeleton;
+use crate::motion::units::{Unit, UnitSource};
+use crate::motion::Motion;
+
+/// `m` with `options` applied. A skeleton take is transformed through its channels (its
+/// positions are then its joints' FK); any other through its positions. The take's up
+/// axis is inferred from its figure (Y when there is none to measure).
+pub fn apply(m: &Motion, options: &Options) -> Result<Motion, String> {
+    if options.is_identity() {
+        return Ok(m.clone());
+    }
+    let up = infer_up(m.positions(), m.point_count()).unwrap_or(Up::Y);
+    let fps = options.fps.unwrap_or(m.fps);
+    let unit = match options.metres_per_unit {
+        Some(mpu) => Unit::new(mpu, UnitSource::Explicit).map_err(|e| e.to_string())?,
+        None => m.unit.clone(),
+    };
+    let frames = m.frame_count();
+    let resample = options.fps.filter(|&f| f != m.fps);
+    if let Some(s) = &m.skeleton {
+        let mut pose = SkeletonPose::new(options, &s.joints, up, m.unit.metres_per_unit)?;
+        let values = match resample {
+            Some(to) => {
+                let mut r = Resampler::new(Channels::new(&s.joints), frames, m.fps, to);
+                let mut out = Vec::new();
+                r.push(&s.values, &mut out);
+                out
+            }
+            None => s.values.clone(),
+        };
+        let mut shaped = Vec::with_capacity(values.len());
+        for f in values.chunks_exact(pose.channels_in().max(1)) {
+            pose.frame(f, &mut shaped);
+        }
+        let skeleton = Skeleton::new(pose.joints().to_vec(), shaped).map_err(|e| e.to_string())?;
+        let names = skeleton.joints.iter().map(|j| j.name.clone()).collect();
+        let positions = skeleton
+            .forward_kinematics()
+            .into_iter()
+            .map(|v| v as f32)
+            .collect();
+        return Motion::new(fps, unit, names, positions, Some(skeleton)).map_err(|e| e.to_string());
+    }
+    let points = m.point_count();
+    let pose = PointPose::new(options, points, None, up, m.unit.metres_per_unit)?;
+    let src: Vec<f64> = m.positions().iter().map(|&v| f64::from(v)).collect();
+    let frames_in = match resample {
+        Some(to) => {
+            let mut r = Resampler::new(Positions { points }, frames, m.fps, to);
+            let mut out = Vec::new();
+            r.push(&src, &mut out);
+            out
+        }
+        None => src,
+    };
+    let mut shaped = Vec::with_capacity(frames_in.len());
+    for f in frames_in.chunks_exact((points * 3).max(1)) {
+        pose.frame(f, &mut shaped);
+    }
+    let mut names = m.point_names.clone();
+    if options.root == Root::Extract {
+        names.push(ROOT_MOTION.into());
+    }
+    let positions = shaped.into_iter().map(|v| v as f32).collect();
+    Motion::new(fps, unit, names, positions, None).map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::synthetic::dancer_bvh;
+
+    /// A whole take transformed is what FK of its transformed channels gives: root in place,
+    /// 60 fps, in metres; its positions are its joints'.
+    #[test]
+    fn a_skeleton_take_transformed_whole() {
+        // Frame time 0.008333 s: 120.0048 fps, taken as 120 (every other frame at 60).
+        let m = crate::motion::formats::read(
+            dancer_bvh(61, 120.0, 2, 6).as_bytes(),
+            &Default::default(),
+        )
+        .unwrap()
+        .motion;
+        let o = Options {
+            fps: Some(60.0),
+            root: Root::InPlace,
+            metres_per_unit: Some(1.0),
+            up: None,
+        };
+        let t = apply(&m, &o).unwrap();
+        assert_eq!(t.frame_count(), 31);
+        assert_eq!(t.fps, 60.0);
+        assert_eq!(t.unit.metres_per_unit, 1.0);
+        for f in 0..t.frame_count() {
+            let root = t.sample(f, 0).unwrap();
+            assert!(root[0].abs() < 1e-6 && root[2].abs() < 1e-6, "{root:?}");
+            // Every other source frame, relative to the root, in metres.
+            let (a, b) = (m.frame(2 * f), t.frame(f));
+            let k = m.unit.metres_per_unit as f32;
+            for p in 1..m.point_count() {
+                for c in 0..3 {
+                    let rel = (a[p * 3 + c] - a[c]) * k;
+                    assert!((rel - (b[p * 3 + c] - b[c])).abs() < 1e-4, "{p} {c}");
+                }
+            }
+        }
+    }
+}
