@@ -117,7 +117,7 @@ export async function takePage(main, id, params) {
   const formats = ['glb', 'gltf', 'c3d', 'json', 'csv', 'trc', 'npy', 'f32'];
   if (take.source_format === 'bvh') formats.unshift('bvh');
   // The transforms every format takes on the way out (glTF is always metres, +Y up).
-  const outFps = el('input', { type: 'number', min: '1', max: '10000', step: 'any', placeholder: String(fmt.num(fps, 2)), class: 'out-fps', title: 'frame rate of the file (resampled)' });
+  const outFps = el('input', { type: 'number', min: '1', max: '10000', step: 'any', placeholder: String(fmt.num(fps, 2)), class: 'out-fps', title: 'frame rate of the file (resampled)', 'aria-label': 'frame rate of the file' });
   const pick = (cls, title, options) => el('select', { class: cls, title },
     ...options.map(([v, label]) => el('option', { value: v }, label)));
   const root = pick('out-root', 'root motion', [['keep', 'root: as captured'], ['in-place', 'root: in place'], ['extract', 'root: extracted']]);
@@ -135,7 +135,7 @@ export async function takePage(main, id, params) {
     }
     return q.map((x) => `&${x}`).join('');
   };
-  main.append(el('h2', {}, 'Download'), el('p', { class: 'transforms' }, outFps, ' fps ', root, up, unit),
+  main.append(el('h2', {}, 'Download'), el('p', { class: 'transforms' }, el('label', {}, outFps, ' fps'), ' ', root, up, unit),
     el('p', {}, 'The loop range (or the whole take): ',
     ...formats.map((f) => el('button', { class: 'download', onclick: () => {
       const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];
