@@ -74,6 +74,17 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
             .transpose()
             .map_err(|e| format!("--out-unit: {e}"))?,
     };
+    if format == Format::C3d
+        && (transform.root != Root::Keep
+            || transform.up.is_some()
+            || transform.metres_per_unit.is_some())
+    {
+        return Err(
+            "C3D keeps the lab's axes, units and root motion (its parameters place the force \
+             plates in them): leave out --root, --up and --out-unit (--out-fps applies)"
+                .into(),
+        );
+    }
     let gltf = matches!(format, Format::Glb | Format::Gltf);
     if gltf {
         if transform.metres_per_unit.is_some_and(|m| m != 1.0) || transform.up == Some(Up::Z) {
@@ -105,11 +116,15 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
             }
             other => other.clone(),
         };
+        // The trial frame of the first frame, at the output's rate (as the service writes).
+        let first = loaded.extras.first_frame.unwrap_or(1);
+        let first_frame =
+            ((first - 1) as f64 * motion.fps / loaded.motion.fps).round() as usize + 1;
         formats::c3d::write::write(&formats::c3d::write::Out {
             motion: &motion,
             analog: analog.as_ref(),
             parameters: loaded.extras.parameters.as_ref(),
-            first_frame: loaded.extras.first_frame.unwrap_or(1),
+            first_frame,
         })
     } else {
         formats::write(&motion, format)

@@ -312,6 +312,16 @@ pub async fn open(
                         .into(),
                 ));
             }
+            if transform.root != crate::motion::transform::Root::Keep
+                || transform.up.is_some()
+                || transform.metres_per_unit.is_some()
+            {
+                return Err(Error::InvalidRequest(
+                    "C3D keeps the lab's axes, units and root motion (its parameters place the \
+                     force plates in them): leave out root, up and unit (fps applies)"
+                        .into(),
+                ));
+            }
             let take = super::fetch::take(store, id).await?;
             if take.is_live() {
                 return Err(Error::Unsatisfiable(format!(

@@ -11,10 +11,6 @@ use crate::motion::transform::pose::{PointPose, SkeletonPose};
 use crate::motion::transform::resample::{output_frames, Positions, Resampler};
 use crate::motion::transform::{infer_up, Options, Root, Up, ROOT_MOTION};
 
-/// The highest frame rate an answer may ask for: a resampled answer is still bounded by the
-/// answer limits, but a rate past any capture system's is a mistake, not a request.
-pub const MAX_FPS: f64 = 10_000.0;
-
 /// The transforms of one answer, and the state they keep between blocks.
 pub enum Shaper {
     /// Positions: all the take's points are decoded (root motion follows the root even
@@ -39,24 +35,9 @@ pub enum Shaper {
     },
 }
 
-/// Checks the options every answer shares: a positive rate within [`MAX_FPS`], a positive
-/// unit.
+/// The options every answer shares, checked ([`Options::check`]): a 400 saying why not.
 pub fn check(options: &Options) -> Result<()> {
-    if let Some(fps) = options.fps {
-        if !(fps.is_finite() && fps > 0.0 && fps <= MAX_FPS) {
-            return Err(Error::InvalidRequest(format!(
-                "fps must be above 0 and at most {MAX_FPS}, got {fps}"
-            )));
-        }
-    }
-    if let Some(m) = options.metres_per_unit {
-        if !(m.is_finite() && m > 0.0) {
-            return Err(Error::InvalidRequest(format!(
-                "unit must be positive, got {m} m"
-            )));
-        }
-    }
-    Ok(())
+    options.check().map_err(Error::InvalidRequest)
 }
 
 /// Frames an answer of `frames` source frames has after `options`.

@@ -53,7 +53,8 @@ pub fn output_frames(source: usize, from: f64, to: f64) -> usize {
     if source == 0 {
         return 0;
     }
-    (((source - 1) as f64 / grid_step(from, to)) + 1e-9).floor() as usize + 1
+    // The same tolerance as `Resampler::locate`, in source frames.
+    (((source - 1) as f64 + 1e-9) / grid_step(from, to)).floor() as usize + 1
 }
 
 /// Output frames of a source range as its frames arrive.
@@ -98,14 +99,27 @@ impl<I: Interpolant> Resampler<I> {
 
     /// Where output frame `k` lies: the source frame before it and the fraction past it.
     fn locate(&self, k: usize) -> (usize, f64) {
+        let last = self.source_frames.saturating_sub(1);
         let u = k as f64 * self.step;
         let i = (u + 1e-9).floor();
         let f = u - i;
-        let i = (i as usize).min(self.source_frames.saturating_sub(1));
+        if !(i.is_finite() && f.is_finite()) || i as usize >= last {
+            return (last, 0.0);
+        }
         if f < 1e-9 {
-            (i, 0.0)
+            (i as usize, 0.0)
         } else {
-            (i, f)
+            (i as usize, f)
+        }
+    }
+
+    /// The first source frame an output frame still to make needs (the neighbour before
+    /// its first); frames before it are not kept.
+    fn first_needed(&self) -> usize {
+        if self.next_out >= self.output_frames {
+            usize::MAX
+        } else {
+            self.locate(self.next_out).0.saturating_sub(1)
         }
     }
 
@@ -118,8 +132,16 @@ impl<I: Interpolant> Resampler<I> {
             if self.received >= self.source_frames {
                 break;
             }
-            self.kept.push_back(frame.to_vec());
+            let index = self.received;
             self.received += 1;
+            if index < self.first_needed() {
+                // No output frame to come lies next to it (a low output rate skips many):
+                // what is kept stays a few frames, however far apart the outputs are.
+                self.kept.clear();
+                self.kept_from = index + 1;
+                continue;
+            }
+            self.kept.push_back(frame.to_vec());
             made += self.emit_ready(out);
         }
         made
@@ -255,6 +277,24 @@ mod tests {
         assert_eq!(grid_step(1.0 / 0.008333, 60.0), 2.0);
         assert_eq!(grid_step(29.97, 30.0), 29.97 / 30.0);
         assert_eq!(output_frames(994, 1.0 / 0.00833333, 30.0), 249);
+    }
+
+    /// A rate a hair off a multiple of the source's ends on the last source frame, not past
+    /// it; a very low rate keeps a few source frames, not all of them.
+    #[test]
+    fn odd_rates_stay_in_bounds_and_memory() {
+        let src = wave(19, 120.0);
+        let out = resample(1, &src, 120.0, 113.333_333_326_962_97, 19);
+        assert!(out.iter().all(|v| v.is_finite()));
+        let long = wave(5000, 120.0);
+        let mut r = Resampler::new(Positions { points: 1 }, 5000, 120.0, 0.01);
+        let mut got = Vec::new();
+        for b in long.chunks(3 * 100) {
+            r.push(b, &mut got);
+            assert!(r.kept.len() <= 4, "{} frames kept", r.kept.len());
+        }
+        assert_eq!(got.len() / 3, r.output_frames());
+        assert_eq!(&got[..3], &long[..3]);
     }
 
     #[test]

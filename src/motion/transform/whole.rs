@@ -13,6 +13,7 @@ use crate::motion::Motion;
 /// positions are then its joints' FK); any other through its positions. The take's up
 /// axis is inferred from its figure (Y when there is none to measure).
 pub fn apply(m: &Motion, options: &Options) -> Result<Motion, String> {
+    options.check()?;
     if options.is_identity() {
         return Ok(m.clone());
     }
