@@ -8,6 +8,7 @@ use clap::Args;
 use super::ReadArgs;
 use mocapstore::motion::analog::per_frame_at;
 use mocapstore::motion::formats::{self, Format};
+use mocapstore::motion::transform::resample::trial_frame_at;
 use mocapstore::motion::transform::{whole, Options, Root, Up};
 use mocapstore::motion::units::parse_unit;
 
@@ -118,8 +119,7 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
         };
         // The trial frame of the first frame, at the output's rate (as the service writes).
         let first = loaded.extras.first_frame.unwrap_or(1);
-        let first_frame =
-            ((first - 1) as f64 * motion.fps / loaded.motion.fps).round() as usize + 1;
+        let first_frame = trial_frame_at(first, loaded.motion.fps, motion.fps);
         formats::c3d::write::write(&formats::c3d::write::Out {
             motion: &motion,
             analog: analog.as_ref(),

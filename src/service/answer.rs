@@ -363,7 +363,9 @@ pub async fn open(
                 analog,
                 // The trial frame of the first frame written, at the answer's rate.
                 first_frame: match transform.fps {
-                    Some(fps) => ((first - 1) as f64 * fps / prepared.fps).round() as usize + 1,
+                    Some(fps) => {
+                        crate::motion::transform::resample::trial_frame_at(first, prepared.fps, fps)
+                    }
                     None => first,
                 },
                 metres_per_unit: transform

@@ -47,6 +47,12 @@ pub fn grid_step(from: f64, to: f64) -> f64 {
     step
 }
 
+/// Trial frame `first` (1-based, at `from` fps) as the frame at the same time at `to` fps:
+/// where a resampled C3D starts, so that its events keep their times.
+pub fn trial_frame_at(first: usize, from: f64, to: f64) -> usize {
+    (first.saturating_sub(1) as f64 * to / from).round() as usize + 1
+}
+
 /// Frames a resampled range has: those of `source` frames at `from` fps put on a grid of
 /// `to` fps from the first one, up to the last.
 pub fn output_frames(source: usize, from: f64, to: f64) -> usize {
