@@ -31,15 +31,17 @@
 //!   ([`codec::Reader`]); shared bases; rate control to a bound. Pure.
 //! - [`motion`]: the `Motion` model (positions, units, gaps, skeletons), forward kinematics,
 //!   error metrics and the file formats in [`motion::formats`] (BVH, C3D, TRC, JSON, NPY in;
-//!   BVH, TRC, JSON, NPY, CSV, raw f32 out). Pure: no I/O, no async, no database.
+//!   BVH, C3D, TRC, JSON, NPY, CSV, raw f32, glTF out) and the transforms between
+//!   decoder and writer ([`motion::transform`]: resampling, root motion, axes, units). Pure: no I/O, no async, no database.
 //!
 //! Beside them, depending on nothing: [`limits`] holds every bound on untrusted input and
 //! server memory (one place; each layer converts it to its own), [`rng`] the deterministic
-//! generator trainers and test motions draw from, and [`corpus`] says where the real-data
-//! corpus and its manifest are (tests and benchmarks).
+//! generator trainers and test motions draw from, [`dates`] the calendar of the Unix clock,
+//! and [`corpus`] says where the real-data corpus and its manifest are (tests and benchmarks).
 
 pub mod codec;
 pub mod corpus;
+pub mod dates;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod http;

@@ -1,12 +1,14 @@
 //! `mocapstore verify`, `export` and `import`: an archivist's tools, run against the
 //! database directly (the service need not be running).
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args;
 
 use mocapstore::service::archive::{self, Imported, ManifestLine};
+use mocapstore::service::export;
 use mocapstore::store::{BasisRow, Filter, Store};
 
 /// Which database, and which takes.
@@ -41,10 +43,13 @@ pub struct VerifyArgs {
 
 #[derive(Args)]
 pub struct ExportArgs {
-    /// Folder to write into (created; must not hold an export already).
+    /// Folder to write into (created; without --format it must not hold an export already,
+    /// with --format a second run resumes).
     dir: PathBuf,
     #[command(flatten)]
     selection: Selection,
+    #[command(flatten)]
+    files: super::export::FilesArgs,
 }
 
 #[derive(Args)]
@@ -129,27 +134,16 @@ pub fn verify(args: &VerifyArgs) -> ExitCode {
     })
 }
 
-/// A file-name-safe form of a take's name.
-fn safe(name: &str) -> String {
-    let s: String = name
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || "._-".contains(c) {
-                c
-            } else {
-                '_'
-            }
-        })
-        .take(80)
-        .collect();
-    if s.is_empty() || s.starts_with('.') {
-        format!("_{s}")
-    } else {
-        s
-    }
-}
-
 pub fn export(args: &ExportArgs) -> ExitCode {
+    if args.files.format.is_some() {
+        let s = &args.selection;
+        return super::export::run(
+            &args.dir,
+            s.library.as_deref(),
+            s.tag.as_deref(),
+            &args.files,
+        );
+    }
     let Some(rt) = runtime("export") else {
         return ExitCode::FAILURE;
     };
@@ -180,9 +174,10 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
         .map_err(|e| e.to_string())?;
     let mut lines = String::new();
     let n = rows.len();
+    let with = archive::ReadWith::default();
     for row in rows {
         let id = row.id.clone();
-        let t = archive::export_take(&store, row)
+        let mut t = archive::export_take(&store, &with, row)
             .await
             .map_err(|e| format!("take {id}: {e}"))?;
         let folder = format!(
@@ -190,11 +185,11 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
             if t.take.library.is_empty() {
                 "_".to_string()
             } else {
-                safe(&t.take.library)
+                export::safe(&t.take.library)
             }
         );
         std::fs::create_dir_all(dir.join(&folder)).map_err(|e| io(dir, e))?;
-        let stem = format!("{folder}/{}__{}", safe(&t.take.name), t.take.id);
+        let stem = format!("{folder}/{}__{}", export::safe(&t.take.name), t.take.id);
         let bitstream = format!("{stem}.mcst");
         let file = format!("{stem}.{}", t.format.name());
         let analog = t.analog.as_ref().map(|_| format!("{stem}.analog.mcst"));
@@ -202,10 +197,13 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
             .parameters
             .as_ref()
             .map(|_| format!("{stem}.parameters.zst"));
-        let mut files = vec![
-            (bitstream.clone(), t.container.to_bytes()),
-            (file.clone(), t.file),
-        ];
+        // The open file piece by piece, as it is decoded.
+        let path = dir.join(&file);
+        let mut out = std::fs::File::create(&path).map_err(|e| io(&path, e))?;
+        while let Some(piece) = t.file.next().await.map_err(|e| format!("take {id}: {e}"))? {
+            out.write_all(&piece).map_err(|e| io(&path, e))?;
+        }
+        let mut files = vec![(bitstream.clone(), t.container.to_bytes())];
         if let (Some(rel), Some(c)) = (&analog, &t.analog) {
             files.push((rel.clone(), c.to_bytes()));
         }

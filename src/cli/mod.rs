@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand};
 mod archive;
 mod bench;
 mod convert;
+mod export;
 mod fetch;
 mod ingest;
 mod inspect;
@@ -50,8 +51,10 @@ enum Command {
     /// Read every chunk, check its checksum, decode every take and compare it with what was
     /// measured when it was stored; exits non-zero on anything wrong.
     Verify(archive::VerifyArgs),
-    /// Write every take back to files: its frames in an open format and its exact bitstream,
-    /// with a manifest (import reads it back into any store).
+    /// Write every take back to files: without --format, from the database, its frames in
+    /// an open format and its exact bitstream with a manifest (import reads it back into any
+    /// store); with --format (glb, c3d, bvh, …), from a running service, the files people
+    /// open, with manifest.csv, resumable.
     Export(archive::ExportArgs),
     /// Store the takes of an export again, byte for byte (into SQLite or Postgres).
     Import(archive::ImportArgs),

@@ -1,4 +1,5 @@
-//! `GET /v1/sequences` (listing), `PATCH /v1/sequences/{id}`, `GET /v1/stats`.
+//! `GET /v1/sequences` (listing), `PATCH /v1/sequences/{id}`, `GET /v1/stats`,
+//! `GET /v1/export` (a library as one ZIP).
 
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
@@ -7,10 +8,18 @@ use axum::Extension;
 use axum::Json;
 use serde::Deserialize;
 
+use axum::body::Body;
+use axum::http::{header, HeaderMap, HeaderValue};
+use futures_util::StreamExt;
+
 use super::error::ApiError;
+use super::sequences::transform_of;
 use super::views::{ListingView, TakeView};
 use super::AppState;
+use crate::motion::formats::Format;
 use crate::service::access::{self, Caller};
+use crate::service::budget::Holder;
+use crate::service::export::{self, ExportRequest};
 use crate::service::library::{self, Stats};
 use crate::store::{Filter, SortKey};
 
@@ -109,6 +118,92 @@ pub async fn stats(
         ..Filter::default()
     });
     Ok(Json(library::stats(&state.store, &filter).await?))
+}
+
+#[derive(Deserialize)]
+pub struct ExportQuery {
+    library: Option<String>,
+    tag: Option<String>,
+    name_prefix: Option<String>,
+    codec: Option<String>,
+    layout: Option<String>,
+    format: Option<String>,
+    fps: Option<f64>,
+    root: Option<String>,
+    up: Option<String>,
+    unit: Option<String>,
+}
+
+/// `GET /v1/export`: every take of a selection in one format, as a ZIP streamed as it is
+/// written, `manifest.csv` last.
+pub async fn export(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
+    query: Result<Query<ExportQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query?;
+    let format = match q.format.as_deref() {
+        None => Format::Json,
+        Some(f) => f
+            .parse::<Format>()
+            .map_err(|e| ApiError::bad_request(e.to_string()))?,
+    };
+    let transform = transform_of(q.fps, q.root.as_deref(), q.up.as_deref(), q.unit.as_deref())?;
+    let file = format!(
+        "{}-{}.zip",
+        export::safe(q.library.as_deref().unwrap_or("library")),
+        format.name()
+    );
+    let filter = caller.grant.restrict(Filter {
+        library: q.library,
+        tag: q.tag,
+        name_prefix: q.name_prefix,
+        codec: q.codec,
+        layout: q.layout,
+        ..Filter::default()
+    });
+    let request = ExportRequest {
+        filter,
+        format,
+        transform,
+    };
+    let mut e = export::open(
+        &state.store,
+        &state.caches,
+        &state.answers,
+        holder,
+        &state.limits,
+        request,
+    )
+    .await?;
+    let mut headers = HeaderMap::new();
+    headers.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/zip"),
+    );
+    let hv = |v: String| HeaderValue::from_str(&v).ok();
+    if let Some(v) = hv(format!("attachment; filename=\"{file}\"")) {
+        headers.insert(header::CONTENT_DISPOSITION, v);
+    }
+    if let Some(v) = hv(e.takes.to_string()) {
+        headers.insert("x-takes", v);
+    }
+    // The first piece before the status, as range answers do.
+    let first = e.next().await?;
+    let rest = futures_util::stream::unfold(Some(e), |e| async move {
+        let mut e = e?;
+        match e.next().await {
+            Ok(Some(piece)) => Some((Ok(piece), Some(e))),
+            Ok(None) => None,
+            Err(err) => {
+                tracing::error!(error = %err, "a library export failed part way");
+                Some((Err(err), None))
+            }
+        }
+    });
+    let body = futures_util::stream::iter(first.map(Ok)).chain(rest);
+    Ok((headers, Body::from_stream(body)).into_response())
 }
 
 #[derive(Deserialize)]

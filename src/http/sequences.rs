@@ -323,29 +323,35 @@ pub fn frames_request(q: FramesQuery) -> Result<RangeRequest, ApiError> {
             "BVH output is the whole skeleton: leave out points",
         ));
     }
-    let bad = |e: String| ApiError::bad_request(e);
-    let transform = Options {
-        fps: q.fps,
-        root: q
-            .root
-            .as_deref()
-            .map(str::parse)
-            .transpose()
-            .map_err(bad)?
-            .unwrap_or_default(),
-        up: q.up.as_deref().map(str::parse).transpose().map_err(bad)?,
-        metres_per_unit: q
-            .unit
-            .as_deref()
-            .map(parse_unit)
-            .transpose()
-            .map_err(|e| ApiError::bad_request(e.to_string()))?,
-    };
+    let transform = transform_of(q.fps, q.root.as_deref(), q.up.as_deref(), q.unit.as_deref())?;
     Ok(RangeRequest {
         range,
         format,
         points,
         transform,
+    })
+}
+
+/// The transforms a query asks for (`fps`, `root`, `up`, `unit`), parsed.
+pub fn transform_of(
+    fps: Option<f64>,
+    root: Option<&str>,
+    up: Option<&str>,
+    unit: Option<&str>,
+) -> Result<Options, ApiError> {
+    let bad = |e: String| ApiError::bad_request(e);
+    Ok(Options {
+        fps,
+        root: root
+            .map(str::parse)
+            .transpose()
+            .map_err(bad)?
+            .unwrap_or_default(),
+        up: up.map(str::parse).transpose().map_err(bad)?,
+        metres_per_unit: unit
+            .map(parse_unit)
+            .transpose()
+            .map_err(|e| ApiError::bad_request(e.to_string()))?,
     })
 }
 

@@ -265,42 +265,6 @@ pub fn values_of(analog: &Analog, channels: &[usize]) -> Vec<f64> {
     out
 }
 
-/// The whole take (or frames `start..end` of it) as a C3D file: its points as decoded,
-/// its analog channels, events and parameters.
-pub fn c3d(
-    take: &Take,
-    points: Vec<f32>,
-    start: usize,
-    analog: Option<Analog>,
-    parameters: Option<Parameters>,
-) -> Result<Vec<u8>> {
-    use crate::motion::formats::c3d::write;
-    let frames = if take.points == 0 {
-        analog.as_ref().map_or(0, Analog::frames)
-    } else {
-        points.len() / (take.points * 3)
-    };
-    let motion = if take.points == 0 {
-        crate::motion::Motion::without_points(take.fps, take.meta.unit.clone(), frames)
-    } else {
-        crate::motion::Motion::new(
-            take.fps,
-            take.meta.unit.clone(),
-            take.meta.point_names.clone(),
-            points,
-            None,
-        )
-    }
-    .map_err(|e| Error::Corrupt(format!("take {}: {e}", take.id)))?;
-    write::write(&write::Out {
-        motion: &motion,
-        analog: analog.as_ref(),
-        parameters: parameters.as_ref(),
-        first_frame: take.meta.first_frame.unwrap_or(1).saturating_add(start),
-    })
-    .map_err(|e| Error::Unsatisfiable(e.to_string()))
-}
-
 /// What every read of a take's analog starts from: the take, its analog decoder (`None`
 /// without analog channels) and the range resolved against the take's frames.
 struct Opened {

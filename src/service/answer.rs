@@ -85,6 +85,9 @@ pub struct Answer {
     pub points: Option<usize>,
     /// The answer's length in bytes, where the format fixes it (f32, NPY).
     pub length: Option<u64>,
+    /// The most bytes the answer can be (a library export's ZIP marks entries that may pass
+    /// 4 GiB as ZIP64).
+    pub len_bound: u64,
     store: Store,
     caches: Arc<ReadCaches>,
     prepared: Arc<Prepared>,
@@ -221,6 +224,40 @@ enum Decoded {
     Channels(codec::rig::Channels),
 }
 
+/// The transforms of a request as `format` takes them, checked: glTF is metres and +Y up
+/// whatever the take's (those are filled in); C3D keeps the lab's axes, units and root
+/// motion. The same for every take, so a library export checks it once.
+pub fn transform_for(format: Format, mut transform: Options) -> Result<Options> {
+    super::shape::check(&transform)?;
+    match format {
+        Format::Glb | Format::Gltf => {
+            if transform.metres_per_unit.is_some_and(|m| m != 1.0) {
+                return Err(Error::InvalidRequest(
+                    "glTF is in metres: leave out unit".into(),
+                ));
+            }
+            if transform.up == Some(Up::Z) {
+                return Err(Error::InvalidRequest("glTF is +Y up: leave out up".into()));
+            }
+            transform.metres_per_unit = Some(1.0);
+            transform.up = Some(Up::Y);
+        }
+        Format::C3d
+            if transform.root != crate::motion::transform::Root::Keep
+                || transform.up.is_some()
+                || transform.metres_per_unit.is_some() =>
+        {
+            return Err(Error::InvalidRequest(
+                "C3D keeps the lab's axes, units and root motion (its parameters place the \
+                 force plates in them): leave out root, up and unit (fps applies)"
+                    .into(),
+            ));
+        }
+        _ => {}
+    }
+    Ok(transform)
+}
+
 /// Check a range request and open its answer, reserving what it will hold from `budget`
 /// for `holder`. Nothing is decoded yet; what cannot be answered is refused here.
 pub async fn open(
@@ -249,21 +286,7 @@ pub async fn open(
     let max_payload = metas.iter().map(|c| u64::from(c.len)).max().unwrap_or(0);
     let all_payloads: u64 = metas.iter().map(|c| u64::from(c.len)).sum();
     let frames = end - start;
-    let mut transform = req.transform;
-    super::shape::check(&transform)?;
-    if matches!(req.format, Format::Glb | Format::Gltf) {
-        // glTF is metres and +Y up, whatever the take's.
-        if transform.metres_per_unit.is_some_and(|m| m != 1.0) {
-            return Err(Error::InvalidRequest(
-                "glTF is in metres: leave out unit".into(),
-            ));
-        }
-        if transform.up == Some(Up::Z) {
-            return Err(Error::InvalidRequest("glTF is +Y up: leave out up".into()));
-        }
-        transform.metres_per_unit = Some(1.0);
-        transform.up = Some(Up::Y);
-    }
+    let transform = transform_for(req.format, req.transform)?;
     let frames_out = super::shape::frames_out(&prepared, &transform, frames);
     // Resampling up makes a block of output frames from a block of decoded ones.
     let grow = |n: u64| (n as f64 * frames_out as f64 / frames.max(1) as f64).ceil() as u64 + 2;
@@ -309,16 +332,6 @@ pub async fn open(
                 return Err(Error::InvalidRequest(
                     "C3D output is the whole take (points, analog, parameters): leave out \
                      points"
-                        .into(),
-                ));
-            }
-            if transform.root != crate::motion::transform::Root::Keep
-                || transform.up.is_some()
-                || transform.metres_per_unit.is_some()
-            {
-                return Err(Error::InvalidRequest(
-                    "C3D keeps the lab's axes, units and root motion (its parameters place the \
-                     force plates in them): leave out root, up and unit (fps applies)"
                         .into(),
                 ));
             }
@@ -471,6 +484,13 @@ pub async fn open(
         }
         Writer::Whole(_) => None,
     };
+    // A whole file (glTF, C3D) is refused past the answer limit before it is built.
+    let len_bound = match &writer {
+        Writer::Whole(_) => limits.answer_bytes,
+        _ => length.unwrap_or(
+            (head.len() as u64 + frames_out as u64 * frame_bytes).saturating_add(TAIL_BYTES as u64),
+        ),
+    };
     // Output in flight: a few pieces, or the whole answer if it is smaller. A piece is a
     // frame past its size at most (the head is the first piece's start).
     let piece = (PIECE_BYTES as u64).max(head.len() as u64) + frame_bytes + TAIL_BYTES as u64;
@@ -502,6 +522,7 @@ pub async fn open(
         metres_per_unit,
         points,
         length,
+        len_bound,
         store: store.clone(),
         caches: caches.clone(),
         cache: chunks.len() <= CACHED_CHUNKS,
@@ -740,18 +761,6 @@ async fn channels_rig(store: &Store, prepared: &Prepared) -> Result<Arc<codec::R
     }
 }
 
-/// A piece of output that counts as held until the connection has written it.
-struct Piece {
-    data: Vec<u8>,
-    _held: Held,
-}
-
-impl AsRef<[u8]> for Piece {
-    fn as_ref(&self) -> &[u8] {
-        &self.data
-    }
-}
-
 impl Answer {
     /// Frames in the answer.
     pub fn frames(&self) -> usize {
@@ -801,8 +810,7 @@ impl Answer {
     fn hand_on(&mut self) -> Bytes {
         let fresh = self.fresh_piece();
         let data = std::mem::replace(&mut self.pending, fresh);
-        let held = self.reservation.hold(data.capacity() as u64);
-        Bytes::from_owner(Piece { data, _held: held })
+        self.reservation.hand_on(data)
     }
 
     /// An empty piece with room for what it may hold: a piece's worth, or what is left of

@@ -10,11 +10,16 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::answer::{self, Answer, RangeRequest};
+use super::budget::{Budget, Holder};
+use super::fetch::TimeRange;
+use super::prepared::ReadCaches;
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::{self, basis::hex, Basis, CodecId, Container, Header, Rig, Shared};
+use crate::limits::Limits;
 use crate::motion::formats::Format;
-use crate::motion::Motion;
+use crate::motion::transform::Options;
 use crate::store::{BasisRow, ChunkEntry, Filter, NewTake, Store};
 
 /// One thing wrong with one stored take.
@@ -225,7 +230,7 @@ async fn check_chunks(
 }
 
 /// A take as export writes it: its row, its bitstream, the bases that bitstream names, and
-/// its frames decoded into a file of an open format.
+/// its frames in a file of an open format, as an answer to be written out piece by piece.
 pub struct ExportedTake {
     pub take: Take,
     pub container: Container,
@@ -233,7 +238,8 @@ pub struct ExportedTake {
     /// The take's skeleton, if it is a skeleton take.
     pub skeleton: Option<Arc<Rig>>,
     pub format: Format,
-    pub file: Vec<u8>,
+    /// The open-format file, through the one read path (as `GET …/frames` writes it).
+    pub file: Answer,
     /// The analog channels' container, if the take has any.
     pub analog: Option<Container>,
     /// The file's parameters as stored (a zstd C3D parameter section), if it had any.
@@ -254,8 +260,29 @@ pub fn export_format(source_format: &str, codec: CodecId) -> Format {
     }
 }
 
-/// Read one take whole: bitstream, bases, and its frames decoded into a file.
-pub async fn export_take(store: &Store, take: Take) -> Result<ExportedTake> {
+/// What an archive export reads with: the caches, budget and limits of the one read path
+/// (the command line has no server; it reads alone, under the server's default limits).
+pub struct ReadWith {
+    pub caches: Arc<ReadCaches>,
+    pub budget: Arc<Budget>,
+    pub limits: Limits,
+}
+
+impl Default for ReadWith {
+    fn default() -> Self {
+        let limits = Limits::default();
+        ReadWith {
+            // Whole takes read past the chunk cache; it only needs to exist.
+            caches: Arc::new(ReadCaches::new(0)),
+            budget: Arc::new(Budget::new(limits.answer_bytes, limits.answer_bytes)),
+            limits,
+        }
+    }
+}
+
+/// Read one take whole: bitstream, bases, and its frames as an open file (an answer of
+/// [`answer::open`], the path every output takes).
+pub async fn export_take(store: &Store, with: &ReadWith, take: Take) -> Result<ExportedTake> {
     let (header, _) = super::fetch::header_of(store, &take).await?;
     let chunks = store
         .chunks(&take.id, 0, header.chunks.len() as i64)
@@ -273,17 +300,11 @@ pub async fn export_take(store: &Store, take: Take) -> Result<ExportedTake> {
             .ok_or_else(|| Error::NotFound(format!("basis {id}")))?;
         bases.push(b);
     }
-    let shared = super::fetch::shared(store, &container.header).await?;
     let skeleton = match &take.skeleton {
         Some(id) => Some(super::skeletons::load(store, id).await?),
         None => None,
     };
     let format = export_format(&take.source_format, take.codec);
-    let (names, unit, fps) = (
-        take.meta.point_names.clone(),
-        take.meta.unit.clone(),
-        take.fps,
-    );
     // What is kept beside the points: the analog container and the parameters as stored.
     let analog = match super::analog::decoder(store, &take.id).await? {
         Some(d) => {
@@ -297,32 +318,21 @@ pub async fn export_take(store: &Store, take: Take) -> Result<ExportedTake> {
         None => None,
     };
     let parameters = store.parameters(&take.id).await?;
-    let tree = parameters
-        .as_ref()
-        .map(|p| super::analog::parameters_of(&take.id, p))
-        .transpose()?;
-    let c3d_take = take.clone();
-    let analog_copy = analog.clone();
-    let (container, file) = blocking(move || -> Result<(Container, Vec<u8>)> {
-        let file = if format == Format::C3d {
-            let frames = codec::decode_all_with(&container, shared)?;
-            let analog = analog_copy
-                .as_ref()
-                .map(codec::analog::decode_all)
-                .transpose()?;
-            super::analog::c3d(&c3d_take, frames, 0, analog, tree)?
-        } else if format == Format::Bvh {
-            let frames = container.header.frames as usize;
-            let source = codec::Stored::new(0, container.chunks.iter().map(Vec::as_slice));
-            super::fetch::bvh_of(&container.header, shared, &source, 0..frames)?
-        } else {
-            let frames = codec::decode_all_with(&container, shared)?;
-            let motion = Motion::new(fps, unit, names, frames, None).map_err(Error::BadInput)?;
-            crate::motion::formats::write(&motion, format).map_err(Error::BadInput)?
-        };
-        Ok((container, file))
-    })
-    .await??;
+    let file = answer::open(
+        store,
+        &with.caches,
+        &with.budget,
+        Holder::Token("archive export".into()),
+        &with.limits,
+        &take.id,
+        RangeRequest {
+            range: TimeRange::All,
+            points: None,
+            format,
+            transform: Options::default(),
+        },
+    )
+    .await?;
     Ok(ExportedTake {
         take,
         container,

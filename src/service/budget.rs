@@ -251,6 +251,27 @@ impl Reservation {
     }
 }
 
+impl Reservation {
+    /// Bytes handed on to the connection that count as held (their capacity) until it has
+    /// written them.
+    pub fn hand_on(self: &Arc<Self>, data: Vec<u8>) -> bytes::Bytes {
+        let held = self.hold(data.capacity() as u64);
+        bytes::Bytes::from_owner(Piece { data, _held: held })
+    }
+}
+
+/// A piece of output that counts as held until the connection has written it.
+struct Piece {
+    data: Vec<u8>,
+    _held: Held,
+}
+
+impl AsRef<[u8]> for Piece {
+    fn as_ref(&self) -> &[u8] {
+        &self.data
+    }
+}
+
 impl Drop for Reservation {
     fn drop(&mut self) {
         if self.units == 0 {

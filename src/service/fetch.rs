@@ -7,8 +7,7 @@ use super::prepared::{Prepared, ReadCaches};
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::container::ChunkMeta;
-use crate::codec::{self, basis::hex, ChunkSource, Header, Limits, Reader, Shared, Stored};
-use crate::motion::Skeleton;
+use crate::codec::{self, basis::hex, Header, Limits, Reader, Shared, Stored};
 use crate::store::{ChunkEntry, Store, TakeRow};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
@@ -106,27 +105,6 @@ pub async fn errors(store: &Store, id: &str) -> Result<TakeErrors> {
         mean_bound_mm: take.bound.mean_mm(),
         series,
     })
-}
-
-/// Frames `range` of a take coded with a codec that keeps channel values, as BVH, from its
-/// header, what the header names, and a source of the chunks the range lies in.
-pub fn bvh_of(
-    header: &Header,
-    shared: Shared,
-    source: &dyn ChunkSource,
-    range: std::ops::Range<usize>,
-) -> Result<Vec<u8>> {
-    let rig = shared
-        .rig
-        .clone()
-        .ok_or_else(|| Error::Corrupt("a take that keeps channels names no skeleton".into()))?;
-    let reader = Reader::new(header.clone(), shared)?;
-    let ch = reader.read_channels(range, rig.channel_count(), source)?;
-    let mut s = Skeleton::new(rig.joints().to_vec(), ch.values).map_err(Error::BadInput)?;
-    if let Some(p) = ch.printed {
-        s = s.with_printed(p).map_err(Error::BadInput)?;
-    }
-    Ok(crate::motion::formats::bvh::write_skeleton(&s, header.fps))
 }
 
 /// The take's reader (cached, or built and cached unless the take is live) and `range`

@@ -7,6 +7,7 @@
 //! - [`budget`]: memory held for requests (bodies, answers): a total and a share per caller.
 //! - [`archive`]: verify everything stored; export takes to open files and bitstreams,
 //!   import them back.
+//! - [`export`]: a library as files of one format, streamed as one ZIP with a manifest.
 //! - [`bases`]: shared bases as stored objects — loading, the newest per layout, deleting.
 //! - [`training`]: training shared bases from a selection of takes, as a background job.
 //! - [`jobs`]: background jobs and their progress.
@@ -26,6 +27,7 @@ pub mod archive;
 pub mod bases;
 pub mod budget;
 pub mod choose;
+pub mod export;
 pub mod fetch;
 pub mod history;
 pub mod ingest;

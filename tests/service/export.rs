@@ -1,0 +1,322 @@
+//! A library as files people open (issue 35): `GET /v1/export` streams every take of a
+//! selection as one ZIP through the one read path, without holding the archive; `mocapstore
+//! export --format` writes the same files and manifest into a folder, and resumes.
+
+use crate::common;
+
+use std::collections::{BTreeMap, HashSet};
+use std::io::{Cursor, Read};
+use std::path::Path;
+
+use mocapstore::corpus;
+use mocapstore::motion::formats::{self, Format};
+use mocapstore::motion::synthetic::walker;
+use mocapstore::service::export::{self, COLUMNS, MANIFEST, ZIP_BYTES};
+
+/// A manifest's lines as column → value maps (RFC 4180: quoted fields may hold commas).
+fn manifest_rows(text: &str) -> Vec<BTreeMap<String, String>> {
+    let mut rows = Vec::new();
+    let mut fields = Vec::new();
+    let mut field = String::new();
+    let mut quoted = false;
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                chars.next();
+                field.push('"');
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => fields.push(std::mem::take(&mut field)),
+            ('\r', false) => {}
+            ('\n', false) => {
+                fields.push(std::mem::take(&mut field));
+                rows.push(std::mem::take(&mut fields));
+            }
+            (c, _) => field.push(c),
+        }
+    }
+    let head = rows.remove(0);
+    assert_eq!(head, COLUMNS, "the manifest's columns");
+    rows.into_iter()
+        .map(|r| {
+            assert_eq!(r.len(), COLUMNS.len(), "{r:?}");
+            head.iter().cloned().zip(r).collect()
+        })
+        .collect()
+}
+
+/// A ZIP's entries, in order, read (and CRC-checked) by the zip crate's reader.
+fn entries(zip: &[u8]) -> Vec<(String, Vec<u8>)> {
+    let mut a = zip::ZipArchive::new(Cursor::new(zip)).unwrap();
+    (0..a.len())
+        .map(|i| {
+            let mut f = a.by_index(i).unwrap();
+            let mut bytes = Vec::new();
+            f.read_to_end(&mut bytes).unwrap();
+            (f.name().unwrap().to_string(), bytes)
+        })
+        .collect()
+}
+
+fn blake3_hex(bytes: &[u8]) -> String {
+    blake3::hash(bytes).to_hex().to_string()
+}
+
+/// Every corpus BVH stored in one library (and one of them twice, under the same name): the
+/// library as GLB at 30 fps is one ZIP of a file per take that Python's `zipfile` reads,
+/// each file the very answer `GET …/frames` gives, the manifest lists every take with its
+/// file's size and digest, and the export holds no more than its largest take's answer.
+#[tokio::test(flavor = "multi_thread")]
+async fn library_export_streams_the_corpus_bvh_as_one_zip() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let mut files: Vec<_> = ["cmu", "bandai", "misc"]
+        .iter()
+        .flat_map(|d| std::fs::read_dir(root.join("bvh").join(d)).unwrap())
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
+        .collect();
+    files.sort();
+    files.push(files[0].clone());
+    let mut ids = Vec::new();
+    for batch in files.chunks(4) {
+        let mut set = tokio::task::JoinSet::new();
+        for (i, f) in batch.iter().enumerate() {
+            let (client, base, f) = (srv.client.clone(), srv.base.clone(), f.clone());
+            set.spawn(async move {
+                let name = f.file_stem().unwrap().to_string_lossy().into_owned();
+                let r = client
+                    .post(format!("{base}/v1/sequences?name={name}&library=corpus"))
+                    .body(std::fs::read(&f).unwrap())
+                    .send()
+                    .await
+                    .unwrap();
+                assert_eq!(r.status(), 201, "{}", f.display());
+                let v: serde_json::Value = r.json().await.unwrap();
+                (i, v["id"].as_str().unwrap().to_string())
+            });
+        }
+        let mut got: Vec<_> = set.join_all().await;
+        got.sort();
+        ids.extend(got.into_iter().map(|(_, id)| id));
+    }
+    // A marker take in another library stays out of the selection.
+    let (status, _) = srv
+        .post(
+            "name=walk&library=markers",
+            formats::write(&walker(120, 6, 60.0, 1, 0.1), Format::Json).unwrap(),
+        )
+        .await;
+    assert_eq!(status, 201);
+
+    let (status, headers, zip) = srv.get("/v1/export?library=corpus&format=glb&fps=30").await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&zip));
+    assert_eq!(headers["content-type"], "application/zip");
+    assert_eq!(headers["x-takes"], ids.len().to_string().as_str());
+    assert!(headers["content-disposition"]
+        .to_str()
+        .unwrap()
+        .contains("corpus-glb.zip"));
+    let peak_export = common::gauge(&srv, "mocapstore_answer_bytes_held_peak").await;
+    assert_eq!(common::gauge(&srv, "mocapstore_answer_bytes_held").await, 0);
+    assert_eq!(
+        common::gauge(&srv, "mocapstore_answer_bytes_reserved").await,
+        0
+    );
+
+    let all = entries(&zip);
+    let (last, manifest) = all.last().unwrap();
+    assert_eq!(last, MANIFEST, "the manifest comes last");
+    let manifest = String::from_utf8(manifest.clone()).unwrap();
+    let rows = manifest_rows(&manifest);
+    assert_eq!(rows.len(), ids.len());
+    assert_eq!(all.len(), ids.len() + 1);
+    let listed: HashSet<&str> = rows.iter().map(|r| r["id"].as_str()).collect();
+    assert_eq!(listed, ids.iter().map(String::as_str).collect());
+    // Named from take names, made unique.
+    let first = files[0].file_stem().unwrap().to_string_lossy().into_owned();
+    assert!(rows
+        .iter()
+        .any(|r| r["file"] == format!("corpus/{first}.glb")));
+    assert_eq!(
+        rows.last().unwrap()["file"],
+        format!("corpus/{first}_2.glb")
+    );
+    for (row, (name, bytes)) in rows.iter().zip(&all) {
+        assert_eq!(&row["file"], name);
+        assert_eq!(row["skipped"], "", "{row:?}");
+        assert_eq!(row["bytes"], bytes.len().to_string(), "{name}");
+        assert_eq!(row["blake3"], blake3_hex(bytes), "{name}");
+        assert_eq!(row["fps"], "30");
+        assert_eq!(row["library"], "corpus");
+        assert!(row["max_error_mm"].parse::<f64>().unwrap() <= 1.0 + 1e-9);
+    }
+    // The one read path: a file in the ZIP is the range answer, byte for byte.
+    for (row, (_, bytes)) in rows.iter().zip(&all).step_by(12) {
+        let (status, _, body) = srv
+            .get(&format!(
+                "/v1/sequences/{}/frames?format=glb&fps=30",
+                row["id"]
+            ))
+            .await;
+        assert_eq!(status, 200);
+        assert!(body == *bytes, "{}", row["file"]);
+    }
+    // An independent reader: every entry's CRC checks out in Python's zipfile.
+    if let Some(python) = common::python() {
+        let path = std::env::temp_dir().join(format!("mocapstore-{}.zip", uuid::Uuid::now_v7()));
+        std::fs::write(&path, &zip).unwrap();
+        let out = std::process::Command::new(python)
+            .args([
+                "-c",
+                "import sys, zipfile; z = zipfile.ZipFile(sys.argv[1]); \
+                 assert z.testzip() is None; print(len(z.namelist()))",
+            ])
+            .arg(&path)
+            .output()
+            .unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(
+            String::from_utf8_lossy(&out.stdout).trim(),
+            (ids.len() + 1).to_string()
+        );
+    }
+    srv.stop().await;
+
+    // What the export held against what one take's answer holds: a fresh server over the
+    // same store reads every take alone; the export held at most the largest of those, the
+    // ZIP's own pieces and its manifest — not the archive, nor anything per take.
+    let mut t = t;
+    t.reopen().await;
+    let alone = common::start(t.store.clone(), 64 << 20).await;
+    for id in &ids {
+        let (status, _, _) = alone
+            .get(&format!("/v1/sequences/{id}/frames?format=glb&fps=30"))
+            .await;
+        assert_eq!(status, 200);
+    }
+    let peak_alone = common::gauge(&alone, "mocapstore_answer_bytes_held_peak").await;
+    let manifest_bound =
+        (ids.len() * std::mem::size_of::<export::Entry>() + 2 * manifest.len()) as u64;
+    assert!(
+        peak_export <= peak_alone + ZIP_BYTES + manifest_bound,
+        "the export held {peak_export} bytes; one take alone {peak_alone}"
+    );
+    alone.stop().await;
+    t.reopen().await;
+    t.finish().await;
+}
+
+/// A take the format cannot hold is skipped and the manifest says why; a request no take
+/// could answer is refused before anything is sent.
+#[tokio::test]
+async fn export_skips_what_a_format_cannot_hold_and_refuses_what_none_can() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let (status, r) = srv
+        .post(
+            "name=walk&library=m",
+            formats::write(&walker(120, 6, 60.0, 1, 0.1), Format::Json).unwrap(),
+        )
+        .await;
+    assert_eq!(status, 201, "{r}");
+    let (status, _, zip) = srv.get("/v1/export?library=m&format=bvh").await;
+    assert_eq!(status, 200);
+    let all = entries(&zip);
+    assert_eq!(all.len(), 1, "only the manifest");
+    let rows = manifest_rows(std::str::from_utf8(&all[0].1).unwrap());
+    assert_eq!(rows[0]["id"], r["id"].as_str().unwrap());
+    assert!(rows[0]["skipped"].contains("no skeleton"), "{rows:?}");
+    assert_eq!(rows[0]["bytes"], "");
+
+    // An empty selection is an empty export: the manifest's header alone.
+    let (status, _, zip) = srv.get("/v1/export?library=none").await;
+    assert_eq!(status, 200);
+    assert_eq!(entries(&zip)[0].1, export::manifest_head().as_bytes());
+
+    for q in [
+        "format=xyz",
+        "format=gltf&unit=mm",
+        "format=c3d&root=in-place",
+        "fps=0",
+        "root=sideways",
+    ] {
+        let (status, _, body) = srv.get(&format!("/v1/export?library=m&{q}")).await;
+        assert_eq!(status, 400, "{q}: {}", String::from_utf8_lossy(&body));
+        let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        assert!(v["error"]["message"].is_string(), "{q}: {v}");
+    }
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// `mocapstore export DIR --format bvh`: the files and manifest the ZIP holds, written into a
+/// folder; a second run fetches nothing, a file changed since is fetched again, and a run
+/// with other options is refused.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_command_line_writes_the_same_files_and_resumes() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let body = formats::write(&walker(90, 6, 30.0, 2, 0.0), Format::Json).unwrap();
+    for name in ["a", "b", "a"] {
+        let (status, r) = srv
+            .post(&format!("name={name}&library=cli"), body.clone())
+            .await;
+        assert_eq!(status, 201, "{r}");
+    }
+    let dir = std::env::temp_dir().join(format!("mocapstore-files-{}", uuid::Uuid::now_v7()));
+    let d = dir.display().to_string();
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "export",
+            &d,
+            "--format",
+            "trc",
+            "--library",
+            "cli",
+            "--server",
+            &srv.base,
+        ];
+        args.extend_from_slice(extra);
+        common::mocapstore(&args)
+    };
+    let (ok, out, err) = run(&["--fps", "60"]);
+    assert!(ok, "{out}{err}");
+    assert!(out.contains("3 files written, 0 already there"), "{out}");
+    let (_, _, zip) = srv.get("/v1/export?library=cli&format=trc&fps=60").await;
+    for (name, bytes) in entries(&zip) {
+        let on_disk = std::fs::read(dir.join(&name)).unwrap();
+        assert!(on_disk == bytes, "{name}: the folder and the ZIP differ");
+    }
+    assert!(dir.join("cli/a_2.trc").is_file());
+
+    let (ok, out, err) = run(&["--fps", "60"]);
+    assert!(
+        ok && out.contains("0 files written, 3 already there"),
+        "{out}{err}"
+    );
+    std::fs::write(dir.join("cli/b.trc"), b"changed").unwrap();
+    let (ok, out, err) = run(&["--fps", "60"]);
+    assert!(
+        ok && out.contains("1 files written, 2 already there"),
+        "{out}{err}"
+    );
+    assert_eq!(
+        std::fs::read(dir.join(MANIFEST)).unwrap(),
+        entries(&zip).last().unwrap().1
+    );
+    let (ok, _, err) = run(&[]);
+    assert!(!ok && err.contains("other options"), "{err}");
+    let _ = std::fs::remove_dir_all(Path::new(&dir));
+    srv.stop().await;
+    t.finish().await;
+}
