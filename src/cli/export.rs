@@ -110,6 +110,25 @@ async fn export_files(
         .unwrap_or("json")
         .parse()
         .map_err(|e| format!("--format: {e}"))?;
+    // Refused here as the service would refuse them for every take.
+    let transform = mocapstore::motion::transform::Options {
+        fps: args.fps,
+        root: match &args.root {
+            Some(r) => r.parse().map_err(|e| format!("--root: {e}"))?,
+            None => Default::default(),
+        },
+        up: match &args.up {
+            Some(u) => Some(u.parse().map_err(|e| format!("--up: {e}"))?),
+            None => None,
+        },
+        metres_per_unit: match &args.unit {
+            Some(u) => {
+                Some(mocapstore::motion::units::parse_unit(u).map_err(|e| format!("--unit: {e}"))?)
+            }
+            None => None,
+        },
+    };
+    mocapstore::service::answer::transform_for(format, transform).map_err(|e| e.to_string())?;
     let options = Options {
         format: format.name().to_string(),
         library: library.map(str::to_string),
@@ -133,6 +152,10 @@ async fn export_files(
         .append(true)
         .open(dir.join(JOURNAL))
         .map_err(|e| io(&dir.join(JOURNAL), e))?;
+    // A line an interrupted run cut short ends here, not glued to the next.
+    if resumed && !journal_ends_whole(&dir.join(JOURNAL)) {
+        writeln!(journal).map_err(|e| io(&dir.join(JOURNAL), e))?;
+    }
     if !resumed {
         writeln!(journal, "{}", json(&options)).map_err(|e| io(&dir.join(JOURNAL), e))?;
     }
@@ -175,7 +198,7 @@ async fn export_files(
             }),
         ));
     }
-    let (mut written, mut skipped) = (0, 0);
+    let (mut written, mut skipped, mut failed) = (0, 0, 0);
     for (i, task) in tasks {
         let got = task
             .await
@@ -198,6 +221,11 @@ async fn export_files(
                 e.skipped = Some(why);
                 skipped += 1;
             }
+            Fetched::Failed(why) => {
+                eprintln!("mocapstore export: {}: {why}", e.file);
+                e.skipped = Some(why);
+                failed += 1;
+            }
         }
     }
     bar.finish_and_clear();
@@ -209,14 +237,22 @@ async fn export_files(
             }
         }
     }
-    let mut manifest = export::manifest_head();
-    for e in &entries {
-        manifest.push_str(&e.csv_line());
-    }
+    let manifest = export::manifest(&entries);
     let partial = dir.join(format!("{MANIFEST}.partial"));
     std::fs::write(&partial, manifest).map_err(|e| io(&partial, e))?;
     std::fs::rename(&partial, dir.join(MANIFEST)).map_err(|e| io(&dir.join(MANIFEST), e))?;
+    if failed > 0 {
+        return Err(format!(
+            "the server failed to write {failed} takes (listed above and in manifest.csv); \
+             run again to retry them"
+        ));
+    }
     Ok((written, kept, skipped))
+}
+
+/// Whether a journal ends with a whole line.
+fn journal_ends_whole(path: &Path) -> bool {
+    std::fs::read(path).is_ok_and(|b| b.last().is_none_or(|&c| c == b'\n'))
 }
 
 fn json<T: Serialize>(v: &T) -> String {
@@ -355,6 +391,8 @@ enum Fetched {
     },
     /// The take cannot be written in this format (the service said why).
     Skipped(String),
+    /// The server failed to write it.
+    Failed(String),
 }
 
 /// Fetch one take's file to `path` (through `path.partial`, renamed when whole).
@@ -385,13 +423,18 @@ async fn fetch(
         break r;
     };
     let status = r.status();
-    if status.is_client_error() {
-        let body = r.bytes().await.map_err(|e| e.to_string())?;
-        return Ok(Fetched::Skipped(message(&body)));
-    }
     if !status.is_success() {
         let body = r.bytes().await.map_err(|e| e.to_string())?;
-        return Err(format!("{status}: {}", message(&body)));
+        let why = message(&body);
+        return match status.as_u16() {
+            // The token does not reach it, or the server is not ready: nothing will do.
+            401 | 403 | 503 => Err(format!("{status}: {why}")),
+            // This take cannot be written so (the format cannot hold it, it was deleted
+            // since it was listed), or the server could not read it (a damaged take; the
+            // server's log says more): skipped, as the service's ZIP skips it.
+            400..=499 => Ok(Fetched::Skipped(why)),
+            _ => Ok(Fetched::Failed(format!("{status}: {why}"))),
+        };
     }
     let header = |name: &str| {
         r.headers()

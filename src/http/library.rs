@@ -182,13 +182,8 @@ pub async fn export(
         header::CONTENT_TYPE,
         HeaderValue::from_static("application/zip"),
     );
-    let hv = |v: String| HeaderValue::from_str(&v).ok();
-    if let Some(v) = hv(format!("attachment; filename=\"{file}\"")) {
-        headers.insert(header::CONTENT_DISPOSITION, v);
-    }
-    if let Some(v) = hv(e.takes.to_string()) {
-        headers.insert("x-takes", v);
-    }
+    headers.insert(header::CONTENT_DISPOSITION, attachment(&file));
+    headers.insert("x-takes", HeaderValue::from(e.takes));
     // The first piece before the status, as range answers do.
     let first = e.next().await?;
     let rest = futures_util::stream::unfold(Some(e), |e| async move {
@@ -204,6 +199,29 @@ pub async fn export(
     });
     let body = futures_util::stream::iter(first.map(Ok)).chain(rest);
     Ok((headers, Body::from_stream(body)).into_response())
+}
+
+/// `Content-Disposition` of a download named `file` (letters of any script, digits, `._-`):
+/// an ASCII `filename` for old clients and the UTF-8 one (RFC 6266) for the rest.
+fn attachment(file: &str) -> HeaderValue {
+    let ascii: String = file
+        .chars()
+        .map(|c| if c.is_ascii() { c } else { '_' })
+        .collect();
+    let encoded: String = file
+        .bytes()
+        .map(|b| {
+            if b.is_ascii_alphanumeric() || b"._-".contains(&b) {
+                char::from(b).to_string()
+            } else {
+                format!("%{b:02X}")
+            }
+        })
+        .collect();
+    HeaderValue::from_str(&format!(
+        "attachment; filename=\"{ascii}\"; filename*=UTF-8''{encoded}"
+    ))
+    .expect("an ASCII header value")
 }
 
 #[derive(Deserialize)]

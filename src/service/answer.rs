@@ -269,6 +269,20 @@ pub async fn open(
     id: &str,
     req: RangeRequest,
 ) -> Result<Answer> {
+    let reservation = budget.reservation(holder);
+    open_with(store, caches, reservation, limits, id, req).await
+}
+
+/// [`open`], reserving into `reservation` (empty; a library export's takes reserve beside
+/// the export's own, [`Budget::reservation_beside`]).
+pub async fn open_with(
+    store: &Store,
+    caches: &Arc<ReadCaches>,
+    mut reservation: Reservation,
+    limits: &Limits,
+    id: &str,
+    req: RangeRequest,
+) -> Result<Answer> {
     let (prepared, (start, end)) = prepare(store, caches, id, req.range).await?;
     let header = prepared.reader.header();
     let chunks = prepared.reader.chunks_for(start..end)?;
@@ -335,6 +349,7 @@ pub async fn open(
                         .into(),
                 ));
             }
+            check_size(frames_out, prepared.point_names.len(), limits)?;
             let take = super::fetch::take(store, id).await?;
             if take.is_live() {
                 return Err(Error::Unsatisfiable(format!(
@@ -368,9 +383,10 @@ pub async fn open(
                     limits.answer_bytes
                 )));
             }
-            // Gathered positions (f64), the decoded analog (whole chunks) and the file.
-            let gathered = frames_out as u64 * points_out as u64 * 24;
-            let analog_bytes = frames as u64 * words as u64 * 8 * 2;
+            // Gathered positions (f64, then their f32 copy), the decoded analog (whole
+            // chunks; `words` a frame at the answer's rate) and the file.
+            let gathered = frames_out as u64 * points_out as u64 * (24 + 12);
+            let analog_bytes = frames_out as u64 * words as u64 * 8 * 2;
             let first = take.meta.first_frame.unwrap_or(1) + start;
             let c3d = C3dParts {
                 analog,
@@ -415,12 +431,15 @@ pub async fn open(
                 .map_or(shaper.width() / 3, <[crate::motion::skeleton::Joint]>::len);
             let file = crate::motion::formats::gltf::glb_len_bound(frames_out, nodes);
             let gathered = frames_out as u64 * shaper.width() as u64 * 8;
-            if file.saturating_mul(2) + gathered > limits.answer_bytes {
+            // Building it holds the binary buffer and the file: a GLB is the buffer once
+            // more; a glTF is its base64 (4/3 of it) inside the JSON text.
+            let build = file.saturating_mul(if req.format == Format::Gltf { 4 } else { 2 });
+            if build.saturating_add(gathered) > limits.answer_bytes {
                 return Err(Error::InvalidRequest(format!(
                     "a glTF of {frames_out} frames of {nodes} nodes takes about {} bytes to \
                      build, over the limit of {} for one answer; ask for a shorter range or a \
                      lower fps",
-                    file * 2 + gathered,
+                    build + gathered,
                     limits.answer_bytes
                 )));
             }
@@ -430,7 +449,7 @@ pub async fn open(
                 shaper,
                 frames_out,
                 &span,
-                file + gathered,
+                build + gathered,
                 None,
             )
         }
@@ -498,7 +517,6 @@ pub async fn open(
         (PIECES_IN_FLIGHT * piece).min(head.len() as u64 + frames_out as u64 * frame_bytes + piece);
     let payloads = PAYLOAD_BATCH.min(all_payloads).max(max_payload);
     let bound = 2 * decode_bytes + block_bytes + payloads + output;
-    let mut reservation = budget.reservation(holder);
     reservation
         .grow_to(bound)
         .map_err(|r| Error::Busy(format!("{}; retry shortly", r.reason("range answers"))))?;
@@ -885,23 +903,27 @@ impl Answer {
                 let keep = self.cache && matches!(chunk, OneChunk::Stored(_));
                 let working = self.reservation.hold(2 * full as u64);
                 let p = self.prepared.clone();
-                let (data, fresh) = blocking(move || {
+                // The transforms run beside the decode, on the blocking pool (resampling a
+                // chunk is a pass over every sample); the shaper's state goes with them.
+                let mut shaper = self.shaper.take();
+                let (data, fresh, shaper) = blocking(move || {
                     let _held = (working, payload_held);
                     let one = One::new(i, chunk, keep);
-                    let data = p.reader.read(part, selected.as_deref(), &one);
-                    (data, one.kept.into_inner().ok().flatten())
+                    let data =
+                        p.reader
+                            .read(part, selected.as_deref(), &one)
+                            .map(|d| match &mut shaper {
+                                Some(s) => s.positions(&d, frames),
+                                None => (d, frames),
+                            });
+                    (data, one.kept.into_inner().ok().flatten(), shaper)
                 })
                 .await?;
                 if let Some(fresh) = fresh {
                     self.caches.chunks.insert(&id, i, fresh);
                 }
-                let mut data = data?;
-                let mut frames = frames;
-                if let Some(shaper) = &mut self.shaper {
-                    let source = data;
-                    data = shaper.positions(&source);
-                    frames = data.len() / shaper.width().max(1);
-                }
+                let (data, frames) = data?;
+                self.shaper = shaper;
                 let held = self.reservation.hold(data.capacity() as u64 * 4);
                 Block {
                     frames,
@@ -916,22 +938,29 @@ impl Answer {
                     .reservation
                     .hold(r.len() as u64 * (channels as u64 * CHANNEL_BYTES) + full as u64);
                 let p = self.prepared.clone();
-                let decoded = blocking(move || {
+                let mut shaper = self.shaper.take();
+                let (decoded, shaper) = blocking(move || {
                     let _held = (working, payload_held);
                     let one = One::new(i, OneChunk::Stored(payload), false);
-                    p.reader.read_channels(part, channels, &one)
+                    let decoded = p.reader.read_channels(part, channels, &one).map(|d| {
+                        match &mut shaper {
+                            // Shaped values are new values: nothing was printed for them.
+                            Some(s) => codec::rig::Channels {
+                                values: s.channel_values(&d.values),
+                                printed: None,
+                            },
+                            None => d,
+                        }
+                    });
+                    (decoded, shaper)
                 })
-                .await??;
-                let mut decoded = decoded;
-                let mut frames = frames;
-                if let Some(shaper) = &mut self.shaper {
-                    let values = shaper.channel_values(&decoded.values);
-                    frames = values.len() / shaper.width().max(1);
-                    decoded = codec::rig::Channels {
-                        values,
-                        printed: None,
-                    };
-                }
+                .await?;
+                let decoded = decoded?;
+                let frames = match &shaper {
+                    Some(s) => decoded.values.len() / s.width().max(1),
+                    None => frames,
+                };
+                self.shaper = shaper;
                 let bytes = decoded.values.capacity() * 8
                     + decoded
                         .printed

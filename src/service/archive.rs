@@ -260,8 +260,10 @@ pub fn export_format(source_format: &str, codec: CodecId) -> Format {
     }
 }
 
-/// What an archive export reads with: the caches, budget and limits of the one read path
-/// (the command line has no server; it reads alone, under the server's default limits).
+/// What an archive export reads with: the caches, budget and limits of the one read path.
+/// The command line reads alone, one take at a time, and must get every stored take out
+/// (a C3D stored from a 512 MiB upload included), so its answers are not held to a
+/// server's per-answer limits; what it holds is one take's file.
 pub struct ReadWith {
     pub caches: Arc<ReadCaches>,
     pub budget: Arc<Budget>,
@@ -270,7 +272,11 @@ pub struct ReadWith {
 
 impl Default for ReadWith {
     fn default() -> Self {
-        let limits = Limits::default();
+        let limits = Limits {
+            answer_samples: u64::MAX,
+            answer_bytes: 1 << 40,
+            ..Limits::default()
+        };
         ReadWith {
             // Whole takes read past the chunk cache; it only needs to exist.
             caches: Arc::new(ReadCaches::new(0)),

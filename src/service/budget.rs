@@ -154,10 +154,21 @@ impl Budget {
             budget: self.clone(),
             holder,
             units: 0,
+            beside: 0,
             whole: false,
             permits: None,
             held: AtomicU64::new(0),
         }
+    }
+
+    /// An empty reservation for a part of a request that holds `parent` already (each take
+    /// of a library export): the parent's units count as this one's for the rule that a
+    /// caller alone may take one reservation past its share, so the part may be as large as
+    /// a request of its own could be.
+    pub fn reservation_beside(self: &Arc<Self>, parent: &Reservation) -> Reservation {
+        let mut r = self.reservation(parent.holder.clone());
+        r.beside = parent.units;
+        r
     }
 
     fn add_held(&self, bytes: u64) {
@@ -172,6 +183,8 @@ pub struct Reservation {
     budget: Arc<Budget>,
     holder: Holder,
     units: u64,
+    /// Units its request's parent reservation holds ([`Budget::reservation_beside`]).
+    beside: u64,
     /// It asked for more than the whole budget and holds all of it (see
     /// [`Reservation::grow_to`]): what it holds may pass what it reserved.
     whole: bool,
@@ -206,7 +219,7 @@ impl Reservation {
         let mut by = b.by_holder.lock().expect("budget lock");
         let mine = by.get(&self.holder).copied().unwrap_or(0);
         // Alone, a holder may take one reservation past its share; never a second.
-        let alone = mine == self.units;
+        let alone = mine == self.units + self.beside;
         if !alone && mine + more > b.share_units {
             return Err(Refused::Share {
                 share: b.share_bytes(),

@@ -5,18 +5,23 @@
 //! [`plan`] and [`Entry`], so both give the same names and manifest).
 //!
 //! # What an export holds
-//! One take's answer at a time (its own reservation, as any range answer), the ZIP writer's
-//! compressor and a few pieces of output ([`ZIP_BYTES`]), and the manifest: a line per take,
-//! reserved before anything is written. Nothing grows with the takes' lengths; the manifest
-//! grows by its line per take, so a selection whose manifest does not fit the caller's share
-//! is refused before it starts (narrow it by library, tag or name).
+//! One take's answer at a time (its own reservation, taken beside the export's, so a take
+//! may be as large as a request of its own), the ZIP writer's compressor and a few pieces of
+//! output ([`ZIP_BYTES`]), and per take its manifest entry and its record in the ZIP's
+//! central directory (a few hundred bytes), reserved before anything is written. Nothing
+//! grows with the takes' lengths; the per-take records grow with their number, so a
+//! selection whose records do not fit the caller's share is refused before it starts
+//! (narrow it by library, tag or name). Takes are listed a page at a time.
 //!
 //! # What a client gets
 //! Entries are `library/name.ext`, in the order the takes were stored; a name used already
 //! (ignoring case, as macOS and Windows do) gets `_2`, `_3`… Each entry's modification time
 //! is its take's creation time, so exporting the same selection twice gives the same bytes.
-//! A take that cannot be written in the format (BVH of a marker take, a live take) is not an
-//! error: its manifest line says why in `skipped` and the export goes on.
+//! A take that cannot be written in the format (BVH of a marker take, a glTF too long for one
+//! answer) or cannot be read (a damaged chunk, a record that does not parse) is not an
+//! error: its manifest line says why in `skipped` and the export goes on. What stops an
+//! export is the database or the server failing, or a take failing once its file is under
+//! way (the ZIP is then cut short, without its central directory, which readers refuse).
 //! `manifest.csv` comes last, when every file's size and BLAKE3 are known.
 
 use std::collections::HashSet;
@@ -32,13 +37,14 @@ use zip::{CompressionMethod, ZipWriter};
 use super::answer::{self, RangeRequest, PIECES_IN_FLIGHT, PIECE_BYTES};
 use super::budget::{Budget, Held, Holder, Reservation};
 use super::fetch::TimeRange;
+use super::library::MAX_PAGE;
 use super::prepared::ReadCaches;
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::limits::Limits;
 use crate::motion::formats::Format;
 use crate::motion::transform::Options;
-use crate::store::{Filter, Store};
+use crate::store::{Filter, SortKey, Store};
 
 /// The manifest's file name, in the ZIP and in an export folder.
 pub const MANIFEST: &str = "manifest.csv";
@@ -130,6 +136,36 @@ impl Entry {
             blake3: None,
             skipped: None,
             created_at: take.created_at,
+        }
+    }
+
+    /// The entry of a take whose record could not be read: what its row says.
+    fn unread(
+        file: String,
+        id: String,
+        name: String,
+        library: String,
+        tags: Vec<String>,
+        created_at: i64,
+    ) -> Entry {
+        Entry {
+            file,
+            id,
+            name,
+            library,
+            tags,
+            frames: 0,
+            fps: 0.0,
+            source_fps: 0.0,
+            codec: String::new(),
+            max_bound_mm: 0.0,
+            mean_bound_mm: None,
+            max_error_mm: 0.0,
+            mean_error_mm: 0.0,
+            bytes: None,
+            blake3: None,
+            skipped: None,
+            created_at,
         }
     }
 
@@ -244,15 +280,55 @@ pub fn plan(takes: &[Take], format: Format) -> Vec<Entry> {
         .collect()
 }
 
+/// The manifest of `entries`: its header, then a line per entry.
+pub fn manifest(entries: &[Entry]) -> String {
+    let mut text = manifest_head();
+    for e in entries {
+        text.push_str(&e.csv_line());
+    }
+    text
+}
+
+/// What an entry adds to what an export holds, besides the entry itself: its manifest line
+/// (reserved at its longest: a size, a digest and a reason to skip filled in later), and its
+/// record in the ZIP writer's central directory, kept and then written at the end.
+fn entry_bytes(e: &Entry) -> u64 {
+    let line = e.csv_line().len() + 20 + 64 + SKIP_REASON_BYTES;
+    let central = 2 * (e.file.len() + 128);
+    (std::mem::size_of::<Entry>() + e.file.len() + 2 * line + central) as u64
+}
+
+/// The most of a reason to skip a take a manifest keeps (longer ones are cut).
+const SKIP_REASON_BYTES: usize = 400;
+
+/// A reason to skip a take, as the manifest keeps it.
+fn reason(e: &Error) -> String {
+    let mut why = e.to_string();
+    if why.len() > SKIP_REASON_BYTES {
+        let mut cut = SKIP_REASON_BYTES - 3;
+        while !why.is_char_boundary(cut) {
+            cut -= 1;
+        }
+        why.truncate(cut);
+        why.push_str("...");
+    }
+    why
+}
+
 /// How every file is stored in the ZIP: deflated. Text shrinks to a third or less, and the
 /// binary formats too (measured on the CMU and TRC corpus takes at 30 fps: GLB to 61 %, C3D
 /// to 49 %: rest poses, repeated times and gaps repeat), at about 30 MB/s of one core.
 const METHOD: CompressionMethod = CompressionMethod::Deflated;
 
 /// Whether a take's answer failed for a reason of its own (it is skipped, and the manifest
-/// says why), or for one that stops the export (the store, the server).
+/// says why: the format cannot hold it, it is damaged, it was deleted meanwhile), or for
+/// one that stops the export (the database, the server).
 fn skips(e: &Error) -> bool {
-    !matches!(e, Error::Store(_) | Error::Internal(_) | Error::Busy(_))
+    match e {
+        Error::Store(crate::store::Error::Corrupt(_)) => true,
+        Error::Store(_) | Error::Internal(_) | Error::Busy(_) => false,
+        _ => true,
+    }
 }
 
 /// What the ZIP is written into: bytes handed on as they come.
@@ -315,7 +391,6 @@ pub struct Export {
     store: Store,
     caches: Arc<ReadCaches>,
     budget: Arc<Budget>,
-    holder: Holder,
     limits: Limits,
     format: Format,
     transform: Options,
@@ -330,7 +405,7 @@ pub struct Export {
     sink: Sink,
     reservation: Arc<Reservation>,
     _entries_held: Held,
-    manifest_done: bool,
+    tail: Tail,
 }
 
 /// Check an export and open it, reserving what it will hold. The takes are listed and
@@ -345,19 +420,50 @@ pub async fn open(
 ) -> Result<Export> {
     // The same for every take: refused once, not skipped take by take.
     let transform = answer::transform_for(req.format, req.transform)?;
-    let takes = super::library::all_takes(store, &req.filter).await?;
-    let entries = plan(&takes, req.format);
-    drop(takes);
-    // Entries as kept, and the manifest written from them at the end.
-    let manifest: u64 = entries
-        .iter()
-        .map(|e| (std::mem::size_of::<Entry>() + 2 * e.csv_line().len()) as u64)
-        .sum();
-    let mut reservation = budget.reservation(holder.clone());
+    // A page of takes at a time, each kept as its entry only.
+    let mut entries = Vec::new();
+    let mut names = Names::default();
+    let mut cursor = None;
+    loop {
+        let page = store
+            .list(
+                &req.filter,
+                SortKey::Created,
+                false,
+                MAX_PAGE,
+                cursor.as_ref(),
+            )
+            .await?;
+        for row in page.items {
+            let file = names.file(&row.library, &row.name, req.format.name());
+            let (id, name, library, tags) = (
+                row.id.clone(),
+                row.name.clone(),
+                row.library.clone(),
+                row.tags.clone(),
+            );
+            let created_at = row.created_at;
+            entries.push(match super::fetch::parse(store, row).await {
+                Ok(take) => Entry::of(&take, file),
+                // A record that does not parse is reported, not a reason to stop.
+                Err(e) => Entry {
+                    skipped: Some(reason(&e)),
+                    ..Entry::unread(file, id, name, library, tags, created_at)
+                },
+            });
+        }
+        match page.next {
+            Some(c) => cursor = Some(c),
+            None => break,
+        }
+    }
+    drop(names);
+    let manifest: u64 = entries.iter().map(entry_bytes).sum();
+    let mut reservation = budget.reservation(holder);
     reservation.grow_to(ZIP_BYTES + manifest).map_err(|r| {
         Error::Busy(format!(
             "{}; an export of {} takes holds {manifest} bytes of manifest: retry shortly, or \
-                 narrow it by library, tag or name",
+             narrow it by library, tag or name",
             r.reason("library exports"),
             entries.len()
         ))
@@ -369,7 +475,6 @@ pub async fn open(
         store: store.clone(),
         caches: caches.clone(),
         budget: budget.clone(),
-        holder,
         limits: *limits,
         format: req.format,
         transform,
@@ -385,8 +490,18 @@ pub async fn open(
         }),
         sink,
         reservation,
-        manifest_done: false,
+        tail: Tail::Takes,
     })
+}
+
+/// Where an export is past its takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Tail {
+    Takes,
+    /// The manifest's entry is started and its text is the input.
+    Manifest,
+    /// The central directory is written: what is left in the sink is the last piece.
+    Finished,
 }
 
 impl Export {
@@ -397,6 +512,7 @@ impl Export {
                 return Ok(Some(self.hand_on()));
             }
             if let Some((piece, at)) = self.input.take() {
+                // Into the ZIP a slice at a time, so that what the sink holds stays a piece.
                 let end = (at + PIECE_BYTES).min(piece.len());
                 let part = piece.slice(at..end);
                 self.zip(move |z| z.write(&part)).await?;
@@ -406,6 +522,7 @@ impl Export {
                 continue;
             }
             if let Some(a) = &mut self.answer {
+                // Past its first piece a take cannot be skipped: its entry is under way.
                 match a.next().await? {
                     Some(piece) => self.input = Some((piece, 0)),
                     None => {
@@ -423,72 +540,86 @@ impl Export {
                 self.open_next().await?;
                 continue;
             }
-            if !self.manifest_done {
-                self.manifest_done = true;
-                let mut manifest = manifest_head();
-                for e in &self.entries {
-                    manifest.push_str(&e.csv_line());
+            match self.tail {
+                Tail::Takes => {
+                    let text = manifest(&self.entries);
+                    let created = self.entries.iter().map(|e| e.created_at).max().unwrap_or(0);
+                    let options = file_options(created, text.len() as u64);
+                    self.zip(move |z| z.start(MANIFEST, options)).await?;
+                    self.input = Some((Bytes::from(text), 0));
+                    self.tail = Tail::Manifest;
                 }
-                let created = self.entries.iter().map(|e| e.created_at).max().unwrap_or(0);
-                let options = file_options(created, manifest.len() as u64);
-                self.zip(move |z| {
-                    z.start(MANIFEST, options)?;
-                    z.write(manifest.as_bytes())
-                })
-                .await?;
-                let z = self.zipper.take().ok_or_else(Self::finished)?;
-                blocking(move || z.zip.finish().map(drop).map_err(zip_error)).await??;
-                continue;
+                Tail::Manifest => {
+                    let z = self.zipper.take().ok_or_else(Self::finished)?;
+                    blocking(move || z.zip.finish().map(drop).map_err(zip_error)).await??;
+                    self.tail = Tail::Finished;
+                }
+                Tail::Finished => return Ok((self.sink.len() > 0).then(|| self.hand_on())),
             }
-            return Ok((self.sink.len() > 0).then(|| self.hand_on()));
         }
     }
 
-    /// Open the answer of the next entry's take, or mark it skipped.
+    /// Open the answer of the next entry's take and start its entry with its first piece,
+    /// or mark the take skipped: a take whose answer fails before any of it is written (a
+    /// glTF or C3D is built whole in its first piece) is skipped, not the export stopped.
     async fn open_next(&mut self) -> Result<()> {
-        let waited = Instant::now();
         let entry = &self.entries[self.at];
+        if entry.skipped.is_some() {
+            self.at += 1;
+            return Ok(());
+        }
+        let id = entry.id.clone();
         let request = RangeRequest {
             range: TimeRange::All,
             points: None,
             format: self.format,
             transform: self.transform,
         };
+        let waited = Instant::now();
         let opened = loop {
-            let opened = answer::open(
+            let reservation = self.budget.reservation_beside(&self.reservation);
+            let opened = answer::open_with(
                 &self.store,
                 &self.caches,
-                &self.budget,
-                self.holder.clone(),
+                reservation,
                 &self.limits,
-                &entry.id,
+                &id,
                 request.clone(),
             )
             .await;
             match opened {
+                // Other answers end within seconds; the export is alone in its share.
                 Err(Error::Busy(_)) if waited.elapsed() < BUDGET_WAIT => {
                     tokio::time::sleep(Duration::from_millis(200)).await;
                 }
                 other => break other,
             }
         };
-        match opened {
-            Ok(a) => {
-                let options = file_options(entry.created_at, a.len_bound);
-                let name = entry.file.clone();
-                let e = &mut self.entries[self.at];
-                e.frames = a.frames_out;
-                e.fps = a.fps;
-                self.answer = Some(a);
-                self.zip(move |z| z.start(&name, options)).await
-            }
-            Err(e) if skips(&e) => {
-                self.entries[self.at].skipped = Some(e.to_string());
-                self.at += 1;
-                Ok(())
-            }
+        let first = match opened {
+            Ok(mut a) => match a.next().await {
+                Ok(first) => Ok((a, first)),
+                Err(e) => Err(e),
+            },
             Err(e) => Err(e),
-        }
+        };
+        let (a, first) = match first {
+            Ok(got) => got,
+            Err(e) if skips(&e) => {
+                tracing::warn!(take = %id, error = %e, "a library export skips a take");
+                self.entries[self.at].skipped = Some(reason(&e));
+                self.at += 1;
+                return Ok(());
+            }
+            Err(e) => return Err(e),
+        };
+        let e = &mut self.entries[self.at];
+        e.frames = a.frames_out;
+        e.fps = a.fps;
+        let options = file_options(e.created_at, a.len_bound);
+        let name = e.file.clone();
+        self.answer = Some(a);
+        self.input = first.map(|p| (p, 0));
+        self.zip(move |z| z.start(&name, options)).await
     }
 
     /// Run `f` on the ZIP writer on the blocking pool (deflate is a pass over every byte).

@@ -77,8 +77,11 @@ impl Shaper {
             PointPose::new(options, points, root_point, up, prepared.metres_per_unit)
                 .map_err(Error::InvalidRequest)
         };
+        // A skeleton take stored before takes kept their up axis is Y-up (BVH's), as its
+        // channels are; a marker take's is inferred from its first frames.
+        let known = prepared.up.or(prepared.skeleton.then_some(Up::Y));
         // Refused options are refused now, whatever the axis turns out to be.
-        let probe = pose(prepared.up.unwrap_or(Up::Y))?;
+        let probe = pose(known.unwrap_or(Up::Y))?;
         let extract = options.root == Root::Extract;
         let mut selected = selected.unwrap_or_else(|| (0..points).collect());
         if extract {
@@ -87,7 +90,7 @@ impl Shaper {
         Ok(Shaper::Points {
             options: *options,
             resampler: resampler(Positions { points }, prepared, options, frames),
-            pose: prepared.up.map(|_| probe),
+            pose: known.map(|_| probe),
             points,
             root_point,
             metres_per_unit: prepared.metres_per_unit,
@@ -162,9 +165,9 @@ impl Shaper {
         }
     }
 
-    /// Decoded positions of whole source frames (every point of the take) to shaped ones,
-    /// as many frames as are ready.
-    pub fn positions(&mut self, decoded: &[f32]) -> Vec<f32> {
+    /// Decoded positions of `count` whole source frames (every point of the take) to shaped
+    /// ones, as many frames as are ready, and how many (a take of no points has frames too).
+    pub fn positions(&mut self, decoded: &[f32], count: usize) -> (Vec<f32>, usize) {
         let Shaper::Points {
             options,
             resampler,
@@ -184,25 +187,25 @@ impl Shaper {
                 .expect("the options were checked when the answer opened")
         });
         let src: Vec<f64> = decoded.iter().map(|&v| f64::from(v)).collect();
-        let frames = match resampler {
+        let (frames, count) = match resampler {
             Some(r) => {
-                let mut out = Vec::with_capacity(r.most_out_of(src.len() / w.max(1)) * w);
-                r.push(&src, &mut out);
-                out
+                let mut out = Vec::with_capacity(r.most_out_of(count) * w);
+                let made = r.push_count(&src, count, &mut out);
+                (out, made)
             }
-            None => src,
+            None => (src, count),
         };
         let wo = pose.points_out() * 3;
-        let mut shaped = Vec::with_capacity(frames.len() / w.max(1) * wo);
-        let mut out = Vec::with_capacity(selected.len() * 3 * frames.len() / w.max(1));
-        for f in frames.chunks_exact(w.max(1)) {
+        let mut shaped = Vec::with_capacity(wo);
+        let mut out = Vec::with_capacity(selected.len() * 3 * count);
+        for f in (0..count).map(|i| &frames[i * w..(i + 1) * w]) {
             shaped.clear();
             pose.frame(f, &mut shaped);
             for &p in selected.iter() {
                 out.extend(shaped[p * 3..p * 3 + 3].iter().map(|&v| v as f32));
             }
         }
-        out
+        (out, count)
     }
 
     /// Decoded channel values of whole source frames to shaped ones, as many frames as

@@ -320,3 +320,70 @@ async fn the_command_line_writes_the_same_files_and_resumes() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// A damaged take is skipped (the manifest says why) and the export goes on; a take whose
+/// answer needs more than the caller's share minus what the export holds is still written,
+/// as it would be alone.
+#[tokio::test(flavor = "multi_thread")]
+async fn export_skips_a_damaged_take_and_writes_one_as_large_as_the_share_allows() {
+    let t = common::sqlite().await;
+    let config = mocapstore::http::Config {
+        limits: mocapstore::limits::Limits {
+            answer_share_bytes: 1 << 20,
+            ..mocapstore::limits::Limits::default()
+        },
+        ..mocapstore::http::Config::default()
+    };
+    let srv = common::start_with(t.store.clone(), config).await;
+    let mut ids = Vec::new();
+    for (name, frames) in [("small", 120), ("large", 20_000)] {
+        let (status, r) = srv
+            .post(
+                &format!("name={name}&library=d&codec=raw"),
+                formats::write(&walker(frames, 40, 120.0, 1, 0.0), Format::Json).unwrap(),
+            )
+            .await;
+        assert_eq!(status, 201, "{r}");
+        ids.push(r["id"].as_str().unwrap().to_string());
+    }
+    // Alone, the large take's answer reserves past the 1 MiB share (one may).
+    let (status, _, alone) = srv
+        .get(&format!("/v1/sequences/{}/frames?format=json", ids[1]))
+        .await;
+    assert_eq!(status, 200);
+    let one_peak = common::gauge(&srv, "mocapstore_answer_bytes_one_peak").await;
+    assert!(one_peak > 1 << 20, "the answer held {one_peak} bytes");
+
+    // One byte of the small take's first chunk damaged.
+    let mocapstore::store::Store::Sqlite(pool) = &t.store else {
+        unreachable!()
+    };
+    let (mut payload,): (Vec<u8>,) =
+        sqlx::query_as("SELECT payload FROM chunks WHERE sequence_id = $1 AND idx = 0")
+            .bind(&ids[0])
+            .fetch_one(pool)
+            .await
+            .unwrap();
+    let last = payload.len() - 1;
+    payload[last] ^= 0x10;
+    sqlx::query("UPDATE chunks SET payload = $1 WHERE sequence_id = $2 AND idx = 0")
+        .bind(payload)
+        .bind(&ids[0])
+        .execute(pool)
+        .await
+        .unwrap();
+
+    let (status, _, zip) = srv.get("/v1/export?library=d&format=json").await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&zip));
+    let all = entries(&zip);
+    let rows = manifest_rows(std::str::from_utf8(&all.last().unwrap().1).unwrap());
+    assert_eq!(rows.len(), 2);
+    assert_eq!(rows[0]["id"], ids[0]);
+    assert!(!rows[0]["skipped"].is_empty(), "{rows:?}");
+    assert_eq!(rows[0]["bytes"], "");
+    assert_eq!(rows[1]["skipped"], "");
+    assert_eq!(all.len(), 2, "the large take's file and the manifest");
+    assert!(all[0].1 == alone, "the large take's file is its answer");
+    srv.stop().await;
+    t.finish().await;
+}

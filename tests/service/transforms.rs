@@ -626,3 +626,28 @@ async fn assimp_opens_the_glb_and_bvh_exports() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// A take of analog channels and no points still has frames: resampled, its answers count
+/// them (x-frames and the body agree), as C3D and as JSON.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_take_of_no_points_resamples_its_frames() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let (id, report) = ingest(&srv, &root, "c3d/c3dio__sample_30__emgwl.c3d", "name=emg").await;
+    assert_eq!(report["points"], 0, "{report}");
+    let frames = report["frames"].as_u64().unwrap();
+    let fps = report["fps"].as_f64().unwrap();
+    let (status, h, body) = srv
+        .get(&format!("/v1/sequences/{id}/frames?fps={}", fps / 2.0))
+        .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    let out: usize = header(&h, "x-frames").parse().unwrap();
+    assert_eq!(out as u64, frames.div_ceil(2));
+    let (_, got) = samples(&body);
+    assert_eq!(got.len(), out);
+    srv.stop().await;
+    t.finish().await;
+}

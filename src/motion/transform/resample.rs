@@ -132,9 +132,17 @@ impl<I: Interpolant> Resampler<I> {
     /// Push whole source frames (`width` values each, in order); the output frames now
     /// complete are appended to `out`. Returns how many.
     pub fn push(&mut self, frames: &[f64], out: &mut Vec<f64>) -> usize {
+        let count = frames.len() / self.interp.width().max(1);
+        self.push_count(frames, count, out)
+    }
+
+    /// [`Resampler::push`] of `count` frames: a frame of no values (a take of analog
+    /// channels and no points) is still a frame, and the output still counts its frames.
+    pub fn push_count(&mut self, frames: &[f64], count: usize, out: &mut Vec<f64>) -> usize {
         let w = self.interp.width();
+        debug_assert_eq!(frames.len(), count * w);
         let mut made = 0;
-        for frame in frames.chunks_exact(w.max(1)) {
+        for frame in (0..count).map(|i| &frames[i * w..(i + 1) * w]) {
             if self.received >= self.source_frames {
                 break;
             }

@@ -52,17 +52,21 @@ pub fn apply(m: &Motion, options: &Options) -> Result<Motion, String> {
     let points = m.point_count();
     let pose = PointPose::new(options, points, None, up, m.unit.metres_per_unit)?;
     let src: Vec<f64> = m.positions().iter().map(|&v| f64::from(v)).collect();
-    let frames_in = match resample {
+    let (frames_in, count) = match resample {
         Some(to) => {
             let mut r = Resampler::new(Positions { points }, frames, m.fps, to);
             let mut out = Vec::new();
-            r.push(&src, &mut out);
-            out
+            let made = r.push_count(&src, frames, &mut out);
+            (out, made)
         }
-        None => src,
+        None => (src, frames),
     };
+    if points == 0 {
+        // Frames of no points (a C3D of analog channels only) are still frames.
+        return Motion::without_points(fps, unit, count).map_err(|e| e.to_string());
+    }
     let mut shaped = Vec::with_capacity(frames_in.len());
-    for f in frames_in.chunks_exact((points * 3).max(1)) {
+    for f in frames_in.chunks_exact(points * 3) {
         pose.frame(f, &mut shaped);
     }
     let mut names = m.point_names.clone();
