@@ -220,6 +220,7 @@ fn cases() -> Vec<Case> {
             409,
         ),
         c(Method::GET, "/v1/stats", "read", false, 200),
+        c(Method::GET, "/v1/export", "read", false, 200),
         c(Method::GET, "/v1/bases", "read", false, 200),
         c(Method::POST, "/v1/bases", "admin", false, 400),
         c(Method::GET, "/v1/bases/{id}", "read", false, 404),

@@ -387,3 +387,46 @@ async fn export_skips_a_damaged_take_and_writes_one_as_large_as_the_share_allows
     srv.stop().await;
     t.finish().await;
 }
+
+/// A token limited to some libraries exports their takes only, whatever the query names.
+#[tokio::test]
+async fn an_export_reaches_only_the_libraries_of_its_token() {
+    let t = common::sqlite().await;
+    let writer = common::token(&t.store, "writer", "write", None).await;
+    let secret = common::token(&t.store, "reader", "read", Some(&["a"])).await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    for library in ["a", "b"] {
+        let r = srv
+            .client
+            .post(format!(
+                "{}/v1/sequences?name=walk&library={library}",
+                srv.base
+            ))
+            .bearer_auth(&writer)
+            .body(formats::write(&walker(60, 6, 60.0, 1, 0.0), Format::Json).unwrap())
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 201);
+    }
+    for query in ["", "?library=b"] {
+        let r = srv
+            .client
+            .get(format!("{}/v1/export{query}", srv.base))
+            .bearer_auth(&secret)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200);
+        let zip = r.bytes().await.unwrap();
+        let all = entries(&zip);
+        let rows = manifest_rows(std::str::from_utf8(&all.last().unwrap().1).unwrap());
+        assert!(
+            rows.iter().all(|r| r["library"] == "a"),
+            "{query}: {rows:?}"
+        );
+        assert_eq!(rows.len(), usize::from(query.is_empty()), "{query}");
+    }
+    srv.stop().await;
+    t.finish().await;
+}

@@ -628,7 +628,7 @@ async fn assimp_opens_the_glb_and_bvh_exports() {
 }
 
 /// A take of analog channels and no points still has frames: resampled, its answers count
-/// them (x-frames and the body agree), as C3D and as JSON.
+/// them (x-frames and the body agree).
 #[tokio::test(flavor = "multi_thread")]
 async fn a_take_of_no_points_resamples_its_frames() {
     let Some((root, _)) = corpus::for_tests() else {
@@ -648,6 +648,92 @@ async fn a_take_of_no_points_resamples_its_frames() {
     assert_eq!(out as u64, frames.div_ceil(2));
     let (_, got) = samples(&body);
     assert_eq!(got.len(), out);
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// NPY, CSV and f32 answers with transforms, read by numpy (`np.load`, `np.genfromtxt`,
+/// `np.fromfile` with the shape headers), hold the JSON answer's samples and gaps: a marker
+/// take with gaps at 30 fps, +Z up, in metres, and a skeleton take in place at 60 fps.
+#[tokio::test(flavor = "multi_thread")]
+async fn numpy_reads_the_position_formats_with_transforms() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let Some(python) = common::python() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let (markers, _) = ingest(&srv, &root, "trc/TRCSamples__Gait.trc", "name=gait").await;
+    let (skeleton, _) = ingest(&srv, &root, "bvh/cmu/131_01.bvh", "name=cmu").await;
+    let dir = std::env::temp_dir().join(format!("mocapstore-numpy-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (id, query) in [
+        (&markers, "fps=30&up=z&unit=m"),
+        (&skeleton, "fps=60&root=in-place&unit=cm"),
+    ] {
+        let mut paths = Vec::new();
+        let mut shape = (0, 0);
+        for format in ["json", "npy", "csv", "f32"] {
+            let (status, h, body) = srv
+                .get(&format!(
+                    "/v1/sequences/{id}/frames?format={format}&{query}"
+                ))
+                .await;
+            assert_eq!(status, 200, "{format} {query}");
+            if format == "f32" {
+                shape = (
+                    header(&h, "x-frames").parse::<usize>().unwrap(),
+                    header(&h, "x-points").parse::<usize>().unwrap(),
+                );
+            }
+            let p = dir.join(format!("take.{format}"));
+            std::fs::write(&p, &body).unwrap();
+            paths.push(p);
+        }
+        let script = r#"
+import json, sys, numpy as np
+j, npy, csv, f32, frames, points = sys.argv[1:7]
+frames, points = int(frames), int(points)
+doc = json.load(open(j))
+ref = np.array([[p if p is not None else [np.nan] * 3 for p in f] for f in doc["frames"]],
+               dtype=np.float64).reshape(len(doc["frames"]), -1, 3)
+got = {
+    "npy": np.load(npy).astype(np.float64),
+    "csv": np.genfromtxt(csv, delimiter=",", skip_header=1)[:, 2:].reshape(ref.shape[0], -1, 3),
+    "f32": np.fromfile(f32, dtype="<f4").astype(np.float64).reshape(frames, points, 3),
+}
+out = {"shape": list(ref.shape), "gaps": int(np.isnan(ref).sum())}
+for k, v in got.items():
+    assert v.shape == ref.shape, (k, v.shape, ref.shape)
+    assert (np.isnan(v) == np.isnan(ref)).all(), k
+    ok = ~np.isnan(ref)
+    out[k] = float(np.abs(v[ok] - ref[ok]).max() / max(1.0, np.abs(ref[ok]).max()))
+print(json.dumps(out))
+"#;
+        let o = std::process::Command::new(&python)
+            .arg("-c")
+            .arg(script)
+            .args(&paths)
+            .arg(shape.0.to_string())
+            .arg(shape.1.to_string())
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{query}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+        // f32 values printed as text read back within an f32's rounding.
+        for k in ["npy", "csv", "f32"] {
+            assert!(v[k].as_f64().unwrap() < 1e-6, "{query}: {v}");
+        }
+        assert_eq!(v["shape"][0].as_u64().unwrap() as usize, shape.0, "{v}");
+        eprintln!("{query}: {v}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
     srv.stop().await;
     t.finish().await;
 }
