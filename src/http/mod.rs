@@ -234,6 +234,16 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
             axum::http::header::X_CONTENT_TYPE_OPTIONS,
             axum::http::HeaderValue::from_static("nosniff"),
         ))
+        // Which API every answer speaks, so that a client can tell at its first call
+        // whether it speaks the same one (the Python client does).
+        .layer(SetResponseHeaderLayer::overriding(
+            axum::http::HeaderName::from_static(API_HEADER),
+            axum::http::HeaderValue::from_static(API_VERSION),
+        ))
+        .layer(SetResponseHeaderLayer::overriding(
+            axum::http::HeaderName::from_static("x-mocapstore-version"),
+            axum::http::HeaderValue::from_static(env!("CARGO_PKG_VERSION")),
+        ))
         .layer(axum::middleware::from_fn_with_state(
             state.metrics.clone(),
             metrics::count_requests,
@@ -241,6 +251,13 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
         .layer(TraceLayer::new_for_http());
     (router, forget)
 }
+
+/// The header every answer names the API's version in.
+pub const API_HEADER: &str = "x-mocapstore-api";
+
+/// The API's version: its major number, raised when a client of the previous one would
+/// misread an answer (fields or headers removed or changed in meaning); additions keep it.
+pub const API_VERSION: &str = "1";
 
 /// CORS for the allowed origins: the methods and headers the API takes, and the headers of
 /// its answers a page may read.
@@ -267,7 +284,7 @@ fn cors(origins: &[String]) -> tower_http::cors::CorsLayer {
     ] {
         allow.push(HeaderName::from_bytes(format!("x-mocap-{f}").as_bytes()).expect("ASCII"));
     }
-    let expose: Vec<HeaderName> = ["x-frames", "x-points", "x-start-frame", "x-fps"]
+    let expose: Vec<HeaderName> = ["x-frames", "x-points", "x-start-frame", "x-fps", API_HEADER]
         .iter()
         .map(|h| HeaderName::from_static(h))
         .chain([header::LOCATION, header::RETRY_AFTER])

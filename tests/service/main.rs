@@ -17,6 +17,7 @@ mod http;
 mod library;
 mod limits;
 mod openapi;
+mod python;
 mod robustness;
 mod skeletons;
 mod store;

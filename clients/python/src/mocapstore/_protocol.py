@@ -1,0 +1,243 @@
+"""What the client says to the server and how it reads the answers, without any I/O.
+
+Each operation is a generator that yields the [`Request`]s it needs and is sent back their
+[`Response`]s, then returns its result. [`mocapstore.Client`] runs them with blocking I/O
+and [`mocapstore.AsyncClient`] with ``await``: the two clients share every rule (query
+fields, shapes, errors, paging) and differ only in how bytes move.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from collections.abc import Generator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+
+from . import errors
+from ._version import API
+from .types import Frames, Take
+
+T = TypeVar("T")
+
+Params = list[tuple[str, str]]
+
+
+@dataclass(frozen=True)
+class Request:
+    """One HTTP request. ``safe``: repeating it cannot change what the server holds twice
+    (reads, deletes), so it may be retried after a broken connection. ``to``: the body is
+    written to this file as it arrives (a download), not kept in memory."""
+
+    method: str
+    path: str
+    params: Params
+    content: bytes | None = None
+    json: Any = None
+    safe: bool = True
+    to: Path | None = None
+
+
+@dataclass(frozen=True)
+class Response:
+    """One HTTP answer (its body empty if it went to a file)."""
+
+    status: int
+    headers: Mapping[str, str]
+    content: bytes
+
+
+Op = Generator[Request, Response, T]
+
+Scalar = str | int | float | bool | None
+
+
+def params(**fields: Scalar | Sequence[str]) -> Params:
+    """Query fields, leaving out those that are ``None``; lists joined by commas."""
+    out: Params = []
+    for k, v in fields.items():
+        if v is None:
+            continue
+        if isinstance(v, bool):
+            out.append((k, "true" if v else "false"))
+        elif isinstance(v, (list, tuple)):
+            out.append((k, ",".join(v)))
+        else:
+            out.append((k, str(v)))
+    return out
+
+
+def check_api(headers: Mapping[str, str]) -> None:
+    """Refuse a server that speaks another API than this client."""
+    got = headers.get("x-mocapstore-api")
+    if got is None:
+        raise errors.IncompatibleServer(
+            "the server does not say which API it speaks (no x-mocapstore-api header): it "
+            f"is not mocapstore, or older than this client (API {API}); upgrade the server"
+        )
+    if got != API:
+        version = headers.get("x-mocapstore-version", "?")
+        raise errors.IncompatibleServer(
+            f"the server (mocapstore {version}) speaks API {got}, this client API {API}: "
+            "install the client of the server's version (pip install mocapstore=="
+            f"{version})"
+        )
+
+
+def raise_for(r: Response) -> Response:
+    """The answer if it is a success, else the exception of its error."""
+    if r.status < 400:
+        return r
+    code, message = "", ""
+    try:
+        body = json.loads(r.content)
+        code = str(body["error"]["code"])
+        message = str(body["error"]["message"])
+    except (ValueError, KeyError, TypeError):
+        message = r.content[:500].decode("utf-8", "replace") or f"HTTP {r.status}"
+    if r.status in (429, 503):
+        wait = retry_after(r.headers)
+        raise errors.Busy(message, status=r.status, code=code, retry_after=wait)
+    raise errors.from_status(r.status, code, message)
+
+
+def retry_after(headers: Mapping[str, str], default: float = 1.0) -> float:
+    """Seconds the server asks a client to wait (``Retry-After``, in seconds)."""
+    try:
+        return max(0.0, float(headers.get("retry-after", default)))
+    except ValueError:
+        return default
+
+
+def json_of(r: Response) -> Any:
+    return json.loads(raise_for(r).content)
+
+
+# Operations ------------------------------------------------------------------------------
+
+
+def take(id: str) -> Op[Take]:
+    r = yield Request("GET", f"/v1/sequences/{id}", [])
+    return Take.from_json(json_of(r))
+
+
+@dataclass(frozen=True)
+class Page:
+    takes: list[Take]
+    cursor: str | None
+
+
+def page(filters: Params, cursor: str | None, limit: int) -> Op[Page]:
+    """One page of a listing, oldest first (a cursor's order stays valid while takes are
+    added: new takes come on later pages)."""
+    q = [*filters, ("sort", "created"), ("order", "asc"), ("limit", str(limit))]
+    if cursor is not None:
+        q.append(("cursor", cursor))
+    r = yield Request("GET", "/v1/sequences", q)
+    v = json_of(r)
+    return Page([Take.from_json(t) for t in v["items"]], v.get("next_cursor"))
+
+
+def update(id: str, name: str | None, library: str | None, tags: Sequence[str] | None) -> Op[Take]:
+    body: dict[str, Any] = {}
+    if name is not None:
+        body["name"] = name
+    if library is not None:
+        body["library"] = library
+    if tags is not None:
+        body["tags"] = list(tags)
+    r = yield Request("PATCH", f"/v1/sequences/{id}", [], json=body, safe=False)
+    return Take.from_json(json_of(r))
+
+
+def delete(id: str) -> Op[None]:
+    r = yield Request("DELETE", f"/v1/sequences/{id}", [])
+    raise_for(r)
+
+
+def stats(filters: Params) -> Op[dict[str, Any]]:
+    r = yield Request("GET", "/v1/stats", filters)
+    v: dict[str, Any] = json_of(r)
+    return v
+
+
+def npy_bytes(array: npt.ArrayLike) -> bytes:
+    """An array of positions, ``(frames, points, 3)``, as NPY bytes (float32)."""
+    a = np.asarray(array, dtype=np.float32)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"positions are (frames, points, 3), got shape {a.shape}")
+    buf = io.BytesIO()
+    np.save(buf, a, allow_pickle=False)
+    return buf.getvalue()
+
+
+def json_doc(array: npt.ArrayLike, fps: float, point_names: Sequence[str]) -> bytes:
+    """Positions with their point names, as the JSON format (NaN → null)."""
+    a = np.asarray(array, dtype=np.float64)
+    if a.ndim != 3 or a.shape[2] != 3 or a.shape[1] != len(point_names):
+        raise ValueError(
+            f"positions are (frames, {len(point_names)}, 3) for {len(point_names)} names, "
+            f"got shape {a.shape}"
+        )
+    frames = [[None if np.isnan(p).any() else [float(x) for x in p] for p in f] for f in a.tolist()]
+    return json.dumps({"fps": fps, "points": list(point_names), "frames": frames}).encode()
+
+
+def ingest(body: bytes, query: Params) -> Op[Take]:
+    """Store a file's bytes; the take as stored."""
+    r = yield Request("POST", "/v1/sequences", query, content=body, safe=False)
+    report = json_of(r)
+    stored: Take = yield from take(report["id"])
+    return stored
+
+
+def frame_names(t: Take, points: Sequence[str] | None, root: str | None) -> tuple[str, ...]:
+    """The point names of a positions answer: those asked for in their order (else the
+    take's), and ``root_motion`` after them when the root's path is extracted."""
+    names = tuple(points) if points is not None else t.point_names
+    if root == "extract":
+        names = (*names, "root_motion")
+    return names
+
+
+def header_int(h: Mapping[str, str], name: str) -> int:
+    return int(h[name])
+
+
+def header_float(h: Mapping[str, str], name: str) -> float:
+    return float(h[name])
+
+
+def frames(t: Take, query: Params, points: Sequence[str] | None, root: str | None) -> Op[Frames]:
+    """A range of frames as float32 positions, from the raw f32 answer (no copy)."""
+    r = yield Request("GET", f"/v1/sequences/{t.id}/frames", [*query, ("format", "f32")])
+    raise_for(r)
+    h = r.headers
+    n, p = header_int(h, "x-frames"), header_int(h, "x-points")
+    data = np.frombuffer(r.content, dtype="<f4")
+    if data.size != n * p * 3:
+        raise errors.MocapstoreError(
+            f"the answer holds {data.size} values, not {n} frames x {p} points x 3"
+        )
+    names = frame_names(t, points, root)
+    if len(names) != p:
+        raise errors.MocapstoreError(f"the answer has {p} points, the take names {len(names)}")
+    return Frames(
+        data=data.reshape(n, p, 3),
+        point_names=names,
+        fps=header_float(h, "x-fps"),
+        source_fps=header_float(h, "x-source-fps"),
+        start=header_int(h, "x-start-frame"),
+        metres_per_unit=header_float(h, "x-metres-per-unit"),
+    )
+
+
+def download(path: str, query: Params, to: Path) -> Op[Path]:
+    """An answer written to a file as it arrives."""
+    r = yield Request("GET", path, query, to=to)
+    raise_for(r)
+    return to

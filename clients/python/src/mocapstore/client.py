@@ -1,0 +1,520 @@
+"""The clients: [`Client`] (blocking) and [`AsyncClient`] (``await``). Both run the same
+operations of [`mocapstore._protocol`]; this module only moves their bytes, retries what
+may be retried and checks the server's API once.
+
+Retries: an answer of 503 or 429 (the server refused at once, before acting, and says when
+to come back with ``Retry-After``) is retried for any request, up to ``retries`` times; a
+broken connection only for requests that are safe to repeat (reads and deletes), never for
+an upload, whose first attempt may have been stored.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import time
+from collections.abc import AsyncIterator, Iterator, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+import httpx
+import numpy.typing as npt
+
+from . import _protocol as p
+from . import errors
+from ._version import __version__
+from .types import Frames, Take
+
+T = TypeVar("T")
+
+#: Where the client looks when no URL is given (as the command line does).
+DEFAULT_URL = "http://127.0.0.1:8080"
+
+#: Seconds between attempts after a broken connection, doubling.
+BACKOFF_S = 0.2
+
+
+class _Base:
+    """What both clients hold and how they turn arguments into operations."""
+
+    def __init__(self, url: str | None, token: str | None, retries: int) -> None:
+        self.url = (url or os.environ.get("MOCAP_SERVER") or DEFAULT_URL).rstrip("/")
+        token = token if token is not None else os.environ.get("MOCAP_TOKEN")
+        self._headers = {"user-agent": f"mocapstore-python/{__version__}"}
+        if token:
+            self._headers["authorization"] = f"Bearer {token.strip()}"
+        self._retries = retries
+        self._api_checked = False
+        # Point names per take (they never change): a range's names without a second call.
+        self._takes: dict[str, Take] = {}
+
+    def _checked(self, r: p.Response) -> p.Response:
+        if not self._api_checked:
+            p.check_api(r.headers)
+            self._api_checked = True
+        return r
+
+    def _take_op(self, id: str) -> p.Op[Take]:
+        if id in self._takes:
+            return self._takes[id]
+        t: Take = yield from p.take(id)
+        self._takes[id] = t
+        return t
+
+    def _frames_op(
+        self,
+        id: str,
+        start: int | None,
+        end: int | None,
+        t0: float | None,
+        t1: float | None,
+        points: Sequence[str] | None,
+        fps: float | None,
+        root: str | None,
+        up: str | None,
+        unit: str | None,
+    ) -> p.Op[Frames]:
+        t = yield from self._take_op(id)
+        query = p.params(
+            start=start,
+            end=end,
+            t0=t0,
+            t1=t1,
+            points=points,
+            fps=fps,
+            root=root,
+            up=up,
+            unit=unit,
+        )
+        f: Frames = yield from p.frames(t, query, points, root)
+        return f
+
+    @staticmethod
+    def _ingest_body(
+        source: str | os.PathLike[str] | npt.ArrayLike,
+        fps: float | None,
+        point_names: Sequence[str] | None,
+    ) -> tuple[bytes, str | None]:
+        """The upload's bytes, and the name a file gives the take."""
+        if isinstance(source, (str, os.PathLike)):
+            path = Path(source)
+            return path.read_bytes(), path.stem
+        if point_names is not None:
+            if fps is None:
+                raise ValueError("an array needs fps=")
+            return p.json_doc(source, fps, point_names), None
+        return p.npy_bytes(source), None
+
+    @staticmethod
+    def _ingest_query(name: str | None, **fields: Any) -> p.Params:
+        return p.params(name=name, **fields)
+
+    @staticmethod
+    def _filters(**fields: Any) -> p.Params:
+        return p.params(**fields)
+
+
+class Client(_Base):
+    """A blocking client of one server. ``url`` and ``token`` default to ``MOCAP_SERVER``
+    and ``MOCAP_TOKEN``; connections are kept alive between calls. Use it as a context
+    manager, or call ``close()``.
+
+    Not to be shared across processes (``fork``): make one per process."""
+
+    def __init__(
+        self,
+        url: str | None = None,
+        token: str | None = None,
+        *,
+        timeout: float = 120.0,
+        retries: int = 5,
+    ) -> None:
+        super().__init__(url, token, retries)
+        self._http = httpx.Client(base_url=self.url, headers=self._headers, timeout=timeout)
+
+    def close(self) -> None:
+        self._http.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # Transport ---------------------------------------------------------------------------
+
+    def _run(self, op: p.Op[T]) -> T:
+        try:
+            req = next(op)
+            while True:
+                req = op.send(self._send(req))
+        except StopIteration as done:
+            result: T = done.value
+            return result
+
+    def _send(self, req: p.Request) -> p.Response:
+        attempt = 0
+        while True:
+            try:
+                r = self._exchange(req)
+            except httpx.TransportError as e:
+                if req.safe and attempt < self._retries:
+                    time.sleep(BACKOFF_S * 2**attempt)
+                    attempt += 1
+                    continue
+                raise errors.ConnectionFailed(f"{self.url}: {e}") from e
+            self._checked(r)
+            if r.status in (429, 503) and attempt < self._retries:
+                time.sleep(p.retry_after(r.headers))
+                attempt += 1
+                continue
+            return r
+
+    def _exchange(self, req: p.Request) -> p.Response:
+        if req.to is None:
+            r = self._http.request(
+                req.method,
+                req.path,
+                params=tuple(req.params),
+                content=req.content,
+                json=req.json,
+            )
+            return p.Response(r.status_code, r.headers, r.content)
+        with self._http.stream(req.method, req.path, params=tuple(req.params)) as r:
+            if r.status_code >= 400:
+                return p.Response(r.status_code, r.headers, r.read())
+            partial = req.to.with_name(req.to.name + ".partial")
+            with open(partial, "wb") as f:
+                for chunk in r.iter_bytes():
+                    f.write(chunk)
+            partial.replace(req.to)
+            return p.Response(r.status_code, r.headers, b"")
+
+    # Takes -------------------------------------------------------------------------------
+
+    def take(self, id: str) -> Take:
+        """A stored take's record."""
+        return self._run(p.take(id))
+
+    def takes(
+        self,
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        name_prefix: str | None = None,
+        codec: str | None = None,
+        layout: str | None = None,
+        page_size: int = 500,
+    ) -> Iterator[Take]:
+        """Every take of a selection, oldest first, fetched a page at a time as the iterator
+        is read (takes stored meanwhile come at the end; none twice)."""
+        filters = self._filters(
+            library=library, tag=tag, name_prefix=name_prefix, codec=codec, layout=layout
+        )
+        cursor: str | None = None
+        while True:
+            page = self._run(p.page(filters, cursor, page_size))
+            yield from page.takes
+            if page.cursor is None:
+                return
+            cursor = page.cursor
+
+    def update(
+        self,
+        id: str,
+        *,
+        name: str | None = None,
+        library: str | None = None,
+        tags: Sequence[str] | None = None,
+    ) -> Take:
+        """Rename a take, move it to another library and/or replace its tags."""
+        t = self._run(p.update(id, name, library, tags))
+        self._takes.pop(id, None)
+        return t
+
+    def delete(self, id: str) -> None:
+        """Delete a take (needs an admin token on a server with tokens)."""
+        self._run(p.delete(id))
+        self._takes.pop(id, None)
+
+    def stats(
+        self, *, library: str | None = None, tag: str | None = None, codec: str | None = None
+    ) -> dict[str, Any]:
+        """Totals over the library, by codec and by library."""
+        return self._run(p.stats(self._filters(library=library, tag=tag, codec=codec)))
+
+    def ingest(
+        self,
+        source: str | os.PathLike[str] | npt.ArrayLike,
+        *,
+        name: str | None = None,
+        library: str | None = None,
+        tags: Sequence[str] | None = None,
+        unit: str | None = None,
+        fps: float | None = None,
+        max_error_mm: float | None = None,
+        mean_error_mm: float | None = None,
+        keep: str | None = None,
+        codec: str | None = None,
+        point_names: Sequence[str] | None = None,
+    ) -> Take:
+        """Store a file (BVH, C3D, TRC, JSON, NPY; named after the file unless ``name`` is
+        given) or an array of positions ``(frames, points, 3)`` (NaN where missing; with
+        ``point_names`` it keeps them, else points are numbered; ``fps`` is needed)."""
+        body, stem = self._ingest_body(source, fps, point_names)
+        query = self._ingest_query(
+            name if name is not None else stem,
+            library=library,
+            tags=tags,
+            unit=unit,
+            fps=fps,
+            max_error_mm=max_error_mm,
+            mean_error_mm=mean_error_mm,
+            keep=keep,
+            codec=codec,
+        )
+        return self._run(p.ingest(body, query))
+
+    # Frames ------------------------------------------------------------------------------
+
+    def frames(
+        self,
+        id: str,
+        *,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+        points: Sequence[str] | None = None,
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> Frames:
+        """A range of a take (frames ``start:end`` or seconds ``t0:t1``; all by default) as
+        float32 positions ``(frames, points, 3)``, NaN where missing, decoded by the server
+        with its transforms: ``fps`` (resampled), ``root`` (``keep``, ``in-place``,
+        ``extract``: a ``root_motion`` point), ``up`` (``y``, ``z``), ``unit`` (``mm``,
+        ``m``, …)."""
+        return self._run(self._frames_op(id, start, end, t0, t1, points, fps, root, up, unit))
+
+    def export(
+        self,
+        id: str,
+        path: str | os.PathLike[str],
+        *,
+        format: str | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> Path:
+        """A take (or a range of it) written to ``path`` in any format the server writes
+        (``glb``, ``gltf``, ``bvh``, ``c3d``, ``trc``, ``csv``, ``json``, ``npy``, ``f32``;
+        by default the file's extension), streamed to disk as it is decoded."""
+        to = Path(path)
+        query = p.params(
+            format=format or to.suffix.lstrip(".").lower() or None,
+            start=start,
+            end=end,
+            t0=t0,
+            t1=t1,
+            fps=fps,
+            root=root,
+            up=up,
+            unit=unit,
+        )
+        return self._run(p.download(f"/v1/sequences/{id}/frames", query, to))
+
+    def export_library(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        format: str = "json",
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> Path:
+        """Every take of a selection in one format, as the server's ZIP (a file per take and
+        ``manifest.csv``), streamed to ``path``."""
+        query = p.params(
+            library=library, tag=tag, format=format, fps=fps, root=root, up=up, unit=unit
+        )
+        return self._run(p.download("/v1/export", query, Path(path)))
+
+
+class AsyncClient(_Base):
+    """[`Client`] for ``asyncio``: the same methods, awaited (``takes`` is an async
+    iterator)."""
+
+    def __init__(
+        self,
+        url: str | None = None,
+        token: str | None = None,
+        *,
+        timeout: float = 120.0,
+        retries: int = 5,
+    ) -> None:
+        super().__init__(url, token, retries)
+        self._http = httpx.AsyncClient(base_url=self.url, headers=self._headers, timeout=timeout)
+
+    async def aclose(self) -> None:
+        await self._http.aclose()
+
+    async def __aenter__(self) -> AsyncClient:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.aclose()
+
+    async def _run(self, op: p.Op[T]) -> T:
+        try:
+            req = next(op)
+            while True:
+                req = op.send(await self._send(req))
+        except StopIteration as done:
+            result: T = done.value
+            return result
+
+    async def _send(self, req: p.Request) -> p.Response:
+        attempt = 0
+        while True:
+            try:
+                r = await self._exchange(req)
+            except httpx.TransportError as e:
+                if req.safe and attempt < self._retries:
+                    await asyncio.sleep(BACKOFF_S * 2**attempt)
+                    attempt += 1
+                    continue
+                raise errors.ConnectionFailed(f"{self.url}: {e}") from e
+            self._checked(r)
+            if r.status in (429, 503) and attempt < self._retries:
+                await asyncio.sleep(p.retry_after(r.headers))
+                attempt += 1
+                continue
+            return r
+
+    async def _exchange(self, req: p.Request) -> p.Response:
+        if req.to is None:
+            r = await self._http.request(
+                req.method,
+                req.path,
+                params=tuple(req.params),
+                content=req.content,
+                json=req.json,
+            )
+            return p.Response(r.status_code, r.headers, r.content)
+        async with self._http.stream(req.method, req.path, params=tuple(req.params)) as r:
+            if r.status_code >= 400:
+                return p.Response(r.status_code, r.headers, await r.aread())
+            partial = req.to.with_name(req.to.name + ".partial")
+            with open(partial, "wb") as f:
+                async for chunk in r.aiter_bytes():
+                    f.write(chunk)
+            partial.replace(req.to)
+            return p.Response(r.status_code, r.headers, b"")
+
+    async def take(self, id: str) -> Take:
+        """A stored take's record."""
+        return await self._run(p.take(id))
+
+    async def takes(
+        self,
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        name_prefix: str | None = None,
+        codec: str | None = None,
+        layout: str | None = None,
+        page_size: int = 500,
+    ) -> AsyncIterator[Take]:
+        """Every take of a selection, oldest first, a page at a time."""
+        filters = self._filters(
+            library=library, tag=tag, name_prefix=name_prefix, codec=codec, layout=layout
+        )
+        cursor: str | None = None
+        while True:
+            page = await self._run(p.page(filters, cursor, page_size))
+            for t in page.takes:
+                yield t
+            if page.cursor is None:
+                return
+            cursor = page.cursor
+
+    async def update(
+        self,
+        id: str,
+        *,
+        name: str | None = None,
+        library: str | None = None,
+        tags: Sequence[str] | None = None,
+    ) -> Take:
+        """Rename a take, move it to another library and/or replace its tags."""
+        t = await self._run(p.update(id, name, library, tags))
+        self._takes.pop(id, None)
+        return t
+
+    async def delete(self, id: str) -> None:
+        """Delete a take."""
+        await self._run(p.delete(id))
+        self._takes.pop(id, None)
+
+    async def stats(
+        self, *, library: str | None = None, tag: str | None = None, codec: str | None = None
+    ) -> dict[str, Any]:
+        """Totals over the library, by codec and by library."""
+        return await self._run(p.stats(self._filters(library=library, tag=tag, codec=codec)))
+
+    async def ingest(
+        self,
+        source: str | os.PathLike[str] | npt.ArrayLike,
+        *,
+        name: str | None = None,
+        library: str | None = None,
+        tags: Sequence[str] | None = None,
+        unit: str | None = None,
+        fps: float | None = None,
+        max_error_mm: float | None = None,
+        mean_error_mm: float | None = None,
+        keep: str | None = None,
+        codec: str | None = None,
+        point_names: Sequence[str] | None = None,
+    ) -> Take:
+        """Store a file or an array of positions (see [`Client.ingest`])."""
+        body, stem = self._ingest_body(source, fps, point_names)
+        query = self._ingest_query(
+            name if name is not None else stem,
+            library=library,
+            tags=tags,
+            unit=unit,
+            fps=fps,
+            max_error_mm=max_error_mm,
+            mean_error_mm=mean_error_mm,
+            keep=keep,
+            codec=codec,
+        )
+        return await self._run(p.ingest(body, query))
+
+    async def frames(
+        self,
+        id: str,
+        *,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+        points: Sequence[str] | None = None,
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> Frames:
+        """A range of a take as float32 positions (see [`Client.frames`])."""
+        return await self._run(self._frames_op(id, start, end, t0, t1, points, fps, root, up, unit))

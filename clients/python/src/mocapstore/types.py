@@ -1,0 +1,161 @@
+"""What the server's answers are, as Python values: a stored take's record ([`Take`]) and a
+range of its frames as a numpy array with its names and clock ([`Frames`])."""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field, replace
+from typing import Any, overload
+
+import numpy as np
+import numpy.typing as npt
+
+F32Array = npt.NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class Take:
+    """A stored take: what it is, how it was coded, what that cost and what error it
+    measured. ``raw`` is the server's record as it came, for fields this client does not
+    name."""
+
+    id: str
+    name: str
+    library: str
+    tags: tuple[str, ...]
+    fps: float
+    frames: int
+    points: int
+    duration_s: float
+    metres_per_unit: float
+    codec: str
+    max_bound_mm: float
+    mean_bound_mm: float | None
+    raw_bytes: int
+    stored_bytes: int
+    ratio: float
+    max_mm: float
+    mean_mm: float
+    rms_mm: float
+    created_at: int
+    point_names: tuple[str, ...]
+    source_format: str
+    skeleton: str | None
+    live: bool
+    raw: dict[str, Any] = field(repr=False, compare=False)
+
+    @classmethod
+    def from_json(cls, v: dict[str, Any]) -> Take:
+        """A take from the server's JSON record."""
+        meta = v.get("meta") or {}
+        return cls(
+            id=v["id"],
+            name=v["name"],
+            library=v.get("library", ""),
+            tags=tuple(v.get("tags", ())),
+            fps=float(v["fps"]),
+            frames=int(v["frames"]),
+            points=int(v["points"]),
+            duration_s=float(v.get("duration_s", 0.0)),
+            metres_per_unit=float(v["metres_per_unit"]),
+            codec=v["codec"],
+            max_bound_mm=float(v["max_bound_mm"]),
+            mean_bound_mm=(
+                float(v["mean_bound_mm"]) if v.get("mean_bound_mm") is not None else None
+            ),
+            raw_bytes=int(v["raw_bytes"]),
+            stored_bytes=int(v["stored_bytes"]),
+            ratio=float(v["ratio"]),
+            max_mm=float(v["max_mm"]),
+            mean_mm=float(v["mean_mm"]),
+            rms_mm=float(v["rms_mm"]),
+            created_at=int(v["created_at"]),
+            point_names=tuple(meta.get("point_names", ())),
+            source_format=v.get("source_format", ""),
+            skeleton=v.get("skeleton"),
+            live=bool(v.get("live", False)),
+            raw=v,
+        )
+
+
+@dataclass(frozen=True)
+class Frames:
+    """A range of a take's frames: ``data`` is ``(frames, points, 3)`` float32, NaN where a
+    sample is missing, in ``metres_per_unit`` and at ``fps``. ``start`` is the take's frame
+    the range starts at (the take's own frames, before any resampling).
+
+    ``data`` is a read-only view of the answer's bytes (no copy); ``np.array(frames)`` or
+    ``frames.data.copy()`` gives a writable one.
+
+    ``frames["LeftHand"]`` is that point's ``(frames, 3)`` track; ``frames[10:20]`` and
+    ``frames.between(1.0, 2.5)`` are ranges (by frame, by seconds from the range's start)."""
+
+    data: F32Array
+    point_names: tuple[str, ...]
+    fps: float
+    source_fps: float
+    start: int
+    metres_per_unit: float
+
+    def __len__(self) -> int:
+        return int(self.data.shape[0])
+
+    def __array__(self, dtype: Any = None, copy: bool | None = None) -> F32Array:
+        a = self.data if dtype is None else self.data.astype(dtype)
+        return a.copy() if copy else a
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.data.shape)
+
+    @property
+    def times(self) -> npt.NDArray[np.float64]:
+        """Seconds of each frame from the range's start."""
+        return np.arange(len(self), dtype=np.float64) / self.fps
+
+    def point(self, name: str) -> F32Array:
+        """The ``(frames, 3)`` track of the point ``name``."""
+        try:
+            i = self.point_names.index(name)
+        except ValueError:
+            raise KeyError(f"no point {name!r} in these frames") from None
+        return self.data[:, i, :]
+
+    @overload
+    def __getitem__(self, key: str) -> F32Array: ...
+
+    @overload
+    def __getitem__(self, key: slice) -> Frames: ...
+
+    def __getitem__(self, key: str | slice) -> F32Array | Frames:
+        if isinstance(key, str):
+            return self.point(key)
+        _, _, step = key.indices(len(self))
+        if step != 1:
+            raise ValueError("frames are sliced with a step of 1; resample with fps= instead")
+        data = self.data[key]
+        return replace(self, data=data)
+
+    def between(self, t0: float, t1: float) -> Frames:
+        """The frames at ``t0 <= t < t1`` seconds from the range's start."""
+        first = max(0, int(np.ceil(t0 * self.fps - 1e-9)))
+        end = max(first, int(np.ceil(t1 * self.fps - 1e-9)))
+        return self[first:end]
+
+    def to_pandas(self) -> Any:
+        """A long table: one row per frame and point (``frame``, ``time``, ``point``, ``x``,
+        ``y``, ``z``); needs the ``pandas`` extra."""
+        pd = importlib.import_module("pandas")  # an optional dependency (the extra)
+
+        n, p, _ = self.data.shape
+        flat = self.data.reshape(n * p, 3)
+        return pd.DataFrame(
+            {
+                "frame": np.repeat(np.arange(n), p),
+                "time": np.repeat(self.times, p),
+                "point": np.tile(np.array(self.point_names, dtype=object), n),
+                "x": flat[:, 0],
+                "y": flat[:, 1],
+                "z": flat[:, 2],
+            }
+        )

@@ -1,0 +1,211 @@
+"""The client against a real server: every method, answers bit for bit as the server's
+own routes give them, gaps as NaN, paging that sees every take once, errors that carry the
+server's code, and a clear refusal of a server of another API."""
+
+from __future__ import annotations
+
+import asyncio
+import http.server
+import json
+import threading
+import uuid
+import zipfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+import mocapstore
+from mocapstore import _protocol
+
+NAMES = ["head", "lhand", "rhand", "lfoot", "rfoot"]
+
+
+def walker(frames: int, gaps: bool = False) -> npt.NDArray[np.float32]:
+    """A small moving figure, in mm; with gaps, the left hand missing for a stretch."""
+    t = np.arange(frames, dtype=np.float64)[:, None] / 60.0
+    base = np.array([[0, 1700, 0], [-400, 1000, 0], [400, 1000, 0], [-150, 80, 0], [150, 80, 0]])
+    k = np.arange(5)
+    wave = [300 * np.sin(t + k), 20 * np.cos(2 * t + k), 500 * t + 0 * k]
+    a: npt.NDArray[np.float32] = (base[None, :, :] + np.stack(wave, axis=-1)).astype(np.float32)
+    if gaps:
+        a[20:35, 1, :] = np.nan
+    return a
+
+
+@pytest.fixture
+def client(server: str) -> Iterator[mocapstore.Client]:
+    with mocapstore.Client(server) as c:
+        yield c
+
+
+def library() -> str:
+    return f"py-{uuid.uuid4().hex[:12]}"
+
+
+def test_ingest_array_and_read_frames_bit_for_bit(client: mocapstore.Client, server: str) -> None:
+    lib = library()
+    take = client.ingest(
+        walker(120, gaps=True),
+        name="walk",
+        library=lib,
+        fps=60,
+        point_names=NAMES,
+        unit="mm",
+        tags=["a", "b"],
+    )
+    assert (take.name, take.library, take.frames, take.points) == ("walk", lib, 120, 5)
+    assert take.point_names == tuple(NAMES)
+    assert take.tags == ("a", "b")
+    f = client.frames(take.id)
+    assert f.shape == (120, 5, 3) and f.data.dtype == np.float32
+    assert f.point_names == tuple(NAMES) and f.fps == 60 and f.start == 0
+    raw = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format=f32").content
+    assert f.data.tobytes() == raw, "the array is the f32 answer, bit for bit"
+    # Gaps are NaN exactly where the JSON answer says null.
+    doc = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format=json").json()
+    nulls = np.array([[p is None for p in fr] for fr in doc["frames"]])
+    assert (np.isnan(f.data).any(axis=2) == nulls).all()
+    assert nulls[20:35, 1].all() and nulls.sum() == 15
+    # Within the bound of what was stored.
+    ok = ~np.isnan(walker(120, gaps=True))
+    assert np.abs(f.data[ok] - walker(120, gaps=True)[ok]).max() <= take.max_bound_mm + 1e-3
+    # By name, by frame, by seconds.
+    assert np.array_equal(f["lhand"], f.data[:, 1, :], equal_nan=True)
+    assert len(f[10:20]) == 10 and len(f.between(0.5, 1.0)) == 30
+    assert f.between(0.5, 1.0).data[0].tobytes() == f.data[30].tobytes()
+
+
+def test_ranges_points_and_transforms_name_what_they_hold(
+    client: mocapstore.Client, server: str
+) -> None:
+    take = client.ingest(walker(120), name="w", library=library(), fps=60, point_names=NAMES)
+    f = client.frames(take.id, t0=0.5, t1=1.5, points=["rfoot", "head"], fps=30, unit="m", up="z")
+    doc = httpx.get(
+        f"{server}/v1/sequences/{take.id}/frames",
+        params={"t0": 0.5, "t1": 1.5, "points": "rfoot,head", "fps": 30, "unit": "m", "up": "z"},
+    ).json()
+    assert list(f.point_names) == doc["points"] == ["rfoot", "head"]
+    assert f.fps == 30 and f.source_fps == 60 and f.start == 30 and f.metres_per_unit == 1.0
+    assert np.allclose(f.data, np.array(doc["frames"], dtype=np.float32))
+    with pytest.raises(mocapstore.BadRequest) as e:
+        client.frames(take.id, unit="furlong")
+    assert e.value.code == "bad_request" and "furlong" in e.value.message
+    with pytest.raises(mocapstore.OutOfRange):
+        client.frames(take.id, start=500, end=600)
+    with pytest.raises(mocapstore.NotFound) as nf:
+        client.frames("no-such-take")
+    assert nf.value.status == 404 and nf.value.code == "not_found"
+
+
+def test_a_skeleton_take_extracts_its_root(client: mocapstore.Client, corpus: Path | None) -> None:
+    if corpus is None:
+        pytest.skip("no corpus")
+    take = client.ingest(corpus / "bvh" / "cmu" / "131_02.bvh", library=library())
+    assert take.name == "131_02" and take.skeleton is not None
+    f = client.frames(take.id, end=50, root="extract")
+    assert f.point_names[-1] == "root_motion" and f.shape == (50, take.points + 1, 3)
+    still = client.frames(take.id, end=50, root="in-place")
+    assert np.allclose(still.data[:, 0, [0, 2]], 0.0, atol=1e-4)
+
+
+def test_takes_pages_see_every_take_once_while_takes_are_added(client: mocapstore.Client) -> None:
+    lib = library()
+    first = [client.ingest(walker(30), name=f"t{i}", library=lib, fps=60).id for i in range(5)]
+    seen: list[str] = []
+    added: list[str] = []
+    for t in client.takes(library=lib, page_size=2):
+        seen.append(t.id)
+        if len(added) < 3:
+            added.append(client.ingest(walker(30), name="late", library=lib, fps=60).id)
+    assert sorted(seen) == sorted(first + added), "every take, once"
+    assert len(seen) == len(set(seen))
+    assert [t.id for t in client.takes(library=lib)] == first + added, "oldest first"
+
+
+def test_update_delete_take_and_stats(client: mocapstore.Client) -> None:
+    lib = library()
+    take = client.ingest(walker(60), name="x", library=lib, fps=60)
+    moved = client.update(take.id, name="y", tags=["keep"])
+    assert (moved.name, moved.tags) == ("y", ("keep",))
+    assert client.take(take.id).name == "y"
+    s = client.stats(library=lib)
+    assert s["total"]["takes"] == 1
+    client.delete(take.id)
+    with pytest.raises(mocapstore.NotFound):
+        client.take(take.id)
+    assert client.stats(library=lib)["total"]["takes"] == 0
+
+
+def test_export_writes_what_the_server_answers(
+    client: mocapstore.Client, server: str, tmp_path: Path
+) -> None:
+    lib = library()
+    take = client.ingest(walker(60), name="e", library=lib, fps=60, point_names=NAMES)
+    out = client.export(take.id, tmp_path / "e.glb", fps=30)
+    want = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format=glb&fps=30").content
+    assert out.read_bytes() == want and want[:4] == b"glTF"
+    with pytest.raises(mocapstore.Conflict):
+        client.export(take.id, tmp_path / "e.bvh")
+    assert not (tmp_path / "e.bvh").exists()
+    z = client.export_library(tmp_path / "lib.zip", library=lib, format="c3d")
+    names = zipfile.ZipFile(z).namelist()
+    assert names == [f"{lib}/e.c3d", "manifest.csv"]
+
+
+def test_the_async_client_does_the_same(server: str) -> None:
+    async def run() -> None:
+        async with mocapstore.AsyncClient(server) as c:
+            lib = library()
+            take = await c.ingest(walker(60), name="a", library=lib, fps=60, point_names=NAMES)
+            f = await c.frames(take.id, points=["head"])
+            assert f.shape == (60, 1, 3) and f.point_names == ("head",)
+            assert [t.id async for t in c.takes(library=lib)] == [take.id]
+            assert (await c.update(take.id, library=lib + "-b")).library == lib + "-b"
+            assert (await c.stats(library=lib + "-b"))["total"]["takes"] == 1
+            await c.delete(take.id)
+            with pytest.raises(mocapstore.NotFound):
+                await c.take(take.id)
+
+    asyncio.run(run())
+
+
+class _NotMocapstore(http.server.BaseHTTPRequestHandler):
+    def do_GET(self) -> None:
+        body = json.dumps({"items": [], "next_cursor": None}).encode()
+        self.send_response(200)
+        self.send_header("content-length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *args: object) -> None:
+        pass
+
+
+def test_a_server_of_another_api_is_refused_clearly() -> None:
+    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _NotMocapstore)
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
+    try:
+        url = f"http://127.0.0.1:{srv.server_address[1]}"
+        with (
+            mocapstore.Client(url) as c,
+            pytest.raises(mocapstore.IncompatibleServer, match="x-mocapstore-api"),
+        ):
+            list(c.takes())
+    finally:
+        srv.shutdown()
+    with pytest.raises(mocapstore.IncompatibleServer, match="speaks API 2"):
+        _protocol.check_api({"x-mocapstore-api": "2", "x-mocapstore-version": "9.0.0"})
+
+
+def test_defaults_come_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("MOCAP_SERVER", "http://example.invalid:1/")
+    monkeypatch.setenv("MOCAP_TOKEN", "secret")
+    with mocapstore.Client() as c:
+        assert c.url == "http://example.invalid:1"
+        assert c._headers["authorization"] == "Bearer secret"
+        with pytest.raises(mocapstore.ConnectionFailed):
+            c.take("x")
