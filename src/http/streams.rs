@@ -59,6 +59,9 @@ pub struct AppendQuery {
     /// When the producer captured the last frame sent, in ms since the Unix epoch (its
     /// clock): watchers show the delay from capture to their screen.
     captured_ms: Option<i64>,
+    /// The stream's frame index the body's first frame is: frames the stream has already
+    /// (an append retried after its answer was lost) are not appended twice.
+    first: Option<usize>,
 }
 
 /// Frames from the body: JSON (`{"frames": [[x, y, z, …], …]}` or a bare array of frames,
@@ -181,6 +184,7 @@ pub async fn append(
             &state.caches,
             &id,
             frames,
+            q.first,
             q.flush,
             q.captured_ms,
         )

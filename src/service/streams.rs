@@ -581,6 +581,7 @@ impl Streams {
         caches: &ReadCaches,
         id: &str,
         frames: Vec<f32>,
+        first: Option<usize>,
         flush: bool,
         captured_ms: Option<i64>,
     ) -> Result<StreamInfo> {
@@ -617,6 +618,20 @@ impl Streams {
                  send null (JSON) or NaN (f32) for a missing sample",
                 frames[i]
             )));
+        }
+        let mut frames = frames;
+        if let Some(first) = first {
+            // A producer that numbers its appends sends each frame once, however often it
+            // retries: the frames the stream has are dropped, a gap is refused.
+            let have = live.received;
+            if first > have {
+                return Err(Error::Conflict(format!(
+                    "stream {id} has {have} frames; frames {have}..{first} were never \
+                     received: send from frame {have}"
+                )));
+            }
+            let skip = (have - first).min(frames.len() / w);
+            frames.drain(..skip * w);
         }
         live.last_activity = Instant::now();
         let first = live.received;

@@ -540,3 +540,56 @@ async fn a_slow_watcher_skips_appends_and_never_holds_the_producer() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// An append numbered with `first` adds each frame once: a retry of an append the stream
+/// has already (its answer lost) adds nothing, an overlapping one only its new frames, and
+/// one that would leave a gap is refused, saying where to resume.
+#[tokio::test]
+async fn numbered_appends_add_each_frame_once() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let (status, _, s) = srv
+        .post_json("/v1/streams", &json!({"name": "n", "fps": 60, "points": 2}))
+        .await;
+    assert_eq!(status, 201, "{s}");
+    let id = s["id"].as_str().unwrap().to_string();
+    let frames = |n: usize, from: usize| json!({"frames": (from..from + n).map(|f| vec![f as f64, 0.0, 0.0, 1.0, 1.0, 1.0]).collect::<Vec<_>>()});
+    for (first, body, want) in [
+        (0, frames(10, 0), 10),
+        (0, frames(10, 0), 10),
+        (5, frames(10, 5), 15),
+    ] {
+        let (status, _, r) = srv
+            .post_json(&format!("/v1/streams/{id}/frames?first={first}"), &body)
+            .await;
+        assert_eq!(status, 200, "{r}");
+        assert_eq!(r["frames_received"], want, "first={first}: {r}");
+    }
+    let (status, _, r) = srv
+        .post_json(&format!("/v1/streams/{id}/frames?first=20"), &frames(3, 20))
+        .await;
+    assert_eq!(status, 409, "{r}");
+    assert!(
+        r["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("send from frame 15"),
+        "{r}"
+    );
+    let (status, _, take) = srv
+        .post_json(&format!("/v1/streams/{id}/finish"), &json!({}))
+        .await;
+    assert_eq!(status, 200, "{take}");
+    // Frame 12 is the one sent as frame 12, once.
+    let (_, _, body) = srv
+        .get(&format!("/v1/sequences/{id}/frames?start=12&end=13"))
+        .await;
+    // Within the 1 mm bound: a frame appended twice would be off by 5.
+    let v: Value = serde_json::from_slice(&body).unwrap();
+    assert!(
+        (v["frames"][0][0][0].as_f64().unwrap() - 12.0).abs() <= 1.0,
+        "{v}"
+    );
+    srv.stop().await;
+    t.finish().await;
+}

@@ -8,7 +8,7 @@
 """
 
 from ._version import API, __version__
-from .client import AsyncClient, Client
+from .client import AsyncClient, AsyncStream, Client, Stream
 from .errors import (
     BadRequest,
     Busy,
@@ -28,6 +28,7 @@ from .types import Frames, Take
 __all__ = [
     "API",
     "AsyncClient",
+    "AsyncStream",
     "BadRequest",
     "Busy",
     "Client",
@@ -40,6 +41,7 @@ __all__ = [
     "NotFound",
     "OutOfRange",
     "ServerError",
+    "Stream",
     "Take",
     "Unauthorized",
     "Unreadable",

@@ -241,3 +241,42 @@ def download(path: str, query: Params, to: Path) -> Op[Path]:
     r = yield Request("GET", path, query, to=to)
     raise_for(r)
     return to
+
+
+# Live streams ---------------------------------------------------------------------------
+
+
+def open_stream(body: dict[str, Any]) -> Op[dict[str, Any]]:
+    """Open a live take; its state (``id``, ``frames_received``, …)."""
+    r = yield Request("POST", "/v1/streams", [], json=body, safe=False)
+    v: dict[str, Any] = json_of(r)
+    return v
+
+
+def f32_frames(array: npt.ArrayLike, points: int) -> tuple[bytes, int]:
+    """Frames ``(frames, points, 3)`` (or ``(frames, points * 3)``) as little-endian f32,
+    and how many."""
+    a = np.asarray(array, dtype="<f4")
+    if a.ndim == 2 and a.shape[1] == points * 3:
+        a = a.reshape(a.shape[0], points, 3)
+    if a.ndim != 3 or a.shape[1:] != (points, 3):
+        raise ValueError(f"frames of this stream are (n, {points}, 3), got shape {a.shape}")
+    return np.ascontiguousarray(a).tobytes(), int(a.shape[0])
+
+
+def append(
+    id: str, body: bytes, first: int, flush: bool, captured_ms: int | None
+) -> Op[dict[str, Any]]:
+    """Append frames numbered from ``first``: the server drops those it has, so the request
+    is safe to repeat after a broken connection."""
+    q = params(first=first, flush=flush or None, captured_ms=captured_ms)
+    r = yield Request("POST", f"/v1/streams/{id}/frames", q, content=body, safe=True)
+    v: dict[str, Any] = json_of(r)
+    return v
+
+
+def finish_stream(id: str) -> Op[Take]:
+    r = yield Request("POST", f"/v1/streams/{id}/finish", [], json={}, safe=False)
+    raise_for(r)
+    t: Take = yield from take(id)
+    return t

@@ -114,6 +114,122 @@ class _Base:
         return p.params(**fields)
 
 
+def _stream_body(
+    fps: float,
+    points: int | Sequence[str],
+    name: str | None,
+    library: str | None,
+    tags: Sequence[str] | None,
+    unit: str | None,
+    max_error_mm: float | None,
+    mean_error_mm: float | None,
+    codec: str | None,
+    chunk_seconds: float | None,
+) -> dict[str, Any]:
+    body: dict[str, Any] = {
+        "fps": fps,
+        "points": points if isinstance(points, int) else list(points),
+    }
+    for k, v in [
+        ("name", name),
+        ("library", library),
+        ("tags", list(tags) if tags is not None else None),
+        ("unit", unit),
+        ("max_error_mm", max_error_mm),
+        ("mean_error_mm", mean_error_mm),
+        ("codec", codec),
+        ("chunk_seconds", chunk_seconds),
+    ]:
+        if v is not None:
+            body[k] = v
+    return body
+
+
+class Stream:
+    """A live take being recorded ([`Client.stream`]). Each append is numbered with the
+    frame it starts at, so a retry (after a 503, or a connection broken before the answer
+    came) neither loses nor repeats a frame. Finished when the ``with`` block ends."""
+
+    def __init__(self, client: Client, info: dict[str, Any]) -> None:
+        self._client = client
+        self.info = info
+        self.id: str = info["id"]
+        self.points: int = int(info["points"])
+        self.take: Take | None = None
+
+    @property
+    def frames_received(self) -> int:
+        return int(self.info["frames_received"])
+
+    def append(
+        self, frames: npt.ArrayLike, *, captured_ms: int | None = None, flush: bool = False
+    ) -> None:
+        """Append frames ``(n, points, 3)``, NaN where missing (``captured_ms``: when the
+        last was captured, ms since the epoch, for watchers' delay)."""
+        body, _ = p.f32_frames(frames, self.points)
+        self.info = self._client._run(
+            p.append(self.id, body, self.frames_received, flush, captured_ms)
+        )
+
+    def flush(self) -> None:
+        """Commit what is pending now (readable by range at once)."""
+        self.info = self._client._run(p.append(self.id, b"", self.frames_received, True, None))
+
+    def finish(self) -> Take:
+        """Close the stream; the stored take."""
+        if self.take is None:
+            self.take = self._client._run(p.finish_stream(self.id))
+        return self.take
+
+    def __enter__(self) -> Stream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.finish()
+
+
+class AsyncStream:
+    """[`Stream`] for [`AsyncClient`]."""
+
+    def __init__(self, client: AsyncClient, info: dict[str, Any]) -> None:
+        self._client = client
+        self.info = info
+        self.id: str = info["id"]
+        self.points: int = int(info["points"])
+        self.take: Take | None = None
+
+    @property
+    def frames_received(self) -> int:
+        return int(self.info["frames_received"])
+
+    async def append(
+        self, frames: npt.ArrayLike, *, captured_ms: int | None = None, flush: bool = False
+    ) -> None:
+        """Append frames ``(n, points, 3)`` (see [`Stream.append`])."""
+        body, _ = p.f32_frames(frames, self.points)
+        self.info = await self._client._run(
+            p.append(self.id, body, self.frames_received, flush, captured_ms)
+        )
+
+    async def flush(self) -> None:
+        """Commit what is pending now."""
+        self.info = await self._client._run(
+            p.append(self.id, b"", self.frames_received, True, None)
+        )
+
+    async def finish(self) -> Take:
+        """Close the stream; the stored take."""
+        if self.take is None:
+            self.take = await self._client._run(p.finish_stream(self.id))
+        return self.take
+
+    async def __aenter__(self) -> AsyncStream:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.finish()
+
+
 class Client(_Base):
     """A blocking client of one server. ``url`` and ``token`` default to ``MOCAP_SERVER``
     and ``MOCAP_TOKEN``; connections are kept alive between calls. Use it as a context
@@ -330,6 +446,38 @@ class Client(_Base):
         )
         return self._run(p.download(f"/v1/sequences/{id}/frames", query, to))
 
+    # Live streams ------------------------------------------------------------------------
+
+    def stream(
+        self,
+        fps: float,
+        points: int | Sequence[str],
+        *,
+        name: str | None = None,
+        library: str | None = None,
+        tags: Sequence[str] | None = None,
+        unit: str | None = None,
+        max_error_mm: float | None = None,
+        mean_error_mm: float | None = None,
+        codec: str | None = None,
+        chunk_seconds: float | None = None,
+    ) -> Stream:
+        """Open a live take of ``points`` (a count, or their names) at ``fps``; use it as a
+        context manager (finished when the block ends)."""
+        body = _stream_body(
+            fps,
+            points,
+            name,
+            library,
+            tags,
+            unit,
+            max_error_mm,
+            mean_error_mm,
+            codec,
+            chunk_seconds,
+        )
+        return Stream(self, self._run(p.open_stream(body)))
+
     def export_library(
         self,
         path: str | os.PathLike[str],
@@ -518,3 +666,32 @@ class AsyncClient(_Base):
     ) -> Frames:
         """A range of a take as float32 positions (see [`Client.frames`])."""
         return await self._run(self._frames_op(id, start, end, t0, t1, points, fps, root, up, unit))
+
+    async def stream(
+        self,
+        fps: float,
+        points: int | Sequence[str],
+        *,
+        name: str | None = None,
+        library: str | None = None,
+        tags: Sequence[str] | None = None,
+        unit: str | None = None,
+        max_error_mm: float | None = None,
+        mean_error_mm: float | None = None,
+        codec: str | None = None,
+        chunk_seconds: float | None = None,
+    ) -> AsyncStream:
+        """Open a live take (see [`Client.stream`])."""
+        body = _stream_body(
+            fps,
+            points,
+            name,
+            library,
+            tags,
+            unit,
+            max_error_mm,
+            mean_error_mm,
+            codec,
+            chunk_seconds,
+        )
+        return AsyncStream(self, await self._run(p.open_stream(body)))
