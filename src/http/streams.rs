@@ -23,7 +23,7 @@ use super::views::TakeView;
 use super::AppState;
 use crate::service::access::{self, Caller};
 use crate::service::budget::Holder;
-use crate::service::streams::{Arrival, OpenRequest, StreamInfo, Watch};
+use crate::service::streams::{Append, Arrival, OpenRequest, StreamInfo, Watch};
 
 pub async fn open(
     State(state): State<AppState>,
@@ -183,10 +183,12 @@ pub async fn append(
             &state.store,
             &state.caches,
             &id,
-            frames,
-            q.first,
-            q.flush,
-            q.captured_ms,
+            Append {
+                frames,
+                first: q.first,
+                flush: q.flush,
+                captured_ms: q.captured_ms,
+            },
         )
         .await?;
     Ok(Json(info))

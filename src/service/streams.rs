@@ -165,6 +165,19 @@ impl Plan {
     }
 }
 
+/// One append to a stream, as the producer sent it.
+#[derive(Debug, Clone, Default)]
+pub struct Append {
+    /// `n × points × 3` values, NaN for missing samples.
+    pub frames: Vec<f32>,
+    /// The stream's index of the first frame, if the producer numbers its appends: frames
+    /// the stream has already are dropped (a retried append), a gap is refused.
+    pub first: Option<usize>,
+    pub flush: bool,
+    /// When the producer captured the last frame (ms since the epoch, its clock).
+    pub captured_ms: Option<i64>,
+}
+
 /// What a stream reports after each call.
 #[derive(Debug, Clone, Serialize)]
 pub struct StreamInfo {
@@ -572,19 +585,22 @@ impl Streams {
         }
     }
 
-    /// Append frames (`n × points × 3`, NaN for missing samples); commits every chunk they
-    /// complete, and with `flush` the frames still pending too (the next chunk then starts
-    /// with an intra frame: lower delay, a few more bytes).
+    /// Append frames; commits every chunk they complete, and with `flush` the frames still
+    /// pending too (the next chunk then starts with an intra frame: lower delay, a few more
+    /// bytes).
     pub async fn append(
         &self,
         store: &Store,
         caches: &ReadCaches,
         id: &str,
-        frames: Vec<f32>,
-        first: Option<usize>,
-        flush: bool,
-        captured_ms: Option<i64>,
+        append: Append,
     ) -> Result<StreamInfo> {
+        let Append {
+            frames,
+            first,
+            flush,
+            captured_ms,
+        } = append;
         if let Some(t) = captured_ms.filter(|t| !(0..=MAX_CAPTURE_MS).contains(t)) {
             return Err(Error::InvalidRequest(format!(
                 "captured_ms {t} is not a time in ms since the Unix epoch (0..={MAX_CAPTURE_MS})"
