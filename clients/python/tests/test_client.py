@@ -209,3 +209,47 @@ def test_defaults_come_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> 
         assert c._headers["authorization"] == "Bearer secret"
         with pytest.raises(mocapstore.ConnectionFailed):
             c.take("x")
+
+
+def test_channels_are_the_bvh_the_server_writes(
+    client: mocapstore.Client, server: str, corpus: Path | None, tmp_path: Path
+) -> None:
+    if corpus is None:
+        pytest.skip("no corpus")
+    path = corpus / "bvh" / "cmu" / "131_02.bvh"
+    take = client.ingest(path, library=library(), codec="bvh-lossless")
+    ch = client.channels(take.id, start=10, end=60)
+    bvh = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format=bvh&start=10&end=60").content
+    assert ch.bvh == bvh and ch.to_bvh(tmp_path / "t.bvh").read_bytes() == bvh
+    assert ch.start == 10 and len(ch) == 50 and abs(ch.fps - take.fps) < 1e-9
+    sk = ch.skeleton
+    assert sk.names[0] == "Hips" and sk.parents[0] == -1 and sk.joints[0].rotation_order
+    assert ch.values.shape == (50, len(sk.channel_names))
+    # bvh-lossless: the values as uploaded (the file's MOTION lines 10..60).
+    text = path.read_text().split("MOTION")[1].strip().splitlines()
+    uploaded = np.array(" ".join(text[2 + 10 : 2 + 60]).split(), dtype=np.float64)
+    assert np.array_equal(ch.values.ravel(), uploaded)
+    assert ch.joint("Hips").shape == (50, 6)
+    # Positions of the same range: one point per joint and End Site.
+    assert client.frames(take.id, start=10, end=60).point_names == sk.names
+    with pytest.raises(mocapstore.Conflict):
+        client.channels(client.ingest(walker(30), library=library(), fps=30).id)
+
+
+def test_a_folder_is_ingested_with_its_refusals_reported(
+    client: mocapstore.Client, tmp_path: Path
+) -> None:
+    good = tmp_path / "a.npy"
+    np.save(good, walker(30))
+    (tmp_path / "sub").mkdir()
+    np.save(tmp_path / "sub" / "b.npy", walker(40))
+    (tmp_path / "bad.trc").write_text("not a trc\n")
+    (tmp_path / "notes.txt").write_text("ignored")
+    lib = library()
+    out = client.ingest_folder(tmp_path, library=lib, fps=60, progress=False)
+    assert [o.path.name for o in out] == ["a.npy", "bad.trc", "b.npy"]
+    stored = {o.path.name: o.take for o in out if o.take is not None}
+    assert stored["a.npy"].frames == 30 and stored["b.npy"].frames == 40
+    bad = next(o for o in out if o.path.name == "bad.trc")
+    assert isinstance(bad.error, mocapstore.Unreadable) and bad.take is None
+    assert sorted(t.name for t in client.takes(library=lib)) == ["a", "b"]

@@ -8,7 +8,7 @@
 """
 
 from ._version import API, __version__
-from .client import AsyncClient, AsyncStream, Client, Stream
+from .client import AsyncClient, AsyncStream, Client, Ingested, Stream
 from .errors import (
     BadRequest,
     Busy,
@@ -23,6 +23,7 @@ from .errors import (
     Unauthorized,
     Unreadable,
 )
+from .skeleton import Channels, Joint, Skeleton
 from .types import Frames, Take
 
 __all__ = [
@@ -31,16 +32,20 @@ __all__ = [
     "AsyncStream",
     "BadRequest",
     "Busy",
+    "Channels",
     "Client",
     "Conflict",
     "ConnectionFailed",
     "Forbidden",
     "Frames",
     "IncompatibleServer",
+    "Ingested",
+    "Joint",
     "MocapstoreError",
     "NotFound",
     "OutOfRange",
     "ServerError",
+    "Skeleton",
     "Stream",
     "Take",
     "Unauthorized",

@@ -11,7 +11,7 @@ from __future__ import annotations
 import io
 import json
 from collections.abc import Generator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -20,6 +20,8 @@ import numpy.typing as npt
 
 from . import errors
 from ._version import API
+from .skeleton import Channels
+from .skeleton import parse as parse_bvh
 from .types import Frames, Take
 
 T = TypeVar("T")
@@ -280,3 +282,25 @@ def finish_stream(id: str) -> Op[Take]:
     raise_for(r)
     t: Take = yield from take(id)
     return t
+
+
+# Skeletons ------------------------------------------------------------------------------
+
+
+def channels(id: str, query: Params) -> Op[Channels]:
+    """A skeleton take's channel values, from the BVH the server writes."""
+    r = yield Request("GET", f"/v1/sequences/{id}/frames", [*query, ("format", "bvh")])
+    raise_for(r)
+    c = parse_bvh(r.content, start=header_int(r.headers, "x-start-frame"))
+    return replace(c, fps=header_float(r.headers, "x-fps"))
+
+
+#: The files a folder's ingest picks up.
+TAKE_SUFFIXES = (".bvh", ".c3d", ".trc", ".json", ".npy")
+
+
+def take_files(root: Path) -> list[Path]:
+    """The take files under ``root`` (or ``root`` itself), sorted."""
+    if root.is_file():
+        return [root]
+    return sorted(p for p in root.rglob("*") if p.suffix.lower() in TAKE_SUFFIXES)

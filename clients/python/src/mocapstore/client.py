@@ -11,11 +11,14 @@ an upload, whose first attempt may have been stored.
 from __future__ import annotations
 
 import asyncio
+import importlib
 import os
 import time
 from collections.abc import AsyncIterator, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import httpx
 import numpy.typing as npt
@@ -23,6 +26,7 @@ import numpy.typing as npt
 from . import _protocol as p
 from . import errors
 from ._version import __version__
+from .skeleton import Channels
 from .types import Frames, Take
 
 T = TypeVar("T")
@@ -32,6 +36,40 @@ DEFAULT_URL = "http://127.0.0.1:8080"
 
 #: Seconds between attempts after a broken connection, doubling.
 BACKOFF_S = 0.2
+
+
+@dataclass(frozen=True)
+class Ingested:
+    """One file of a folder's ingest: the take stored, or why not."""
+
+    path: Path
+    take: Take | None
+    error: errors.MocapstoreError | None
+
+
+class _Bar(Protocol):
+    def update(self, n: int) -> object: ...
+    def close(self) -> object: ...
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _progress(total: int, show: bool) -> _Bar:
+    """A tqdm bar if tqdm is installed and one is wanted."""
+    if show:
+        try:
+            tqdm = importlib.import_module("tqdm").tqdm
+        except ImportError:
+            return _NoBar()
+        bar: _Bar = tqdm(total=total, unit="take")
+        return bar
+    return _NoBar()
 
 
 class _Base:
@@ -88,6 +126,19 @@ class _Base:
         )
         f: Frames = yield from p.frames(t, query, points, root)
         return f
+
+    @staticmethod
+    def _range_query(
+        start: int | None,
+        end: int | None,
+        t0: float | None,
+        t1: float | None,
+        fps: float | None,
+        root: str | None,
+        up: str | None,
+        unit: str | None,
+    ) -> p.Params:
+        return p.params(start=start, end=end, t0=t0, t1=t1, fps=fps, root=root, up=up, unit=unit)
 
     @staticmethod
     def _ingest_body(
@@ -446,6 +497,53 @@ class Client(_Base):
         )
         return self._run(p.download(f"/v1/sequences/{id}/frames", query, to))
 
+    def channels(
+        self,
+        id: str,
+        *,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> Channels:
+        """A skeleton take's channel values ``(frames, channels)`` and its skeleton, over a
+        range and with the same transforms as [`Client.frames`] (a 409 ``Conflict`` for a
+        take whose codec did not keep its animation)."""
+        q = self._range_query(start, end, t0, t1, fps, root, up, unit)
+        return self._run(p.channels(id, q))
+
+    def ingest_folder(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        concurrency: int = 4,
+        progress: bool = True,
+        **fields: Any,
+    ) -> list[Ingested]:
+        """Store every take file under ``path`` (.bvh .c3d .trc .json .npy), ``concurrency``
+        at a time, each named after its file, with ``fields`` as [`Client.ingest`] takes
+        them; a progress bar when ``tqdm`` is installed. A file the server refuses is
+        reported in its result, not raised."""
+        files = p.take_files(Path(path))
+        bar = _progress(len(files), progress)
+
+        def one(f: Path) -> Ingested:
+            try:
+                return Ingested(f, self.ingest(f, **fields), None)
+            except errors.MocapstoreError as e:
+                return Ingested(f, None, e)
+            finally:
+                bar.update(1)
+
+        with ThreadPoolExecutor(max(1, concurrency)) as pool:
+            out = list(pool.map(one, files))
+        bar.close()
+        return out
+
     # Live streams ------------------------------------------------------------------------
 
     def stream(
@@ -695,3 +793,46 @@ class AsyncClient(_Base):
             chunk_seconds,
         )
         return AsyncStream(self, await self._run(p.open_stream(body)))
+
+    async def channels(
+        self,
+        id: str,
+        *,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> Channels:
+        """A skeleton take's channel values and skeleton (see [`Client.channels`])."""
+        q = self._range_query(start, end, t0, t1, fps, root, up, unit)
+        return await self._run(p.channels(id, q))
+
+    async def ingest_folder(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        concurrency: int = 4,
+        progress: bool = True,
+        **fields: Any,
+    ) -> list[Ingested]:
+        """Store every take file under ``path`` (see [`Client.ingest_folder`])."""
+        files = p.take_files(Path(path))
+        bar = _progress(len(files), progress)
+        slots = asyncio.Semaphore(max(1, concurrency))
+
+        async def one(f: Path) -> Ingested:
+            async with slots:
+                try:
+                    return Ingested(f, await self.ingest(f, **fields), None)
+                except errors.MocapstoreError as e:
+                    return Ingested(f, None, e)
+                finally:
+                    bar.update(1)
+
+        out = list(await asyncio.gather(*(one(f) for f in files)))
+        bar.close()
+        return out
