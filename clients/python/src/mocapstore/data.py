@@ -1,0 +1,224 @@
+"""A library as training data: fixed-length windows of every take at one rate
+([`Windows`]), indexable and shuffleable, fetched by range (the server decodes only the
+chunks a window lies in) on kept-alive connections, several at once, through a bounded
+cache in memory and optionally on disk.
+
+A [`Windows`] holds the server's address, not a connection: each process (a DataLoader
+worker after ``fork``) opens its own client at its first fetch, so none is shared.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import threading
+from collections import OrderedDict
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .client import Client
+from .types import Take
+
+F32Array = npt.NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class Window:
+    """Where a window lies: its take and its first frame (the take's own frames)."""
+
+    take: str
+    name: str
+    start: int
+    end: int
+
+
+class Windows:
+    """Every ``seconds``-long window of a selection's takes, ``stride`` seconds apart
+    (default: ``seconds``, no overlap), resampled to ``fps``; each is ``(frames, points,
+    3)`` float32 with ``frames = round(seconds * fps)``, NaN where missing. ``points``
+    selects and orders points by name (every take must have them); ``unit``, ``up`` and
+    ``root`` are the server's transforms. Takes shorter than a window give none.
+
+    ``cache_bytes`` bounds the windows kept in memory; with ``cache_dir`` they are also
+    kept on disk (at most ``disk_bytes``) for the next epoch or process."""
+
+    def __init__(
+        self,
+        url: str | None = None,
+        token: str | None = None,
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        seconds: float = 1.0,
+        fps: float = 30.0,
+        stride: float | None = None,
+        points: Sequence[str] | None = None,
+        unit: str | None = None,
+        up: str | None = None,
+        root: str | None = None,
+        cache_bytes: int = 256 << 20,
+        cache_dir: str | os.PathLike[str] | None = None,
+        disk_bytes: int = 4 << 30,
+        concurrency: int = 4,
+    ) -> None:
+        if seconds <= 0 or fps <= 0 or (stride is not None and stride <= 0):
+            raise ValueError("seconds, fps and stride must be positive")
+        self.url, self.token = url, token
+        self.seconds, self.fps = seconds, fps
+        self.stride = stride if stride is not None else seconds
+        self.frames = max(1, round(seconds * fps))
+        self.points = tuple(points) if points is not None else None
+        self.unit, self.up, self.root = unit, up, root
+        self.cache_bytes, self.disk_bytes = cache_bytes, disk_bytes
+        self.cache_dir = Path(cache_dir) if cache_dir is not None else None
+        self.concurrency = max(1, concurrency)
+        self._client: Client | None = None
+        self._pid = 0
+        self._memory: OrderedDict[int, F32Array] = OrderedDict()
+        self._held = 0
+        self._lock = threading.Lock()
+        with Client(url, token) as c:
+            self.windows = self._index(c.takes(library=library, tag=tag))
+        self._key = hashlib.sha256(
+            repr((self.fps, self.frames, self.points, unit, up, root)).encode()
+        ).hexdigest()[:16]
+
+    def _index(self, takes: Iterator[Take]) -> list[Window]:
+        out: list[Window] = []
+        for t in takes:
+            if self.points is not None and not set(self.points) <= set(t.point_names):
+                continue
+            # Source frames a window spans (and one more, for the last output frame's
+            # neighbour), and the step between windows.
+            span = math.ceil(self.seconds * t.fps) + 1
+            step = max(1, round(self.stride * t.fps))
+            for start in range(0, t.frames - span + 1, step):
+                out.append(Window(t.id, t.name, start, start + span))
+        return out
+
+    def __len__(self) -> int:
+        return len(self.windows)
+
+    def __getstate__(self) -> dict[str, Any]:
+        # What a worker process gets: the index and settings, no client, an empty cache.
+        state = self.__dict__.copy()
+        state.update(_client=None, _pid=0, _memory=OrderedDict(), _held=0, _lock=None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+    def client(self) -> Client:
+        """This process's client (made at its first use, and again after a fork)."""
+        if self._client is None or self._pid != os.getpid():
+            self._client = Client(self.url, self.token)
+            self._pid = os.getpid()
+        return self._client
+
+    def _disk(self, i: int) -> Path | None:
+        if self.cache_dir is None:
+            return None
+        w = self.windows[i]
+        return self.cache_dir / self._key / f"{w.take}-{w.start}.npy"
+
+    def _remember(self, i: int, a: F32Array) -> None:
+        with self._lock:
+            if i in self._memory:
+                return
+            self._memory[i] = a
+            self._held += a.nbytes
+            while self._held > self.cache_bytes and self._memory:
+                _, old = self._memory.popitem(last=False)
+                self._held -= old.nbytes
+
+    def _fetch(self, i: int) -> F32Array:
+        w = self.windows[i]
+        f = self.client().frames(
+            w.take,
+            start=w.start,
+            end=w.end,
+            fps=self.fps,
+            points=self.points,
+            unit=self.unit,
+            up=self.up,
+            root=self.root,
+        )
+        if len(f) < self.frames:
+            raise RuntimeError(f"window {i} of {w.name} gave {len(f)} frames, not {self.frames}")
+        a: F32Array = np.array(f.data[: self.frames])
+        return a
+
+    def __getitem__(self, i: int) -> F32Array:
+        """Window ``i``: ``(frames, points, 3)`` float32 (a writable array of its own)."""
+        if not -len(self) <= i < len(self):
+            raise IndexError(i)
+        i %= len(self)
+        with self._lock:
+            hit = self._memory.get(i)
+            if hit is not None:
+                self._memory.move_to_end(i)
+                mine: F32Array = hit.copy()
+                return mine
+        disk = self._disk(i)
+        if disk is not None and disk.is_file():
+            a: F32Array = np.load(disk)
+        else:
+            a = self._fetch(i)
+            if disk is not None:
+                self._store(disk, a)
+        self._remember(i, a)
+        out: F32Array = a.copy()
+        return out
+
+    def _store(self, path: Path, a: F32Array) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.partial")
+        with open(tmp, "wb") as f:
+            np.save(f, a)
+        tmp.replace(path)
+        files = sorted(path.parent.glob("*.npy"), key=lambda p: p.stat().st_mtime)
+        total = sum(p.stat().st_size for p in files)
+        for old in files:
+            if total <= self.disk_bytes:
+                break
+            total -= old.stat().st_size
+            old.unlink(missing_ok=True)
+
+    def batch(self, indices: Sequence[int]) -> F32Array:
+        """Windows ``indices`` stacked, ``(len, frames, points, 3)``, fetched
+        ``concurrency`` at a time."""
+        with ThreadPoolExecutor(self.concurrency) as pool:
+            return np.stack(list(pool.map(self.__getitem__, indices)))
+
+    def order(self, shuffle: bool = False, seed: int | None = None) -> list[int]:
+        """The windows' indices, in order or shuffled (``seed`` for the same order again)."""
+        idx = list(range(len(self)))
+        if shuffle:
+            np.random.default_rng(seed).shuffle(idx)
+        return idx
+
+    def __iter__(self) -> Iterator[F32Array]:
+        return self.iter()
+
+    def iter(self, shuffle: bool = False, seed: int | None = None) -> Iterator[F32Array]:
+        """Every window once, fetched ``concurrency`` ahead of the reader."""
+        with ThreadPoolExecutor(self.concurrency) as pool:
+            yield from pool.map(self.__getitem__, self.order(shuffle, seed))
+
+    def to_pandas(self, i: int) -> Any:
+        """Window ``i`` as a long table (``frame``, ``time``, ``point``, ``x``, ``y``,
+        ``z``); needs the ``pandas`` extra."""
+        from .types import Frames
+
+        w = self.windows[i]
+        names = self.points or self.client().take(w.take).point_names
+        a = self[i]
+        return Frames(a, tuple(names), self.fps, self.fps, w.start, 0.0).to_pandas()

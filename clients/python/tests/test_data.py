@@ -1,0 +1,94 @@
+"""A library as windows: the right count and shape, each window the range the server
+gives, every window once per epoch in order or shuffled, the cache in memory and on disk,
+and two worker processes (fork) that read every window once between them."""
+
+from __future__ import annotations
+
+import multiprocessing
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mocapstore
+from mocapstore.data import Windows
+
+from .test_client import NAMES, walker
+
+
+@pytest.fixture(scope="module")
+def lib(server: str) -> str:
+    name = f"py-data-{uuid.uuid4().hex[:8]}"
+    with mocapstore.Client(server) as c:
+        for frames in (150, 95, 40):  # 2.5 s, 1.6 s, 0.67 s at 60 fps
+            c.ingest(walker(frames, gaps=True), library=name, fps=60, point_names=NAMES)
+    return name
+
+
+def first_window_of(w: Windows, i: int) -> int:
+    return w.windows[i].start
+
+
+def test_windows_count_shape_and_content(server: str, lib: str) -> None:
+    w = Windows(server, library=lib, seconds=0.5, fps=30, points=["rhand", "head"])
+    # 0.5 s windows (31 source frames with the neighbour) every 30 frames: 4 + 3 + 1.
+    assert len(w) == 8 and w.frames == 15
+    a = w[5]
+    assert a.shape == (15, 2, 3) and a.dtype == np.float32
+    win = w.windows[5]
+    with mocapstore.Client(server) as c:
+        f = c.frames(win.take, start=win.start, end=win.end, fps=30, points=["rhand", "head"])
+    assert a.tobytes() == f.data[:15].tobytes()
+    # The left hand's gap (frames 20..35 of each take) is NaN in the windows over it.
+    full = Windows(server, library=lib, seconds=0.5, fps=60)
+    assert np.isnan(full[0][20:35, 1]).all() and not np.isnan(full[0][:20]).any()
+    with pytest.raises(IndexError):
+        w[8]
+
+
+def test_every_window_once_in_order_or_shuffled(server: str, lib: str, tmp_path: Path) -> None:
+    w = Windows(server, library=lib, seconds=0.25, fps=60, cache_dir=tmp_path)
+    ordered = [a.tobytes() for a in w]
+    assert len(ordered) == len(w) > 0
+    assert w.order(shuffle=True, seed=3) == w.order(shuffle=True, seed=3)
+    shuffled = [a.tobytes() for a in w.iter(shuffle=True, seed=3)]
+    assert sorted(shuffled) == sorted(ordered)
+    # A second Windows reads the same windows from the disk cache.
+    again = Windows(server, library=lib, seconds=0.25, fps=60, cache_dir=tmp_path)
+    calls = 0
+    original = again._fetch
+
+    def counted(i: int) -> np.ndarray:
+        nonlocal calls
+        calls += 1
+        return original(i)
+
+    again._fetch = counted  # type: ignore[method-assign]
+    assert [again[i].tobytes() for i in range(len(again))] == ordered
+    assert calls == 0
+    assert w.batch([0, 2]).shape == (2, w.frames, len(NAMES), 3)
+
+
+def _read(args: tuple[Windows, list[int]]) -> list[tuple[int, bytes]]:
+    w, idx = args
+    return [(i, w[i].tobytes()) for i in idx]
+
+
+def test_two_worker_processes_read_every_window_once(server: str, lib: str) -> None:
+    w = Windows(server, library=lib, seconds=0.25, fps=60)
+    w[0]  # the parent's own client exists before the fork
+    idx = w.order(shuffle=True, seed=1)
+    halves = [(w, idx[0::2]), (w, idx[1::2])]
+    with multiprocessing.get_context("fork").Pool(2) as pool:
+        got = [x for part in pool.map(_read, halves) for x in part]
+    assert sorted(i for i, _ in got) == list(range(len(w)))
+    assert all(b == w[i].tobytes() for i, b in got)
+
+
+def test_the_bench_runs(server: str, lib: str, capsys: pytest.CaptureFixture[str]) -> None:
+    from mocapstore import bench
+
+    bench.main([server, "--library", lib, "--windows", "5"])
+    out = capsys.readouterr().out
+    assert "windows/s" in out and "whole takes" in out
