@@ -92,3 +92,26 @@ def test_the_bench_runs(server: str, lib: str, capsys: pytest.CaptureFixture[str
     bench.main([server, "--library", lib, "--windows", "5"])
     out = capsys.readouterr().out
     assert "windows/s" in out and "whole takes" in out
+
+
+def test_the_torch_dataset_pickles_without_a_connection(
+    server: str, lib: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # torch is not installed in CI (its wheel is over a gigabyte): a stand-in module with
+    # the one function the dataset calls checks the wrapper itself.
+    import pickle
+    import sys
+    import types
+
+    fake = types.ModuleType("torch")
+    fake.from_numpy = lambda a: ("tensor", a)  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "torch", fake)
+    from mocapstore.torch import WindowDataset
+
+    w = Windows(server, library=lib, seconds=0.25, fps=60)
+    ds = WindowDataset(w)
+    kind, a = ds[3]
+    assert kind == "tensor" and a.tobytes() == w[3].tobytes() and len(ds) == len(w)
+    copy = pickle.loads(pickle.dumps(ds))
+    assert copy.windows._client is None and len(copy.windows._memory) == 0
+    assert copy[3][1].tobytes() == a.tobytes()

@@ -4,10 +4,12 @@ frame sent, once, in order."""
 
 from __future__ import annotations
 
+import asyncio
 import http.server
 import threading
 import uuid
 from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 import numpy as np
@@ -131,3 +133,19 @@ def test_an_append_that_would_leave_a_gap_is_refused(server: str) -> None:
         assert s.finish().frames == 15
         with pytest.raises(ValueError, match=r"\(n, 2, 3\)"):
             s.append(np.zeros((3, 3, 3)))
+
+
+def test_the_async_client_streams_and_reads_channels(server: str, corpus: Path | None) -> None:
+    async def run() -> None:
+        async with mocapstore.AsyncClient(server) as c:
+            async with await c.stream(30, 2, name="async") as s:
+                await s.append(motion(10, 2))
+                await s.append(motion(10, 2)[5:])
+                await s.flush()
+            assert s.take is not None and s.take.frames == 15
+            if corpus is not None:
+                t = await c.ingest(corpus / "bvh" / "cmu" / "131_02.bvh", codec="bvh-lossless")
+                ch = await c.channels(t.id, end=5)
+                assert ch.values.shape[0] == 5 and ch.skeleton.names[0] == "Hips"
+
+    asyncio.run(run())

@@ -92,7 +92,10 @@ class Windows:
 
     def _index(self, takes: Iterator[Take]) -> list[Window]:
         out: list[Window] = []
+        # The listed records name each take's points: no window asks for them again.
+        self._records: dict[str, Take] = {}
         for t in takes:
+            self._records[t.id] = t
             if self.points is not None and not set(self.points) <= set(t.point_names):
                 continue
             # Source frames a window spans (and one more, for the last output frame's
@@ -120,6 +123,7 @@ class Windows:
         """This process's client (made at its first use, and again after a fork)."""
         if self._client is None or self._pid != os.getpid():
             self._client = Client(self.url, self.token)
+            self._client._takes.update(self._records)
             self._pid = os.getpid()
         return self._client
 
