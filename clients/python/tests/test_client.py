@@ -253,3 +253,21 @@ def test_a_folder_is_ingested_with_its_refusals_reported(
     bad = next(o for o in out if o.path.name == "bad.trc")
     assert isinstance(bad.error, mocapstore.Unreadable) and bad.take is None
     assert sorted(t.name for t in client.takes(library=lib)) == ["a", "b"]
+
+
+def test_frames_as_a_table(client: mocapstore.Client) -> None:
+    take = client.ingest(walker(40, gaps=True), library=library(), fps=60, point_names=NAMES)
+    f = client.frames(take.id, end=30)
+    df = f.to_pandas()
+    assert list(df.columns) == ["frame", "time", "point", "x", "y", "z"]
+    assert len(df) == 30 * 5
+    row = df[(df.frame == 25) & (df.point == "lhand")].iloc[0]
+    assert np.isnan(row.x) and abs(row.time - 25 / 60) < 1e-12
+    head = df[(df.frame == 3) & (df.point == "head")].iloc[0]
+    assert (head.x, head.y, head.z) == tuple(float(v) for v in f["head"][3])
+
+
+def test_a_folder_with_a_progress_bar(client: mocapstore.Client, tmp_path: Path) -> None:
+    np.save(tmp_path / "one.npy", walker(30))
+    out = client.ingest_folder(tmp_path, library=library(), fps=60, progress=True)
+    assert [o.take is not None for o in out] == [True]
