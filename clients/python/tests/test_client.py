@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import http.server
 import json
+import tempfile
 import threading
 import uuid
 import zipfile
@@ -271,3 +272,52 @@ def test_a_folder_with_a_progress_bar(client: mocapstore.Client, tmp_path: Path)
     np.save(tmp_path / "one.npy", walker(30))
     out = client.ingest_folder(tmp_path, library=library(), fps=60, progress=True)
     assert [o.take is not None for o in out] == [True]
+
+
+def test_slices_keep_their_place_and_names_must_be_a_list(client: mocapstore.Client) -> None:
+    take = client.ingest(walker(120), library=library(), fps=60, point_names=NAMES)
+    f = client.frames(take.id, start=30, fps=30)
+    assert f.start == 30 and f[5:10].start == 40 and f.between(1.0, 2.0).start == 90
+    with pytest.raises(TypeError, match="sliced by frame"):
+        f[0]  # type: ignore[call-overload]
+    with pytest.raises(TypeError, match=r"points=\['head'\]"):
+        client.frames(take.id, points="head")
+    with pytest.raises(ValueError, match="fps="):
+        client.ingest(walker(10))
+
+
+def test_a_delete_whose_answer_was_lost_is_done() -> None:
+    calls: list[str] = []
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        calls.append(request.method)
+        h = {"x-mocapstore-api": "1"}
+        if len(calls) == 1:
+            raise httpx.ReadError("lost", request=request)
+        return httpx.Response(
+            404, headers=h, json={"error": {"code": "not_found", "message": "gone"}}
+        )
+
+    c = mocapstore.Client("http://mock")
+    c._http = httpx.Client(base_url="http://mock", transport=httpx.MockTransport(answer))
+    c.delete("x")
+    assert calls == ["DELETE", "DELETE"]
+    with pytest.raises(mocapstore.NotFound):
+        c.delete("y")  # a first answer of 404 is still an error
+
+
+def test_joint_names_with_spaces(client: mocapstore.Client) -> None:
+    bvh = (
+        "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition "
+        "Zrotation Xrotation Yrotation\n  JOINT Left Leg\n  {\n    OFFSET 10 -40 0\n"
+        "    CHANNELS 3 Zrotation Xrotation Yrotation\n    End Site\n    {\n"
+        "      OFFSET 0 -40 0\n    }\n  }\n}\nMOTION\nFrames: 3\nFrame Time: 0.0333333\n"
+        + "".join(f"{f} 90 0 {f} 1 2 3 4 5\n" for f in range(3))
+    )
+    path = Path(tempfile.mkdtemp()) / "spaces.bvh"
+    path.write_text(bvh)
+    take = client.ingest(path, library=library(), codec="bvh-lossless")
+    ch = client.channels(take.id)
+    assert ch.skeleton.names == ("Hips", "Left Leg", "Left Leg_End")
+    assert ch.joint("Left Leg").tolist() == [[3.0, 4.0, 5.0]] * 3
+    assert client.frames(take.id).point_names == ch.skeleton.names

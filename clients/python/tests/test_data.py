@@ -32,8 +32,8 @@ def first_window_of(w: Windows, i: int) -> int:
 
 def test_windows_count_shape_and_content(server: str, lib: str) -> None:
     w = Windows(server, library=lib, seconds=0.5, fps=30, points=["rhand", "head"])
-    # 0.5 s windows (31 source frames with the neighbour) every 30 frames: 4 + 3 + 1.
-    assert len(w) == 8 and w.frames == 15
+    # 15 frames at 30 fps span 29 source frames at 60; one every 30: 5 + 3 + 1.
+    assert len(w) == 9 and w.frames == 15
     a = w[5]
     assert a.shape == (15, 2, 3) and a.dtype == np.float32
     win = w.windows[5]
@@ -44,7 +44,10 @@ def test_windows_count_shape_and_content(server: str, lib: str) -> None:
     full = Windows(server, library=lib, seconds=0.5, fps=60)
     assert np.isnan(full[0][20:35, 1]).all() and not np.isnan(full[0][:20]).any()
     with pytest.raises(IndexError):
-        w[8]
+        w[9]
+    # The last window of a take ends at its last frame.
+    last = w.windows[4]
+    assert last.end == 149 and w[4].shape == (15, 2, 3)
 
 
 def test_every_window_once_in_order_or_shuffled(server: str, lib: str, tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ import numpy.typing as npt
 import pytest
 
 import mocapstore
+from mocapstore import _protocol
 
 HOP = {"transfer-encoding", "connection", "content-length", "keep-alive"}
 
@@ -149,3 +150,26 @@ def test_the_async_client_streams_and_reads_channels(server: str, corpus: Path |
                 assert ch.values.shape[0] == 5 and ch.skeleton.names[0] == "Hips"
 
     asyncio.run(run())
+
+
+def test_after_a_failed_append_the_stream_asks_where_it_is(server: str) -> None:
+    with mocapstore.Client(server) as c:
+        s = c.stream(30, 2, name="resync")
+        s.append(motion(10, 2))
+        real = c._exchange
+        state = {"fail": True}
+
+        def once(req: _protocol.Request) -> _protocol.Response:
+            r = real(req)
+            if state["fail"] and "/frames" in req.path:
+                state["fail"] = False
+                raise mocapstore.ConnectionFailed("the answer was lost")
+            return r
+
+        c._retries = 0  # the lost answer is not retried here: the caller sees the failure
+        c._exchange = once  # type: ignore[method-assign]
+        with pytest.raises(mocapstore.ConnectionFailed):
+            s.append(motion(10, 2)[5:])  # stored by the server as 10..15; its answer lost
+        # The next append goes after them (numbered from 10 it would be dropped as a repeat).
+        s.append(motion(15, 2)[10:])
+        assert s.frames_received == 20 and s.finish().frames == 20

@@ -59,22 +59,33 @@ Scalar = str | int | float | bool | None
 
 
 def params(**fields: Scalar | Sequence[str]) -> Params:
-    """Query fields, leaving out those that are ``None``; lists joined by commas."""
+    """Query fields, leaving out those that are ``None``; sequences joined by commas."""
     out: Params = []
     for k, v in fields.items():
         if v is None:
             continue
         if isinstance(v, bool):
             out.append((k, "true" if v else "false"))
-        elif isinstance(v, (list, tuple)):
-            out.append((k, ",".join(v)))
-        else:
+        elif isinstance(v, (str, int, float)):
             out.append((k, str(v)))
+        else:
+            out.append((k, ",".join(str(x) for x in v)))
     return out
 
 
+def names(points: Sequence[str] | None) -> tuple[str, ...] | None:
+    """Point names as given (a list, a tuple, an array of strings), refusing one bare
+    string, which would otherwise be read as its letters."""
+    if points is None:
+        return None
+    if isinstance(points, str):
+        raise TypeError(f"points is a list of names: points=[{points!r}]")
+    return tuple(str(p) for p in points)
+
+
 def check_api(headers: Mapping[str, str]) -> None:
-    """Refuse a server that speaks another API than this client."""
+    """Refuse a server that speaks another API than this client (called on the first
+    answer that names one, or the first success: a proxy's error page is not the server)."""
     got = headers.get("x-mocapstore-api")
     if got is None:
         raise errors.IncompatibleServer(
@@ -159,6 +170,13 @@ def update(id: str, name: str | None, library: str | None, tags: Sequence[str] |
 def delete(id: str) -> Op[None]:
     r = yield Request("DELETE", f"/v1/sequences/{id}", [])
     raise_for(r)
+
+
+def stream_info(id: str) -> Op[dict[str, Any]]:
+    """An open stream's state (where its next frame goes: ``frames_received``)."""
+    r = yield Request("GET", f"/v1/streams/{id}", [])
+    v: dict[str, Any] = json_of(r)
+    return v
 
 
 def stats(filters: Params) -> Op[dict[str, Any]]:

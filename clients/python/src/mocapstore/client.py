@@ -87,9 +87,17 @@ class _Base:
         self._takes: dict[str, Take] = {}
 
     def _checked(self, r: p.Response) -> p.Response:
-        if not self._api_checked:
+        named = "x-mocapstore-api" in r.headers
+        if not self._api_checked and (named or r.status < 400):
             p.check_api(r.headers)
             self._api_checked = True
+        return r
+
+    @staticmethod
+    def _retried_delete(req: p.Request, attempt: int, r: p.Response) -> p.Response:
+        """A delete retried after its answer was lost finds the take gone: done."""
+        if req.method == "DELETE" and attempt > 0 and r.status == 404:
+            return p.Response(204, r.headers, b"")
         return r
 
     def _take_op(self, id: str) -> p.Op[Take]:
@@ -112,6 +120,7 @@ class _Base:
         up: str | None,
         unit: str | None,
     ) -> p.Op[Frames]:
+        points = p.names(points)
         t = yield from self._take_op(id)
         query = p.params(
             start=start,
@@ -150,10 +159,10 @@ class _Base:
         if isinstance(source, (str, os.PathLike)):
             path = Path(source)
             return path.read_bytes(), path.stem
+        if fps is None:
+            raise ValueError("an array of positions needs fps= (it has no clock of its own)")
         if point_names is not None:
-            if fps is None:
-                raise ValueError("an array needs fps=")
-            return p.json_doc(source, fps, point_names), None
+            return p.json_doc(source, fps, p.names(point_names) or ()), None
         return p.npy_bytes(source), None
 
     @staticmethod
@@ -207,6 +216,8 @@ class Stream:
         self.id: str = info["id"]
         self.points: int = int(info["points"])
         self.take: Take | None = None
+        # An append failed (its frames may be stored or not): resynchronise before the next.
+        self._unsure = False
 
     @property
     def frames_received(self) -> int:
@@ -218,9 +229,17 @@ class Stream:
         """Append frames ``(n, points, 3)``, NaN where missing (``captured_ms``: when the
         last was captured, ms since the epoch, for watchers' delay)."""
         body, _ = p.f32_frames(frames, self.points)
-        self.info = self._client._run(
-            p.append(self.id, body, self.frames_received, flush, captured_ms)
-        )
+        if self._unsure:
+            # An append failed: it may have been stored. Ask where the stream is.
+            self.info = self._client._run(p.stream_info(self.id))
+            self._unsure = False
+        try:
+            self.info = self._client._run(
+                p.append(self.id, body, self.frames_received, flush, captured_ms)
+            )
+        except errors.MocapstoreError:
+            self._unsure = True
+            raise
 
     def flush(self) -> None:
         """Commit what is pending now (readable by range at once)."""
@@ -248,6 +267,8 @@ class AsyncStream:
         self.id: str = info["id"]
         self.points: int = int(info["points"])
         self.take: Take | None = None
+        # An append failed (its frames may be stored or not): resynchronise before the next.
+        self._unsure = False
 
     @property
     def frames_received(self) -> int:
@@ -258,9 +279,16 @@ class AsyncStream:
     ) -> None:
         """Append frames ``(n, points, 3)`` (see [`Stream.append`])."""
         body, _ = p.f32_frames(frames, self.points)
-        self.info = await self._client._run(
-            p.append(self.id, body, self.frames_received, flush, captured_ms)
-        )
+        if self._unsure:
+            self.info = await self._client._run(p.stream_info(self.id))
+            self._unsure = False
+        try:
+            self.info = await self._client._run(
+                p.append(self.id, body, self.frames_received, flush, captured_ms)
+            )
+        except errors.MocapstoreError:
+            self._unsure = True
+            raise
 
     async def flush(self) -> None:
         """Commit what is pending now."""
@@ -335,7 +363,7 @@ class Client(_Base):
                 time.sleep(p.retry_after(r.headers))
                 attempt += 1
                 continue
-            return r
+            return self._retried_delete(req, attempt, r)
 
     def _exchange(self, req: p.Request) -> p.Response:
         if req.to is None:
@@ -351,9 +379,16 @@ class Client(_Base):
             if r.status_code >= 400:
                 return p.Response(r.status_code, r.headers, r.read())
             partial = req.to.with_name(req.to.name + ".partial")
-            with open(partial, "wb") as f:
-                for chunk in r.iter_bytes():
-                    f.write(chunk)
+            try:
+                with open(partial, "wb") as f:
+                    for chunk in r.iter_bytes():
+                        f.write(chunk)
+            except httpx.TransportError as e:
+                # The server cut its answer short (it failed part way): not retried.
+                raise errors.ConnectionFailed(f"{req.path}: the answer was cut short: {e}") from e
+            finally:
+                if partial.exists() and not r.is_stream_consumed:
+                    partial.unlink()
             partial.replace(req.to)
             return p.Response(r.status_code, r.headers, b"")
 
@@ -426,8 +461,10 @@ class Client(_Base):
         point_names: Sequence[str] | None = None,
     ) -> Take:
         """Store a file (BVH, C3D, TRC, JSON, NPY; named after the file unless ``name`` is
-        given) or an array of positions ``(frames, points, 3)`` (NaN where missing; with
-        ``point_names`` it keeps them, else points are numbered; ``fps`` is needed)."""
+        given) or an array of positions ``(frames, points, 3)`` with its ``fps`` (NaN where
+        missing; with ``point_names`` it keeps them, else points are numbered). A slow
+        upload is not retried: if it times out, look for the take before sending it again
+        (it may have been stored)."""
         body, stem = self._ingest_body(source, fps, point_names)
         query = self._ingest_query(
             name if name is not None else stem,
@@ -598,7 +635,7 @@ class Client(_Base):
 
 class AsyncClient(_Base):
     """[`Client`] for ``asyncio``: the same methods, awaited (``takes`` is an async
-    iterator)."""
+    iterator); files are read and written off the event loop."""
 
     def __init__(
         self,
@@ -645,7 +682,7 @@ class AsyncClient(_Base):
                 await asyncio.sleep(p.retry_after(r.headers))
                 attempt += 1
                 continue
-            return r
+            return self._retried_delete(req, attempt, r)
 
     async def _exchange(self, req: p.Request) -> p.Response:
         if req.to is None:
@@ -661,9 +698,16 @@ class AsyncClient(_Base):
             if r.status_code >= 400:
                 return p.Response(r.status_code, r.headers, await r.aread())
             partial = req.to.with_name(req.to.name + ".partial")
-            with open(partial, "wb") as f:
+            f = await asyncio.to_thread(open, partial, "wb")
+            try:
                 async for chunk in r.aiter_bytes():
-                    f.write(chunk)
+                    await asyncio.to_thread(f.write, chunk)
+            except httpx.TransportError as e:
+                raise errors.ConnectionFailed(f"{req.path}: the answer was cut short: {e}") from e
+            finally:
+                f.close()
+                if not r.is_stream_consumed:
+                    partial.unlink(missing_ok=True)
             partial.replace(req.to)
             return p.Response(r.status_code, r.headers, b"")
 
@@ -734,7 +778,8 @@ class AsyncClient(_Base):
         point_names: Sequence[str] | None = None,
     ) -> Take:
         """Store a file or an array of positions (see [`Client.ingest`])."""
-        body, stem = self._ingest_body(source, fps, point_names)
+        # Reading a file (or serialising an array) off the event loop.
+        body, stem = await asyncio.to_thread(self._ingest_body, source, fps, point_names)
         query = self._ingest_query(
             name if name is not None else stem,
             library=library,
@@ -747,6 +792,47 @@ class AsyncClient(_Base):
             codec=codec,
         )
         return await self._run(p.ingest(body, query))
+
+    async def export(
+        self,
+        id: str,
+        path: str | os.PathLike[str],
+        *,
+        format: str | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> Path:
+        """A take (or a range of it) written to ``path`` (see [`Client.export`])."""
+        to = Path(path)
+        query = [
+            *p.params(format=format or to.suffix.lstrip(".").lower() or None),
+            *self._range_query(start, end, t0, t1, fps, root, up, unit),
+        ]
+        return await self._run(p.download(f"/v1/sequences/{id}/frames", query, to))
+
+    async def export_library(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        format: str = "json",
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> Path:
+        """Every take of a selection as the server's ZIP (see [`Client.export_library`])."""
+        query = p.params(
+            library=library, tag=tag, format=format, fps=fps, root=root, up=up, unit=unit
+        )
+        return await self._run(p.download("/v1/export", query, Path(path)))
 
     async def frames(
         self,

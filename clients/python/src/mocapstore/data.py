@@ -13,9 +13,9 @@ import hashlib
 import math
 import os
 import threading
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,10 +23,22 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from . import _protocol
 from .client import Client
-from .types import Take
+from .types import Frames, Take
 
 F32Array = npt.NDArray[np.float32]
+
+
+def grid_step(source: float, to: float) -> float:
+    """Source frames per output frame as the server resamples: ``source / to``, snapped to
+    a fraction ``p / q`` (``q <= 16``) within 1e-4 (a rate printed to a few decimals)."""
+    step = source / to
+    for q in range(1, 17):
+        n = round(step * q)
+        if n >= 1 and abs(step - n / q) <= 1e-4 * step:
+            return n / q
+    return step
 
 
 @dataclass(frozen=True)
@@ -44,7 +56,9 @@ class Windows:
     (default: ``seconds``, no overlap), resampled to ``fps``; each is ``(frames, points,
     3)`` float32 with ``frames = round(seconds * fps)``, NaN where missing. ``points``
     selects and orders points by name (every take must have them); ``unit``, ``up`` and
-    ``root`` are the server's transforms. Takes shorter than a window give none.
+    ``root`` are the server's transforms. Takes shorter than a window give none. Without
+    ``points``, windows have each take's own points: stack them (``batch``, a DataLoader's
+    collate) only over takes of one marker set or skeleton.
 
     ``cache_bytes`` bounds the windows kept in memory; with ``cache_dir`` they are also
     kept on disk (at most ``disk_bytes``) for the next epoch or process."""
@@ -74,7 +88,7 @@ class Windows:
         self.seconds, self.fps = seconds, fps
         self.stride = stride if stride is not None else seconds
         self.frames = max(1, round(seconds * fps))
-        self.points = tuple(points) if points is not None else None
+        self.points = _protocol.names(points)
         self.unit, self.up, self.root = unit, up, root
         self.cache_bytes, self.disk_bytes = cache_bytes, disk_bytes
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
@@ -83,7 +97,9 @@ class Windows:
         self._pid = 0
         self._memory: OrderedDict[int, F32Array] = OrderedDict()
         self._held = 0
+        self._disk_written = 0
         self._lock = threading.Lock()
+        self._client_lock = threading.Lock()
         with Client(url, token) as c:
             self.windows = self._index(c.takes(library=library, tag=tag))
         self._key = hashlib.sha256(
@@ -98,9 +114,10 @@ class Windows:
             self._records[t.id] = t
             if self.points is not None and not set(self.points) <= set(t.point_names):
                 continue
-            # Source frames a window spans (and one more, for the last output frame's
-            # neighbour), and the step between windows.
-            span = math.ceil(self.seconds * t.fps) + 1
+            # Source frames a window spans: the fewest whose answer at ``fps`` has
+            # ``frames`` frames (the server's grid, snapped as it snaps), and the step
+            # between windows.
+            span = math.ceil((self.frames - 1) * grid_step(t.fps, self.fps) - 1e-9) + 1
             step = max(1, round(self.stride * t.fps))
             for start in range(0, t.frames - span + 1, step):
                 out.append(Window(t.id, t.name, start, start + span))
@@ -112,20 +129,24 @@ class Windows:
     def __getstate__(self) -> dict[str, Any]:
         # What a worker process gets: the index and settings, no client, an empty cache.
         state = self.__dict__.copy()
-        state.update(_client=None, _pid=0, _memory=OrderedDict(), _held=0, _lock=None)
+        state.update(
+            _client=None, _pid=0, _memory=OrderedDict(), _held=0, _lock=None, _client_lock=None
+        )
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._lock = threading.Lock()
+        self._client_lock = threading.Lock()
 
     def client(self) -> Client:
         """This process's client (made at its first use, and again after a fork)."""
-        if self._client is None or self._pid != os.getpid():
-            self._client = Client(self.url, self.token)
-            self._client._takes.update(self._records)
-            self._pid = os.getpid()
-        return self._client
+        with self._client_lock:
+            if self._client is None or self._pid != os.getpid():
+                self._client = Client(self.url, self.token)
+                self._client._takes.update(self._records)
+                self._pid = os.getpid()
+            return self._client
 
     def _disk(self, i: int) -> Path | None:
         if self.cache_dir is None:
@@ -172,9 +193,13 @@ class Windows:
                 mine: F32Array = hit.copy()
                 return mine
         disk = self._disk(i)
-        if disk is not None and disk.is_file():
-            a: F32Array = np.load(disk)
-        else:
+        a: F32Array | None = None
+        if disk is not None:
+            try:
+                a = np.load(disk)
+            except (FileNotFoundError, ValueError, OSError):
+                a = None  # not there, or removed by another worker meanwhile: a miss
+        if a is None:
             a = self._fetch(i)
             if disk is not None:
                 self._store(disk, a)
@@ -185,15 +210,26 @@ class Windows:
     def _store(self, path: Path, a: F32Array) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f"{path.name}.{os.getpid()}.partial")
-        with open(tmp, "wb") as f:
-            np.save(f, a)
+        with open(tmp, "wb") as out:
+            np.save(out, a)
         tmp.replace(path)
-        files = sorted(path.parent.glob("*.npy"), key=lambda p: p.stat().st_mtime)
-        total = sum(p.stat().st_size for p in files)
-        for old in files:
+        self._disk_written += a.nbytes
+        # The folder is measured now and then (each file a window), not at every store.
+        if self._disk_written < self.disk_bytes // 16:
+            return
+        self._disk_written = 0
+        sized: list[tuple[float, int, Path]] = []
+        for f in path.parent.glob("*.npy"):
+            try:
+                st = f.stat()
+            except FileNotFoundError:
+                continue  # another worker evicted it
+            sized.append((st.st_mtime, st.st_size, f))
+        total = sum(size for _, size, _ in sized)
+        for _, size, old in sorted(sized):
             if total <= self.disk_bytes:
                 break
-            total -= old.stat().st_size
+            total -= size
             old.unlink(missing_ok=True)
 
     def batch(self, indices: Sequence[int]) -> F32Array:
@@ -213,16 +249,26 @@ class Windows:
         return self.iter()
 
     def iter(self, shuffle: bool = False, seed: int | None = None) -> Iterator[F32Array]:
-        """Every window once, fetched ``concurrency`` ahead of the reader."""
+        """Every window once, at most ``2 * concurrency`` fetched ahead of the reader."""
+        ahead = 2 * self.concurrency
+        order = self.order(shuffle, seed)
         with ThreadPoolExecutor(self.concurrency) as pool:
-            yield from pool.map(self.__getitem__, self.order(shuffle, seed))
+            pending: deque[Future[F32Array]] = deque()
+            try:
+                for i in order:
+                    pending.append(pool.submit(self.__getitem__, i))
+                    if len(pending) >= ahead:
+                        yield pending.popleft().result()
+                while pending:
+                    yield pending.popleft().result()
+            finally:
+                for f in pending:
+                    f.cancel()
 
     def to_pandas(self, i: int) -> Any:
         """Window ``i`` as a long table (``frame``, ``time``, ``point``, ``x``, ``y``,
         ``z``); needs the ``pandas`` extra."""
-        from .types import Frames
-
         w = self.windows[i]
-        names = self.points or self.client().take(w.take).point_names
-        a = self[i]
-        return Frames(a, tuple(names), self.fps, self.fps, w.start, 0.0).to_pandas()
+        take = self._records[w.take]
+        names = _protocol.frame_names(take, self.points, self.root)
+        return Frames(self[i], names, self.fps, take.fps, w.start, 0.0).to_pandas()

@@ -94,58 +94,62 @@ class BvhError(ValueError):
 
 
 def parse(text: bytes, start: int = 0) -> Channels:
-    """A BVH (as the server writes it) as its skeleton and channel values."""
+    """A BVH (as the server writes it) as its skeleton and channel values. Joint names are
+    the rest of their line (they may hold spaces); End Sites are named as the server names
+    their points (``<parent>_End``, then ``_End2``… when a name is taken)."""
     head, sep, motion = text.decode("utf-8").partition("MOTION")
     if not sep:
         raise BvhError("no MOTION section")
-    tokens = head.split()
-    if not tokens or tokens[0] != "HIERARCHY":
+    lines = [ln.strip() for ln in head.splitlines() if ln.strip()]
+    if not lines or lines[0] != "HIERARCHY":
         raise BvhError("no HIERARCHY")
     joints: list[Joint] = []
     stack: list[int] = []
-    i = 1
     pending: tuple[str, int, bool] | None = None
-    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    channels: tuple[str, ...] = ()
-    while i < len(tokens):
-        t = tokens[i]
-        if t in ("ROOT", "JOINT"):
-            pending = (tokens[i + 1], stack[-1] if stack else -1, False)
-            i += 2
-        elif t == "End":
+
+    def unique(name: str) -> str:
+        taken = {j.name for j in joints}
+        if name not in taken:
+            return name
+        n = 2
+        while f"{name}{n}" in taken:
+            n += 1
+        return f"{name}{n}"
+
+    for line in lines[1:]:
+        word, _, rest = line.partition(" ")
+        rest = rest.strip()
+        if word in ("ROOT", "JOINT"):
+            pending = (rest, stack[-1] if stack else -1, False)
+        elif word == "End":
             parent = stack[-1]
-            pending = (f"{joints[parent].name}_End", parent, True)
-            i += 2
-        elif t == "{":
+            pending = (unique(f"{joints[parent].name}_End"), parent, True)
+        elif word == "{":
             if pending is None:
                 raise BvhError("a brace without a joint")
-            offset, channels = (0.0, 0.0, 0.0), ()
-            joints.append(Joint(pending[0], pending[1], offset, channels, pending[2]))
+            joints.append(Joint(pending[0], pending[1], (0.0, 0.0, 0.0), (), pending[2]))
             stack.append(len(joints) - 1)
             pending = None
-            i += 1
-        elif t == "OFFSET":
-            x, y, z = (float(v) for v in tokens[i + 1 : i + 4])
+        elif word == "OFFSET":
+            x, y, z = (float(v) for v in rest.split()[:3])
             j = joints[stack[-1]]
             joints[stack[-1]] = Joint(j.name, j.parent, (x, y, z), j.channels, j.end_site)
-            i += 4
-        elif t == "CHANNELS":
-            n = int(tokens[i + 1])
+        elif word == "CHANNELS":
+            n, *names = rest.split()
+            if len(names) != int(n):
+                raise BvhError(f"CHANNELS {n} names {len(names)}")
             j = joints[stack[-1]]
-            names = tuple(tokens[i + 2 : i + 2 + n])
-            joints[stack[-1]] = Joint(j.name, j.parent, j.offset, names, j.end_site)
-            i += 2 + n
-        elif t == "}":
+            joints[stack[-1]] = Joint(j.name, j.parent, j.offset, tuple(names), j.end_site)
+        elif word == "}":
             stack.pop()
-            i += 1
         else:
-            raise BvhError(f"unexpected {t!r} in the hierarchy")
+            raise BvhError(f"unexpected {line!r} in the hierarchy")
     skeleton = Skeleton(tuple(joints))
-    lines = motion.strip().splitlines()
-    frames = int(lines[0].split(":")[1])
-    frame_time = float(lines[1].split(":")[1])
+    rows = motion.strip().splitlines()
+    frames = int(rows[0].split(":")[1])
+    frame_time = float(rows[1].split(":")[1])
     width = len(skeleton.channel_names)
-    body = " ".join(lines[2 : 2 + frames])
+    body = " ".join(rows[2 : 2 + frames])
     values = np.array(body.split(), dtype=np.float64) if frames else np.zeros(0)
     if values.size != frames * width:
         raise BvhError(f"{values.size} values for {frames} frames of {width} channels")

@@ -130,11 +130,17 @@ class Frames:
     def __getitem__(self, key: str | slice) -> F32Array | Frames:
         if isinstance(key, str):
             return self.point(key)
-        _, _, step = key.indices(len(self))
+        if not isinstance(key, slice):
+            raise TypeError(
+                "frames are indexed by a point's name or sliced by frame (f[10:20]); "
+                "f.data[i] is frame i"
+            )
+        first, _, step = key.indices(len(self))
         if step != 1:
             raise ValueError("frames are sliced with a step of 1; resample with fps= instead")
-        data = self.data[key]
-        return replace(self, data=data)
+        # ``start`` counts the take's own frames: the slice's first, at the take's rate.
+        start = self.start + round(first * self.source_fps / self.fps) if self.fps else 0
+        return replace(self, data=self.data[key], start=start)
 
     def between(self, t0: float, t1: float) -> Frames:
         """The frames at ``t0 <= t < t1`` seconds from the range's start."""
