@@ -362,7 +362,10 @@ async fn list(
         let status = r.status();
         let body = r.bytes().await.map_err(|e| e.to_string())?;
         if !status.is_success() {
-            return Err(format!("listing the takes: {status}: {}", message(&body)));
+            return Err(format!(
+                "listing the takes: {status}: {}",
+                super::token::error_message(&body)
+            ));
         }
         let page: Page =
             serde_json::from_slice(&body).map_err(|e| format!("listing the takes: {e}"))?;
@@ -372,14 +375,6 @@ async fn list(
             None => return Ok(out),
         }
     }
-}
-
-/// The server's error message in a JSON error body, else the body.
-fn message(body: &[u8]) -> String {
-    serde_json::from_slice::<serde_json::Value>(body)
-        .ok()
-        .and_then(|v| v["error"]["message"].as_str().map(str::to_string))
-        .unwrap_or_else(|| String::from_utf8_lossy(body).into_owned())
 }
 
 enum Fetched {
@@ -425,7 +420,7 @@ async fn fetch(
     let status = r.status();
     if !status.is_success() {
         let body = r.bytes().await.map_err(|e| e.to_string())?;
-        let why = message(&body);
+        let why = super::token::error_message(&body);
         return match status.as_u16() {
             // The token does not reach it, or the server is not ready: nothing will do.
             401 | 403 | 503 => Err(format!("{status}: {why}")),

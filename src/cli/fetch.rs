@@ -88,10 +88,7 @@ fn fetch(args: &FetchArgs) -> Result<usize, String> {
         let status = r.status();
         let body = r.bytes().await.map_err(|e| e.to_string())?;
         if !status.is_success() {
-            let msg = serde_json::from_slice::<serde_json::Value>(&body)
-                .ok()
-                .and_then(|v| v["error"]["message"].as_str().map(str::to_string))
-                .unwrap_or_else(|| String::from_utf8_lossy(&body).into_owned());
+            let msg = super::token::error_message(&body);
             return Err(format!("take {}: {status}: {msg}", args.id));
         }
         Ok(body)

@@ -288,6 +288,14 @@ fn expiry(text: &str, now: i64) -> Result<i64, String> {
 }
 
 /// A client for the service, sending `token` (if any) as a bearer token with every request.
+/// The server's message in a JSON error body, else the body as text.
+pub fn error_message(body: &[u8]) -> String {
+    serde_json::from_slice::<serde_json::Value>(body)
+        .ok()
+        .and_then(|v| v["error"]["message"].as_str().map(str::to_string))
+        .unwrap_or_else(|| String::from_utf8_lossy(body).into_owned())
+}
+
 pub fn client(token: Option<&str>) -> Result<reqwest::Client, String> {
     let mut headers = reqwest::header::HeaderMap::new();
     if let Some(t) = token.map(str::trim).filter(|t| !t.is_empty()) {

@@ -8,15 +8,12 @@ use axum::Extension;
 use axum::Json;
 use serde::Deserialize;
 
-use axum::body::Body;
 use axum::http::{header, HeaderMap, HeaderValue};
-use futures_util::StreamExt;
 
 use super::error::ApiError;
-use super::sequences::transform_of;
+use super::sequences::{format_of, streamed, transform_of};
 use super::views::{ListingView, TakeView};
 use super::AppState;
-use crate::motion::formats::Format;
 use crate::service::access::{self, Caller};
 use crate::service::budget::Holder;
 use crate::service::export::{self, ExportRequest};
@@ -143,12 +140,7 @@ pub async fn export(
     query: Result<Query<ExportQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
-    let format = match q.format.as_deref() {
-        None => Format::Json,
-        Some(f) => f
-            .parse::<Format>()
-            .map_err(|e| ApiError::bad_request(e.to_string()))?,
-    };
+    let format = format_of(q.format.as_deref())?;
     let transform = transform_of(q.fps, q.root.as_deref(), q.up.as_deref(), q.unit.as_deref())?;
     let file = format!(
         "{}-{}.zip",
@@ -168,7 +160,7 @@ pub async fn export(
         format,
         transform,
     };
-    let mut e = export::open(
+    let e = export::open(
         &state.store,
         &state.caches,
         &state.answers,
@@ -184,21 +176,7 @@ pub async fn export(
     );
     headers.insert(header::CONTENT_DISPOSITION, attachment(&file));
     headers.insert("x-takes", HeaderValue::from(e.takes));
-    // The first piece before the status, as range answers do.
-    let first = e.next().await?;
-    let rest = futures_util::stream::unfold(Some(e), |e| async move {
-        let mut e = e?;
-        match e.next().await {
-            Ok(Some(piece)) => Some((Ok(piece), Some(e))),
-            Ok(None) => None,
-            Err(err) => {
-                tracing::error!(error = %err, "a library export failed part way");
-                Some((Err(err), None))
-            }
-        }
-    });
-    let body = futures_util::stream::iter(first.map(Ok)).chain(rest);
-    Ok((headers, Body::from_stream(body)).into_response())
+    Ok((headers, streamed(e).await?).into_response())
 }
 
 /// `Content-Disposition` of a download named `file` (letters of any script, digits, `._-`):

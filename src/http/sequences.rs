@@ -21,7 +21,7 @@ use crate::motion::transform::Options;
 use crate::motion::units::parse_unit;
 use crate::service::access::{self, Caller};
 use crate::service::analog;
-use crate::service::answer::{self, RangeRequest};
+use crate::service::answer::{self, Pieces, RangeRequest};
 use crate::service::budget::Holder;
 use crate::service::choose::{CodecRequest, Keep};
 use crate::service::fetch::{self, TimeRange};
@@ -311,12 +311,7 @@ pub fn frames_request(q: FramesQuery) -> Result<RangeRequest, ApiError> {
             ))
         }
     };
-    let format = match q.format.as_deref() {
-        None => Format::Json,
-        Some(f) => f
-            .parse::<Format>()
-            .map_err(|e| ApiError::bad_request(e.to_string()))?,
-    };
+    let format = format_of(q.format.as_deref())?;
     let points = q.points.map(|p| p.split(',').map(str::to_string).collect());
     if format == Format::Bvh && points.is_some() {
         return Err(ApiError::bad_request(
@@ -365,7 +360,7 @@ pub async fn frames(
     let Query(q) = query?;
     access::check_take(&state.store, &caller.grant, &id).await?;
     let request = frames_request(q)?;
-    let mut a = answer::open(
+    let a = answer::open(
         &state.store,
         &state.caches,
         &state.answers,
@@ -401,24 +396,37 @@ pub async fn frames(
         _ => "application/octet-stream",
     };
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
-    // The first piece before the status: what fails at the start (a stored chunk that does
-    // not decode) is still an error answer, not a cut-off one.
-    let first = a.next().await?;
+    Ok((headers, streamed(a).await?).into_response())
+}
+
+/// The body of an answer written piece by piece. The first piece is made before the
+/// status: what fails at the start (a stored chunk that does not decode) is still an error
+/// answer, not a cut-off one. Past it, a failure can only cut the body short, which a
+/// client sees as a body shorter than its length or an unfinished chunking.
+pub async fn streamed<P: Pieces>(mut a: P) -> Result<Body, ApiError> {
+    let first = a.next_piece().await?;
     let rest = futures_util::stream::unfold(Some(a), |a| async move {
         let mut a = a?;
-        match a.next().await {
+        match a.next_piece().await {
             Ok(Some(piece)) => Some((Ok(piece), Some(a))),
             Ok(None) => None,
             Err(e) => {
-                // The status is sent: all that is left is to cut the answer short, which a
-                // client sees as a body shorter than its length or an unfinished chunking.
-                tracing::error!(take = %a.id, error = %e, "a range answer failed part way");
+                tracing::error!(answer = %a.what(), error = %e, "an answer failed part way");
                 Some((Err(e), None))
             }
         }
     });
-    let body = futures_util::stream::iter(first.map(Ok)).chain(rest);
-    Ok((headers, Body::from_stream(body)).into_response())
+    Ok(Body::from_stream(
+        futures_util::stream::iter(first.map(Ok)).chain(rest),
+    ))
+}
+
+/// The output format a query names; JSON when it names none.
+pub fn format_of(format: Option<&str>) -> Result<Format, ApiError> {
+    format.map_or(Ok(Format::Json), |f| {
+        f.parse::<Format>()
+            .map_err(|e| ApiError::bad_request(e.to_string()))
+    })
 }
 
 #[derive(Deserialize)]

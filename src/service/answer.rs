@@ -57,6 +57,25 @@ const TAIL_BYTES: usize = 64;
 /// Ranges of at most this many chunks are decoded through the server's chunk cache.
 pub const CACHED_CHUNKS: usize = 8;
 
+/// An answer written piece by piece ([`Answer`], a library export's ZIP): what the HTTP
+/// layer streams, the first piece before the status.
+pub trait Pieces: Send + 'static {
+    /// The next piece; `None` once the answer is whole.
+    fn next_piece(&mut self) -> impl std::future::Future<Output = Result<Option<Bytes>>> + Send;
+    /// What the answer is, for the log when it fails part way.
+    fn what(&self) -> String;
+}
+
+impl Pieces for Answer {
+    fn next_piece(&mut self) -> impl std::future::Future<Output = Result<Option<Bytes>>> + Send {
+        self.next()
+    }
+
+    fn what(&self) -> String {
+        format!("range answer of take {}", self.id)
+    }
+}
+
 /// A range request, parsed: which frames, which points, which format, which transforms.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RangeRequest {

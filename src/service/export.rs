@@ -504,6 +504,16 @@ enum Tail {
     Finished,
 }
 
+impl answer::Pieces for Export {
+    fn next_piece(&mut self) -> impl std::future::Future<Output = Result<Option<Bytes>>> + Send {
+        self.next()
+    }
+
+    fn what(&self) -> String {
+        format!("library export of {} takes", self.takes)
+    }
+}
+
 impl Export {
     /// The next piece of the ZIP; `None` once it is whole.
     pub async fn next(&mut self) -> Result<Option<Bytes>> {

@@ -521,17 +521,10 @@ class Client(_Base):
         (``glb``, ``gltf``, ``bvh``, ``c3d``, ``trc``, ``csv``, ``json``, ``npy``, ``f32``;
         by default the file's extension), streamed to disk as it is decoded."""
         to = Path(path)
-        query = p.params(
-            format=format or to.suffix.lstrip(".").lower() or None,
-            start=start,
-            end=end,
-            t0=t0,
-            t1=t1,
-            fps=fps,
-            root=root,
-            up=up,
-            unit=unit,
-        )
+        query = [
+            *p.params(format=format or to.suffix.lstrip(".").lower() or None),
+            *self._range_query(start, end, t0, t1, fps, root, up, unit),
+        ]
         return self._run(p.download(f"/v1/sequences/{id}/frames", query, to))
 
     def channels(
