@@ -62,6 +62,11 @@ pub const MAX_TOKEN_LIBRARIES: usize = 100;
 /// Audit entries one request may ask for.
 pub const MAX_AUDIT_PAGE: usize = 1_000;
 
+/// Ranges one `GET /v1/ranges` may ask for: a training batch (a few hundred windows). Each
+/// part is opened, decoded and written in turn, so what a batch holds does not grow with
+/// it; the bound keeps the query string and the up-front checks small.
+pub const MAX_RANGES: usize = 1_024;
+
 /// Watchers of one live stream at once (the viewer's live page, `GET /v1/streams/{id}/events`).
 pub const STREAM_WATCHERS: usize = 16;
 

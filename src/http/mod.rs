@@ -148,6 +148,7 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
                 .patch(library::patch.layer(json.clone())),
         )
         .route("/v1/stats", get(library::stats))
+        .route("/v1/ranges", get(sequences::ranges))
         .route("/v1/export", get(library::export))
         .route(
             "/v1/bases",

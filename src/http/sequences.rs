@@ -10,8 +10,10 @@ use axum::Extension;
 use axum::Json;
 use futures_util::StreamExt;
 use serde::Deserialize;
+use std::sync::Arc;
 
 use super::error::ApiError;
+use super::metrics::Metrics;
 use super::views::TakeView;
 use super::AppState;
 use crate::codec::{CodecId, ErrorBound, Hints, Latency};
@@ -21,11 +23,12 @@ use crate::motion::transform::Options;
 use crate::motion::units::parse_unit;
 use crate::service::access::{self, Caller};
 use crate::service::analog;
-use crate::service::answer::{self, Pieces, RangeRequest};
+use crate::service::answer::{self, Answer, Pieces, RangeRequest};
 use crate::service::budget::Holder;
 use crate::service::choose::{CodecRequest, Keep};
 use crate::service::fetch::{self, TimeRange};
 use crate::service::ingest::{self, IngestRequest};
+use crate::service::ranges::{self, Part, Ranges, RangesRequest};
 use crate::service::take::Label;
 
 #[derive(Deserialize)]
@@ -373,10 +376,17 @@ pub async fn frames(
     state
         .metrics
         .decoded(a.frames(), a.frames() * a.points.unwrap_or(0) * 12);
-    let frames_out = a.frames_out;
+    let headers = answer_headers(&a);
+    Ok((headers, streamed(a).await?).into_response())
+}
+
+/// What an answer's headers say of it: its frames and where they start, its rate and the
+/// take's, its points and unit, its length where the format fixes it, its content type.
+/// The same for a whole answer and for each part of a batch ([`ranges`]).
+fn answer_headers(a: &Answer) -> HeaderMap {
     let mut headers = HeaderMap::new();
     let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
-    headers.insert("x-frames", hv(frames_out.to_string()));
+    headers.insert("x-frames", hv(a.frames_out.to_string()));
     headers.insert("x-start-frame", hv(a.start.to_string()));
     headers.insert("x-fps", hv(a.fps.to_string()));
     headers.insert("x-source-fps", hv(a.source_fps.to_string()));
@@ -396,7 +406,164 @@ pub async fn frames(
         _ => "application/octet-stream",
     };
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
-    Ok((headers, streamed(a).await?).into_response())
+    headers
+}
+
+#[derive(Deserialize, Default)]
+pub struct RangesQuery {
+    /// `ID:START-END,…`: frames `START..END` (the take's own, end excluded) of take `ID`.
+    ranges: Option<String>,
+    points: Option<String>,
+    format: Option<String>,
+    fps: Option<f64>,
+    root: Option<String>,
+    up: Option<String>,
+    unit: Option<String>,
+}
+
+/// A batch query as the parts and the shared points, format (f32 unless named) and
+/// transforms it asks for.
+fn ranges_request(q: RangesQuery) -> Result<RangesRequest, ApiError> {
+    let list = q.ranges.as_deref().unwrap_or("");
+    let bad = |r: &str| {
+        ApiError::bad_request(format!(
+            "ranges: {r:?} is not ID:START-END (frames START to END, END excluded)"
+        ))
+    };
+    // Counted before the list is split, so a huge list costs no allocation.
+    let count = list.split(',').filter(|r| !r.trim().is_empty()).count();
+    crate::limits::check("ranges", count as u64, crate::limits::MAX_RANGES as u64)
+        .map_err(ApiError::bad_request)?;
+    let mut parts = Vec::with_capacity(count);
+    for r in list.split(',').map(str::trim).filter(|r| !r.is_empty()) {
+        let (id, span) = r.rsplit_once(':').ok_or_else(|| bad(r))?;
+        let (start, end) = span.split_once('-').ok_or_else(|| bad(r))?;
+        let (Ok(start), Ok(end)) = (start.parse::<usize>(), end.parse::<usize>()) else {
+            return Err(bad(r));
+        };
+        if id.is_empty() || end <= start {
+            return Err(bad(r));
+        }
+        parts.push(Part {
+            id: id.to_string(),
+            start,
+            end,
+        });
+    }
+    let format = match q.format.as_deref() {
+        None => Format::F32,
+        f => format_of(f)?,
+    };
+    Ok(RangesRequest {
+        parts,
+        points: q.points.map(|p| p.split(',').map(str::to_string).collect()),
+        format,
+        transform: transform_of(q.fps, q.root.as_deref(), q.up.as_deref(), q.unit.as_deref())?,
+    })
+}
+
+/// `GET /v1/ranges`: several ranges, of one take or many, as one `multipart/mixed` answer
+/// (RFC 2046): each part has the headers and the body `/v1/sequences/{id}/frames` gives
+/// for its range, and `x-sequence` naming its take, in the order asked.
+pub async fn ranges(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
+    query: Result<Query<RangesQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query?;
+    let request = ranges_request(q)?;
+    let batch = ranges::open(
+        &state.store,
+        &state.caches,
+        &state.answers,
+        holder,
+        &state.limits,
+        &caller.grant,
+        request,
+    )
+    .await?;
+    let mut random = [0u8; 16];
+    getrandom::fill(&mut random)
+        .map_err(|e| crate::service::Error::Internal(format!("no random boundary: {e}")))?;
+    let boundary: String = random.iter().map(|b| format!("{b:02x}")).collect();
+    let content_type = format!("multipart/mixed; boundary={boundary}");
+    let body = Multipart {
+        batch,
+        boundary,
+        part: None,
+        done: false,
+        metrics: state.metrics.clone(),
+    };
+    Ok((
+        [(header::CONTENT_TYPE, content_type)],
+        streamed(body).await?,
+    )
+        .into_response())
+}
+
+/// A batch written as `multipart/mixed`: each part's head (its boundary and headers), then
+/// its answer's pieces; the closing boundary last.
+struct Multipart {
+    batch: Ranges,
+    boundary: String,
+    part: Option<(String, Answer)>,
+    done: bool,
+    metrics: Arc<Metrics>,
+}
+
+impl Multipart {
+    async fn next(&mut self) -> Result<Option<Bytes>, crate::service::Error> {
+        if let Some((_, a)) = &mut self.part {
+            if let Some(piece) = a.next().await? {
+                return Ok(Some(piece));
+            }
+            self.part = None;
+        }
+        if self.done {
+            return Ok(None);
+        }
+        // A part's body ends with the line break before the next boundary.
+        let mut head = String::from("\r\n--");
+        head.push_str(&self.boundary);
+        match self.batch.next_part().await? {
+            Some(a) => {
+                self.metrics
+                    .decoded(a.frames(), a.frames() * a.points.unwrap_or(0) * 12);
+                head.push_str("\r\nx-sequence: ");
+                head.push_str(&a.id);
+                for (name, value) in &answer_headers(&a) {
+                    head.push_str("\r\n");
+                    head.push_str(name.as_str());
+                    head.push_str(": ");
+                    head.push_str(value.to_str().unwrap_or_default());
+                }
+                head.push_str("\r\n\r\n");
+                self.part = Some((a.id.clone(), a));
+            }
+            None => {
+                head.push_str("--\r\n");
+                self.done = true;
+            }
+        }
+        Ok(Some(Bytes::from(head)))
+    }
+}
+
+impl Pieces for Multipart {
+    fn next_piece(
+        &mut self,
+    ) -> impl std::future::Future<Output = Result<Option<Bytes>, crate::service::Error>> + Send
+    {
+        self.next()
+    }
+
+    fn what(&self) -> String {
+        match &self.part {
+            Some((id, _)) => format!("batch of {} ranges, at take {id}", self.batch.len()),
+            None => format!("batch of {} ranges", self.batch.len()),
+        }
+    }
 }
 
 /// The body of an answer written piece by piece. The first piece is made before the

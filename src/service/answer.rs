@@ -292,6 +292,30 @@ pub async fn open(
     open_with(store, caches, reservation, limits, id, req).await
 }
 
+/// [`open_with`] into a fresh reservation from `reserve`, waiting up to `wait` while the
+/// answer budget is full: for a part of a larger answer already under way (a library
+/// export's next take, a batch's next range), which can no longer answer 503. Other
+/// answers end within seconds.
+pub async fn open_waiting(
+    store: &Store,
+    caches: &Arc<ReadCaches>,
+    reserve: impl Fn() -> Reservation,
+    limits: &Limits,
+    id: &str,
+    req: RangeRequest,
+    wait: std::time::Duration,
+) -> Result<Answer> {
+    let waited = std::time::Instant::now();
+    loop {
+        match open_with(store, caches, reserve(), limits, id, req.clone()).await {
+            Err(Error::Busy(_)) if waited.elapsed() < wait => {
+                tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+            }
+            other => return other,
+        }
+    }
+}
+
 /// [`open`], reserving into `reservation` (empty; a library export's takes reserve beside
 /// the export's own, [`Budget::reservation_beside`]).
 pub async fn open_with(
@@ -740,7 +764,7 @@ impl Plan {
 }
 
 /// An answer of `frames` of `points` within [`Limits::answer_samples`], or a 400 saying so.
-fn check_size(frames: usize, points: usize, limits: &Limits) -> Result<()> {
+pub(super) fn check_size(frames: usize, points: usize, limits: &Limits) -> Result<()> {
     let samples = (frames as u64).saturating_mul(points as u64);
     crate::limits::check(
         "the answer's samples (frames × points)",
@@ -755,7 +779,7 @@ const CHANNEL_BYTES: u64 = 8 + 16;
 
 /// The indices of the named points: a 400 naming the first that is not in the take, or
 /// that is named twice (each repeat would be a whole column more of output).
-fn point_indices(prepared: &Prepared, names: &[String]) -> Result<Vec<usize>> {
+pub(super) fn point_indices(prepared: &Prepared, names: &[String]) -> Result<Vec<usize>> {
     let mut seen = std::collections::HashSet::with_capacity(names.len());
     if let Some(twice) = names.iter().find(|n| !seen.insert(n.as_str())) {
         return Err(Error::InvalidRequest(format!(

@@ -27,7 +27,7 @@
 use std::collections::HashSet;
 use std::io::Write;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use bytes::Bytes;
 use serde::{Deserialize, Serialize};
@@ -585,26 +585,18 @@ impl Export {
             format: self.format,
             transform: self.transform,
         };
-        let waited = Instant::now();
-        let opened = loop {
-            let reservation = self.budget.reservation_beside(&self.reservation);
-            let opened = answer::open_with(
-                &self.store,
-                &self.caches,
-                reservation,
-                &self.limits,
-                &id,
-                request.clone(),
-            )
-            .await;
-            match opened {
-                // Other answers end within seconds; the export is alone in its share.
-                Err(Error::Busy(_)) if waited.elapsed() < BUDGET_WAIT => {
-                    tokio::time::sleep(Duration::from_millis(200)).await;
-                }
-                other => break other,
-            }
-        };
+        let budget = self.budget.clone();
+        let parent = &self.reservation;
+        let opened = answer::open_waiting(
+            &self.store,
+            &self.caches,
+            || budget.reservation_beside(parent),
+            &self.limits,
+            &id,
+            request,
+            BUDGET_WAIT,
+        )
+        .await;
         let first = match opened {
             Ok(mut a) => match a.next().await {
                 Ok(first) => Ok((a, first)),

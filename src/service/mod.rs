@@ -34,6 +34,7 @@ pub mod ingest;
 pub mod jobs;
 pub mod library;
 pub mod prepared;
+pub mod ranges;
 pub mod shape;
 pub mod skeletons;
 pub mod streams;

@@ -221,6 +221,8 @@ fn cases() -> Vec<Case> {
         ),
         c(Method::GET, "/v1/stats", "read", false, 200),
         c(Method::GET, "/v1/export", "read", false, 200),
+        // A batch naming a take of the lab: to another library's token it is not there.
+        c(Method::GET, "/v1/ranges", "read", true, 200),
         c(Method::GET, "/v1/bases", "read", false, 200),
         c(Method::POST, "/v1/bases", "admin", false, 400),
         c(Method::GET, "/v1/bases/{id}", "read", false, 404),
@@ -260,7 +262,7 @@ fn expected(case: &Case, who: Who) -> u16 {
     if who == Who::WrongLibrary && case.in_lab {
         // A take of another library answers as one that does not exist; naming another
         // library for a new one is refused.
-        return if case.route.contains("{id}") {
+        return if case.route.contains("{id}") || case.route == "/v1/ranges" {
             404
         } else {
             403
@@ -291,6 +293,13 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
             ),
             Body::None,
         ),
+        ("GET", "/v1/ranges") => {
+            let id = take().await;
+            (
+                format!("/v1/ranges?ranges={id}:0-10,{id}:5-15&format=f32"),
+                Body::None,
+            )
+        }
         ("GET", "/v1/sequences/{id}/errors") => {
             (format!("/v1/sequences/{}/errors", take().await), Body::None)
         }

@@ -18,6 +18,7 @@ mod library;
 mod limits;
 mod openapi;
 mod python;
+mod ranges;
 mod robustness;
 mod skeletons;
 mod store;

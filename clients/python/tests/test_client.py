@@ -102,6 +102,47 @@ def test_ranges_points_and_transforms_name_what_they_hold(
     assert nf.value.status == 404 and nf.value.code == "not_found"
 
 
+def test_a_batch_of_ranges_is_each_range_bit_for_bit(
+    client: mocapstore.Client, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    lib = library()
+    a = client.ingest(walker(200, gaps=True), name="a", library=lib, fps=60, point_names=NAMES)
+    b = client.ingest(walker(90), name="b", library=lib, fps=60, point_names=NAMES)
+    parts = [(a.id, 0, 60), (b.id, 10, 70), (a.id, 15, 45), (a.id, 100, 200), (b.id, 0, 90)]
+    for kw in [{}, {"fps": 30.0, "unit": "m"}, {"points": ["rhand", "lhand"], "up": "z"}]:
+        got = client.ranges(parts, **kw)  # type: ignore[arg-type]
+        assert len(got) == len(parts)
+        for (id, s, e), f in zip(parts, got, strict=True):
+            one = client.frames(id, start=s, end=e, **kw)  # type: ignore[arg-type]
+            assert f.data.tobytes() == one.data.tobytes(), (id, s, e, kw)
+            assert (f.point_names, f.fps, f.start, f.metres_per_unit) == (
+                one.point_names,
+                one.fps,
+                one.start,
+                one.metres_per_unit,
+            )
+    # More parts than one request may carry: split, in order.
+    monkeypatch.setattr(mocapstore.client, "MAX_RANGES", 2)
+    assert [f.start for f in client.ranges(parts)] == [0, 10, 15, 100, 0]
+    # A batch the server cannot answer whole is an error, with the server's code.
+    with pytest.raises(mocapstore.NotFound):
+        client.ranges([(a.id, 0, 10), (str(uuid.uuid4()), 0, 10)])
+    with pytest.raises(mocapstore.MocapstoreError) as refused:
+        client.ranges([(a.id, 0, 10), (b.id, 80, 120)])
+    assert refused.value.status == 416
+
+
+def test_a_batch_cut_short_is_an_error() -> None:
+    head = "--b\r\ncontent-length: 12\r\nx-sequence: t\r\n\r\n"
+    whole = (head + "x" * 12 + "\r\n--b--\r\n").encode()
+    r = _protocol.Response(200, {"content-type": "multipart/mixed; boundary=b"}, whole)
+    assert [bytes(body) for _, body in _protocol.multipart(r)] == [b"x" * 12]
+    for cut in (len(whole) - 4, len(head) + 5, 0):
+        short = _protocol.Response(200, r.headers, whole[:cut])
+        with pytest.raises(mocapstore.MocapstoreError, match="cut short"):
+            _protocol.multipart(short)
+
+
 def test_a_skeleton_take_extracts_its_root(client: mocapstore.Client, corpus: Path | None) -> None:
     if corpus is None:
         pytest.skip("no corpus")
@@ -164,6 +205,8 @@ def test_the_async_client_does_the_same(server: str) -> None:
             take = await c.ingest(walker(60), name="a", library=lib, fps=60, point_names=NAMES)
             f = await c.frames(take.id, points=["head"])
             assert f.shape == (60, 1, 3) and f.point_names == ("head",)
+            (g,) = await c.ranges([(take.id, 0, 60)], points=["head"])
+            assert g.data.tobytes() == f.data.tobytes()
             assert [t.id async for t in c.takes(library=lib)] == [take.id]
             assert (await c.update(take.id, library=lib + "-b")).library == lib + "-b"
             assert (await c.stats(library=lib + "-b"))["total"]["takes"] == 1

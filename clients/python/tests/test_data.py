@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import multiprocessing
 import uuid
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 import mocapstore
@@ -62,15 +64,41 @@ def test_every_window_once_in_order_or_shuffled(server: str, lib: str, tmp_path:
     calls = 0
     original = again._fetch
 
-    def counted(i: int) -> np.ndarray:
+    def counted(indices: Sequence[int]) -> list[npt.NDArray[np.float32]]:
         nonlocal calls
         calls += 1
-        return original(i)
+        return original(indices)
 
     again._fetch = counted  # type: ignore[method-assign]
     assert [again[i].tobytes() for i in range(len(again))] == ordered
     assert calls == 0
     assert w.batch([0, 2]).shape == (2, w.frames, len(NAMES), 3)
+
+
+def test_windows_come_many_to_a_request(server: str, lib: str) -> None:
+    w = Windows(server, library=lib, seconds=0.25, fps=60, batch_size=4, concurrency=2)
+    one = [Windows(server, library=lib, seconds=0.25, fps=60)[i].tobytes() for i in range(len(w))]
+    asked: list[int] = []
+    original = w._fetch
+
+    def counted(indices: Sequence[int]) -> list[npt.NDArray[np.float32]]:
+        asked.append(len(indices))
+        return original(indices)
+
+    w._fetch = counted  # type: ignore[method-assign]
+    order = w.order(shuffle=True, seed=5)
+    assert [a.tobytes() for a in w.iter(shuffle=True, seed=5)] == [one[i] for i in order]
+    assert sum(asked) == len(w) and max(asked) == 4 and len(asked) == -(-len(w) // 4)
+    # Read again: from memory, no request.
+    asked.clear()
+    assert [a.tobytes() for a in w.many(order)] == [one[i] for i in order]
+    assert asked == []
+    fresh = Windows(server, library=lib, seconds=0.25, fps=60, batch_size=64, concurrency=2)
+    fresh._fetch = counted  # type: ignore[method-assign]
+    idx = [1, 0, 1, 2, 3, 0]
+    assert [a.tobytes() for a in fresh.many(idx)] == [one[i] for i in idx]
+    # A batch is split among the worker threads, a request each.
+    assert len(asked) == 2 and sum(asked) == len(idx)
 
 
 def _read(args: tuple[Windows, list[int]]) -> list[tuple[int, bytes]]:
@@ -94,7 +122,7 @@ def test_the_bench_runs(server: str, lib: str, capsys: pytest.CaptureFixture[str
 
     bench.main([server, "--library", lib, "--windows", "5"])
     out = capsys.readouterr().out
-    assert "windows/s" in out and "whole takes" in out
+    assert "windows/s" in out and "whole takes" in out and "client CPU" in out
 
 
 def test_the_torch_dataset_pickles_without_a_connection(
@@ -118,3 +146,6 @@ def test_the_torch_dataset_pickles_without_a_connection(
     copy = pickle.loads(pickle.dumps(ds))
     assert copy.windows._client is None and len(copy.windows._memory) == 0
     assert copy[3][1].tobytes() == a.tobytes()
+    # What a DataLoader calls for a batch, when the dataset has it: one request.
+    got = ds.__getitems__([3, 0, 3])
+    assert [t[1].tobytes() for t in got] == [w[i].tobytes() for i in (3, 0, 3)]

@@ -236,14 +236,18 @@ def frames(t: Take, query: Params, points: Sequence[str] | None, root: str | Non
     """A range of frames as float32 positions, from the raw f32 answer (no copy)."""
     r = yield Request("GET", f"/v1/sequences/{t.id}/frames", [*query, ("format", "f32")])
     raise_for(r)
-    h = r.headers
+    return f32_answer(r.headers, r.content, frame_names(t, points, root))
+
+
+def f32_answer(h: Mapping[str, str], body: bytes | memoryview, names: tuple[str, ...]) -> Frames:
+    """A raw f32 answer (or a batch's part) with its headers as [`Frames`], a view of the
+    bytes (no copy)."""
     n, p = header_int(h, "x-frames"), header_int(h, "x-points")
-    data = np.frombuffer(r.content, dtype="<f4")
+    data = np.frombuffer(body, dtype="<f4")
     if data.size != n * p * 3:
         raise errors.MocapstoreError(
             f"the answer holds {data.size} values, not {n} frames x {p} points x 3"
         )
-    names = frame_names(t, points, root)
     if len(names) != p:
         raise errors.MocapstoreError(f"the answer has {p} points, the take names {len(names)}")
     return Frames(
@@ -254,6 +258,68 @@ def frames(t: Take, query: Params, points: Sequence[str] | None, root: str | Non
         start=header_int(h, "x-start-frame"),
         metres_per_unit=header_float(h, "x-metres-per-unit"),
     )
+
+
+def ranges_spec(parts: Sequence[tuple[str, int, int]]) -> str:
+    """The ``ranges`` field of a batch: ``ID:START-END`` for each part, comma-separated."""
+    return ",".join(f"{id}:{start}-{end}" for id, start, end in parts)
+
+
+def multipart(r: Response) -> list[tuple[dict[str, str], memoryview]]:
+    """The parts of a ``multipart/mixed`` answer, each its headers (lower-case) and its body
+    (a view of the answer, no copy), read by their ``content-length``."""
+    ctype = r.headers.get("content-type", "")
+    marker = "boundary="
+    if not ctype.startswith("multipart/mixed") or marker not in ctype:
+        raise errors.MocapstoreError(f"a batch answer is multipart/mixed, not {ctype!r}")
+    delim = b"--" + ctype.split(marker, 1)[1].split(";")[0].strip().strip('"').encode()
+    body = r.content
+    view = memoryview(body)
+    out: list[tuple[dict[str, str], memoryview]] = []
+    pos = body.find(delim)
+    while pos >= 0:
+        pos += len(delim)
+        if body[pos : pos + 2] == b"--":
+            return out
+        head_end = body.find(b"\r\n\r\n", pos)
+        if head_end < 0:
+            break
+        headers: dict[str, str] = {}
+        for line in body[pos:head_end].decode("latin-1").split("\r\n"):
+            if ":" in line:
+                k, v = line.split(":", 1)
+                headers[k.strip().lower()] = v.strip()
+        start = head_end + 4
+        n = int(headers.get("content-length", "-1"))
+        if n < 0 or start + n > len(body):
+            break
+        out.append((headers, view[start : start + n]))
+        pos = start + n
+        if body[pos : pos + 2 + len(delim)] != b"\r\n" + delim:
+            break
+        pos += 2
+    raise errors.MocapstoreError(f"the batch answer was cut short after {len(out)} parts")
+
+
+def ranges(
+    parts: Sequence[tuple[Take, int, int]],
+    query: Params,
+    points: Sequence[str] | None,
+    root: str | None,
+) -> Op[list[Frames]]:
+    """Several ranges in one request (``GET /v1/ranges``), each as [`frames`] reads it."""
+    spec = ranges_spec([(t.id, s, e) for t, s, e in parts])
+    r = yield Request("GET", "/v1/ranges", [("ranges", spec), *query, ("format", "f32")])
+    raise_for(r)
+    got = multipart(r)
+    if len(got) != len(parts):
+        raise errors.MocapstoreError(f"asked for {len(parts)} ranges, the answer has {len(got)}")
+    out: list[Frames] = []
+    for (t, _, _), (h, body) in zip(parts, got, strict=True):
+        if h.get("x-sequence") != t.id:
+            raise errors.MocapstoreError(f"a part of take {h.get('x-sequence')}, not {t.id}")
+        out.append(f32_answer(h, body, frame_names(t, points, root)))
+    return out
 
 
 def download(path: str, query: Params, to: Path) -> Op[Path]:

@@ -60,6 +60,10 @@ class Windows:
     ``points``, windows have each take's own points: stack them (``batch``, a DataLoader's
     collate) only over takes of one marker set or skeleton.
 
+    Windows are fetched ``batch_size`` to a request (``GET /v1/ranges``, one request for
+    windows of many takes), ``concurrency`` requests at once, so that the server's decode,
+    not the client's per-request work, sets the pace.
+
     ``cache_bytes`` bounds the windows kept in memory; with ``cache_dir`` they are also
     kept on disk (at most ``disk_bytes``) for the next epoch or process."""
 
@@ -81,6 +85,7 @@ class Windows:
         cache_dir: str | os.PathLike[str] | None = None,
         disk_bytes: int = 4 << 30,
         concurrency: int = 4,
+        batch_size: int = 64,
     ) -> None:
         if seconds <= 0 or fps <= 0 or (stride is not None and stride <= 0):
             raise ValueError("seconds, fps and stride must be positive")
@@ -93,6 +98,7 @@ class Windows:
         self.cache_bytes, self.disk_bytes = cache_bytes, disk_bytes
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
         self.concurrency = max(1, concurrency)
+        self.batch_size = max(1, batch_size)
         self._client: Client | None = None
         self._pid = 0
         self._memory: OrderedDict[int, F32Array] = OrderedDict()
@@ -164,48 +170,77 @@ class Windows:
                 _, old = self._memory.popitem(last=False)
                 self._held -= old.nbytes
 
-    def _fetch(self, i: int) -> F32Array:
-        w = self.windows[i]
-        f = self.client().frames(
-            w.take,
-            start=w.start,
-            end=w.end,
+    def _fetch(self, indices: Sequence[int]) -> list[F32Array]:
+        """Windows ``indices`` from the server, in one request per ``MAX_RANGES``; each an
+        array of its own (not a view that would keep the whole answer alive)."""
+        ws = [self.windows[i] for i in indices]
+        got = self.client().ranges(
+            [(w.take, w.start, w.end) for w in ws],
             fps=self.fps,
             points=self.points,
             unit=self.unit,
             up=self.up,
             root=self.root,
         )
-        if len(f) < self.frames:
-            raise RuntimeError(f"window {i} of {w.name} gave {len(f)} frames, not {self.frames}")
-        a: F32Array = np.array(f.data[: self.frames])
-        return a
+        out: list[F32Array] = []
+        for i, w, f in zip(indices, ws, got, strict=True):
+            if len(f) < self.frames:
+                raise RuntimeError(
+                    f"window {i} of {w.name} gave {len(f)} frames, not {self.frames}"
+                )
+            out.append(np.array(f.data[: self.frames]))
+        return out
 
     def __getitem__(self, i: int) -> F32Array:
         """Window ``i``: ``(frames, points, 3)`` float32 (a writable array of its own)."""
-        if not -len(self) <= i < len(self):
-            raise IndexError(i)
-        i %= len(self)
+        return self._get([i])[0]
+
+    def _get(self, indices: Sequence[int]) -> list[F32Array]:
+        """Windows ``indices`` from the memory cache, the disk cache, or in one request for
+        the rest; each a writable array of its own."""
+        n = len(self)
+        for i in indices:
+            if not -n <= i < n:
+                raise IndexError(i)
+        idx = [i % n for i in indices]
+        out: list[F32Array | None] = [None] * len(idx)
         with self._lock:
-            hit = self._memory.get(i)
-            if hit is not None:
-                self._memory.move_to_end(i)
-                mine: F32Array = hit.copy()
-                return mine
-        disk = self._disk(i)
-        a: F32Array | None = None
-        if disk is not None:
-            try:
-                a = np.load(disk)
-            except (FileNotFoundError, ValueError, OSError):
-                a = None  # not there, or removed by another worker meanwhile: a miss
-        if a is None:
-            a = self._fetch(i)
+            for k, i in enumerate(idx):
+                hit = self._memory.get(i)
+                if hit is not None:
+                    self._memory.move_to_end(i)
+                    out[k] = hit.copy()
+        missing: list[int] = []
+        for k, i in enumerate(idx):
+            if out[k] is not None:
+                continue
+            disk = self._disk(i)
+            a: F32Array | None = None
             if disk is not None:
-                self._store(disk, a)
-        self._remember(i, a)
-        out: F32Array = a.copy()
-        return out
+                try:
+                    a = np.load(disk)
+                except (FileNotFoundError, ValueError, OSError):
+                    a = None  # not there, or removed by another worker meanwhile: a miss
+            if a is None:
+                missing.append(k)
+                continue
+            self._remember(i, a)
+            out[k] = a.copy()
+        if missing:
+            for k, a in zip(missing, self._fetch([idx[k] for k in missing]), strict=True):
+                disk = self._disk(idx[k])
+                if disk is not None:
+                    self._store(disk, a)
+                self._remember(idx[k], a)
+                out[k] = a.copy()
+        return [a for a in out if a is not None]
+
+    def _groups(self, indices: Sequence[int]) -> list[Sequence[int]]:
+        """``indices`` in requests of at most ``batch_size``, and at least ``concurrency``
+        requests when there are enough windows (the server decodes each request's parts in
+        turn, its requests side by side)."""
+        size = max(1, min(self.batch_size, math.ceil(len(indices) / self.concurrency)))
+        return [indices[i : i + size] for i in range(0, len(indices), size)]
 
     def _store(self, path: Path, a: F32Array) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -232,11 +267,18 @@ class Windows:
             total -= size
             old.unlink(missing_ok=True)
 
-    def batch(self, indices: Sequence[int]) -> F32Array:
-        """Windows ``indices`` stacked, ``(len, frames, points, 3)``, fetched
-        ``concurrency`` at a time."""
+    def many(self, indices: Sequence[int]) -> list[F32Array]:
+        """Windows ``indices``, in their order, fetched ``batch_size`` to a request and
+        ``concurrency`` requests at once."""
+        groups = self._groups(indices)
+        if len(groups) == 1:
+            return self._get(groups[0])
         with ThreadPoolExecutor(self.concurrency) as pool:
-            return np.stack(list(pool.map(self.__getitem__, indices)))
+            return [a for got in pool.map(self._get, groups) for a in got]
+
+    def batch(self, indices: Sequence[int]) -> F32Array:
+        """Windows ``indices`` stacked, ``(len, frames, points, 3)`` (see [`many`])."""
+        return np.stack(self.many(indices))
 
     def order(self, shuffle: bool = False, seed: int | None = None) -> list[int]:
         """The windows' indices, in order or shuffled (``seed`` for the same order again)."""
@@ -249,18 +291,19 @@ class Windows:
         return self.iter()
 
     def iter(self, shuffle: bool = False, seed: int | None = None) -> Iterator[F32Array]:
-        """Every window once, at most ``2 * concurrency`` fetched ahead of the reader."""
-        ahead = 2 * self.concurrency
+        """Every window once, fetched ``batch_size`` to a request, at most ``concurrency +
+        1`` requests ahead of the reader."""
         order = self.order(shuffle, seed)
+        groups = [order[i : i + self.batch_size] for i in range(0, len(order), self.batch_size)]
         with ThreadPoolExecutor(self.concurrency) as pool:
-            pending: deque[Future[F32Array]] = deque()
+            pending: deque[Future[list[F32Array]]] = deque()
             try:
-                for i in order:
-                    pending.append(pool.submit(self.__getitem__, i))
-                    if len(pending) >= ahead:
-                        yield pending.popleft().result()
+                for g in groups:
+                    pending.append(pool.submit(self._get, g))
+                    if len(pending) > self.concurrency:
+                        yield from pending.popleft().result()
                 while pending:
-                    yield pending.popleft().result()
+                    yield from pending.popleft().result()
             finally:
                 for f in pending:
                     f.cancel()

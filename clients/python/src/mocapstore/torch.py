@@ -24,6 +24,11 @@ class WindowDataset:
     def __getitem__(self, i: int) -> Any:
         return self._torch.from_numpy(self.windows[i])
 
+    def __getitems__(self, indices: list[int]) -> list[Any]:
+        """A DataLoader batch's windows in one request (or ``concurrency``): what the
+        DataLoader calls, when a dataset has it, instead of one ``__getitem__`` each."""
+        return [self._torch.from_numpy(a) for a in self.windows.many(indices)]
+
     def __getstate__(self) -> dict[str, Any]:
         return {"windows": self.windows}
 
