@@ -8,6 +8,7 @@ import multiprocessing
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -125,6 +126,11 @@ def test_the_bench_runs(server: str, lib: str, capsys: pytest.CaptureFixture[str
     assert "windows/s" in out and "whole takes" in out and "client CPU" in out
 
 
+def _read_batch(args: tuple[Any, list[int]]) -> list[Any]:
+    ds, idx = args
+    return list(ds.__getitems__(idx))
+
+
 def test_the_torch_dataset_pickles_without_a_connection(
     server: str, lib: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -149,3 +155,13 @@ def test_the_torch_dataset_pickles_without_a_connection(
     # What a DataLoader calls for a batch, when the dataset has it: one request.
     got = ds.__getitems__([3, 0, 3])
     assert [t[1].tobytes() for t in got] == [w[i].tobytes() for i in (3, 0, 3)]
+    # As a DataLoader with 2 workers runs it: the dataset pickled to two forked processes,
+    # each reading its batches of an epoch's shuffled order: every window once.
+    order = w.order(shuffle=True, seed=2)
+    batches = [order[i : i + 4] for i in range(0, len(order), 4)]
+    with multiprocessing.get_context("fork").Pool(2) as pool:
+        got_batches = pool.map(_read_batch, [(ds, b) for b in batches])
+    seen = [i for b in batches for i in b]
+    assert sorted(seen) == list(range(len(w)))
+    flat = [t[1].tobytes() for b in got_batches for t in b]
+    assert flat == [w[i].tobytes() for i in seen]

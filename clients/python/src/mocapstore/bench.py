@@ -68,6 +68,7 @@ def measure(c: Client, run: Callable[[], int], items: int, what: str, one: str) 
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the bench with command-line ``argv`` (``sys.argv`` by default)."""
     ap = argparse.ArgumentParser(prog="python -m mocapstore.bench", description=__doc__)
     ap.add_argument("url", nargs="?", default=None, help="the server (default MOCAP_SERVER)")
     ap.add_argument("--library")

@@ -60,6 +60,7 @@ class _NoBar:
         pass
 
     def close(self) -> None:
+        """Close the kept-alive connections."""
         pass
 
 
@@ -245,6 +246,7 @@ class Stream:
 
     @property
     def frames_received(self) -> int:
+        """Frames the server holds of this stream: the next append's first frame."""
         return int(self.info["frames_received"])
 
     def append(
@@ -296,6 +298,7 @@ class AsyncStream:
 
     @property
     def frames_received(self) -> int:
+        """Frames the server holds of this stream: the next append's first frame."""
         return int(self.info["frames_received"])
 
     async def append(
@@ -352,6 +355,7 @@ class Client(_Base):
         self._http = httpx.Client(base_url=self.url, headers=self._headers, timeout=timeout)
 
     def close(self) -> None:
+        """Close the kept-alive connections."""
         self._http.close()
 
     def __enter__(self) -> Client:
@@ -682,6 +686,7 @@ class AsyncClient(_Base):
         self._http = httpx.AsyncClient(base_url=self.url, headers=self._headers, timeout=timeout)
 
     async def aclose(self) -> None:
+        """Close the kept-alive connections."""
         await self._http.aclose()
 
     async def __aenter__(self) -> AsyncClient:

@@ -38,10 +38,12 @@ class Skeleton:
 
     @property
     def names(self) -> tuple[str, ...]:
+        """The joints' names, in file order."""
         return tuple(j.name for j in self.joints)
 
     @property
     def parents(self) -> npt.NDArray[np.int64]:
+        """Each joint's parent index (-1 for a root), in file order."""
         return np.array([j.parent for j in self.joints], dtype=np.int64)
 
     @property

@@ -106,6 +106,7 @@ class Frames:
 
     @property
     def shape(self) -> tuple[int, ...]:
+        """``(frames, points, 3)``."""
         return tuple(self.data.shape)
 
     @property
