@@ -187,9 +187,14 @@ def test_export_writes_what_the_server_answers(
 ) -> None:
     lib = library()
     take = client.ingest(walker(60), name="e", library=lib, fps=60, point_names=NAMES)
-    out = client.export(take.id, tmp_path / "e.glb", fps=30)
-    want = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format=glb&fps=30").content
-    assert out.read_bytes() == want and want[:4] == b"glTF"
+    # Every format the server writes for a marker take, by extension or named.
+    for fmt in ["glb", "gltf", "c3d", "trc", "csv", "json", "npy", "f32"]:
+        out = client.export(take.id, tmp_path / f"e.{fmt}", fps=30)
+        want = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format={fmt}&fps=30").content
+        assert out.read_bytes() == want and len(want) > 0, fmt
+        named = client.export(take.id, tmp_path / f"e-{fmt}.bin", format=fmt, fps=30)
+        assert named.read_bytes() == want, fmt
+    assert (tmp_path / "e.glb").read_bytes()[:4] == b"glTF"
     with pytest.raises(mocapstore.Conflict):
         client.export(take.id, tmp_path / "e.bvh")
     assert not (tmp_path / "e.bvh").exists()
