@@ -18,6 +18,7 @@ import httpx
 
 from .client import Client
 from .data import Windows
+from .types import Take
 
 #: Bytes of answer one request of whole takes asks for at most.
 BATCH_BYTES = 4 << 20
@@ -102,14 +103,14 @@ def main(argv: list[str] | None = None) -> None:
         takes = list(c.takes(library=a.library))
 
         # Whole takes, several to a request (at most BATCH_BYTES of answer each).
-        groups: list[list[tuple[str, int, int]]] = [[]]
+        groups: list[list[tuple[str | Take, int, int]]] = [[]]
         size = 0
         for tk in takes:
             b = tk.frames * len(tk.point_names) * 12
             if groups[-1] and size + b > BATCH_BYTES:
                 groups.append([])
                 size = 0
-            groups[-1].append((tk.id, 0, tk.frames))
+            groups[-1].append((tk, 0, tk.frames))
             size += b
 
         def whole() -> int:

@@ -142,7 +142,7 @@ class _Base:
 
     def _ranges_op(
         self,
-        parts: Sequence[tuple[str, int, int]],
+        parts: Sequence[tuple[str | Take, int, int]],
         points: Sequence[str] | None,
         fps: float | None,
         root: str | None,
@@ -151,8 +151,8 @@ class _Base:
     ) -> p.Op[list[Frames]]:
         points = p.names(points)
         takes: list[tuple[Take, int, int]] = []
-        for id, start, end in parts:
-            t = yield from self._take_op(id)
+        for take, start, end in parts:
+            t = take if isinstance(take, Take) else (yield from self._take_op(take))
             takes.append((t, int(start), int(end)))
         query = p.params(points=points, fps=fps, root=root, up=up, unit=unit)
         out: list[Frames] = []
@@ -532,7 +532,7 @@ class Client(_Base):
 
     def ranges(
         self,
-        parts: Sequence[tuple[str, int, int]],
+        parts: Sequence[tuple[str | Take, int, int]],
         *,
         points: Sequence[str] | None = None,
         fps: float | None = None,
@@ -540,8 +540,9 @@ class Client(_Base):
         up: str | None = None,
         unit: str | None = None,
     ) -> list[Frames]:
-        """Several ranges, ``(take id, start, end)`` in the takes' own frames (end
-        excluded), of one take or many, each as [`frames`] gives it, in one request per
+        """Several ranges, ``(take, start, end)`` in the takes' own frames (end excluded;
+        the take by id, or its record from ``takes()``, which saves a lookup), of one take
+        or many, each as [`frames`] gives it, in one request per
         ``MAX_RANGES`` parts: what reading a shuffled batch of windows costs once instead of
         once per window."""
         return self._run(self._ranges_op(parts, points, fps, root, up, unit))
@@ -891,7 +892,7 @@ class AsyncClient(_Base):
 
     async def ranges(
         self,
-        parts: Sequence[tuple[str, int, int]],
+        parts: Sequence[tuple[str | Take, int, int]],
         *,
         points: Sequence[str] | None = None,
         fps: float | None = None,

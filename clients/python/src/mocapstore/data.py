@@ -150,7 +150,6 @@ class Windows:
         with self._client_lock:
             if self._client is None or self._pid != os.getpid():
                 self._client = Client(self.url, self.token)
-                self._client._takes.update(self._records)
                 self._pid = os.getpid()
             return self._client
 
@@ -175,7 +174,7 @@ class Windows:
         array of its own (not a view that would keep the whole answer alive)."""
         ws = [self.windows[i] for i in indices]
         got = self.client().ranges(
-            [(w.take, w.start, w.end) for w in ws],
+            [(self._records[w.take], w.start, w.end) for w in ws],
             fps=self.fps,
             points=self.points,
             unit=self.unit,
