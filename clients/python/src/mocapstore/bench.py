@@ -1,10 +1,10 @@
 """``python -m mocapstore.bench URL``: how fast a library reads as training data through
 this client — windows/s and frames/s for ``--seconds`` windows at ``--fps`` (shuffled), and
 frames/s for whole takes (several to a request) — beside what the server spent on them:
-its CPU per window and the frames it decodes per second of its CPU (from its ``/metrics``,
-when the token may read them), and this process's CPU per window. When the client's CPU
-per window is the smaller, the reading is limited by the server's decode, not by the
-client."""
+its CPU per window and the source frames it reads per second of its CPU (from its
+``/metrics``, when the token may read them), and this process's CPU per window. When the
+client's CPU per window is the smaller, the reading is limited by the server's decode, not
+by the client."""
 
 from __future__ import annotations
 
@@ -61,8 +61,8 @@ def measure(c: Client, run: Callable[[], int], items: int, what: str, one: str) 
     print(f"  server CPU: {1e3 * server_cpu / items:.3f} ms per {one}")
     if server_cpu > 0:
         print(
-            f"  server decode: {decoded / server_cpu:,.0f} frames per server CPU second "
-            f"({decoded:,.0f} source frames decoded)"
+            f"  server: {decoded / server_cpu:,.0f} source frames per server CPU second "
+            f"({decoded:,.0f} read; decoded, or from its cache of decoded chunks)"
         )
     side = "server" if server_cpu >= cpu else "client"
     print(f"  limited by the {side}'s CPU")
