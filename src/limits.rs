@@ -62,10 +62,12 @@ pub const MAX_TOKEN_LIBRARIES: usize = 100;
 /// Audit entries one request may ask for.
 pub const MAX_AUDIT_PAGE: usize = 1_000;
 
-/// Ranges one `GET /v1/ranges` may ask for: a training batch (a few hundred windows). Each
-/// part is opened, decoded and written in turn, so what a batch holds does not grow with
-/// it; the bound keeps the query string and the up-front checks small.
-pub const MAX_RANGES: usize = 1_024;
+/// Ranges one `GET /v1/ranges` may ask for: a training batch. Each part is checked before
+/// the first is written and opened again when its turn comes, so a batch of more takes than
+/// the server keeps decoders for ([`crate::service::prepared::DECODERS`]) would build each
+/// decoder twice and push other callers' out. Each part is opened, decoded and written in
+/// turn, so what a batch holds does not grow with it.
+pub const MAX_RANGES: usize = 256;
 
 /// Watchers of one live stream at once (the viewer's live page, `GET /v1/streams/{id}/events`).
 pub const STREAM_WATCHERS: usize = 16;

@@ -326,6 +326,114 @@ pub async fn open_with(
     id: &str,
     req: RangeRequest,
 ) -> Result<Answer> {
+    let Planned {
+        prepared,
+        start,
+        end,
+        chunks,
+        frames_out,
+        fps,
+        metres_per_unit,
+        mut writer,
+        points,
+        shaper,
+        block_bytes,
+        frame_bytes,
+        head,
+        length,
+        len_bound,
+        bound,
+    } = plan(store, caches, limits, id, &req).await?;
+    reservation
+        .grow_to(bound)
+        .map_err(|r| Error::Busy(format!("{}; retry shortly", r.reason("range answers"))))?;
+    let reservation = Arc::new(reservation);
+    if let Writer::Whole(w) = &mut writer {
+        // What gathering holds, counted from the start: it is the answer's bulk.
+        w._held = Some(reservation.hold(block_bytes));
+    }
+    Ok(Answer {
+        id: id.to_string(),
+        format: req.format,
+        start,
+        end,
+        frames_out,
+        fps,
+        source_fps: prepared.fps,
+        metres_per_unit,
+        points,
+        length,
+        len_bound,
+        store: store.clone(),
+        caches: caches.clone(),
+        cache: chunks.len() <= CACHED_CHUNKS,
+        next_chunk: chunks.start,
+        last_chunk: chunks.end,
+        prepared,
+        reservation,
+        writer,
+        shaper,
+        batch: VecDeque::new(),
+        block: None,
+        pending: {
+            let room = (frames_out * frame_bytes as usize).min(PIECE_BYTES);
+            let mut first =
+                Vec::with_capacity(head.len().max(room) + frame_bytes as usize + TAIL_BYTES);
+            first.extend_from_slice(&head);
+            first
+        },
+        frame_bytes: frame_bytes as usize,
+        frames_left: frames_out,
+        tail_done: false,
+    })
+}
+
+/// Check a range request exactly as [`open_with`] does, reserving and decoding nothing:
+/// what a batch of ranges checks of every part before it writes the first
+/// ([`super::ranges`]). The answer's samples (frames × points; joints and End Sites for
+/// BVH).
+pub async fn check(
+    store: &Store,
+    caches: &Arc<ReadCaches>,
+    limits: &Limits,
+    id: &str,
+    req: &RangeRequest,
+) -> Result<u64> {
+    let p = plan(store, caches, limits, id, req).await?;
+    let points = p.points.unwrap_or(p.prepared.point_names.len());
+    Ok(p.frames_out as u64 * points as u64)
+}
+
+/// A range request checked and planned: what [`open_with`] needs to build the answer, and
+/// the most it will hold (`bound`, to reserve).
+struct Planned {
+    prepared: Arc<Prepared>,
+    start: usize,
+    end: usize,
+    chunks: std::ops::Range<usize>,
+    frames_out: usize,
+    fps: f64,
+    metres_per_unit: f64,
+    writer: Writer,
+    points: Option<usize>,
+    shaper: Option<Shaper>,
+    block_bytes: u64,
+    frame_bytes: u64,
+    head: Vec<u8>,
+    length: Option<u64>,
+    len_bound: u64,
+    bound: u64,
+}
+
+/// Everything [`open_with`] refuses, checked, and its plan; nothing reserved or decoded.
+async fn plan(
+    store: &Store,
+    caches: &Arc<ReadCaches>,
+    limits: &Limits,
+    id: &str,
+    req: &RangeRequest,
+) -> Result<Planned> {
+    let req = req.clone();
     let (prepared, (start, end)) = prepare(store, caches, id, req.range).await?;
     let header = prepared.reader.header();
     let chunks = prepared.reader.chunks_for(start..end)?;
@@ -560,51 +668,27 @@ pub async fn open_with(
         (PIECES_IN_FLIGHT * piece).min(head.len() as u64 + frames_out as u64 * frame_bytes + piece);
     let payloads = PAYLOAD_BATCH.min(all_payloads).max(max_payload);
     let bound = 2 * decode_bytes + block_bytes + payloads + output;
-    reservation
-        .grow_to(bound)
-        .map_err(|r| Error::Busy(format!("{}; retry shortly", r.reason("range answers"))))?;
-    let reservation = Arc::new(reservation);
-    if let Writer::Whole(w) = &mut writer {
-        // What gathering holds, counted from the start: it is the answer's bulk.
-        w._held = Some(reservation.hold(block_bytes));
-    }
     let fps = transform.fps.unwrap_or(prepared.fps);
     let metres_per_unit = transform
         .metres_per_unit
         .unwrap_or(prepared.metres_per_unit);
-    Ok(Answer {
-        id: id.to_string(),
-        format: req.format,
+    Ok(Planned {
+        prepared,
         start,
         end,
+        chunks,
         frames_out,
         fps,
-        source_fps: prepared.fps,
         metres_per_unit,
+        writer,
         points,
+        shaper,
+        block_bytes,
+        frame_bytes,
+        head,
         length,
         len_bound,
-        store: store.clone(),
-        caches: caches.clone(),
-        cache: chunks.len() <= CACHED_CHUNKS,
-        next_chunk: chunks.start,
-        last_chunk: chunks.end,
-        prepared,
-        reservation,
-        writer,
-        shaper,
-        batch: VecDeque::new(),
-        block: None,
-        pending: {
-            let room = (frames_out * frame_bytes as usize).min(PIECE_BYTES);
-            let mut first =
-                Vec::with_capacity(head.len().max(room) + frame_bytes as usize + TAIL_BYTES);
-            first.extend_from_slice(&head);
-            first
-        },
-        frame_bytes: frame_bytes as usize,
-        frames_left: frames_out,
-        tail_done: false,
+        bound,
     })
 }
 
@@ -764,7 +848,7 @@ impl Plan {
 }
 
 /// An answer of `frames` of `points` within [`Limits::answer_samples`], or a 400 saying so.
-pub(super) fn check_size(frames: usize, points: usize, limits: &Limits) -> Result<()> {
+fn check_size(frames: usize, points: usize, limits: &Limits) -> Result<()> {
     let samples = (frames as u64).saturating_mul(points as u64);
     crate::limits::check(
         "the answer's samples (frames × points)",
@@ -779,7 +863,7 @@ const CHANNEL_BYTES: u64 = 8 + 16;
 
 /// The indices of the named points: a 400 naming the first that is not in the take, or
 /// that is named twice (each repeat would be a whole column more of output).
-pub(super) fn point_indices(prepared: &Prepared, names: &[String]) -> Result<Vec<usize>> {
+fn point_indices(prepared: &Prepared, names: &[String]) -> Result<Vec<usize>> {
     let mut seen = std::collections::HashSet::with_capacity(names.len());
     if let Some(twice) = names.iter().find(|n| !seen.insert(n.as_str())) {
         return Err(Error::InvalidRequest(format!(

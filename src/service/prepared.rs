@@ -197,9 +197,12 @@ impl ChunkCache {
     }
 }
 
+/// Takes whose decoders a server keeps ready (least recently used dropped first).
+pub const DECODERS: usize = 256;
+
 impl Default for DecoderCache {
     fn default() -> Self {
-        DecoderCache::new(256)
+        DecoderCache::new(DECODERS)
     }
 }
 

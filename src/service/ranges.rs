@@ -8,19 +8,21 @@
 //! request's points, format and transforms, opened one after the other: the answer holds
 //! one part's reservation at a time (two while the last pieces of one are written), never
 //! the batch's. Everything a part could be refused for is checked before the first is
-//! opened — each take exists and the caller may read it, each range lies in its take,
-//! each point is in each take, each part fits the answer limit — so a batch is refused
-//! whole with a 4xx, not cut off part way; only a take deleted meanwhile, a fault, or a
-//! budget still full after [`PART_WAIT`] cuts it short.
+//! opened, by the check its answer opens with ([`answer::check`]: the take exists, the
+//! range lies in it, the points are in it, the transforms suit it, the answer fits the
+//! limit), with the caller's access to each take and the batch's total against one
+//! answer's limit — so a batch is refused whole with a 4xx, not cut off part way; only a
+//! take deleted meanwhile, a fault, or a budget still full after [`PART_WAIT`] cuts it
+//! short.
 
-use std::collections::HashMap;
+use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::Duration;
 
 use super::access::{self, Grant};
 use super::answer::{self, Answer, RangeRequest};
 use super::budget::{Budget, Holder};
-use super::fetch::{prepare, TimeRange};
+use super::fetch::TimeRange;
 use super::prepared::ReadCaches;
 use super::{Error, Result};
 use crate::limits::{self, Limits};
@@ -90,30 +92,30 @@ pub async fn open(
     )
     .map_err(Error::InvalidRequest)?;
     let transform = answer::transform_for(request.format, request.transform)?;
-    let mut checked: HashMap<&str, usize> = HashMap::new();
+    let mut reachable: HashSet<&str> = HashSet::new();
+    let mut samples = 0u64;
     for part in &request.parts {
-        if !checked.contains_key(part.id.as_str()) {
+        if part.end <= part.start {
+            return Err(Error::InvalidRequest(format!(
+                "range {}:{}-{} holds no frames (END is the frame after the last)",
+                part.id, part.start, part.end
+            )));
+        }
+        if reachable.insert(&part.id) {
             access::check_take(store, grant, &part.id).await?;
         }
-        let range = TimeRange::Frames {
-            start: part.start,
-            end: Some(part.end),
-        };
-        let (prepared, (start, end)) = prepare(store, caches, &part.id, range).await?;
-        let points = match checked.get(part.id.as_str()) {
-            Some(&points) => points,
-            None => {
-                let points = match &request.points {
-                    Some(names) => answer::point_indices(&prepared, names)?.len(),
-                    None => prepared.point_names.len(),
-                };
-                checked.insert(&part.id, points);
-                points
-            }
-        };
-        let frames = super::shape::frames_out(&prepared, &transform, end - start);
-        answer::check_size(frames, points, limits)?;
+        // The part's own request, checked as its answer will open it.
+        let one = part_request(&request, part, transform);
+        samples += answer::check(store, caches, limits, &part.id, &one).await?;
     }
+    // One request may not ask for more than one answer may hold: the parts are decoded in
+    // turn, so memory is bounded anyway, but the time one request holds a decoder is not.
+    limits::check(
+        "the batch's samples (frames × points)",
+        samples,
+        limits.answer_samples,
+    )
+    .map_err(|why| Error::InvalidRequest(format!("{why}: ask for fewer or shorter ranges")))?;
     Ok(Ranges {
         store: store.clone(),
         caches: caches.clone(),
@@ -124,6 +126,19 @@ pub async fn open(
         request,
         at: 0,
     })
+}
+
+/// A part's request: its range, with the batch's points, format and transforms.
+fn part_request(batch: &RangesRequest, part: &Part, transform: Options) -> RangeRequest {
+    RangeRequest {
+        range: TimeRange::Frames {
+            start: part.start,
+            end: Some(part.end),
+        },
+        points: batch.points.clone(),
+        format: batch.format,
+        transform,
+    }
 }
 
 impl Ranges {
@@ -143,15 +158,7 @@ impl Ranges {
         let Some(part) = self.request.parts.get(self.at) else {
             return Ok(None);
         };
-        let request = RangeRequest {
-            range: TimeRange::Frames {
-                start: part.start,
-                end: Some(part.end),
-            },
-            points: self.request.points.clone(),
-            format: self.request.format,
-            transform: self.transform,
-        };
+        let request = part_request(&self.request, part, self.transform);
         let wait = if self.at == 0 {
             Duration::ZERO
         } else {

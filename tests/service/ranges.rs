@@ -189,7 +189,7 @@ async fn a_batch_that_cannot_be_answered_whole_is_refused_before_it_starts() {
         (format!("ranges={id}:0-10&format=json"), 400, "f32 or npy"),
         ("ranges=".to_string(), 400, "names no range"),
         (format!("ranges={id}"), 400, "ID:START-END"),
-        (format!("ranges={id}:10-10"), 400, "ID:START-END"),
+        (format!("ranges={id}:10-10"), 400, "holds no frames"),
         (format!("ranges={id}:a-10"), 400, "ID:START-END"),
         (too_many, 400, "over the limit"),
         // The bad part is the last: refused before the first is written.
@@ -219,4 +219,138 @@ async fn a_batch_that_cannot_be_answered_whole_is_refused_before_it_starts() {
 
 fn ranges_limit() -> usize {
     mocapstore::limits::MAX_RANGES
+}
+
+/// A skeleton take of two joints (an End Site under the second), 30 frames at 30 fps.
+fn skeleton_bvh() -> Vec<u8> {
+    let mut s = String::from(
+        "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition \
+         Zrotation Xrotation Yrotation\n  JOINT Chest\n  {\n    OFFSET 0 20 0\n    CHANNELS \
+         3 Zrotation Xrotation Yrotation\n    End Site\n    {\n      OFFSET 0 20 0\n    }\n  \
+         }\n}\nMOTION\nFrames: 30\nFrame Time: 0.0333333\n",
+    );
+    for f in 0..30 {
+        let t = f as f64 / 30.0;
+        s += &format!(
+            "{:.4} 90 0 {:.3} 0 0 {:.3} 0 0\n",
+            t * 100.0,
+            10.0 * t,
+            20.0 * (2.0 * t).sin()
+        );
+    }
+    s.into_bytes()
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn every_part_is_checked_as_its_own_request_would_be() {
+    let t = common::sqlite().await;
+    let srv = common::start_with(
+        t.store.clone(),
+        mocapstore::http::Config {
+            limits: mocapstore::limits::Limits {
+                answer_samples: 1_000,
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+    )
+    .await;
+    let (status, markers) = srv
+        .post(
+            "codec=quant&max_error_mm=0.5&unit=mm",
+            take_json(3, 100, 0.0),
+        )
+        .await;
+    assert_eq!(status, 201, "{markers}");
+    let (status, skeleton) = srv.post("unit=cm", skeleton_bvh()).await;
+    assert_eq!(status, 201, "{skeleton}");
+    let (m, k) = (
+        markers["id"].as_str().unwrap(),
+        skeleton["id"].as_str().unwrap(),
+    );
+    // Root motion is a skeleton's: a marker take after a skeleton take is refused before the
+    // skeleton's part is written, as its own request would be.
+    let (status, _, body) = srv
+        .get(&format!("/v1/sequences/{m}/frames?root=in-place"))
+        .await;
+    assert_eq!(status, 400, "{}", String::from_utf8_lossy(&body));
+    let (status, h, body) = srv
+        .get(&format!(
+            "/v1/ranges?ranges={k}:0-30,{m}:0-10&root=in-place"
+        ))
+        .await;
+    assert_eq!(status, 400, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(h["content-type"], "application/json");
+    let (status, _, _) = srv
+        .get(&format!("/v1/ranges?ranges={k}:0-30,{k}:5-10&root=extract"))
+        .await;
+    assert_eq!(status, 200);
+    // Each part fits one answer (3 × 100 = 300 samples of 1,000); four do not together.
+    let part = format!("{m}:0-100");
+    let (status, _, _) = srv
+        .get(&format!(
+            "/v1/ranges?ranges={}",
+            [part.as_str(); 3].join(",")
+        ))
+        .await;
+    assert_eq!(status, 200);
+    let (status, body) = srv
+        .get_json(&format!(
+            "/v1/ranges?ranges={}",
+            [part.as_str(); 4].join(",")
+        ))
+        .await;
+    assert_eq!(status, 400, "{body}");
+    assert!(
+        body["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("batch's samples"),
+        "{body}"
+    );
+    srv.stop().await;
+}
+
+/// A token limited to one library: a batch naming a take of another is 404 whole, wherever
+/// that take comes in the batch.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_take_the_token_does_not_reach_is_not_there_in_any_part() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let admin = common::token(&t.store, "admin", "admin", None).await;
+    let reader = common::token(&t.store, "lab-reader", "read", Some(&["lab"])).await;
+    let mut ids = Vec::new();
+    for library in ["lab", "other"] {
+        let r = srv
+            .client
+            .post(format!(
+                "{}/v1/sequences?library={library}&codec=quant&max_error_mm=1&unit=mm",
+                srv.base
+            ))
+            .bearer_auth(&admin)
+            .body(take_json(3, 60, 0.0))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 201);
+        let v: Value = r.json().await.unwrap();
+        ids.push(v["id"].as_str().unwrap().to_string());
+    }
+    let (lab, other) = (&ids[0], &ids[1]);
+    for (ranges, want) in [
+        (format!("{lab}:0-10"), 200),
+        (format!("{lab}:0-10,{other}:0-10"), 404),
+        (format!("{other}:0-10,{lab}:0-10"), 404),
+        (format!("{lab}:0-10,{lab}:5-20,{other}:0-10"), 404),
+    ] {
+        let r = srv
+            .client
+            .get(format!("{}/v1/ranges?ranges={ranges}", srv.base))
+            .bearer_auth(&reader)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), want, "{ranges}");
+    }
+    srv.stop().await;
 }

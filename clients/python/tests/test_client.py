@@ -122,7 +122,12 @@ def test_a_batch_of_ranges_is_each_range_bit_for_bit(
                 one.metres_per_unit,
             )
     # More parts than one request may carry: split, in order.
-    monkeypatch.setattr(mocapstore.client, "MAX_RANGES", 2)
+    monkeypatch.setattr(mocapstore.client, "MAX_RANGES", 2)  # three requests
+    assert [f.start for f in client.ranges(parts)] == [0, 10, 15, 100, 0]
+    monkeypatch.setattr(mocapstore.client, "MAX_RANGES", 256)
+    monkeypatch.setattr(mocapstore.client, "MAX_RANGES_CHARS", 100)  # two ids a request
+    groups = mocapstore.client._url_sized([(a, s, e) for _, s, e in parts])
+    assert [len(g) for g in groups] == [2, 2, 1]
     assert [f.start for f in client.ranges(parts)] == [0, 10, 15, 100, 0]
     # A batch the server cannot answer whole is an error, with the server's code.
     with pytest.raises(mocapstore.NotFound):

@@ -76,7 +76,7 @@ def test_every_window_once_in_order_or_shuffled(server: str, lib: str, tmp_path:
     assert w.batch([0, 2]).shape == (2, w.frames, len(NAMES), 3)
 
 
-def test_windows_come_many_to_a_request(server: str, lib: str) -> None:
+def test_windows_come_many_to_a_request(server: str, lib: str, tmp_path: Path) -> None:
     w = Windows(server, library=lib, seconds=0.25, fps=60, batch_size=4, concurrency=2)
     one = [Windows(server, library=lib, seconds=0.25, fps=60)[i].tobytes() for i in range(len(w))]
     asked: list[int] = []
@@ -100,6 +100,11 @@ def test_windows_come_many_to_a_request(server: str, lib: str) -> None:
     assert [a.tobytes() for a in fresh.many(idx)] == [one[i] for i in idx]
     # A batch is split among the worker threads, a request each.
     assert len(asked) == 2 and sum(asked) == len(idx)
+    # Repeats in one batch, split among threads, store the same window on disk at once.
+    disk = Windows(server, library=lib, seconds=0.25, fps=60, concurrency=2, cache_dir=tmp_path)
+    for _ in range(3):
+        assert [a.tobytes() for a in disk.many(idx * 4)] == [one[i] for i in idx * 4]
+        disk._memory.clear()
 
 
 def _read(args: tuple[Windows, list[int]]) -> list[tuple[int, bytes]]:

@@ -9,7 +9,6 @@ by the client."""
 from __future__ import annotations
 
 import argparse
-import itertools
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -96,8 +95,7 @@ def main(argv: list[str] | None = None) -> None:
     with Client(a.url) as c:
 
         def windows() -> int:
-            it = itertools.islice(w.iter(shuffle=True, seed=0), n)
-            return sum(x.shape[0] for x in it)
+            return sum(x.shape[0] for x in w.many(w.order(shuffle=True, seed=0)[:n]))
 
         measure(c, windows, n, "windows, shuffled", "window")
         takes = list(c.takes(library=a.library))

@@ -38,7 +38,26 @@ DEFAULT_URL = "http://127.0.0.1:8080"
 BACKOFF_S = 0.2
 
 #: Ranges one batch request asks for at most (the server's limit, ``limits::MAX_RANGES``).
-MAX_RANGES = 1024
+MAX_RANGES = 256
+
+#: Characters of ``ranges=`` one request carries at most: within the 8 KiB request line a
+#: proxy's defaults allow (nginx's ``large_client_header_buffers``), with room for the rest.
+MAX_RANGES_CHARS = 6000
+
+
+def _url_sized(parts: list[tuple[Take, int, int]]) -> list[list[tuple[Take, int, int]]]:
+    """``parts`` in requests of at most ``MAX_RANGES`` parts and ``MAX_RANGES_CHARS``
+    characters of ``ranges=``, in order."""
+    groups: list[list[tuple[Take, int, int]]] = [[]]
+    chars = 0
+    for part in parts:
+        n = len(p.ranges_spec([(part[0].id, part[1], part[2])])) + 1
+        if groups[-1] and (len(groups[-1]) >= MAX_RANGES or chars + n > MAX_RANGES_CHARS):
+            groups.append([])
+            chars = 0
+        groups[-1].append(part)
+        chars += n
+    return groups
 
 
 @dataclass(frozen=True)
@@ -156,8 +175,8 @@ class _Base:
             takes.append((t, int(start), int(end)))
         query = p.params(points=points, fps=fps, root=root, up=up, unit=unit)
         out: list[Frames] = []
-        for i in range(0, len(takes), MAX_RANGES):
-            got = yield from p.ranges(takes[i : i + MAX_RANGES], query, points, root)
+        for group in _url_sized(takes):
+            got = yield from p.ranges(group, query, points, root)
             out.extend(got)
         return out
 
@@ -542,9 +561,9 @@ class Client(_Base):
     ) -> list[Frames]:
         """Several ranges, ``(take, start, end)`` in the takes' own frames (end excluded;
         the take by id, or its record from ``takes()``, which saves a lookup), of one take
-        or many, each as [`frames`] gives it, in one request per
-        ``MAX_RANGES`` parts: what reading a shuffled batch of windows costs once instead of
-        once per window."""
+        or many, each as [`frames`] gives it, in one request per ``MAX_RANGES`` parts (fewer
+        when their ids would pass ``MAX_RANGES_CHARS`` of URL): what reading a shuffled batch
+        of windows costs once instead of once per window."""
         return self._run(self._ranges_op(parts, points, fps, root, up, unit))
 
     def export(

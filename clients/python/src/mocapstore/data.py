@@ -60,9 +60,10 @@ class Windows:
     ``points``, windows have each take's own points: stack them (``batch``, a DataLoader's
     collate) only over takes of one marker set or skeleton.
 
-    Windows are fetched ``batch_size`` to a request (``GET /v1/ranges``, one request for
-    windows of many takes), ``concurrency`` requests at once, so that the server's decode,
-    not the client's per-request work, sets the pace.
+    Windows are fetched at most ``batch_size`` to a request (``GET /v1/ranges``, one request
+    for windows of many takes; a batch smaller than ``concurrency * batch_size`` is split
+    evenly among the ``concurrency`` requests sent at once), so that the server's decode, not
+    the client's per-request work, sets the pace.
 
     ``cache_bytes`` bounds the windows kept in memory; with ``cache_dir`` they are also
     kept on disk (at most ``disk_bytes``) for the next epoch or process."""
@@ -232,7 +233,10 @@ class Windows:
                     self._store(disk, a)
                 self._remember(idx[k], a)
                 out[k] = a.copy()
-        return [a for a in out if a is not None]
+        got = [a for a in out if a is not None]
+        if len(got) != len(out):
+            raise RuntimeError(f"{len(out) - len(got)} of {len(out)} windows were not read")
+        return got
 
     def _groups(self, indices: Sequence[int]) -> list[Sequence[int]]:
         """``indices`` in requests of at most ``batch_size``, and at least ``concurrency``
@@ -243,7 +247,8 @@ class Windows:
 
     def _store(self, path: Path, a: F32Array) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f"{path.name}.{os.getpid()}.partial")
+        # Named for this process and thread: two threads may store the same window at once.
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.{threading.get_ident()}.partial")
         with open(tmp, "wb") as out:
             np.save(out, a)
         tmp.replace(path)
