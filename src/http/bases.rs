@@ -12,7 +12,7 @@ use super::AppState;
 use crate::codec::BasisKind;
 use crate::service::access::Caller;
 use crate::service::bases;
-use crate::service::jobs::{Job, MAX_WAIT_S};
+use crate::service::jobs::{Job, JobState, MAX_LIST, MAX_WAIT_S};
 use crate::service::training::{self, TrainRequest};
 use crate::service::Error;
 use crate::store::BasisRow;
@@ -89,7 +89,37 @@ pub async fn job(
     state
         .jobs
         .wait_for(&id, std::time::Duration::from_secs(wait), &caller.grant)
-        .await
+        .await?
         .map(Json)
         .ok_or_else(|| Error::NotFound(format!("job {id}")).into())
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobsQuery {
+    state: Option<String>,
+    limit: Option<usize>,
+}
+
+/// `GET /v1/jobs`: the jobs the token may see (every server's), newest first.
+pub async fn jobs(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    query: Result<Query<JobsQuery>, QueryRejection>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let Query(q) = query?;
+    let job_state = q
+        .state
+        .as_deref()
+        .map(str::parse::<JobState>)
+        .transpose()
+        .map_err(ApiError::bad_request)?;
+    let limit = q.limit.unwrap_or(100);
+    if limit == 0 || limit > MAX_LIST {
+        return Err(ApiError::bad_request(format!(
+            "limit must be 1 to {MAX_LIST}, got {limit}"
+        )));
+    }
+    let items = state.jobs.list(&caller.grant, job_state, limit).await?;
+    Ok(Json(serde_json::json!({ "items": items })))
 }

@@ -56,6 +56,9 @@ pub struct Config {
     /// How long a live take stays live when its server stops renewing it (see
     /// [`Streams::lease`]); leases are renewed every [`MAINTENANCE_PERIOD`].
     pub stream_lease: Duration,
+    /// How long a background job's lease lasts ([`crate::service::jobs`]): a job whose server
+    /// has not renewed it for this long is run again by another server.
+    pub job_lease: Duration,
     /// Encode every candidate of every take in full: no candidate is left out by what a
     /// layout's earlier takes say ([`crate::service::history`]).
     pub exhaustive_choice: bool,
@@ -81,6 +84,7 @@ impl Default for Config {
             limits: Limits::default(),
             decoded_cache_mib: 256,
             stream_lease: Duration::from_secs(60),
+            job_lease: crate::service::jobs::DEFAULT_LEASE,
             exhaustive_choice: false,
             policy: Policy::default(),
             metrics_listen: None,
@@ -155,6 +159,7 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
             get(bases::list).post(bases::train.layer(json.clone())),
         )
         .route("/v1/bases/{id}", get(bases::get).delete(bases::delete))
+        .route("/v1/jobs", get(bases::jobs))
         .route("/v1/jobs/{id}", get(bases::job))
         .route("/v1/skeletons", get(skeletons::list))
         .route(
@@ -339,7 +344,7 @@ impl Application {
             answers: Arc::new(Budget::new(limits.answer_bytes, limits.answer_share_bytes)),
             metrics: Arc::new(Metrics::default()),
             caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
-            jobs: Arc::new(Jobs::default()),
+            jobs: Arc::new(Jobs::new(store.clone(), config.job_lease)),
             streams: Arc::new(Streams::new(limits, config.stream_lease)),
             histories: (!config.exhaustive_choice).then(|| Arc::new(Histories::default())),
             auth: Arc::new(Authenticator::default()),
@@ -432,6 +437,33 @@ impl Application {
                 }
             }
         });
+        // Jobs whose server died, taken over (a third of a lease after it ran out at most);
+        // finished ones forgotten after a week.
+        let state = self.state.clone();
+        let job_watch = tokio::spawn(async move {
+            let every = (state.jobs.lease() / 3).max(Duration::from_millis(200));
+            let mut tick = tokio::time::interval(every);
+            let mut pruned: Option<std::time::Instant> = None;
+            loop {
+                tick.tick().await;
+                loop {
+                    match crate::service::training::take_over(&state.store, &state.jobs).await {
+                        Ok(true) => continue,
+                        Ok(false) => break,
+                        Err(e) => {
+                            tracing::warn!(error = %e, "looking for jobs to take over failed");
+                            break;
+                        }
+                    }
+                }
+                if pruned.is_none_or(|t| t.elapsed() >= Duration::from_secs(3600)) {
+                    pruned = Some(std::time::Instant::now());
+                    if let Err(e) = state.jobs.prune().await {
+                        tracing::warn!(error = %e, "forgetting old jobs failed");
+                    }
+                }
+            }
+        });
         // Watches of live streams never end on their own: end them first, or the graceful
         // shutdown would wait for them.
         let streams = self.state.streams.clone();
@@ -466,6 +498,7 @@ impl Application {
         )
         .await;
         reaper.abort();
+        job_watch.abort();
         if let Some(m) = metrics {
             let _ = m.await;
         }

@@ -1,16 +1,42 @@
-//! Background jobs (training bases): their state and progress, as `GET /v1/jobs/{id}` reports
-//! it. Jobs live in the server's memory: a restart forgets a job's record (what it made — a
-//! stored basis — stays), and a job that was running when the server stopped is simply gone.
+//! Background jobs (training bases), kept in the database so that every server sharing it
+//! sees them: `GET /v1/jobs/{id}` answers the same on any server, whichever runs the job.
+//!
+//! # One job, one runner, and who takes over
+//! A job is a row ([`crate::store::JobRow`]) with the server running it (`owner`, a random
+//! id per process) and a lease. The runner renews the lease with its progress every
+//! [`FLUSH_EVERY`]; its result or error is written only while it still owns the job. When a
+//! server dies mid-job its lease runs out, and the next server whose maintenance looks
+//! ([`Jobs::take_over`], every few seconds) takes the job and runs it again from the start
+//! (training is not resumable part way; `attempts` counts the starts).
+//!
+//! While a job runs, an identical request (the same kind and request: its `dedup_key`)
+//! returns that job instead of starting a second: a unique index on running jobs' keys
+//! decides, so two servers racing insert one.
 
-use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use serde::Serialize;
 
 use super::access::Grant;
+use super::{now_ms, Error, Result};
+use crate::store::{JobRow, Store};
 
-/// Finished jobs kept for inspection before the oldest are forgotten.
-const KEEP_FINISHED: usize = 256;
+/// How often a runner writes its progress and renews its lease.
+pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
+
+/// How long a job's lease lasts by default: a server that has not renewed it for this long
+/// is taken for dead, and its job is run again by another.
+pub const DEFAULT_LEASE: Duration = Duration::from_secs(30);
+
+/// Finished jobs are kept this long for inspection, then forgotten (what they made stays).
+pub const KEEP_FINISHED: Duration = Duration::from_secs(7 * 24 * 3600);
+
+/// The longest a client may ask [`Jobs::wait_for`] to wait, seconds.
+pub const MAX_WAIT_S: u64 = 600;
+
+/// Jobs one listing answers at most.
+pub const MAX_LIST: usize = 1_000;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -20,6 +46,31 @@ pub enum JobState {
     Failed,
 }
 
+impl JobState {
+    fn name(self) -> &'static str {
+        match self {
+            JobState::Running => "running",
+            JobState::Succeeded => "succeeded",
+            JobState::Failed => "failed",
+        }
+    }
+}
+
+impl std::str::FromStr for JobState {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "running" => Ok(JobState::Running),
+            "succeeded" => Ok(JobState::Succeeded),
+            "failed" => Ok(JobState::Failed),
+            _ => Err(format!(
+                "job state {s:?} is not running, succeeded or failed"
+            )),
+        }
+    }
+}
+
+/// A job as the API shows it.
 #[derive(Debug, Clone, Serialize)]
 pub struct Job {
     pub id: String,
@@ -38,6 +89,9 @@ pub struct Job {
     /// The libraries of the takes it works on: a token limited to libraries sees the job
     /// only if it reaches every one of them.
     pub libraries: Vec<String>,
+    /// Times it was started: more than 1 when a server died running it and another took
+    /// it over.
+    pub attempts: i64,
 }
 
 impl Job {
@@ -50,136 +104,316 @@ impl Job {
             }
         }
     }
+
+    /// A stored row as a job; a row that does not parse is an error, not a default.
+    fn from_row(r: JobRow) -> Result<Job> {
+        let corrupt = |what: &str, e: &dyn std::fmt::Display| {
+            Error::Corrupt(format!("job {}: {what}: {e}", r.id))
+        };
+        Ok(Job {
+            state: r.state.parse().map_err(|e: String| corrupt("state", &e))?,
+            result: r
+                .result
+                .as_deref()
+                .map(serde_json::from_str)
+                .transpose()
+                .map_err(|e| corrupt("result", &e))?,
+            libraries: serde_json::from_str(&r.libraries).map_err(|e| corrupt("libraries", &e))?,
+            id: r.id,
+            kind: r.kind,
+            progress: r.progress,
+            message: r.message,
+            error: r.error,
+            created_at: r.created_at,
+            finished_at: r.finished_at,
+            attempts: r.attempts,
+        })
+    }
 }
 
-#[derive(Default)]
+/// A job to start: what it is, how to tell an identical one, and who may see it.
+pub struct NewJob {
+    pub kind: String,
+    /// The request, as it will be stored and run again on takeover.
+    pub request: serde_json::Value,
+    pub libraries: Vec<String>,
+}
+
+/// The jobs of the database, as this server (`server`, an id of its own) runs them.
 pub struct Jobs {
-    inner: Mutex<(HashMap<String, Job>, VecDeque<String>)>,
-    /// Woken whenever a job finishes, for [`Jobs::wait`].
-    finished: tokio::sync::Notify,
+    store: Store,
+    server: String,
+    lease: Duration,
 }
-
-/// The longest a client may ask [`Jobs::wait`] to wait, seconds.
-pub const MAX_WAIT_S: u64 = 600;
 
 impl Jobs {
-    /// Register a running job on takes of `libraries` and return the handle its worker
-    /// reports through.
-    pub fn start(self: &Arc<Self>, kind: &str, libraries: Vec<String>) -> Progress {
-        let id = uuid::Uuid::now_v7().to_string();
-        let job = Job {
-            id: id.clone(),
-            kind: kind.to_string(),
-            state: JobState::Running,
+    pub fn new(store: Store, lease: Duration) -> Jobs {
+        Jobs {
+            store,
+            server: uuid::Uuid::now_v7().to_string(),
+            lease,
+        }
+    }
+
+    /// How long a job's lease lasts.
+    pub fn lease(&self) -> Duration {
+        self.lease
+    }
+
+    /// This server's id as the job rows name it (`owner`).
+    pub fn server(&self) -> &str {
+        &self.server
+    }
+
+    fn lease_until(&self) -> i64 {
+        now_ms() + self.lease.as_millis() as i64
+    }
+
+    /// Start `job` run by this server, or find the identical job running already: the job,
+    /// and the handle to run it with when it is new (`None`: someone runs it).
+    pub async fn start(self: &Arc<Self>, job: NewJob) -> Result<(Job, Option<Progress>)> {
+        let request = job.request.to_string();
+        let dedup_key = format!(
+            "{}:{}",
+            job.kind,
+            crate::codec::basis::hex(blake3::hash(request.as_bytes()).as_bytes())
+        );
+        let row = JobRow {
+            id: uuid::Uuid::now_v7().to_string(),
+            kind: job.kind,
+            dedup_key: dedup_key.clone(),
+            request,
+            libraries: serde_json::to_string(&job.libraries)
+                .map_err(|e| Error::Internal(e.to_string()))?,
+            state: JobState::Running.name().into(),
             progress: 0.0,
             message: "queued".into(),
             result: None,
             error: None,
-            created_at: super::now_ms(),
+            owner: self.server.clone(),
+            lease_until: self.lease_until(),
+            attempts: 1,
+            created_at: now_ms(),
             finished_at: None,
-            libraries,
         };
-        self.inner
-            .lock()
-            .expect("jobs lock")
-            .0
-            .insert(id.clone(), job);
-        Progress {
-            jobs: self.clone(),
-            id,
+        if self.store.insert_job(&row).await? {
+            let progress = self.runner(&row.id);
+            return Ok((Job::from_row(row)?, Some(progress)));
+        }
+        match self.store.running_job(&dedup_key).await? {
+            Some(running) => Ok((Job::from_row(running)?, None)),
+            // It finished between the insert and the look: start it again.
+            None => {
+                Box::pin(
+                    self.start(NewJob {
+                        kind: row.kind,
+                        request: serde_json::from_str(&row.request)
+                            .map_err(|e| Error::Internal(e.to_string()))?,
+                        libraries: job.libraries,
+                    }),
+                )
+                .await
+            }
         }
     }
 
-    pub fn get(&self, id: &str) -> Option<Job> {
-        self.inner.lock().expect("jobs lock").0.get(id).cloned()
+    /// A handle on job `id`, run by this server, that writes its progress and renews its
+    /// lease every [`FLUSH_EVERY`] until it finishes.
+    fn runner(self: &Arc<Self>, id: &str) -> Progress {
+        let progress = Progress {
+            jobs: self.clone(),
+            id: id.to_string(),
+            latest: Arc::new(Mutex::new(Latest {
+                progress: 0.0,
+                message: "started".into(),
+                done: false,
+                lost: false,
+            })),
+        };
+        let p = progress.clone();
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(FLUSH_EVERY);
+            loop {
+                tick.tick().await;
+                if !p.flush().await {
+                    return;
+                }
+            }
+        });
+        progress
     }
 
-    /// The job once it has finished, or as it is after `timeout` (a long poll: clients and
-    /// tests wait for a job without polling in a loop); `None` when there is no such job or
-    /// `grant` may not see it (the same answer, so that a limited token learns nothing).
+    /// Take over one job whose server died (its lease ran out), if there is one: its stored
+    /// request, and the handle to run it with.
+    pub async fn take_over(self: &Arc<Self>) -> Result<Option<(String, Progress)>> {
+        let Some(row) = self
+            .store
+            .take_over_job(&self.server, now_ms(), self.lease_until())
+            .await?
+        else {
+            return Ok(None);
+        };
+        tracing::warn!(
+            job = %row.id,
+            kind = %row.kind,
+            attempt = row.attempts,
+            "taking over a job whose server stopped renewing it; running it again"
+        );
+        Ok(Some((row.request.clone(), self.runner(&row.id))))
+    }
+
+    /// Forget jobs finished more than [`KEEP_FINISHED`] ago.
+    pub async fn prune(&self) -> Result<u64> {
+        let before = now_ms() - KEEP_FINISHED.as_millis() as i64;
+        Ok(self.store.prune_jobs(before).await?)
+    }
+
+    pub async fn get(&self, id: &str) -> Result<Option<Job>> {
+        self.store.job(id).await?.map(Job::from_row).transpose()
+    }
+
+    /// Jobs `grant` may see, newest first, at most `limit`, of one state or every one.
+    pub async fn list(
+        &self,
+        grant: &Grant,
+        state: Option<JobState>,
+        limit: usize,
+    ) -> Result<Vec<Job>> {
+        let limit = limit.min(MAX_LIST);
+        let mut out = Vec::new();
+        // A limited token sees a part of the rows: read more than asked, up to the cap.
+        let rows = self.store.jobs(state.map(JobState::name), MAX_LIST).await?;
+        for r in rows {
+            let job = Job::from_row(r)?;
+            if job.visible_to(grant) {
+                out.push(job);
+                if out.len() == limit {
+                    break;
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The job once it has finished, or as it is after `timeout` (a long poll: clients wait
+    /// for a job without polling in a loop; the server polls the row, which any server may
+    /// finish); `None` when there is no such job or `grant` may not see it (the same answer,
+    /// so that a limited token learns nothing).
     pub async fn wait_for(
         &self,
         id: &str,
-        timeout: std::time::Duration,
+        timeout: Duration,
         grant: &Grant,
-    ) -> Option<Job> {
-        if !self.get(id)?.visible_to(grant) {
-            return None;
-        }
-        self.wait(id, timeout).await
-    }
-
-    /// [`Jobs::wait_for`] over every library.
-    pub async fn wait(&self, id: &str, timeout: std::time::Duration) -> Option<Job> {
+    ) -> Result<Option<Job>> {
         let deadline = tokio::time::Instant::now() + timeout;
+        let mut poll = Duration::from_millis(20);
         loop {
-            // Registered before the state is read, so a finish in between is not missed.
-            let woken = self.finished.notified();
-            tokio::pin!(woken);
-            woken.as_mut().enable();
-            let job = self.get(id)?;
-            if job.state != JobState::Running {
-                return Some(job);
+            let Some(job) = self.get(id).await? else {
+                return Ok(None);
+            };
+            if !job.visible_to(grant) {
+                return Ok(None);
             }
-            if tokio::time::timeout_at(deadline, woken).await.is_err() {
-                return Some(job);
+            if job.state != JobState::Running || tokio::time::Instant::now() >= deadline {
+                return Ok(Some(job));
             }
-        }
-    }
-
-    fn update(&self, id: &str, f: impl FnOnce(&mut Job)) {
-        let mut g = self.inner.lock().expect("jobs lock");
-        let (map, finished) = &mut *g;
-        let Some(job) = map.get_mut(id) else { return };
-        f(job);
-        if job.state != JobState::Running && job.finished_at.is_none() {
-            job.finished_at = Some(super::now_ms());
-            self.finished.notify_waiters();
-            finished.push_back(id.to_string());
-            while finished.len() > KEEP_FINISHED {
-                if let Some(old) = finished.pop_front() {
-                    map.remove(&old);
-                }
-            }
+            tokio::time::sleep_until((tokio::time::Instant::now() + poll).min(deadline)).await;
+            poll = (poll * 2).min(Duration::from_millis(250));
         }
     }
 }
 
-/// A worker's handle on its job.
+/// What a runner reported last, not yet written.
+struct Latest {
+    progress: f64,
+    message: String,
+    done: bool,
+    /// Another server took the job over: this runner's writes are refused.
+    lost: bool,
+}
+
+/// A runner's handle on its job. [`Progress::report`] is cheap and synchronous (training
+/// calls it from its worker threads); the handle's task writes the newest report.
 #[derive(Clone)]
 pub struct Progress {
     jobs: Arc<Jobs>,
     pub id: String,
+    latest: Arc<Mutex<Latest>>,
 }
 
 impl Progress {
     pub fn report(&self, progress: f64, message: impl Into<String>) {
-        let message = message.into();
-        self.jobs.update(&self.id, |j| {
-            j.progress = progress.clamp(0.0, 1.0);
-            j.message = message;
-        });
+        let mut l = self.latest.lock().expect("progress lock");
+        l.progress = progress.clamp(0.0, 1.0);
+        l.message = message.into();
     }
 
-    pub fn succeed(&self, result: serde_json::Value) {
-        self.jobs.update(&self.id, |j| {
-            j.state = JobState::Succeeded;
-            j.progress = 1.0;
-            j.message = "done".into();
-            j.result = Some(result);
-        });
+    /// Write the newest report and renew the lease; `false` once the job is finished here
+    /// or owned by another server (the task stops).
+    async fn flush(&self) -> bool {
+        let (progress, message) = {
+            let l = self.latest.lock().expect("progress lock");
+            if l.done || l.lost {
+                return false;
+            }
+            (l.progress, l.message.clone())
+        };
+        let j = &self.jobs;
+        match j
+            .store
+            .job_progress(&self.id, &j.server, progress, &message, j.lease_until())
+            .await
+        {
+            Ok(true) => true,
+            Ok(false) => {
+                tracing::warn!(job = %self.id, "another server runs this job now");
+                self.latest.lock().expect("progress lock").lost = true;
+                false
+            }
+            // The database is away: keep trying; the lease says how long we may.
+            Err(e) => {
+                tracing::warn!(job = %self.id, error = %e, "could not renew a job's lease");
+                true
+            }
+        }
     }
 
-    pub fn fail(&self, error: String) {
-        self.jobs.update(&self.id, |j| {
-            j.state = JobState::Failed;
-            j.message = "failed".into();
-            j.error = Some(error);
-        });
+    async fn finish(&self, state: JobState, result: Option<String>, error: Option<&str>) {
+        self.latest.lock().expect("progress lock").done = true;
+        let j = &self.jobs;
+        match j
+            .store
+            .finish_job(
+                &self.id,
+                &j.server,
+                state.name(),
+                result.as_deref(),
+                error,
+                now_ms(),
+            )
+            .await
+        {
+            Ok(true) => {}
+            Ok(false) => tracing::warn!(job = %self.id, "finished a job another server runs now"),
+            Err(e) => tracing::error!(job = %self.id, error = %e, "could not record a job's end"),
+        }
     }
 
-    pub fn job(&self) -> Option<Job> {
-        self.jobs.get(&self.id)
+    pub async fn succeed(&self, result: serde_json::Value) {
+        self.finish(JobState::Succeeded, Some(result.to_string()), None)
+            .await;
+    }
+
+    pub async fn fail(&self, error: String) {
+        self.finish(JobState::Failed, None, Some(&error)).await;
+    }
+
+    /// The job as stored now.
+    pub async fn job(&self) -> Result<Job> {
+        self.jobs
+            .get(&self.id)
+            .await?
+            .ok_or_else(|| Error::Internal(format!("job {} vanished", self.id)))
     }
 }
 
@@ -187,38 +421,39 @@ impl Progress {
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_job_reports_progress_then_its_outcome() {
-        let jobs = Arc::new(Jobs::default());
-        let p = jobs.start("train-bases", vec!["lab".into()]);
-        p.report(0.5, "training x");
-        let j = jobs.get(&p.id).unwrap();
-        assert_eq!(
-            (j.state, j.progress, j.message.as_str()),
-            (JobState::Running, 0.5, "training x")
-        );
-        p.succeed(serde_json::json!({"id": "abc"}));
-        let j = jobs.get(&p.id).unwrap();
-        assert_eq!(j.state, JobState::Succeeded);
-        assert!(j.finished_at.is_some() && j.result.is_some());
-        let q = jobs.start("train-bases", vec!["lab".into()]);
-        q.fail("no takes".into());
-        assert_eq!(jobs.get(&q.id).unwrap().error.as_deref(), Some("no takes"));
+    fn job(libraries: &[&str]) -> Job {
+        Job {
+            id: "j".into(),
+            kind: "train-bases".into(),
+            state: JobState::Running,
+            progress: 0.0,
+            message: String::new(),
+            result: None,
+            error: None,
+            created_at: 0,
+            finished_at: None,
+            libraries: libraries.iter().map(|l| l.to_string()).collect(),
+            attempts: 1,
+        }
     }
 
-    #[tokio::test]
-    async fn waiting_returns_when_the_job_finishes_or_at_the_timeout() {
-        use std::time::Duration;
-        let jobs = Arc::new(Jobs::default());
-        let p = jobs.start("train-bases", vec!["lab".into()]);
-        let running = jobs.wait(&p.id, Duration::from_millis(1)).await.unwrap();
-        assert_eq!(running.state, JobState::Running);
-        let (j2, id) = (jobs.clone(), p.id.clone());
-        let waiter = tokio::spawn(async move { j2.wait(&id, Duration::from_secs(600)).await });
-        tokio::task::yield_now().await;
-        p.succeed(serde_json::json!({}));
-        let done = waiter.await.unwrap().unwrap();
-        assert_eq!(done.state, JobState::Succeeded);
-        assert!(jobs.wait("nope", Duration::from_secs(1)).await.is_none());
+    #[test]
+    fn a_limited_token_sees_jobs_whose_takes_all_lie_in_its_libraries() {
+        let grant = |libs: Option<&[&str]>| Grant {
+            libraries: libs.map(|l| l.iter().map(|s| s.to_string()).collect()),
+            ..Grant::everything()
+        };
+        assert!(job(&["a", "b"]).visible_to(&grant(None)));
+        assert!(job(&["a"]).visible_to(&grant(Some(&["a", "b"]))));
+        assert!(!job(&["a", "c"]).visible_to(&grant(Some(&["a", "b"]))));
+        assert!(!job(&[]).visible_to(&grant(Some(&["a"]))));
+    }
+
+    #[test]
+    fn states_read_back_as_they_are_written() {
+        for s in [JobState::Running, JobState::Succeeded, JobState::Failed] {
+            assert_eq!(s.name().parse::<JobState>(), Ok(s));
+        }
+        assert!("queued".parse::<JobState>().is_err());
     }
 }

@@ -3,9 +3,9 @@
 
 use std::sync::Arc;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
-use super::jobs::{Jobs, Progress};
+use super::jobs::{Job, Jobs, NewJob, Progress};
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::lsdt::train::{train_basis_reporting, TrainOptions};
@@ -14,7 +14,7 @@ use crate::codec::{Basis, BasisKind, Input, Target};
 use crate::store::{BasisRow, Filter, Store};
 
 /// What to train and on which takes.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainRequest {
     /// `lsdt` (the default).
@@ -291,25 +291,57 @@ async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<Bas
     ))
 }
 
-/// Start training in the background; obvious mistakes are refused before a job exists.
-pub async fn start_training(
-    store: &Store,
-    jobs: &Arc<Jobs>,
-    req: TrainRequest,
-) -> Result<crate::service::jobs::Job> {
+/// What training jobs are called in the job table.
+pub const JOB_KIND: &str = "train-bases";
+
+/// Start training in the background; obvious mistakes are refused before a job exists. An
+/// identical request while one runs (on any server) gets that job.
+pub async fn start_training(store: &Store, jobs: &Arc<Jobs>, req: TrainRequest) -> Result<Job> {
     let sel = select(store, &req).await?;
     let mut libraries: Vec<String> = sel.takes.iter().map(|t| t.library.clone()).collect();
     libraries.sort();
     libraries.dedup();
-    let progress = jobs.start("train-bases", libraries);
-    let (store, p) = (store.clone(), progress.clone());
+    let request = serde_json::to_value(&req).map_err(|e| Error::Internal(e.to_string()))?;
+    let (job, runner) = jobs
+        .start(NewJob {
+            kind: JOB_KIND.into(),
+            request,
+            libraries,
+        })
+        .await?;
+    if let Some(progress) = runner {
+        run(store.clone(), sel, progress);
+    }
+    Ok(job)
+}
+
+/// Take over a training job whose server died, if there is one, and run it again here.
+pub async fn take_over(store: &Store, jobs: &Arc<Jobs>) -> Result<bool> {
+    let Some((request, progress)) = jobs.take_over().await? else {
+        return Ok(false);
+    };
+    let selected = match serde_json::from_str::<TrainRequest>(&request) {
+        Ok(req) => select(store, &req).await,
+        Err(e) => Err(Error::Corrupt(format!("job {}: request: {e}", progress.id))),
+    };
+    match selected {
+        Ok(sel) => run(store.clone(), sel, progress),
+        // The takes it selected may have gone meanwhile.
+        Err(e) => progress.fail(e.to_string()).await,
+    }
+    Ok(true)
+}
+
+/// Train `sel` in the background, reporting through `progress`.
+fn run(store: Store, sel: Selection, progress: Progress) {
     tokio::spawn(async move {
-        match train(&store, sel, &p).await {
-            Ok(row) => p.succeed(serde_json::to_value(&row).unwrap_or_default()),
-            Err(e) => p.fail(e.to_string()),
+        match train(&store, sel, &progress).await {
+            Ok(row) => {
+                progress
+                    .succeed(serde_json::to_value(&row).unwrap_or_default())
+                    .await
+            }
+            Err(e) => progress.fail(e.to_string()).await,
         }
     });
-    progress
-        .job()
-        .ok_or_else(|| Error::Internal("job vanished".into()))
 }

@@ -626,7 +626,9 @@ macro_rules! bind_all {
 
 mod bases;
 pub use bases::{BasisRow, Deletion};
+mod jobs;
 mod skeletons;
+pub use jobs::JobRow;
 pub use skeletons::SkeletonRow;
 mod access;
 pub use access::{AuditRow, TokenRow};

@@ -227,6 +227,7 @@ fn cases() -> Vec<Case> {
         c(Method::POST, "/v1/bases", "admin", false, 400),
         c(Method::GET, "/v1/bases/{id}", "read", false, 404),
         c(Method::DELETE, "/v1/bases/{id}", "admin", false, 404),
+        c(Method::GET, "/v1/jobs", "read", false, 200),
         c(Method::GET, "/v1/jobs/{id}", "read", false, 404),
         c(Method::GET, "/v1/skeletons", "read", false, 200),
         c(Method::GET, "/v1/skeletons/{id}", "read", false, 404),

@@ -11,6 +11,7 @@ mod bases;
 mod c3d;
 mod choice;
 mod cli;
+mod cluster;
 mod export;
 mod hostile;
 mod http;
