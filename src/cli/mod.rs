@@ -102,6 +102,16 @@ struct ServeArgs {
     /// its own that resolves to it (DNS rebinding).
     #[arg(long = "allow-host", env = "MOCAP_ALLOW_HOSTS", value_delimiter = ',')]
     allowed_hosts: Vec<String>,
+    /// A reverse proxy (an address or a CIDR network, e.g. 10.0.0.0/8) whose
+    /// `X-Forwarded-For` names the client: rate limits, budget shares and the audit count
+    /// the client's address, not the proxy's; repeat for several. Without it the header is
+    /// ignored.
+    #[arg(
+        long = "trusted-proxy",
+        env = "MOCAP_TRUSTED_PROXIES",
+        value_delimiter = ','
+    )]
+    trusted_proxies: Vec<String>,
     /// Also serve GET /metrics without a token on this address (for a Prometheus scraper
     /// on an internal network); on --listen, /metrics needs an admin token.
     #[arg(long, env = "MOCAP_METRICS_LISTEN")]
@@ -327,8 +337,17 @@ fn serve(args: ServeArgs) -> ExitCode {
                 .unwrap_or_else(|_| "info,tower_http=info,sqlx=warn".into()),
         )
         .init();
+    let trusted_proxies =
+        match mocapstore::http::proxy::TrustedProxies::parse(&args.trusted_proxies) {
+            Ok(t) => t,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(2);
+            }
+        };
     let config = mocapstore::http::Config {
         listen: args.listen,
+        trusted_proxies,
         database_url: args.database_url,
         limits: args.limits.limits(),
         decoded_cache_mib: args.decoded_cache_mib,

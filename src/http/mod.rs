@@ -9,6 +9,7 @@ pub mod budget;
 mod error;
 mod library;
 mod metrics;
+pub mod proxy;
 mod sequences;
 pub mod serve;
 mod skeletons;
@@ -67,6 +68,8 @@ pub struct Config {
     /// A second address serving `GET /metrics` alone, without a token (for a scraper on an
     /// internal network); on the main address `/metrics` needs an admin token.
     pub metrics_listen: Option<String>,
+    /// Reverse proxies whose `X-Forwarded-For` names the client ([`proxy`]).
+    pub trusted_proxies: proxy::TrustedProxies,
 }
 
 /// Connections the `--metrics-listen` address takes at once.
@@ -88,6 +91,7 @@ impl Default for Config {
             exhaustive_choice: false,
             policy: Policy::default(),
             metrics_listen: None,
+            trusted_proxies: proxy::TrustedProxies::default(),
         }
     }
 }
@@ -312,6 +316,7 @@ pub struct Application {
     store: Store,
     state: AppState,
     forget_idle_keys: Option<Forget>,
+    proxies: Arc<proxy::TrustedProxies>,
 }
 
 impl Application {
@@ -391,6 +396,7 @@ impl Application {
             store,
             state,
             forget_idle_keys,
+            proxies: Arc::new(config.trusted_proxies.clone()),
         })
     }
 
@@ -485,7 +491,8 @@ impl Application {
                 ..self.state.limits
             };
             let m = self.state.metrics.clone();
-            tokio::spawn(serve::serve(l, router, limits, m, async move {
+            let none = Arc::new(proxy::TrustedProxies::default());
+            tokio::spawn(serve::serve(l, router, limits, m, none, async move {
                 let _ = stopped.wait_for(|s| *s).await;
             }))
         });
@@ -494,6 +501,7 @@ impl Application {
             self.router,
             self.state.limits,
             self.state.metrics.clone(),
+            self.proxies,
             shutdown,
         )
         .await;

@@ -38,6 +38,8 @@ use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 
 use axum::body::{Body, HttpBody};
+
+use super::proxy::TrustedProxies;
 use axum::extract::ConnectInfo;
 use axum::http::{Request, Response};
 use axum::Router;
@@ -84,6 +86,7 @@ pub async fn serve(
     router: Router,
     limits: Limits,
     metrics: Arc<Metrics>,
+    proxies: Arc<TrustedProxies>,
     shutdown: impl Future<Output = ()> + Send,
 ) -> io::Result<()> {
     let gate = Gate {
@@ -113,7 +116,7 @@ pub async fn serve(
             }
         };
         let _ = stream.set_nodelay(true);
-        let slot = match gate.admit(peer.ip()) {
+        let slot = match gate.admit(peer.ip(), proxies.contains(peer.ip())) {
             Ok(s) => s,
             Err(why) => {
                 metrics.connection_refused();
@@ -123,9 +126,9 @@ pub async fn serve(
         };
         metrics.connection_opened();
         let watcher = graceful.watcher();
-        let (router, metrics) = (router.clone(), metrics.clone());
+        let (router, metrics, proxies) = (router.clone(), metrics.clone(), proxies.clone());
         tokio::spawn(async move {
-            let closed = connection(stream, peer, router, limits, watcher).await;
+            let closed = connection(stream, peer, router, limits, proxies, watcher).await;
             if let Some(why) = closed {
                 metrics.connection_closed(why.name());
             }
@@ -146,16 +149,22 @@ struct Gate {
 
 /// A connection's place under the cap, given back when it closes.
 struct Slot {
-    _share: Share,
+    _share: Option<Share>,
     _permit: OwnedSemaphorePermit,
 }
 
 impl Gate {
-    fn admit(&self, address: IpAddr) -> Result<Slot, &'static str> {
-        let share = self
-            .per_address
-            .take(&Holder::address(address))
-            .ok_or("this address has as many connections open as the server allows one")?;
+    /// A place for a connection from `address`; a trusted proxy (which carries every
+    /// client's connections) is held to the total cap only.
+    fn admit(&self, address: IpAddr, proxy: bool) -> Result<Slot, &'static str> {
+        let share = match proxy {
+            true => None,
+            false => Some(
+                self.per_address
+                    .take(&Holder::address(address))
+                    .ok_or("this address has as many connections open as the server allows one")?,
+            ),
+        };
         let permit = self
             .slots
             .clone()
@@ -201,6 +210,7 @@ async fn connection(
     peer: SocketAddr,
     router: Router,
     limits: Limits,
+    proxies: Arc<TrustedProxies>,
     watcher: hyper_util::server::graceful::Watcher,
 ) -> Option<Closed> {
     let activity = Arc::new(Activity::new());
@@ -211,6 +221,7 @@ async fn connection(
     let service = TowerToHyperService::new(Counted {
         inner: router,
         peer,
+        proxies,
         activity: activity.clone(),
     });
     let conn = http1::Builder::new()
@@ -412,12 +423,14 @@ impl Watched {
     }
 }
 
-/// The router, for one connection: each request carries the peer's address and counts as
-/// in progress until its answer's body ends.
+/// The router, for one connection: each request carries the client's address (the peer's,
+/// or behind a trusted proxy the one it forwards) and counts as in progress until its
+/// answer's body ends.
 #[derive(Clone)]
 struct Counted {
     inner: Router,
     peer: SocketAddr,
+    proxies: Arc<TrustedProxies>,
     activity: Arc<Activity>,
 }
 
@@ -433,7 +446,9 @@ impl Service<Request<Incoming>> for Counted {
     fn call(&mut self, req: Request<Incoming>) -> Self::Future {
         let progress = self.activity.begin();
         let mut req = req.map(Body::new);
-        req.extensions_mut().insert(ConnectInfo(self.peer));
+        let client = self.proxies.client(self.peer.ip(), req.headers());
+        req.extensions_mut()
+            .insert(ConnectInfo(SocketAddr::new(client, self.peer.port())));
         let call = self.inner.call(req);
         Box::pin(async move {
             let response = call.await?;
@@ -542,21 +557,21 @@ mod tests {
         };
         let a = IpAddr::from([10, 0, 0, 1]);
         let b = IpAddr::from([10, 0, 0, 2]);
-        let s1 = gate.admit(a).unwrap();
-        let _s2 = gate.admit(a).unwrap();
-        assert!(gate.admit(a).is_err(), "per address");
-        let _s3 = gate.admit(b).unwrap();
-        assert!(gate.admit(b).is_err(), "in all");
+        let s1 = gate.admit(a, false).unwrap();
+        let _s2 = gate.admit(a, false).unwrap();
+        assert!(gate.admit(a, false).is_err(), "per address");
+        let _s3 = gate.admit(b, false).unwrap();
+        assert!(gate.admit(b, false).is_err(), "in all");
         drop(s1);
-        assert!(gate.admit(b).is_ok());
+        assert!(gate.admit(b, false).is_ok());
         // An IPv6 client is one whatever address of its /64 it comes from.
         let v6 = |last: u16| IpAddr::from([0x2001, 0xdb8, 0, 1, 0, 0, 0, last]);
         let gate = Gate {
             slots: Arc::new(Semaphore::new(10)),
             per_address: Shares::new(2),
         };
-        let _x = gate.admit(v6(1)).unwrap();
-        let _y = gate.admit(v6(2)).unwrap();
-        assert!(gate.admit(v6(3)).is_err());
+        let _x = gate.admit(v6(1), false).unwrap();
+        let _y = gate.admit(v6(2), false).unwrap();
+        assert!(gate.admit(v6(3), false).is_err());
     }
 }

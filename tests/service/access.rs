@@ -884,3 +884,69 @@ async fn token_commands_work_and_no_secret_reaches_the_server_log() {
     let _ = std::fs::remove_file(log.with_extension("err"));
     t.finish().await;
 }
+
+/// Behind a trusted proxy the client's address (from `X-Forwarded-For`) is what anonymous
+/// rate limits count, so two clients behind one proxy have their own; without
+/// `--trusted-proxy` the header is anyone's to write, and ignored.
+#[tokio::test]
+async fn a_trusted_proxy_names_the_client_and_no_one_else_can() {
+    let limits = Limits {
+        requests_per_s: 1,
+        request_burst: 2,
+        ..Limits::default()
+    };
+    let open = mocapstore::http::auth::Policy {
+        open_beyond_loopback: true,
+        ..Default::default()
+    };
+    let statuses = |srv: &common::Server, from: &'static str| {
+        let (client, url) = (srv.client.clone(), format!("{}/v1/stats", srv.base));
+        async move {
+            let mut got = Vec::new();
+            for _ in 0..4 {
+                let r = client
+                    .get(&url)
+                    .header("x-forwarded-for", from)
+                    .send()
+                    .await
+                    .unwrap();
+                got.push(r.status().as_u16());
+            }
+            got
+        }
+    };
+    for trusted in [true, false] {
+        let t = common::sqlite().await;
+        let proxies = if trusted {
+            vec!["127.0.0.1/32"]
+        } else {
+            vec![]
+        };
+        let srv = common::start_with(
+            t.store.clone(),
+            Config {
+                limits,
+                policy: open.clone(),
+                trusted_proxies: mocapstore::http::proxy::TrustedProxies::parse(&proxies).unwrap(),
+                ..Config::default()
+            },
+        )
+        .await;
+        let first = statuses(&srv, "203.0.113.1").await;
+        assert!(first.contains(&429), "{trusted}: {first:?}");
+        // Another client behind the proxy; then the first again, forging an entry before
+        // the one the proxy appended.
+        let second = statuses(&srv, "203.0.113.2").await;
+        let forged = statuses(&srv, "203.0.113.9, 203.0.113.1").await;
+        if trusted {
+            assert_eq!(second[0], 200, "its own limit: {second:?}");
+            assert_eq!(
+                forged[0], 429,
+                "a forged entry is not the client: {forged:?}"
+            );
+        } else {
+            assert_eq!(second[0], 429, "one peer, one limit: {second:?}");
+        }
+        srv.stop().await;
+    }
+}
