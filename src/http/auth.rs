@@ -14,7 +14,7 @@
 //! # Routes and scopes
 //! | route | scope |
 //! |---|---|
-//! | `GET /healthz`, `GET /` and `GET /ui/…` (the viewer's files) | none |
+//! | `GET /healthz`, `GET /readyz`, `GET /` and `GET /ui/…` (the viewer's files) | none |
 //! | every other `GET` | read |
 //! | `POST /v1/sequences`, `PATCH /v1/sequences/{id}`, `POST /v1/streams…` | write |
 //! | `DELETE /v1/sequences/{id}`, `POST`/`DELETE /v1/bases…`, `DELETE /v1/skeletons/{id}`, `/v1/tokens…`, `GET /v1/audit`, `GET /metrics` | admin |
@@ -98,7 +98,7 @@ struct Route(String);
 /// Routes anyone may call: liveness, and the viewer's files (which hold no data; the
 /// viewer asks for a token when the API answers 401).
 fn is_public(path: &str) -> bool {
-    path == "/healthz" || path == "/" || path.starts_with("/ui/")
+    path == "/healthz" || path == "/readyz" || path == "/" || path.starts_with("/ui/")
 }
 
 /// The scope a route needs; `None` for the routes anyone may call.

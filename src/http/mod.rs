@@ -118,6 +118,14 @@ pub struct AppState {
     pub audit: Arc<AuditLog>,
 }
 
+/// `GET /readyz`: 200 while the database answers, else 503 with `Retry-After`.
+async fn readyz(
+    axum::extract::State(state): axum::extract::State<AppState>,
+) -> Result<&'static str, error::ApiError> {
+    crate::service::health::ready(&state.store).await?;
+    Ok("ready")
+}
+
 /// Forgets the rate limiter's idle keys; run with the other maintenance.
 type Forget = Arc<dyn Fn() + Send + Sync>;
 
@@ -142,6 +150,7 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
     let json_tokens = json.clone();
     let inner = Router::new()
         .route("/healthz", get(|| async { "ok" }))
+        .route("/readyz", get(readyz))
         .route("/", get(ui::index))
         .route("/ui/{*path}", get(ui::file))
         .route("/metrics", get(metrics::render))

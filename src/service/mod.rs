@@ -29,6 +29,7 @@ pub mod budget;
 pub mod choose;
 pub mod export;
 pub mod fetch;
+pub mod health;
 pub mod history;
 pub mod ingest;
 pub mod jobs;

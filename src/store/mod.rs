@@ -481,6 +481,14 @@ impl Store {
     }
 
     /// Whether a take exists (one indexed lookup).
+    /// One round trip to the database (`/readyz`): `Err` when it cannot be reached.
+    pub async fn ping(&self) -> Result<()> {
+        dispatch!(self, pool => {
+            sqlx::query("SELECT 1").execute(pool).await?;
+            Ok(())
+        })
+    }
+
     pub async fn exists(&self, id: &str) -> Result<bool> {
         dispatch!(self, pool => {
             Ok(sqlx::query("SELECT 1 AS one FROM sequences WHERE id = $1")

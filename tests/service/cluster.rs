@@ -190,3 +190,29 @@ async fn jobs_are_seen_shared_and_taken_over_by_every_server() {
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
 }
+
+/// `/readyz` says whether the database answers (what a balancer polls); `/healthz` only that
+/// the process does.
+#[tokio::test(flavor = "multi_thread")]
+async fn ready_while_the_database_answers() {
+    for t in common::all().await {
+        let srv = common::start(t.store.clone(), 8 << 20).await;
+        let (status, _, body) = srv.get("/readyz").await;
+        assert_eq!(
+            (status, body.as_slice()),
+            (200, &b"ready"[..]),
+            "{}",
+            t.name
+        );
+        // The database goes away (here: the server's pool is closed under it).
+        t.store.close().await;
+        let (status, h, body) = srv.get("/readyz").await;
+        assert_eq!(status, 503, "{}", t.name);
+        assert!(h.contains_key("retry-after"));
+        let v: Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(v["error"]["code"], "busy");
+        let (status, _, _) = srv.get("/healthz").await;
+        assert_eq!(status, 200, "alive, not ready");
+        srv.stop().await;
+    }
+}
