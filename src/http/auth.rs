@@ -78,12 +78,19 @@ struct Refused {
     status: StatusCode,
     code: &'static str,
     message: String,
+    /// `Retry-After`, for a refusal that is a 503 (the database away while checking the
+    /// token).
+    retry_after: Option<u64>,
 }
 
 /// The answer to a refused request, once it has passed the rate limiter.
 pub async fn refusal(req: Request) -> Response {
     match req.extensions().get::<Refused>() {
-        Some(r) => ApiError::new(r.status, r.code, r.message.clone()).into_response(),
+        Some(r) => ApiError {
+            retry_after: r.retry_after,
+            ..ApiError::new(r.status, r.code, r.message.clone())
+        }
+        .into_response(),
         None => ApiError::unauthorized("refused").into_response(),
     }
 }
@@ -195,6 +202,7 @@ pub async fn front(State(f): State<Front>, mut req: Request, next: Next) -> Resp
                         status: e.status,
                         code: e.code,
                         message: e.message,
+                        retry_after: e.retry_after,
                     });
                     match refuse.clone().oneshot(req).await {
                         Ok(r) => r,

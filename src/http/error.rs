@@ -78,6 +78,12 @@ impl From<service::Error> for ApiError {
             E::Forbidden(_) => (StatusCode::FORBIDDEN, "forbidden"),
             E::Codec(crate::codec::Error::Invalid(_)) => (StatusCode::BAD_REQUEST, "bad_request"),
             E::Store(crate::store::Error::Conflict(_)) => (StatusCode::CONFLICT, "conflict"),
+            E::Store(s) if s.is_unavailable() => {
+                tracing::warn!(error = %e, "the database is unavailable");
+                return ApiError::busy(
+                    "the database is unavailable (restarting or out of connections); retry shortly",
+                );
+            }
             E::Codec(_) | E::Store(_) | E::Corrupt(_) | E::Internal(_) => {
                 tracing::error!(error = %e, "request failed");
                 return ApiError::new(

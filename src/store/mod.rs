@@ -43,6 +43,35 @@ pub enum Error {
     Conflict(String),
 }
 
+impl Error {
+    /// Whether the database could not be reached or asked to wait (down, restarting, its
+    /// connections all taken, a SQLite file locked past the busy timeout), rather than
+    /// refusing this request: worth a retry later, not a fault of the request or the data.
+    pub fn is_unavailable(&self) -> bool {
+        let Error::Database(e) = self else {
+            return false;
+        };
+        match e {
+            sqlx::Error::Io(_)
+            | sqlx::Error::Tls(_)
+            | sqlx::Error::Protocol(_)
+            | sqlx::Error::PoolTimedOut
+            | sqlx::Error::PoolClosed
+            | sqlx::Error::WorkerCrashed => true,
+            sqlx::Error::Database(d) => match d.code().as_deref() {
+                // Postgres: connection exceptions (class 08), shutting down or starting up
+                // (57P01–57P03), too many connections (53300).
+                Some(c) if c.starts_with("08") => true,
+                Some("57P01" | "57P02" | "57P03" | "53300") => true,
+                // SQLite: busy or locked past the busy timeout.
+                Some("5" | "6" | "261" | "517") => true,
+                _ => false,
+            },
+            _ => false,
+        }
+    }
+}
+
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// A connection pool to one of the two backends.
@@ -113,7 +142,9 @@ impl Store {
         } else if url.starts_with("postgres:") || url.starts_with("postgresql:") {
             let pool = PgPoolOptions::new()
                 .max_connections(16)
-                .acquire_timeout(Duration::from_secs(10))
+                // A request waits this long for a connection before it is told to come back
+                // (503): long enough for a burst, short enough that an outage fails fast.
+                .acquire_timeout(Duration::from_secs(5))
                 .connect(url)
                 .await?;
             sqlx::migrate!("migrations/postgres").run(&pool).await?;

@@ -216,3 +216,212 @@ async fn ready_while_the_database_answers() {
         srv.stop().await;
     }
 }
+
+/// A TCP proxy the test owns between a server and Postgres: cutting it is the database
+/// going away (every connection closed, new ones refused) without touching the shared
+/// Postgres server.
+struct Cuttable {
+    addr: std::net::SocketAddr,
+    cut: tokio::sync::watch::Sender<bool>,
+}
+
+impl Cuttable {
+    async fn to(target: std::net::SocketAddr) -> Cuttable {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let (cut, watch) = tokio::sync::watch::channel(false);
+        tokio::spawn(async move {
+            loop {
+                let Ok((mut client, _)) = listener.accept().await else {
+                    return;
+                };
+                if *watch.borrow() {
+                    continue; // refused: dropped at once
+                }
+                let mut watch = watch.clone();
+                tokio::spawn(async move {
+                    let Ok(mut server) = tokio::net::TcpStream::connect(target).await else {
+                        return;
+                    };
+                    tokio::select! {
+                        _ = tokio::io::copy_bidirectional(&mut client, &mut server) => {}
+                        _ = watch.wait_for(|c| *c) => {}
+                    }
+                });
+            }
+        });
+        Cuttable { addr, cut }
+    }
+
+    fn set(&self, cut: bool) {
+        self.cut.send_replace(cut);
+    }
+}
+
+/// Postgres cut off under ingests and reads for several seconds: every request ends (none
+/// hangs) as a success or a 503 with `Retry-After`, never a 500; the server serves again
+/// by itself within seconds of the database's return; nothing half-written is stored.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_database_outage_is_503s_and_the_server_recovers_by_itself() {
+    let Some(pg) = common::postgres().await else {
+        return;
+    };
+    let url = pg.url().to_string();
+    let (head, rest) = url.split_once("://").unwrap();
+    let (auth, hostpath) = rest.rsplit_once('@').map_or(("", rest), |(a, h)| (a, h));
+    let (host, path) = hostpath.split_once('/').unwrap();
+    let target: std::net::SocketAddr = tokio::net::lookup_host(host)
+        .await
+        .unwrap()
+        .find(|a| a.is_ipv4())
+        .unwrap();
+    let proxy = Cuttable::to(target).await;
+    let at = if auth.is_empty() {
+        String::new()
+    } else {
+        format!("{auth}@")
+    };
+    let proxied = format!("{head}://{at}{}/{path}", proxy.addr);
+    let store = mocapstore::store::Store::open(&proxied).await.unwrap();
+    let srv = common::start(store, 8 << 20).await;
+    let client = reqwest::Client::builder()
+        .timeout(Duration::from_secs(20))
+        .build()
+        .unwrap();
+    let (status, _, _) = srv.get("/readyz").await;
+    assert_eq!(status, 200);
+    let first = walker(120, 6, 60.0, 1, 0.0);
+    let r = client
+        .post(format!("{}/v1/sequences?codec=quant&name=first", srv.base))
+        .body(formats::write(&first, Format::Json).unwrap())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let known: Value = r.json().await.unwrap();
+    let known = known["id"].as_str().unwrap().to_string();
+
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let mut workers = Vec::new();
+    for w in 0..4u64 {
+        let (client, base, stop, known) = (
+            client.clone(),
+            srv.base.clone(),
+            stop.clone(),
+            known.clone(),
+        );
+        workers.push(tokio::spawn(async move {
+            // Status, Retry-After, an ingest; and the slowest answer.
+            let mut seen: Vec<(u16, bool, bool)> = Vec::new();
+            let mut slowest = Duration::ZERO;
+            let mut n = 0u64;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                n += 1;
+                let ingest = w % 2 == 0;
+                let req = if ingest {
+                    let m = walker(60, 6, 60.0, 100 * w + n, 0.0);
+                    client
+                        .post(format!("{base}/v1/sequences?codec=quant&library=outage"))
+                        .body(formats::write(&m, Format::Json).unwrap())
+                } else if n % 2 == 0 {
+                    client.get(format!("{base}/v1/sequences/{known}/frames?format=f32"))
+                } else {
+                    client.get(format!("{base}/v1/sequences?library=outage"))
+                };
+                let asked = std::time::Instant::now();
+                let r = req
+                    .send()
+                    .await
+                    .expect("every request is answered (none hangs)");
+                slowest = slowest.max(asked.elapsed());
+                let status = r.status().as_u16();
+                let retry = r.headers().contains_key("retry-after");
+                let body = r.bytes().await.unwrap_or_default();
+                if status == 503 && !retry {
+                    eprintln!(
+                        "503 without Retry-After: {}",
+                        String::from_utf8_lossy(&body)
+                    );
+                }
+                seen.push((status, retry, ingest));
+                if status == 503 {
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                }
+            }
+            (seen, slowest)
+        }));
+    }
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    proxy.set(true);
+    tokio::time::sleep(Duration::from_secs(8)).await;
+    let (status, _, _) = srv.get("/readyz").await;
+    assert_eq!(status, 503, "not ready while the database is away");
+    proxy.set(false);
+    let back = std::time::Instant::now();
+    loop {
+        let (status, _, _) = srv.get("/readyz").await;
+        if status == 200 {
+            break;
+        }
+        assert!(
+            back.elapsed() < Duration::from_secs(15),
+            "ready again within seconds"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    eprintln!(
+        "ready again {} ms after the database",
+        back.elapsed().as_millis()
+    );
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let mut all = Vec::new();
+    let mut slowest = Duration::ZERO;
+    for w in workers {
+        let (seen, slow) = w.await.unwrap();
+        all.extend(seen);
+        slowest = slowest.max(slow);
+    }
+    // A request waits for a connection 5 s at most (the pool's acquire timeout), then 503.
+    assert!(
+        slowest < Duration::from_secs(10),
+        "fails fast: the slowest took {slowest:?}"
+    );
+    let count = |f: &dyn Fn(&(u16, bool, bool)) -> bool| all.iter().filter(|s| f(s)).count();
+    let created = count(&|s| s.0 == 201);
+    let refused_ingests = count(&|s| s.0 == 503 && s.2);
+    eprintln!(
+        "outage: {} requests, {} succeeded, {} refused with 503, the slowest {slowest:?}",
+        all.len(),
+        count(&|s| s.0 < 300),
+        count(&|s| s.0 == 503)
+    );
+    let odd: Vec<_> = all
+        .iter()
+        .filter(|s| !matches!(s.0, 200 | 201 | 503))
+        .collect();
+    assert!(odd.is_empty(), "only successes and 503s: {odd:?}");
+    assert!(
+        all.iter().all(|s| s.0 != 503 || s.1),
+        "every 503 says when to retry"
+    );
+    assert!(count(&|s| s.0 == 503) > 0, "the outage was seen");
+    // The last requests, after the database came back, succeeded.
+    assert!(
+        all.iter().rev().take(4).all(|s| s.0 < 300),
+        "served again: {:?}",
+        &all[all.len() - 4..]
+    );
+    // Nothing half-written: every stored take reads back whole; an ingest answered 503
+    // may have committed as the connection dropped (its answer lost), no more.
+    let (status, stats) = srv.get_json("/v1/stats?library=outage").await;
+    assert_eq!(status, 200);
+    let stored = stats["total"]["takes"].as_u64().unwrap() as usize;
+    assert!(
+        created <= stored && stored <= created + refused_ingests,
+        "{created} created, {stored} stored"
+    );
+    srv.stop().await;
+    let (ok, out, err) = common::mocapstore(&["verify", "--database-url", pg.url()]);
+    assert!(ok, "verify: {out}\n{err}");
+}
