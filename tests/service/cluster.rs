@@ -317,13 +317,13 @@ async fn a_database_outage_is_503s_and_the_server_recovers_by_itself() {
             let mut n = 0u64;
             while !stop.load(std::sync::atomic::Ordering::Relaxed) {
                 n += 1;
-                let ingest = w % 2 == 0;
+                let ingest = w.is_multiple_of(2);
                 let req = if ingest {
                     let m = walker(60, 6, 60.0, 100 * w + n, 0.0);
                     client
                         .post(format!("{base}/v1/sequences?codec=quant&library=outage"))
                         .body(formats::write(&m, Format::Json).unwrap())
-                } else if n % 2 == 0 {
+                } else if n.is_multiple_of(2) {
                     client.get(format!("{base}/v1/sequences/{known}/frames?format=f32"))
                 } else {
                     client.get(format!("{base}/v1/sequences?library=outage"))
