@@ -5,6 +5,12 @@
 //! generated take (default 10 minutes, 38 points, 120 fps), stores the same frames as raw f32
 //! in one-second BLOBs, then runs a fixed number of requests from concurrent clients to
 //! each route and prints p50/p99 latency and requests per second.
+//!
+//! With `--server URL` (repeatable) it measures running servers instead — several behind
+//! no balancer, sharing one database: the take is ingested through the first, and the
+//! clients are spread over them round-robin (client `c` asks server `c mod N`), so a take
+//! stored through one is read through all. No baseline then (the raw BLOBs need the
+//! database), and the take is deleted at the end when the token may.
 
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -39,6 +45,13 @@ pub struct LoadArgs {
     /// The service's decoded-chunk cache, MiB (0: every request decodes).
     #[arg(long, default_value_t = 256)]
     decoded_cache_mib: usize,
+    /// Running servers to measure (repeatable, or comma-separated) instead of one started
+    /// here; the clients are spread over them round-robin.
+    #[arg(long = "server", value_delimiter = ',')]
+    servers: Vec<String>,
+    /// API token for `--server`s that need one (write scope to ingest; admin to delete).
+    #[arg(long, env = "MOCAP_TOKEN")]
+    token: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -63,7 +76,14 @@ pub fn run(args: &LoadArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    match rt.block_on(load(args)) {
+    let run = async {
+        if args.servers.is_empty() {
+            load(args).await
+        } else {
+            load_servers(args).await
+        }
+    };
+    match rt.block_on(run) {
         Ok(report) => {
             println!("{report}");
             ExitCode::SUCCESS
@@ -158,13 +178,13 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
 
     let seconds = args.seconds.max(2);
     let fps = args.fps;
-    let codec_url = move |s: usize| {
+    let codec_url = move |_client: usize, s: usize| {
         format!(
             "{base}/v1/sequences/{id}/frames?t0={s}&t1={}&format=f32",
             s + 1
         )
     };
-    let raw_url = move |s: usize| format!("{raw_base}/raw?second={s}");
+    let raw_url = move |_client: usize, s: usize| format!("{raw_base}/raw?second={s}");
     let mut out = format!(
         "take: {frames} frames × {} points at {fps} fps ({} s); stored as {} at ratio {:.1}, max error {:.3} mm\n\
          ingest over HTTP: {:.2} s = {:.0} frames/s (parse + every candidate codec + store)\n\n\
@@ -180,13 +200,13 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
         args.requests,
         args.decoded_cache_mib
     );
-    let codec_url: Arc<dyn Fn(usize) -> String + Send + Sync> = Arc::new(codec_url);
+    let codec_url: Arc<UrlOf> = Arc::new(codec_url);
     let route = "GET /v1/sequences/{id}/frames?t0&t1&format=f32";
     for (name, url) in [
         (route.to_string(), codec_url.clone()),
         (
             "raw f32 BLOB from SQLite (baseline)".to_string(),
-            Arc::new(raw_url) as Arc<dyn Fn(usize) -> String + Send + Sync>,
+            Arc::new(raw_url) as Arc<UrlOf>,
         ),
     ] {
         let (p50, p99, rps) =
@@ -222,10 +242,13 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
     Ok(out)
 }
 
+/// The URL client `c` asks for range `s`.
+type UrlOf = dyn Fn(usize, usize) -> String + Send + Sync;
+
 /// `requests` GETs of random ranges from `clients` concurrent tasks; (p50 ms, p99 ms, req/s).
 async fn hammer(
     client: &reqwest::Client,
-    url: Arc<dyn Fn(usize) -> String + Send + Sync>,
+    url: Arc<UrlOf>,
     ranges: usize,
     clients: usize,
     requests: usize,
@@ -239,7 +262,7 @@ async fn hammer(
             let mut rng = Rng::new(c as u64 + 1);
             let mut lat = Vec::with_capacity(per_client);
             for _ in 0..per_client {
-                let u = url(rng.below(ranges));
+                let u = url(c, rng.below(ranges));
                 let t = Instant::now();
                 let r = client.get(&u).send().await.map_err(|e| e.to_string())?;
                 if !r.status().is_success() {
@@ -259,4 +282,82 @@ async fn hammer(
     all.sort();
     let pct = |p: f64| all[((all.len() - 1) as f64 * p) as usize].as_secs_f64() * 1e3;
     Ok((pct(0.5), pct(0.99), all.len() as f64 / elapsed))
+}
+
+/// The run against `--server`s: the take ingested through the first, the clients spread over
+/// all of them round-robin.
+async fn load_servers(args: &LoadArgs) -> Result<String, String> {
+    let servers: Vec<String> = args
+        .servers
+        .iter()
+        .map(|s| s.trim_end_matches('/').to_string())
+        .collect();
+    let client = super::token::client(args.token.as_deref())?;
+    let frames = (args.seconds as f64 * args.fps) as usize;
+    let motion = walker(frames, args.points, args.fps, 11, 0.0);
+    let body = formats::write(&motion, Format::Npy).map_err(|e| e.to_string())?;
+    let t0 = Instant::now();
+    let r = client
+        .post(format!(
+            "{}/v1/sequences?name=loadtest&library=loadtest&unit=mm&fps={}&max_error_mm=1",
+            servers[0], args.fps
+        ))
+        .body(body)
+        .send()
+        .await
+        .map_err(|e| format!("{}: {e}", servers[0]))?;
+    let ingest_s = t0.elapsed().as_secs_f64();
+    if !r.status().is_success() {
+        let status = r.status();
+        let text = r.text().await.unwrap_or_default();
+        return Err(format!(
+            "{}: ingest: {status}: {}",
+            servers[0],
+            super::token::error_message(text.as_bytes())
+        ));
+    }
+    let report: serde_json::Value = r.json().await.map_err(|e| e.to_string())?;
+    let id = report["id"]
+        .as_str()
+        .ok_or(format!("ingest answered no id: {report}"))?
+        .to_string();
+    let seconds = args.seconds.max(2);
+    let (urls, take) = (servers.clone(), id.clone());
+    let url: Arc<UrlOf> = Arc::new(move |c: usize, s: usize| {
+        format!(
+            "{}/v1/sequences/{take}/frames?t0={s}&t1={}&format=f32",
+            urls[c % urls.len()],
+            s + 1
+        )
+    });
+    let result = hammer(&client, url, seconds - 1, args.clients, args.requests).await;
+    // Leave no take behind (an admin token may delete it; others leave it, and say so).
+    let deleted = client
+        .delete(format!("{}/v1/sequences/{id}", servers[servers.len() - 1]))
+        .send()
+        .await
+        .is_ok_and(|r| r.status().is_success());
+    let (p50, p99, rps) = result?;
+    let mut out = format!(
+        "take: {frames} frames × {} points at {} fps ({} s) through {}: stored as {} at ratio \
+         {:.1}; ingest {:.2} s\n\n| 1-s ranges over {} servers, round-robin ({} clients, {} \
+         requests) | p50 ms | p99 ms | req/s |\n|---|---:|---:|---:|\n| {} | {p50:.3} | {p99:.3} | \
+         {rps:.0} |\n",
+        args.points,
+        args.fps,
+        args.seconds,
+        servers[0],
+        report["codec"].as_str().unwrap_or("?"),
+        report["ratio"].as_f64().unwrap_or(0.0),
+        ingest_s,
+        servers.len(),
+        args.clients,
+        args.requests,
+        servers.join(", ")
+    );
+    if !deleted {
+        out +=
+            &format!("\n(take {id} was left in library loadtest: the token may not delete it)\n");
+    }
+    Ok(out)
 }

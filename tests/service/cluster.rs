@@ -425,3 +425,40 @@ async fn a_database_outage_is_503s_and_the_server_recovers_by_itself() {
     let (ok, out, err) = common::mocapstore(&["verify", "--database-url", pg.url()]);
     assert!(ok, "verify: {out}\n{err}");
 }
+
+/// `loadtest --server A --server B` reads one take through every server, round-robin.
+#[tokio::test(flavor = "multi_thread")]
+async fn loadtest_spreads_its_clients_over_the_servers() {
+    let t = common::sqlite().await;
+    let a = common::start(t.store.clone(), 64 << 20).await;
+    let b = common::start(t.store.clone(), 64 << 20).await;
+    let servers = format!("{},{}", a.base, b.base);
+    let out = tokio::task::spawn_blocking(move || {
+        common::mocapstore(&[
+            "loadtest",
+            "--server",
+            &servers,
+            "--seconds",
+            "4",
+            "--points",
+            "8",
+            "--clients",
+            "4",
+            "--requests",
+            "40",
+        ])
+    })
+    .await
+    .unwrap();
+    assert!(out.0, "{}\n{}", out.1, out.2);
+    assert!(out.1.contains("over 2 servers"), "{}", out.1);
+    for srv in [&a, &b] {
+        let m = common::metrics(srv).await;
+        assert!(
+            m["mocapstore_decoded_frames_total"] >= 20 * 100,
+            "each served its half"
+        );
+    }
+    a.stop().await;
+    b.stop().await;
+}
