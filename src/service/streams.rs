@@ -24,7 +24,7 @@
 //! mean bound is then met too) with the residual layer, and checks every chunk on its decoded
 //! output before committing it. `finish` can re-encode the whole take with per-take choice.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -39,8 +39,8 @@ use super::{blocking, Error, Result};
 use crate::codec::stream::{StreamChunk, StreamEncoder, StreamSpec};
 use crate::codec::{self, Basis, CodecId, ErrorBound, Latency};
 use crate::limits::{
-    Limits, MAX_CAPTURE_MS, MAX_COORDINATE_M, MAX_FPS, STREAM_WATCHERS, STREAM_WATCH_QUEUE,
-    STREAM_WATCH_SAMPLES,
+    Limits, MAX_CAPTURE_MS, MAX_COORDINATE_M, MAX_FPS, STREAM_UNSAVED_BYTES, STREAM_WATCHERS,
+    STREAM_WATCH_QUEUE, STREAM_WATCH_SAMPLES,
 };
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
@@ -234,6 +234,9 @@ struct Live {
     basis_id: Option<String>,
     chunk_frames: usize,
     received: usize,
+    /// Chunks coded but not yet stored because the database is away, oldest first: stored
+    /// at the next append, flush or finish once it is back ([`Streams::save`]).
+    unsaved: VecDeque<StreamChunk>,
     failed: Option<String>,
     last_activity: Instant,
     /// Every frame as sent, for re-encoding on finish (if asked for).
@@ -309,6 +312,11 @@ impl Live {
 }
 
 type Entry = Arc<tokio::sync::Mutex<Live>>;
+
+/// Whether `e` is the database being away (worth holding on and trying again), not a fault.
+fn unavailable(e: &Error) -> bool {
+    matches!(e, Error::Store(s) if s.is_unavailable())
+}
 
 /// The open streams of this server.
 pub struct Streams {
@@ -509,6 +517,7 @@ impl Streams {
             basis_id: basis.map(|b| b.id()),
             chunk_frames,
             received: 0,
+            unsaved: VecDeque::new(),
             failed: None,
             last_activity: Instant::now(),
             archive: plan.reencode_on_finish.then(Vec::new),
@@ -635,6 +644,12 @@ impl Streams {
                 frames[i]
             )));
         }
+        // While the database is away, coded chunks wait in memory; past a bound the stream
+        // takes no more frames until they are stored.
+        let held: usize = live.unsaved.iter().map(|c| c.payload.len()).sum();
+        if held > STREAM_UNSAVED_BYTES {
+            self.save(store, &mut live).await?;
+        }
         let mut frames = frames;
         if let Some(first) = first {
             // A producer that numbers its appends sends each frame once, however often it
@@ -667,11 +682,35 @@ impl Streams {
         }
         let r = self.code_and_commit(store, &mut live, frames, flush).await;
         caches.forget(id);
-        if let Err(e) = &r {
-            live.failed = Some(e.to_string());
+        match r {
+            Ok(()) => {}
+            // The frames are taken: coded and held until the database is back (the answer
+            // says how many are committed).
+            Err(e) if unavailable(&e) => {
+                tracing::warn!(stream = id, error = %e, held = live.unsaved.len(), "holding a stream's chunks until the database is back");
+            }
+            Err(e) => {
+                live.failed = Some(e.to_string());
+                return Err(e);
+            }
         }
-        r?;
         Ok(live.info())
+    }
+
+    /// Store the chunks waiting for the database, in order; the first that cannot be stored
+    /// (the database still away) stays first, and its error is returned.
+    async fn save(&self, store: &Store, live: &mut Live) -> Result<()> {
+        while let Some(chunk) = live.unsaved.pop_front() {
+            if let Err(e) = self.commit(store, live, &chunk).await {
+                live.unsaved.push_front(chunk);
+                return Err(e);
+            }
+            live.encoder
+                .as_mut()
+                .ok_or_else(|| Error::Internal("stream encoder missing".into()))?
+                .confirm(chunk)?;
+        }
+        Ok(())
     }
 
     /// Code `frames` on the blocking pool and commit every chunk they finish, in order.
@@ -692,16 +731,14 @@ impl Streams {
         })
         .await?;
         live.encoder = Some(encoder);
-        for chunk in chunks? {
-            self.commit(store, live, chunk).await?;
-        }
-        Ok(())
+        live.unsaved.extend(chunks?);
+        self.save(store, live).await
     }
 
     /// Commit one coded and checked chunk: one chunk row and the take's running totals,
     /// nothing that grows with the stream.
-    async fn commit(&self, store: &Store, live: &mut Live, chunk: StreamChunk) -> Result<()> {
-        let totals = live.encoder()?.totals_with(&chunk);
+    async fn commit(&self, store: &Store, live: &mut Live, chunk: &StreamChunk) -> Result<()> {
+        let totals = live.encoder()?.totals_with(chunk);
         let mut take = live.take.clone();
         take.set_frames(totals.frames);
         take.set_measured(totals.stored_bytes, &totals.stats);
@@ -723,10 +760,6 @@ impl Streams {
             )));
         }
         live.take = take;
-        live.encoder
-            .as_mut()
-            .ok_or_else(|| Error::Internal("stream encoder missing".into()))?
-            .confirm(chunk)?;
         Ok(())
     }
 
@@ -739,17 +772,22 @@ impl Streams {
             None => return Err(Self::not_open(store, id).await),
         };
         let mut live = entry.lock_owned().await;
-        self.open.lock().expect("streams lock").remove(id);
         if live.failed.is_none() {
-            if let Err(e) = self
+            match self
                 .code_and_commit(store, &mut live, Vec::new(), true)
                 .await
             {
-                tracing::warn!(stream = id, error = %e, "pending frames of a finished stream were lost");
-                live.warnings
-                    .push(format!("frames pending at finish were lost: {e}"));
+                Ok(()) => {}
+                // Not finished: the stream stays open, its chunks held, for a finish later.
+                Err(e) if unavailable(&e) => return Err(e),
+                Err(e) => {
+                    tracing::warn!(stream = id, error = %e, "pending frames of a finished stream were lost");
+                    live.warnings
+                        .push(format!("frames pending at finish were lost: {e}"));
+                }
             }
         }
+        self.open.lock().expect("streams lock").remove(id);
         let encoder = live.encoder()?;
         let (closed, digest) = (encoder.closed_header(), encoder.decoded_digest());
         // The take as this stream closes it (what the store holds unless another server
@@ -804,6 +842,14 @@ impl Streams {
                 }
             } else if let Err(err) = store.renew_lease(&id, self.lease_end()).await {
                 tracing::warn!(stream = %id, error = %err, "renewing a stream's lease failed");
+            } else if let Ok(mut live) = e.try_lock() {
+                // The database is back: store what a quiet stream held meanwhile.
+                if !live.unsaved.is_empty() {
+                    if let Err(err) = self.save(store, &mut live).await {
+                        tracing::warn!(stream = %id, error = %err, "storing held chunks failed");
+                    }
+                    caches.forget(&id);
+                }
             }
         }
         if let Err(err) = self.close_orphans(store, caches).await {

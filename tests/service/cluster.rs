@@ -462,3 +462,104 @@ async fn loadtest_spreads_its_clients_over_the_servers() {
     a.stop().await;
     b.stop().await;
 }
+
+/// A live stream outlives a database outage shorter than its lease: appends refused
+/// meanwhile (503) are sent again, numbered, and the take holds every frame once.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_stream_keeps_its_frames_through_a_database_outage() {
+    let Some(pg) = common::postgres().await else {
+        return;
+    };
+    let url = pg.url().to_string();
+    let (head, rest) = url.split_once("://").unwrap();
+    let (auth, hostpath) = rest.rsplit_once('@').map_or(("", rest), |(a, h)| (a, h));
+    let (host, path) = hostpath.split_once('/').unwrap();
+    let target: std::net::SocketAddr = tokio::net::lookup_host(host)
+        .await
+        .unwrap()
+        .find(|a| a.is_ipv4())
+        .unwrap();
+    let proxy = Cuttable::to(target).await;
+    let at = if auth.is_empty() {
+        String::new()
+    } else {
+        format!("{auth}@")
+    };
+    let proxied = format!("{head}://{at}{}/{path}", proxy.addr);
+    let store = mocapstore::store::Store::open(&proxied).await.unwrap();
+    let srv = common::start(store, 8 << 20).await;
+    let (status, _, s) = srv
+        .post_json(
+            "/v1/streams",
+            &json!({"name": "through", "fps": 60, "points": 2}),
+        )
+        .await;
+    assert_eq!(status, 201, "{s}");
+    let id = s["id"].as_str().unwrap().to_string();
+    const FRAMES: usize = 900;
+    let batch = |from: usize, n: usize| json!({"frames": (from..from + n).map(|f| vec![f as f64, 0.0, 0.0, 1.0, 1.0, 1.0]).collect::<Vec<_>>()});
+    let mut received = 0usize;
+    let mut refused = 0usize;
+    // The most frames taken but not yet stored: chunks held while the database was away.
+    let mut held = 0usize;
+    let started = std::time::Instant::now();
+    let mut cut = false;
+    while received < FRAMES {
+        // The database goes away a second in, for 4 s (the lease is a minute).
+        let t = started.elapsed();
+        if !cut && t > Duration::from_secs(1) {
+            proxy.set(true);
+            cut = true;
+        }
+        if cut && t > Duration::from_secs(5) {
+            proxy.set(false);
+        }
+        let n = 6.min(FRAMES - received);
+        let (status, _, r) = srv
+            .post_json(
+                &format!("/v1/streams/{id}/frames?first={received}"),
+                &batch(received, n),
+            )
+            .await;
+        match status {
+            200 => {
+                received = r["frames_received"].as_u64().unwrap() as usize;
+                let committed = r["frames_committed"].as_u64().unwrap() as usize;
+                held = held.max(received - committed);
+            }
+            503 => refused += 1,
+            other => panic!("append: {other} {r}"),
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    proxy.set(false);
+    let take = loop {
+        let (status, _, r) = srv
+            .post_json(&format!("/v1/streams/{id}/finish"), &json!({}))
+            .await;
+        match status {
+            200 => break r,
+            503 => tokio::time::sleep(Duration::from_millis(200)).await,
+            other => panic!("finish: {other} {r}"),
+        }
+    };
+    eprintln!(
+        "stream through an outage: {refused} appends refused, at most {held} frames held, \
+         {} frames",
+        take["frames"]
+    );
+    assert!(
+        held > 60,
+        "chunks (60 frames) were held while the database was away: {held}"
+    );
+    let (status, _, body) = srv.get(&format!("/v1/sequences/{id}/frames")).await;
+    assert_eq!(status, 200);
+    let v: Value = serde_json::from_slice(&body).unwrap();
+    let frames = v["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), FRAMES, "every frame once");
+    for (f, frame) in frames.iter().enumerate() {
+        let x = frame[0][0].as_f64().unwrap();
+        assert!((x - f as f64).abs() <= 1.0, "frame {f} holds {x}");
+    }
+    srv.stop().await;
+}
