@@ -80,9 +80,10 @@ struct ServeArgs {
     /// takes say would lose.
     #[arg(long, env = "MOCAP_EXHAUSTIVE_CHOICE")]
     exhaustive_choice: bool,
-    /// Seconds a background job's lease lasts: a server that has not renewed it for this
-    /// long (it died) has its job run again by another server on the same database.
-    #[arg(long, env = "MOCAP_JOB_LEASE_S", default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..=3600))]
+    /// Seconds a background job's lease lasts (5 at least): a server that has not renewed
+    /// it for this long (it died) has its job run again by another server on the same
+    /// database.
+    #[arg(long, env = "MOCAP_JOB_LEASE_S", default_value_t = 30, value_parser = clap::value_parser!(u64).range(5..=3600))]
     job_lease_s: u64,
     /// Serve on a non-loopback address although no token exists: anyone who reaches it may
     /// read, change and delete the archive. Without it, `serve` refuses to start so.

@@ -90,6 +90,7 @@ pub fn streaming_codecs() -> Vec<CodecId> {
 
 /// One finished chunk, checked, ready to store: its index entry (the frame it starts at in
 /// the take), its payload as stored, and what it decodes to.
+#[derive(Clone)]
 pub struct StreamChunk {
     pub meta: ChunkMeta,
     pub payload: Vec<u8>,

@@ -55,11 +55,13 @@ impl TrustedProxies {
         }
         let mut client = peer;
         // Several headers are one list, in order.
+        // Split as bytes: a client's own entry with bytes that are not ASCII must not hide
+        // the entries a proxy appended to the same line.
         let hops = headers
             .get_all("x-forwarded-for")
             .iter()
-            .filter_map(|v| v.to_str().ok())
-            .flat_map(|v| v.split(','))
+            .flat_map(|v| v.as_bytes().split(|&b| b == b','))
+            .map(|hop| std::str::from_utf8(hop).unwrap_or(""))
             .collect::<Vec<_>>();
         for hop in hops.iter().rev() {
             match parse_hop(hop) {
@@ -137,6 +139,13 @@ mod tests {
         assert_eq!(t.client(proxy, &xff(&["10.2.2.2"])), ip("10.2.2.2"));
         // Garbage stops the walk where it is.
         assert_eq!(t.client(proxy, &xff(&["203.0.113.5, junk"])), proxy);
+        // A client's bytes that are not ASCII do not hide what the proxy appended.
+        let mut h = HeaderMap::new();
+        h.append(
+            "x-forwarded-for",
+            HeaderValue::from_bytes(b"\xff\xfe, 203.0.113.8").unwrap(),
+        );
+        assert_eq!(t.client(proxy, &h), ip("203.0.113.8"));
         // Trusting none (the default) reads no header.
         let none = TrustedProxies::default();
         assert_eq!(none.client(proxy, &xff(&["203.0.113.5"])), proxy);

@@ -29,6 +29,10 @@ pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
 /// is taken for dead, and its job is run again by another.
 pub const DEFAULT_LEASE: Duration = Duration::from_secs(30);
 
+/// The shortest lease a server may be given: several renewals, and a wait for a database
+/// connection (5 s), must fit in it, or a live runner would be taken for dead.
+pub const MIN_LEASE: Duration = Duration::from_secs(5);
+
 /// Finished jobs are kept this long for inspection, then forgotten (what they made stays).
 pub const KEEP_FINISHED: Duration = Duration::from_secs(7 * 24 * 3600);
 
@@ -147,11 +151,12 @@ pub struct Jobs {
 }
 
 impl Jobs {
+    /// Jobs run under leases of `lease` ([`MIN_LEASE`] at least).
     pub fn new(store: Store, lease: Duration) -> Jobs {
         Jobs {
             store,
             server: uuid::Uuid::now_v7().to_string(),
-            lease,
+            lease: lease.max(MIN_LEASE),
         }
     }
 
@@ -228,13 +233,28 @@ impl Jobs {
                 message: "started".into(),
                 done: false,
                 lost: false,
+                renewed: std::time::Instant::now(),
             })),
         };
-        let p = progress.clone();
+        // The task holds the runner's state weakly: a runner gone without finishing (its
+        // task panicked) stops renewing, so its lease runs out and the job is run again.
+        let (jobs, id, latest) = (
+            self.clone(),
+            id.to_string(),
+            Arc::downgrade(&progress.latest),
+        );
         tokio::spawn(async move {
             let mut tick = tokio::time::interval(FLUSH_EVERY);
             loop {
                 tick.tick().await;
+                let Some(latest) = latest.upgrade() else {
+                    return;
+                };
+                let p = Progress {
+                    jobs: jobs.clone(),
+                    id: id.clone(),
+                    latest,
+                };
                 if !p.flush().await {
                     return;
                 }
@@ -330,6 +350,9 @@ struct Latest {
     done: bool,
     /// Another server took the job over: this runner's writes are refused.
     lost: bool,
+    /// When the lease was last renewed: past it by a lease, another server may have taken
+    /// the job (the database away meanwhile), so the runner must not store its result.
+    renewed: std::time::Instant,
 }
 
 /// A runner's handle on its job. [`Progress::report`] is cheap and synchronous (training
@@ -342,6 +365,13 @@ pub struct Progress {
 }
 
 impl Progress {
+    /// Whether this runner may no longer own its job: another server took it over, or its
+    /// lease has not been renewed for a lease's time. Checked before a result is stored.
+    pub fn is_lost(&self) -> bool {
+        let l = self.latest.lock().expect("progress lock");
+        l.lost || l.renewed.elapsed() > self.jobs.lease
+    }
+
     pub fn report(&self, progress: f64, message: impl Into<String>) {
         let mut l = self.latest.lock().expect("progress lock");
         l.progress = progress.clamp(0.0, 1.0);
@@ -364,7 +394,10 @@ impl Progress {
             .job_progress(&self.id, &j.server, progress, &message, j.lease_until())
             .await
         {
-            Ok(true) => true,
+            Ok(true) => {
+                self.latest.lock().expect("progress lock").renewed = std::time::Instant::now();
+                true
+            }
             Ok(false) => {
                 tracing::warn!(job = %self.id, "another server runs this job now");
                 self.latest.lock().expect("progress lock").lost = true;

@@ -699,12 +699,14 @@ impl Streams {
 
     /// Store the chunks waiting for the database, in order; the first that cannot be stored
     /// (the database still away) stays first, and its error is returned.
+    ///
+    /// A chunk leaves the queue only once stored: a request dropped while it commits (its
+    /// client gone) leaves it first in line, and storing it again is a no-op
+    /// ([`Store::append_chunk`] stores a chunk once).
     async fn save(&self, store: &Store, live: &mut Live) -> Result<()> {
-        while let Some(chunk) = live.unsaved.pop_front() {
-            if let Err(e) = self.commit(store, live, &chunk).await {
-                live.unsaved.push_front(chunk);
-                return Err(e);
-            }
+        while let Some(chunk) = live.unsaved.front().cloned() {
+            self.commit(store, live, &chunk).await?;
+            live.unsaved.pop_front();
             live.encoder
                 .as_mut()
                 .ok_or_else(|| Error::Internal("stream encoder missing".into()))?

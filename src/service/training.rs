@@ -186,6 +186,11 @@ pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result
         serde_json::json!(sel.takes.iter().map(|t| &t.id).collect::<Vec<_>>());
     row.provenance["frames"] = serde_json::json!(sel.takes.iter().map(|t| t.frames).sum::<usize>());
     row.provenance["seconds"] = serde_json::json!(t0.elapsed().as_secs_f64());
+    if progress.is_lost() {
+        return Err(Error::Conflict(
+            "another server runs this job now (its lease ran out here)".into(),
+        ));
+    }
     store.insert_basis(&row).await?;
     Ok(row)
 }
@@ -326,6 +331,10 @@ pub async fn take_over(store: &Store, jobs: &Arc<Jobs>) -> Result<bool> {
     };
     match selected {
         Ok(sel) => run(store.clone(), sel, progress),
+        // The database away again: leave the job to its lease, for whoever looks next.
+        Err(Error::Store(e)) if e.is_unavailable() => {
+            tracing::warn!(job = %progress.id, error = %e, "cannot run a job taken over yet");
+        }
         // The takes it selected may have gone meanwhile.
         Err(e) => progress.fail(e.to_string()).await,
     }

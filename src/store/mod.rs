@@ -64,7 +64,7 @@ impl Error {
                 Some(c) if c.starts_with("08") => true,
                 Some("57P01" | "57P02" | "57P03" | "53300") => true,
                 // SQLite: busy or locked past the busy timeout.
-                Some("5" | "6" | "261" | "517") => true,
+                Some("5" | "6" | "261" | "517" | "773") => true,
                 _ => false,
             },
             _ => false,
@@ -329,7 +329,25 @@ impl Store {
             if r.rows_affected() == 0 {
                 return Ok(false);
             }
-            bind_chunk(sqlx::query(INSERT_CHUNK), id, chunk).execute(&mut *tx).await?;
+            // Once: a commit whose answer was lost (the connection dropped as it committed)
+            // is sent again, and finds its chunk stored, with the same bytes.
+            let sql = format!("{INSERT_CHUNK} ON CONFLICT (sequence_id, idx) DO NOTHING");
+            let inserted = bind_chunk(sqlx::query(&sql), id, chunk).execute(&mut *tx).await?;
+            if inserted.rows_affected() == 0 {
+                let crc: i64 = sqlx::query_scalar(
+                    "SELECT crc32c FROM chunks WHERE sequence_id = $1 AND idx = $2",
+                )
+                .bind(id)
+                .bind(chunk.idx)
+                .fetch_one(&mut *tx)
+                .await?;
+                if crc != i64::from(chunk.crc32c) {
+                    return Err(Error::Conflict(format!(
+                        "chunk {} of take {id}, stored already with other bytes",
+                        chunk.idx
+                    )));
+                }
+            }
             tx.commit().await?;
             Ok(true)
         })
@@ -511,7 +529,6 @@ impl Store {
         })
     }
 
-    /// Whether a take exists (one indexed lookup).
     /// One round trip to the database (`/readyz`): `Err` when it cannot be reached.
     pub async fn ping(&self) -> Result<()> {
         dispatch!(self, pool => {
@@ -520,6 +537,7 @@ impl Store {
         })
     }
 
+    /// Whether a take exists (one indexed lookup).
     pub async fn exists(&self, id: &str) -> Result<bool> {
         dispatch!(self, pool => {
             Ok(sqlx::query("SELECT 1 AS one FROM sequences WHERE id = $1")

@@ -100,7 +100,7 @@ async fn jobs_are_seen_shared_and_taken_over_by_every_server() {
     for t in common::all().await {
         let url = t.url().to_string();
         let servers: Vec<Process> = (0..3)
-            .map(|_| Process::start(&url, &["--job-lease-s", "2"]))
+            .map(|_| Process::start(&url, &["--job-lease-s", "5"]))
             .collect();
         let base = |i: usize| servers[i % 3].base.clone();
         // Takes of one layout, stored through each server in turn.
