@@ -85,6 +85,17 @@ struct ServeArgs {
     /// database.
     #[arg(long, env = "MOCAP_JOB_LEASE_S", default_value_t = 30, value_parser = clap::value_parser!(u64).range(5..=3600))]
     job_lease_s: u64,
+    /// Seconds a live stream's lease lasts (3 at least): a server that has not renewed it
+    /// for this long (it died) has its stream taken over by the next request through
+    /// another server on the same database, and closed after one more lease if none comes.
+    #[arg(long, env = "MOCAP_STREAM_LEASE_S", default_value_t = 60, value_parser = clap::value_parser!(u64).range(3..=3600))]
+    stream_lease_s: u64,
+    /// Where the other servers on the same database reach this one (http://host:port), to
+    /// forward to it the requests of the live streams it codes. Default: the --listen
+    /// address (127.0.0.1 if that is 0.0.0.0): set it when servers run on several machines
+    /// or containers.
+    #[arg(long, env = "MOCAP_ADVERTISE_URL")]
+    advertise_url: Option<String>,
     /// Serve on a non-loopback address although no token exists: anyone who reaches it may
     /// read, change and delete the archive. Without it, `serve` refuses to start so.
     #[arg(long, env = "MOCAP_INSECURE_NO_AUTH")]
@@ -354,13 +365,14 @@ fn serve(args: ServeArgs) -> ExitCode {
         decoded_cache_mib: args.decoded_cache_mib,
         exhaustive_choice: args.exhaustive_choice,
         job_lease: std::time::Duration::from_secs(args.job_lease_s),
+        stream_lease: std::time::Duration::from_secs(args.stream_lease_s),
+        advertise_url: args.advertise_url,
         metrics_listen: args.metrics_listen,
         policy: mocapstore::http::auth::Policy {
             allowed_origins: args.cors_origins,
             open_beyond_loopback: args.insecure_no_auth,
             allowed_hosts: args.allowed_hosts,
         },
-        ..mocapstore::http::Config::default()
     };
     let runtime = match tokio::runtime::Runtime::new() {
         Ok(r) => r,

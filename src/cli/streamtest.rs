@@ -8,8 +8,16 @@
 //! 2. replays a take in real time (`--live-batch` frames per request, as a capture system
 //!    would send them) with and without `flush`, and reports, per frame, the time from when
 //!    it was captured until a range fetch that includes it succeeds.
+//!
+//! With `--server URL` (repeatable) it measures running servers instead — several behind
+//! one database: each stream is opened through the first, and its appends, range fetches
+//! and finish are spread over all of them round-robin (request `i` to server `i mod N`), as
+//! a balancer would; the servers that do not code a stream forward its requests to the one
+//! that does. No basis is trained there (streams code with the layout's newest, or the
+//! codec's untrained one); the streams are deleted after when the token may.
 
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use clap::Args;
@@ -38,6 +46,42 @@ pub struct StreamArgs {
     /// Seconds replayed in real time (per run).
     #[arg(long, default_value_t = 10)]
     live_seconds: usize,
+    /// Running servers to measure (repeatable, or comma-separated) instead of one started
+    /// here; requests are spread over them round-robin.
+    #[arg(long = "server", value_delimiter = ',')]
+    servers: Vec<String>,
+    /// API token for `--server`s that need one (write scope; admin to delete the streams).
+    #[arg(long, env = "MOCAP_TOKEN")]
+    token: Option<String>,
+}
+
+/// The servers requests go to, in turn.
+struct Servers {
+    urls: Vec<String>,
+    next: AtomicUsize,
+    /// Requests sent through [`Servers::pick`].
+    sent: AtomicUsize,
+}
+
+impl Servers {
+    fn new(urls: Vec<String>) -> Servers {
+        Servers {
+            urls,
+            next: AtomicUsize::new(0),
+            sent: AtomicUsize::new(0),
+        }
+    }
+
+    /// The next server, round-robin.
+    fn pick(&self) -> &str {
+        self.sent.fetch_add(1, Ordering::Relaxed);
+        let i = self.next.fetch_add(1, Ordering::Relaxed);
+        &self.urls[i % self.urls.len()]
+    }
+
+    fn first(&self) -> &str {
+        &self.urls[0]
+    }
 }
 
 pub fn run(args: &StreamArgs) -> ExitCode {
@@ -127,6 +171,15 @@ async fn append(
 }
 
 async fn test(args: &StreamArgs) -> Result<String, String> {
+    if !args.servers.is_empty() {
+        let urls = args
+            .servers
+            .iter()
+            .map(|s| s.trim_end_matches('/').to_string())
+            .collect();
+        let client = super::token::client(args.token.as_deref())?;
+        return measure(args, &client, &Servers::new(urls)).await;
+    }
     let dir = std::env::temp_dir().join(format!("mocapstore-stream-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let url = format!("sqlite://{}", dir.join("store.db").display());
@@ -148,7 +201,6 @@ async fn test(args: &StreamArgs) -> Result<String, String> {
     }));
     let client = reqwest::Client::new();
     let (fps, points) = (args.fps, args.points);
-    let w = points * 3;
 
     // A basis for the layout, trained on a minute of another take of it.
     let training = walker((60.0 * fps) as usize, points, fps, 1, 0.0);
@@ -183,17 +235,34 @@ async fn test(args: &StreamArgs) -> Result<String, String> {
             _ => tokio::time::sleep(Duration::from_millis(50)).await,
         }
     }
+    let report = measure(args, &client, &Servers::new(vec![base])).await;
+    let _ = stop.send(());
+    let _ = server.await;
+    let _ = std::fs::remove_dir_all(&dir);
+    report
+}
+
+/// The two runs against `servers`: throughput, then delay in real time.
+async fn measure(
+    args: &StreamArgs,
+    client: &reqwest::Client,
+    servers: &Servers,
+) -> Result<String, String> {
+    let (fps, points) = (args.fps, args.points);
+    let w = points * 3;
+    let mut opened = Vec::new();
 
     // 1. Throughput.
     let take = walker(args.seconds * fps as usize, points, fps, 2, 0.0);
-    let id = open(&client, &base, fps, points).await?;
+    let id = open(client, servers.first(), fps, points).await?;
+    opened.push(id.clone());
     let t0 = Instant::now();
     for batch in take.positions().chunks(args.batch.max(1) * w) {
-        append(&client, &base, &id, batch, false).await?;
+        append(client, servers.pick(), &id, batch, false).await?;
     }
     let info = post_json(
-        &client,
-        format!("{base}/v1/streams/{id}/finish"),
+        client,
+        format!("{}/v1/streams/{id}/finish", servers.pick()),
         &json!({}),
     )
     .await?;
@@ -212,7 +281,8 @@ async fn test(args: &StreamArgs) -> Result<String, String> {
     // 2. Delay from capture to fetchable, in real time.
     let live = walker(args.live_seconds * fps as usize, points, fps, 3, 0.0);
     for flush in [true, false] {
-        let id = open(&client, &base, fps, points).await?;
+        let id = open(client, servers.first(), fps, points).await?;
+        opened.push(id.clone());
         let start = Instant::now();
         let mut delays = Vec::new();
         let mut committed = 0usize;
@@ -229,13 +299,14 @@ async fn test(args: &StreamArgs) -> Result<String, String> {
             for f in 0..n {
                 captured_at.push((i * batch + f + 1) as f64 / fps);
             }
-            let info = append(&client, &base, &id, chunk, flush).await?;
+            let info = append(client, servers.pick(), &id, chunk, flush).await?;
             let now_committed = info["frames_committed"].as_u64().unwrap_or(0) as usize;
             if now_committed > committed {
                 // Fetchable from now: prove it with a range fetch of the newest frames.
                 let r = client
                     .get(format!(
-                        "{base}/v1/sequences/{id}/frames?start={}&end={now_committed}&format=f32",
+                        "{}/v1/sequences/{id}/frames?start={}&end={now_committed}&format=f32",
+                        servers.pick(),
                         now_committed - 1
                     ))
                     .send()
@@ -252,8 +323,8 @@ async fn test(args: &StreamArgs) -> Result<String, String> {
             }
         }
         post_json(
-            &client,
-            format!("{base}/v1/streams/{id}/finish"),
+            client,
+            format!("{}/v1/streams/{id}/finish", servers.pick()),
             &json!({}),
         )
         .await?;
@@ -266,8 +337,33 @@ async fn test(args: &StreamArgs) -> Result<String, String> {
             delays.len()
         );
     }
-    let _ = stop.send(());
-    let _ = server.await;
-    let _ = std::fs::remove_dir_all(&dir);
+    if servers.urls.len() > 1 {
+        report += &format!(
+            "{} requests spread round-robin over {} servers ({}); each stream coded by the \
+             server it was opened on, the others forwarding to it\n",
+            servers.sent.load(Ordering::Relaxed),
+            servers.urls.len(),
+            servers.urls.join(", ")
+        );
+    }
+    if !args.servers.is_empty() {
+        // Leave no take behind (an admin token may delete them; others leave them, and say so).
+        let mut left = Vec::new();
+        for id in opened {
+            let r = client
+                .delete(format!("{}/v1/sequences/{id}", servers.first()))
+                .send()
+                .await;
+            if !r.is_ok_and(|r| r.status().is_success()) {
+                left.push(id);
+            }
+        }
+        if !left.is_empty() {
+            report += &format!(
+                "(streams {} were left: the token may not delete them)\n",
+                left.join(", ")
+            );
+        }
+    }
     Ok(report)
 }

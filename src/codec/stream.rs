@@ -102,6 +102,14 @@ pub struct StreamChunk {
     pub index: usize,
 }
 
+impl StreamChunk {
+    /// The take's error sums up to and with this chunk: stored with it, for a server that
+    /// takes the stream over ([`StreamEncoder::resume`]).
+    pub fn running(&self) -> &Accumulator {
+        &self.running
+    }
+}
+
 /// A stream's take so far: frames, chunks, stored bytes and measured errors.
 #[derive(Debug, Clone)]
 pub struct Totals {
@@ -187,6 +195,63 @@ impl StreamEncoder {
             handed_stats: Accumulator::new(spec.points),
             digest: blake3::Hasher::new(),
         })
+    }
+
+    /// Go on with a stream another server started and stopped coding (it died): a coder
+    /// opened afresh, whose first chunk is intra (every chunk decodes alone), joined to the
+    /// take as stored. `stored` is the take's live header; `stats` the error sums stored
+    /// with its last chunk. Then [`absorb`](Self::absorb) each stored chunk, in order.
+    pub fn resume(
+        codec_id: CodecId,
+        spec: &StreamSpec<'_>,
+        stored: &Header,
+        stats: Accumulator,
+    ) -> Result<StreamEncoder> {
+        let mut e = StreamEncoder::open(codec_id, spec)?;
+        if e.header != *stored {
+            return Err(Error::Invalid(format!(
+                "stream of {codec_id} cannot go on: its stored header differs from one opened \
+                 with the same settings (another version wrote it?)"
+            )));
+        }
+        if stats.points() != spec.points {
+            return Err(Error::Invalid(format!(
+                "stream error sums over {} points, the stream has {}",
+                stats.points(),
+                spec.points
+            )));
+        }
+        e.stats = stats.clone();
+        e.handed_stats = stats;
+        Ok(e)
+    }
+
+    /// Join a chunk already stored to a [`resume`](Self::resume)d stream, in order: its
+    /// index entry, size and decoded frames (for the take's digest).
+    pub fn absorb(&mut self, meta: ChunkMeta, payload: &[u8]) -> Result<()> {
+        if meta.first_frame as usize != self.next_frame || meta.frames == 0 {
+            return Err(Error::Invalid(format!(
+                "stored stream chunk {} starts at frame {}, the take has {}",
+                self.index.len(),
+                meta.first_frame,
+                self.next_frame
+            )));
+        }
+        let alone = Header {
+            frames: meta.frames,
+            chunks: vec![ChunkMeta {
+                first_frame: 0,
+                ..meta
+            }],
+            ..self.header.clone()
+        };
+        let decoded = read::decode_chunk(&alone, self.decoder.as_ref(), 0, payload)?;
+        pipeline::digest_update(&mut self.digest, &decoded);
+        self.payload_bytes += payload.len();
+        self.next_frame += meta.frames as usize;
+        self.handed_out += 1;
+        self.index.push(meta);
+        Ok(())
     }
 
     /// The take's header as stored while it is live: no chunk index, no frames.

@@ -33,6 +33,8 @@ pub struct Metrics {
     closed_header: AtomicU64,
     closed_idle: AtomicU64,
     closed_send: AtomicU64,
+    /// Live-stream requests sent on to the server coding the stream.
+    forwarded: AtomicU64,
 }
 
 impl Metrics {
@@ -51,6 +53,11 @@ impl Metrics {
         self.decoded_frames
             .fetch_add(frames as u64, Ordering::Relaxed);
         self.served_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+    }
+
+    /// A live stream's request answered by the server that codes it, through this one.
+    pub fn forwarded(&self) {
+        self.forwarded.fetch_add(1, Ordering::Relaxed);
     }
 
     pub fn connection_opened(&self) {
@@ -166,6 +173,13 @@ impl Metrics {
                 g(v)
             );
         }
+        s += "# HELP mocapstore_stream_requests_forwarded_total live-stream requests answered by \
+              the server coding the stream, through this one\n";
+        s += "# TYPE mocapstore_stream_requests_forwarded_total counter\n";
+        s += &format!(
+            "mocapstore_stream_requests_forwarded_total {}\n",
+            g(&self.forwarded)
+        );
         if let Some(cpu) = process_cpu_seconds() {
             // The Prometheus client libraries' standard name: what a benchmark (the Python
             // client's) reads to set the server's CPU per request beside its own.

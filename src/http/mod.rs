@@ -7,6 +7,7 @@ pub mod auth;
 mod bases;
 pub mod budget;
 mod error;
+pub mod forward;
 mod library;
 mod metrics;
 pub mod proxy;
@@ -43,6 +44,7 @@ use crate::service::history::Histories;
 use crate::service::jobs::Jobs;
 use crate::service::prepared::ReadCaches;
 use crate::service::streams::Streams;
+use crate::service::Node;
 use crate::store::Store;
 
 /// How to run the service.
@@ -70,13 +72,17 @@ pub struct Config {
     pub metrics_listen: Option<String>,
     /// Reverse proxies whose `X-Forwarded-For` names the client ([`proxy`]).
     pub trusted_proxies: proxy::TrustedProxies,
+    /// The address other servers on the same database reach this one at, to forward a
+    /// live stream's requests to it (`http://host:port`); by default the address it
+    /// listens on (loopback if it listens on every interface).
+    pub advertise_url: Option<String>,
 }
 
 /// Connections the `--metrics-listen` address takes at once.
 pub const METRICS_CONNECTIONS: u64 = 16;
 
-/// How often the server renews its streams' leases, finishes idle streams and closes the
-/// takes of streams whose server died.
+/// How often the server renews its streams' leases (more often for leases under three
+/// times this), finishes idle streams and closes the takes of streams whose server died.
 pub const MAINTENANCE_PERIOD: Duration = Duration::from_secs(10);
 
 impl Default for Config {
@@ -92,6 +98,7 @@ impl Default for Config {
             policy: Policy::default(),
             metrics_listen: None,
             trusted_proxies: proxy::TrustedProxies::default(),
+            advertise_url: None,
         }
     }
 }
@@ -109,6 +116,8 @@ pub struct AppState {
     pub caches: Arc<ReadCaches>,
     pub jobs: Arc<Jobs>,
     pub streams: Arc<Streams>,
+    /// Sends a live stream's requests on to the server that codes it.
+    pub forwarder: Arc<forward::Forwarder>,
     /// What per-take choice has learnt from the takes ingested so far; `None` when every
     /// candidate is encoded ([`Config::exhaustive_choice`]).
     pub histories: Option<Arc<Histories>>,
@@ -116,6 +125,30 @@ pub struct AppState {
     pub auth: Arc<Authenticator>,
     /// The audit log, with the counts of refused requests not yet written.
     pub audit: Arc<AuditLog>,
+}
+
+/// The address other servers forward a stream's requests to: `--advertise-url`, or the
+/// bound address (loopback for an unspecified one: a server listening on every interface
+/// of a machine shared with others should say where it is reached).
+fn advertised(config: &Config, bound: SocketAddr) -> Result<String, String> {
+    if let Some(url) = &config.advertise_url {
+        let uri: axum::http::Uri = url
+            .parse()
+            .map_err(|e| format!("--advertise-url {url:?}: {e}"))?;
+        if uri.scheme_str() != Some("http") || uri.host().is_none() {
+            return Err(format!(
+                "--advertise-url {url:?}: give http://host:port, where the other servers reach \
+                 this one"
+            ));
+        }
+        return Ok(url.trim_end_matches('/').to_string());
+    }
+    let ip = match bound.ip() {
+        ip if ip.is_unspecified() && ip.is_ipv4() => std::net::Ipv4Addr::LOCALHOST.into(),
+        ip if ip.is_unspecified() => std::net::Ipv6Addr::LOCALHOST.into(),
+        ip => ip,
+    };
+    Ok(format!("http://{}", SocketAddr::new(ip, bound.port())))
 }
 
 /// `GET /readyz`: 200 while the database answers, else 503 with `Retry-After`.
@@ -351,6 +384,10 @@ impl Application {
             ),
         };
         let limits = config.limits;
+        let bound = listener
+            .local_addr()
+            .map_err(|e| format!("{}: {e}", config.listen))?;
+        let node = Node::new(advertised(&config, bound)?);
         let state = AppState {
             store: store.clone(),
             limits,
@@ -358,17 +395,16 @@ impl Application {
             answers: Arc::new(Budget::new(limits.answer_bytes, limits.answer_share_bytes)),
             metrics: Arc::new(Metrics::default()),
             caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
-            jobs: Arc::new(Jobs::new(store.clone(), config.job_lease)),
-            streams: Arc::new(Streams::new(limits, config.stream_lease)),
+            jobs: Arc::new(Jobs::new(store.clone(), config.job_lease, &node.id)),
+            streams: Arc::new(Streams::new(limits, config.stream_lease, node.clone())),
+            forwarder: Arc::new(forward::Forwarder::new(&node.id)),
             histories: (!config.exhaustive_choice).then(|| Arc::new(Histories::default())),
             auth: Arc::new(Authenticator::default()),
             audit: Arc::new(AuditLog::default()),
         };
         // Without tokens the server answers anyone who reaches it: only loopback, unless
         // the operator says otherwise.
-        let addr = listener
-            .local_addr()
-            .map_err(|e| format!("{}: {e}", config.listen))?;
+        let addr = bound;
         if !addr.ip().is_loopback() {
             let tokens = state
                 .auth
@@ -431,7 +467,10 @@ impl Application {
         let state = self.state.clone();
         let forget = self.forget_idle_keys.clone();
         let reaper = tokio::spawn(async move {
-            let mut tick = tokio::time::interval(MAINTENANCE_PERIOD);
+            // Leases renewed three times a lease at least: a quiet stream's server that lives
+            // is never taken for stopped.
+            let every = (state.streams.lease / 3).clamp(Duration::from_secs(1), MAINTENANCE_PERIOD);
+            let mut tick = tokio::time::interval(every);
             let mut pruned: Option<std::time::Instant> = None;
             loop {
                 tick.tick().await;

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use axum::body::Bytes;
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
-use axum::http::{header, HeaderMap, StatusCode};
+use axum::http::{header, HeaderMap, Method, StatusCode, Uri};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
@@ -23,7 +23,57 @@ use super::views::TakeView;
 use super::AppState;
 use crate::service::access::{self, Caller};
 use crate::service::budget::Holder;
-use crate::service::streams::{Append, Arrival, OpenRequest, StreamInfo, Watch};
+use crate::service::streams::{Append, Arrival, OpenRequest, Route, StreamInfo, Watch};
+
+/// A request for stream `id` as it came, for the server that codes it.
+struct Sent<'a> {
+    method: Method,
+    uri: &'a Uri,
+    headers: &'a HeaderMap,
+    body: Bytes,
+}
+
+/// The answer of the server that codes stream `id`, if that is another server: the
+/// request forwarded there ([`super::forward`]). `None`: answer here — this server codes
+/// it, took it over from one that stopped, or no server codes it (finished).
+async fn at_owner(
+    state: &AppState,
+    holder: &Holder,
+    id: &str,
+    sent: Sent<'_>,
+) -> Result<Option<Response>, ApiError> {
+    let forwarded = sent.headers.contains_key(super::forward::FORWARDED);
+    let Route::Owner { url } = state
+        .streams
+        .route(&state.store, id, holder, forwarded)
+        .await?
+    else {
+        return Ok(None);
+    };
+    let answer = state
+        .forwarder
+        .send(&url, sent.method, sent.uri, sent.headers, sent.body, holder)
+        .await;
+    match answer {
+        Ok(r) => {
+            state.metrics.forwarded();
+            Ok(Some(r))
+        }
+        Err(why) => {
+            tracing::warn!(stream = id, owner = %url, error = %why, "forwarding a stream request failed");
+            match state
+                .streams
+                .owner_unreachable(&state.store, id, holder, &url)
+                .await?
+            {
+                Route::Here => Ok(None),
+                Route::Owner { .. } => Err(ApiError::busy(format!(
+                    "stream {id} is coded by another server that does not answer; retry"
+                ))),
+            }
+        }
+    }
+}
 
 pub async fn open(
     State(state): State<AppState>,
@@ -45,10 +95,22 @@ pub async fn open(
 pub async fn get(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
-) -> Result<Json<StreamInfo>, ApiError> {
+    uri: Uri,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
     access::check_take(&state.store, &caller.grant, &id).await?;
-    Ok(Json(state.streams.info(&state.store, &id).await?))
+    let sent = Sent {
+        method: Method::GET,
+        uri: &uri,
+        headers: &headers,
+        body: Bytes::new(),
+    };
+    if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
+        return Ok(r);
+    }
+    Ok(Json(state.streams.info(&state.store, &id).await?).into_response())
 }
 
 #[derive(Deserialize)]
@@ -166,16 +228,28 @@ impl<'de> Visitor<'de> for Frame<'_> {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 pub async fn append(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
     query: Result<Query<AppendQuery>, QueryRejection>,
+    uri: Uri,
     headers: HeaderMap,
     body: Bytes,
-) -> Result<Json<StreamInfo>, ApiError> {
+) -> Result<Response, ApiError> {
     let Query(q) = query?;
     access::check_take(&state.store, &caller.grant, &id).await?;
+    let sent = Sent {
+        method: Method::POST,
+        uri: &uri,
+        headers: &headers,
+        body: body.clone(),
+    };
+    if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
+        return Ok(r);
+    }
     let frames = parse_frames(&headers, &body)?;
     let info = state
         .streams
@@ -191,15 +265,27 @@ pub async fn append(
             },
         )
         .await?;
-    Ok(Json(info))
+    Ok(Json(info).into_response())
 }
 
 pub async fn finish(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
+    uri: Uri,
+    headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     access::check_take(&state.store, &caller.grant, &id).await?;
+    let sent = Sent {
+        method: Method::POST,
+        uri: &uri,
+        headers: &headers,
+        body: Bytes::new(),
+    };
+    if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
+        return Ok(r);
+    }
     let take = state
         .streams
         .finish(&state.store, &state.caches, &id)
@@ -293,8 +379,19 @@ pub async fn events(
     Extension(caller): Extension<Caller>,
     Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
-) -> Result<impl IntoResponse, ApiError> {
+    uri: Uri,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
     access::check_take(&state.store, &caller.grant, &id).await?;
+    let sent = Sent {
+        method: Method::GET,
+        uri: &uri,
+        headers: &headers,
+        body: Bytes::new(),
+    };
+    if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
+        return Ok(r);
+    }
     let mut watch = state.streams.watch(&state.store, &id, &holder).await?;
     let hello = json_event(
         "stream",
@@ -347,7 +444,9 @@ pub async fn events(
     let events = futures_util::stream::iter(head)
         .chain(rest)
         .map(Ok::<_, Infallible>);
-    Ok(Sse::new(events).keep_alive(KeepAlive::default()))
+    Ok(Sse::new(events)
+        .keep_alive(KeepAlive::default())
+        .into_response())
 }
 
 fn end_event(reason: &str) -> Event {

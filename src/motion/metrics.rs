@@ -69,8 +69,9 @@ fn sample_error(pa: &[f32], pb: &[f32]) -> f64 {
 }
 
 /// Error sums over frames as they come (a live stream's chunks), giving the same
-/// [`ErrorStats`] as [`compare`] over all of them at once.
-#[derive(Debug, Clone)]
+/// [`ErrorStats`] as [`compare`] over all of them at once. Serialisable: a stream taken over
+/// by another server goes on from the sums stored with its last chunk.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Accumulator {
     points: usize,
     frames: usize,
@@ -96,6 +97,11 @@ impl Accumulator {
             spread_sq: 0.0,
             samples: 0,
         }
+    }
+
+    /// Points per frame.
+    pub fn points(&self) -> usize {
+        self.points
     }
 
     /// Add whole frames (`original` and `decoded` of equal length, in the take's units).

@@ -547,6 +547,7 @@ pub async fn import_take(
             errors: None,
             analog,
             parameters,
+            stream: None,
         })
         .await?;
     Ok(Imported::Stored)

@@ -172,6 +172,8 @@ pub async fn ingest(
         decision: decision.clone(),
         decoded_blake3: Some(enc.decoded_digest.clone()),
         interrupted: None,
+        frames_lost: 0,
+        handovers: Vec::new(),
         reencoded_from: None,
         events: extras.events,
         first_frame: extras.first_frame,
@@ -214,6 +216,7 @@ pub async fn ingest(
             errors: Some(enc.series.to_bytes()),
             analog: analog.as_ref().map(|a| analog::rows(&a.container, &a.meta)),
             parameters,
+            stream: None,
         })
         .await?;
     let (raw_bytes, stored_bytes, ratio) = (

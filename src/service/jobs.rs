@@ -151,11 +151,12 @@ pub struct Jobs {
 }
 
 impl Jobs {
-    /// Jobs run under leases of `lease` ([`MIN_LEASE`] at least).
-    pub fn new(store: Store, lease: Duration) -> Jobs {
+    /// Jobs run by `server` ([`super::Node::id`]) under leases of `lease` ([`MIN_LEASE`]
+    /// at least).
+    pub fn new(store: Store, lease: Duration, server: &str) -> Jobs {
         Jobs {
             store,
-            server: uuid::Uuid::now_v7().to_string(),
+            server: server.to_string(),
             lease: lease.max(MIN_LEASE),
         }
     }

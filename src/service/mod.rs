@@ -107,6 +107,25 @@ pub(crate) fn normalise_tags(tags: &[String]) -> Vec<String> {
     t
 }
 
+/// This server among those sharing the database: a per-process id, which job and stream
+/// rows name their owner with, and the address other servers reach it at (where they
+/// forward a stream's requests: `serve --advertise-url`).
+#[derive(Debug, Clone)]
+pub struct Node {
+    pub id: String,
+    pub url: String,
+}
+
+impl Node {
+    /// A new process's identity, reached at `url`.
+    pub fn new(url: impl Into<String>) -> Node {
+        Node {
+            id: uuid::Uuid::now_v7().to_string(),
+            url: url.into(),
+        }
+    }
+}
+
 /// Milliseconds since the Unix epoch.
 pub fn now_ms() -> i64 {
     std::time::SystemTime::now()

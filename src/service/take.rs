@@ -73,6 +73,13 @@ pub struct TakeMeta {
     /// Why a live take was closed without finishing (its server stopped).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interrupted: Option<String>,
+    /// Frames a live stream's producer had sent and been answered for that the take does
+    /// not hold: pending on a server that stopped before it committed them.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub frames_lost: usize,
+    /// Each time another server took the stream over from one that stopped.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub handovers: Vec<StreamHandover>,
     /// The codec a finished stream was coded with live, before it was re-encoded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reencoded_from: Option<CodecId>,
@@ -91,6 +98,21 @@ pub struct TakeMeta {
     /// for live ones: then read paths infer it from the frames they decode.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub up: Option<crate::motion::transform::Up>,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
+/// A live stream taken over by another server after the one coding it stopped: the take
+/// goes on at `frame`, and the `frames_lost` frames that server had accepted after it are
+/// not in it (their producer may send them again).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StreamHandover {
+    pub frame: usize,
+    pub frames_lost: usize,
+    /// When, ms since the Unix epoch.
+    pub at_ms: i64,
 }
 
 /// Who a new take is and where it goes: what a client names.
@@ -464,6 +486,8 @@ mod tests {
                 },
                 decoded_blake3: Some("00".into()),
                 interrupted: None,
+                frames_lost: 0,
+                handovers: Vec::new(),
                 reencoded_from: None,
                 first_frame: None,
                 events: Vec::new(),

@@ -180,6 +180,18 @@ impl Store {
             if let Err(e) = r {
                 return Err(conflict_or(e, &format!("sequence {}", s.id)));
             }
+            if let Some(n) = &s.stream {
+                sqlx::query(
+                    "UPDATE sequences SET stream_server = $1, stream_url = $2, \
+                     frames_received = 0, stream_state = $3 WHERE id = $4",
+                )
+                .bind(&n.owner.server)
+                .bind(&n.owner.url)
+                .bind(&n.state)
+                .bind(&s.id)
+                .execute(&mut *tx)
+                .await?;
+            }
             for tag in &s.tags {
                 sqlx::query("INSERT INTO sequence_tags (sequence_id, tag) VALUES ($1, $2)")
                     .bind(&s.id)
@@ -308,22 +320,31 @@ impl Store {
     /// Add one chunk to a live take and update its running totals (frames, sizes,
     /// statistics) and lease, in one transaction. Nothing else is rewritten: the cost of an
     /// append does not grow with the take. False if the take is gone or no longer live.
+    ///
+    /// Only `append.server`, the stream's owner, may: false too if another server took the
+    /// stream over. The producer's count of frames and the coder's state go with the chunk
+    /// ([`StreamRow`]), for a server that takes the stream over.
     pub async fn append_chunk(
         &self,
         id: &str,
         totals: &TakeTotals,
         chunk: &ChunkRow,
-        live_until: i64,
+        append: &ChunkAppend<'_>,
     ) -> Result<bool> {
         dispatch!(self, pool => {
             let mut tx = pool.begin_write().await?;
             let sql = format!(
-                "UPDATE sequences SET {}, live_until = $10 WHERE id = $11 AND live_until IS NOT NULL",
+                "UPDATE sequences SET {}, live_until = $10, frames_received = $11, \
+                 stream_state = $12 \
+                 WHERE id = $13 AND live_until IS NOT NULL AND stream_server = $14",
                 rows::SET_TOTALS
             );
             let r = rows::bind_totals(sqlx::query(&sql), totals)
-            .bind(live_until)
+            .bind(append.live_until)
+            .bind(append.frames_received)
+            .bind(append.state)
             .bind(id)
+            .bind(append.server)
             .execute(&mut *tx)
             .await?;
             if r.rows_affected() == 0 {
@@ -353,14 +374,17 @@ impl Store {
         })
     }
 
-    /// Extend the lease of a live take; false if it is not live any more.
-    pub async fn renew_lease(&self, id: &str, live_until: i64) -> Result<bool> {
+    /// Extend the lease of a live take `server` codes; false if it is not live any more, or
+    /// another server took it over.
+    pub async fn renew_lease(&self, id: &str, server: &str, live_until: i64) -> Result<bool> {
         dispatch!(self, pool => {
             let r = sqlx::query(
-                "UPDATE sequences SET live_until = $1 WHERE id = $2 AND live_until IS NOT NULL",
+                "UPDATE sequences SET live_until = $1 \
+                 WHERE id = $2 AND live_until IS NOT NULL AND stream_server = $3",
             )
             .bind(live_until)
             .bind(id)
+            .bind(server)
             .execute(pool)
             .await?;
             Ok(r.rows_affected() > 0)
@@ -685,8 +709,10 @@ mod bases;
 pub use bases::{BasisRow, Deletion};
 mod jobs;
 mod skeletons;
+mod streams;
 pub use jobs::JobRow;
 pub use skeletons::SkeletonRow;
+pub use streams::{ChunkAppend, NewStream, StreamClaim, StreamOwnerRow, StreamRow};
 mod access;
 pub use access::{AuditRow, TokenRow};
 

@@ -115,6 +115,8 @@ pub struct NewTake {
     pub analog: Option<AnalogRows>,
     /// The uploaded file's parameters, if its format has any.
     pub parameters: Option<ParametersRow>,
+    /// For a live stream's take: the server that codes it, and its coder's state.
+    pub stream: Option<super::NewStream>,
 }
 
 /// A take's analog channels as stored: their container header, its sizes, its chunks.

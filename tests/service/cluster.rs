@@ -563,3 +563,248 @@ async fn a_stream_keeps_its_frames_through_a_database_outage() {
     }
     srv.stop().await;
 }
+
+/// What a round-robin producer's run through several servers met.
+#[derive(Default, Debug)]
+struct Tally {
+    requests: usize,
+    ok: usize,
+    /// 503s while the killed owner's lease ran.
+    unavailable: usize,
+    /// 409s that said where to send from (after the handover).
+    resend: usize,
+}
+
+/// Append frames `first..first + n` (numbered) through `base`.
+async fn append_numbered(
+    base: &str,
+    id: &str,
+    first: usize,
+    n: usize,
+    frame: &impl Fn(usize) -> Vec<f64>,
+) -> (u16, Value) {
+    let frames: Vec<Vec<f64>> = (first..first + n).map(frame).collect();
+    post_json(
+        base,
+        &format!("/v1/streams/{id}/frames?first={first}"),
+        &json!({ "frames": frames }),
+    )
+    .await
+}
+
+/// A stream sent through three servers in turn codes as one stream on the server that
+/// opened it (the others forward its appends and its watchers); when that server is
+/// killed, the next append after its lease, through another, takes the stream over: the
+/// frames it had accepted and never committed are counted exactly, the producer sends them
+/// again, and the take holds every frame once. Reads, stats and deletes agree on every
+/// server.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_stream_goes_through_any_server_and_outlives_its_server() {
+    const POINTS: usize = 4;
+    const BEFORE: usize = 130; // 4 chunks of 30 committed, 10 frames pending at the kill
+    const TOTAL: usize = 240;
+    let frame = |f: usize| -> Vec<f64> {
+        (0..POINTS * 3)
+            .map(|k| 100.0 * ((f as f64) * 0.05 + k as f64).sin() + k as f64 * 10.0)
+            .collect()
+    };
+    for t in common::all().await {
+        let url = t.url().to_string();
+        let mut servers: Vec<Process> = (0..3)
+            .map(|_| Process::start(&url, &["--stream-lease-s", "3"]))
+            .collect();
+        let bases: Vec<String> = servers.iter().map(|s| s.base.clone()).collect();
+        let mut tally = Tally::default();
+
+        let (status, info) = post_json(
+            &bases[0],
+            "/v1/streams",
+            &json!({"name": "roundrobin", "fps": 60, "points": POINTS,
+                    "chunk_seconds": 0.5, "max_error_mm": 0.5}),
+        )
+        .await;
+        assert_eq!(status, 201, "{}: {info}", t.name);
+        let id = info["id"].as_str().unwrap().to_string();
+
+        // A watcher on the third server sees the frames the first codes.
+        let mut events = reqwest::get(format!("{}/v1/streams/{id}/events", bases[2]))
+            .await
+            .unwrap();
+        assert_eq!(events.status(), 200);
+
+        // Appends of 13 frames, round-robin: every one answered by the owner.
+        let mut sent = 0;
+        let mut i = 0;
+        while sent < BEFORE {
+            let n = 13.min(BEFORE - sent);
+            let (status, r) = append_numbered(&bases[i % 3], &id, sent, n, &frame).await;
+            tally.requests += 1;
+            assert_eq!(
+                status,
+                200,
+                "{}: append through server {}: {r}",
+                t.name,
+                i % 3
+            );
+            tally.ok += 1;
+            sent += n;
+            assert_eq!(r["frames_received"], sent, "{r}");
+            i += 1;
+        }
+        let mut seen = String::new();
+        while !seen.contains("event: frames") {
+            let chunk = tokio::time::timeout(Duration::from_secs(10), events.chunk())
+                .await
+                .expect("the watcher hears of the appends")
+                .unwrap()
+                .expect("the event stream stays open");
+            seen.push_str(&String::from_utf8_lossy(&chunk));
+        }
+        let (_, state) = get_json(&bases[1], &format!("/v1/streams/{id}")).await;
+        assert_eq!(
+            (
+                state["frames_received"].as_u64(),
+                state["frames_committed"].as_u64()
+            ),
+            (Some(BEFORE as u64), Some(120)),
+            "{}: {state}",
+            t.name
+        );
+
+        // The owner dies with 10 frames accepted and not committed.
+        servers[0].kill();
+        let mut at = sent;
+        let lost = loop {
+            let (status, r) = append_numbered(&bases[1 + i % 2], &id, at, 10, &frame).await;
+            tally.requests += 1;
+            i += 1;
+            match status {
+                503 => {
+                    tally.unavailable += 1;
+                    assert!(tally.unavailable < 100, "{}: no takeover: {r}", t.name);
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                }
+                409 => {
+                    // Numbered appends: the new owner says where to send from.
+                    tally.resend += 1;
+                    let msg = r["error"]["message"].as_str().unwrap();
+                    assert!(msg.contains("send from frame 120"), "{msg}");
+                    assert!(msg.contains("10 frames were lost"), "{msg}");
+                    let (_, state) = get_json(&bases[2], &format!("/v1/streams/{id}")).await;
+                    at = state["frames_received"].as_u64().unwrap() as usize;
+                    break state["frames_lost"].as_u64().unwrap();
+                }
+                other => panic!("{}: append after the kill: {other} {r}", t.name),
+            }
+        };
+        assert_eq!(
+            (lost, at),
+            (10, 120),
+            "{}: the lost frames, exactly",
+            t.name
+        );
+
+        // The producer sends them again, and goes on through both servers left.
+        while at < TOTAL {
+            let n = 13.min(TOTAL - at);
+            let (status, r) = append_numbered(&bases[1 + i % 2], &id, at, n, &frame).await;
+            tally.requests += 1;
+            assert_eq!(status, 200, "{}: {r}", t.name);
+            tally.ok += 1;
+            at += n;
+            i += 1;
+        }
+        let (status, take) =
+            post_json(&bases[2], &format!("/v1/streams/{id}/finish"), &json!({})).await;
+        tally.requests += 1;
+        assert_eq!(status, 200, "{}: {take}", t.name);
+        tally.ok += 1;
+        assert_eq!(take["frames"], TOTAL, "{}: {take}", t.name);
+        assert_eq!(take["meta"]["frames_lost"], 10, "{take}");
+        assert_eq!(take["meta"]["handovers"][0]["frame"], 120, "{take}");
+        assert_eq!(take["meta"]["handovers"][0]["frames_lost"], 10, "{take}");
+        eprintln!(
+            "{}: stream through three servers, owner killed: {tally:?}",
+            t.name
+        );
+
+        // The take as sent, within its bound, read from either server left; stats agree.
+        for base in &bases[1..] {
+            let (status, v) = get_json(base, &format!("/v1/sequences/{id}/frames")).await;
+            assert_eq!(status, 200);
+            let got = v["frames"].as_array().unwrap();
+            assert_eq!(got.len(), TOTAL);
+            for (f, row) in got.iter().enumerate() {
+                let want = frame(f);
+                for p in 0..POINTS {
+                    let d: f64 = (0..3)
+                        .map(|k| (row[p][k].as_f64().unwrap() - want[p * 3 + k]).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    assert!(d <= 0.5 + 1e-6, "{}: frame {f} point {p}: {d} mm", t.name);
+                }
+            }
+        }
+        let (_, s1) = get_json(&bases[1], "/v1/stats").await;
+        let (_, s2) = get_json(&bases[2], "/v1/stats").await;
+        assert_eq!(s1, s2, "{}", t.name);
+        drop(servers.remove(0));
+        let (ok, out, err) = common::mocapstore(&["verify", "--database-url", &url]);
+        assert!(ok, "{}: verify: {out}\n{err}", t.name);
+        let r = reqwest::Client::new()
+            .delete(format!("{}/v1/sequences/{id}", bases[1]))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 204);
+        let (status, _) = get_json(&bases[2], &format!("/v1/sequences/{id}")).await;
+        assert_eq!(
+            status, 404,
+            "a take deleted on one server is gone on the others"
+        );
+        drop(servers);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+/// `streamtest --server A,B` spreads each stream's requests over both servers; the one
+/// that did not open a stream forwards its appends to the one that did.
+#[tokio::test(flavor = "multi_thread")]
+async fn streamtest_spreads_its_requests_over_the_servers() {
+    let t = common::sqlite().await;
+    let a = common::start(t.store.clone(), 64 << 20).await;
+    let b = common::start(t.store.clone(), 64 << 20).await;
+    let servers = format!("{},{}", a.base, b.base);
+    let out = tokio::task::spawn_blocking(move || {
+        common::mocapstore(&[
+            "streamtest",
+            "--server",
+            &servers,
+            "--seconds",
+            "4",
+            "--live-seconds",
+            "1",
+            "--points",
+            "8",
+            "--fps",
+            "60",
+        ])
+    })
+    .await
+    .unwrap();
+    assert!(out.0, "{}\n{}", out.1, out.2);
+    assert!(out.1.contains("over 2 servers"), "{}", out.1);
+    let m = common::metrics(&b).await;
+    assert!(
+        m["mocapstore_stream_requests_forwarded_total"] >= 4,
+        "the second server forwarded its share: {m:?}"
+    );
+    let (_, list) = a.get_json("/v1/sequences").await;
+    assert_eq!(
+        list["items"].as_array().unwrap().len(),
+        0,
+        "the streams were deleted after: {list}"
+    );
+    a.stop().await;
+    b.stop().await;
+}

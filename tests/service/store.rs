@@ -2,7 +2,10 @@
 
 use crate::common;
 
-use mocapstore::store::{ChunkRow, Error, NewTake, Store, TakeRow, TakeTotals};
+use mocapstore::store::{
+    ChunkAppend, ChunkRow, Error, NewStream, NewTake, Store, StreamClaim, StreamOwnerRow, TakeRow,
+    TakeTotals,
+};
 
 fn take(id: &str, n: usize) -> NewTake {
     let chunks: Vec<ChunkRow> = (0..n)
@@ -54,6 +57,7 @@ fn take(id: &str, n: usize) -> NewTake {
         errors: None,
         analog: None,
         parameters: None,
+        stream: None,
     }
 }
 
@@ -244,4 +248,87 @@ async fn migration_0005_gives_every_stored_take_a_max_bound() {
     );
     store.close().await;
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A live take's stream rows: one claim wins, and the server that lost the stream can no
+/// longer write it (each write names its owner), the same chunk stored twice is stored once.
+#[tokio::test]
+async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
+    for t in common::all().await {
+        let s = &t.store;
+        let owner = |n: &str| StreamOwnerRow {
+            server: n.into(),
+            url: format!("http://{n}"),
+        };
+        let mut new = take("live", 0);
+        new.row.totals.frames = 0;
+        new.row.live_until = Some(1_000);
+        new.stream = Some(NewStream {
+            owner: owner("a"),
+            state: "{}".into(),
+        });
+        s.insert(&new).await.unwrap();
+        let chunk = take("x", 1).chunks.remove(0);
+        let totals = TakeTotals {
+            frames: 120,
+            ..new.row.totals
+        };
+        let append = |server: &'static str| ChunkAppend {
+            server,
+            live_until: 2_000,
+            frames_received: 130,
+            state: "{\"n\": 1}",
+        };
+        assert!(s
+            .append_chunk("live", &totals, &chunk, &append("a"))
+            .await
+            .unwrap());
+        // Sent again (its answer lost): stored once.
+        assert!(s
+            .append_chunk("live", &totals, &chunk, &append("a"))
+            .await
+            .unwrap());
+        assert_eq!(s.chunk_index("live").await.unwrap().len(), 1, "{}", t.name);
+        let row = s.stream("live").await.unwrap().unwrap();
+        assert_eq!(
+            (row.frames, row.frames_received, row.live_until, row.owner),
+            (120, 130, 2_000, Some(owner("a"))),
+            "{}",
+            t.name
+        );
+        // Before the lease runs out nobody else claims it; after, one claim wins.
+        fn claim(o: &StreamOwnerRow, now: i64) -> StreamClaim<'_> {
+            StreamClaim {
+                owner: o,
+                now,
+                live_until: now + 5_000,
+                frames: 120,
+                frames_received: 130,
+                meta: "{}",
+            }
+        }
+        let (b, c) = (owner("b"), owner("c"));
+        assert!(!s.claim_stream("live", &claim(&b, 1_500)).await.unwrap());
+        assert!(s.claim_stream("live", &claim(&b, 2_500)).await.unwrap());
+        assert!(
+            !s.claim_stream("live", &claim(&c, 2_500)).await.unwrap(),
+            "{}: the row changed (received reset, lease renewed): a second claim loses",
+            t.name
+        );
+        let row = s.stream("live").await.unwrap().unwrap();
+        assert_eq!((row.owner, row.frames_received), (Some(b.clone()), 120));
+        // The old owner is fenced off.
+        assert!(!s.note_received("live", "a", 140, 9_000).await.unwrap());
+        assert!(!s.renew_lease("live", "a", 9_000).await.unwrap());
+        let mut next = chunk.clone();
+        next.idx = 1;
+        next.first_frame = 120;
+        assert!(!s
+            .append_chunk("live", &totals, &next, &append("a"))
+            .await
+            .unwrap());
+        assert!(s.note_received("live", "b", 125, 9_000).await.unwrap());
+        assert_eq!(s.chunk_index("live").await.unwrap().len(), 1, "{}", t.name);
+        t.finish().await;
+    }
 }

@@ -24,6 +24,11 @@
 //! mean bound is then met too) with the residual layer, and checks every chunk on its decoded
 //! output before committing it. `finish` can re-encode the whole take with per-take choice.
 
+mod handover;
+
+use handover::Resumable;
+pub use handover::Route;
+
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -35,7 +40,7 @@ use super::budget::{Holder, Share, Shares};
 use super::choose::{CodecRequest, Decision, Keep};
 use super::prepared::ReadCaches;
 use super::take::{Label, Take, TakeMeta};
-use super::{blocking, Error, Result};
+use super::{blocking, Error, Node, Result};
 use crate::codec::stream::{StreamChunk, StreamEncoder, StreamSpec};
 use crate::codec::{self, Basis, CodecId, ErrorBound, Latency};
 use crate::limits::{
@@ -44,7 +49,7 @@ use crate::limits::{
 };
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
-use crate::store::{BasisRow, ChunkRow, NewTake, Store};
+use crate::store::{BasisRow, ChunkAppend, ChunkRow, NewStream, NewTake, Store};
 
 /// The points of a stream: their names, or just how many.
 #[derive(Debug, Clone, Deserialize)]
@@ -190,6 +195,9 @@ pub struct StreamInfo {
     pub chunk_frames: usize,
     pub frames_received: usize,
     pub frames_committed: usize,
+    /// Frames accepted by a server that stopped before committing them (the stream was
+    /// then taken over by another): not in the take. Their producer may send them again.
+    pub frames_lost: usize,
     pub chunks_committed: usize,
     pub live: bool,
     pub max_mm: f64,
@@ -234,6 +242,9 @@ struct Live {
     basis_id: Option<String>,
     chunk_frames: usize,
     received: usize,
+    /// `received` as the take's row has it (written with each append, for a server that
+    /// takes the stream over to count what was lost).
+    persisted: usize,
     /// Chunks coded but not yet stored because the database is away, oldest first: stored
     /// at the next append, flush or finish once it is back ([`Streams::save`]).
     unsaved: VecDeque<StreamChunk>,
@@ -265,6 +276,7 @@ impl Live {
             chunk_frames: self.chunk_frames,
             frames_received: self.received,
             frames_committed: self.take.frames,
+            frames_lost: self.take.meta.frames_lost,
             chunks_committed: self.encoder.as_ref().map_or(0, StreamEncoder::chunks),
             live: true,
             max_mm: self.take.max_mm,
@@ -333,12 +345,16 @@ pub struct Streams {
     pub lease: Duration,
     /// Set when the server shuts down ([`Streams::stop_watchers`]).
     stopping: watch::Sender<bool>,
+    /// This server, as stream rows name their owner.
+    node: Node,
+    /// Held while a stream is taken over ([`handover`]).
+    taking_over: tokio::sync::Mutex<()>,
 }
 
 impl Streams {
     /// `limits.stream_points` is capped at [`crate::limits::LSDT_MAX_POINTS`]: a stream codes
     /// with an LSDT basis of its layout.
-    pub fn new(mut limits: Limits, lease: Duration) -> Self {
+    pub fn new(mut limits: Limits, lease: Duration, node: Node) -> Self {
         limits.stream_points = limits
             .stream_points
             .min(crate::limits::LSDT_MAX_POINTS as u64);
@@ -350,6 +366,8 @@ impl Streams {
             idle: Duration::from_secs(300),
             lease,
             stopping: watch::Sender::new(false),
+            node,
+            taking_over: tokio::sync::Mutex::new(()),
         }
     }
 
@@ -415,15 +433,9 @@ impl Streams {
         self.open.lock().expect("streams lock").get(id).cloned()
     }
 
-    /// Open a stream for `holder`: the take exists (with no frames) from now on.
-    pub async fn open(
-        &self,
-        store: &Store,
-        req: OpenRequest,
-        holder: &Holder,
-    ) -> Result<StreamInfo> {
-        let plan = Plan::of(req, &self.limits)?;
-        // A place among the caller's and the server's open streams, held until it closes.
+    /// A place among `holder`'s and the server's open streams, held until the stream
+    /// closes (or moves to another server).
+    fn places(&self, holder: &Holder) -> Result<(OwnedSemaphorePermit, Share)> {
         let share = self.by_caller.take(holder).ok_or_else(|| {
             Error::Busy(format!(
                 "this caller has {} streams open, the most one caller may have at once; \
@@ -437,6 +449,26 @@ impl Streams {
                 self.limits.open_streams
             ))
         })?;
+        Ok((slot, share))
+    }
+
+    /// Drop a stream this server no longer codes (another server took it over): its
+    /// requests go to the new owner from now on.
+    fn let_go(&self, id: &str) {
+        if self.open.lock().expect("streams lock").remove(id).is_some() {
+            tracing::warn!(stream = id, "another server took this stream over");
+        }
+    }
+
+    /// Open a stream for `holder`: the take exists (with no frames) from now on.
+    pub async fn open(
+        &self,
+        store: &Store,
+        req: OpenRequest,
+        holder: &Holder,
+    ) -> Result<StreamInfo> {
+        let plan = Plan::of(req, &self.limits)?;
+        let (slot, share) = self.places(holder)?;
         let points = plan.names.len();
         let shape = Motion::new(
             plan.fps,
@@ -482,6 +514,8 @@ impl Streams {
             decision,
             decoded_blake3: None,
             interrupted: None,
+            frames_lost: 0,
+            handovers: Vec::new(),
             reencoded_from: None,
             events: Vec::new(),
             first_frame: None,
@@ -500,6 +534,11 @@ impl Streams {
         take.header = encoder.live_header().to_bytes();
         take.stored_bytes = take.header.len() as u64;
         take.live_until = Some(self.lease_end());
+        let state = Resumable {
+            chunk_frames,
+            reencode_on_finish: plan.reencode_on_finish,
+            errors: None,
+        };
         store
             .insert(&NewTake {
                 row: take.to_row()?,
@@ -509,6 +548,10 @@ impl Streams {
                 errors: None,
                 analog: None,
                 parameters: None,
+                stream: Some(NewStream {
+                    owner: self.owner_row(),
+                    state: state.to_text()?,
+                }),
             })
             .await?;
         let live = Live {
@@ -517,6 +560,7 @@ impl Streams {
             basis_id: basis.map(|b| b.id()),
             chunk_frames,
             received: 0,
+            persisted: 0,
             unsaved: VecDeque::new(),
             failed: None,
             last_activity: Instant::now(),
@@ -656,9 +700,15 @@ impl Streams {
             // retries: the frames the stream has are dropped, a gap is refused.
             let have = live.received;
             if first > have {
+                let lost = match live.take.meta.frames_lost {
+                    0 => String::new(),
+                    n => {
+                        format!(" ({n} frames were lost when the server coding the stream stopped)")
+                    }
+                };
                 return Err(Error::Conflict(format!(
                     "stream {id} has {have} frames; frames {have}..{first} were never \
-                     received: send from frame {have}"
+                     received{lost}: send from frame {have}"
                 )));
             }
             let skip = (have - first).min(frames.len() / w);
@@ -680,7 +730,11 @@ impl Streams {
                 a.extend_from_slice(&frames);
             }
         }
-        let r = self.code_and_commit(store, &mut live, frames, flush).await;
+        let mut r = self.code_and_commit(store, &mut live, frames, flush).await;
+        if r.is_ok() && live.persisted != live.received {
+            // No chunk carried the count: write it, for a server that takes over.
+            r = self.note_received(store, &mut live).await;
+        }
         caches.forget(id);
         match r {
             Ok(()) => {}
@@ -691,10 +745,41 @@ impl Streams {
             }
             Err(e) => {
                 live.failed = Some(e.to_string());
+                if matches!(e, Error::Conflict(_)) {
+                    self.let_go(id);
+                }
                 return Err(e);
             }
         }
         Ok(live.info())
+    }
+
+    /// Write how many frames the producer has had accepted, renewing the lease: a
+    /// conflict if another server took the stream over meanwhile.
+    async fn note_received(&self, store: &Store, live: &mut Live) -> Result<()> {
+        let received = live.received;
+        if !store
+            .note_received(
+                &live.take.id,
+                &self.node.id,
+                received as i64,
+                self.lease_end(),
+            )
+            .await?
+        {
+            return Err(Self::lost(&live.take.id));
+        }
+        live.persisted = received;
+        Ok(())
+    }
+
+    /// Why this server may no longer write a stream's take.
+    fn lost(id: &str) -> Error {
+        Error::Conflict(format!(
+            "stream {id} is no longer coded by this server: it was finished, deleted, or \
+             taken over by another server after this one could not renew its lease; ask the \
+             stream where it is (GET /v1/streams/{id}) and send from its frames_received"
+        ))
     }
 
     /// Store the chunks waiting for the database, in order; the first that cannot be stored
@@ -751,17 +836,26 @@ impl Streams {
             crc32c: chunk.meta.crc32c,
             payload: chunk.payload.clone(),
         };
+        let state = Resumable {
+            chunk_frames: live.chunk_frames,
+            reencode_on_finish: live.archive.is_some(),
+            errors: Some(chunk.running().clone()),
+        }
+        .to_text()?;
+        let append = ChunkAppend {
+            server: &self.node.id,
+            live_until: self.lease_end(),
+            frames_received: live.received as i64,
+            state: &state,
+        };
         if !store
-            .append_chunk(&take.id, &take.totals(), &chunk_row, self.lease_end())
+            .append_chunk(&take.id, &take.totals(), &chunk_row, &append)
             .await?
         {
-            return Err(Error::Conflict(format!(
-                "take {} is no longer live (deleted, or closed by another server after its \
-                 lease ran out)",
-                live.take.id
-            )));
+            return Err(Self::lost(&live.take.id));
         }
         live.take = take;
+        live.persisted = live.received;
         Ok(())
     }
 
@@ -842,9 +936,23 @@ impl Streams {
                 if let Err(err) = self.finish(store, caches, &id).await {
                     tracing::warn!(stream = %id, error = %err, "finishing an idle stream failed");
                 }
-            } else if let Err(err) = store.renew_lease(&id, self.lease_end()).await {
-                tracing::warn!(stream = %id, error = %err, "renewing a stream's lease failed");
-            } else if let Ok(mut live) = e.try_lock() {
+                continue;
+            }
+            match store
+                .renew_lease(&id, &self.node.id, self.lease_end())
+                .await
+            {
+                Err(err) => {
+                    tracing::warn!(stream = %id, error = %err, "renewing a stream's lease failed");
+                    continue;
+                }
+                Ok(false) => {
+                    self.let_go(&id);
+                    continue;
+                }
+                Ok(true) => {}
+            }
+            if let Ok(mut live) = e.try_lock() {
                 // The database is back: store what a quiet stream held meanwhile.
                 if !live.unsaved.is_empty() {
                     if let Err(err) = self.save(store, &mut live).await {
@@ -859,12 +967,15 @@ impl Streams {
         }
     }
 
-    /// Close every live take whose lease has run out and that no stream here codes: its
-    /// server stopped mid-stream. What it committed stays, indexed from its chunk rows;
-    /// frames that were pending on that server are lost, and the take says so.
+    /// Close every live take whose lease ran out a lease ago or more and that no stream
+    /// here codes: its server stopped mid-stream, and no producer came back to go on
+    /// through another server within that lease ([`handover`]). What it committed stays,
+    /// indexed from its chunk rows; frames that were pending on that server are lost, and
+    /// the take says so and how many.
     pub async fn close_orphans(&self, store: &Store, caches: &ReadCaches) -> Result<usize> {
         let mut closed = 0;
-        for id in store.expired_live(super::now_ms()).await? {
+        let before = super::now_ms() - self.lease.as_millis() as i64;
+        for id in store.expired_live(before).await? {
             if self.entry(&id).is_some() {
                 continue;
             }
@@ -878,7 +989,9 @@ impl Streams {
                 }
             };
             let header = super::fetch::header_from_index(&take, &store.chunk_index(&id).await?)?;
+            let received = store.stream(&id).await?.map_or(0, |s| s.frames_received);
             let mut meta = take.meta.clone();
+            meta.frames_lost += (received - take.frames as i64).max(0) as usize;
             meta.interrupted = Some(
                 "the server coding this stream stopped before it finished; the take keeps the \
                  chunks it had committed"
