@@ -73,7 +73,7 @@ impl From<service::Error> for ApiError {
             E::OutOfRange(_) => (StatusCode::RANGE_NOT_SATISFIABLE, "out_of_range"),
             E::Unsatisfiable(_) => (StatusCode::CONFLICT, "unsatisfiable"),
             E::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
-            E::Busy(_) => return ApiError::busy(e.to_string()),
+            E::Busy(_) | E::Moved(_) => return ApiError::busy(e.to_string()),
             E::Unauthorized(_) => return ApiError::unauthorized(e.to_string()),
             E::Forbidden(_) => (StatusCode::FORBIDDEN, "forbidden"),
             E::Codec(crate::codec::Error::Invalid(_)) => (StatusCode::BAD_REQUEST, "bad_request"),

@@ -22,9 +22,11 @@ pub const FORWARDED: HeaderName = HeaderName::from_static("x-mocapstore-forwarde
 /// taken for stopped (its lease then decides).
 pub const CONNECT_TIMEOUT: Duration = Duration::from_secs(2);
 
-/// How long a server waits for the head of the owner's answer (an append codes a chunk or
-/// two; a watch answers at once).
-pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(30);
+/// How long a server waits for the head of the owner's answer: long, since a finish may
+/// re-encode the whole take, and a slow success answered 503 would be sent again (an append
+/// codes a chunk or two; a watch answers at once). Only a connection that cannot be made
+/// ([`CONNECT_TIMEOUT`]) says the owner stopped; its lease then decides.
+pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(600);
 
 /// The request headers passed on: who the caller is, what the body is, and the name and
 /// origin the caller used (the owner checks a browser's write against them as this server
@@ -37,12 +39,15 @@ const PASSED: [HeaderName; 5] = [
     header::ORIGIN,
 ];
 
-/// Answer headers not passed back: they describe the hop, not the answer.
-const HOP: [HeaderName; 4] = [
+/// Answer headers not passed back: they describe the hop, not the answer (RFC 9110
+/// §7.6.1), with any the answer's `Connection` names.
+const HOP: [HeaderName; 6] = [
     header::CONNECTION,
     header::TRANSFER_ENCODING,
     header::UPGRADE,
     header::TE,
+    header::TRAILER,
+    HeaderName::from_static("keep-alive"),
 ];
 
 /// A pooled HTTP/1.1 client to the other servers.
@@ -101,7 +106,15 @@ impl Forwarder {
             .map_err(|_| format!("no answer from {base} within {ANSWER_TIMEOUT:?}"))?
             .map_err(|e| format!("{base}: {e}"))?;
         let (mut parts, body) = answer.into_parts();
-        for name in HOP {
+        let named: Vec<HeaderName> = parts
+            .headers
+            .get_all(header::CONNECTION)
+            .iter()
+            .filter_map(|v| v.to_str().ok())
+            .flat_map(|v| v.split(','))
+            .filter_map(|n| HeaderName::from_bytes(n.trim().as_bytes()).ok())
+            .collect();
+        for name in HOP.into_iter().chain(named) {
             parts.headers.remove(name);
         }
         Ok(Response::from_parts(parts, Body::new(body)))

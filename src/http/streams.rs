@@ -390,7 +390,18 @@ pub async fn events(
         body: Bytes::new(),
     };
     if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
-        return Ok(r);
+        // Passed back as it comes, until this server shuts down (a watch here would end
+        // then too; one held open would keep the server from stopping).
+        let mut stopping = state.streams.stopping();
+        let (parts, body) = r.into_parts();
+        let stopped = async move {
+            let _ = stopping.wait_for(|s| *s).await;
+        };
+        let body = body.into_data_stream().take_until(Box::pin(stopped));
+        return Ok(Response::from_parts(
+            parts,
+            axum::body::Body::from_stream(body),
+        ));
     }
     let mut watch = state.streams.watch(&state.store, &id, &holder).await?;
     let hello = json_event(

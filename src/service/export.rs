@@ -326,7 +326,7 @@ const METHOD: CompressionMethod = CompressionMethod::Deflated;
 fn skips(e: &Error) -> bool {
     match e {
         Error::Store(crate::store::Error::Corrupt(_)) => true,
-        Error::Store(_) | Error::Internal(_) | Error::Busy(_) => false,
+        Error::Store(_) | Error::Internal(_) | Error::Busy(_) | Error::Moved(_) => false,
         _ => true,
     }
 }

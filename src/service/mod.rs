@@ -73,6 +73,10 @@ pub enum Error {
     /// The server is at a capacity limit (open streams); the same request may succeed later.
     #[error("{0}")]
     Busy(String),
+    /// A live stream this server coded was taken over by another meanwhile (this one could
+    /// not renew its lease): the same request sent again goes to the new owner.
+    #[error("{0}")]
+    Moved(String),
     #[error("codec: {0}")]
     Codec(#[from] codec::Error),
     #[error("store: {0}")]

@@ -404,19 +404,39 @@ impl Store {
         })
     }
 
-    /// Close a live take: its final header and meta, and no lease. False if it was not live
-    /// (another server closed it first).
-    pub async fn close_live(&self, id: &str, header: &[u8], meta: &str) -> Result<bool> {
+    /// Close a live take: its final header and meta, and no lease, if `by` may (see
+    /// [`Closer`]). False if not: it was closed, taken over or changed meanwhile.
+    pub async fn close_live(
+        &self,
+        id: &str,
+        header: &[u8],
+        meta: &str,
+        by: Closer<'_>,
+    ) -> Result<bool> {
         dispatch!(self, pool => {
-            let r = sqlx::query(
-                "UPDATE sequences SET header = $1, meta = $2, live_until = NULL \
-                 WHERE id = $3 AND live_until IS NOT NULL",
-            )
-            .bind(header)
-            .bind(meta)
-            .bind(id)
-            .execute(pool)
-            .await?;
+            const SET: &str = "UPDATE sequences SET header = $1, meta = $2, live_until = NULL \
+                 WHERE id = $3 AND live_until IS NOT NULL";
+            let r = match by {
+                Closer::Owner(server) => {
+                    sqlx::query(&format!("{SET} AND stream_server = $4"))
+                        .bind(header)
+                        .bind(meta)
+                        .bind(id)
+                        .bind(server)
+                        .execute(pool)
+                        .await?
+                }
+                Closer::Orphan { before, frames } => {
+                    sqlx::query(&format!("{SET} AND live_until < $4 AND frames = $5"))
+                        .bind(header)
+                        .bind(meta)
+                        .bind(id)
+                        .bind(before)
+                        .bind(frames)
+                        .execute(pool)
+                        .await?
+                }
+            };
             Ok(r.rows_affected() > 0)
         })
     }
@@ -712,7 +732,7 @@ mod skeletons;
 mod streams;
 pub use jobs::JobRow;
 pub use skeletons::SkeletonRow;
-pub use streams::{ChunkAppend, NewStream, StreamClaim, StreamOwnerRow, StreamRow};
+pub use streams::{ChunkAppend, Closer, NewStream, StreamClaim, StreamOwnerRow, StreamRow};
 mod access;
 pub use access::{AuditRow, TokenRow};
 

@@ -39,6 +39,16 @@ pub struct NewStream {
     pub state: String,
 }
 
+/// Who closes a live take ([`Store::close_live`]), and so on what condition.
+#[derive(Debug, Clone, Copy)]
+pub enum Closer<'a> {
+    /// Its owner, finishing it: only while it still owns it.
+    Owner(&'a str),
+    /// Any server, for a take whose server stopped: only while its lease is still past
+    /// `before` and it still has the `frames` read (nobody took it over meanwhile).
+    Orphan { before: i64, frames: i64 },
+}
+
 /// A live take's stream as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StreamRow {

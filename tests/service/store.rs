@@ -3,8 +3,8 @@
 use crate::common;
 
 use mocapstore::store::{
-    ChunkAppend, ChunkRow, Error, NewStream, NewTake, Store, StreamClaim, StreamOwnerRow, TakeRow,
-    TakeTotals,
+    ChunkAppend, ChunkRow, Closer, Error, NewStream, NewTake, Store, StreamClaim, StreamOwnerRow,
+    TakeRow, TakeTotals,
 };
 
 fn take(id: &str, n: usize) -> NewTake {
@@ -329,6 +329,18 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
             .unwrap());
         assert!(s.note_received("live", "b", 125, 9_000).await.unwrap());
         assert_eq!(s.chunk_index("live").await.unwrap().len(), 1, "{}", t.name);
+        // Nor may it close the take; an orphan close needs the lease run out and the
+        // frames it read.
+        let close = |by| s.close_live("live", &[9], "{}", by);
+        assert!(!close(Closer::Owner("a")).await.unwrap(), "{}", t.name);
+        let orphan = |before, frames| Closer::Orphan { before, frames };
+        assert!(
+            !close(orphan(8_000, 120)).await.unwrap(),
+            "lease still runs"
+        );
+        assert!(!close(orphan(10_000, 60)).await.unwrap(), "frames changed");
+        assert!(close(Closer::Owner("b")).await.unwrap());
+        assert!(s.stream("live").await.unwrap().is_none(), "closed");
         t.finish().await;
     }
 }

@@ -17,16 +17,22 @@
 //! every client, which a balancer in front of private addresses does not give.
 //!
 //! When the owner stops (kill -9, a crash, a machine gone), its lease (`live_until`, renewed
-//! by every append and by maintenance) runs out; the next request for the stream, through
-//! any server, takes it over ([`Streams::take_over`]): the new owner claims the row (one
-//! conditional update: one server wins), goes on after the last committed chunk with a
-//! coder opened afresh (its first chunk intra, as every chunk decodes alone), and counts the
-//! frames the stopped server had accepted but never committed (`frames_received`, written
-//! with every append, minus the committed frames): they are lost, recorded on the take
-//! (`meta.frames_lost`, `meta.handovers`) and in every answer (`frames_lost`), and a
-//! producer that numbers its appends is told to send again from the first of them.
-//! A server that was only cut off (not dead) past its lease finds its writes refused (each
-//! names its owner) and lets the stream go.
+//! by every append and by maintenance) runs out; the next request for the stream that finds
+//! it unreachable takes it over ([`Streams::owner_unreachable`], [`Streams::take_over`]): the
+//! new owner claims the row (one conditional update: one server wins), goes on after the
+//! last committed chunk with a coder opened afresh (its first chunk intra, as every chunk
+//! decodes alone), and counts the frames the stopped server had accepted but never
+//! committed (`frames_received`, written with every append, minus the committed frames):
+//! they are lost, recorded on the take (`meta.frames_lost`, `meta.handovers`) and in every
+//! answer (`frames_lost`), and a producer that numbers its appends is told to send again
+//! from the first of them.
+//!
+//! A server that answers is never taken over, however late its lease: it may only have
+//! lost the database for a while, holding frames it answered for. It, in turn, takes no
+//! frame once the lease it last wrote is about to run out until it has written it again
+//! ([`Streams::append`]), so what it answered for is either stored or counted. Every write
+//! an owner makes names it: one that lost its stream anyway (cut off from the other servers
+//! as well as the database) is refused, and lets the stream go ([`crate::service::Error::Moved`]).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -55,7 +61,7 @@ pub enum Route {
 }
 
 /// Chunks absorbed per blocking call when a stream is taken over.
-const ABSORB_BATCH: i64 = 64;
+const ABSORB_BATCH: usize = 64;
 
 /// What a server taking a stream over needs beyond the take as stored, written with the
 /// take when the stream opens and with every chunk (`stream_state`).
@@ -84,8 +90,11 @@ impl Streams {
         }
     }
 
-    /// Where a request for stream `id` is answered, taking the stream over first if the
-    /// server that coded it stopped (its lease ran out). `forwarded`: the request comes
+    /// Where a request for stream `id` is answered. A stream another server codes is
+    /// answered there ([`Route::Owner`]), even past its lease: that server may be alive and
+    /// only slow to reach the database, holding frames it answered for. It is taken over
+    /// only when it cannot be reached ([`Streams::owner_unreachable`]), or when its owner
+    /// was an earlier run of this server (the same address). `forwarded`: the request comes
     /// from another server, which found this one named as the owner; it is never sent on.
     pub async fn route(
         &self,
@@ -102,30 +111,34 @@ impl Streams {
             let Some(row) = store.stream(id).await? else {
                 return Ok(Route::Here);
             };
-            let mine = row.owner.as_ref().is_some_and(|o| o.server == self.node.id);
-            if mine || row.live_until < now_ms() {
-                if self.take_over(store, id, &row, holder).await? {
-                    return Ok(Route::Here);
+            let left_ms = row.live_until - now_ms();
+            match &row.owner {
+                // Ours, though not open here (a close or a claim that did not complete).
+                Some(o) if o.server == self.node.id => {}
+                // An earlier run of this server, at its address: it stopped.
+                Some(o) if o.url == self.node.url && left_ms < 0 => {}
+                Some(o) if o.url == self.node.url => return Err(Self::wait_for_lease(id, left_ms)),
+                Some(o) if !forwarded => return Ok(Route::Owner { url: o.url.clone() }),
+                Some(_) => {
+                    return Err(Error::Busy(format!(
+                        "stream {id} is moving between servers; retry"
+                    )))
                 }
-                continue;
-            }
-            return match row.owner {
-                Some(o) if !forwarded => Ok(Route::Owner { url: o.url }),
-                Some(_) => Err(Error::Busy(format!(
-                    "stream {id} is moving between servers; retry"
-                ))),
                 // Opened by a server from before streams had owners.
-                None => Err(Self::not_open(store, id).await),
-            };
+                None => return Err(Self::not_open(store, id).await),
+            }
+            if self.take_over(store, id, &row, holder).await? {
+                return Ok(Route::Here);
+            }
         }
         Err(Error::Busy(format!(
             "stream {id} is being taken over by another server; retry"
         )))
     }
 
-    /// The owner at `url` did not answer a forwarded request for stream `id`: if its lease
-    /// has run out, this server takes the stream over ([`Route::Here`]); if not, the
-    /// caller is told when to retry.
+    /// The server at `url`, named as the owner of stream `id`, could not be reached: if
+    /// its lease has run out (it stopped), this server takes the stream over
+    /// ([`Route::Here`]); if not, the caller is told when to retry.
     pub async fn owner_unreachable(
         &self,
         store: &Store,
@@ -136,20 +149,39 @@ impl Streams {
         let Some(row) = store.stream(id).await? else {
             return Ok(Route::Here);
         };
-        let left_ms = row.live_until - now_ms();
-        if left_ms < 0 {
-            return self.route(store, id, holder, true).await;
+        match &row.owner {
+            // Moved meanwhile: ask again.
+            Some(o) if o.url != url => {
+                return Err(Error::Busy(format!(
+                    "stream {id} is moving between servers; retry"
+                )))
+            }
+            _ => {}
         }
-        tracing::warn!(
-            stream = id,
-            owner = url,
-            "the server coding a stream does not answer"
-        );
+        let left_ms = row.live_until - now_ms();
+        if left_ms >= 0 {
+            tracing::warn!(
+                stream = id,
+                owner = url,
+                "the server coding a stream does not answer"
+            );
+            return Err(Self::wait_for_lease(id, left_ms));
+        }
+        if self.take_over(store, id, &row, holder).await? {
+            return Ok(Route::Here);
+        }
         Err(Error::Busy(format!(
-            "the server coding stream {id} ({url}) does not answer; if it stopped, the next \
-             request after its lease runs out (in {} s) takes the stream over",
-            left_ms / 1000 + 1
+            "stream {id} is being taken over by another server; retry"
         )))
+    }
+
+    /// A stream whose server does not answer, its lease running `left_ms` more.
+    fn wait_for_lease(id: &str, left_ms: i64) -> Error {
+        Error::Busy(format!(
+            "the server coding stream {id} does not answer; if it stopped, the next request \
+             after its lease runs out (in {} s) takes the stream over",
+            left_ms / 1000 + 1
+        ))
     }
 
     /// Take stream `id` over from the server that stopped coding it (as `row` was read):
@@ -207,23 +239,33 @@ impl Streams {
             };
             StreamEncoder::resume(codec, &spec, &live_header, errors)
         })
-        .await??;
+        .await?
+        .map_err(|e| Error::Corrupt(format!("stream {id} cannot go on: {e}")))?;
         // The committed chunks, decoded for the take's digest, a batch at a time.
         let mut next = 0;
-        while (next as usize) < chunks.len() {
-            let rows = store.chunks(id, next, next + ABSORB_BATCH).await?;
-            if rows.is_empty() {
-                return Err(Error::Corrupt(format!("stream {id}: chunk {next} missing")));
+        while next < chunks.len() {
+            let end = (next + ABSORB_BATCH).min(chunks.len());
+            let rows = store.chunks(id, next as i64, end as i64).await?;
+            let metas = chunks[next..end].to_vec();
+            let same = rows.len() == metas.len()
+                && rows.iter().zip(&metas).enumerate().all(|(k, (r, m))| {
+                    r.idx == (next + k) as i64
+                        && r.first_frame == i64::from(m.first_frame)
+                        && r.crc32c == m.crc32c
+                });
+            if !same {
+                // The chunks changed while they were read (committed, deleted): read again.
+                return Ok(false);
             }
-            let metas = chunks[next as usize..next as usize + rows.len()].to_vec();
-            next += rows.len() as i64;
+            next = end;
             encoder = blocking(move || {
                 for (meta, r) in metas.into_iter().zip(&rows) {
                     encoder.absorb(meta, &r.payload)?;
                 }
                 Ok::<_, crate::codec::Error>(encoder)
             })
-            .await??;
+            .await?
+            .map_err(|e| Error::Corrupt(format!("stream {id}: a stored chunk: {e}")))?;
         }
         let committed = encoder.committed();
         if committed.frames as i64 != row.frames {
@@ -233,12 +275,17 @@ impl Streams {
         let lost = (row.frames_received - row.frames).max(0) as usize;
         let now = now_ms();
         let mut meta = take.meta.clone();
-        meta.frames_lost += lost;
-        meta.handovers.push(StreamHandover {
-            frame: committed.frames,
-            frames_lost: lost,
-            at_ms: now,
-        });
+        // Taken back by this very process (a close or a claim that did not complete):
+        // not a handover unless frames were lost.
+        let ours = row.owner.as_ref().is_some_and(|o| o.server == self.node.id);
+        if lost > 0 || !ours {
+            meta.frames_lost += lost;
+            meta.handovers.push(StreamHandover {
+                frame: committed.frames,
+                frames_lost: lost,
+                at_ms: now,
+            });
+        }
         let owner = self.owner_row();
         let live_until = self.lease_end();
         let claimed = store
@@ -263,11 +310,14 @@ impl Streams {
             frames_lost = lost,
             "took over a stream whose server stopped"
         );
-        let mut warnings = vec![format!(
-            "taken over at frame {} by another server after the one coding it stopped; {lost} \
-             frames it had accepted were never committed",
-            committed.frames
-        )];
+        let mut warnings = Vec::new();
+        if !ours {
+            warnings.push(format!(
+                "taken over at frame {} by another server after the one coding it stopped; \
+                 {lost} frames it had accepted were never committed",
+                committed.frames
+            ));
+        }
         if state.reencode_on_finish {
             warnings.push(
                 "re-encoding on finish dropped: the frames as sent before the handover were \
@@ -285,6 +335,7 @@ impl Streams {
             chunk_frames,
             received: committed.frames,
             persisted: committed.frames,
+            lease_until: live_until,
             unsaved: Default::default(),
             failed: None,
             last_activity: Instant::now(),

@@ -49,7 +49,7 @@ use crate::limits::{
 };
 use crate::motion::units::{parse_unit, Unit, UnitSource};
 use crate::motion::Motion;
-use crate::store::{BasisRow, ChunkAppend, ChunkRow, NewStream, NewTake, Store};
+use crate::store::{BasisRow, ChunkAppend, ChunkRow, Closer, NewStream, NewTake, Store};
 
 /// The points of a stream: their names, or just how many.
 #[derive(Debug, Clone, Deserialize)]
@@ -245,6 +245,9 @@ struct Live {
     /// `received` as the take's row has it (written with each append, for a server that
     /// takes the stream over to count what was lost).
     persisted: usize,
+    /// The end of the lease this server last wrote (ms since the epoch): past it, another
+    /// server may take the stream over.
+    lease_until: i64,
     /// Chunks coded but not yet stored because the database is away, oldest first: stored
     /// at the next append, flush or finish once it is back ([`Streams::save`]).
     unsaved: VecDeque<StreamChunk>,
@@ -324,6 +327,10 @@ impl Live {
 }
 
 type Entry = Arc<tokio::sync::Mutex<Live>>;
+
+/// How long before the lease it last wrote runs out a server writes it again before it
+/// takes more frames ([`Streams::append`]).
+const LEASE_MARGIN_MS: i64 = 1_000;
 
 /// Whether `e` is the database being away (worth holding on and trying again), not a fault.
 fn unavailable(e: &Error) -> bool {
@@ -533,7 +540,8 @@ impl Streams {
         );
         take.header = encoder.live_header().to_bytes();
         take.stored_bytes = take.header.len() as u64;
-        take.live_until = Some(self.lease_end());
+        let take_lease = self.lease_end();
+        take.live_until = Some(take_lease);
         let state = Resumable {
             chunk_frames,
             reencode_on_finish: plan.reencode_on_finish,
@@ -561,6 +569,7 @@ impl Streams {
             chunk_frames,
             received: 0,
             persisted: 0,
+            lease_until: take_lease,
             unsaved: VecDeque::new(),
             failed: None,
             last_activity: Instant::now(),
@@ -620,6 +629,12 @@ impl Streams {
     /// End every watch: the server is shutting down, and open watches would hold it.
     pub fn stop_watchers(&self) {
         self.stopping.send_replace(true);
+    }
+
+    /// Turns true when the server shuts down ([`Streams::stop_watchers`]): what a watch
+    /// forwarded to another server ends on.
+    pub fn stopping(&self) -> watch::Receiver<bool> {
+        self.stopping.subscribe()
     }
 
     /// Why a stream id is not open here: finished or coded elsewhere (409), or unknown (404).
@@ -689,10 +704,22 @@ impl Streams {
             )));
         }
         // While the database is away, coded chunks wait in memory; past a bound the stream
-        // takes no more frames until they are stored.
+        // takes no more frames until they are stored. And once the lease this server last
+        // wrote is about to run out, another server may take the stream over: no frame is
+        // taken before the lease is written again (else frames answered for could be lost
+        // uncounted).
         let held: usize = live.unsaved.iter().map(|c| c.payload.len()).sum();
-        if held > STREAM_UNSAVED_BYTES {
-            self.save(store, &mut live).await?;
+        if held > STREAM_UNSAVED_BYTES || super::now_ms() + LEASE_MARGIN_MS >= live.lease_until {
+            let r = match self.save(store, &mut live).await {
+                Ok(()) => self.note_received(store, &mut live).await,
+                Err(e) => Err(e),
+            };
+            if let Err(e) = r {
+                if matches!(e, Error::Moved(_)) {
+                    self.let_go(id);
+                }
+                return Err(e);
+            }
         }
         let mut frames = frames;
         if let Some(first) = first {
@@ -743,42 +770,41 @@ impl Streams {
             Err(e) if unavailable(&e) => {
                 tracing::warn!(stream = id, error = %e, held = live.unsaved.len(), "holding a stream's chunks until the database is back");
             }
+            Err(e @ Error::Moved(_)) => {
+                self.let_go(id);
+                return Err(e);
+            }
             Err(e) => {
                 live.failed = Some(e.to_string());
-                if matches!(e, Error::Conflict(_)) {
-                    self.let_go(id);
-                }
                 return Err(e);
             }
         }
         Ok(live.info())
     }
 
-    /// Write how many frames the producer has had accepted, renewing the lease: a
-    /// conflict if another server took the stream over meanwhile.
+    /// Write how many frames the producer has had accepted, renewing the lease:
+    /// [`Error::Moved`] if another server took the stream over meanwhile.
     async fn note_received(&self, store: &Store, live: &mut Live) -> Result<()> {
         let received = live.received;
+        let until = self.lease_end();
         if !store
-            .note_received(
-                &live.take.id,
-                &self.node.id,
-                received as i64,
-                self.lease_end(),
-            )
+            .note_received(&live.take.id, &self.node.id, received as i64, until)
             .await?
         {
             return Err(Self::lost(&live.take.id));
         }
         live.persisted = received;
+        live.lease_until = until;
         Ok(())
     }
 
-    /// Why this server may no longer write a stream's take.
+    /// Why this server may no longer write a stream's take: another server took it over
+    /// (or it was finished or deleted meanwhile); the same request sent again is routed to
+    /// wherever it is now.
     fn lost(id: &str) -> Error {
-        Error::Conflict(format!(
-            "stream {id} is no longer coded by this server: it was finished, deleted, or \
-             taken over by another server after this one could not renew its lease; ask the \
-             stream where it is (GET /v1/streams/{id}) and send from its frames_received"
+        Error::Moved(format!(
+            "stream {id} is no longer coded by this server (another server took it over, or \
+             it was finished or deleted); send the request again"
         ))
     }
 
@@ -842,9 +868,10 @@ impl Streams {
             errors: Some(chunk.running().clone()),
         }
         .to_text()?;
+        let until = self.lease_end();
         let append = ChunkAppend {
             server: &self.node.id,
-            live_until: self.lease_end(),
+            live_until: until,
             frames_received: live.received as i64,
             state: &state,
         };
@@ -856,6 +883,7 @@ impl Streams {
         }
         live.take = take;
         live.persisted = live.received;
+        live.lease_until = until;
         Ok(())
     }
 
@@ -876,6 +904,11 @@ impl Streams {
                 Ok(()) => {}
                 // Not finished: the stream stays open, its chunks held, for a finish later.
                 Err(e) if unavailable(&e) => return Err(e),
+                // Another server codes it now: the finish is sent there.
+                Err(e @ Error::Moved(_)) => {
+                    self.let_go(id);
+                    return Err(e);
+                }
                 Err(e) => {
                     tracing::warn!(stream = id, error = %e, "pending frames of a finished stream were lost");
                     live.warnings
@@ -883,7 +916,6 @@ impl Streams {
                 }
             }
         }
-        self.open.lock().expect("streams lock").remove(id);
         let encoder = live.encoder()?;
         let (closed, digest) = (encoder.closed_header(), encoder.decoded_digest());
         // The take as this stream closes it (what the store holds unless another server
@@ -893,18 +925,32 @@ impl Streams {
         take.meta.warnings.extend(live.warnings.iter().cloned());
         take.header = closed.to_bytes();
         take.live_until = None;
-        if !store
-            .close_live(id, &take.header, &meta_text(id, &take.meta)?)
-            .await?
-        {
-            // Closed from its chunk rows by another server after the lease ran out (or
-            // deleted): what it stored is what was committed, the same chunks.
+        let closed = store
+            .close_live(
+                id,
+                &take.header,
+                &meta_text(id, &take.meta)?,
+                Closer::Owner(&self.node.id),
+            )
+            .await?;
+        // Closed (or not ours to close): no longer open here. A close that failed (the
+        // database away) leaves it open, for the finish to be sent again.
+        self.open.lock().expect("streams lock").remove(id);
+        caches.forget(id);
+        if !closed {
+            if store.stream(id).await?.is_some() {
+                // Taken over by another server (this one could not renew its lease): the
+                // finish is sent there.
+                return Err(Self::lost(id));
+            }
+            // Closed from its chunk rows by another server after the lease ran out, or
+            // deleted: what it stored is what was committed, the same chunks.
             tracing::warn!(
                 stream = id,
                 "stream was closed elsewhere before it finished"
             );
+            return super::fetch::take(store, id).await;
         }
-        caches.forget(id);
         if let Some(frames) = live.archive.take().filter(|_| take.frames > 0) {
             let committed = take.frames * take.points * 3;
             if frames.len() >= committed {
@@ -926,22 +972,21 @@ impl Streams {
             .iter()
             .map(|(k, v)| (k.clone(), v.clone()))
             .collect();
+        // Leases first: finishing an idle stream may take a while (re-encoding), and must
+        // not let the others' leases run out.
+        let mut idle = Vec::new();
         for (id, e) in entries {
             // A stream busy with a request renews its lease by committing.
-            let idle = match e.try_lock() {
-                Ok(l) => l.last_activity.elapsed() > self.idle,
-                Err(_) => continue,
-            };
-            if idle {
-                if let Err(err) = self.finish(store, caches, &id).await {
-                    tracing::warn!(stream = %id, error = %err, "finishing an idle stream failed");
+            match e.try_lock() {
+                Ok(l) if l.last_activity.elapsed() > self.idle => {
+                    idle.push(id);
+                    continue;
                 }
-                continue;
+                Ok(_) => {}
+                Err(_) => continue,
             }
-            match store
-                .renew_lease(&id, &self.node.id, self.lease_end())
-                .await
-            {
+            let until = self.lease_end();
+            match store.renew_lease(&id, &self.node.id, until).await {
                 Err(err) => {
                     tracing::warn!(stream = %id, error = %err, "renewing a stream's lease failed");
                     continue;
@@ -953,6 +998,7 @@ impl Streams {
                 Ok(true) => {}
             }
             if let Ok(mut live) = e.try_lock() {
+                live.lease_until = until;
                 // The database is back: store what a quiet stream held meanwhile.
                 if !live.unsaved.is_empty() {
                     if let Err(err) = self.save(store, &mut live).await {
@@ -960,6 +1006,11 @@ impl Streams {
                     }
                     caches.forget(&id);
                 }
+            }
+        }
+        for id in idle {
+            if let Err(err) = self.finish(store, caches, &id).await {
+                tracing::warn!(stream = %id, error = %err, "finishing an idle stream failed");
             }
         }
         if let Err(err) = self.close_orphans(store, caches).await {
@@ -997,8 +1048,12 @@ impl Streams {
                  chunks it had committed"
                     .into(),
             );
+            let orphan = Closer::Orphan {
+                before,
+                frames: take.frames as i64,
+            };
             if store
-                .close_live(&id, &header.to_bytes(), &meta_text(&id, &meta)?)
+                .close_live(&id, &header.to_bytes(), &meta_text(&id, &meta)?, orphan)
                 .await?
             {
                 tracing::warn!(stream = %id, frames = take.frames, "closed a stream whose server stopped");
