@@ -757,6 +757,7 @@ impl Streams {
                 a.extend_from_slice(&frames);
             }
         }
+        let held_before = live.unsaved.len();
         let mut r = self.code_and_commit(store, &mut live, frames, flush).await;
         if r.is_ok() && live.persisted != live.received {
             // No chunk carried the count: write it, for a server that takes over.
@@ -768,7 +769,10 @@ impl Streams {
             // The frames are taken: coded and held until the database is back (the answer
             // says how many are committed).
             Err(e) if unavailable(&e) => {
-                tracing::warn!(stream = id, error = %e, held = live.unsaved.len(), "holding a stream's chunks until the database is back");
+                // Once per chunk held, not per append.
+                if live.unsaved.len() > held_before {
+                    tracing::warn!(stream = id, error = %e, held = live.unsaved.len(), "holding a stream's chunks until the database is back");
+                }
             }
             Err(e @ Error::Moved(_)) => {
                 self.let_go(id);
