@@ -5,11 +5,15 @@
 //!
 //! A format or parameter version change *adds* files (`MOCAPSTORE_FREEZE=1 cargo test --test
 //! frozen -- --ignored` writes those of the current encoders that are missing); a file here is
-//! never replaced or deleted, since a database somewhere holds takes coded that way.
+//! never replaced or deleted, since a database somewhere holds takes coded that way
+//! (`tests/frozen/README.md`). The test holds the directory to that: every file is in the
+//! index with the BLAKE3 of its bytes, and every parameter version each codec's decoder
+//! accepts ([`Codec::versions`], from the code) has a file that is that version.
 //!
-//! `index.txt`: one line per file: `<file> <hash of the decoded f32 bytes> <what it is>`.
-//! Bases a bitstream names sit in `tests/frozen/bases/<id>.mcsb`, skeletons in
-//! `tests/frozen/skeletons/<id>.mcsk`.
+//! `index.txt`: one line per file: `<file> <BLAKE3 of its bytes> <BLAKE3 of the decoded f32
+//! bytes> <what it is>` (each hash its first 32 hex digits). Bases a bitstream names sit in
+//! `tests/frozen/bases/<id>.mcsb`, skeletons in `tests/frozen/skeletons/<id>.mcsk`, each
+//! named by its own content hash.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -31,7 +35,12 @@ fn dir() -> PathBuf {
 /// Decoded frames as bytes, hashed.
 fn digest(frames: &[f32]) -> String {
     let bytes: Vec<u8> = frames.iter().flat_map(|v| v.to_le_bytes()).collect();
-    blake3::hash(&bytes).to_hex()[..32].to_string()
+    short_hash(&bytes)
+}
+
+/// The first 32 hex digits of the BLAKE3 of `bytes`.
+fn short_hash(bytes: &[u8]) -> String {
+    blake3::hash(bytes).to_hex()[..32].to_string()
 }
 
 /// An analog container's stored values, as f32 (16-bit integers are exact in one).
@@ -65,59 +74,131 @@ fn decode_file(path: &Path) -> Vec<f32> {
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// (file, hash, description) of every line of the index.
-fn index() -> Vec<(String, String, String)> {
+/// One line of the index.
+struct Entry {
+    file: String,
+    /// Of the file's bytes.
+    bytes: String,
+    /// Of what it decodes to.
+    decoded: String,
+    what: String,
+}
+
+/// Every line of the index.
+fn index() -> Vec<Entry> {
     let text = std::fs::read_to_string(dir().join("index.txt")).unwrap_or_default();
     text.lines()
         .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
         .map(|l| {
-            let mut parts = l.splitn(3, ' ');
-            let file = parts.next().unwrap().to_string();
-            let hash = parts.next().expect("hash").to_string();
-            (file, hash, parts.next().unwrap_or("").to_string())
+            let mut parts = l.splitn(4, ' ');
+            let mut next = || parts.next().unwrap_or_default().to_string();
+            let (file, bytes, decoded, what) = (next(), next(), next(), next());
+            assert!(
+                bytes.len() == 32 && decoded.len() == 32,
+                "index.txt: {l:?} is not <file> <hash> <hash> <what>"
+            );
+            Entry {
+                file,
+                bytes,
+                decoded,
+                what,
+            }
         })
         .collect()
 }
 
-/// Every codec, and every parameter version its decoder accepts, has a frozen bitstream.
-const REQUIRED: &[&str] = &[
-    "raw",
-    "quant",
-    "quant-v2",
-    "mdtt",
-    "mdtt-shared-v1",
-    "lsdt-clip-v1",
-    "lsdt-clip-v2",
-    "lsdt-frame-v1",
-    "lsdt-frame-v2",
-    "lsdt-frame-v3",
-    "bvh-lossless-v1",
-    "rot-v1",
-    "rot-v2",
-    "pga-v1",
-    "pga-v1-plain",
-    "pga-v1-ik",
-    "pga-v1-canonical",
-    "spca-v1",
-    "spca-v1-torso",
-    "analog-lossless-v1-int",
-    "analog-lossless-v1-float",
-    "analog-bounded-v1-int",
-];
-
 #[test]
 fn every_frozen_bitstream_decodes_to_what_it_decoded_to_when_written() {
-    let index = index();
-    for want in REQUIRED {
-        assert!(
-            index.iter().any(|(f, _, _)| f.starts_with(&format!("{want}-")) || f == &format!("{want}.mcst")),
-            "no frozen bitstream for {want}: freeze one (see the module doc)"
+    for e in index() {
+        let got = digest(&decode_file(&dir().join(&e.file)));
+        assert_eq!(
+            got, e.decoded,
+            "{} ({}) no longer decodes as it did",
+            e.file, e.what
         );
     }
-    for (file, hash, what) in &index {
-        let got = digest(&decode_file(&dir().join(file)));
-        assert_eq!(&got, hash, "{file} ({what}) no longer decodes as it did");
+}
+
+/// A frozen file is never rewritten, and none is left out of the index.
+#[test]
+fn every_frozen_file_is_indexed_and_unchanged() {
+    let index = index();
+    for e in &index {
+        let bytes = std::fs::read(dir().join(&e.file)).unwrap();
+        assert_eq!(
+            short_hash(&bytes),
+            e.bytes,
+            "{} was rewritten: a format change is a new version and a new file, never a \
+             rewrite (tests/frozen/README.md)",
+            e.file
+        );
     }
+    for f in std::fs::read_dir(dir()).unwrap() {
+        let name = f.unwrap().file_name().to_string_lossy().into_owned();
+        if name.ends_with(".mcst") {
+            assert!(
+                index.iter().any(|e| e.file == name),
+                "{name} is not in tests/frozen/index.txt"
+            );
+        }
+    }
+    // Bases and skeletons are named by their content: a changed one no longer has its name.
+    for f in std::fs::read_dir(dir().join("bases")).unwrap() {
+        let path = f.unwrap().path();
+        let b = Basis::parse(&std::fs::read(&path).unwrap()).unwrap();
+        assert_eq!(
+            format!("{}.mcsb", b.id()),
+            path.file_name().unwrap().to_string_lossy(),
+            "a frozen basis changed"
+        );
+    }
+    for f in std::fs::read_dir(dir().join("skeletons")).unwrap() {
+        let path = f.unwrap().path();
+        let r = codec::Rig::parse(&std::fs::read(&path).unwrap(), 10_000).unwrap();
+        assert_eq!(
+            format!("{}.mcsk", r.id()),
+            path.file_name().unwrap().to_string_lossy(),
+            "a frozen skeleton changed"
+        );
+    }
+}
+
+/// Every codec × every parameter version its decoder accepts (as the code says) has a
+/// frozen bitstream of that version.
+#[test]
+fn every_version_every_decoder_accepts_is_frozen() {
+    let mut have = std::collections::BTreeSet::new();
+    for e in index() {
+        let bytes = std::fs::read(dir().join(&e.file)).unwrap();
+        let c = Container::parse(&bytes, &Limits::default()).unwrap();
+        let id = c.header.codec;
+        let version = if id.is_analog() {
+            c.header.params.first().copied()
+        } else {
+            codec::codec(id).unwrap().version_of(&c.header.params)
+        };
+        have.insert((id, version.expect("a frozen file of no version")));
+    }
+    let mut want = Vec::new();
+    for id in CodecId::ALL {
+        for &v in codec::codec(id).unwrap().versions() {
+            want.push((id, v));
+        }
+    }
+    for id in CodecId::ANALOG {
+        for v in codec::analog::VERSIONS {
+            want.push((id, v));
+        }
+    }
+    let missing: Vec<String> = want
+        .iter()
+        .filter(|w| !have.contains(w))
+        .map(|(id, v)| format!("{id} version {v}"))
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "no frozen bitstream of {missing:?}: freeze one (see the module doc)"
+    );
 }
 
 /// The small take every frozen bitstream codes: 2 s, 5 points, some gaps.
@@ -310,7 +391,8 @@ fn freeze_current_bitstreams() {
     ));
 
     let mut index = std::fs::read_to_string(dir().join("index.txt")).unwrap_or_else(|_| {
-        "# file, BLAKE3 (first 32 hex) of the decoded frames as little-endian f32, what it is\n"
+        "# file, BLAKE3 (first 32 hex) of its bytes, of the decoded frames as little-endian \
+         f32, what it is\n"
             .into()
     });
     std::fs::create_dir_all(dir().join("bases")).unwrap();
@@ -326,23 +408,34 @@ fn freeze_current_bitstreams() {
             )
             .unwrap();
         }
-        std::fs::write(dir().join(&file), c.to_bytes()).unwrap();
+        let bytes = c.to_bytes();
+        std::fs::write(dir().join(&file), &bytes).unwrap();
         let decoded = codec::decode_all_with(&c, basis).unwrap();
-        index.push_str(&format!("{file} {} {what}\n", digest(&decoded)));
+        let (b, d) = (short_hash(&bytes), digest(&decoded));
+        index.push_str(&format!("{file} {b} {d} {what}\n"));
         eprintln!("froze {file}");
     }
+    // Variants last, and a file whose bytes another already holds is not frozen twice
+    // (pga's default encoding is one of its variants).
+    skeletal.rotate_left(3);
     for (name, c, what) in skeletal {
         let file = format!("{name}.mcst");
-        if index.lines().any(|l| l.starts_with(&format!("{file} "))) {
+        let bytes = c.to_bytes();
+        let same = format!(" {} ", short_hash(&bytes));
+        if index
+            .lines()
+            .any(|l| l.starts_with(&format!("{file} ")) || l.contains(&same))
+        {
             continue;
         }
-        std::fs::write(dir().join(&file), c.to_bytes()).unwrap();
+        std::fs::write(dir().join(&file), &bytes).unwrap();
         let shared = codec::Shared {
             basis: None,
             rig: Some(rig.clone()),
         };
         let decoded = codec::decode_all_with(&c, shared).unwrap();
-        index.push_str(&format!("{file} {} {what}\n", digest(&decoded)));
+        let (b, d) = (short_hash(&bytes), digest(&decoded));
+        index.push_str(&format!("{file} {b} {d} {what}\n"));
         eprintln!("froze {file}");
     }
     // The analog codecs: a force plate and EMG as ADC integers and as floats (on a grid,
@@ -381,12 +474,14 @@ fn freeze_current_bitstreams() {
         let c = codec::analog::encode(&a, 100.0, &[32, 28], &bounds)
             .unwrap()
             .container;
-        std::fs::write(dir().join(&file), c.to_bytes()).unwrap();
+        let bytes = c.to_bytes();
+        std::fs::write(dir().join(&file), &bytes).unwrap();
         let what = format!(
             "{}, 8 channels (force plate, EMG) × 600 rows",
             c.header.codec
         );
-        index.push_str(&format!("{file} {} {what}\n", digest(&decode_analog(&c))));
+        let (b, d) = (short_hash(&bytes), digest(&decode_analog(&c)));
+        index.push_str(&format!("{file} {b} {d} {what}\n"));
         eprintln!("froze {file}");
     }
     std::fs::write(dir().join("index.txt"), index).unwrap();

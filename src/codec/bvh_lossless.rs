@@ -106,6 +106,10 @@ impl Codec for BvhLossless {
         })
     }
 
+    fn versions(&self) -> &'static [u8] {
+        &[VERSION]
+    }
+
     fn decoder(
         &self,
         params: &[u8],

@@ -205,6 +205,13 @@ pub trait Codec: Send + Sync {
         points: usize,
         shared: &Shared,
     ) -> Result<Box<dyn ChunkDecoder>>;
+    /// Every parameter version [`Codec::decoder`] reads: each is a promise that takes stored
+    /// so decode forever, and `tests/frozen` holds a bitstream of each.
+    fn versions(&self) -> &'static [u8];
+    /// The version stored `params` are (their first byte, for most codecs).
+    fn version_of(&self, params: &[u8]) -> Option<u8> {
+        params.first().copied()
+    }
     /// The kind of shared basis this codec codes with, if it uses one: it then competes only
     /// for takes whose layout has such a basis.
     fn basis_kind(&self) -> Option<BasisKind> {

@@ -36,6 +36,15 @@ impl Codec for Raw {
         })
     }
 
+    /// One layout, which has no parameters.
+    fn versions(&self) -> &'static [u8] {
+        &[1]
+    }
+
+    fn version_of(&self, params: &[u8]) -> Option<u8> {
+        params.is_empty().then_some(1)
+    }
+
     fn decoder(
         &self,
         params: &[u8],

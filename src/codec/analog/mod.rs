@@ -30,6 +30,8 @@ use crate::motion::analog::{Analog, Channel, Samples};
 use lpc::Predictor;
 
 const PARAMS_VERSION: u8 = 1;
+/// Every parameter version the analog decoders read (`tests/frozen` holds each).
+pub const VERSIONS: [u8; 1] = [PARAMS_VERSION];
 /// Residual contexts, by the bit length of a running mean of recent residuals.
 const CONTEXTS: usize = 14;
 

@@ -339,6 +339,10 @@ impl Codec for MdttShared {
         })
     }
 
+    fn versions(&self) -> &'static [u8] {
+        &[PARAMS_VERSION]
+    }
+
     fn decoder(
         &self,
         params: &[u8],

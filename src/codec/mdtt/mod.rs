@@ -494,6 +494,15 @@ impl Codec for Mdtt {
         })
     }
 
+    /// One layout, with no version byte.
+    fn versions(&self) -> &'static [u8] {
+        &[1]
+    }
+
+    fn version_of(&self, _params: &[u8]) -> Option<u8> {
+        Some(1)
+    }
+
     fn decoder(
         &self,
         params: &[u8],

@@ -62,6 +62,10 @@ impl Codec for Pga {
         )
     }
 
+    fn versions(&self) -> &'static [u8] {
+        &params::VERSIONS
+    }
+
     fn decoder(
         &self,
         params: &[u8],

@@ -168,7 +168,8 @@ impl Geodesics {
 
     /// The model as stored, each direction `i`'s components to within `precision[i]` (what
     /// the encoder allows: a coordinate that never exceeds `x` turns a joint by at most
-    /// `x · precision` more): `n` and `k` (u32 each), its kind (u8: 1 for the
+    /// `x · precision` more): `n` and `k` (u32 each), its kind (u8, since parameters
+    /// version 2: 1 for the
     /// [canonical](Geodesics::canonical) model, whose `k` is `3n` and nothing follows the
     /// means; 0 otherwise), per joint its mean as a unit quaternion (w, x, y, z; f32), per
     /// direction its step exponent `e` (u8, step `2^−e`),
@@ -223,13 +224,28 @@ impl Geodesics {
     /// directions of components within ±1. The encoder codes with the parsed model, so both
     /// sides use the same numbers.
     pub fn parse(bytes: &[u8], joints: usize, max_dims: usize) -> Result<Geodesics> {
+        Geodesics::parse_layout(bytes, joints, max_dims, true)
+    }
+
+    /// The model as parameters version 1 stored it: no kind byte (every model fitted), the
+    /// rest as [`Geodesics::parse`].
+    pub fn parse_v1(bytes: &[u8], joints: usize, max_dims: usize) -> Result<Geodesics> {
+        Geodesics::parse_layout(bytes, joints, max_dims, false)
+    }
+
+    fn parse_layout(
+        bytes: &[u8],
+        joints: usize,
+        max_dims: usize,
+        kind_byte: bool,
+    ) -> Result<Geodesics> {
         let mut r = Reader::named(bytes, "pga model");
         let n = r.u32()? as usize;
         let k = r.u32()? as usize;
-        let canonical = match r.u8()? {
-            0 => false,
-            1 => true,
-            other => return Err(malformed(format!("pga model kind {other}"))),
+        let canonical = match kind_byte.then(|| r.u8()).transpose()? {
+            None | Some(0) => false,
+            Some(1) => true,
+            Some(other) => return Err(malformed(format!("pga model kind {other}"))),
         };
         if n != joints || k == 0 || k > max_dims.min(3 * n) || (canonical && k != 3 * n) {
             return Err(malformed(format!(

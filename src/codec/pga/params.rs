@@ -1,6 +1,6 @@
 //! A `pga` take's header parameters: how it was coded and the model it was coded with.
 //!
-//! Version 1, little-endian: `version u8`, `iterations u8` (IK steps per frame, at most
+//! Version 2 (1 had no model kind byte, [`Geodesics::parse_v1`]), little-endian: `version u8`, `iterations u8` (IK steps per frame, at most
 //! [`MAX_ITERATIONS`]; 0: poses from the coordinates alone, end points not coded),
 //! `stride u8` (log₂ of the lifting's coarsest stride, at most [`MAX_STRIDE_LOG2`]),
 //! `base f64` (the `α` of step index 224, take units), `rho f32`, `lambda f32`
@@ -14,7 +14,11 @@ use crate::codec::error::{malformed, Result};
 use crate::codec::rig::Rig;
 use crate::codec::wire::{Reader, Writer};
 
-pub const VERSION: u8 = 1;
+/// What the encoder writes. Version 2 added the model's kind byte (the canonical model);
+/// version 1 models are all fitted ([`Geodesics::parse_v1`]).
+pub const VERSION: u8 = 2;
+/// The versions a decoder reads.
+pub const VERSIONS: [u8; 2] = [1, 2];
 /// IK steps per decoded frame: what bounds a chunk's decoding time.
 pub const MAX_ITERATIONS: u8 = 8;
 /// The lifting's coarsest stride, 2⁸ frames at most.
@@ -56,7 +60,7 @@ impl Params {
         let channels = rig.channel_count();
         let mut r = Reader::named(bytes, "pga parameters");
         let version = r.u8()?;
-        if version != VERSION {
+        if !VERSIONS.contains(&version) {
             return Err(malformed(format!("pga version {version}")));
         }
         let iterations = r.u8()?;
@@ -91,7 +95,15 @@ impl Params {
         let inner = layout.inner_count();
         let at = r.position();
         let model_bytes = bytes[at..].to_vec();
-        let model = Geodesics::parse(&model_bytes, inner, 3 * inner)?;
+        let model = match version {
+            // Takes written between the canonical model's arrival and this version's say
+            // version 1 with a kind byte: read so when the layout without it does not parse
+            // (the two cannot both consume the model's bytes exactly).
+            1 => Geodesics::parse_v1(&model_bytes, inner, 3 * inner).or_else(|first| {
+                Geodesics::parse(&model_bytes, inner, 3 * inner).map_err(|_| first)
+            })?,
+            _ => Geodesics::parse(&model_bytes, inner, 3 * inner)?,
+        };
         let params = Params {
             iterations,
             stride_log2,

@@ -89,6 +89,19 @@ impl Codec for Quant {
         encode_version(input, target, None)
     }
 
+    /// 1: the step alone (8 bytes); 2: rANS tables, its version first.
+    fn versions(&self) -> &'static [u8] {
+        &[1, tables::VERSION]
+    }
+
+    fn version_of(&self, params: &[u8]) -> Option<u8> {
+        if params.len() == 8 {
+            Some(1)
+        } else {
+            params.first().copied()
+        }
+    }
+
     fn decoder(
         &self,
         params: &[u8],

@@ -39,8 +39,8 @@ mod aim;
 mod delta;
 mod transform;
 
-/// What the encoder writes ([`Version::V2`]); the decoder reads every [`Version`].
-const VERSION: u8 = 2;
+/// What the encoder writes ([`Version::V3`]); the decoder reads every [`Version`].
+const VERSION: u8 = 3;
 pub(super) const SIZE_CONTEXTS: usize = 20;
 
 pub struct Rot;
@@ -117,8 +117,16 @@ pub(super) enum Version {
     V1,
     /// A joint's step scales with its longest bone (the encoder aims each joint from its
     /// decoded parent, [`aim`], so an error moves the joint's own children only); delta mode
-    /// chooses each part's predictor.
+    /// always extrapolates.
     V2,
+    /// As version 2, and delta mode chooses each part's predictor (one bit per part per
+    /// chunk).
+    V3,
+}
+
+impl Version {
+    /// The versions a decoder reads.
+    pub const ALL: [u8; 3] = [1, 2, 3];
 }
 
 impl Version {
@@ -126,6 +134,7 @@ impl Version {
         match v {
             1 => Some(Version::V1),
             2 => Some(Version::V2),
+            3 => Some(Version::V3),
             _ => None,
         }
     }
@@ -148,7 +157,7 @@ fn distances(rig: &Rig, version: Version) -> Vec<f64> {
             dist[p] = dist[p].max((pos[d] - pos[p]).norm());
             a = match version {
                 Version::V1 => joints[p].parent,
-                Version::V2 => None,
+                Version::V2 | Version::V3 => None,
             };
         }
     }
@@ -174,6 +183,10 @@ impl Codec for Rot {
         }
         let take = Take::new(rig, skeleton, input, t, default_chunk_frames(input.fps));
         take.encode(target)
+    }
+
+    fn versions(&self) -> &'static [u8] {
+        &Version::ALL
     }
 
     fn decoder(
@@ -309,7 +322,7 @@ impl<'a> Take<'a> {
     ) -> Take<'a> {
         let frames = skeleton.frame_count();
         let values = &skeleton.values[..];
-        let steps = Steps::new(rig, Version::V2, base);
+        let steps = Steps::new(rig, Version::V3, base);
         let layout = steps.plan(rig, 224);
         let cc = layout.channels;
         let chunks = (0..frames)

@@ -56,6 +56,10 @@ impl Codec for Spca {
         encode_with(input, target, Options::SPCA)
     }
 
+    fn versions(&self) -> &'static [u8] {
+        &[params::VERSION]
+    }
+
     fn decoder(
         &self,
         params: &[u8],

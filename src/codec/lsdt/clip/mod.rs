@@ -432,6 +432,11 @@ impl Codec for LsdtClip {
         encode_with_clip(input, target, default_clip(input.fps))
     }
 
+    /// 1: live streams (adaptive); 2: whole takes (tables).
+    fn versions(&self) -> &'static [u8] {
+        &[ADAPTIVE_VERSION, TABLES_VERSION]
+    }
+
     fn decoder(
         &self,
         params: &[u8],

@@ -404,6 +404,11 @@ impl Codec for LsdtFrame {
         encode_with_period(input, target, default_chunk_frames(input.fps))
     }
 
+    /// 1: live streams (adaptive); 2 and 3: whole takes (tables).
+    fn versions(&self) -> &'static [u8] {
+        &[ADAPTIVE_VERSION, TABLES_V2, TABLES_VERSION]
+    }
+
     fn decoder(
         &self,
         params: &[u8],
