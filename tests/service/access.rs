@@ -7,6 +7,7 @@ use crate::common;
 use common::token;
 
 use std::collections::BTreeSet;
+use std::time::Duration;
 
 use mocapstore::http::Config;
 use mocapstore::limits::Limits;
@@ -948,5 +949,133 @@ async fn a_trusted_proxy_names_the_client_and_no_one_else_can() {
             assert_eq!(second[0], 429, "one peer, one limit: {second:?}");
         }
         srv.stop().await;
+    }
+}
+
+/// Revocation on running servers, two on one database (SQLite and Postgres): a token
+/// revoked over HTTP is refused at once by the server that revoked it and within
+/// [`TOKEN_CACHE`] by the other; one revoked with the CLI (on the database, no server told)
+/// within [`TOKEN_CACHE`] by both. Each server had the token cached as good just before.
+#[tokio::test]
+async fn a_revoked_token_stops_at_once_here_and_within_the_cache_time_everywhere() {
+    for t in common::all().await {
+        let admin = token(&t.store, "admin", "admin", None).await;
+        let a = common::start(t.store.clone(), 8 << 20).await;
+        let b = common::start(t.store.clone(), 8 << 20).await;
+        let client = reqwest::Client::new();
+        let create = |name: &str| {
+            let r = client
+                .post(format!("{}/v1/tokens", a.base))
+                .bearer_auth(&admin)
+                .json(&serde_json::json!({"name": name, "scope": "read"}))
+                .send();
+            async move {
+                let r = r.await.unwrap();
+                assert_eq!(r.status(), 201);
+                let v: serde_json::Value = r.json().await.unwrap();
+                (
+                    v["id"].as_str().unwrap().to_string(),
+                    v["secret"].as_str().unwrap().to_string(),
+                )
+            }
+        };
+
+        // Over HTTP, on server a.
+        let (id, secret) = create("victim").await;
+        assert_eq!(status(&client, &a, &secret).await, 200, "{}", t.name);
+        assert_eq!(status(&client, &b, &secret).await, 200, "{}", t.name);
+        let r = client
+            .delete(format!("{}/v1/tokens/{id}", a.base))
+            .bearer_auth(&admin)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 204, "{}", t.name);
+        assert_eq!(
+            status(&client, &a, &secret).await,
+            401,
+            "{}: at once here",
+            t.name
+        );
+        let took = refused_within(&client, "the other server", &b, &secret).await;
+        eprintln!(
+            "{}: revoked over HTTP, the other server refused it after {took:?}",
+            t.name
+        );
+        let listed: serde_json::Value = client
+            .get(format!("{}/v1/tokens", b.base))
+            .bearer_auth(&admin)
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        let row = listed
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["id"] == id.as_str())
+            .unwrap()
+            .clone();
+        assert!(row["revoked_at"].is_i64(), "{row}");
+
+        // With the CLI, on the database alone.
+        let (_, secret) = create("victim-cli").await;
+        assert_eq!(status(&client, &a, &secret).await, 200);
+        assert_eq!(status(&client, &b, &secret).await, 200);
+        let url = t.url().to_string();
+        let (ok, out, err) = tokio::task::spawn_blocking(move || {
+            common::mocapstore(&["token", "revoke", "victim-cli", "--database-url", &url])
+        })
+        .await
+        .unwrap();
+        assert!(ok, "{out}{err}");
+        for (name, srv) in [("server a", &a), ("server b", &b)] {
+            let took = refused_within(&client, name, srv, &secret).await;
+            eprintln!(
+                "{}: revoked with the CLI, {name} refused it after {took:?}",
+                t.name
+            );
+        }
+        a.stop().await;
+        b.stop().await;
+        t.finish().await;
+    }
+}
+
+/// The status of a read with `secret` on `srv`.
+async fn status(client: &reqwest::Client, srv: &common::Server, secret: &str) -> u16 {
+    client
+        .get(format!("{}/v1/sequences", srv.base))
+        .bearer_auth(secret)
+        .send()
+        .await
+        .unwrap()
+        .status()
+        .as_u16()
+}
+
+/// How long until `srv` (called `name`) refuses `secret`, polled every 50 ms; it must within
+/// the token cache time and a second.
+async fn refused_within(
+    client: &reqwest::Client,
+    name: &str,
+    srv: &common::Server,
+    secret: &str,
+) -> Duration {
+    let started = std::time::Instant::now();
+    loop {
+        match status(client, srv, secret).await {
+            401 => return started.elapsed(),
+            200 => {}
+            other => panic!("{name}: {other}"),
+        }
+        assert!(
+            started.elapsed() <= mocapstore::limits::TOKEN_CACHE + Duration::from_secs(1),
+            "{name} still takes a revoked token after {:?}",
+            started.elapsed()
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
     }
 }
