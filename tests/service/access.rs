@@ -796,26 +796,31 @@ async fn token_commands_work_and_no_secret_reaches_the_server_log() {
     empty.finish().await;
 
     // The real binary, logging everything, asked with the secret and with a wrong one.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let log = std::env::temp_dir().join(format!("mocapstore-auth-log-{port}.txt"));
+    // Port 0, the address read back from its log: no port found free here and bound
+    // again by the child, which another process could take between.
+    let log = std::env::temp_dir().join(format!(
+        "mocapstore-auth-log-{}-{}.txt",
+        std::process::id(),
+        now_ms()
+    ));
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_mocapstore"))
-        .args([
-            "serve",
-            "--listen",
-            &format!("127.0.0.1:{port}"),
-            "--database-url",
-            &db,
-        ])
+        .args(["serve", "--listen", "127.0.0.1:0", "--database-url", &db])
         .env("RUST_LOG", "trace")
+        .env("NO_COLOR", "1")
         .stdout(std::fs::File::create(&log).unwrap())
         .stderr(std::fs::File::create(log.with_extension("err")).unwrap())
         .spawn()
         .unwrap();
-    let base = format!("http://127.0.0.1:{port}");
+    let mut address = None;
+    for _ in 0..200 {
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        if let Some((_, rest)) = text.split_once("address=") {
+            address = rest.split_whitespace().next().map(str::to_string);
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    let base = format!("http://{}", address.expect("the server logs its address"));
     let client = reqwest::Client::new();
     let mut up = false;
     for _ in 0..200 {

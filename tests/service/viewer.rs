@@ -53,19 +53,29 @@ impl Browser {
             eprintln!("chromium or chromedriver missing: skipping the browser test");
             return None;
         }
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
-        // Its own process group, which the browsers it starts join: `Drop` ends them all.
-        let driver = Command::new("chromedriver")
-            .arg(format!("--port={port}"))
+        // Port 0: chromedriver binds a free port itself and says which (no port found free
+        // here and bound again by the child, which another process could take between).
+        let mut driver = Command::new("chromedriver")
+            .arg("--port=0")
             .process_group(0)
-            .stdout(Stdio::null())
+            .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
             .expect("chromedriver starts");
+        let mut lines = std::io::BufRead::lines(std::io::BufReader::new(
+            driver.stdout.take().expect("chromedriver's output"),
+        ));
+        let port: u16 = loop {
+            let line = lines
+                .next()
+                .expect("chromedriver says its port")
+                .expect("chromedriver's output");
+            if let Some(rest) = line.split("started successfully on port ").nth(1) {
+                break rest.trim_end_matches('.').trim().parse().expect("a port");
+            }
+        };
+        // Keep reading what it prints, or a full pipe would stop it.
+        std::thread::spawn(move || lines.for_each(drop));
         let base = format!("http://127.0.0.1:{port}");
         let http = reqwest::Client::new();
         for _ in 0..200 {
@@ -778,14 +788,20 @@ async fn the_live_page_shows_a_stream_as_it_arrives() {
         .await;
     assert!(status.as_str().unwrap().contains("as they arrive"));
 
-    // 12 frames every 100 ms, each append saying when its last frame was captured.
+    // 12 frames every 100 ms, each append saying when its last frame was captured, until
+    // the page has been seen to do what it should (not a fixed window of frames, which a
+    // slow machine could miss).
     let (client, base, id) = (srv.client.clone(), srv.base.clone(), sid.clone());
     let frame_bytes = points * 12;
     let src_frames = bytes.clone();
+    let (stop, stopped) = tokio::sync::watch::channel(false);
     let producer = tokio::spawn(async move {
         let start = tokio::time::Instant::now();
-        for (i, batch) in bytes.chunks(12 * frame_bytes).take(40).enumerate() {
+        for (i, batch) in bytes.chunks(12 * frame_bytes).enumerate() {
             tokio::time::sleep_until(start + Duration::from_millis(100 * (i as u64 + 1))).await;
+            if *stopped.borrow() {
+                break;
+            }
             let r = client
                 .post(format!(
                     "{base}/v1/streams/{id}/frames?captured_ms={}",
@@ -834,6 +850,7 @@ async fn the_live_page_shows_a_stream_as_it_arrives() {
     assert!(capture >= server - 20.0, "{delays}");
     assert_eq!(unnamed_controls(&browser).await, json!([]));
     browser.screenshot("live").await;
+    stop.send_replace(true);
     producer.await.unwrap();
 
     let (status, _, _) = srv
