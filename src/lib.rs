@@ -26,9 +26,14 @@
 //! - [`store`]: SQLite (default) and Postgres via sqlx; keeps rows, in one transaction per
 //!   change.
 //! - [`codec`]: the codecs (`raw`, `quant`, `mdtt`, `mdtt-shared`, `lsdt-clip`,
-//!   `lsdt-frame`), found by id in one registry; the chunked container; the one encode path
-//!   ([`codec::encode_with`], [`codec::stream`] for live streams) and the one read path
-//!   ([`codec::Reader`]); shared bases; rate control to a bound. Pure.
+//!   `lsdt-frame`, `spca`, `pga`, `bvh-lossless`, `rot`, and the analog channels'
+//!   `analog-lossless` and `analog-bounded`), found by id in one registry ([`codec::codec`]);
+//!   the chunked container; the one encode path ([`codec::encode_with`], [`codec::stream`]
+//!   for live streams) and the one read path ([`codec::Reader`]); shared bases and
+//!   skeletons; rate control to a bound. Pure.
+//!
+//! `docs/ARCHITECTURE.md` walks through these layers: an ingest and a range read end to
+//! end, the words the code uses, and how to add a codec or a file format.
 //! - [`motion`]: the `Motion` model (positions, units, gaps, skeletons), forward kinematics,
 //!   error metrics and the file formats in [`motion::formats`] (BVH, C3D, TRC, JSON, NPY in;
 //!   BVH, C3D, TRC, JSON, NPY, CSV, raw f32, glTF out) and the transforms between

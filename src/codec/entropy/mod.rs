@@ -1,14 +1,19 @@
 //! The entropy stage: quantised integers to bytes and back.
 //!
-//! Two coders are kept: the adaptive binary range coder ([`rangecoder`] + [`ints`]), which
-//! the codecs use, and zigzag varints + zstd ([`zstd_varint`]), the general-purpose
-//! alternative it was measured against (`mocapstore bench --entropy`). On `quant`'s
-//! per-chunk streams over the whole corpus the range coder (with `quant`'s contexts and
-//! inter-trajectory references) is 3–6 % smaller than zstd level 19 and 13–18× faster to
-//! encode; zstd level 3 is as fast but 10–20 % larger than the range coder. Only zstd-19
-//! over a whole take as one stream comes out smaller at coarse bounds, and that gives up
-//! random access. MDTT's coefficient streams are a few hundred integers per chunk, where
-//! zstd has nothing to learn from.
+//! Three coders are kept:
+//! - **The adaptive binary range coder** ([`rangecoder`] + [`ints`]). Most codecs use it, and
+//!   every live stream does: it learns as it codes, so it needs no tables up front.
+//! - **rANS** ([`rans`], with [`tokens`] and [`geometric`] for the models). Whole takes of
+//!   `quant` (version 2), `lsdt-clip` and `lsdt-frame` are coded with it against per-take
+//!   tables stored in the header; it decodes about twice as fast.
+//! - **Zigzag varints + zstd** ([`zstd_varint`]). This is the general-purpose alternative the
+//!   others were measured against (`mocapstore bench --entropy`), and no codec writes it.
+//!   - Against the range coder, on `quant`'s per-chunk streams over the whole corpus: the
+//!     range coder (with `quant`'s contexts and inter-trajectory references) is 3–6 % smaller
+//!     than zstd level 19 and 13–18× faster to encode, and zstd level 3 is as fast but 10–20 %
+//!     larger.
+//!   - Only zstd-19 over a whole take as one stream comes out smaller, at coarse bounds, and
+//!     that gives up random access.
 
 pub mod geometric;
 pub mod ints;
