@@ -193,6 +193,60 @@ pub fn decode(codec: CodecId, data: &[u8]) {
     }
 }
 
+/// The skeleton the skeleton codecs' targets decode against: the synthetic dancer's, the one
+/// the frozen `rot`, `pga` and `bvh-lossless` bitstreams (their seeds) were coded on.
+fn dancer_rig() -> Arc<codec::Rig> {
+    static RIG: OnceLock<Arc<codec::Rig>> = OnceLock::new();
+    RIG.get_or_init(|| {
+        let m = crate::motion::synthetic::dancer(2, 60.0, 11);
+        let joints = m.skeleton.expect("the dancer has a skeleton").joints;
+        Arc::new(codec::Rig::new(joints).expect("the dancer's skeleton is a rig"))
+    })
+    .clone()
+}
+
+/// A skeleton codec's chunk decoder (`rot`, `pga`, `bvh-lossless`), positions and channel
+/// values, on [`dancer_rig`]. `data` as for [`decode`]; byte 0 is ignored (the rig sets the
+/// points).
+pub fn decode_skeletal(codec: CodecId, data: &[u8]) {
+    if data.len() < 4 {
+        return;
+    }
+    let rig = dancer_rig();
+    let frames = usize::from(data[1]) + 1;
+    let plen = usize::from(u16::from_le_bytes([data[2], data[3]]));
+    let Some(params) = data.get(4..4 + plen) else {
+        return;
+    };
+    let payload = &data[4 + plen..];
+    let header = Header {
+        codec,
+        frames: frames as u32,
+        points: rig.joints().len() as u32,
+        fps: 60.0,
+        metres_per_unit: 0.01,
+        params: params.to_vec(),
+        basis: None,
+        rig: Some(rig.hash()),
+        chunks: vec![ChunkMeta {
+            first_frame: 0,
+            frames: frames as u32,
+            len: payload.len() as u32,
+            crc32c: crc32c::crc32c(payload),
+        }],
+    };
+    let shared = codec::Shared {
+        basis: None,
+        rig: Some(rig.clone()),
+    };
+    let Ok(reader) = codec::Reader::new(header, shared) else {
+        return;
+    };
+    let source = codec::Stored::new(0, [payload]);
+    let _ = reader.read_all(&source);
+    let _ = reader.read_channels(0..frames, rig.channel_count(), &source);
+}
+
 /// A whole stored bitstream (container): header, index, checksums, every chunk.
 pub fn container(data: &[u8]) {
     let limits = crate::codec::Limits {

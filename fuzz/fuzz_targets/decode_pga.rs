@@ -1,0 +1,5 @@
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+use mocapstore::codec::CodecId;
+
+fuzz_target!(|data: &[u8]| mocapstore::fuzzing::decode_skeletal(CodecId::Pga, data));
