@@ -104,6 +104,23 @@ fn cases() -> Vec<(String, String)> {
             h.finalize().to_hex()[..32].to_string(),
         ));
     }
+    // The skeleton codecs, on a BVH take: channel values as printed (bvh-lossless), and
+    // rotations held to a bound on the FK positions (rot, pga).
+    let bvh = mocapstore::motion::synthetic::dancer(300, 60.0, 3);
+    for (codec, bound) in [
+        (CodecId::BvhLossless, ErrorBound::max(1.0)),
+        (CodecId::Rot, ErrorBound::max(1.0)),
+        (CodecId::Rot, ErrorBound::mean(3.0)),
+        (CodecId::Pga, ErrorBound::max(1.0)),
+        (CodecId::Pga, ErrorBound::mean(3.0)),
+    ] {
+        let enc = codec::encode(&bvh, codec, bound).expect("encodes");
+        let hash = blake3::hash(&enc.container.to_bytes());
+        out.push((
+            format!("dancer-300@60 {codec} {bound}"),
+            hash.to_hex()[..32].to_string(),
+        ));
+    }
     out
 }
 
