@@ -54,8 +54,8 @@ pub(super) fn code_chunk<I: Io>(
     let mut extrapolate_model = Bit::default();
     for (p, (part, h)) in plan.parts.iter().zip(&mut hist).enumerate() {
         h.extrapolate = match plan.version {
-            Version::V1 | Version::V2 => true,
-            Version::V3 => {
+            Version::V1 => true,
+            Version::V2 => {
                 let want = given.is_some_and(|g| {
                     extrapolates(part, &g.coeffs.rotations[p], g.values, cc, frames)
                 });

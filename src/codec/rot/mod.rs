@@ -39,8 +39,8 @@ mod aim;
 mod delta;
 mod transform;
 
-/// What the encoder writes ([`Version::V3`]); the decoder reads every [`Version`].
-const VERSION: u8 = 3;
+/// What the encoder writes ([`Version::V2`]); the decoder reads every [`Version`].
+const VERSION: u8 = 2;
 pub(super) const SIZE_CONTEXTS: usize = 20;
 
 pub struct Rot;
@@ -117,16 +117,13 @@ pub(super) enum Version {
     V1,
     /// A joint's step scales with its longest bone (the encoder aims each joint from its
     /// decoded parent, [`aim`], so an error moves the joint's own children only); delta mode
-    /// always extrapolates.
+    /// chooses each part's predictor.
     V2,
-    /// As version 2, and delta mode chooses each part's predictor (one bit per part per
-    /// chunk).
-    V3,
 }
 
 impl Version {
     /// The versions a decoder reads.
-    pub const ALL: [u8; 3] = [1, 2, 3];
+    pub const ALL: [u8; 2] = [1, 2];
 }
 
 impl Version {
@@ -134,7 +131,6 @@ impl Version {
         match v {
             1 => Some(Version::V1),
             2 => Some(Version::V2),
-            3 => Some(Version::V3),
             _ => None,
         }
     }
@@ -157,7 +153,7 @@ fn distances(rig: &Rig, version: Version) -> Vec<f64> {
             dist[p] = dist[p].max((pos[d] - pos[p]).norm());
             a = match version {
                 Version::V1 => joints[p].parent,
-                Version::V2 | Version::V3 => None,
+                Version::V2 => None,
             };
         }
     }
@@ -322,7 +318,7 @@ impl<'a> Take<'a> {
     ) -> Take<'a> {
         let frames = skeleton.frame_count();
         let values = &skeleton.values[..];
-        let steps = Steps::new(rig, Version::V3, base);
+        let steps = Steps::new(rig, Version::V2, base);
         let layout = steps.plan(rig, 224);
         let cc = layout.channels;
         let chunks = (0..frames)
