@@ -58,7 +58,6 @@ pub struct StreamArgs {
 /// The servers requests go to, in turn.
 struct Servers {
     urls: Vec<String>,
-    next: AtomicUsize,
     /// Requests sent through [`Servers::pick`].
     sent: AtomicUsize,
 }
@@ -67,15 +66,13 @@ impl Servers {
     fn new(urls: Vec<String>) -> Servers {
         Servers {
             urls,
-            next: AtomicUsize::new(0),
             sent: AtomicUsize::new(0),
         }
     }
 
     /// The next server, round-robin.
     fn pick(&self) -> &str {
-        self.sent.fetch_add(1, Ordering::Relaxed);
-        let i = self.next.fetch_add(1, Ordering::Relaxed);
+        let i = self.sent.fetch_add(1, Ordering::Relaxed);
         &self.urls[i % self.urls.len()]
     }
 

@@ -25,24 +25,20 @@ use crate::service::access::{self, Caller};
 use crate::service::budget::Holder;
 use crate::service::streams::{Append, Arrival, OpenRequest, Route, StreamInfo, Watch};
 
-/// A request for stream `id` as it came, for the server that codes it.
-struct Sent<'a> {
-    method: Method,
-    uri: &'a Uri,
-    headers: &'a HeaderMap,
-    body: Bytes,
-}
-
 /// The answer of the server that codes stream `id`, if that is another server: the
 /// request forwarded there ([`super::forward`]). `None`: answer here — this server codes
 /// it, took it over from one that stopped, or no server codes it (finished).
+/// `method`, `uri`, `headers` and `body` are the request as it came.
 async fn at_owner(
     state: &AppState,
     holder: &Holder,
     id: &str,
-    sent: Sent<'_>,
+    method: Method,
+    uri: &Uri,
+    headers: &HeaderMap,
+    body: Bytes,
 ) -> Result<Option<Response>, ApiError> {
-    let forwarded = sent.headers.contains_key(super::forward::FORWARDED);
+    let forwarded = headers.contains_key(super::forward::FORWARDED);
     let Route::Owner { url } = state
         .streams
         .route(&state.store, id, holder, forwarded)
@@ -52,7 +48,7 @@ async fn at_owner(
     };
     let answer = state
         .forwarder
-        .send(&url, sent.method, sent.uri, sent.headers, sent.body, holder)
+        .send(&url, method, uri, headers, body, holder)
         .await;
     match answer {
         Ok(r) => {
@@ -101,13 +97,16 @@ pub async fn get(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     access::check_take(&state.store, &caller.grant, &id).await?;
-    let sent = Sent {
-        method: Method::GET,
-        uri: &uri,
-        headers: &headers,
-        body: Bytes::new(),
-    };
-    if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
+    let owner = at_owner(
+        &state,
+        &holder,
+        &id,
+        Method::GET,
+        &uri,
+        &headers,
+        Bytes::new(),
+    );
+    if let Some(r) = owner.await? {
         return Ok(r);
     }
     Ok(Json(state.streams.info(&state.store, &id).await?).into_response())
@@ -241,13 +240,16 @@ pub async fn append(
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
     access::check_take(&state.store, &caller.grant, &id).await?;
-    let sent = Sent {
-        method: Method::POST,
-        uri: &uri,
-        headers: &headers,
-        body: body.clone(),
-    };
-    if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
+    let owner = at_owner(
+        &state,
+        &holder,
+        &id,
+        Method::POST,
+        &uri,
+        &headers,
+        body.clone(),
+    );
+    if let Some(r) = owner.await? {
         return Ok(r);
     }
     let frames = parse_frames(&headers, &body)?;
@@ -277,13 +279,16 @@ pub async fn finish(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     access::check_take(&state.store, &caller.grant, &id).await?;
-    let sent = Sent {
-        method: Method::POST,
-        uri: &uri,
-        headers: &headers,
-        body: Bytes::new(),
-    };
-    if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
+    let owner = at_owner(
+        &state,
+        &holder,
+        &id,
+        Method::POST,
+        &uri,
+        &headers,
+        Bytes::new(),
+    );
+    if let Some(r) = owner.await? {
         return Ok(r);
     }
     let take = state
@@ -383,13 +388,16 @@ pub async fn events(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     access::check_take(&state.store, &caller.grant, &id).await?;
-    let sent = Sent {
-        method: Method::GET,
-        uri: &uri,
-        headers: &headers,
-        body: Bytes::new(),
-    };
-    if let Some(r) = at_owner(&state, &holder, &id, sent).await? {
+    let owner = at_owner(
+        &state,
+        &holder,
+        &id,
+        Method::GET,
+        &uri,
+        &headers,
+        Bytes::new(),
+    );
+    if let Some(r) = owner.await? {
         // Passed back as it comes, until this server shuts down (a watch here would end
         // then too; one held open would keep the server from stopping).
         let mut stopping = state.streams.stopping();

@@ -253,6 +253,26 @@ impl Cuttable {
         Cuttable { addr, cut }
     }
 
+    /// A proxy before the Postgres at `url`, and the URL that goes through it.
+    async fn before(url: &str) -> (Cuttable, String) {
+        let (head, rest) = url.split_once("://").unwrap();
+        let (auth, hostpath) = rest.rsplit_once('@').map_or(("", rest), |(a, h)| (a, h));
+        let (host, path) = hostpath.split_once('/').unwrap();
+        let target: std::net::SocketAddr = tokio::net::lookup_host(host)
+            .await
+            .unwrap()
+            .find(|a| a.is_ipv4())
+            .unwrap();
+        let proxy = Cuttable::to(target).await;
+        let at = if auth.is_empty() {
+            String::new()
+        } else {
+            format!("{auth}@")
+        };
+        let proxied = format!("{head}://{at}{}/{path}", proxy.addr);
+        (proxy, proxied)
+    }
+
     fn set(&self, cut: bool) {
         self.cut.send_replace(cut);
     }
@@ -266,22 +286,7 @@ async fn a_database_outage_is_503s_and_the_server_recovers_by_itself() {
     let Some(pg) = common::postgres().await else {
         return;
     };
-    let url = pg.url().to_string();
-    let (head, rest) = url.split_once("://").unwrap();
-    let (auth, hostpath) = rest.rsplit_once('@').map_or(("", rest), |(a, h)| (a, h));
-    let (host, path) = hostpath.split_once('/').unwrap();
-    let target: std::net::SocketAddr = tokio::net::lookup_host(host)
-        .await
-        .unwrap()
-        .find(|a| a.is_ipv4())
-        .unwrap();
-    let proxy = Cuttable::to(target).await;
-    let at = if auth.is_empty() {
-        String::new()
-    } else {
-        format!("{auth}@")
-    };
-    let proxied = format!("{head}://{at}{}/{path}", proxy.addr);
+    let (proxy, proxied) = Cuttable::before(pg.url()).await;
     let store = mocapstore::store::Store::open(&proxied).await.unwrap();
     let srv = common::start(store, 8 << 20).await;
     let client = reqwest::Client::builder()
@@ -470,22 +475,7 @@ async fn a_stream_keeps_its_frames_through_a_database_outage() {
     let Some(pg) = common::postgres().await else {
         return;
     };
-    let url = pg.url().to_string();
-    let (head, rest) = url.split_once("://").unwrap();
-    let (auth, hostpath) = rest.rsplit_once('@').map_or(("", rest), |(a, h)| (a, h));
-    let (host, path) = hostpath.split_once('/').unwrap();
-    let target: std::net::SocketAddr = tokio::net::lookup_host(host)
-        .await
-        .unwrap()
-        .find(|a| a.is_ipv4())
-        .unwrap();
-    let proxy = Cuttable::to(target).await;
-    let at = if auth.is_empty() {
-        String::new()
-    } else {
-        format!("{auth}@")
-    };
-    let proxied = format!("{head}://{at}{}/{path}", proxy.addr);
+    let (proxy, proxied) = Cuttable::before(pg.url()).await;
     let store = mocapstore::store::Store::open(&proxied).await.unwrap();
     let srv = common::start(store, 8 << 20).await;
     let (status, _, s) = srv
