@@ -227,12 +227,16 @@ class Windows:
             self._remember(i, a)
             out[k] = a.copy()
         if missing:
-            for k, a in zip(missing, self._fetch([idx[k] for k in missing]), strict=True):
-                disk = self._disk(idx[k])
+            # A window asked for twice in one batch is fetched once.
+            wanted = list(dict.fromkeys(idx[k] for k in missing))
+            fetched = dict(zip(wanted, self._fetch(wanted), strict=True))
+            for i, a in fetched.items():
+                disk = self._disk(i)
                 if disk is not None:
                     self._store(disk, a)
-                self._remember(idx[k], a)
-                out[k] = a.copy()
+                self._remember(i, a)
+            for k in missing:
+                out[k] = fetched[idx[k]].copy()
         got = [a for a in out if a is not None]
         if len(got) != len(out):
             raise RuntimeError(f"{len(out) - len(got)} of {len(out)} windows were not read")
