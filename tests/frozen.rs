@@ -25,8 +25,12 @@ use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::pga::encode::{Directions, Options, Take};
 use mocapstore::codec::{self, Basis, CodecId, Container, ErrorBound, Header, Limits};
 use mocapstore::motion::analog::Samples;
+use mocapstore::motion::formats::bvh::ChannelWriter;
 use mocapstore::motion::synthetic::{force_and_emg, two_behaviours, walker};
 use mocapstore::motion::Motion;
+
+#[path = "support/scalar.rs"]
+mod scalar;
 
 fn dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/frozen")
@@ -162,6 +166,76 @@ fn every_frozen_bitstream_reads_any_range_as_the_same_rows_of_the_whole() {
     assert!(gaps, "some frozen takes have gaps");
 }
 
+/// `channels.txt`: per frozen take of a codec that keeps a skeleton's channels, the BLAKE3 of
+/// its channel values (f64, little-endian) and of the BVH text written from them (what
+/// `GET …/frames?format=bvh` serves: the digits `bvh-lossless` kept, six decimals for the
+/// others). A line is added with the file (`MOCAPSTORE_FREEZE=1`), never changed.
+const CHANNELS: &str = "channels.txt";
+
+/// The channel values and BVH text of frozen take `file`, hashed; `None` for a take of a
+/// codec that keeps positions only.
+fn channel_hashes(file: &str) -> Option<(String, String)> {
+    let path = dir().join(file);
+    let c = Container::parse(&std::fs::read(&path).unwrap(), &Limits::default()).unwrap();
+    if c.header.codec.is_analog() || !codec::codec(c.header.codec).unwrap().codes_channels() {
+        return None;
+    }
+    let shared = shared_of(&c, &path);
+    let rig = shared
+        .rig
+        .clone()
+        .expect("a channel codec names a skeleton");
+    let reader = codec::Reader::new(c.header.clone(), shared).unwrap();
+    let source = codec::Stored::new(0, c.chunks.iter().map(Vec::as_slice));
+    let frames = c.header.frames as usize;
+    let ch = reader
+        .read_channels(0..frames, rig.channel_count(), &source)
+        .unwrap();
+    let values: Vec<u8> = ch.values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let w = ChannelWriter::new(rig.joints().to_vec(), c.header.fps, frames);
+    let mut bvh = Vec::new();
+    w.head(&mut bvh);
+    w.frames(&ch.values, ch.printed.as_ref(), 0..frames, &mut bvh);
+    Some((short_hash(&values), short_hash(&bvh)))
+}
+
+/// Every frozen take of a channel codec reads as the same channel values and BVH text as
+/// when it was frozen (`channels.txt`), so the BVH-out path and `bvh-lossless`'s printed
+/// digits cannot drift.
+#[test]
+fn every_frozen_channel_take_reads_as_the_same_channels_and_bvh_text() {
+    let path = dir().join(CHANNELS);
+    let mut text = std::fs::read_to_string(&path).unwrap_or_default();
+    let freeze = std::env::var("MOCAPSTORE_FREEZE").as_deref() == Ok("1");
+    let mut checked = 0;
+    for e in index() {
+        let Some((values, bvh)) = channel_hashes(&e.file) else {
+            continue;
+        };
+        let line = text
+            .lines()
+            .find(|l| l.split(' ').next() == Some(e.file.as_str()));
+        match line {
+            Some(l) => assert_eq!(
+                l,
+                format!("{} {values} {bvh}", e.file),
+                "{}: channels or BVH text changed",
+                e.file
+            ),
+            None if freeze => text.push_str(&format!("{} {values} {bvh}\n", e.file)),
+            None => panic!(
+                "{}: not in {CHANNELS} (MOCAPSTORE_FREEZE=1 adds it)",
+                e.file
+            ),
+        }
+        checked += 1;
+    }
+    if freeze {
+        std::fs::write(&path, &text).unwrap();
+    }
+    assert!(checked >= 3, "only {checked} channel takes");
+}
+
 /// One line of the index.
 struct Entry {
     file: String,
@@ -204,6 +278,23 @@ fn every_frozen_bitstream_decodes_to_what_it_decoded_to_when_written() {
             "{} ({}) no longer decodes as it did",
             e.file, e.what
         );
+    }
+}
+
+/// The plain build of the hot loops (`MOCAP_SCALAR=1`) decodes every frozen file, whole and
+/// by ranges, to the same pinned bits as the AVX2 build this process runs.
+#[test]
+fn the_plain_build_decodes_every_frozen_bitstream_to_the_same_bits() {
+    if scalar::in_child() {
+        return;
+    }
+    scalar::parent_path_is_the_vector_one_where_it_can_be();
+    for name in [
+        "every_frozen_bitstream_decodes_to_what_it_decoded_to_when_written",
+        "every_frozen_bitstream_reads_any_range_as_the_same_rows_of_the_whole",
+        "the_plain_build_decodes_every_frozen_bitstream_to_the_same_bits",
+    ] {
+        scalar::rerun(name);
     }
 }
 

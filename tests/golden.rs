@@ -15,6 +15,9 @@ use mocapstore::codec::{self, CodecId, ErrorBound};
 use mocapstore::motion::synthetic::walker;
 use mocapstore::motion::Motion;
 
+#[path = "support/scalar.rs"]
+mod scalar;
+
 const TABLE: &str = "tests/golden/hashes.txt";
 
 /// `m`'s frames with gaps filled (`filled`) as codec input.
@@ -32,7 +35,26 @@ fn input<'a>(m: &Motion, filled: &'a [f32], shared: Option<&'a Basis>) -> codec:
     }
 }
 
-fn cases() -> Vec<(String, String)> {
+/// One golden encoding: its name, the BLAKE3 of its bytes, and for a whole take the BLAKE3 of
+/// what a reader decodes it to (the hashes are the table's; the decodes are compared between
+/// the AVX2 and the plain build).
+struct Case {
+    name: String,
+    hash: String,
+    decoded: Option<String>,
+}
+
+/// `enc` read back by a reader of its own (not the encoder's check).
+fn decoded(enc: &codec::Encoded, basis: Option<&Arc<Basis>>) -> Option<String> {
+    let shared = codec::Shared {
+        basis: enc.container.header.basis.and(basis.cloned()),
+        rig: enc.rig.clone(),
+    };
+    let frames = codec::decode_all_with(&enc.container, shared).expect("decodes");
+    Some(codec::decoded_digest(&frames))
+}
+
+fn cases() -> Vec<Case> {
     let motions = [
         ("walker-240x8@120", walker(240, 8, 120.0, 1, 0.0)),
         ("walker-500x5@60-gaps", walker(500, 5, 60.0, 2, 0.3)),
@@ -66,10 +88,11 @@ fn cases() -> Vec<(String, String)> {
             });
             let enc = codec::encode_with(m, codec, bound, Some(&basis)).expect("encodes");
             let hash = blake3::hash(&enc.container.to_bytes());
-            out.push((
-                format!("{name} {codec} {bound}"),
-                hash.to_hex()[..32].to_string(),
-            ));
+            out.push(Case {
+                name: format!("{name} {codec} {bound}"),
+                hash: hash.to_hex()[..32].to_string(),
+                decoded: decoded(&enc, Some(&basis)),
+            });
         }
         // lsdt-frame's adaptive stage, what live streams are coded with (one frame at a
         // time, stream parameters): their chunks are stored as they are.
@@ -86,10 +109,11 @@ fn cases() -> Vec<(String, String)> {
         if let Some(c) = e.finish() {
             h.update(&c.bytes);
         }
-        out.push((
-            format!("{name} lsdt-frame adaptive (stream) max 0.5 mm"),
-            h.finalize().to_hex()[..32].to_string(),
-        ));
+        out.push(Case {
+            name: format!("{name} lsdt-frame adaptive (stream) max 0.5 mm"),
+            hash: h.finalize().to_hex()[..32].to_string(),
+            decoded: None,
+        });
         // lsdt-clip's adaptive stage, what live streams are coded with (clip by clip).
         let p = clip::stream_params(0.5 / m.unit.to_mm(), m.fps);
         let basis = dct_basis(m.point_count());
@@ -99,10 +123,11 @@ fn cases() -> Vec<(String, String)> {
         for c in clip::encode_fixed(&input(m, &filled, Some(&basis)), p).expect("encodes") {
             h.update(&c.bytes);
         }
-        out.push((
-            format!("{name} lsdt-clip adaptive (stream) max 0.5 mm"),
-            h.finalize().to_hex()[..32].to_string(),
-        ));
+        out.push(Case {
+            name: format!("{name} lsdt-clip adaptive (stream) max 0.5 mm"),
+            hash: h.finalize().to_hex()[..32].to_string(),
+            decoded: None,
+        });
     }
     // The skeleton codecs, on a BVH take: channel values as printed (bvh-lossless), and
     // rotations held to a bound on the FK positions (rot, pga).
@@ -116,17 +141,21 @@ fn cases() -> Vec<(String, String)> {
     ] {
         let enc = codec::encode(&bvh, codec, bound).expect("encodes");
         let hash = blake3::hash(&enc.container.to_bytes());
-        out.push((
-            format!("dancer-300@60 {codec} {bound}"),
-            hash.to_hex()[..32].to_string(),
-        ));
+        out.push(Case {
+            name: format!("dancer-300@60 {codec} {bound}"),
+            hash: hash.to_hex()[..32].to_string(),
+            decoded: decoded(&enc, None),
+        });
     }
     out
 }
 
 #[test]
 fn encodings_match_the_committed_hashes() {
-    let got: String = cases().iter().map(|(k, h)| format!("{h}  {k}\n")).collect();
+    let got: String = cases()
+        .iter()
+        .map(|c| format!("{}  {}\n", c.hash, c.name))
+        .collect();
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(TABLE);
     // Only the explicit value re-blesses: `MOCAPSTORE_BLESS=0` (or any other value) checks.
     if std::env::var("MOCAPSTORE_BLESS").as_deref() == Ok("1") {
@@ -138,4 +167,34 @@ fn encodings_match_the_committed_hashes() {
         got, want,
         "bitstreams changed; if deliberate, run MOCAPSTORE_BLESS=1 cargo test --test golden"
     );
+}
+
+/// What each golden encoding is, as bytes and as decoded frames.
+fn printed(cases: &[Case]) -> String {
+    cases
+        .iter()
+        .map(|c| {
+            let decoded = c.decoded.as_deref().unwrap_or("-");
+            format!("golden {} {decoded} {}\n", c.hash, c.name)
+        })
+        .collect()
+}
+
+/// The plain build of the hot loops (`MOCAP_SCALAR=1`) writes the same bytes for every golden
+/// encoding and decodes each to the same bits as the AVX2 build this process runs.
+#[test]
+fn the_plain_build_encodes_and_decodes_the_golden_takes_to_the_same_bits() {
+    const NAME: &str = "the_plain_build_encodes_and_decodes_the_golden_takes_to_the_same_bits";
+    if scalar::in_child() {
+        // On a line of its own: libtest prints the test's name before its output.
+        print!("\n{}", printed(&cases()));
+        return;
+    }
+    scalar::parent_path_is_the_vector_one_where_it_can_be();
+    let plain: String = scalar::rerun(NAME)
+        .lines()
+        .filter(|l| l.starts_with("golden "))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert_eq!(plain, printed(&cases()));
 }

@@ -390,7 +390,9 @@ fn serve(args: ServeArgs) -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
-        tracing::info!(address = %app.local_addr(), %database, "mocapstore listening");
+        // The build the codecs' hot loops run (`MOCAP_SCALAR=1` forces the plain one).
+        let simd = mocapstore::codec::simd::path().name();
+        tracing::info!(address = %app.local_addr(), %database, simd, "mocapstore listening");
         if let Some(m) = app.metrics_addr() {
             tracing::info!(address = %m, "GET /metrics without a token");
         }

@@ -49,6 +49,7 @@ pub mod rig;
 pub mod rot;
 pub mod search;
 pub mod segment;
+pub mod simd;
 pub mod spca;
 pub mod stream;
 #[cfg(test)]

@@ -196,8 +196,8 @@ fn rows_of(text: &str) -> Vec<String> {
 
 /// Every BVH file of the corpus, ingested with defaults, comes back as BVH: the same
 /// hierarchy and frame count read by this project's reader and by an independent one
-/// (`bvh_anim`), the values as uploaded (`bvh-lossless`) or FK positions within the bound
-/// (`rot`), and a range equal to the same rows of the whole take.
+/// (`bvh_anim`), the values as uploaded (`bvh-lossless`, compared by both readers) or FK
+/// positions within the bound (`rot`), and a range equal to the same rows of the whole take.
 #[tokio::test]
 async fn every_corpus_bvh_comes_back_as_bvh() {
     let Some((root, entries)) = mocapstore::corpus::for_tests() else {
@@ -205,7 +205,11 @@ async fn every_corpus_bvh_comes_back_as_bvh() {
     };
     let t = common::sqlite().await;
     let srv = start(t.store.clone(), 64 << 20).await;
-    let (mut checked, mut codecs) = (0, std::collections::BTreeMap::new());
+    let (mut checked, mut faulty, mut codecs) = (
+        0,
+        std::collections::BTreeSet::new(),
+        std::collections::BTreeMap::new(),
+    );
     for e in entries.iter().filter(|e| e.path.ends_with(".bvh")) {
         let bytes = std::fs::read(root.join(&e.path)).unwrap();
         let Ok(original) = formats::read(&bytes, &ReadOptions::default()) else {
@@ -241,12 +245,24 @@ async fn every_corpus_bvh_comes_back_as_bvh() {
             match codec.as_str() {
                 "bvh-lossless" => {
                     assert_eq!(rows_of(&text), rows_of(&uploaded), "{}", e.path);
-                    if let Ok(theirs) = bvh_anim::from_bytes(&bytes) {
-                        let values = |b: &bvh_anim::Bvh| -> Vec<f32> {
-                            b.frames().flat_map(|f| f.as_slice().to_vec()).collect()
-                        };
-                        assert_eq!(values(&other), values(&theirs), "{}", e.path);
-                    }
+                    let values = |b: &bvh_anim::Bvh| -> Vec<f32> {
+                        b.frames().flat_map(|f| f.as_slice().to_vec()).collect()
+                    };
+                    let theirs = match bvh_anim::from_bytes(&bytes) {
+                        Ok(b) => values(&b),
+                        // bvh_anim refuses only what the manifest's reference parser
+                        // refused too (a header that miscounts its frames); the upload's
+                        // rows, as numbers, stand in for it there.
+                        Err(err) => {
+                            assert_eq!(e.reference_ok, Some(false), "{}: bvh_anim: {err}", e.path);
+                            faulty.insert(e.path.clone());
+                            rows_of(&uploaded)
+                                .iter()
+                                .flat_map(|r| r.split(' ').map(|t| t.parse::<f32>().unwrap()))
+                                .collect()
+                        }
+                    };
+                    assert_eq!(values(&other), theirs, "{}", e.path);
                 }
                 "rot" | "pga" => {
                     let max = served_max_mm(&original, &served);
@@ -274,7 +290,11 @@ async fn every_corpus_bvh_comes_back_as_bvh() {
         checked += 1;
     }
     assert!(checked >= 180, "{checked} BVH files checked");
-    println!("{checked} corpus BVH files served as BVH: {codecs:?}");
+    assert!(faulty.len() <= 2, "bvh_anim could not read {faulty:?}");
+    println!(
+        "{checked} corpus BVH files served as BVH: {codecs:?}; faulty headers, compared by \
+         their rows: {faulty:?}"
+    );
     srv.stop().await;
     t.finish().await;
 }

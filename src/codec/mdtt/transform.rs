@@ -10,6 +10,7 @@ use crate::codec::linalg::leading_eigen;
 
 use super::params::Params;
 use crate::codec::linalg::add_outer_products;
+use crate::codec::simd::dispatch;
 use crate::codec::{dct, segment, Input};
 
 /// Clip length: the paper's 280 frames at 120 fps, scaled to the take's frame rate.
@@ -95,60 +96,62 @@ impl DctTables {
     }
 }
 
-/// Reconstruct frames `rows` of a clip of `len` frames (into `out`, `rows.len()` frames)
-/// from its dequantised coefficients (`k × lc`): `mean + (B S D̃ᵀ)ᵀ`, in f32 in a fixed
-/// order, so that encoder and decoder produce the same bits (each frame's sums are the
-/// same whichever rows are asked for).
-///
-/// Compiled also for AVX2 and chosen at run time ([`multiversion`]): the loops are
-/// element-wise (no sum changes its order with the vector width) and Rust never fuses a
-/// multiply and an add, so every build gives the same bits, twice as fast where AVX2 is.
-#[multiversion::multiversion(targets("x86_64+avx2"))]
-pub fn reconstruct(
-    p: &Params,
-    coefs: &[f32],
-    d: &[f32],
-    (len, lc): (usize, usize),
-    rows: Range<usize>,
-    out: &mut [f32],
-) {
-    debug_assert!(rows.end <= len);
-    let w = p.width();
-    let k = p.k;
-    // T = B·S laid out j-major (lc × w) so the per-frame loop runs along coordinates.
-    let mut t = vec![0f32; lc * w];
-    for j in 0..lc {
-        let row = &mut t[j * w..(j + 1) * w];
-        for b in 0..k {
-            let s = coefs[b * lc + j];
-            if s == 0.0 {
-                continue;
-            }
-            for (v, bc) in row.iter_mut().zip(&p.basis[b * w..(b + 1) * w]) {
-                *v += bc * s;
+dispatch! {
+    /// Reconstruct frames `rows` of a clip of `len` frames (into `out`, `rows.len()` frames)
+    /// from its dequantised coefficients (`k × lc`): `mean + (B S D̃ᵀ)ᵀ`, in f32 in a fixed
+    /// order, so that encoder and decoder produce the same bits (each frame's sums are the
+    /// same whichever rows are asked for).
+    ///
+    /// Compiled also for AVX2 and chosen at run time ([`dispatch!`]): the loops are
+    /// element-wise (no sum changes its order with the vector width) and Rust never fuses a
+    /// multiply and an add, so every build gives the same bits, twice as fast where AVX2 is.
+    pub fn reconstruct(
+        p: &Params,
+        coefs: &[f32],
+        d: &[f32],
+        shape: (usize, usize),
+        rows: Range<usize>,
+        out: &mut [f32],
+    ) {
+        let (len, lc) = shape;
+        debug_assert!(rows.end <= len);
+        let w = p.width();
+        let k = p.k;
+        // T = B·S laid out j-major (lc × w) so the per-frame loop runs along coordinates.
+        let mut t = vec![0f32; lc * w];
+        for j in 0..lc {
+            let row = &mut t[j * w..(j + 1) * w];
+            for b in 0..k {
+                let s = coefs[b * lc + j];
+                if s == 0.0 {
+                    continue;
+                }
+                for (v, bc) in row.iter_mut().zip(&p.basis[b * w..(b + 1) * w]) {
+                    *v += bc * s;
+                }
             }
         }
-    }
-    // Four DCT rows per pass over the frame: a quarter of the loads and stores of `o`. The
-    // sums are grouped the same way in encoder and decoder, so both get the same bits.
-    for (f, o) in rows.zip(out.chunks_exact_mut(w)) {
-        o.copy_from_slice(&p.mean);
-        let dr = &d[f * lc..(f + 1) * lc];
-        let mut j = 0;
-        while j + 4 <= lc {
-            let (d0, d1, d2, d3) = (dr[j], dr[j + 1], dr[j + 2], dr[j + 3]);
-            let rows = &t[j * w..(j + 4) * w];
-            let (t0, rest) = rows.split_at(w);
-            let (t1, rest) = rest.split_at(w);
-            let (t2, t3) = rest.split_at(w);
-            for c in 0..w {
-                o[c] += t0[c] * d0 + t1[c] * d1 + t2[c] * d2 + t3[c] * d3;
+        // Four DCT rows per pass over the frame: a quarter of the loads and stores of `o`. The
+        // sums are grouped the same way in encoder and decoder, so both get the same bits.
+        for (f, o) in rows.zip(out.chunks_exact_mut(w)) {
+            o.copy_from_slice(&p.mean);
+            let dr = &d[f * lc..(f + 1) * lc];
+            let mut j = 0;
+            while j + 4 <= lc {
+                let (d0, d1, d2, d3) = (dr[j], dr[j + 1], dr[j + 2], dr[j + 3]);
+                let rows = &t[j * w..(j + 4) * w];
+                let (t0, rest) = rows.split_at(w);
+                let (t1, rest) = rest.split_at(w);
+                let (t2, t3) = rest.split_at(w);
+                for c in 0..w {
+                    o[c] += t0[c] * d0 + t1[c] * d1 + t2[c] * d2 + t3[c] * d3;
+                }
+                j += 4;
             }
-            j += 4;
-        }
-        for (jj, &dj) in dr.iter().enumerate().skip(j) {
-            for (v, tv) in o.iter_mut().zip(&t[jj * w..(jj + 1) * w]) {
-                *v += tv * dj;
+            for (jj, &dj) in dr.iter().enumerate().skip(j) {
+                for (v, tv) in o.iter_mut().zip(&t[jj * w..(jj + 1) * w]) {
+                    *v += tv * dj;
+                }
             }
         }
     }

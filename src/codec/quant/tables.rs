@@ -220,7 +220,8 @@ mod tests {
                     quant::encode_version(i, t, Some(version))
                 })
                 .unwrap();
-            assert!(enc.stats.max_mm <= 0.5);
+            let (max, _) = crate::codec::testing::measured(&m, &enc);
+            assert!(max <= 0.5, "{max}");
             assert_eq!(enc.container.header.params.len() == 8, version == 1);
         }
         let m = walker(300, 7, 120.0, 5, 0.0);

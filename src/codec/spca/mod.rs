@@ -202,7 +202,8 @@ mod tests {
         let enc = crate::codec::encode_hinted(&w, CodecId::Spca, bound, None, &hints).unwrap();
         let p = Params::parse(&enc.container.header.params, w.point_count()).unwrap();
         assert_eq!(p.torso.map(|(_, t)| t), Some([0, 2, 4]));
-        assert!(enc.stats.max_mm <= 2.0);
+        let (max, _) = crate::codec::testing::measured(&w, &enc);
+        assert!(max <= 2.0, "{max}");
         let bad = crate::codec::Hints {
             torso: Some(["nope".into(), names[2].clone(), names[4].clone()]),
         };

@@ -10,6 +10,7 @@ use crate::codec::entropy::IntModel;
 use crate::codec::error::{malformed, Result};
 use crate::codec::linalg::{add_outer_products, leading_eigen, LeastSquares};
 use crate::codec::measure::quantise;
+use crate::codec::simd::dispatch;
 
 /// Finest basis precision the format allows, fractional bits.
 pub const MAX_BITS: u8 = 20;
@@ -247,15 +248,16 @@ impl Truncation {
     }
 }
 
-/// `mean + Σ_j c_j · column_j` into `out` (columns of `mean.len()` values, contiguous): the
-/// spca decoder's inner loop. Compiled for AVX2 too and chosen at run time; element-wise,
-/// so the same bits either way (see `mdtt::transform::reconstruct`).
-#[multiversion::multiversion(targets("x86_64+avx2"))]
-fn combine(mean: &[f64], basis: &[f64], c: &[f64], out: &mut [f64]) {
-    out.copy_from_slice(mean);
-    for (column, &cj) in basis.chunks_exact(mean.len().max(1)).zip(c) {
-        for (o, &b) in out.iter_mut().zip(column) {
-            *o += b * cj;
+dispatch! {
+    /// `mean + Σ_j c_j · column_j` into `out` (columns of `mean.len()` values, contiguous): the
+    /// spca decoder's inner loop. Compiled for AVX2 too and chosen at run time ([`dispatch!`]);
+    /// element-wise, so the same bits either way (see `mdtt::transform::reconstruct`).
+    fn combine(mean: &[f64], basis: &[f64], c: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(mean);
+        for (column, &cj) in basis.chunks_exact(mean.len().max(1)).zip(c) {
+            for (o, &b) in out.iter_mut().zip(column) {
+                *o += b * cj;
+            }
         }
     }
 }

@@ -27,6 +27,7 @@ use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::{max_mean, quantise};
 use crate::codec::residual;
 use crate::codec::search::largest_multiplier;
+use crate::codec::simd::dispatch;
 use crate::codec::stream::{StreamCoder, StreamSpec, Streaming};
 use crate::codec::wire::{Reader, Writer};
 use crate::codec::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target};
@@ -132,27 +133,28 @@ fn table(n: usize) -> Vec<f32> {
     dct::basis(n, n).into_iter().map(|v| v as f32).collect()
 }
 
-/// Reconstruct `n` frames from quantised coefficients `q` (`(kmax + 1) × w`, frequency
-/// major): inverse spatial transform per frequency, then the inverse DCT. One function for
-/// encoder and decoder, so the residual layer sees exactly what the decoder will. Compiled
-/// for AVX2 too and chosen at run time: element-wise loops, so the same bits either way
-/// (see `mdtt::transform::reconstruct`).
-#[multiversion::multiversion(targets("x86_64+avx2"))]
-fn synthesise(spatial: &Spatial, q: &[i32], step: f32, n: usize, table: &[f32], out: &mut [f32]) {
-    let w = spatial.points() * 3;
-    let kn = q.len() / w;
-    let mut freq = vec![0f32; kn * w];
-    let mut scratch = spatial.scratch();
-    for (k, f) in freq.chunks_exact_mut(w).enumerate() {
-        spatial.inverse_add(&q[k * w..(k + 1) * w], step, &mut scratch, f);
-    }
-    out[..n * w].fill(0.0);
-    for t in 0..n {
-        let row = &mut out[t * w..(t + 1) * w];
-        for (k, f) in freq.chunks_exact(w).enumerate() {
-            let d = table[t * n + k];
-            for (o, &v) in row.iter_mut().zip(f) {
-                *o += d * v;
+dispatch! {
+    /// Reconstruct `n` frames from quantised coefficients `q` (`(kmax + 1) × w`, frequency
+    /// major): inverse spatial transform per frequency, then the inverse DCT. One function for
+    /// encoder and decoder, so the residual layer sees exactly what the decoder will. Compiled
+    /// for AVX2 too and chosen at run time ([`dispatch!`]): element-wise loops, so the same bits either way
+    /// (see `mdtt::transform::reconstruct`).
+    fn synthesise(spatial: &Spatial, q: &[i32], step: f32, n: usize, table: &[f32], out: &mut [f32]) {
+        let w = spatial.points() * 3;
+        let kn = q.len() / w;
+        let mut freq = vec![0f32; kn * w];
+        let mut scratch = spatial.scratch();
+        for (k, f) in freq.chunks_exact_mut(w).enumerate() {
+            spatial.inverse_add(&q[k * w..(k + 1) * w], step, &mut scratch, f);
+        }
+        out[..n * w].fill(0.0);
+        for t in 0..n {
+            let row = &mut out[t * w..(t + 1) * w];
+            for (k, f) in freq.chunks_exact(w).enumerate() {
+                let d = table[t * n + k];
+                for (o, &v) in row.iter_mut().zip(f) {
+                    *o += d * v;
+                }
             }
         }
     }
