@@ -205,9 +205,12 @@ fn dancer_rig() -> Arc<codec::Rig> {
     .clone()
 }
 
-/// A skeleton codec's chunk decoder (`rot`, `pga`, `bvh-lossless`), positions and channel
-/// values, on [`dancer_rig`]. `data` as for [`decode`]; byte 0 is ignored (the rig sets the
-/// points).
+/// A skeleton codec's chunk decoder (`rot`, `pga`, `bvh-lossless`) on [`dancer_rig`]: FK
+/// positions when byte 0 is even, channel values (what BVH out reads) when it is odd. `data`
+/// as for [`decode`], but the rig sets the points. One of the two per input, not both: the
+/// positions path is the channels' whole decode plus FK (the channels path adds only the
+/// reader's range plumbing), so both would double the work of an execution (pga's IK
+/// decode makes it the slowest target) for little code the one alone misses.
 pub fn decode_skeletal(codec: CodecId, data: &[u8]) {
     if data.len() < 4 {
         return;
@@ -243,8 +246,11 @@ pub fn decode_skeletal(codec: CodecId, data: &[u8]) {
         return;
     };
     let source = codec::Stored::new(0, [payload]);
-    let _ = reader.read_all(&source);
-    let _ = reader.read_channels(0..frames, rig.channel_count(), &source);
+    if data[0].is_multiple_of(2) {
+        let _ = reader.read_all(&source);
+    } else {
+        let _ = reader.read_channels(0..frames, rig.channel_count(), &source);
+    }
 }
 
 /// A whole stored bitstream (container): header, index, checksums, every chunk.

@@ -106,6 +106,7 @@ fn ranges(frames: usize, seed: u64, n: usize) -> Vec<std::ops::Range<usize>> {
 /// same channel values by range as whole.
 #[test]
 fn every_frozen_bitstream_reads_any_range_as_the_same_rows_of_the_whole() {
+    scalar::in_child();
     let mut gaps = false;
     for e in index() {
         let path = dir().join(&e.file);
@@ -169,7 +170,7 @@ fn every_frozen_bitstream_reads_any_range_as_the_same_rows_of_the_whole() {
 /// `channels.txt`: per frozen take of a codec that keeps a skeleton's channels, the BLAKE3 of
 /// its channel values (f64, little-endian) and of the BVH text written from them (what
 /// `GET …/frames?format=bvh` serves: the digits `bvh-lossless` kept, six decimals for the
-/// others). A line is added with the file (`MOCAPSTORE_FREEZE=1`), never changed.
+/// others). The freezer adds a new file's line ([`add_channel_lines`]); a line never changes.
 const CHANNELS: &str = "channels.txt";
 
 /// The channel values and BVH text of frozen take `file`, hashed; `None` for a take of a
@@ -204,36 +205,52 @@ fn channel_hashes(file: &str) -> Option<(String, String)> {
 /// digits cannot drift.
 #[test]
 fn every_frozen_channel_take_reads_as_the_same_channels_and_bvh_text() {
-    let path = dir().join(CHANNELS);
-    let mut text = std::fs::read_to_string(&path).unwrap_or_default();
-    let freeze = std::env::var("MOCAPSTORE_FREEZE").as_deref() == Ok("1");
-    let mut checked = 0;
+    let text = std::fs::read_to_string(dir().join(CHANNELS)).unwrap();
+    let mut checked = Vec::new();
     for e in index() {
         let Some((values, bvh)) = channel_hashes(&e.file) else {
             continue;
         };
         let line = text
             .lines()
-            .find(|l| l.split(' ').next() == Some(e.file.as_str()));
-        match line {
-            Some(l) => assert_eq!(
-                l,
-                format!("{} {values} {bvh}", e.file),
-                "{}: channels or BVH text changed",
-                e.file
-            ),
-            None if freeze => text.push_str(&format!("{} {values} {bvh}\n", e.file)),
-            None => panic!(
-                "{}: not in {CHANNELS} (MOCAPSTORE_FREEZE=1 adds it)",
-                e.file
-            ),
+            .find(|l| l.split(' ').next() == Some(e.file.as_str()))
+            .unwrap_or_else(|| panic!("{}: not in {CHANNELS} (the freezer adds it)", e.file));
+        assert_eq!(
+            line,
+            format!("{} {values} {bvh}", e.file),
+            "{}: channels or BVH text changed",
+            e.file
+        );
+        checked.push(e.file);
+    }
+    assert!(checked.len() >= 3, "only {checked:?}");
+    // And no line for a file that is not a frozen channel take.
+    for l in text.lines() {
+        let file = l.split(' ').next().unwrap_or_default();
+        assert!(
+            checked.iter().any(|c| c == file),
+            "{CHANNELS}: {l:?} names no channel take"
+        );
+    }
+}
+
+/// Add the `channels.txt` lines of frozen channel takes that have none (the freezer's last
+/// step).
+fn add_channel_lines() {
+    let path = dir().join(CHANNELS);
+    let mut text = std::fs::read_to_string(&path).unwrap_or_default();
+    for e in index() {
+        if text
+            .lines()
+            .any(|l| l.split(' ').next() == Some(e.file.as_str()))
+        {
+            continue;
         }
-        checked += 1;
+        if let Some((values, bvh)) = channel_hashes(&e.file) {
+            text.push_str(&format!("{} {values} {bvh}\n", e.file));
+        }
     }
-    if freeze {
-        std::fs::write(&path, &text).unwrap();
-    }
-    assert!(checked >= 3, "only {checked} channel takes");
+    std::fs::write(&path, text).unwrap();
 }
 
 /// One line of the index.
@@ -271,6 +288,7 @@ fn index() -> Vec<Entry> {
 
 #[test]
 fn every_frozen_bitstream_decodes_to_what_it_decoded_to_when_written() {
+    scalar::in_child();
     for e in index() {
         let got = digest(&decode_file(&dir().join(&e.file)));
         assert_eq!(
@@ -285,17 +303,13 @@ fn every_frozen_bitstream_decodes_to_what_it_decoded_to_when_written() {
 /// by ranges, to the same pinned bits as the AVX2 build this process runs.
 #[test]
 fn the_plain_build_decodes_every_frozen_bitstream_to_the_same_bits() {
-    if scalar::in_child() {
+    if scalar::in_child() || !scalar::parent_runs_the_vector_build() {
         return;
     }
-    scalar::parent_path_is_the_vector_one_where_it_can_be();
-    for name in [
+    scalar::rerun(&[
         "every_frozen_bitstream_decodes_to_what_it_decoded_to_when_written",
         "every_frozen_bitstream_reads_any_range_as_the_same_rows_of_the_whole",
-        "the_plain_build_decodes_every_frozen_bitstream_to_the_same_bits",
-    ] {
-        scalar::rerun(name);
-    }
+    ]);
 }
 
 /// A frozen file is never rewritten, and none is left out of the index.
@@ -692,4 +706,5 @@ fn freeze_current_bitstreams() {
         eprintln!("froze {file}");
     }
     std::fs::write(dir().join("index.txt"), index).unwrap();
+    add_channel_lines();
 }

@@ -290,7 +290,7 @@ async fn every_corpus_bvh_comes_back_as_bvh() {
         checked += 1;
     }
     assert!(checked >= 180, "{checked} BVH files checked");
-    assert!(faulty.len() <= 2, "bvh_anim could not read {faulty:?}");
+    assert!(faulty.len() <= 1, "bvh_anim could not read {faulty:?}");
     println!(
         "{checked} corpus BVH files served as BVH: {codecs:?}; faulty headers, compared by \
          their rows: {faulty:?}"

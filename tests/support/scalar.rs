@@ -23,28 +23,42 @@ pub fn in_child() -> bool {
     child
 }
 
-/// Run test `name` of this binary with `MOCAP_SCALAR=1`; it must pass. Its printed output.
-pub fn rerun(name: &str) -> String {
+/// Run tests `names` of this binary with `MOCAP_SCALAR=1`; each must pass (each calls
+/// [`in_child`], which checks the switch took). Their printed output.
+pub fn rerun(names: &[&str]) -> String {
     let out = Command::new(std::env::current_exe().expect("the test binary"))
-        .args(["--exact", name, "--nocapture", "--test-threads=1"])
+        .args(names)
+        .args(["--exact", "--nocapture", "--test-threads=1"])
         .env(simd::ENV, "1")
         .env(CHILD, "1")
         .output()
         .expect("runs the test binary");
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let passed = format!("test result: ok. {} passed", names.len());
     assert!(
-        out.status.success() && stdout.contains("1 passed"),
-        "{name} on the plain build:\n{stdout}\n{}",
+        out.status.success() && stdout.contains(&passed),
+        "{names:?} on the plain build:\n{stdout}\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
     stdout
 }
 
-/// The parent's own path: AVX2 where the CPU has it and `MOCAP_SCALAR` is not set, so that
-/// the rerun compares two builds, not one with itself.
-pub fn parent_path_is_the_vector_one_where_it_can_be() {
+/// Whether this process runs the AVX2 build, so that a rerun compares two builds; where it
+/// cannot (no AVX2, or `MOCAP_SCALAR` set for the whole run), says so.
+pub fn parent_runs_the_vector_build() -> bool {
+    let vector = simd::path() == simd::Path::Avx2;
+    if !vector {
+        println!(
+            "not compared: this process runs the plain build too (no AVX2, or {} set)",
+            simd::ENV
+        );
+    }
     #[cfg(target_arch = "x86_64")]
     if std::env::var_os(simd::ENV).is_none() && std::is_x86_feature_detected!("avx2") {
-        assert_eq!(simd::path(), simd::Path::Avx2);
+        assert!(
+            vector,
+            "AVX2 is there and not switched off, yet the plain build runs"
+        );
     }
+    vector
 }
