@@ -21,6 +21,7 @@ use super::entropy::io::{code_residual, Io};
 use super::entropy::rangecoder::{Bit, Decoder, Encoder};
 use super::error::{malformed, Error, Result};
 use super::rig::{Channels, Rig};
+use super::skeletal::{no_skeleton, rig_of, ChannelDecoder, Posed};
 use super::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared, Target};
 use crate::motion::decimal::{Notation, Printed, PrintedValues};
 
@@ -119,11 +120,8 @@ impl Codec for BvhLossless {
         if params != [VERSION] {
             return Err(malformed("bvh-lossless parameters"));
         }
-        let rig = shared
-            .rig
-            .clone()
-            .ok_or_else(|| Error::Basis("bvh-lossless decodes with the take's skeleton".into()))?;
-        Ok(Box::new(LosslessDecoder { rig }))
+        let rig = rig_of(shared, CodecId::BvhLossless)?;
+        Ok(Box::new(Posed(LosslessDecoder { rig })))
     }
 
     fn codes_channels(&self) -> bool {
@@ -131,10 +129,7 @@ impl Codec for BvhLossless {
     }
 
     fn unsuited(&self, motion: &crate::motion::Motion) -> Option<String> {
-        motion
-            .skeleton
-            .is_none()
-            .then(|| "the take has no skeleton (point data only)".into())
+        no_skeleton(motion)
     }
 }
 
@@ -142,14 +137,12 @@ struct LosslessDecoder {
     rig: Arc<Rig>,
 }
 
-impl ChunkDecoder for LosslessDecoder {
-    fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
-        let ch = self.decode_channels(bytes, frames)?;
-        self.rig.positions(&ch.values, out);
-        Ok(())
+impl ChannelDecoder for LosslessDecoder {
+    fn rig(&self) -> &Rig {
+        &self.rig
     }
 
-    fn decode_channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
+    fn channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
         let cc = self.rig.channel_count();
         let mut dec = Decoder::new(bytes);
         let mut chunk = Chunk::new(cc);

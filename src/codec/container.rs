@@ -74,6 +74,19 @@ impl ChunkMeta {
     }
 }
 
+/// What a rate search counts a coding as taking stored: `params` header bytes, and per chunk
+/// its codec bytes, its index entry and the one-byte gap-mask length of a chunk without
+/// gaps. The searches code gap-filled frames, and a mask where there is one costs every
+/// candidate alike, so it is left out (counting it would change which setting mdtt settles
+/// on, and the bytes it writes).
+pub fn estimated_bytes(params: usize, chunks: &[super::ChunkOut]) -> usize {
+    params
+        + chunks
+            .iter()
+            .map(|c| c.bytes.len() + ChunkMeta::INDEX_BYTES + 1)
+            .sum::<usize>()
+}
+
 /// Everything needed to decode any chunk, apart from the chunk's own bytes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Header {

@@ -50,6 +50,7 @@ pub mod rot;
 pub mod search;
 pub mod segment;
 pub mod simd;
+pub mod skeletal;
 pub mod spca;
 pub mod stream;
 #[cfg(test)]

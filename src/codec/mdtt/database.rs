@@ -18,6 +18,7 @@ use nalgebra::DMatrix;
 use super::transform::{clip_len, ratio, reconstruct, Analysis};
 use super::{decode_clip, encode_coefs, past_the_best, rank_ladder, Params};
 use crate::codec::basis::{Basis, BasisKind, Matrix};
+use crate::codec::container::estimated_bytes;
 use crate::codec::entropy::{Decoder, Encoder, IntModel};
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::max_mean;
@@ -215,7 +216,7 @@ fn code(
         });
     }
     let (max, mean) = max_mean(input.data, &recon_all, input.valid);
-    let bytes = params.to_bytes().len() + chunks.iter().map(|c| c.bytes.len() + 17).sum::<usize>();
+    let bytes = estimated_bytes(params.to_bytes().len(), &chunks);
     Trial {
         bytes,
         params,
@@ -543,8 +544,7 @@ pub fn train_set(takes: &[Input<'_>], targets: &[Target], opts: &SetOptions) -> 
                 ..*t
             };
             let out = MdttShared.encode(&input, target)?;
-            bytes +=
-                out.params.len() + out.chunks.iter().map(|c| c.bytes.len() + 17).sum::<usize>();
+            bytes += estimated_bytes(out.params.len(), &out.chunks);
         }
         let basis_bytes = basis.bytes().len();
         sizes.push((kk, bytes, basis_bytes));

@@ -32,6 +32,7 @@ pub mod transform;
 
 use nalgebra::DMatrix;
 
+use super::container::estimated_bytes;
 use super::entropy::{Decoder, Encoder, IntModel};
 use super::error::{malformed, Error, Result};
 use super::linalg::LeastSquares;
@@ -328,9 +329,7 @@ fn code(input: &Input<'_>, a: &mut Analysis, c: Choice, residual_t: f64) -> Tria
         });
     }
     let (max, mean) = max_mean(input.data, &recon_all, input.valid);
-    let header = params.to_bytes().len();
-    // Each chunk also costs a 16-byte index entry and a mask-length byte.
-    let bytes = header + chunks.iter().map(|ch| ch.bytes.len() + 17).sum::<usize>();
+    let bytes = estimated_bytes(params.to_bytes().len(), &chunks);
     Trial {
         choice: c,
         params,

@@ -41,8 +41,9 @@ use self::encode::{Directions, Options, Take};
 use self::layout::Layout;
 use self::params::Params;
 use super::entropy::rangecoder::Decoder;
-use super::error::{malformed, Error, Result};
+use super::error::{malformed, Result};
 use super::rig::{Channels, Rig};
+use super::skeletal::{no_skeleton, rig_of, ChannelDecoder, Posed};
 use super::{ChunkDecoder, Codec, CodecId, CodecOutput, Input, Shared, Target};
 use crate::motion::Motion;
 
@@ -72,15 +73,12 @@ impl Codec for Pga {
         _points: usize,
         shared: &Shared,
     ) -> Result<Box<dyn ChunkDecoder>> {
-        let rig = shared
-            .rig
-            .clone()
-            .ok_or_else(|| Error::Basis("pga decodes with the take's skeleton".into()))?;
+        let rig = rig_of(shared, CodecId::Pga)?;
         let (params, layout) = Params::parse(params, &rig)?;
-        Ok(Box::new(PgaDecoder {
+        Ok(Box::new(Posed(PgaDecoder {
             rig,
             coder: Coder::new(&layout, params),
-        }))
+        })))
     }
 
     fn codes_channels(&self) -> bool {
@@ -89,7 +87,7 @@ impl Codec for Pga {
 
     fn unsuited(&self, motion: &Motion) -> Option<String> {
         let Some(sk) = &motion.skeleton else {
-            return Some("the take has no skeleton (point data only)".into());
+            return no_skeleton(motion);
         };
         let rig = match Rig::new(sk.joints.clone()) {
             Ok(r) => r,
@@ -104,14 +102,12 @@ struct PgaDecoder {
     coder: Coder,
 }
 
-impl ChunkDecoder for PgaDecoder {
-    fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
-        let ch = self.decode_channels(bytes, frames)?;
-        self.rig.positions(&ch.values, out);
-        Ok(())
+impl ChannelDecoder for PgaDecoder {
+    fn rig(&self) -> &Rig {
+        &self.rig
     }
 
-    fn decode_channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
+    fn channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
         let mut dec = Decoder::new(bytes);
         let values = self.coder.code(&mut dec, 0, frames, None)?;
         if dec.overran() {
@@ -130,6 +126,7 @@ mod tests {
     use crate::codec::testing::{
         damage_channels, first_chunk, measured, meets_bounds_and_shrinks, skeleton_shared,
     };
+    use crate::codec::Error;
     use crate::codec::{encode, encode_variant, ErrorBound};
     use crate::motion::synthetic::dancer;
 

@@ -29,6 +29,7 @@ use super::measure::max_mean;
 pub(super) use super::rig::printed;
 use super::rig::{Channels, Rig};
 use super::search::largest_meeting;
+use super::skeletal::{no_skeleton, rig_of, ChannelDecoder, Posed};
 use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared,
     Target,
@@ -201,12 +202,9 @@ impl Codec for Rot {
         if !(base.is_finite() && base > 0.0) {
             return Err(malformed(format!("rot step {base}")));
         }
-        let rig = shared
-            .rig
-            .clone()
-            .ok_or_else(|| Error::Basis("rot decodes with the take's skeleton".into()))?;
+        let rig = rig_of(shared, CodecId::Rot)?;
         let steps = Steps::new(&rig, version, base);
-        Ok(Box::new(RotDecoder { rig, steps }))
+        Ok(Box::new(Posed(RotDecoder { rig, steps })))
     }
 
     fn codes_channels(&self) -> bool {
@@ -214,10 +212,7 @@ impl Codec for Rot {
     }
 
     fn unsuited(&self, motion: &crate::motion::Motion) -> Option<String> {
-        motion
-            .skeleton
-            .is_none()
-            .then(|| "the take has no skeleton (point data only)".into())
+        no_skeleton(motion)
     }
 }
 
@@ -444,14 +439,12 @@ struct RotDecoder {
     steps: Steps,
 }
 
-impl ChunkDecoder for RotDecoder {
-    fn decode_chunk(&self, bytes: &[u8], frames: usize, out: &mut [f32]) -> Result<()> {
-        let ch = self.decode_channels(bytes, frames)?;
-        self.rig.positions(&ch.values, out);
-        Ok(())
+impl ChannelDecoder for RotDecoder {
+    fn rig(&self) -> &Rig {
+        &self.rig
     }
 
-    fn decode_channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
+    fn channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
         let mut dec = Decoder::new(bytes);
         let mut values = Vec::new();
         code(

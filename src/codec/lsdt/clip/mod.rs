@@ -20,6 +20,7 @@ use std::sync::Arc;
 
 use super::spatial::Spatial;
 use crate::codec::basis::{Basis, BasisKind};
+use crate::codec::container::estimated_bytes;
 use crate::codec::dct;
 use crate::codec::entropy::geometric::{read_models, tables_of, write_models, Geometric};
 use crate::codec::entropy::{magnitude_context, Decoder, Encoder, IntModel};
@@ -350,9 +351,7 @@ pub fn encode_with_clip(input: &Input<'_>, target: Target, clip: usize) -> Resul
         .clamp(1, input.frames.max(1))
         .min(crate::codec::MAX_CLIP);
     let a = Analysis::new(input, &spatial, clip);
-    let size = |params: &[u8], chunks: &[ChunkOut]| {
-        params.len() + chunks.iter().map(|c| c.bytes.len() + 17).sum::<usize>()
-    };
+    let size = |params: &[u8], chunks: &[ChunkOut]| estimated_bytes(params.len(), chunks);
     let mut best: Option<(usize, ClipParams, Vec<u8>, Vec<ChunkOut>)> = None;
     let mut offer = |p: ClipParams| -> bool {
         let (params, chunks, max, mean) = code_tables(input, &spatial, &a, p);

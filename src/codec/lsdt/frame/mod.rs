@@ -29,6 +29,7 @@ use std::sync::Arc;
 
 use super::spatial::{Scratch, Spatial};
 use crate::codec::basis::{Basis, BasisKind};
+use crate::codec::container::estimated_bytes;
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::{max_mean, quantise};
 use crate::codec::residual::FrameResidual;
@@ -375,7 +376,7 @@ pub fn encode_with_period(
     for (_, p, frames) in ranked {
         let (tables, chunks) = frames.finish();
         let params = tables.params_bytes(&p);
-        let bytes = params.len() + chunks.iter().map(|c| c.bytes.len() + 17).sum::<usize>();
+        let bytes = estimated_bytes(params.len(), &chunks);
         if best.as_ref().is_none_or(|b| bytes < b.0) {
             best = Some((bytes, params, chunks));
         }
