@@ -88,6 +88,20 @@ pub async fn open(
     ))
 }
 
+/// A read of a stream (its state, a watch): the take checked against the caller, then the
+/// owner's answer if another server codes the stream.
+async fn read_at_owner(
+    state: &AppState,
+    caller: &Caller,
+    holder: &Holder,
+    id: &str,
+    uri: &Uri,
+    headers: &HeaderMap,
+) -> Result<Option<Response>, ApiError> {
+    access::check_take(&state.store, &caller.grant, id).await?;
+    at_owner(state, holder, id, Method::GET, uri, headers, Bytes::new()).await
+}
+
 pub async fn get(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -96,17 +110,7 @@ pub async fn get(
     uri: Uri,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    access::check_take(&state.store, &caller.grant, &id).await?;
-    let owner = at_owner(
-        &state,
-        &holder,
-        &id,
-        Method::GET,
-        &uri,
-        &headers,
-        Bytes::new(),
-    );
-    if let Some(r) = owner.await? {
+    if let Some(r) = read_at_owner(&state, &caller, &holder, &id, &uri, &headers).await? {
         return Ok(r);
     }
     Ok(Json(state.streams.info(&state.store, &id).await?).into_response())
@@ -387,17 +391,7 @@ pub async fn events(
     uri: Uri,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    access::check_take(&state.store, &caller.grant, &id).await?;
-    let owner = at_owner(
-        &state,
-        &holder,
-        &id,
-        Method::GET,
-        &uri,
-        &headers,
-        Bytes::new(),
-    );
-    if let Some(r) = owner.await? {
+    if let Some(r) = read_at_owner(&state, &caller, &holder, &id, &uri, &headers).await? {
         // Passed back as it comes, until this server shuts down (a watch here would end
         // then too; one held open would keep the server from stopping).
         let mut stopping = state.streams.stopping();
