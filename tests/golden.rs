@@ -12,7 +12,8 @@ use mocapstore::codec::lsdt::spatial::dct_basis;
 use mocapstore::codec::lsdt::{clip, frame};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::{self, CodecId, ErrorBound};
-use mocapstore::motion::synthetic::walker;
+use mocapstore::motion::synthetic::{walker, Rng};
+use mocapstore::motion::units::Unit;
 use mocapstore::motion::Motion;
 
 #[path = "support/scalar.rs"]
@@ -44,10 +45,67 @@ struct Case {
     decoded: Option<String>,
 }
 
+/// `m` encoded with `codec` at `bound`. The shared-basis codecs code with a basis made from
+/// the take: the DCT (fixed, not trained, so the hash follows only the codec), or for
+/// `mdtt-shared` two bases annealed from the take itself (deterministic: fixed seed).
+fn case(name: &str, m: &Motion, codec: CodecId, bound: ErrorBound) -> Case {
+    let basis = Arc::new(if codec == CodecId::MdttShared {
+        let filled = codec::gaps::fill(m.positions(), m.point_count());
+        train_bases(&[input(m, &filled, None)], 2, &SetOptions::default()).expect("trains")
+    } else {
+        dct_basis(m.point_count())
+    });
+    let enc = codec::encode_with(m, codec, bound, Some(&basis)).expect("encodes");
+    let hash = blake3::hash(&enc.container.to_bytes());
+    Case {
+        name: format!("{name} {codec} {bound}"),
+        hash: hash.to_hex()[..32].to_string(),
+        decoded: Some(enc.decoded_digest.clone()),
+    }
+}
+
+/// `points` markers moving as white noise, uniform in ±50 mm: nothing for a transform to
+/// find.
+fn noise(frames: usize, points: usize, fps: f64) -> Motion {
+    let mut rng = Rng::new(7);
+    let data = (0..frames * points * 3)
+        .map(|_| (rng.unit() * 100.0 - 50.0) as f32)
+        .collect();
+    let names = (0..points).map(|i| format!("N{i}")).collect();
+    Motion::new(fps, Unit::millimetres(), names, data, None).expect("consistent shape")
+}
+
+/// `points` markers standing still but for 0.05 mm of jitter.
+fn still(frames: usize, points: usize, fps: f64) -> Motion {
+    let mut rng = Rng::new(8);
+    let at: Vec<f64> = (0..points * 3).map(|_| rng.unit() * 1000.0).collect();
+    let data = (0..frames)
+        .flat_map(|_| {
+            at.iter()
+                .map(|a| (a + 0.05 * rng.unit()) as f32)
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let names = (0..points).map(|i| format!("S{i}")).collect();
+    Motion::new(fps, Unit::millimetres(), names, data, None).expect("consistent shape")
+}
+
 fn cases() -> Vec<Case> {
     let motions = [
         ("walker-240x8@120", walker(240, 8, 120.0, 1, 0.0)),
         ("walker-500x5@60-gaps", walker(500, 5, 60.0, 2, 0.3)),
+    ];
+    // Takes that send the rate searches down their rarer paths: white noise under a mean
+    // bound tighter than the residual layer at the max can hold (the noise steps, MDTT's
+    // residual fallbacks), and a still take under a mean bound (the step grows to its
+    // ceiling).
+    let searches = [
+        (
+            "noise-200x6@60",
+            noise(200, 6, 60.0),
+            ErrorBound::both(2.0, 0.3),
+        ),
+        ("still-300x6@60", still(300, 6, 60.0), ErrorBound::mean(3.0)),
     ];
     let encodings = [
         (CodecId::Raw, ErrorBound::max(1.0)),
@@ -65,24 +123,20 @@ fn cases() -> Vec<Case> {
         (CodecId::Spca, ErrorBound::mean(3.0)),
     ];
     let mut out = Vec::new();
+    for (name, m, bound) in &searches {
+        for codec in [
+            CodecId::Mdtt,
+            CodecId::MdttShared,
+            CodecId::LsdtClip,
+            CodecId::LsdtFrame,
+            CodecId::Spca,
+        ] {
+            out.push(case(name, m, codec, *bound));
+        }
+    }
     for (name, m) in &motions {
         for (codec, bound) in encodings {
-            // The shared-basis codecs code with the DCT as their basis: fixed, not trained,
-            // so the hash follows only the codec.
-            let basis = Arc::new(if codec == CodecId::MdttShared {
-                // Two bases annealed from the take itself: deterministic (fixed seed).
-                let filled = codec::gaps::fill(m.positions(), m.point_count());
-                train_bases(&[input(m, &filled, None)], 2, &SetOptions::default()).expect("trains")
-            } else {
-                dct_basis(m.point_count())
-            });
-            let enc = codec::encode_with(m, codec, bound, Some(&basis)).expect("encodes");
-            let hash = blake3::hash(&enc.container.to_bytes());
-            out.push(Case {
-                name: format!("{name} {codec} {bound}"),
-                hash: hash.to_hex()[..32].to_string(),
-                decoded: Some(enc.decoded_digest.clone()),
-            });
+            out.push(case(name, m, codec, bound));
         }
         // lsdt-frame's adaptive stage, what live streams are coded with (one frame at a
         // time, stream parameters): their chunks are stored as they are.

@@ -4,6 +4,8 @@
 //! and kind are chosen per chunk by the residual cost they estimate. Pure integer
 //! prediction, so encoder and decoder agree bit for bit on every machine.
 
+use crate::codec::rate::Smallest;
+
 /// Highest LPC order tried (FLAC's `-8` uses 12; sampled force and EMG signals gain a
 /// little more from longer predictors, and a chunk is long enough to pay for them).
 pub const MAX_ORDER: usize = 32;
@@ -80,16 +82,13 @@ fn cost(residuals: &[i64], overhead_bits: f64) -> f64 {
 /// The predictor with the smallest estimated cost for `x`, and its residuals.
 pub fn choose(x: &[i64]) -> (Predictor, Vec<i64>) {
     let warm = |order: usize| order as f64 * 20.0;
-    let mut best: Option<(f64, Predictor, Vec<i64>)> = None;
+    let mut best = Smallest::new();
     let mut consider = |p: Predictor, extra: f64| {
         if p.order() > x.len() {
             return;
         }
         let r = p.residuals(x);
-        let c = cost(&r, extra + warm(p.order()));
-        if best.as_ref().is_none_or(|(b, _, _)| c < *b) {
-            best = Some((c, p, r));
-        }
+        best.offer(cost(&r, extra + warm(p.order())), (p, r));
     };
     for k in 0..=4 {
         consider(Predictor::Fixed(k), 8.0);
@@ -105,7 +104,7 @@ pub fn choose(x: &[i64]) -> (Predictor, Vec<i64>) {
             }
         }
     }
-    let (_, p, r) = best.expect("fixed order 0 always fits");
+    let (p, r) = best.into_best().expect("fixed order 0 always fits");
     (p, r)
 }
 

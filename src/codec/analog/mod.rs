@@ -25,6 +25,7 @@ use super::entropy::rangecoder::{Bit, Decoder as RangeDecoder, Encoder as RangeE
 use super::entropy::{get_varint, put_varint, unzigzag, zigzag};
 use super::error::{malformed, Error, Result};
 use super::id::CodecId;
+use super::rate::Smallest;
 use super::wire::{Reader, Writer};
 use crate::motion::analog::{Analog, Channel, Samples};
 use lpc::Predictor;
@@ -301,7 +302,7 @@ pub fn encode(
                     quantum: q,
                     fix,
                 }));
-                let mut best: Option<(usize, Column)> = None;
+                let mut best = Smallest::new();
                 for col in candidates {
                     let mut e = RangeEncoder::new();
                     let mut trial = Column {
@@ -310,12 +311,9 @@ pub fn encode(
                         ..col
                     };
                     code_column(&mut e, &layout, c, &mut trial)?;
-                    let size = e.finish().len();
-                    if best.as_ref().is_none_or(|(b, _)| size < *b) {
-                        best = Some((size, col));
-                    }
+                    best.offer(e.finish().len(), col);
                 }
-                column_io = best.expect("two candidates at least").1;
+                column_io = best.into_best().expect("two candidates at least");
             }
             code_column(&mut enc, &layout, c, &mut column_io)?;
             let decoded = column_io.values(&layout, c)?;

@@ -15,13 +15,15 @@
 
 use nalgebra::DMatrix;
 
+use super::search::{self, Choice, Plan, Shape};
 use super::transform::{clip_len, ratio, reconstruct, Analysis};
-use super::{decode_clip, encode_coefs, past_the_best, rank_ladder, Params};
+use super::{decode_clip, encode_coefs, Params};
 use crate::codec::basis::{Basis, BasisKind, Matrix};
 use crate::codec::container::estimated_bytes;
 use crate::codec::entropy::{Decoder, Encoder, IntModel};
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::max_mean;
+use crate::codec::rate::{self, Ceiling, Smallest, Trial};
 use crate::codec::residual;
 use crate::codec::wire::{Reader, Writer};
 use crate::codec::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target};
@@ -139,26 +141,14 @@ fn check_basis(b: &Basis, width: usize) -> Result<()> {
     Ok(())
 }
 
-struct Trial {
-    bytes: usize,
-    params: SharedParams,
-    chunks: Vec<ChunkOut>,
-    max: f64,
-    mean: f64,
-}
-
-/// Code the take with rank `k`, bandwidth `l` and step: each clip with the basis whose
-/// leading `k` columns keep most of its energy.
-fn code(
-    input: &Input<'_>,
-    a: &mut Analysis,
-    bases: &[Matrix],
-    k: usize,
-    l: usize,
-    coef_step: f64,
-    rt: f64,
-) -> Trial {
+/// Code the take with rank `c.k`, bandwidth `c.l` and step (no basis of its own, so no
+/// basis precision): each clip with the basis whose leading `k` columns keep most of its
+/// energy.
+fn code(input: &Input<'_>, a: &mut Analysis, bases: &[Matrix], c: Choice, rt: f64) -> Trial {
     let w = a.w;
+    let Choice {
+        k, l, coef_step, ..
+    } = c;
     let params = SharedParams {
         clip: a.clip,
         k,
@@ -216,92 +206,24 @@ fn code(
         });
     }
     let (max, mean) = max_mean(input.data, &recon_all, input.valid);
-    let bytes = estimated_bytes(params.to_bytes().len(), &chunks);
-    Trial {
-        bytes,
-        params,
+    let out = CodecOutput {
+        params: params.to_bytes(),
         chunks,
-        max,
-        mean,
-    }
+    };
+    Trial::new(out, max, mean)
 }
 
-/// The parameter search: rank on a ladder, then bandwidth, then the step: scanned (the
-/// residual layer at `rt` holds the max at any step), and under a mean bound also grown and
-/// bisected for the largest that meets it.
-fn search(input: &Input<'_>, bases: &[Matrix], target: Target, rt: f64) -> Option<Trial> {
-    let w = input.width();
-    let clip = clip_len(input.fps).min(input.frames);
-    let r = ratio(clip, input.fps);
-    let l_of = |k: usize, m: f64| ((r * m * k as f64).round() as usize).clamp(1, clip);
-    let t = target.tightest();
-    let step = |k: usize, l: usize, beta: f64| {
-        beta * t * ((clip * w) as f64 / (k * l) as f64).sqrt().min(8.0)
-    };
-    let mut a = Analysis::new(input, clip, l_of(w, 3.0));
-    let mut best: Option<Trial> = None;
-    let mut offer = |tr: Trial| -> Option<usize> {
-        if !target.holds(tr.max, tr.mean) {
-            return None;
-        }
-        let b = tr.bytes;
-        if best.as_ref().is_none_or(|x| b < x.bytes) {
-            best = Some(tr);
-        }
-        Some(b)
-    };
-    let bisect = target.mean.is_some();
-    let beta0 = if bisect { 1.0 } else { 0.5 };
-    let mut sizes: Vec<(usize, Option<usize>)> = Vec::new();
-    for k in rank_ladder(w) {
-        let l = l_of(k, 1.0);
-        sizes.push((
-            k,
-            offer(code(input, &mut a, bases, k, l, step(k, l, beta0), rt)),
-        ));
-        let met: Vec<usize> = sizes.iter().filter_map(|s| s.1).collect();
-        if past_the_best(&met) {
-            break;
-        }
-    }
-    let k = sizes
-        .iter()
-        .filter_map(|&(k, s)| s.map(|s| (s, k)))
-        .min()
-        .map(|(_, k)| k)?;
-    let mut m_best = (1.0, usize::MAX);
-    for m in [0.6, 0.8, 1.0, 1.3, 1.7, 2.2] {
-        let l = l_of(k, m);
-        if let Some(b) = offer(code(input, &mut a, bases, k, l, step(k, l, beta0), rt)) {
-            if b < m_best.1 {
-                m_best = (m, b);
-            }
-        }
-    }
-    let l = l_of(k, m_best.0);
-    for beta in [0.25, 0.35, 0.5, 0.7, 1.0]
-        .into_iter()
-        .filter(|&b| b != beta0)
-    {
-        offer(code(input, &mut a, bases, k, l, step(k, l, beta), rt));
-    }
-    if bisect {
-        let (mut lo, mut hi) = (beta0, beta0 * 1.5);
-        while hi < 64.0 && offer(code(input, &mut a, bases, k, l, step(k, l, hi), rt)).is_some() {
-            lo = hi;
-            hi *= 1.5;
-        }
-        for _ in 0..5 {
-            let mid = (lo * hi).sqrt();
-            if offer(code(input, &mut a, bases, k, l, step(k, l, mid), rt)).is_some() {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-    }
-    best
-}
+/// `mdtt-shared`'s search: the ladder's rank kept, no basis precision (the bases are the
+/// library's), no step tried at or past 64× the first, and where nothing meets a mean bound
+/// with the residual layer at the max, the residual layer at 3, 1.4 and 1 times the mean.
+const PLAN: Plan = Plan {
+    refine_rank: false,
+    bandwidths: &[0.6, 0.8, 1.3, 1.7, 2.2],
+    gamma: 0.0,
+    gammas: &[],
+    ceiling: Ceiling::Tried(64.0),
+    fallbacks: &[3.0, 1.4, 1.0],
+};
 
 pub struct MdttShared;
 
@@ -320,24 +242,16 @@ impl Codec for MdttShared {
             .ok_or_else(|| Error::Basis("mdtt-shared needs an mdtt-set basis".into()))?;
         check_basis(basis, input.width())?;
         let bases = basis.matrices();
-        // The residual layer at the max; where a mean bound is not met so, at a few times
-        // the mean (never past the max).
-        let best = search(input, bases, target, target.max).or_else(|| {
-            target
-                .mean
-                .into_iter()
-                .flat_map(|m| [3.0, 1.4, 1.0].map(|f| (f * m).min(target.max)))
-                .filter_map(|rt| search(input, bases, target, rt))
-                .min_by_key(|tr| tr.bytes)
+        let shape = Shape::new(input, target);
+        let found = rate::with_fallback_residuals(target, PLAN.fallbacks, |rt| {
+            let mut a = Analysis::new(input, shape.clip, shape.l(shape.w, 3.0));
+            search::run(&shape, target, &PLAN, |c| code(input, &mut a, bases, c, rt))
         });
-        let best = best.ok_or_else(|| Error::BoundMissed {
+        let (best, _) = found.ok_or_else(|| Error::BoundMissed {
             codec: "mdtt-shared".into(),
             detail: format!("no setting meets {target}"),
         })?;
-        Ok(CodecOutput {
-            params: best.params.to_bytes(),
-            chunks: best.chunks,
-        })
+        Ok(best.out)
     }
 
     fn versions(&self) -> &'static [u8] {
@@ -527,7 +441,7 @@ pub fn train_set(takes: &[Input<'_>], targets: &[Target], opts: &SetOptions) -> 
     }
     let (c, points) = clips_of(takes)?;
     let mut sizes = Vec::new();
-    let mut best: Option<(usize, Basis, Vec<f64>)> = None;
+    let mut best = Smallest::new();
     let mut tried = Vec::new();
     for &kk in &opts.ks {
         let kk = kk.clamp(1, c.covs.len().max(1));
@@ -548,14 +462,11 @@ pub fn train_set(takes: &[Input<'_>], targets: &[Target], opts: &SetOptions) -> 
         }
         let basis_bytes = basis.bytes().len();
         sizes.push((kk, bytes, basis_bytes));
-        if best
-            .as_ref()
-            .is_none_or(|(b, _, _)| bytes + basis_bytes < *b)
-        {
-            best = Some((bytes + basis_bytes, basis, dist));
-        }
+        best.offer(bytes + basis_bytes, (basis, dist));
     }
-    let (_, basis, distortion) = best.ok_or_else(|| Error::Invalid("no candidate K".into()))?;
+    let (basis, distortion) = best
+        .into_best()
+        .ok_or_else(|| Error::Invalid("no candidate K".into()))?;
     Ok(TrainedSet {
         basis,
         sizes,

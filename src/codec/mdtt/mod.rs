@@ -28,19 +28,21 @@
 
 pub mod database;
 pub mod params;
+mod search;
 pub mod transform;
 
 use nalgebra::DMatrix;
 
-use super::container::estimated_bytes;
 use super::entropy::{Decoder, Encoder, IntModel};
 use super::error::{malformed, Error, Result};
 use super::linalg::LeastSquares;
 use super::measure::{max_mean, quantise};
+use super::rate::{self, Ceiling, Trial};
 use super::residual;
 use super::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target};
 pub use params::Params;
 use params::{quantise_basis, MAX_BASIS_BITS};
+use search::{Choice, Plan, Shape};
 use transform::clips_for;
 pub use transform::{clip_len, ratio, ClipMode};
 use transform::{coefs_for, reconstruct, Analysis};
@@ -222,17 +224,6 @@ fn decode_clip(
 /// Starting basis precision of the search (see [`basis_bits`]).
 const GAMMA0: f64 = 0.17;
 
-/// One point of the parameter space.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Choice {
-    k: usize,
-    l: usize,
-    coef_step: f64,
-    /// Basis precision relative to the coefficients' (see [`basis_bits`]); 0 for the
-    /// paper's flat 16 bits.
-    basis_gamma: f64,
-}
-
 /// Per-column basis precision. An error δ in column b of B moves the reconstruction by
 /// δ·‖S_b‖, where ‖S_b‖² is that column's eigenvalue λ_b (its coefficients' energy over the
 /// take). Matching that to the coefficient quantisation error (N_b coefficients of step q)
@@ -248,16 +239,6 @@ fn basis_bits(eigenvalues: &[f64], coefficients: usize, coef_step: f64, gamma: f
             (-step.log2()).ceil().clamp(1.0, f64::from(MAX_BASIS_BITS)) as u8
         })
         .collect()
-}
-
-/// One parameter choice, fully coded and measured.
-struct Trial {
-    choice: Choice,
-    params: Params,
-    chunks: Vec<ChunkOut>,
-    bytes: usize,
-    max: f64,
-    mean: f64,
 }
 
 /// Code the take with choice `c`; `residual_t` > 0 adds the residual layer at that bound.
@@ -329,85 +310,17 @@ fn code(input: &Input<'_>, a: &mut Analysis, c: Choice, residual_t: f64) -> Tria
         });
     }
     let (max, mean) = max_mean(input.data, &recon_all, input.valid);
-    let bytes = estimated_bytes(params.to_bytes().len(), &chunks);
-    Trial {
-        choice: c,
-        params,
+    let out = CodecOutput {
+        params: params.to_bytes(),
         chunks,
-        bytes,
-        max,
-        mean,
-    }
+    };
+    Trial::new(out, max, mean)
 }
 
 /// The residual layer holds every sample to the max bound; a mean bound is met by the
 /// transform.
 fn residual_for(target: Target) -> f64 {
     target.max
-}
-
-/// Residual bounds to fall back on when no transform setting meets a mean bound with the
-/// residual layer at the max (noise-like or tiny takes): a few times the mean, never past
-/// the max.
-fn fallback_residuals(target: Target) -> Vec<f64> {
-    target.mean.map_or_else(Vec::new, |m| {
-        [3.0, 2.0, 1.4, 1.0]
-            .into_iter()
-            .map(|f| (f * m).min(target.max))
-            .collect()
-    })
-}
-
-/// Keeps the smallest trial that meets the target.
-struct Best {
-    target: Target,
-    trial: Option<Trial>,
-}
-
-impl Best {
-    /// Record a trial; returns its size if it met the target.
-    fn offer(&mut self, t: Trial) -> Option<usize> {
-        if !self.target.holds(t.max, t.mean) {
-            return None;
-        }
-        let bytes = t.bytes;
-        if self.trial.as_ref().is_none_or(|b| bytes < b.bytes) {
-            self.trial = Some(t);
-        }
-        Some(bytes)
-    }
-
-    fn choice(&self) -> Option<Choice> {
-        self.trial.as_ref().map(|t| t.choice)
-    }
-}
-
-/// Whether the rank ladder's sizes so far (`met`, in rung order) have grown past their
-/// smallest on the last two rungs, by more than 1 %: at low ranks, where the residual layer
-/// codes nearly everything, sizes sit on a plateau and move by a few bytes either way, and
-/// stopping there (measured on C3D marker takes with clips shorter than the full length)
-/// kept rank 1 at 3.6× the size of the rank the ladder reaches further up.
-fn past_the_best(met: &[usize]) -> bool {
-    let Some(&min) = met.iter().min() else {
-        return false;
-    };
-    let grown = |b: usize| b as f64 > min as f64 * 1.01;
-    met.len() >= 3 && grown(met[met.len() - 1]) && grown(met[met.len() - 2])
-}
-
-/// Candidate ranks: a geometric ladder up to the number of coordinates.
-fn rank_ladder(w: usize) -> Vec<usize> {
-    let mut ks = Vec::new();
-    let mut k = 1.0f64;
-    while (k.round() as usize) < w {
-        let v = k.round() as usize;
-        if ks.last() != Some(&v) {
-            ks.push(v);
-        }
-        k *= 1.4;
-    }
-    ks.push(w);
-    ks
 }
 
 /// MDTT's bases are `3J × 3J`, found by an eigendecomposition of that size: refuse layouts
@@ -444,32 +357,37 @@ pub fn encode_with(
         coef_step,
         basis_gamma: 0.0,
     };
-    let t = code(input, &mut a, c, residual_for(target));
-    Ok(CodecOutput {
-        params: t.params.to_bytes(),
-        chunks: t.chunks,
-    })
+    Ok(code(input, &mut a, c, residual_for(target)).out)
 }
 
 /// Search the parameters for the fewest bytes that meet `target`, with clips cut as `mode`
 /// says.
 pub fn encode_clips(input: &Input<'_>, target: Target, mode: ClipMode) -> Result<CodecOutput> {
     check_points(input.points)?;
-    let best = search(input, target, residual_for(target), mode).or_else(|| {
-        fallback_residuals(target)
-            .into_iter()
-            .filter_map(|rt| search(input, target, rt, mode))
-            .min_by_key(|tr| tr.bytes)
+    let shape = Shape::new(input, target);
+    let found = rate::with_fallback_residuals(target, PLAN.fallbacks, |rt| {
+        let clips = clips_for(input, shape.clip, mode);
+        let mut a = Analysis::with_clips(input, shape.clip, shape.l(shape.w, 3.0), clips);
+        search::run(&shape, target, &PLAN, |c| code(input, &mut a, c, rt))
     });
-    let best = best.ok_or_else(|| Error::BoundMissed {
+    let (best, _) = found.ok_or_else(|| Error::BoundMissed {
         codec: "mdtt".into(),
         detail: format!("no setting meets {target}"),
     })?;
-    Ok(CodecOutput {
-        params: best.params.to_bytes(),
-        chunks: best.chunks,
-    })
+    Ok(best.out)
 }
+
+/// Per-take MDTT's search: ranks refined beside the best rung, the basis precision
+/// searched, and where nothing meets a mean bound with the residual layer at the max, the
+/// residual layer at 3, 2, 1.4 and 1 times the mean (noise-like or tiny takes).
+const PLAN: Plan = Plan {
+    refine_rank: true,
+    bandwidths: &[0.6, 0.8, 1.3, 1.7, 2.2, 3.0],
+    gamma: GAMMA0,
+    gammas: &[0.0, 0.08, 0.12, 0.25, 0.5],
+    ceiling: Ceiling::FromBelow(64.0),
+    fallbacks: &[3.0, 2.0, 1.4, 1.0],
+};
 
 impl Codec for Mdtt {
     fn id(&self) -> CodecId {
@@ -512,131 +430,6 @@ impl Codec for Mdtt {
         let full = FullClipTable::new(p.clip, p.l);
         Ok(Box::new(MdttDecoder { p, points, full }))
     }
-}
-
-/// Search the parameters for the fewest bytes that meet `target`, with the residual layer
-/// at `rt`. `None` if no setting meets it.
-fn search(input: &Input<'_>, target: Target, rt: f64, mode: ClipMode) -> Option<Trial> {
-    let w = input.width();
-    let clip = clip_len(input.fps).min(input.frames);
-    let r = ratio(clip, input.fps);
-    let l_of = |k: usize, m: f64| ((r * m * k as f64).round() as usize).clamp(1, clip);
-    let t = target.tightest();
-    // The quantisation error of S spreads over a whole clip (B and D̃ are orthonormal),
-    // so the step scales with √(L·w / k·l) relative to the bound.
-    let step = |k: usize, l: usize, beta: f64| {
-        beta * t * ((clip * w) as f64 / (k * l) as f64).sqrt().min(8.0)
-    };
-    // The residual layer holds the max at every step, and the fewest bytes come from a
-    // scan; a mean bound's error grows with the step, and bisection finds the largest.
-    let betas: &[f64] = &[0.25, 0.35, 0.5, 0.7, 1.0];
-    let bisect = target.mean.is_some();
-    let beta0 = if bisect { 1.0 } else { 0.5 };
-    let mut a = Analysis::with_clips(input, clip, l_of(w, 3.0), clips_for(input, clip, mode));
-    let mut best = Best {
-        target,
-        trial: None,
-    };
-    let choice = |k: usize, m: f64, beta: f64, gamma: f64| {
-        let l = l_of(k, m);
-        Choice {
-            k,
-            l,
-            coef_step: step(k, l, beta),
-            basis_gamma: gamma,
-        }
-    };
-
-    // 1. Rank, on a geometric ladder, with the paper's ratio; stop two rungs past the
-    //    best once sizes grow again.
-    let ks = rank_ladder(w);
-    let mut sizes: Vec<Option<usize>> = Vec::new();
-    for &k in &ks {
-        sizes.push(best.offer(code(input, &mut a, choice(k, 1.0, beta0, GAMMA0), rt)));
-        let met: Vec<usize> = sizes.iter().flatten().copied().collect();
-        if past_the_best(&met) {
-            break;
-        }
-    }
-    // 2. Refine the rank between the neighbours of the best rung.
-    if let Some(c) = best.choice() {
-        let i = ks.iter().position(|&k| k == c.k).unwrap_or(0);
-        let (lo, hi) = (ks[i.saturating_sub(1)], ks[(i + 1).min(ks.len() - 1)]);
-        let stride = ((hi - lo) / 4).max(1);
-        for k in (lo..=hi).step_by(stride).filter(|k| !ks.contains(k)) {
-            best.offer(code(input, &mut a, choice(k, 1.0, beta0, GAMMA0), rt));
-        }
-    }
-    // 3. Temporal bandwidth (l relative to the paper's ratio), the basis precision, then
-    //    the coefficient step, each around the best so far.
-    let mut m_best = 1.0;
-    if let Some(c) = best.choice() {
-        for m in [0.6, 0.8, 1.3, 1.7, 2.2, 3.0] {
-            let before = best.choice();
-            best.offer(code(input, &mut a, choice(c.k, m, beta0, GAMMA0), rt));
-            if best.choice() != before {
-                m_best = m;
-            }
-        }
-    }
-    if let Some(c) = best.choice() {
-        for gamma in [0.0, 0.08, 0.12, 0.25, 0.5] {
-            best.offer(code(
-                input,
-                &mut a,
-                Choice {
-                    basis_gamma: gamma,
-                    ..c
-                },
-                rt,
-            ));
-        }
-    }
-    if let Some(c) = best.choice() {
-        for &beta in betas.iter().filter(|&&b| b != beta0) {
-            best.offer(code(
-                input,
-                &mut a,
-                choice(c.k, m_best, beta, c.basis_gamma),
-                rt,
-            ));
-        }
-        if bisect {
-            // Grow the step while the mean holds, then bisect.
-            let (mut lo, mut hi) = (beta0, beta0);
-            while hi < 64.0
-                && best
-                    .offer(code(
-                        input,
-                        &mut a,
-                        choice(c.k, m_best, hi * 1.5, c.basis_gamma),
-                        rt,
-                    ))
-                    .is_some()
-            {
-                lo = hi * 1.5;
-                hi = lo;
-            }
-            hi *= 1.5;
-            for _ in 0..5 {
-                let mid = (lo * hi).sqrt();
-                if best
-                    .offer(code(
-                        input,
-                        &mut a,
-                        choice(c.k, m_best, mid, c.basis_gamma),
-                        rt,
-                    ))
-                    .is_some()
-                {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-        }
-    }
-    best.trial
 }
 
 struct MdttDecoder {

@@ -12,12 +12,13 @@ use super::layout::Layout;
 use super::model::Geodesics;
 use super::params::{Params, MAX_ITERATIONS, MAX_STRIDE_LOG2};
 use super::scale;
+use crate::codec::container::estimated_bytes;
 use crate::codec::entropy::io::Dry;
 use crate::codec::entropy::rangecoder::Encoder;
 use crate::codec::error::{Error, Result};
 use crate::codec::measure::max_mean;
+use crate::codec::rate::{narrow, ChunkSteps, Smallest};
 use crate::codec::rig::{printed, Rig};
-use crate::codec::search::{largest_meeting, narrow};
 use crate::codec::{default_chunk_frames, ChunkOut, CodecOutput, Input, Target};
 use crate::motion::Skeleton;
 
@@ -187,20 +188,36 @@ impl<'a> Take<'a> {
         let (Some(first), Some(_)) = (options.first(), models.first()) else {
             return Err(Error::Invalid("pga was given no options".into()));
         };
-        let mut best: Option<(Result<CodecOutput>, usize)> = None;
+        // The smallest success, with the model it came from; the first error if none.
+        let mut best = Smallest::new();
+        let mut error = None;
+        let mut offer = |best: &mut Smallest<_>, coded: Result<CodecOutput>, m: usize| match coded {
+            Ok(out) => {
+                best.offer(estimated_bytes(out.params.len(), &out.chunks), (out, m));
+            }
+            Err(e) => {
+                error.get_or_insert(e);
+            }
+        };
         let mut candidates = Vec::with_capacity(models.len());
         for (m, directions) in models.iter().enumerate() {
             let candidate = self.model(*directions, target, t)?;
-            let coded = self.code(&candidate, *first, target);
-            best = better(best, (coded, m));
+            offer(&mut best, self.code(&candidate, *first, target), m);
             candidates.push(candidate);
         }
-        let winner = best.as_ref().map_or(0, |b| b.1);
+        let winner = best.best().map_or(0, |b| b.1);
         for o in &options[1..] {
-            let coded = self.code(&candidates[winner], *o, target);
-            best = better(best, (coded, winner));
+            offer(
+                &mut best,
+                self.code(&candidates[winner], *o, target),
+                winner,
+            );
         }
-        best.expect("one model at least").0
+        match (best.into_best(), error) {
+            (Some((out, _)), _) => Ok(out),
+            (None, Some(e)) => Err(e),
+            (None, None) => Err(Error::Invalid("pga was given no models".into())),
+        }
     }
 
     /// A model for `target` and each chunk's trajectories along it.
@@ -262,7 +279,7 @@ impl<'a> Take<'a> {
         let k = coder.params.model.dims();
         let w = self.input.points * 3;
         let mut chunks = Vec::with_capacity(given.len());
-        let mut hint = None;
+        let mut steps = ChunkSteps::default();
         for (i, (f0, given)) in given.iter().enumerate() {
             let (f0, len) = (*f0, given.root_position.len());
             let original = &self.input.data[f0 * w..(f0 + len) * w];
@@ -274,13 +291,12 @@ impl<'a> Take<'a> {
                 let (max, mean) = max_mean(original, &positions, valid);
                 Ok(target.holds(max, mean))
             };
-            let s = largest_meeting(hint, meets)?.ok_or_else(|| Error::BoundMissed {
+            let s = steps.largest(meets)?.ok_or_else(|| Error::BoundMissed {
                 codec: "pga".into(),
                 detail: format!(
                     "chunk {i} misses the bound even at the finest step with {k} directions"
                 ),
             })?;
-            hint = Some(s);
             let mut enc = Encoder::new();
             coder.code(&mut enc, s, len, Some(given))?;
             chunks.push(ChunkOut {
@@ -293,31 +309,6 @@ impl<'a> Take<'a> {
             chunks,
         })
     }
-}
-
-/// The bytes a coded take stores (parameters and chunks).
-fn size(c: &CodecOutput) -> usize {
-    c.params.len() + c.chunks.iter().map(|c| c.bytes.len()).sum::<usize>()
-}
-
-/// The smaller of two outcomes (with what they were coded with); a success over an error,
-/// the first error over a later one.
-fn better<T>(
-    best: Option<(Result<CodecOutput>, T)>,
-    next: (Result<CodecOutput>, T),
-) -> Option<(Result<CodecOutput>, T)> {
-    Some(match (best, next) {
-        (Some((Ok(b), bt)), (Ok(c), ct)) => {
-            if size(&c) < size(&b) {
-                (Ok(c), ct)
-            } else {
-                (Ok(b), bt)
-            }
-        }
-        (Some((Ok(b), bt)), (Err(_), _)) => (Ok(b), bt),
-        (Some((Err(e), bt)), (Err(_), _)) => (Err(e), bt),
-        (_, next) => next,
-    })
 }
 
 /// Which directions a take's model has.

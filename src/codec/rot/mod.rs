@@ -26,9 +26,9 @@ use super::entropy::io::{Dry, Io};
 use super::entropy::rangecoder::{Decoder, Encoder};
 use super::error::{malformed, Error, Result};
 use super::measure::max_mean;
+use super::rate::{ChunkSteps, Smallest};
 pub(super) use super::rig::printed;
 use super::rig::{Channels, Rig};
-use super::search::largest_meeting;
 use super::skeletal::{no_skeleton, rig_of, ChannelDecoder, Posed};
 use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared,
@@ -375,46 +375,31 @@ impl<'a> Take<'a> {
         Ok(target.holds(max, mean))
     }
 
-    /// The largest step index at which chunk `i` coded `how` meets `target`; `None` if not
-    /// even the finest does.
-    fn step_for(
-        &self,
-        how: How,
-        i: usize,
-        target: Target,
-        hint: Option<u32>,
-    ) -> Result<Option<u32>> {
-        largest_meeting(hint, |k| self.meets(how, i, k, target))
-    }
-
     /// The bitstream: every chunk in the mode that codes it smaller, each at the largest
     /// step that meets `target`. Chunks are aimed ([`aim`]) unless aiming cannot meet the
     /// bound (a rig whose position channels move children away from where their parent's
     /// rotation puts them): then the file's rotations are coded as they are.
     fn encode(&self, target: Target) -> Result<CodecOutput> {
         let mut chunks = Vec::with_capacity(self.chunks.len());
-        // The last step index found per mode and aiming: where the next chunk's search starts.
-        let mut hints = [[None; 2]; 2];
+        // The step search per mode and aiming: each chunk's starts where the last one's ended.
+        let mut steps = [[ChunkSteps::default(); 2]; 2];
         for i in 0..self.chunks.len() {
-            let mut best: Option<Vec<u8>> = None;
+            let mut best = Smallest::new();
             for mode in [Mode::Delta, Mode::Transform] {
                 for aim in [true, false] {
                     let how = How { mode, aim };
-                    let hint = &mut hints[mode as usize][usize::from(aim)];
-                    let Some(k) = self.step_for(how, i, target, *hint)? else {
+                    let steps = &mut steps[mode as usize][usize::from(aim)];
+                    let Some(k) = steps.largest(|k| self.meets(how, i, k, target))? else {
                         continue;
                     };
-                    *hint = Some(k);
                     let mut enc = Encoder::new();
                     self.chunk(how, i, k, &mut enc)?;
                     let bytes = enc.finish();
-                    if best.as_ref().is_none_or(|b| bytes.len() < b.len()) {
-                        best = Some(bytes);
-                    }
+                    best.offer(bytes.len(), bytes);
                     break;
                 }
             }
-            let bytes = best.ok_or_else(|| Error::BoundMissed {
+            let bytes = best.into_best().ok_or_else(|| Error::BoundMissed {
                 codec: "rot".into(),
                 detail: format!("chunk {i} misses the bound even at the finest step"),
             })?;

@@ -25,7 +25,7 @@ use super::torso::{self, to_local};
 use crate::codec::entropy::Encoder;
 use crate::codec::error::{Error, Result};
 use crate::codec::measure::max_mean;
-use crate::codec::search::largest_meeting;
+use crate::codec::rate::{largest_meeting, walk_grid, Best, Trial};
 use crate::codec::{residual, segment, ChunkOut, CodecOutput, Input, Target};
 
 /// The longest segment, frames: a longer one is split evenly. Segments are chunks, and a
@@ -187,13 +187,7 @@ impl<'a> Take<'a> {
         }
         let (max, mean) = max_mean(self.input.data, &decoded, self.input.valid);
         let params = coder.params.to_bytes();
-        let bytes = params.len() + chunks.iter().map(|c| c.bytes.len()).sum::<usize>();
-        Ok(Trial {
-            out: CodecOutput { params, chunks },
-            bytes,
-            max,
-            mean,
-        })
+        Ok(Trial::new(CodecOutput { params, chunks }, max, mean))
     }
 
     /// Segment `i`'s keys at scale `s`: the torso's, then its coefficients' from the poses
@@ -268,7 +262,7 @@ impl<'a> Take<'a> {
             target,
             t,
             tried: std::collections::HashMap::new(),
-            best: None,
+            best: Best::new(target),
         };
         let top = match target.mean {
             None => *GRID.end(),
@@ -291,36 +285,8 @@ impl<'a> Take<'a> {
                 }
             }
         };
-        let start = START.min(top);
-        search.better(start)?;
-        let up = start + 2 <= top && search.better(start + 2)?;
-        let (mut b, mut j, mut misses) = if up {
-            (start + 2, start + 2, 0)
-        } else {
-            (start, start, 1)
-        };
-        while misses < 2 {
-            let next = if up {
-                j.checked_add(2)
-            } else {
-                j.checked_sub(2)
-            };
-            let Some(n) = next.filter(|&n| GRID.contains(&n) && n <= top) else {
-                break;
-            };
-            j = n;
-            if search.better(n)? {
-                (b, misses) = (n, 0);
-            } else {
-                misses += 1;
-            }
-        }
-        for j in [b - 1, b + 1] {
-            if j <= top {
-                search.better(j)?;
-            }
-        }
-        let (_, trial) = search.best.ok_or_else(|| Error::BoundMissed {
+        walk_grid(START.min(top), 2, GRID, top, |j| search.better(j))?;
+        let (trial, _) = search.best.into_best().ok_or_else(|| Error::BoundMissed {
             codec: "spca".into(),
             detail: format!("no scale meets {target}"),
         })?;
@@ -336,7 +302,7 @@ struct ScaleSearch<'s, 'a> {
     t: f64,
     /// Grid index → its size if it met the target.
     tried: std::collections::HashMap<usize, Option<usize>>,
-    best: Option<(usize, Trial)>,
+    best: Best<usize>,
 }
 
 impl ScaleSearch<'_, '_> {
@@ -350,25 +316,14 @@ impl ScaleSearch<'_, '_> {
             return Ok(r);
         }
         let trial = self.take.trial(self.scale(j), self.target.max)?;
-        let r = self
-            .target
-            .holds(trial.max, trial.mean)
-            .then_some(trial.bytes);
-        if r.is_some()
-            && self
-                .best
-                .as_ref()
-                .is_none_or(|(_, b)| trial.bytes < b.bytes)
-        {
-            self.best = Some((j, trial));
-        }
+        let r = self.best.offer(trial, j);
         self.tried.insert(j, r);
         Ok(r)
     }
 
     /// Whether grid index `j` meets the target with fewer bytes than any before it.
     fn better(&mut self, j: usize) -> Result<bool> {
-        let before = self.best.as_ref().map(|(_, b)| b.bytes);
+        let before = self.best.bytes();
         let r = self.bytes(j)?;
         Ok(r.is_some_and(|b| before.is_none_or(|x| b < x)))
     }
@@ -392,11 +347,4 @@ fn normalise(
         }
     }
     out
-}
-
-struct Trial {
-    out: CodecOutput,
-    bytes: usize,
-    max: f64,
-    mean: f64,
 }

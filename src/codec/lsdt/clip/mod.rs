@@ -26,8 +26,8 @@ use crate::codec::entropy::geometric::{read_models, tables_of, write_models, Geo
 use crate::codec::entropy::{magnitude_context, Decoder, Encoder, IntModel};
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::{max_mean, quantise};
+use crate::codec::rate::{max_then_mean, Best, Ladder, Trial};
 use crate::codec::residual;
-use crate::codec::search::largest_multiplier;
 use crate::codec::simd::dispatch;
 use crate::codec::stream::{StreamCoder, StreamSpec, Streaming};
 use crate::codec::wire::{Reader, Writer};
@@ -293,14 +293,8 @@ fn code(
     (chunks, max, mean)
 }
 
-/// Code every clip with fixed parameters and models fitted to the take (version 2);
-/// returns the parameters, the chunks and (max, mean) error.
-fn code_tables(
-    input: &Input<'_>,
-    spatial: &Spatial,
-    a: &Analysis,
-    p: ClipParams,
-) -> (Vec<u8>, Vec<ChunkOut>, f64, f64) {
+/// Code every clip with fixed parameters and models fitted to the take (version 2).
+fn code_tables(input: &Input<'_>, spatial: &Spatial, a: &Analysis, p: ClipParams) -> Trial {
     let mut recon = vec![0f32; input.data.len()];
     let mut clips = Vec::with_capacity(a.clips.len());
     for i in 0..a.clips.len() {
@@ -323,7 +317,8 @@ fn code_tables(
         })
         .collect();
     let (max, mean) = max_mean(input.data, &recon, input.valid);
-    (p.tables_bytes(&models), chunks, max, mean)
+    let params = p.tables_bytes(&models);
+    Trial::new(CodecOutput { params, chunks }, max, mean)
 }
 
 /// Parameters for live streams, where no search is possible: the bound as a max bound,
@@ -351,72 +346,39 @@ pub fn encode_with_clip(input: &Input<'_>, target: Target, clip: usize) -> Resul
         .clamp(1, input.frames.max(1))
         .min(crate::codec::MAX_CLIP);
     let a = Analysis::new(input, &spatial, clip);
-    let size = |params: &[u8], chunks: &[ChunkOut]| estimated_bytes(params.len(), chunks);
-    let mut best: Option<(usize, ClipParams, Vec<u8>, Vec<ChunkOut>)> = None;
-    let mut offer = |p: ClipParams| -> bool {
-        let (params, chunks, max, mean) = code_tables(input, &spatial, &a, p);
-        let ok = target.holds(max, mean);
-        let bytes = size(&params, &chunks);
-        if ok && best.as_ref().is_none_or(|b| bytes < b.0) {
-            best = Some((bytes, p, params, chunks));
-        }
-        ok
-    };
-    let base = ClipParams {
-        clip,
-        step: 1.0,
-        residual_t: 0.0,
-    };
-    // The residual layer holds every sample to the max; steps around it meet it with the
-    // fewest bytes.
-    let t = target.max;
-    for beta in [0.6, 0.9, 1.3, 1.8, 2.5, 3.5] {
-        offer(ClipParams {
-            step: beta * t,
-            residual_t: t,
-            ..base
-        });
-    }
-    if let Some(m) = target.mean {
-        // A mean bound: bisect for the largest step that meets it, the residual layer still
-        // holding the max.
-        let with_cap = ClipParams {
-            residual_t: t,
-            ..base
+    let mut best = Best::new(target);
+    max_then_mean(target, SEARCH, |step, residual_t| {
+        let p = ClipParams {
+            clip,
+            step,
+            residual_t,
         };
-        let met = largest_multiplier(8.0, |f| {
-            offer(ClipParams {
-                step: f * m,
-                ..with_cap
-            })
-        })
-        .is_some();
-        if !met {
-            // Noise-like takes: bound every sample at the mean.
-            for beta in [1.3, 2.0] {
-                offer(ClipParams {
-                    step: beta * m,
-                    residual_t: m.min(t),
-                    ..base
-                });
-            }
-        }
-    }
-    let (bytes, p, params, chunks) = best.ok_or_else(|| Error::BoundMissed {
+        best.offer(code_tables(input, &spatial, &a, p), p).is_some()
+    });
+    let (trial, p) = best.into_best().ok_or_else(|| Error::BoundMissed {
         codec: "lsdt-clip".into(),
         detail: format!("no setting meets {target}"),
     })?;
     // On a take of a few clips the models can cost more than they save; the adaptive stage
     // codes the same reconstruction, so it meets the target too.
     let (adaptive, _, _) = code(input, &spatial, &a, p);
-    if size(&p.to_bytes(), &adaptive) < bytes {
+    let params = p.to_bytes();
+    if estimated_bytes(params.len(), &adaptive) < trial.bytes {
         return Ok(CodecOutput {
-            params: p.to_bytes(),
+            params,
             chunks: adaptive,
         });
     }
-    Ok(CodecOutput { params, chunks })
+    Ok(trial.out)
 }
+
+/// The steps [`encode_with_clip`] tries: around the max bound with the residual layer
+/// holding it (the fewest bytes meet a max bound there), and for noise-like takes around a
+/// mean bound with the residual layer at the mean.
+const SEARCH: Ladder = Ladder {
+    at_max: &[0.6, 0.9, 1.3, 1.8, 2.5, 3.5],
+    noise: &[1.3, 2.0],
+};
 
 pub struct LsdtClip;
 
@@ -667,7 +629,12 @@ mod tests {
                 step: 1.5,
                 residual_t,
             };
-            let (params, chunks, max, mean) = code_tables(&input, &spatial, &a, p);
+            let Trial {
+                out: CodecOutput { params, chunks },
+                max,
+                mean,
+                ..
+            } = code_tables(&input, &spatial, &a, p);
             assert_eq!(params[0], TABLES_VERSION);
             assert_eq!(
                 chunks.iter().map(|c| c.frames).collect::<Vec<_>>(),
@@ -726,7 +693,7 @@ mod tests {
                 step: 1.0,
                 residual_t,
             };
-            let (params, chunks, _, _) = code_tables(&input, &spatial, &a, p);
+            let CodecOutput { params, chunks } = code_tables(&input, &spatial, &a, p).out;
             let bytes = &chunks[0].bytes;
             // Any byte flipped: an error or other frames, never a panic.
             for i in 0..bytes.len() {

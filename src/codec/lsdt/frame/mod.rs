@@ -32,8 +32,8 @@ use crate::codec::basis::{Basis, BasisKind};
 use crate::codec::container::estimated_bytes;
 use crate::codec::error::{malformed, Error, Result};
 use crate::codec::measure::{max_mean, quantise};
+use crate::codec::rate::{max_then_mean, Ladder, Ranked, Smallest};
 use crate::codec::residual::FrameResidual;
-use crate::codec::search::largest_multiplier;
 use crate::codec::stream::{StreamCoder, StreamSpec, Streaming};
 use crate::codec::wire::{Reader, Writer};
 use crate::codec::{
@@ -314,79 +314,46 @@ pub fn encode_with_period(
     // Settings that meet the target, ranked by an estimate of their size; only the best few
     // are fitted with every context shape and coded (fitting all of them was most of the
     // search's time, and the estimate ranks settings as the coded sizes do but for near-ties).
-    let mut ranked: Vec<(f64, FrameParams, tables::Recorder)> = Vec::new();
-    let mut offer = |p: FrameParams| -> bool {
-        let (frames, max, mean) = quantise_take(input, &spatial, p);
-        if !target.holds(max, mean) {
-            return false;
-        }
-        let estimate = frames.estimate_bits();
-        let at = ranked.partition_point(|c| c.0 <= estimate);
-        if at < CODED_CANDIDATES {
-            ranked.insert(at, (estimate, p, frames));
-            ranked.truncate(CODED_CANDIDATES);
-        }
-        true
-    };
+    let mut ranked = Ranked::new(CODED_CANDIDATES);
     let period = intra_period.max(1);
     for order in [1u8, 2] {
-        let base = FrameParams {
-            step: 1.0,
-            residual_t: 0.0,
-            intra_period: period,
-            order,
-        };
-        // The residual layer holds every sample to the max; steps around it meet it with
-        // the fewest bytes.
-        let t = target.max;
-        for beta in [0.6, 0.9, 1.2, 1.6, 2.2, 3.0] {
-            offer(FrameParams {
-                step: beta * t,
-                residual_t: t,
-                ..base
-            });
-        }
-        let Some(m) = target.mean else {
-            continue;
-        };
-        // A mean bound: its error grows with the step, so bisect for the largest step
-        // that meets it (the residual layer still holding the max).
-        let with_cap = FrameParams {
-            residual_t: t,
-            ..base
-        };
-        let met = largest_multiplier(8.0, |f| {
-            offer(FrameParams {
-                step: f * m,
-                ..with_cap
-            })
-        });
-        if met.is_none() {
-            // Noise-like takes: bound every sample at the mean.
-            for beta in [1.2, 2.0] {
-                offer(FrameParams {
-                    step: beta * m,
-                    residual_t: m.min(t),
-                    ..base
-                });
+        max_then_mean(target, SEARCH, |step, residual_t| {
+            let p = FrameParams {
+                step,
+                residual_t,
+                intra_period: period,
+                order,
+            };
+            let (frames, max, mean) = quantise_take(input, &spatial, p);
+            let met = target.holds(max, mean);
+            if met {
+                ranked.offer(frames.estimate_bits(), (p, frames));
             }
-        }
+            met
+        });
     }
-    let mut best: Option<(usize, Vec<u8>, Vec<ChunkOut>)> = None;
-    for (_, p, frames) in ranked {
+    let mut best = Smallest::new();
+    for (p, frames) in ranked.into_items() {
         let (tables, chunks) = frames.finish();
         let params = tables.params_bytes(&p);
-        let bytes = estimated_bytes(params.len(), &chunks);
-        if best.as_ref().is_none_or(|b| bytes < b.0) {
-            best = Some((bytes, params, chunks));
-        }
+        best.offer(
+            estimated_bytes(params.len(), &chunks),
+            CodecOutput { params, chunks },
+        );
     }
-    let (_, params, chunks) = best.ok_or_else(|| Error::BoundMissed {
+    best.into_best().ok_or_else(|| Error::BoundMissed {
         codec: "lsdt-frame".into(),
         detail: format!("no setting meets {target}"),
-    })?;
-    Ok(CodecOutput { params, chunks })
+    })
 }
+
+/// The steps [`encode_with_period`] tries for each prediction order: around the max bound
+/// with the residual layer holding it (the fewest bytes meet a max bound there), and for
+/// noise-like takes around a mean bound with the residual layer at the mean.
+const SEARCH: Ladder = Ladder {
+    at_max: &[0.6, 0.9, 1.2, 1.6, 2.2, 3.0],
+    noise: &[1.2, 2.0],
+};
 
 /// How many of the settings a search found to meet its target are coded in full (see
 /// [`encode_with_period`]).

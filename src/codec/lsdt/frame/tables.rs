@@ -28,6 +28,7 @@ use crate::codec::entropy::tokens::{get_signed, get_unsigned, signed, signed_tok
 use crate::codec::entropy::{get_varint, put_varint};
 use crate::codec::error::{malformed, Result};
 use crate::codec::lsdt::spatial::Spatial;
+use crate::codec::rate::Smallest;
 use crate::codec::residual::FrameResidual;
 use crate::codec::wire::Reader;
 use crate::codec::{ChunkDecoder, ChunkOut};
@@ -313,14 +314,12 @@ impl Recorder {
     /// `shapes`.
     pub(super) fn finish_with(self, lag: usize, shapes: &[Shape]) -> (Tables, Vec<ChunkOut>) {
         let chunks = self.chunks();
-        let mut best: Option<(f64, Tables)> = None;
+        let mut best = Smallest::new();
         for &shape in shapes {
             let (bits, tables) = self.fit(&chunks, lag, shape);
-            if best.as_ref().is_none_or(|b| bits < b.0) {
-                best = Some((bits, tables));
-            }
+            best.offer(bits, tables);
         }
-        let (_, tables) = best.expect("at least one shape");
+        let tables = best.into_best().expect("at least one shape");
         let ctx = Contexts::new(tables.shape, self.j);
         let rans_tables = tables.rans_tables();
         let out = chunks
