@@ -128,13 +128,7 @@ impl Basis {
     /// Parse stored bytes (untrusted: sizes are bounded, shapes checked).
     pub fn parse(bytes: &[u8]) -> Result<Basis> {
         let mut r = Reader::named(bytes, "basis");
-        if r.take(4)? != MAGIC {
-            return Err(malformed("not a mocapstore basis (bad magic)"));
-        }
-        let version = r.u16()?;
-        if version != VERSION {
-            return Err(Error::Unsupported(format!("basis version {version}")));
-        }
+        r.opening(MAGIC, VERSION, "basis")?;
         let kb = r.u8()?;
         let kind = BasisKind::from_byte(kb)
             .ok_or_else(|| Error::Unsupported(format!("basis kind {kb}")))?;

@@ -139,13 +139,7 @@ impl Header {
     /// Parse a header from the start of `bytes`; returns it and its length in bytes.
     pub fn parse(bytes: &[u8], limits: &Limits) -> Result<(Header, usize)> {
         let mut r = Reader::named(bytes, "header");
-        if r.take(4)? != MAGIC {
-            return Err(malformed("not a mocapstore bitstream (bad magic)"));
-        }
-        let version = r.u16()?;
-        if version != VERSION {
-            return Err(Error::Unsupported(format!("container version {version}")));
-        }
+        r.opening(MAGIC, VERSION, "bitstream")?;
         let codec_byte = r.u8()?;
         let codec = CodecId::from_byte(codec_byte)
             .ok_or_else(|| Error::Unsupported(format!("codec id {codec_byte}")))?;

@@ -83,13 +83,7 @@ impl Rig {
     /// Parse stored bytes; at most `max_joints` joints are allocated.
     pub fn parse(bytes: &[u8], max_joints: u64) -> Result<Rig> {
         let mut r = Reader::named(bytes, "skeleton");
-        if r.take(4)? != MAGIC {
-            return Err(malformed("not a mocapstore skeleton (bad magic)"));
-        }
-        let version = r.u16()?;
-        if version != VERSION {
-            return Err(Error::Unsupported(format!("skeleton version {version}")));
-        }
+        r.opening(MAGIC, VERSION, "skeleton")?;
         let n = r.u32()?;
         if u64::from(n) > max_joints {
             return Err(Error::Limit {

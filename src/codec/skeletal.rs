@@ -4,7 +4,8 @@
 
 use std::sync::Arc;
 
-use super::error::{Error, Result};
+use super::entropy::rangecoder::Decoder;
+use super::error::{malformed, Error, Result};
 use super::{Channels, ChunkDecoder, CodecId, Rig, Shared};
 use crate::motion::Motion;
 
@@ -25,6 +26,19 @@ pub fn no_skeleton(motion: &Motion) -> Option<String> {
 }
 
 /// A skeleton codec's chunk decoder: it gives channel values.
+/// What a lossy channel decoder read from a chunk: `values` (rounded as printed on the way
+/// out, so none are kept here), or an error when the range decoder `dec` ran past the chunk's
+/// end (a truncated chunk).
+pub fn read_whole(dec: &Decoder<'_>, values: Vec<f64>, codec: CodecId) -> Result<Channels> {
+    if dec.overran() {
+        return Err(malformed(format!("{codec} chunk is truncated")));
+    }
+    Ok(Channels {
+        values,
+        printed: None,
+    })
+}
+
 pub trait ChannelDecoder: Send + Sync {
     /// The rig the values drive.
     fn rig(&self) -> &Rig;

@@ -1,6 +1,6 @@
 //! Little helpers to write and read codec parameter blocks.
 
-use super::error::{malformed, Result};
+use super::error::{malformed, Error, Result};
 
 pub struct Writer(pub Vec<u8>);
 
@@ -43,6 +43,19 @@ impl<'a> Reader<'a> {
     }
     pub fn position(&self) -> usize {
         self.pos
+    }
+    /// The magic and the format version that open one of our stored objects (a bitstream,
+    /// a basis, a skeleton): not ours is malformed, a version this build does not read is
+    /// unsupported.
+    pub fn opening(&mut self, magic: &[u8; 4], version: u16, kind: &str) -> Result<()> {
+        if self.take(4)? != magic {
+            return Err(malformed(format!("not a mocapstore {kind} (bad magic)")));
+        }
+        let v = self.u16()?;
+        if v != version {
+            return Err(Error::Unsupported(format!("{kind} version {v}")));
+        }
+        Ok(())
     }
     pub fn take(&mut self, n: usize) -> Result<&'a [u8]> {
         let end = self

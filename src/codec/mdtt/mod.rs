@@ -513,13 +513,11 @@ mod tests {
         .unwrap();
         let (max, _) = crate::codec::testing::measured(&m, &enc);
         assert!(max <= 1.0, "{max}");
-        let starts: Vec<u32> = enc
-            .container
-            .header
-            .chunks
-            .iter()
-            .map(|c| c.first_frame)
-            .collect();
+        let starts_of = |enc: &crate::codec::Encoded| -> Vec<u32> {
+            let chunks = &enc.container.header.chunks;
+            chunks.iter().map(|c| c.first_frame).collect()
+        };
+        let starts = starts_of(&enc);
         // Equal clips start at multiples of 280 frames; adaptive ones at the cut near 400.
         assert!(
             starts.iter().any(|&s| s.abs_diff(400) <= 60),
@@ -529,14 +527,7 @@ mod tests {
             encode_clips(i, t, ClipMode::Equal)
         })
         .unwrap();
-        let equal_starts: Vec<u32> = equal
-            .container
-            .header
-            .chunks
-            .iter()
-            .map(|c| c.first_frame)
-            .collect();
-        assert_eq!(equal_starts, vec![0, 280, 560]);
+        assert_eq!(starts_of(&equal), vec![0, 280, 560]);
     }
 
     #[test]

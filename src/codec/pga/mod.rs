@@ -41,9 +41,9 @@ use self::encode::{Directions, Options, Take};
 use self::layout::Layout;
 use self::params::Params;
 use super::entropy::rangecoder::Decoder;
-use super::error::{malformed, Result};
+use super::error::Result;
 use super::rig::{Channels, Rig};
-use super::skeletal::{no_skeleton, rig_of, ChannelDecoder, Posed};
+use super::skeletal::{no_skeleton, read_whole, rig_of, ChannelDecoder, Posed};
 use super::{ChunkDecoder, Codec, CodecId, CodecOutput, Input, Shared, Target};
 use crate::motion::Motion;
 
@@ -110,13 +110,7 @@ impl ChannelDecoder for PgaDecoder {
     fn channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
         let mut dec = Decoder::new(bytes);
         let values = self.coder.code(&mut dec, 0, frames, None)?;
-        if dec.overran() {
-            return Err(malformed("pga chunk is truncated"));
-        }
-        Ok(Channels {
-            values,
-            printed: None,
-        })
+        read_whole(&dec, values, CodecId::Pga)
     }
 }
 

@@ -29,7 +29,7 @@ use super::measure::max_mean;
 use super::rate::{ChunkSteps, Smallest};
 pub(super) use super::rig::printed;
 use super::rig::{Channels, Rig};
-use super::skeletal::{no_skeleton, rig_of, ChannelDecoder, Posed};
+use super::skeletal::{no_skeleton, read_whole, rig_of, ChannelDecoder, Posed};
 use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared,
     Target,
@@ -442,13 +442,7 @@ impl ChannelDecoder for RotDecoder {
             None,
             &mut values,
         )?;
-        if dec.overran() {
-            return Err(malformed("rot chunk is truncated"));
-        }
-        Ok(Channels {
-            values,
-            printed: None,
-        })
+        read_whole(&dec, values, CodecId::Rot)
     }
 }
 

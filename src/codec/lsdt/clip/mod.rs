@@ -597,6 +597,40 @@ mod tests {
         }
     }
 
+    /// What [`in_tables`] coded with.
+    struct Coding<'a> {
+        input: &'a Input<'a>,
+        spatial: &'a Spatial,
+        a: &'a Analysis,
+        p: ClipParams,
+        basis: &'a Basis,
+    }
+
+    /// `m` coded by the tables stage in clips of 60 at `step`, without and then with a
+    /// residual layer, each handed to `check`.
+    fn in_tables(m: &Motion, step: f64, mut check: impl FnMut(Coding<'_>, Trial)) {
+        let basis = dct_basis(m.point_count());
+        let spatial = Spatial::new(&basis).unwrap();
+        let input = take(m, &basis);
+        let a = Analysis::new(&input, &spatial, 60);
+        for residual_t in [0.0, 0.3] {
+            let p = ClipParams {
+                clip: 60,
+                step,
+                residual_t,
+            };
+            let trial = code_tables(&input, &spatial, &a, p);
+            let c = Coding {
+                input: &input,
+                spatial: &spatial,
+                a: &a,
+                p,
+                basis: &basis,
+            };
+            check(c, trial);
+        }
+    }
+
     /// Chunks of `params` decoded one by one into a take.
     fn decode(
         params: &[u8],
@@ -619,37 +653,30 @@ mod tests {
         // 250 frames in clips of 60: the last clip is shorter.
         let m = walker(250, 6, 60.0, 3, 0.0);
         let points = m.point_count();
-        let basis = dct_basis(points);
-        let spatial = Spatial::new(&basis).unwrap();
-        let input = take(&m, &basis);
-        let a = Analysis::new(&input, &spatial, 60);
-        for residual_t in [0.0, 0.3] {
-            let p = ClipParams {
-                clip: 60,
-                step: 1.5,
-                residual_t,
-            };
+        in_tables(&m, 1.5, |c, trial| {
             let Trial {
                 out: CodecOutput { params, chunks },
                 max,
                 mean,
                 ..
-            } = code_tables(&input, &spatial, &a, p);
+            } = trial;
+            let (input, spatial, a, p, basis) = (c.input, c.spatial, c.a, c.p, c.basis);
+            let residual_t = p.residual_t;
             assert_eq!(params[0], TABLES_VERSION);
             assert_eq!(
                 chunks.iter().map(|c| c.frames).collect::<Vec<_>>(),
                 [60, 60, 60, 60, 10]
             );
-            let out = decode(&params, &chunks, &basis, points).unwrap();
+            let out = decode(&params, &chunks, basis, points).unwrap();
             // The same error to the last bit: the decoder rebuilt the encoder's frames.
             assert_eq!(max_mean(input.data, &out, None), (max, mean));
             if residual_t > 0.0 {
                 assert!(max <= residual_t, "{max}");
             }
             // The adaptive stage (live streams) codes the same reconstruction.
-            let (adaptive, _, _) = code(&input, &spatial, &a, p);
+            let (adaptive, _, _) = code(input, spatial, a, p);
             assert_eq!(
-                decode(&p.to_bytes(), &adaptive, &basis, points).unwrap(),
+                decode(&p.to_bytes(), &adaptive, basis, points).unwrap(),
                 out
             );
             // Per-take models pay for themselves on this take.
@@ -661,7 +688,7 @@ mod tests {
                 size(&chunks),
                 size(&adaptive)
             );
-        }
+        });
     }
 
     /// The search keeps whichever stage is smaller: per-take models on a long take, the
@@ -683,17 +710,9 @@ mod tests {
     fn damaged_tables_chunks_and_params_are_errors() {
         let m = walker(120, 5, 60.0, 4, 0.0);
         let points = m.point_count();
-        let basis = dct_basis(points);
-        let spatial = Spatial::new(&basis).unwrap();
-        let input = take(&m, &basis);
-        let a = Analysis::new(&input, &spatial, 60);
-        for residual_t in [0.0, 0.3] {
-            let p = ClipParams {
-                clip: 60,
-                step: 1.0,
-                residual_t,
-            };
-            let CodecOutput { params, chunks } = code_tables(&input, &spatial, &a, p).out;
+        in_tables(&m, 1.0, |c, trial| {
+            let CodecOutput { params, chunks } = trial.out;
+            let (basis, residual_t) = (c.basis, c.p.residual_t);
             let bytes = &chunks[0].bytes;
             // Any byte flipped: an error or other frames, never a panic.
             for i in 0..bytes.len() {
@@ -705,11 +724,11 @@ mod tests {
                         frames: 60,
                         bytes: b,
                     }],
-                    &basis,
+                    basis,
                     points,
                 );
             }
-            assert!(decode(&params[..params.len() - 1], &chunks, &basis, points).is_err());
+            assert!(decode(&params[..params.len() - 1], &chunks, basis, points).is_err());
             // Without a residual layer the chunk ends with the raw bits, and a decoder must
             // read exactly to its end (the range-coded residual layer, as in version 1, may
             // read a few bytes past it; the container's checksum catches that damage).
@@ -721,10 +740,10 @@ mod tests {
                         frames: 60,
                         bytes: b,
                     };
-                    assert!(decode(&params, &[c], &basis, points).is_err(), "{len}");
+                    assert!(decode(&params, &[c], basis, points).is_err(), "{len}");
                 }
             }
-        }
+        });
         let mut future = ClipParams {
             clip: 60,
             step: 1.0,
