@@ -5,8 +5,8 @@ use std::ops::Range;
 
 use super::entropy::{get_varint, put_varint};
 use super::error::{malformed, Error, Result};
-use super::id::CodecId;
 use super::wire::Reader;
+use super::CodecId;
 
 pub const MAGIC: &[u8; 4] = b"MCST";
 pub const VERSION: u16 = 1;

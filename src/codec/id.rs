@@ -6,69 +6,69 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use super::error::{Error, Result};
-use super::Target;
+use super::{CodecId, Target};
 
-/// Every codec the container format knows. The numeric value is written in bitstreams:
-/// never reuse one.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
-#[serde(rename_all = "kebab-case")]
-pub enum CodecId {
-    Raw = 1,
-    Quant = 2,
-    Mdtt = 3,
-    LsdtClip = 4,
-    LsdtFrame = 5,
-    Spca = 6,
-    Pga = 7,
-    /// MDTT's database mode: `K` spatial bases shared by a library.
-    MdttShared = 8,
-    /// A skeleton's channel values exactly as the file printed them.
-    BvhLossless = 9,
-    /// A skeleton's rotations, error-bounded on the FK positions.
-    Rot = 10,
-    /// Analog channels, exactly as stored ([`super::analog`]).
-    AnalogLossless = 11,
-    /// Analog channels, each within its bound in its own unit.
-    AnalogBounded = 12,
+/// Declares [`CodecId`] and [`super::codec`] from the registry's table in `codec/mod.rs`,
+/// one line per codec: variant = the byte written in bitstreams, its name, its latency
+/// class, and its implementation (point codecs) — so adding a codec is its own module and
+/// one line there.
+macro_rules! registry {
+    (
+        points: { $( $(#[$pm:meta])* $p:ident = $pb:literal, $pn:literal, $pl:ident => $imp:expr; )* }
+        analog: { $( $(#[$am:meta])* $a:ident = $ab:literal, $an:literal, $al:ident; )* }
+    ) => {
+        /// Every codec the container format knows. The numeric value is written in
+        /// bitstreams: never reuse one.
+        #[derive(
+            Debug, Clone, Copy, PartialEq, Eq, Hash,
+            serde::Serialize, serde::Deserialize, PartialOrd, Ord,
+        )]
+        #[serde(rename_all = "kebab-case")]
+        pub enum CodecId {
+            $( $(#[$pm])* $p = $pb, )*
+            $( $(#[$am])* $a = $ab, )*
+        }
+
+        impl CodecId {
+            /// The codecs of points (and skeletons), in registry order.
+            pub const ALL: [CodecId; [$(CodecId::$p),*].len()] = [$(CodecId::$p),*];
+
+            /// The codecs of analog channels: never candidates for a take's points.
+            pub const ANALOG: [CodecId; [$(CodecId::$a),*].len()] = [$(CodecId::$a),*];
+
+            pub fn name(self) -> &'static str {
+                match self {
+                    $( CodecId::$p => $pn, )*
+                    $( CodecId::$a => $an, )*
+                }
+            }
+
+            /// How many frames a decoder must see before it can emit the first one.
+            pub fn latency(self) -> $crate::codec::Latency {
+                match self {
+                    $( CodecId::$p => $crate::codec::Latency::$pl, )*
+                    $( CodecId::$a => $crate::codec::Latency::$al, )*
+                }
+            }
+        }
+
+        /// The implementation of a point codec.
+        pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
+            match id {
+                $( CodecId::$p => Ok(&$imp), )*
+                $( CodecId::$a )|* => Err(Error::Invalid(format!(
+                    "{id} codes analog channels, not points"
+                ))),
+            }
+        }
+    };
 }
+pub(super) use registry;
 
 impl CodecId {
-    pub const ALL: [CodecId; 10] = [
-        CodecId::Raw,
-        CodecId::Quant,
-        CodecId::Mdtt,
-        CodecId::LsdtClip,
-        CodecId::LsdtFrame,
-        CodecId::Spca,
-        CodecId::Pga,
-        CodecId::MdttShared,
-        CodecId::BvhLossless,
-        CodecId::Rot,
-    ];
-
-    /// The codecs of analog channels: never candidates for a take's points.
-    pub const ANALOG: [CodecId; 2] = [CodecId::AnalogLossless, CodecId::AnalogBounded];
-
     /// Whether this codec codes analog channels rather than points.
     pub fn is_analog(self) -> bool {
         CodecId::ANALOG.contains(&self)
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            CodecId::Raw => "raw",
-            CodecId::Quant => "quant",
-            CodecId::Mdtt => "mdtt",
-            CodecId::LsdtClip => "lsdt-clip",
-            CodecId::LsdtFrame => "lsdt-frame",
-            CodecId::Spca => "spca",
-            CodecId::Pga => "pga",
-            CodecId::MdttShared => "mdtt-shared",
-            CodecId::BvhLossless => "bvh-lossless",
-            CodecId::Rot => "rot",
-            CodecId::AnalogLossless => "analog-lossless",
-            CodecId::AnalogBounded => "analog-bounded",
-        }
     }
 
     pub fn from_byte(b: u8) -> Option<CodecId> {
@@ -76,21 +76,6 @@ impl CodecId {
             .into_iter()
             .chain(CodecId::ANALOG)
             .find(|c| *c as u8 == b)
-    }
-
-    /// How many frames a decoder must see before it can emit the first one.
-    pub fn latency(self) -> Latency {
-        match self {
-            CodecId::Raw
-            | CodecId::Quant
-            | CodecId::LsdtFrame
-            | CodecId::BvhLossless
-            | CodecId::Rot
-            | CodecId::AnalogLossless
-            | CodecId::AnalogBounded => Latency::Frame,
-            CodecId::LsdtClip => Latency::Clip,
-            CodecId::Mdtt | CodecId::MdttShared | CodecId::Spca | CodecId::Pga => Latency::Sequence,
-        }
     }
 }
 
@@ -286,11 +271,37 @@ mod tests {
 
     #[test]
     fn names_round_trip_and_bytes_are_stable() {
-        for c in CodecId::ALL {
+        for c in CodecId::ALL.into_iter().chain(CodecId::ANALOG) {
             assert_eq!(c.name().parse::<CodecId>().unwrap(), c);
             assert_eq!(CodecId::from_byte(c as u8), Some(c));
+            // The API's spelling (serde) is the registry's name.
+            assert_eq!(serde_json::to_value(c).unwrap(), c.name());
+            assert_eq!(super::super::codec(c).is_ok(), !c.is_analog(), "{c}");
         }
-        assert_eq!(CodecId::Mdtt as u8, 3);
+        // Bytes written in bitstreams, and the latency classes choice filters on.
+        let table: Vec<(u8, Latency)> = CodecId::ALL
+            .into_iter()
+            .chain(CodecId::ANALOG)
+            .map(|c| (c as u8, c.latency()))
+            .collect();
+        use Latency::{Clip, Frame, Sequence};
+        assert_eq!(
+            table,
+            [
+                (1, Frame),
+                (2, Frame),
+                (3, Sequence),
+                (4, Clip),
+                (5, Frame),
+                (6, Sequence),
+                (7, Sequence),
+                (8, Sequence),
+                (9, Frame),
+                (10, Frame),
+                (11, Frame),
+                (12, Frame)
+            ]
+        );
         assert!("zip".parse::<CodecId>().is_err());
         assert!(ErrorBound::from_request(Some(-1.0), None).is_err());
         assert!(ErrorBound::from_request(None, Some(f64::NAN)).is_err());

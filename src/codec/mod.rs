@@ -62,7 +62,7 @@ use crate::motion::{Motion, Skeleton};
 pub use basis::{Basis, BasisKind};
 pub use container::{Container, Header, Limits};
 pub use error::{Error, Result};
-pub use id::{CodecId, ErrorBound, Latency};
+pub use id::{ErrorBound, Latency};
 pub use pipeline::{
     decode_all, decode_all_with, decoded_digest, digest_update, encode, encode_hinted,
     encode_variant, encode_with, Encoded,
@@ -277,22 +277,30 @@ pub trait ChunkDecoder: Send + Sync {
     }
 }
 
-/// The codec for an id. (A `Result` so that an id may be named before its codec lands.)
-pub fn codec(id: CodecId) -> Result<&'static dyn Codec> {
-    match id {
-        CodecId::Raw => Ok(&raw::Raw),
-        CodecId::Quant => Ok(&quant::Quant),
-        CodecId::Mdtt => Ok(&mdtt::Mdtt),
-        CodecId::LsdtClip => Ok(&lsdt::clip::LsdtClip),
-        CodecId::LsdtFrame => Ok(&lsdt::frame::LsdtFrame),
-        CodecId::MdttShared => Ok(&mdtt::database::MdttShared),
-        CodecId::BvhLossless => Ok(&bvh_lossless::BvhLossless),
-        CodecId::Rot => Ok(&rot::Rot),
-        CodecId::Pga => Ok(&pga::Pga),
-        CodecId::Spca => Ok(&spca::Spca),
-        CodecId::AnalogLossless | CodecId::AnalogBounded => Err(Error::Invalid(format!(
-            "{id} codes analog channels, not points"
-        ))),
+// The registry: every codec, one line each ([`id::registry`] makes `CodecId`, its names and
+// latencies, and [`codec`], the implementation for an id, from it).
+id::registry! {
+    // variant = byte (written in bitstreams: never reuse one), name, latency => implementation
+    points: {
+        Raw = 1, "raw", Frame => raw::Raw;
+        Quant = 2, "quant", Frame => quant::Quant;
+        Mdtt = 3, "mdtt", Sequence => mdtt::Mdtt;
+        LsdtClip = 4, "lsdt-clip", Clip => lsdt::clip::LsdtClip;
+        LsdtFrame = 5, "lsdt-frame", Frame => lsdt::frame::LsdtFrame;
+        Spca = 6, "spca", Sequence => spca::Spca;
+        Pga = 7, "pga", Sequence => pga::Pga;
+        /// MDTT's database mode: `K` spatial bases shared by a library.
+        MdttShared = 8, "mdtt-shared", Sequence => mdtt::database::MdttShared;
+        /// A skeleton's channel values exactly as the file printed them.
+        BvhLossless = 9, "bvh-lossless", Frame => bvh_lossless::BvhLossless;
+        /// A skeleton's rotations, error-bounded on the FK positions.
+        Rot = 10, "rot", Frame => rot::Rot;
+    }
+    analog: {
+        /// Analog channels, exactly as stored ([`analog`]).
+        AnalogLossless = 11, "analog-lossless", Frame;
+        /// Analog channels, each within its bound in its own unit.
+        AnalogBounded = 12, "analog-bounded", Frame;
     }
 }
 

@@ -13,7 +13,8 @@ use std::sync::Arc;
 
 use super::container::{pack_indexed, ChunkMeta, Header};
 use super::error::{Error, Result};
-use super::id::{CodecId, ErrorBound};
+use super::id::ErrorBound;
+use super::CodecId;
 use super::{codec, pipeline, read, Basis, ChunkDecoder, ChunkOut, Codec};
 use crate::motion::metrics::{Accumulator, ErrorStats};
 

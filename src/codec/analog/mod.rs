@@ -24,9 +24,9 @@ use super::entropy::io::{code_residual, Io};
 use super::entropy::rangecoder::{Bit, Decoder as RangeDecoder, Encoder as RangeEncoder};
 use super::entropy::{get_varint, put_varint, unzigzag, zigzag};
 use super::error::{malformed, Error, Result};
-use super::id::CodecId;
 use super::rate::Smallest;
 use super::wire::{Reader, Writer};
+use super::CodecId;
 use crate::motion::analog::{Analog, Channel, Samples};
 use lpc::Predictor;
 
