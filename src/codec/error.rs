@@ -18,9 +18,15 @@ pub enum Error {
         actual: u64,
         limit: u64,
     },
-    /// Arguments that cannot be encoded (no points, a negative bound, ...).
+    /// The caller's mistake: arguments that cannot be encoded (no points, a negative bound,
+    /// a codec that does not fit the take, a range outside it). HTTP answers 400.
     #[error("invalid: {0}")]
     Invalid(String),
+    /// Our fault: a promise broken inside the service (a chunk the reader was promised and
+    /// not given, shapes that disagree between an encoder and its decoder). Never the
+    /// request's doing, so HTTP answers 500 and logs it.
+    #[error("internal fault: {0}")]
+    Fault(String),
     /// A shared basis is missing, of the wrong kind or shape, or not the one the header names.
     #[error("shared basis: {0}")]
     Basis(String),

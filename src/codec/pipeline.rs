@@ -166,7 +166,7 @@ fn encode_checked(
         },
     )?;
     let stats = metrics::compare(positions, &decoded, points, to_mm)
-        .map_err(|e| Error::Invalid(e.to_string()))?;
+        .map_err(|e| Error::Fault(e.to_string()))?;
     if !bound.holds(stats.max_mm, stats.mean_mm) {
         return Err(Error::BoundMissed {
             codec: codec_id.to_string(),

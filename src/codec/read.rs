@@ -71,7 +71,7 @@ impl ChunkSource for Stored<'_> {
             .checked_sub(self.first)
             .and_then(|i| self.payloads.get(i))
             .map(|p| Chunk::Stored(p))
-            .ok_or_else(|| Error::Invalid(format!("chunk {index} was not supplied")))
+            .ok_or_else(|| Error::Fault(format!("chunk {index} was not supplied")))
     }
 }
 
@@ -149,7 +149,7 @@ impl Reader {
                 }
             };
             if decoded.len() != r.len() * w {
-                return Err(Error::Invalid(format!(
+                return Err(Error::Fault(format!(
                     "chunk {i} holds {} values, its {} frames need {}",
                     decoded.len(),
                     r.len(),
@@ -193,7 +193,7 @@ impl Reader {
         };
         for i in wanted {
             let Chunk::Stored(payload) = source.chunk(i)? else {
-                return Err(Error::Invalid(format!(
+                return Err(Error::Fault(format!(
                     "chunk {i}: channel values need the stored payload"
                 )));
             };
@@ -306,7 +306,7 @@ pub fn decode_chunk(
     let meta = header
         .chunks
         .get(index)
-        .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
+        .ok_or_else(|| Error::Fault(format!("no chunk {index}")))?;
     let mut out = vec![0f32; meta.frames as usize * header.width()];
     decode_chunk_into(header, decoder, index, payload, &mut out)?;
     Ok(out)
@@ -339,12 +339,12 @@ fn decode_rows_into(
     let meta = header
         .chunks
         .get(index)
-        .ok_or_else(|| Error::Invalid(format!("no chunk {index}")))?;
+        .ok_or_else(|| Error::Fault(format!("no chunk {index}")))?;
     verify_chunk(meta, payload, index)?;
     let n = meta.frames as usize;
     let points = header.points as usize;
     if rows.start > rows.end || rows.end > n || out.len() != rows.len() * points * 3 {
-        return Err(Error::Invalid(format!(
+        return Err(Error::Fault(format!(
             "rows {rows:?} of chunk {index} ({n} frames) into {} values",
             out.len()
         )));

@@ -114,3 +114,31 @@ impl From<axum::extract::rejection::BytesRejection> for ApiError {
         ApiError::new(status, code, r.body_text())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codec::Error as C;
+
+    /// The caller's mistakes are 4xx with what was wrong; our faults are 500 with nothing of
+    /// the inside in the body (it goes to the log).
+    #[test]
+    fn a_codec_error_is_the_callers_or_ours_and_answers_so() {
+        let status = |e: C| ApiError::from(service::Error::Codec(e));
+        let bad = status(C::Invalid("frames 9..3 outside 0..5".into()));
+        assert_eq!(bad.status, StatusCode::BAD_REQUEST);
+        assert!(bad.message.contains("outside"), "{}", bad.message);
+        for ours in [
+            C::Fault("chunk 3 was not supplied".into()),
+            C::Malformed("stored chunk".into()),
+            C::BoundMissed {
+                codec: "rot".into(),
+                detail: "chunk 2".into(),
+            },
+        ] {
+            let e = status(ours);
+            assert_eq!(e.status, StatusCode::INTERNAL_SERVER_ERROR);
+            assert!(!e.message.contains("chunk"), "{}", e.message);
+        }
+    }
+}

@@ -1226,7 +1226,7 @@ impl One {
 impl ChunkSource for One {
     fn chunk(&self, index: usize) -> codec::Result<Chunk<'_>> {
         if index != self.index {
-            return Err(codec::Error::Invalid(format!("chunk {index} was not read")));
+            return Err(codec::Error::Fault(format!("chunk {index} was not read")));
         }
         Ok(match &self.chunk {
             OneChunk::Decoded(d) => Chunk::Decoded(d.clone()),

@@ -99,7 +99,7 @@ impl<'a> Take<'a> {
             layout.split(&values[f * cc..(f + 1) * cc], pose);
         }
         let full = Geodesics::fit(&poses, n, 3 * n)
-            .ok_or_else(|| Error::Invalid("pga found no mean pose".into()))?;
+            .ok_or_else(|| Error::Fault("pga found no mean pose".into()))?;
         let mut extent = vec![0f64; full.dims()];
         for pose in poses.chunks_exact(n) {
             for (e, x) in extent.iter_mut().zip(full.coordinates(pose)) {
@@ -186,7 +186,7 @@ impl<'a> Take<'a> {
             )));
         }
         let (Some(first), Some(_)) = (options.first(), models.first()) else {
-            return Err(Error::Invalid("pga was given no options".into()));
+            return Err(Error::Fault("pga was given no options".into()));
         };
         // The smallest success, with the model it came from; the first error if none.
         let mut best = Smallest::new();
@@ -216,7 +216,7 @@ impl<'a> Take<'a> {
         match (best.into_best(), error) {
             (Some((out, _)), _) => Ok(out),
             (None, Some(e)) => Err(e),
-            (None, None) => Err(Error::Invalid("pga was given no models".into())),
+            (None, None) => Err(Error::Fault("pga was given no models".into())),
         }
     }
 
