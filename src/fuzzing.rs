@@ -8,12 +8,12 @@ use std::sync::{Arc, OnceLock};
 use crate::codec::container::{ChunkMeta, Header};
 use crate::codec::lsdt::spatial::dct_basis;
 use crate::codec::{self, Basis, BasisKind, CodecId, Container};
-use crate::motion::formats::{self, Format, Limits, ReadOptions};
+use crate::motion::formats::{self, Format, ReadLimits, ReadOptions};
 
-/// Limits for fuzzing: small enough that a legitimate allocation never trips the fuzzer's
+/// ReadLimits for fuzzing: small enough that a legitimate allocation never trips the fuzzer's
 /// memory limit, so that what it reports is a real failure to bound memory.
-fn limits() -> Limits {
-    Limits {
+fn limits() -> ReadLimits {
+    ReadLimits {
         max_bytes: 1 << 20,
         max_points: 1_000,
         max_frames: 100_000,
@@ -255,9 +255,9 @@ pub fn decode_skeletal(codec: CodecId, data: &[u8]) {
 
 /// A whole stored bitstream (container): header, index, checksums, every chunk.
 pub fn container(data: &[u8]) {
-    let limits = crate::codec::Limits {
+    let limits = crate::codec::DecodeLimits {
         max_samples: 1_000_000,
-        ..crate::codec::Limits::default()
+        ..crate::codec::DecodeLimits::default()
     };
     let Ok(c) = Container::parse(data, &limits) else {
         return;

@@ -31,6 +31,46 @@ pub const MAX_BOUND_MM: f64 = 1e6;
 /// Frame rates a take or stream may have, frames per second.
 pub const MAX_FPS: f64 = 100_000.0;
 
+/// The frame rate a take or stream states, if it is one ([`MAX_FPS`]): the one check that
+/// ingest's `fps=`, a stream's `fps`, and every parsed take apply.
+pub fn fps(fps: f64) -> Result<f64, String> {
+    if fps.is_finite() && fps > 0.0 && fps <= MAX_FPS {
+        Ok(fps)
+    } else {
+        Err(format!("fps must be in (0, {MAX_FPS}], got {fps}"))
+    }
+}
+
+/// Frame rates a take may be resampled to (`fps=` on a read or an export): below one frame
+/// in 100 s a take is a handful of stills; above 10,000 fps no capture system records.
+pub const RESAMPLE_FPS: RangeInclusive<f64> = 0.01..=10_000.0;
+
+/// A rate a take may be resampled to ([`RESAMPLE_FPS`]).
+pub fn resample_fps(fps: f64) -> Result<f64, String> {
+    if fps.is_finite() && RESAMPLE_FPS.contains(&fps) {
+        Ok(fps)
+    } else {
+        let (lo, hi) = (RESAMPLE_FPS.start(), RESAMPLE_FPS.end());
+        Err(format!("fps must be between {lo} and {hi}, got {fps}"))
+    }
+}
+
+/// The longest chunk a live stream may ask to be committed in, seconds: a watcher or a range
+/// read of a live take waits at most this long for frames, and the pending chunk is held
+/// in memory ([`Limits::stream_chunk_samples`] bounds its size too).
+pub const MAX_CHUNK_SECONDS: f64 = 60.0;
+
+/// A stream's `chunk_seconds`, if it is one: in (0, [`MAX_CHUNK_SECONDS`]].
+pub fn chunk_seconds(s: f64) -> Result<f64, String> {
+    if s.is_finite() && s > 0.0 && s <= MAX_CHUNK_SECONDS {
+        Ok(s)
+    } else {
+        Err(format!(
+            "chunk_seconds must be in (0, {MAX_CHUNK_SECONDS}], got {s}"
+        ))
+    }
+}
+
 /// Points of a take that per-take `mdtt` and shared `mdtt-set` bases code: their bases are
 /// `3J × 3J` and found by an eigendecomposition of that size (cubic time, 72 MB of
 /// covariance at this bound). Past it those codecs sit out (and say why); the others code.
@@ -236,13 +276,25 @@ mod tests {
     #[test]
     fn layers_get_the_same_numbers() {
         let l = Limits::default();
-        let reader = crate::motion::formats::Limits::from(&l);
+        let reader = crate::motion::formats::ReadLimits::from(&l);
         assert_eq!(reader.max_points, l.points);
-        assert_eq!(crate::codec::Limits::from(&l).max_samples, l.samples);
-        assert_eq!(crate::motion::formats::Limits::default(), reader);
+        assert_eq!(crate::codec::DecodeLimits::from(&l).max_samples, l.samples);
+        assert_eq!(crate::motion::formats::ReadLimits::default(), reader);
         assert!(check("points", 3, 2)
             .unwrap_err()
             .contains("over the limit of 2"));
         assert!(check("points", 2, 2).is_ok());
+    }
+
+    #[test]
+    fn rates_and_chunk_lengths_are_checked_at_both_ends() {
+        assert_eq!(fps(MAX_FPS), Ok(MAX_FPS));
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, MAX_FPS * 1.01] {
+            assert!(fps(bad).is_err(), "{bad}");
+        }
+        assert!(resample_fps(0.01).is_ok() && resample_fps(10_000.0).is_ok());
+        assert!(resample_fps(0.009).is_err() && resample_fps(10_001.0).is_err());
+        assert_eq!(chunk_seconds(MAX_CHUNK_SECONDS), Ok(60.0));
+        assert!(chunk_seconds(0.0).is_err() && chunk_seconds(60.5).is_err());
     }
 }

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use mocapstore::codec::lsdt::spatial::dct_basis;
 use mocapstore::codec::lsdt::train::{train_basis, TrainOptions};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
-use mocapstore::codec::{self, Basis, CodecId, Container, Error, ErrorBound, Limits};
+use mocapstore::codec::{self, Basis, CodecId, Container, DecodeLimits, Error, ErrorBound};
 use mocapstore::corpus;
 use mocapstore::motion::formats::{self, ReadOptions};
 use mocapstore::motion::metrics;
@@ -115,7 +115,7 @@ fn verify(
         rig: enc.rig.clone(),
     };
     let bytes = enc.container.to_bytes();
-    let c = Container::parse(&bytes, &Limits::default()).unwrap();
+    let c = Container::parse(&bytes, &DecodeLimits::default()).unwrap();
     let full = codec::decode_all_with(&c, shared.clone()).unwrap();
     let s = metrics::compare(m.positions(), &full, m.point_count(), m.unit.to_mm()).unwrap();
     // Both bounds, measured here on what a reader decodes, not taken from the encoder.
@@ -442,7 +442,7 @@ fn a_take_decodes_only_with_the_basis_it_was_coded_with() {
         let enc = codec::encode_with(&m, codec, ErrorBound::max(1.0), Some(&b)).unwrap();
         assert_eq!(enc.container.header.basis, Some(b.hash()));
         let bytes = enc.container.to_bytes();
-        let c = Container::parse(&bytes, &Limits::default()).unwrap();
+        let c = Container::parse(&bytes, &DecodeLimits::default()).unwrap();
         assert!(matches!(codec::decode_all(&c), Err(Error::Basis(_))));
         assert!(matches!(
             codec::decode_all_with(&c, Some(other.clone())),
@@ -554,7 +554,7 @@ fn mutate(container: &Container, shared: &codec::Shared, rng: &mut Rng, outcomes
             }
         }
         let r = catch_unwind(AssertUnwindSafe(|| {
-            Container::parse(&b, &Limits::default()).and_then(|c| decode_both(&c, shared))
+            Container::parse(&b, &DecodeLimits::default()).and_then(|c| decode_both(&c, shared))
         }));
         match r {
             // A copy the damage left as it was (a byte set to its own value, a bit flipped

@@ -23,7 +23,7 @@ use mocapstore::codec::lsdt::spatial::dct_basis;
 use mocapstore::codec::lsdt::{clip, frame};
 use mocapstore::codec::mdtt::database::{train_bases, SetOptions};
 use mocapstore::codec::pga::encode::{Directions, Options, Take};
-use mocapstore::codec::{self, Basis, CodecId, Container, ErrorBound, Header, Limits};
+use mocapstore::codec::{self, Basis, CodecId, Container, DecodeLimits, ErrorBound, Header};
 use mocapstore::motion::analog::Samples;
 use mocapstore::motion::formats::bvh::ChannelWriter;
 use mocapstore::motion::synthetic::{force_and_emg, two_behaviours, walker};
@@ -57,7 +57,7 @@ fn decode_analog(c: &Container) -> Vec<f32> {
 
 fn decode_file(path: &Path) -> Vec<f32> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let c = Container::parse(&bytes, &Limits::default())
+    let c = Container::parse(&bytes, &DecodeLimits::default())
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     if c.header.codec.is_analog() {
         return decode_analog(&c);
@@ -110,7 +110,7 @@ fn every_frozen_bitstream_reads_any_range_as_the_same_rows_of_the_whole() {
     let mut gaps = false;
     for e in index() {
         let path = dir().join(&e.file);
-        let c = Container::parse(&std::fs::read(&path).unwrap(), &Limits::default()).unwrap();
+        let c = Container::parse(&std::fs::read(&path).unwrap(), &DecodeLimits::default()).unwrap();
         if c.header.codec.is_analog() {
             continue;
         }
@@ -177,7 +177,7 @@ const CHANNELS: &str = "channels.txt";
 /// codec that keeps positions only.
 fn channel_hashes(file: &str) -> Option<(String, String)> {
     let path = dir().join(file);
-    let c = Container::parse(&std::fs::read(&path).unwrap(), &Limits::default()).unwrap();
+    let c = Container::parse(&std::fs::read(&path).unwrap(), &DecodeLimits::default()).unwrap();
     if c.header.codec.is_analog() || !codec::codec(c.header.codec).unwrap().codes_channels() {
         return None;
     }
@@ -363,7 +363,7 @@ fn every_version_every_decoder_accepts_is_frozen() {
     let mut have = std::collections::BTreeSet::new();
     for e in index() {
         let bytes = std::fs::read(dir().join(&e.file)).unwrap();
-        let c = Container::parse(&bytes, &Limits::default()).unwrap();
+        let c = Container::parse(&bytes, &DecodeLimits::default()).unwrap();
         let id = c.header.codec;
         let version = if id.is_analog() {
             c.header.params.first().copied()

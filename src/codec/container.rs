@@ -15,7 +15,7 @@ const CHUNK_ENTRY: usize = 16;
 
 /// Bounds on what a decoder of untrusted bytes agrees to allocate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Limits {
+pub struct DecodeLimits {
     pub max_frames: u64,
     pub max_points: u64,
     pub max_samples: u64,
@@ -23,18 +23,18 @@ pub struct Limits {
     pub max_chunk_bytes: u64,
 }
 
-impl Default for Limits {
+impl Default for DecodeLimits {
     /// Shapes as [`crate::limits`] sets them for takes; the byte bounds are the container's.
     fn default() -> Self {
-        Limits::from(&crate::limits::Limits::default())
+        DecodeLimits::from(&crate::limits::Limits::default())
     }
 }
 
-impl From<&crate::limits::Limits> for Limits {
+impl From<&crate::limits::Limits> for DecodeLimits {
     /// What a decoder of stored (or imported) bitstreams may allocate under the service's
     /// policy: the shapes it allows a take; the byte bounds are the container's own.
     fn from(take: &crate::limits::Limits) -> Self {
-        Limits {
+        DecodeLimits {
             max_frames: take.frames,
             max_points: take.points,
             max_samples: take.samples,
@@ -137,7 +137,7 @@ impl Header {
     }
 
     /// Parse a header from the start of `bytes`; returns it and its length in bytes.
-    pub fn parse(bytes: &[u8], limits: &Limits) -> Result<(Header, usize)> {
+    pub fn parse(bytes: &[u8], limits: &DecodeLimits) -> Result<(Header, usize)> {
         let mut r = Reader::named(bytes, "header");
         r.opening(MAGIC, VERSION, "bitstream")?;
         let codec_byte = r.u8()?;
@@ -259,7 +259,7 @@ impl Container {
         b
     }
 
-    pub fn parse(bytes: &[u8], limits: &Limits) -> Result<Container> {
+    pub fn parse(bytes: &[u8], limits: &DecodeLimits) -> Result<Container> {
         let (header, mut pos) = Header::parse(bytes, limits)?;
         let mut chunks = Vec::with_capacity(header.chunks.len());
         for (i, meta) in header.chunks.iter().enumerate() {
@@ -434,7 +434,10 @@ mod tests {
     fn round_trips_and_finds_chunks() {
         let c = sample();
         let bytes = c.to_bytes();
-        assert_eq!(Container::parse(&bytes, &Limits::default()).unwrap(), c);
+        assert_eq!(
+            Container::parse(&bytes, &DecodeLimits::default()).unwrap(),
+            c
+        );
         assert_eq!(c.header.chunks_for(0, 1), 0..1);
         assert_eq!(c.header.chunks_for(4, 6), 0..2);
         assert_eq!(c.header.chunks_for(5, 7), 1..2);
@@ -445,14 +448,14 @@ mod tests {
     fn every_truncation_and_bit_flip_is_a_typed_error() {
         let bytes = sample().to_bytes();
         for cut in 0..bytes.len() {
-            assert!(Container::parse(&bytes[..cut], &Limits::default()).is_err());
+            assert!(Container::parse(&bytes[..cut], &DecodeLimits::default()).is_err());
         }
         for i in 0..bytes.len() {
             for bit in 0..8 {
                 let mut b = bytes.clone();
                 b[i] ^= 1 << bit;
                 assert!(
-                    Container::parse(&b, &Limits::default()).is_err(),
+                    Container::parse(&b, &DecodeLimits::default()).is_err(),
                     "flip {i}.{bit}"
                 );
             }
@@ -462,9 +465,9 @@ mod tests {
     #[test]
     fn limits_reject_before_allocating() {
         let bytes = sample().to_bytes();
-        let tight = Limits {
+        let tight = DecodeLimits {
             max_frames: 6,
-            ..Limits::default()
+            ..DecodeLimits::default()
         };
         assert!(matches!(
             Container::parse(&bytes, &tight),

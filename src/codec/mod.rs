@@ -60,7 +60,7 @@ mod wire;
 use crate::motion::{Motion, Skeleton};
 
 pub use basis::{Basis, BasisKind};
-pub use container::{Container, Header, Limits};
+pub use container::{Container, DecodeLimits, Header};
 pub use error::{Error, Result};
 pub use id::{ErrorBound, Latency};
 pub use pipeline::{

@@ -44,7 +44,7 @@ pub fn damage_channels(d: &dyn ChunkDecoder, bytes: &[u8], frames: usize) {
 /// summed here; a gap must come back a gap.
 pub fn measured(m: &Motion, enc: &Encoded) -> (f64, f64) {
     let bytes = enc.container.to_bytes();
-    let container = super::Container::parse(&bytes, &super::Limits::default()).unwrap();
+    let container = super::Container::parse(&bytes, &super::DecodeLimits::default()).unwrap();
     let rig = m
         .skeleton
         .as_ref()

@@ -161,12 +161,7 @@ impl IngestQuery {
             Some(u) => Some(parse_unit(u).map_err(|e| bad(&e))?),
         };
         if let Some(f) = self.fps {
-            let max = crate::limits::MAX_FPS;
-            if !(f.is_finite() && f > 0.0 && f <= max) {
-                return Err(ApiError::bad_request(format!(
-                    "fps must be in (0, {max}], got {f}"
-                )));
-            }
+            crate::limits::fps(f).map_err(ApiError::bad_request)?;
         }
         if body.is_empty() {
             return Err(ApiError::bad_request(
@@ -189,7 +184,7 @@ impl IngestQuery {
             bound,
             latency,
             keep,
-            limits: formats::Limits::from(limits),
+            limits: formats::ReadLimits::from(limits),
             format_hint: None,
             lenient: self.lenient.unwrap_or(false),
             hints,

@@ -33,12 +33,7 @@ impl Motion {
         positions: Vec<f32>,
         skeleton: Option<Skeleton>,
     ) -> Result<Self> {
-        let max_fps = crate::limits::MAX_FPS;
-        if !(fps.is_finite() && fps > 0.0 && fps <= max_fps) {
-            return Err(Error::Invalid(format!(
-                "frame rate must be in (0, {max_fps}] fps, got {fps}"
-            )));
-        }
+        crate::limits::fps(fps).map_err(Error::Invalid)?;
         let n = point_names.len();
         if n == 0 && !positions.is_empty() || n > 0 && !positions.len().is_multiple_of(n * 3) {
             return Err(Error::Invalid(format!(

@@ -220,7 +220,7 @@ pub async fn decoder(store: &Store, id: &str) -> Result<Option<Decoder>> {
     let Some(rows) = store.analog(id).await? else {
         return Ok(None);
     };
-    let (header, _) = Header::parse(&rows.header, &crate::codec::Limits::default())
+    let (header, _) = Header::parse(&rows.header, &crate::codec::DecodeLimits::default())
         .map_err(|e| Error::Corrupt(format!("analog header of take {id}: {e}")))?;
     Ok(Some(Decoder::new(header).map_err(|e| {
         Error::Corrupt(format!("analog header of take {id}: {e}"))

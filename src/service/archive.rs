@@ -416,7 +416,7 @@ pub async fn import_take(
         }
         loaded.push((Arc::new(b), row));
     }
-    let container = Container::parse(&bitstream, &codec::Limits::default())
+    let container = Container::parse(&bitstream, &codec::DecodeLimits::default())
         .map_err(|e| Error::InvalidRequest(format!("bitstream of {}: {e}", line.take.id)))?;
     let header: &Header = &container.header;
     line.take.check()?;
@@ -501,7 +501,7 @@ pub async fn import_take(
     let analog = match (beside.analog, &line.take.meta.analog) {
         (None, None) => None,
         (Some(bytes), Some(meta)) => {
-            let c = Container::parse(&bytes, &codec::Limits::default())
+            let c = Container::parse(&bytes, &codec::DecodeLimits::default())
                 .map_err(|e| invalid("analog bitstream", &e))?;
             if c.header.frames as usize != line.take.frames || c.header.codec != meta.codec {
                 return Err(invalid(

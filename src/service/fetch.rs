@@ -7,7 +7,7 @@ use super::prepared::{Prepared, ReadCaches};
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::container::ChunkMeta;
-use crate::codec::{self, basis::hex, Header, Limits, Reader, Shared, Stored};
+use crate::codec::{self, basis::hex, DecodeLimits, Header, Reader, Shared, Stored};
 use crate::store::{ChunkEntry, Store, TakeRow};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
@@ -162,7 +162,7 @@ pub async fn header_of(store: &Store, take: &Take) -> Result<(Header, bool)> {
 
 /// The header stored with a closed take (chunk index included).
 pub fn stored_header(take: &Take) -> Result<Header> {
-    Header::parse(&take.header, &Limits::default())
+    Header::parse(&take.header, &DecodeLimits::default())
         .map(|(h, _)| h)
         .map_err(|e| Error::Corrupt(format!("stored take {}: header: {e}", take.id)))
 }
@@ -173,7 +173,7 @@ pub(crate) fn header_from_index(take: &Take, index: &[ChunkEntry]) -> Result<Hea
     let id = &take.id;
     let corrupt = |e: &dyn std::fmt::Display| Error::Corrupt(format!("stored take {id}: {e}"));
     let (mut header, _) =
-        Header::parse(&take.header, &codec::Limits::default()).map_err(|e| corrupt(&e))?;
+        Header::parse(&take.header, &codec::DecodeLimits::default()).map_err(|e| corrupt(&e))?;
     let mut chunks = Vec::with_capacity(index.len());
     for c in index {
         let as_u32 = |v: i64| u32::try_from(v).map_err(|_| corrupt(&format!("chunk {c:?}")));
@@ -187,7 +187,7 @@ pub(crate) fn header_from_index(take: &Take, index: &[ChunkEntry]) -> Result<Hea
     header.frames = chunks.iter().map(|c| c.frames).sum();
     header.chunks = chunks;
     // Round-trip through the parser: the index must tile the frames in order.
-    Header::parse(&header.to_bytes(), &codec::Limits::default())
+    Header::parse(&header.to_bytes(), &codec::DecodeLimits::default())
         .map(|(h, _)| h)
         .map_err(|e| corrupt(&e))
 }

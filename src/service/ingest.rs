@@ -13,7 +13,7 @@ use super::skeletons;
 use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
 use crate::codec::{self, CodecId, Encoded, ErrorBound, Hints, Latency};
-use crate::motion::formats::{self, Format, Limits, ReadOptions};
+use crate::motion::formats::{self, Format, ReadLimits, ReadOptions};
 use crate::motion::Motion;
 use crate::store::{NewTake, Store};
 
@@ -32,7 +32,7 @@ pub struct IngestRequest {
     pub latency: Latency,
     /// For skeleton takes: keep the animation (default) or let position codecs compete.
     pub keep: Keep,
-    pub limits: Limits,
+    pub limits: ReadLimits,
     /// Format to assume when the content does not identify itself (from `Content-Type`).
     pub format_hint: Option<Format>,
     /// Keep a file that contradicts its own header, with a warning (see [`ReadOptions`]).

@@ -11,7 +11,7 @@
 use std::fmt::Write as _;
 
 use super::text::{as_text, numbered_lines};
-use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use super::{perr, unsettled_unit, Format, Parsed, ReadLimits};
 use crate::motion::decimal::PrintedValues;
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
@@ -76,7 +76,7 @@ fn parse_f64(t: &str) -> Option<f64> {
 }
 
 /// Parse a BVH file.
-pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
+pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     let text = as_text(bytes);
     let mut lines = numbered_lines(&text);
 
@@ -232,7 +232,7 @@ pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
     })
 }
 
-fn parse_hierarchy(t: &mut Tokens<'_>, limits: &Limits) -> Result<Vec<Joint>> {
+fn parse_hierarchy(t: &mut Tokens<'_>, limits: &ReadLimits) -> Result<Vec<Joint>> {
     let (line, first) = t.next()?;
     if !first.eq_ignore_ascii_case("HIERARCHY") {
         return Err(err(line, format!("expected HIERARCHY, found {first:?}")));
@@ -267,7 +267,7 @@ fn parse_joints(
     t: &mut Tokens<'_>,
     root_line: usize,
     joints: &mut Vec<Joint>,
-    limits: &Limits,
+    limits: &ReadLimits,
 ) -> Result<()> {
     let mut open = vec![open_joint(t, root_line, None, false, joints, limits)?];
     while let Some(top) = open.last_mut() {
@@ -335,7 +335,7 @@ fn open_joint(
     parent: Option<usize>,
     end_site: bool,
     joints: &mut Vec<Joint>,
-    limits: &Limits,
+    limits: &ReadLimits,
 ) -> Result<Open> {
     if joints.len() as u64 >= limits.max_points {
         return Err(Error::Limit {
@@ -534,7 +534,7 @@ mod tests {
 
     #[test]
     fn reads_joints_end_sites_and_positions() {
-        let p = read(TOY.as_bytes(), &Limits::default()).unwrap();
+        let p = read(TOY.as_bytes(), &ReadLimits::default()).unwrap();
         let m = p.motion;
         assert_eq!(m.point_names, vec!["Hips", "Left Leg", "Left Leg_End"]);
         assert_eq!(m.frame_count(), 2);
@@ -553,9 +553,9 @@ mod tests {
 
     #[test]
     fn round_trips_channel_values_exactly() {
-        let m = read(TOY.as_bytes(), &Limits::default()).unwrap().motion;
+        let m = read(TOY.as_bytes(), &ReadLimits::default()).unwrap().motion;
         let text = write(&m).unwrap();
-        let again = read(&text, &Limits::default()).unwrap().motion;
+        let again = read(&text, &ReadLimits::default()).unwrap().motion;
         assert_eq!(again.skeleton, m.skeleton);
         assert_eq!(again.point_names, m.point_names);
         assert!((again.fps - m.fps).abs() < 1e-6);
@@ -563,7 +563,7 @@ mod tests {
 
     #[test]
     fn a_frame_of_the_longest_values_fits_the_writers_bound() {
-        let p = read(TOY.as_bytes(), &Limits::default()).unwrap();
+        let p = read(TOY.as_bytes(), &ReadLimits::default()).unwrap();
         let joints = p.motion.skeleton.unwrap().joints;
         let w = ChannelWriter::new(joints, 30.0, 1);
         let values = [
@@ -606,26 +606,26 @@ mod tests {
     #[test]
     fn more_rows_than_declared_is_a_warning_fewer_a_contradiction() {
         let more = TOY.replace("Frames:\t2", "Frames:\t1");
-        let p = read(more.as_bytes(), &Limits::default()).unwrap();
+        let p = read(more.as_bytes(), &ReadLimits::default()).unwrap();
         assert_eq!(p.motion.frame_count(), 2);
         assert_eq!(p.warnings.len(), 1);
         assert!(p.contradictions.is_empty());
         let fewer = TOY.replace("Frames:\t2", "Frames:\t3");
-        let p = read(fewer.as_bytes(), &Limits::default()).unwrap();
+        let p = read(fewer.as_bytes(), &ReadLimits::default()).unwrap();
         assert_eq!(p.contradictions.len(), 1, "{:?}", p.contradictions);
     }
 
     #[test]
     fn values_beyond_any_scale_are_a_contradiction() {
         let huge = TOY.replace("1 10 0 90 0 0 0 0 90", "1e308 10 0 90 0 0 0 0 90");
-        let p = read(huge.as_bytes(), &Limits::default()).unwrap();
+        let p = read(huge.as_bytes(), &ReadLimits::default()).unwrap();
         assert_eq!(p.contradictions.len(), 1, "{:?}", p.contradictions);
     }
 
     #[test]
     fn errors_name_the_line() {
         let bad = TOY.replace("1 10 0 90 0 0 0 0 90", "1 10 0 90 0 0 0 0");
-        match read(bad.as_bytes(), &Limits::default()) {
+        match read(bad.as_bytes(), &ReadLimits::default()) {
             Err(Error::Parse { at, .. }) => assert_eq!(at, Location::Line(20)),
             other => panic!("{other:?}"),
         }
@@ -634,18 +634,18 @@ mod tests {
             "Xrotation Wrotation Zrotation",
         );
         assert!(matches!(
-            read(bad.as_bytes(), &Limits::default()),
+            read(bad.as_bytes(), &ReadLimits::default()),
             Err(Error::Parse {
                 at: Location::Line(9),
                 ..
             })
         ));
         let bad = TOY.replace("0.0333333", "0");
-        assert!(read(bad.as_bytes(), &Limits::default()).is_err());
-        assert!(read(b"HIERARCHY\nROOT", &Limits::default()).is_err());
+        assert!(read(bad.as_bytes(), &ReadLimits::default()).is_err());
+        assert!(read(b"HIERARCHY\nROOT", &ReadLimits::default()).is_err());
         assert!(read(
             b"HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\n}\n",
-            &Limits::default()
+            &ReadLimits::default()
         )
         .is_err());
     }
@@ -656,16 +656,16 @@ mod tests {
         use crate::motion::synthetic::chain_bvh;
         let deep = chain_bvh(6_000);
         assert!(matches!(
-            read(deep.as_bytes(), &Limits::default()),
+            read(deep.as_bytes(), &ReadLimits::default()),
             Err(Error::Limit {
                 what: "hierarchy depth",
                 ..
             })
         ));
         // Past the default depth limit, with the limit raised: parsed without recursion.
-        let limits = Limits {
+        let limits = ReadLimits {
             max_depth: 100_000,
-            ..Limits::default()
+            ..ReadLimits::default()
         };
         let m = read(deep.as_bytes(), &limits).unwrap().motion;
         assert_eq!(m.point_count(), 6_000);
@@ -674,13 +674,13 @@ mod tests {
         let again = read(&text, &limits).unwrap().motion;
         assert_eq!(again.skeleton, m.skeleton);
         // Within the default limit it simply loads.
-        assert!(read(chain_bvh(400).as_bytes(), &Limits::default()).is_ok());
+        assert!(read(chain_bvh(400).as_bytes(), &ReadLimits::default()).is_ok());
     }
 
     #[test]
     fn every_prefix_fails_cleanly_or_loads() {
         for cut in 0..TOY.len() {
-            let _ = read(&TOY.as_bytes()[..cut], &Limits::default());
+            let _ = read(&TOY.as_bytes()[..cut], &ReadLimits::default());
         }
     }
 }

@@ -5,7 +5,7 @@
 use serde::Deserialize;
 
 use super::writer::{push_f32, write_whole, FrameWriter, Shape, TEXT_VALUE_BYTES};
-use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use super::{perr, unsettled_unit, Format, Parsed, ReadLimits};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
 use crate::motion::units::{parse_unit, unit_name};
@@ -30,7 +30,7 @@ fn err(at: Location, reason: impl Into<String>) -> Error {
     perr(Format::Json, at, reason)
 }
 
-pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
+pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     let doc: Doc = serde_json::from_slice(bytes).map_err(|e| {
         err(
             Location::Line(e.line()),
@@ -172,7 +172,7 @@ mod tests {
     fn reads_gaps_and_units() {
         let doc = br#"{"fps": 60, "unit": "cm", "points": ["a","b"],
             "frames": [[[1,2,3], null], [[4,5,6],[7,8,9.5]]]}"#;
-        let p = read(doc, &Limits::default()).unwrap();
+        let p = read(doc, &ReadLimits::default()).unwrap();
         assert_eq!(p.declared_unit, Some(0.01));
         assert_eq!(p.motion.gap_count(), 1);
         assert_eq!(p.motion.sample(1, 1), Some([7.0, 8.0, 9.5]));
@@ -181,12 +181,12 @@ mod tests {
     #[test]
     fn shape_errors_are_clear() {
         let doc = br#"{"fps": 60, "points": ["a"], "frames": [[[1,2,3],[4,5,6]]]}"#;
-        let e = read(doc, &Limits::default()).unwrap_err().to_string();
+        let e = read(doc, &ReadLimits::default()).unwrap_err().to_string();
         assert!(e.contains("frame 0 has 2 points"), "{e}");
-        assert!(read(br#"{"fps": 60"#, &Limits::default()).is_err());
+        assert!(read(br#"{"fps": 60"#, &ReadLimits::default()).is_err());
         assert!(read(
             br#"{"fps": -1, "points": [], "frames": []}"#,
-            &Limits::default()
+            &ReadLimits::default()
         )
         .is_err());
     }

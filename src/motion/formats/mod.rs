@@ -25,7 +25,7 @@ pub use writer::{FrameWriter, Shape};
 
 /// Bounds on untrusted input, checked before anything proportional to them is allocated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Limits {
+pub struct ReadLimits {
     pub max_bytes: u64,
     pub max_points: u64,
     pub max_frames: u64,
@@ -37,17 +37,17 @@ pub struct Limits {
     pub max_analog_samples: u64,
 }
 
-impl Default for Limits {
+impl Default for ReadLimits {
     /// The service's defaults ([`crate::limits`], where every limit is set and explained).
     fn default() -> Self {
-        Limits::from(&crate::limits::Limits::default())
+        ReadLimits::from(&crate::limits::Limits::default())
     }
 }
 
-impl From<&crate::limits::Limits> for Limits {
+impl From<&crate::limits::Limits> for ReadLimits {
     /// What file readers may accept under the service's policy.
     fn from(l: &crate::limits::Limits) -> Self {
-        Limits {
+        ReadLimits {
             max_bytes: l.upload_bytes,
             max_points: l.points,
             max_frames: l.frames,
@@ -58,7 +58,7 @@ impl From<&crate::limits::Limits> for Limits {
     }
 }
 
-impl Limits {
+impl ReadLimits {
     pub fn check_bytes(&self, n: usize) -> Result<()> {
         check("input size in bytes", n as u64, self.max_bytes)
     }
@@ -89,7 +89,7 @@ fn check(what: &'static str, actual: u64, limit: u64) -> Result<()> {
 /// How to read: limits, and a unit that overrides whatever the file says or lacks.
 #[derive(Debug, Clone, Default)]
 pub struct ReadOptions {
-    pub limits: Limits,
+    pub limits: ReadLimits,
     /// Metres per stored unit, stated by the user.
     pub unit: Option<f64>,
     /// Frames per second, stated by the user (overrides the file; NPY has none).
@@ -256,12 +256,7 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         );
     }
     match options.fps {
-        Some(fps) if fps.is_finite() && fps > 0.0 => motion.fps = fps,
-        Some(fps) => {
-            return Err(Error::Invalid(format!(
-                "frame rate must be positive, got {fps}"
-            )))
-        }
+        Some(fps) => motion.fps = crate::limits::fps(fps).map_err(Error::Invalid)?,
         None if format == Format::Npy => warnings.push(format!(
             "NPY has no frame rate; assumed {} fps (state one to override)",
             npy::DEFAULT_FPS
@@ -386,7 +381,7 @@ mod tests {
 
     #[test]
     fn limits_are_enforced() {
-        let l = Limits {
+        let l = ReadLimits {
             max_bytes: 10,
             max_points: 2,
             max_frames: 5,

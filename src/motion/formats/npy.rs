@@ -4,7 +4,7 @@
 //! [`super::read_as`]), points are named `P1…`, and the unit is inferred.
 
 use super::writer::{FrameWriter, Shape};
-use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use super::{perr, unsettled_unit, Format, Parsed, ReadLimits};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
 
@@ -79,7 +79,7 @@ fn parse_header(h: &str, at: usize) -> Result<Header> {
     })
 }
 
-pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
+pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     if !bytes.starts_with(MAGIC) || bytes.len() < 10 {
         return Err(err(0, "missing the \\x93NUMPY magic"));
     }
@@ -230,7 +230,7 @@ mod tests {
     fn reads_f8_big_endian_and_fortran_order() {
         let vals: Vec<f64> = (0..6).map(f64::from).collect();
         let be: Vec<u8> = vals.iter().flat_map(|v| v.to_be_bytes()).collect();
-        let m = read(&npy(">f8", false, "(2, 1, 3)", &be), &Limits::default())
+        let m = read(&npy(">f8", false, "(2, 1, 3)", &be), &ReadLimits::default())
             .unwrap()
             .motion;
         assert_eq!(m.positions(), &[0.0, 1.0, 2.0, 3.0, 4.0, 5.0]);
@@ -239,7 +239,7 @@ mod tests {
             .iter()
             .flat_map(|v| (*v as f32).to_le_bytes())
             .collect();
-        let m = read(&npy("<f4", true, "(2, 1, 3)", &le), &Limits::default())
+        let m = read(&npy("<f4", true, "(2, 1, 3)", &le), &ReadLimits::default())
             .unwrap()
             .motion;
         assert_eq!(m.positions(), &[0.0, 2.0, 4.0, 1.0, 3.0, 5.0]);
@@ -248,22 +248,22 @@ mod tests {
     #[test]
     fn rejects_bad_shapes_and_short_data() {
         let d = vec![0u8; 24];
-        assert!(read(&npy("<f4", false, "(2, 3)", &d), &Limits::default()).is_err());
-        assert!(read(&npy("<f4", false, "(2, 1, 4)", &d), &Limits::default()).is_err());
-        assert!(read(&npy("<f4", false, "(3, 1, 3)", &d), &Limits::default()).is_err());
-        assert!(read(&npy("<i4", false, "(2, 1, 3)", &d), &Limits::default()).is_err());
+        assert!(read(&npy("<f4", false, "(2, 3)", &d), &ReadLimits::default()).is_err());
+        assert!(read(&npy("<f4", false, "(2, 1, 4)", &d), &ReadLimits::default()).is_err());
+        assert!(read(&npy("<f4", false, "(3, 1, 3)", &d), &ReadLimits::default()).is_err());
+        assert!(read(&npy("<i4", false, "(2, 1, 3)", &d), &ReadLimits::default()).is_err());
     }
 
     #[test]
     fn writes_aligned_data() {
         let m = read(
             &npy("<f4", false, "(2, 1, 3)", &[0u8; 24]),
-            &Limits::default(),
+            &ReadLimits::default(),
         )
         .unwrap()
         .motion;
         let out = super::super::write(&m, super::super::Format::Npy).unwrap();
         assert_eq!((out.len() - 24) % 64, 0);
-        assert_eq!(read(&out, &Limits::default()).unwrap().motion, m);
+        assert_eq!(read(&out, &ReadLimits::default()).unwrap().motion, m);
     }
 }

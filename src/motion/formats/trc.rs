@@ -8,7 +8,7 @@ use std::io::Write as _;
 
 use super::text::{as_text, numbered_lines};
 use super::writer::{push_f32, FrameWriter, Shape, TEXT_VALUE_BYTES};
-use super::{perr, unsettled_unit, Format, Limits, Parsed};
+use super::{perr, unsettled_unit, Format, Parsed, ReadLimits};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
 use crate::motion::units::{parse_unit, unit_name};
@@ -31,7 +31,7 @@ fn cells(line: &str) -> Vec<&str> {
     c
 }
 
-pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
+pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     let text = as_text(bytes);
     let mut lines = numbered_lines(&text);
     let mut seen = 0;
@@ -256,7 +256,7 @@ mod tests {
 
     #[test]
     fn reads_markers_and_gaps() {
-        let p = read(SAMPLE.as_bytes(), &Limits::default()).unwrap();
+        let p = read(SAMPLE.as_bytes(), &ReadLimits::default()).unwrap();
         let m = &p.motion;
         assert_eq!(m.point_names, vec!["A", "B"]);
         assert_eq!(m.frame_count(), 2);
@@ -271,13 +271,13 @@ mod tests {
     fn short_files_fail_with_a_line() {
         for cut in [0, 20, 60, 90] {
             assert!(matches!(
-                read(&SAMPLE.as_bytes()[..cut], &Limits::default()),
+                read(&SAMPLE.as_bytes()[..cut], &ReadLimits::default()),
                 Err(Error::Parse { .. })
             ));
         }
         let bad = SAMPLE.replace("\t7\t", "\tseven\t");
         assert!(matches!(
-            read(bad.as_bytes(), &Limits::default()),
+            read(bad.as_bytes(), &ReadLimits::default()),
             Err(Error::Parse {
                 at: Location::Line(8),
                 ..

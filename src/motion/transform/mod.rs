@@ -153,20 +153,11 @@ pub struct Options {
     pub metres_per_unit: Option<f64>,
 }
 
-/// The lowest and highest frame rates a take may be resampled to: below one frame in 100 s
-/// a take is a handful of stills; above 10,000 fps no capture system records.
-pub const MIN_FPS: f64 = 0.01;
-pub const MAX_FPS: f64 = 10_000.0;
-
 impl Options {
-    /// A rate within [`MIN_FPS`], [`MAX_FPS`] and a positive unit, or why not.
+    /// A rate within [`crate::limits::RESAMPLE_FPS`] and a positive unit, or why not.
     pub fn check(&self) -> Result<(), String> {
         if let Some(fps) = self.fps {
-            if !(fps.is_finite() && (MIN_FPS..=MAX_FPS).contains(&fps)) {
-                return Err(format!(
-                    "fps must be between {MIN_FPS} and {MAX_FPS}, got {fps}"
-                ));
-            }
+            crate::limits::resample_fps(fps)?;
         }
         if let Some(m) = self.metres_per_unit {
             if !(m.is_finite() && m > 0.0) {

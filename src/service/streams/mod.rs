@@ -44,7 +44,7 @@ use super::{blocking, Error, Node, Result};
 use crate::codec::stream::{StreamChunk, StreamEncoder, StreamSpec};
 use crate::codec::{self, Basis, CodecId, ErrorBound, Latency};
 use crate::limits::{
-    Limits, MAX_CAPTURE_MS, MAX_COORDINATE_M, MAX_FPS, STREAM_UNSAVED_BYTES, STREAM_WATCHERS,
+    Limits, MAX_CAPTURE_MS, MAX_COORDINATE_M, STREAM_UNSAVED_BYTES, STREAM_WATCHERS,
     STREAM_WATCH_QUEUE, STREAM_WATCH_SAMPLES,
 };
 use crate::motion::units::{parse_unit, Unit, UnitSource};
@@ -101,9 +101,7 @@ struct Plan {
 impl Plan {
     fn of(req: OpenRequest, limits: &Limits) -> Result<Plan> {
         let bad = |m: String| Err(Error::InvalidRequest(m));
-        if !(req.fps.is_finite() && req.fps > 0.0 && req.fps <= MAX_FPS) {
-            return bad(format!("fps must be in (0, {MAX_FPS}], got {}", req.fps));
-        }
+        crate::limits::fps(req.fps).map_err(Error::InvalidRequest)?;
         // The count is checked before anything is made from it: a client may ask for 2e10.
         let count = match &req.points {
             PointsSpec::Names(n) => n.len(),
@@ -140,10 +138,10 @@ impl Plan {
             ));
         }
         let chunk_frames = match req.chunk_seconds {
-            Some(s) if !(s.is_finite() && s > 0.0 && s <= 60.0) => {
-                return bad(format!("chunk_seconds must be in (0, 60], got {s}"))
+            Some(s) => {
+                let s = crate::limits::chunk_seconds(s).map_err(Error::InvalidRequest)?;
+                ((s * req.fps).round() as usize).max(1)
             }
-            Some(s) => ((s * req.fps).round() as usize).max(1),
             None => codec::default_chunk_frames(req.fps),
         };
         if let Err(why) = crate::limits::check(

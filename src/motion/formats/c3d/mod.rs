@@ -17,7 +17,7 @@
 pub mod params;
 pub mod write;
 
-use super::{perr, unsettled_unit, Extras, Format, Limits, Parsed};
+use super::{perr, unsettled_unit, Extras, Format, Parsed, ReadLimits};
 use crate::motion::analog::{self, Analog, Samples};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::events::Event;
@@ -82,7 +82,7 @@ fn dec_f32(b: [u8; 4]) -> f32 {
     ieee / 4.0
 }
 
-pub(crate) fn read(bytes: &[u8], limits: &Limits) -> Result<Parsed> {
+pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     if bytes.len() < BLOCK {
         return Err(err(
             0,
@@ -389,7 +389,7 @@ fn read_analog(
     params: &Parameters,
     l: AnalogLayout,
     bytes: &[u8],
-    limits: &Limits,
+    limits: &ReadLimits,
     warnings: &mut Vec<String>,
 ) -> Result<Option<Analog>> {
     let used = params
@@ -674,7 +674,7 @@ mod tests {
             [1.0, 1.0, 1.0, nan],  // a residual that is not a number: a gap, counted
             [f32::INFINITY, 0.0, 0.0, 2.0],
         ];
-        let p = read(&build_float(&Builder::new(), &rows), &Limits::default()).unwrap();
+        let p = read(&build_float(&Builder::new(), &rows), &ReadLimits::default()).unwrap();
         assert!(p.contradictions.is_empty(), "{:?}", p.contradictions);
         let m = &p.motion;
         let valid: Vec<bool> = (0..6).map(|f| m.sample(f, 0).is_some()).collect();
@@ -703,7 +703,7 @@ mod tests {
         let mut b = Builder::new();
         b.param(2, "ACTUAL_START_FIELD", 2, &[2], &u16s(&[1, 0]));
         b.param(2, "ACTUAL_END_FIELD", 2, &[2], &u16s(&[3, 0]));
-        let p = read(&b.build(2, &rows), &Limits::default()).unwrap();
+        let p = read(&b.build(2, &rows), &ReadLimits::default()).unwrap();
         assert_eq!(p.motion.frame_count(), 3);
         // The high word counts 65536 frames: more than the file holds, so it is cut to what
         // is present, and the reader reports that the file contradicts its header (refused
@@ -711,7 +711,7 @@ mod tests {
         let mut b = Builder::new();
         b.param(2, "ACTUAL_START_FIELD", 2, &[2], &u16s(&[1, 0]));
         b.param(2, "ACTUAL_END_FIELD", 2, &[2], &u16s(&[2, 1]));
-        let p = read(&b.build(2, &rows), &Limits::default()).unwrap();
+        let p = read(&b.build(2, &rows), &ReadLimits::default()).unwrap();
         assert_eq!(p.motion.frame_count(), 3);
         assert!(p
             .contradictions
@@ -721,7 +721,7 @@ mod tests {
 
     #[test]
     fn reads_a_hand_made_file() {
-        let p = read(&tiny_c3d(0), &Limits::default()).unwrap();
+        let p = read(&tiny_c3d(0), &ReadLimits::default()).unwrap();
         let m = p.motion;
         assert_eq!(m.point_names, vec!["HEAD"]);
         assert_eq!(m.frame_count(), 2);
@@ -733,7 +733,7 @@ mod tests {
 
     #[test]
     fn negative_residual_is_a_gap() {
-        let m = read(&tiny_c3d(-1), &Limits::default()).unwrap().motion;
+        let m = read(&tiny_c3d(-1), &ReadLimits::default()).unwrap().motion;
         assert_eq!(m.gap_count(), 1);
         assert!(m.sample(1, 0).is_none());
     }
@@ -742,12 +742,12 @@ mod tests {
     fn truncation_and_corruption_never_panic() {
         let good = tiny_c3d(0);
         for cut in 0..good.len() {
-            let _ = read(&good[..cut], &Limits::default());
+            let _ = read(&good[..cut], &ReadLimits::default());
         }
         for i in 0..good.len() {
             let mut b = good.clone();
             b[i] ^= 0xA5;
-            let _ = read(&b, &Limits::default());
+            let _ = read(&b, &ReadLimits::default());
         }
     }
 }
