@@ -8,10 +8,13 @@
 //! the [`Caller`] in the request, and sends the request on either through the rate limiter
 //! (any request with a token, anonymous ones on a server open beyond loopback, and every
 //! refusal, keyed by address) or straight on (anonymous on loopback). After routing,
-//! [`require_scope`] checks the route's scope ([`route_scope`], 403). Handlers check libraries, which only the service knows. When
-//! the answer is back, [`front`] records writes in the audit log, refusals included.
+//! [`super::routes::require`] checks what the route table declares for the route: its scope
+//! (403) and, for a route whose `{id}` names a take, the caller's libraries (404). When the
+//! answer is back, [`front`] records writes in the audit log, refusals included.
 //!
 //! # Routes and scopes
+//! Declared once, route by route, in the table in `http/mod.rs` (`declare`); in short:
+//!
 //! | route | scope |
 //! |---|---|
 //! | `GET /healthz`, `GET /readyz`, `GET /` and `GET /ui/…` (the viewer's files) | none |
@@ -29,7 +32,7 @@
 use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 
-use axum::extract::{ConnectInfo, MatchedPath, Request, State};
+use axum::extract::{ConnectInfo, Request, State};
 use axum::http::{header, HeaderMap, Method, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
@@ -39,7 +42,7 @@ use tower_governor::key_extractor::KeyExtractor;
 use tower_governor::GovernorError;
 
 use super::error::ApiError;
-use crate::service::access::{self, Attempt, AuditLog, Authenticator, Caller, Scope};
+use crate::service::access::{self, Attempt, AuditLog, Authenticator, Caller};
 use crate::service::budget::Holder;
 use crate::store::Store;
 
@@ -98,35 +101,14 @@ pub async fn refusal(req: Request) -> Response {
 /// The one write route not audited entry by entry (see [`front`]).
 const UNAUDITED: &str = "/v1/streams/{id}/frames";
 
-/// The route a request matched, for its audit entry (set by [`require_scope`]).
+/// The route a request matched, for its audit entry (set by [`super::routes::require`]).
 #[derive(Debug, Clone)]
-struct Route(String);
+pub(super) struct Route(pub(super) String);
 
 /// Routes anyone may call: liveness, and the viewer's files (which hold no data; the
 /// viewer asks for a token when the API answers 401).
 fn is_public(path: &str) -> bool {
     path == "/healthz" || path == "/readyz" || path == "/" || path.starts_with("/ui/")
-}
-
-/// The scope a route needs; `None` for the routes anyone may call.
-pub fn route_scope(method: &Method, route: &str) -> Option<Scope> {
-    if is_public(route) {
-        return None;
-    }
-    let admin = route.starts_with("/v1/tokens")
-        || route == "/v1/audit"
-        // Archive-wide totals: for the operator (or a separate `--metrics-listen` address).
-        || route == "/metrics"
-        || (route.starts_with("/v1/bases") && *method != Method::GET)
-        || (*method == Method::DELETE
-            && (route.starts_with("/v1/sequences") || route.starts_with("/v1/skeletons")));
-    Some(if admin {
-        Scope::Admin
-    } else if *method == Method::GET || *method == Method::HEAD {
-        Scope::Read
-    } else {
-        Scope::Write
-    })
 }
 
 /// Whether a method changes state (and so is audited and checked for its origin).
@@ -286,26 +268,6 @@ fn host_allowed(host: &str, policy: &Policy) -> bool {
             .any(|a| a == "*" || a.eq_ignore_ascii_case(name))
 }
 
-/// After routing: the route's scope, or 403.
-pub async fn require_scope(req: Request, next: Next) -> Response {
-    let route = req
-        .extensions()
-        .get::<MatchedPath>()
-        .map_or_else(|| req.uri().path().to_string(), |m| m.as_str().to_string());
-    let needed = route_scope(req.method(), &route);
-    let allowed = match (needed, req.extensions().get::<Caller>()) {
-        (None, _) => Ok(()),
-        (Some(scope), Some(caller)) => caller.grant.require(scope).map_err(ApiError::from),
-        (Some(_), None) => Err(ApiError::unauthorized("no credentials were checked")),
-    };
-    let mut response = match allowed {
-        Ok(()) => next.run(req).await,
-        Err(e) => e.into_response(),
-    };
-    response.extensions_mut().insert(Route(route));
-    response
-}
-
 /// What an answer says for the audit log (read before the log is written: a response
 /// body cannot be held across an await).
 struct Done {
@@ -413,29 +375,6 @@ pub fn too_many(e: GovernorError) -> Response {
 mod tests {
     use super::*;
     use axum::http::HeaderValue;
-
-    #[test]
-    fn routes_need_the_scopes_the_docs_give() {
-        let s = |m: Method, r: &str| route_scope(&m, r);
-        assert_eq!(s(Method::GET, "/healthz"), None);
-        assert_eq!(
-            s(Method::GET, "/v1/sequences/{id}/frames"),
-            Some(Scope::Read)
-        );
-        assert_eq!(s(Method::GET, "/metrics"), Some(Scope::Admin));
-        assert_eq!(s(Method::POST, "/v1/sequences"), Some(Scope::Write));
-        assert_eq!(s(Method::PATCH, "/v1/sequences/{id}"), Some(Scope::Write));
-        assert_eq!(
-            s(Method::POST, "/v1/streams/{id}/frames"),
-            Some(Scope::Write)
-        );
-        assert_eq!(s(Method::DELETE, "/v1/sequences/{id}"), Some(Scope::Admin));
-        assert_eq!(s(Method::POST, "/v1/bases"), Some(Scope::Admin));
-        assert_eq!(s(Method::GET, "/v1/bases"), Some(Scope::Read));
-        assert_eq!(s(Method::GET, "/v1/tokens"), Some(Scope::Admin));
-        assert_eq!(s(Method::GET, "/v1/audit"), Some(Scope::Admin));
-        assert_eq!(s(Method::DELETE, "/v1/skeletons/{id}"), Some(Scope::Admin));
-    }
 
     #[test]
     fn bearer_headers_parse_and_others_are_refused() {

@@ -11,6 +11,7 @@ pub mod forward;
 mod library;
 mod metrics;
 pub mod proxy;
+mod routes;
 mod sequences;
 pub mod serve;
 mod skeletons;
@@ -26,7 +27,7 @@ use std::time::Duration;
 use axum::extract::DefaultBodyLimit;
 use axum::handler::Handler;
 use axum::http::StatusCode;
-use axum::routing::{get, post};
+use axum::routing::get;
 use axum::Router;
 use tokio::net::TcpListener;
 use tower_http::set_header::SetResponseHeaderLayer;
@@ -36,9 +37,10 @@ use auth::{Front, Policy, RateKey};
 use budget::{hold_body, BodyGate};
 pub use error::ApiError;
 pub use metrics::Metrics;
+use routes::Routes;
 
 use crate::limits::Limits;
-use crate::service::access::{AuditLog, Authenticator};
+use crate::service::access::{AuditLog, Authenticator, Scope};
 use crate::service::budget::Budget;
 use crate::service::history::Histories;
 use crate::service::jobs::Jobs;
@@ -159,18 +161,14 @@ async fn readyz(
     Ok("ready")
 }
 
-/// Forgets the rate limiter's idle keys; run with the other maintenance.
-type Forget = Arc<dyn Fn() + Send + Sync>;
-
-/// The routes, behind authentication, scopes, rate limits, CORS and the audit log
-/// ([`auth`]); with the rate limiter's key sweeper when limits are on.
-pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
-    let limits = state.limits;
-    // Each route with a body reads it through the server's budget, under its own limit.
+/// The route table: every route once, with who may call it ([`routes::Access`]) and its
+/// handler; each route with a body reads it through the server's `bodies` budget, under
+/// its own limit.
+fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
     let gate = |limit: u64| {
         axum::middleware::from_fn_with_state(
             BodyGate {
-                budget: state.bodies.clone(),
+                budget: bodies.clone(),
                 limit,
                 idle: limits.body_idle,
             },
@@ -181,56 +179,85 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
     let append = gate(limits.append_bytes);
     let json = gate(limits.json_body_bytes);
     let json_tokens = json.clone();
-    let inner = Router::new()
-        .route("/healthz", get(|| async { "ok" }))
-        .route("/readyz", get(readyz))
-        .route("/", get(ui::index))
-        .route("/ui/{*path}", get(ui::file))
-        .route("/metrics", get(metrics::render))
-        .route(
+    use routes::Access::{Public, Scope as Needs, Take};
+    use Scope::{Admin, Read, Write};
+    Routes::new()
+        .get("/healthz", Public, || async { "ok" })
+        .get("/readyz", Public, readyz)
+        .get("/", Public, ui::index)
+        .get("/ui/{*path}", Public, ui::file)
+        .get("/metrics", Needs(Admin), metrics::render)
+        .post(
             "/v1/sequences",
-            post(sequences::create.layer(upload)).get(library::list),
+            Needs(Write),
+            sequences::create.layer(upload),
         )
-        .route(
+        .get("/v1/sequences", Needs(Read), library::list)
+        .get("/v1/sequences/{id}", Take(Read), sequences::get)
+        .delete("/v1/sequences/{id}", Take(Admin), sequences::delete)
+        .patch(
             "/v1/sequences/{id}",
-            get(sequences::get)
-                .delete(sequences::delete)
-                .patch(library::patch.layer(json.clone())),
+            Take(Write),
+            library::patch.layer(json.clone()),
         )
-        .route("/v1/stats", get(library::stats))
-        .route("/v1/ranges", get(sequences::ranges))
-        .route("/v1/export", get(library::export))
-        .route(
-            "/v1/bases",
-            get(bases::list).post(bases::train.layer(json.clone())),
+        .get("/v1/sequences/{id}/frames", Take(Read), sequences::frames)
+        .get("/v1/sequences/{id}/errors", Take(Read), sequences::errors)
+        .get("/v1/sequences/{id}/analog", Take(Read), sequences::analog)
+        .get(
+            "/v1/sequences/{id}/parameters",
+            Take(Read),
+            sequences::parameters,
         )
-        .route("/v1/bases/{id}", get(bases::get).delete(bases::delete))
-        .route("/v1/jobs", get(bases::jobs))
-        .route("/v1/jobs/{id}", get(bases::job))
-        .route("/v1/skeletons", get(skeletons::list))
-        .route(
-            "/v1/skeletons/{id}",
-            get(skeletons::get).delete(skeletons::delete),
+        .get("/v1/stats", Needs(Read), library::stats)
+        .get("/v1/ranges", Needs(Read), sequences::ranges)
+        .get("/v1/export", Needs(Read), library::export)
+        .get("/v1/bases", Needs(Read), bases::list)
+        .post("/v1/bases", Needs(Admin), bases::train.layer(json.clone()))
+        .get("/v1/bases/{id}", Needs(Read), bases::get)
+        .delete("/v1/bases/{id}", Needs(Admin), bases::delete)
+        .get("/v1/jobs", Needs(Read), bases::jobs)
+        .get("/v1/jobs/{id}", Needs(Read), bases::job)
+        .get("/v1/skeletons", Needs(Read), skeletons::list)
+        .get("/v1/skeletons/{id}", Needs(Read), skeletons::get)
+        .delete("/v1/skeletons/{id}", Needs(Admin), skeletons::delete)
+        .post(
+            "/v1/streams",
+            Needs(Write),
+            streams::open.layer(json.clone()),
         )
-        .route("/v1/streams", post(streams::open.layer(json.clone())))
-        .route("/v1/streams/{id}", get(streams::get))
-        .route("/v1/streams/{id}/events", get(streams::events))
-        .route(
+        .get("/v1/streams/{id}", Take(Read), streams::get)
+        .get("/v1/streams/{id}/events", Take(Read), streams::events)
+        .post(
             "/v1/streams/{id}/frames",
-            post(streams::append.layer(append)),
+            Take(Write),
+            streams::append.layer(append),
         )
-        .route("/v1/streams/{id}/finish", post(streams::finish.layer(json)))
-        .route("/v1/sequences/{id}/frames", get(sequences::frames))
-        .route("/v1/sequences/{id}/errors", get(sequences::errors))
-        .route("/v1/sequences/{id}/analog", get(sequences::analog))
-        .route("/v1/sequences/{id}/parameters", get(sequences::parameters))
-        .route(
+        .post(
+            "/v1/streams/{id}/finish",
+            Take(Write),
+            streams::finish.layer(json),
+        )
+        .get("/v1/tokens", Needs(Admin), tokens::list)
+        .post(
             "/v1/tokens",
-            get(tokens::list).post(tokens::create.layer(json_tokens)),
+            Needs(Admin),
+            tokens::create.layer(json_tokens),
         )
-        .route("/v1/tokens/{id}", axum::routing::delete(tokens::revoke))
-        .route("/v1/audit", get(tokens::audit))
-        .route_layer(axum::middleware::from_fn(auth::require_scope))
+        .delete("/v1/tokens/{id}", Needs(Admin), tokens::revoke)
+        .get("/v1/audit", Needs(Admin), tokens::audit)
+}
+
+/// Forgets the rate limiter's idle keys; run with the other maintenance.
+type Forget = Arc<dyn Fn() + Send + Sync>;
+
+/// The routes, behind authentication, scopes, rate limits, CORS and the audit log
+/// ([`auth`]); with the rate limiter's key sweeper when limits are on.
+pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
+    let limits = state.limits;
+    let (table, access) = declare(&state.bodies, &limits).finish();
+    let require = axum::middleware::from_fn_with_state((state.clone(), access), routes::require);
+    let inner = table
+        .route_layer(require)
         .fallback(|| async {
             ApiError::new(
                 StatusCode::NOT_FOUND,

@@ -21,7 +21,7 @@ use tokio::sync::broadcast::error::RecvError;
 use super::error::ApiError;
 use super::views::TakeView;
 use super::AppState;
-use crate::service::access::{self, Caller};
+use crate::service::access::Caller;
 use crate::service::budget::Holder;
 use crate::service::streams::{Append, Arrival, OpenRequest, Route, StreamInfo, Watch};
 
@@ -88,29 +88,26 @@ pub async fn open(
     ))
 }
 
-/// A read of a stream (its state, a watch): the take checked against the caller, then the
-/// owner's answer if another server codes the stream.
+/// A read of a stream (its state, a watch): the owner's answer if another server codes the
+/// stream (the route checked the caller's libraries).
 async fn read_at_owner(
     state: &AppState,
-    caller: &Caller,
     holder: &Holder,
     id: &str,
     uri: &Uri,
     headers: &HeaderMap,
 ) -> Result<Option<Response>, ApiError> {
-    access::check_take(&state.store, &caller.grant, id).await?;
     at_owner(state, holder, id, Method::GET, uri, headers, Bytes::new()).await
 }
 
 pub async fn get(
     State(state): State<AppState>,
-    Extension(caller): Extension<Caller>,
     Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
     uri: Uri,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    if let Some(r) = read_at_owner(&state, &caller, &holder, &id, &uri, &headers).await? {
+    if let Some(r) = read_at_owner(&state, &holder, &id, &uri, &headers).await? {
         return Ok(r);
     }
     Ok(Json(state.streams.info(&state.store, &id).await?).into_response())
@@ -234,7 +231,6 @@ impl<'de> Visitor<'de> for Frame<'_> {
 #[allow(clippy::too_many_arguments)]
 pub async fn append(
     State(state): State<AppState>,
-    Extension(caller): Extension<Caller>,
     Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
     query: Result<Query<AppendQuery>, QueryRejection>,
@@ -243,7 +239,6 @@ pub async fn append(
     body: Bytes,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
-    access::check_take(&state.store, &caller.grant, &id).await?;
     let owner = at_owner(
         &state,
         &holder,
@@ -276,13 +271,11 @@ pub async fn append(
 
 pub async fn finish(
     State(state): State<AppState>,
-    Extension(caller): Extension<Caller>,
     Extension(holder): Extension<Holder>,
     Path(id): Path<String>,
     uri: Uri,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    access::check_take(&state.store, &caller.grant, &id).await?;
     let owner = at_owner(
         &state,
         &holder,
@@ -391,7 +384,7 @@ pub async fn events(
     uri: Uri,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    if let Some(r) = read_at_owner(&state, &caller, &holder, &id, &uri, &headers).await? {
+    if let Some(r) = read_at_owner(&state, &holder, &id, &uri, &headers).await? {
         // Passed back as it comes, until this server shuts down (a watch here would end
         // then too; one held open would keep the server from stopping).
         let mut stopping = state.streams.stopping();

@@ -1,0 +1,245 @@
+//! The route table's builder: every route is declared once, with who may call it and its
+//! handler, and both the router and the check made before any handler runs ([`require`])
+//! come from that one declaration — so a route cannot be added without a scope, and a
+//! route that names a take cannot forget to check the caller's libraries.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use axum::extract::{MatchedPath, RawPathParams, Request, State};
+use axum::handler::Handler;
+use axum::http::Method;
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use axum::routing::{on, MethodFilter};
+use axum::Router;
+
+use super::auth::Route;
+use super::error::ApiError;
+use super::AppState;
+use crate::service::access::{self, Caller, Scope};
+
+/// Who may call a route.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    /// Anyone: health, readiness, the viewer's files.
+    Public,
+    /// A caller whose token has this scope.
+    Scope(Scope),
+    /// A caller whose token has this scope and whose libraries hold the take the route's
+    /// `{id}` names; a take elsewhere answers 404, as one that does not exist
+    /// ([`access::check_take`]).
+    Take(Scope),
+}
+
+impl Access {
+    /// The scope it needs, if any.
+    pub fn scope(self) -> Option<Scope> {
+        match self {
+            Access::Public => None,
+            Access::Scope(s) | Access::Take(s) => Some(s),
+        }
+    }
+}
+
+/// Every route's access: by path as the router matches it, then by method.
+pub type Table = Arc<HashMap<&'static str, Vec<(Method, Access)>>>;
+
+/// Routes being declared.
+pub struct Routes {
+    router: Router<AppState>,
+    table: HashMap<&'static str, Vec<(Method, Access)>>,
+}
+
+impl Routes {
+    pub fn new() -> Routes {
+        Routes {
+            router: Router::new(),
+            table: HashMap::new(),
+        }
+    }
+
+    /// Route `method path` to `handler` for callers `access` lets in. Panics when the same
+    /// method and path is declared twice (a mistake in the table, found by every test that
+    /// builds a router).
+    pub fn add<H, T>(
+        mut self,
+        method: Method,
+        path: &'static str,
+        access: Access,
+        handler: H,
+    ) -> Routes
+    where
+        H: Handler<T, AppState>,
+        T: 'static,
+    {
+        let filter = MethodFilter::try_from(method.clone()).expect("a method the router routes");
+        self.router = self.router.route(path, on(filter, handler));
+        let methods = self.table.entry(path).or_default();
+        assert!(
+            methods.iter().all(|(m, _)| *m != method),
+            "{method} {path} is declared twice"
+        );
+        methods.push((method, access));
+        self
+    }
+
+    pub fn get<H: Handler<T, AppState>, T: 'static>(
+        self,
+        path: &'static str,
+        access: Access,
+        handler: H,
+    ) -> Routes {
+        self.add(Method::GET, path, access, handler)
+    }
+
+    pub fn post<H: Handler<T, AppState>, T: 'static>(
+        self,
+        path: &'static str,
+        access: Access,
+        handler: H,
+    ) -> Routes {
+        self.add(Method::POST, path, access, handler)
+    }
+
+    pub fn patch<H: Handler<T, AppState>, T: 'static>(
+        self,
+        path: &'static str,
+        access: Access,
+        handler: H,
+    ) -> Routes {
+        self.add(Method::PATCH, path, access, handler)
+    }
+
+    pub fn delete<H: Handler<T, AppState>, T: 'static>(
+        self,
+        path: &'static str,
+        access: Access,
+        handler: H,
+    ) -> Routes {
+        self.add(Method::DELETE, path, access, handler)
+    }
+
+    /// The router and the table [`require`] checks against.
+    pub fn finish(self) -> (Router<AppState>, Table) {
+        (self.router, Arc::new(self.table))
+    }
+}
+
+/// The access a request needs: its route's, `HEAD` as `GET`. A method the route does not
+/// have (axum answers 405 after this) needs read for a read and write otherwise, so that
+/// probing methods tells an outsider nothing.
+pub fn access_of(table: &Table, method: &Method, route: &str) -> Access {
+    let read = *method == Method::GET || *method == Method::HEAD;
+    let wanted = if read { &Method::GET } else { method };
+    let mut declared = table.get(route).into_iter().flatten();
+    declared.find(|(m, _)| m == wanted).map_or(
+        Access::Scope(if read { Scope::Read } else { Scope::Write }),
+        |(_, a)| *a,
+    )
+}
+
+/// After routing, before the handler (and before its body is read): the route's scope
+/// (403), and for a route that names a take, the caller's libraries (404).
+pub async fn require(
+    State((state, table)): State<(AppState, Table)>,
+    params: RawPathParams,
+    req: Request,
+    next: Next,
+) -> Response {
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or_else(|| req.uri().path().to_string(), |m| m.as_str().to_string());
+    let access = access_of(&table, req.method(), &route);
+    let allowed = check(&state, access, req.extensions().get::<Caller>(), &params).await;
+    let mut response = match allowed {
+        Ok(()) => next.run(req).await,
+        Err(e) => e.into_response(),
+    };
+    response.extensions_mut().insert(Route(route));
+    response
+}
+
+async fn check(
+    state: &AppState,
+    access: Access,
+    caller: Option<&Caller>,
+    params: &RawPathParams,
+) -> Result<(), ApiError> {
+    let Some(scope) = access.scope() else {
+        return Ok(());
+    };
+    let caller = caller.ok_or_else(|| ApiError::unauthorized("no credentials were checked"))?;
+    caller.grant.require(scope)?;
+    if let Access::Take(_) = access {
+        let id = params
+            .iter()
+            .find_map(|(k, v)| (k == "id").then_some(v))
+            .ok_or_else(|| ApiError::bad_request("this route names no take"))?;
+        access::check_take(&state.store, &caller.grant, id).await?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::limits::Limits;
+    use crate::service::budget::Budget;
+
+    fn table() -> Table {
+        let limits = Limits::default();
+        let bodies = Arc::new(Budget::new(limits.inflight_bytes, limits.body_share_bytes));
+        super::super::declare(&bodies, &limits).finish().1
+    }
+
+    /// The scopes the README and the module docs of `auth` give.
+    #[test]
+    fn routes_need_the_scopes_the_docs_give() {
+        let t = table();
+        let s = |m: Method, r: &str| access_of(&t, &m, r).scope();
+        assert_eq!(s(Method::GET, "/healthz"), None);
+        assert_eq!(s(Method::HEAD, "/ui/{*path}"), None);
+        assert_eq!(
+            s(Method::GET, "/v1/sequences/{id}/frames"),
+            Some(Scope::Read)
+        );
+        assert_eq!(s(Method::GET, "/metrics"), Some(Scope::Admin));
+        assert_eq!(s(Method::POST, "/v1/sequences"), Some(Scope::Write));
+        assert_eq!(s(Method::PATCH, "/v1/sequences/{id}"), Some(Scope::Write));
+        assert_eq!(
+            s(Method::POST, "/v1/streams/{id}/frames"),
+            Some(Scope::Write)
+        );
+        assert_eq!(s(Method::DELETE, "/v1/sequences/{id}"), Some(Scope::Admin));
+        assert_eq!(s(Method::POST, "/v1/bases"), Some(Scope::Admin));
+        assert_eq!(s(Method::GET, "/v1/bases"), Some(Scope::Read));
+        assert_eq!(s(Method::GET, "/v1/tokens"), Some(Scope::Admin));
+        assert_eq!(s(Method::GET, "/v1/audit"), Some(Scope::Admin));
+        assert_eq!(s(Method::DELETE, "/v1/skeletons/{id}"), Some(Scope::Admin));
+        // A method a route does not have: read for a read, write otherwise.
+        assert_eq!(s(Method::PUT, "/v1/stats"), Some(Scope::Write));
+    }
+
+    /// Every route whose `{id}` is a take (a sequence or a live stream's) checks the
+    /// caller's libraries.
+    #[test]
+    fn every_route_that_names_a_take_checks_its_library() {
+        let t = table();
+        let mut takes = 0;
+        for (path, methods) in t.iter() {
+            let names_a_take =
+                path.starts_with("/v1/sequences/{id}") || path.starts_with("/v1/streams/{id}");
+            for (method, access) in methods {
+                assert_eq!(
+                    matches!(access, Access::Take(_)),
+                    names_a_take,
+                    "{method} {path}: {access:?}"
+                );
+                takes += usize::from(names_a_take);
+            }
+        }
+        assert_eq!(takes, 11);
+    }
+}
