@@ -3,11 +3,12 @@
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, StatusCode};
-use axum::response::IntoResponse;
+use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::views::BasisView;
 use super::AppState;
 use crate::codec::BasisKind;
 use crate::service::access::Caller;
@@ -15,7 +16,6 @@ use crate::service::bases;
 use crate::service::jobs::{Job, JobState, MAX_LIST, MAX_WAIT_S};
 use crate::service::training::{self, TrainRequest};
 use crate::service::Error;
-use crate::store::BasisRow;
 
 /// `POST /v1/bases`: 202 with the training job (and its address in `Location`).
 pub async fn train(
@@ -45,7 +45,11 @@ pub async fn list(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let Query(q) = query?;
-    let items = bases::list(&state.store, q.layout.as_deref(), q.kind, &caller.grant).await?;
+    let rows = bases::list(&state.store, q.layout.as_deref(), q.kind, &caller.grant).await?;
+    let items = rows
+        .iter()
+        .map(BasisView::try_from)
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(Json(serde_json::json!({ "items": items })))
 }
 
@@ -53,8 +57,9 @@ pub async fn get(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
-) -> Result<Json<BasisRow>, ApiError> {
-    Ok(Json(bases::get(&state.store, &id, &caller.grant).await?))
+) -> Result<Response, ApiError> {
+    let row = bases::get(&state.store, &id, &caller.grant).await?;
+    Ok(Json(BasisView::try_from(&row)?).into_response())
 }
 
 /// 204, 404, or 409 while takes still reference the basis.

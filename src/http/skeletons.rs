@@ -3,15 +3,15 @@
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 
 use super::error::ApiError;
+use super::views::SkeletonView;
 use super::AppState;
-use crate::motion::skeleton::Joint;
 use crate::service::access::Caller;
 use crate::service::skeletons;
-use crate::store::SkeletonRow;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -25,28 +25,18 @@ pub async fn list(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let Query(q) = query?;
-    let items = skeletons::list(&state.store, q.layout.as_deref(), &caller.grant).await?;
+    let rows = skeletons::list(&state.store, q.layout.as_deref(), &caller.grant).await?;
+    let items: Vec<SkeletonView> = rows.iter().map(|r| SkeletonView::of(r, None)).collect();
     Ok(Json(serde_json::json!({ "items": items })))
-}
-
-/// A skeleton's row and its hierarchy.
-#[derive(Serialize)]
-pub struct SkeletonView {
-    #[serde(flatten)]
-    row: SkeletonRow,
-    hierarchy: Vec<Joint>,
 }
 
 pub async fn get(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
-) -> Result<Json<SkeletonView>, ApiError> {
+) -> Result<Response, ApiError> {
     let (row, rig) = skeletons::get(&state.store, &id, &caller.grant).await?;
-    Ok(Json(SkeletonView {
-        row,
-        hierarchy: rig.joints().to_vec(),
-    }))
+    Ok(Json(SkeletonView::of(&row, Some(rig.joints()))).into_response())
 }
 
 /// 204, 404, or 409 while takes still reference the skeleton.

@@ -3,15 +3,15 @@
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{header, StatusCode};
-use axum::response::IntoResponse;
+use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::views::AuditView;
 use super::AppState;
 use crate::limits::MAX_AUDIT_PAGE;
 use crate::service::access::{self, NewToken, TokenInfo, TokenRequest};
-use crate::store::AuditRow;
 
 pub async fn create(
     State(state): State<AppState>,
@@ -52,7 +52,7 @@ pub struct AuditQuery {
 pub async fn audit(
     State(state): State<AppState>,
     query: Result<Query<AuditQuery>, QueryRejection>,
-) -> Result<Json<Vec<AuditRow>>, ApiError> {
+) -> Result<Response, ApiError> {
     let Query(q) = query?;
     if q.before.is_some_and(|b| b < 1) {
         return Err(ApiError::bad_request(
@@ -67,7 +67,7 @@ pub async fn audit(
     }
     // What is counted but not yet written belongs in the answer.
     state.audit.flush(&state.store, true).await?;
-    Ok(Json(
-        access::audit_log(&state.store, q.before, limit).await?,
-    ))
+    let rows = access::audit_log(&state.store, q.before, limit).await?;
+    let entries: Vec<AuditView> = rows.iter().map(AuditView::from).collect();
+    Ok(Json(entries).into_response())
 }
