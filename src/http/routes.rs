@@ -127,8 +127,8 @@ impl Routes {
 }
 
 /// The access a request needs: its route's, `HEAD` as `GET`. A method the route does not
-/// have (axum answers 405 after this) needs read for a read and write otherwise, so that
-/// probing methods tells an outsider nothing.
+/// declare never gets here (the router answers 405 before its route layer runs); were one
+/// to, it would need read for a read and write otherwise, never nothing.
 pub fn access_of(table: &Table, method: &Method, route: &str) -> Access {
     let read = *method == Method::GET || *method == Method::HEAD;
     let wanted = if read { &Method::GET } else { method };
@@ -218,7 +218,7 @@ mod tests {
         assert_eq!(s(Method::GET, "/v1/tokens"), Some(Scope::Admin));
         assert_eq!(s(Method::GET, "/v1/audit"), Some(Scope::Admin));
         assert_eq!(s(Method::DELETE, "/v1/skeletons/{id}"), Some(Scope::Admin));
-        // A method a route does not have: read for a read, write otherwise.
+        // A method a route does not declare (the router answers 405 first): never public.
         assert_eq!(s(Method::PUT, "/v1/stats"), Some(Scope::Write));
     }
 

@@ -15,7 +15,7 @@
 
 use nalgebra::DMatrix;
 
-use super::search::{self, Choice, Plan, Shape};
+use super::search::{self, Bandwidth, Choice, Plan, Shape};
 use super::transform::{clip_len, ratio, reconstruct, Analysis};
 use super::{decode_clip, encode_coefs, Params};
 use crate::codec::basis::{Basis, BasisKind, Matrix};
@@ -213,12 +213,15 @@ fn code(input: &Input<'_>, a: &mut Analysis, bases: &[Matrix], c: Choice, rt: f6
     Trial::new(out, max, mean)
 }
 
-/// `mdtt-shared`'s search: the ladder's rank kept, no basis precision (the bases are the
-/// library's), no step tried at or past 64× the first, and where nothing meets a mean bound
-/// with the residual layer at the max, the residual layer at 3, 1.4 and 1 times the mean.
+/// `mdtt-shared`'s search: the ladder's rank kept, the smallest of its own bandwidth scan
+/// (which codes the paper's ratio again), no basis precision (the bases are the library's),
+/// no step tried at or past 64× the first, and where nothing meets a mean bound with the
+/// residual layer at the max, the residual layer at 3, 1.4 and 1 times the mean. Each of
+/// these differs from mdtt's, and each choice is part of the bytes it writes.
 const PLAN: Plan = Plan {
     refine_rank: false,
-    bandwidths: &[0.6, 0.8, 1.3, 1.7, 2.2],
+    bandwidths: &[0.6, 0.8, 1.0, 1.3, 1.7, 2.2],
+    bandwidth: Bandwidth::SmallestScanned,
     gamma: 0.0,
     gammas: &[],
     ceiling: Ceiling::Tried(64.0),

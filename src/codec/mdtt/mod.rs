@@ -42,7 +42,7 @@ use super::residual;
 use super::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Target};
 pub use params::Params;
 use params::{quantise_basis, MAX_BASIS_BITS};
-use search::{Choice, Plan, Shape};
+use search::{Bandwidth, Choice, Plan, Shape};
 use transform::clips_for;
 pub use transform::{clip_len, ratio, ClipMode};
 use transform::{coefs_for, reconstruct, Analysis};
@@ -383,6 +383,7 @@ pub fn encode_clips(input: &Input<'_>, target: Target, mode: ClipMode) -> Result
 const PLAN: Plan = Plan {
     refine_rank: true,
     bandwidths: &[0.6, 0.8, 1.3, 1.7, 2.2, 3.0],
+    bandwidth: Bandwidth::OfTheBest,
     gamma: GAMMA0,
     gammas: &[0.0, 0.08, 0.12, 0.25, 0.5],
     ceiling: Ceiling::FromBelow(64.0),

@@ -4,7 +4,7 @@
 //! smallest, grow then bisect, residual fallbacks) are [`crate::codec::rate`]'s.
 
 use super::transform::{clip_len, ratio};
-use crate::codec::rate::{grow_then_bisect, Best, Ceiling, Trial};
+use crate::codec::rate::{grow_then_bisect, Best, Ceiling, Smallest, Trial};
 use crate::codec::{Input, Target};
 
 /// One point of the parameter space, as coded.
@@ -32,8 +32,10 @@ pub(super) struct Setting {
 pub(super) struct Plan {
     /// Try the ranks between the neighbours of the best rung of the ladder.
     pub refine_rank: bool,
-    /// Bandwidths relative to the paper's ratio, tried at the best rank.
+    /// Bandwidths relative to the paper's ratio, tried at the best rank, and which one the
+    /// later stages code at.
     pub bandwidths: &'static [f64],
+    pub bandwidth: Bandwidth,
     /// The basis precision of the first trials, and those tried after the bandwidth.
     pub gamma: f64,
     pub gammas: &'static [f64],
@@ -42,6 +44,17 @@ pub(super) struct Plan {
     /// Residual bounds, in units of the mean, to search again at when nothing meets the
     /// bound with the residual layer at the max.
     pub fallbacks: &'static [f64],
+}
+
+/// Which bandwidth the stages after the bandwidth scan code at. The two differ only when a
+/// scanned bandwidth codes exactly as small as the best trial before the scan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Bandwidth {
+    /// The bandwidth of the smallest trial so far (per-take `mdtt`).
+    OfTheBest,
+    /// The smallest of the scan itself, the earlier of equals; the paper's ratio if none
+    /// meets the bound (`mdtt-shared`).
+    SmallestScanned,
 }
 
 /// Steps relative to the bound scanned at the best rank and bandwidth: the residual layer
@@ -132,14 +145,20 @@ pub(super) fn run(
         }
     }
     let c = best.setting()?;
+    let mut scanned = Smallest::new();
     for &m in plan.bandwidths {
-        offer(&mut best, Setting { m, ..c });
+        if let Some(bytes) = offer(&mut best, Setting { m, ..c }) {
+            scanned.offer(bytes, m);
+        }
     }
     let c = best.setting()?;
     for &gamma in plan.gammas {
         offer(&mut best, Setting { gamma, ..c });
     }
-    let c = best.setting()?;
+    let mut c = best.setting()?;
+    if plan.bandwidth == Bandwidth::SmallestScanned {
+        c.m = scanned.into_best().unwrap_or(1.0);
+    }
     for beta in BETAS.into_iter().filter(|&b| b != beta0) {
         offer(&mut best, Setting { beta, ..c });
     }

@@ -99,7 +99,7 @@ impl<'a> Take<'a> {
             layout.split(&values[f * cc..(f + 1) * cc], pose);
         }
         let full = Geodesics::fit(&poses, n, 3 * n)
-            .ok_or_else(|| Error::Fault("pga found no mean pose".into()))?;
+            .ok_or_else(|| Error::Invalid("pga found no mean pose".into()))?;
         let mut extent = vec![0f64; full.dims()];
         for pose in poses.chunks_exact(n) {
             for (e, x) in extent.iter_mut().zip(full.coordinates(pose)) {
