@@ -7,8 +7,10 @@ use std::process::ExitCode;
 
 use clap::Args;
 
+use mocapstore::service::access::Grant;
 use mocapstore::service::archive::{self, Imported, ManifestLine};
 use mocapstore::service::export;
+use mocapstore::service::library::TakeQuery;
 use mocapstore::store::{BasisRow, Filter, Store};
 
 /// Which database, and which takes.
@@ -27,11 +29,12 @@ pub struct Selection {
 
 impl Selection {
     fn filter(&self) -> Filter {
-        Filter {
+        TakeQuery {
             library: self.library.clone(),
             tag: self.tag.clone(),
-            ..Filter::default()
+            ..TakeQuery::default()
         }
+        .filter(&Grant::everything())
     }
 }
 

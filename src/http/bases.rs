@@ -46,10 +46,7 @@ pub async fn list(
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let Query(q) = query?;
     let rows = bases::list(&state.store, q.layout.as_deref(), q.kind, &caller.grant).await?;
-    let items = rows
-        .iter()
-        .map(BasisView::try_from)
-        .collect::<Result<Vec<_>, _>>()?;
+    let items: Vec<BasisView> = rows.iter().map(BasisView::from).collect();
     Ok(Json(serde_json::json!({ "items": items })))
 }
 
@@ -59,7 +56,7 @@ pub async fn get(
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     let row = bases::get(&state.store, &id, &caller.grant).await?;
-    Ok(Json(BasisView::try_from(&row)?).into_response())
+    Ok(Json(BasisView::from(&row)).into_response())
 }
 
 /// 204, 404, or 409 while takes still reference the basis.

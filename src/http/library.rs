@@ -14,11 +14,12 @@ use super::error::ApiError;
 use super::sequences::{format_of, streamed, transform_of};
 use super::views::{ListingView, TakeView};
 use super::AppState;
+use crate::codec::CodecId;
 use crate::service::access::Caller;
 use crate::service::budget::Holder;
 use crate::service::export::{self, ExportRequest};
-use crate::service::library::{self, Stats};
-use crate::store::{Filter, SortKey};
+use crate::service::library::{self, Page, Stats, TakeQuery};
+use crate::store::SortKey;
 
 /// Query of a listing: the filter fields, then sort, order, limit and cursor. Written out
 /// rather than flattened: urlencoded flattening cannot parse numbers.
@@ -28,42 +29,27 @@ pub struct ListQuery {
     tag: Option<String>,
     name_prefix: Option<String>,
     fps: Option<f64>,
-    points: Option<i64>,
+    points: Option<u64>,
     layout: Option<String>,
-    codec: Option<String>,
+    codec: Option<CodecId>,
     min_duration_s: Option<f64>,
     max_duration_s: Option<f64>,
-    min_frames: Option<i64>,
-    max_frames: Option<i64>,
+    min_frames: Option<u64>,
+    max_frames: Option<u64>,
     min_ratio: Option<f64>,
     created_after: Option<i64>,
     created_before: Option<i64>,
     sort: Option<SortKey>,
-    order: Option<String>,
+    order: Option<Order>,
     limit: Option<usize>,
     cursor: Option<String>,
 }
 
-impl ListQuery {
-    fn filter(&self) -> Filter {
-        Filter {
-            library: self.library.clone(),
-            tag: self.tag.clone(),
-            name_prefix: self.name_prefix.clone(),
-            fps: self.fps,
-            points: self.points,
-            layout: self.layout.clone(),
-            codec: self.codec.clone(),
-            min_duration_s: self.min_duration_s,
-            max_duration_s: self.max_duration_s,
-            min_frames: self.min_frames,
-            max_frames: self.max_frames,
-            min_ratio: self.min_ratio,
-            created_after: self.created_after,
-            created_before: self.created_before,
-            within: None,
-        }
-    }
+#[derive(Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Order {
+    Asc,
+    Desc,
 }
 
 pub async fn list(
@@ -72,26 +58,29 @@ pub async fn list(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
-    let descending = match q.order.as_deref() {
-        None => matches!(q.sort, None | Some(SortKey::Created)),
-        Some("asc") => false,
-        Some("desc") => true,
-        Some(o) => {
-            return Err(ApiError::bad_request(format!(
-                "order must be asc or desc, got {o:?}"
-            )))
-        }
+    let takes = TakeQuery {
+        library: q.library,
+        tag: q.tag,
+        name_prefix: q.name_prefix,
+        layout: q.layout,
+        codec: q.codec,
+        fps: q.fps,
+        points: q.points,
+        min_duration_s: q.min_duration_s,
+        max_duration_s: q.max_duration_s,
+        min_frames: q.min_frames,
+        max_frames: q.max_frames,
+        min_ratio: q.min_ratio,
+        created_after: q.created_after,
+        created_before: q.created_before,
     };
-    let filter = caller.grant.restrict(q.filter());
-    let listing = library::list(
-        &state.store,
-        &filter,
-        q.sort.unwrap_or_default(),
-        descending,
-        q.limit,
-        q.cursor.as_deref(),
-    )
-    .await?;
+    let page = Page {
+        sort: q.sort.unwrap_or_default(),
+        descending: q.order.map(|o| matches!(o, Order::Desc)),
+        limit: q.limit,
+        cursor: q.cursor,
+    };
+    let listing = library::list(&state.store, &caller.grant, &takes, page).await?;
     Ok(Json(ListingView::from(&listing)).into_response())
 }
 
@@ -99,7 +88,7 @@ pub async fn list(
 pub struct StatsQuery {
     library: Option<String>,
     tag: Option<String>,
-    codec: Option<String>,
+    codec: Option<CodecId>,
 }
 
 pub async fn stats(
@@ -108,13 +97,15 @@ pub async fn stats(
     query: Result<Query<StatsQuery>, QueryRejection>,
 ) -> Result<Json<Stats>, ApiError> {
     let Query(q) = query?;
-    let filter = caller.grant.restrict(Filter {
+    let takes = TakeQuery {
         library: q.library,
         tag: q.tag,
         codec: q.codec,
-        ..Filter::default()
-    });
-    Ok(Json(library::stats(&state.store, &filter).await?))
+        ..TakeQuery::default()
+    };
+    Ok(Json(
+        library::stats(&state.store, &caller.grant, &takes).await?,
+    ))
 }
 
 #[derive(Deserialize)]
@@ -122,7 +113,7 @@ pub struct ExportQuery {
     library: Option<String>,
     tag: Option<String>,
     name_prefix: Option<String>,
-    codec: Option<String>,
+    codec: Option<CodecId>,
     layout: Option<String>,
     format: Option<String>,
     fps: Option<f64>,
@@ -147,16 +138,17 @@ pub async fn export(
         export::safe(q.library.as_deref().unwrap_or("library")),
         format.name()
     );
-    let filter = caller.grant.restrict(Filter {
+    let takes = TakeQuery {
         library: q.library,
         tag: q.tag,
         name_prefix: q.name_prefix,
         codec: q.codec,
         layout: q.layout,
-        ..Filter::default()
-    });
+        ..TakeQuery::default()
+    };
     let request = ExportRequest {
-        filter,
+        takes,
+        grant: caller.grant.clone(),
         format,
         transform,
     };

@@ -457,7 +457,7 @@ impl Application {
         // Takes left live by a server that died mid-stream are closed before serving.
         state
             .streams
-            .close_orphans(&state.store, &state.caches)
+            .close_orphans(&state.store)
             .await
             .map_err(|e| format!("closing interrupted streams: {e}"))?;
         let (router, forget_idle_keys) = router(state.clone(), config.policy);
@@ -501,7 +501,7 @@ impl Application {
             let mut pruned: Option<std::time::Instant> = None;
             loop {
                 tick.tick().await;
-                state.streams.maintain(&state.store, &state.caches).await;
+                state.streams.maintain(&state.store).await;
                 if let Some(f) = &forget {
                     f();
                 }

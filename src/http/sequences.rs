@@ -257,7 +257,7 @@ pub async fn delete(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    crate::service::library::delete(&state.store, &state.caches, &id).await?;
+    crate::service::library::delete(&state.store, &id).await?;
     Ok(StatusCode::NO_CONTENT.into_response())
 }
 

@@ -256,7 +256,6 @@ pub async fn append(
         .streams
         .append(
             &state.store,
-            &state.caches,
             &id,
             Append {
                 frames,
@@ -288,10 +287,7 @@ pub async fn finish(
     if let Some(r) = owner.await? {
         return Ok(r);
     }
-    let take = state
-        .streams
-        .finish(&state.store, &state.caches, &id)
-        .await?;
+    let take = state.streams.finish(&state.store, &id).await?;
     Ok(Json(TakeView::from(&take)).into_response())
 }
 

@@ -8,15 +8,15 @@ use axum::Json;
 use serde::Deserialize;
 
 use super::error::ApiError;
-use super::views::AuditView;
+use super::views::{AuditView, NewTokenView, TokenView};
 use super::AppState;
 use crate::limits::MAX_AUDIT_PAGE;
-use crate::service::access::{self, NewToken, TokenInfo, TokenRequest};
+use crate::service::access::{self, NewToken, TokenRequest};
 
 pub async fn create(
     State(state): State<AppState>,
     body: Result<Json<TokenRequest>, JsonRejection>,
-) -> Result<impl IntoResponse, ApiError> {
+) -> Result<Response, ApiError> {
     let Json(req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
     let token: NewToken = access::create_token(&state.store, req).await?;
     state.auth.forget();
@@ -24,12 +24,15 @@ pub async fn create(
     Ok((
         StatusCode::CREATED,
         [(header::LOCATION, location)],
-        Json(token),
-    ))
+        Json(NewTokenView::from(&token)),
+    )
+        .into_response())
 }
 
-pub async fn list(State(state): State<AppState>) -> Result<Json<Vec<TokenInfo>>, ApiError> {
-    Ok(Json(access::list_tokens(&state.store).await?))
+pub async fn list(State(state): State<AppState>) -> Result<Response, ApiError> {
+    let tokens = access::list_tokens(&state.store).await?;
+    let views: Vec<TokenView> = tokens.iter().map(TokenView::from).collect();
+    Ok(Json(views).into_response())
 }
 
 pub async fn revoke(

@@ -182,7 +182,7 @@ impl Caller {
 }
 
 /// A token as the API and the CLI show it (never its secret or hash).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TokenInfo {
     pub id: String,
     pub name: String,
@@ -197,9 +197,8 @@ pub struct TokenInfo {
 }
 
 /// A new token, with its secret: the only time the secret is seen.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone)]
 pub struct NewToken {
-    #[serde(flatten)]
     pub info: TokenInfo,
     pub secret: String,
 }

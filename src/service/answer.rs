@@ -1000,7 +1000,6 @@ impl Answer {
         let r = header.chunks[i].frame_range();
         let part = r.start.max(self.start)..r.end.min(self.end);
         let full = r.len() * header.points as usize * 3 * 4;
-        let id = self.id.clone();
         // Positions (of the selected points, or all when shaped), or channels (how many).
         let selected = match (&self.writer, &self.shaper) {
             (Writer::Points { selected, .. }, _) => Some(selected.clone()),
@@ -1019,7 +1018,7 @@ impl Answer {
         // away): the blocking pool finishes the work, and its memory stays reserved.
         let block = match selected {
             Some(selected) => {
-                let cached = self.caches.chunks.get(&id, i);
+                let cached = self.caches.chunks.get(self.prepared.generation, i);
                 let (chunk, payload_held) = match cached {
                     Some(d) => (OneChunk::Decoded(d), None),
                     None => {
@@ -1047,7 +1046,9 @@ impl Answer {
                 })
                 .await?;
                 if let Some(fresh) = fresh {
-                    self.caches.chunks.insert(&id, i, fresh);
+                    self.caches
+                        .chunks
+                        .insert(self.prepared.generation, i, fresh);
                 }
                 let (data, frames) = data?;
                 self.shaper = shaper;
@@ -1175,8 +1176,7 @@ impl Answer {
             }
             let rows = self.store.chunks(&self.id, i as i64, end as i64).await?;
             if rows.len() != end - i {
-                // Deleted since its reader was cached: forget it, and say so.
-                self.caches.forget(&self.id);
+                // Deleted since its reader was checked: say so (404), or else that it changed.
                 super::fetch::take(&self.store, &self.id).await?;
                 return Err(Error::Internal(format!(
                     "take {} is missing chunks {i}..{end}",

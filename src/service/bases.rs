@@ -3,10 +3,138 @@
 
 use std::sync::Arc;
 
+use serde::{Deserialize, Serialize};
+
 use super::access::Grant;
 use super::{blocking, Error, Result};
 use crate::codec::{Basis, BasisKind};
 use crate::store::{BasisRow, Deletion, Store};
+
+/// How a shared basis was made: stored with it (JSON) and shown by `/v1/bases`. One
+/// definition for what training writes, what the API shows and what a token limited to
+/// some libraries may see of it ([`Provenance::settings_only`]). Fields a basis was not
+/// made with are absent.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// How it was trained, or, for a stream's untrained basis, how it was made.
+    pub algorithm: String,
+    // How it was trained: settings, shown to every caller that may see the basis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sparsity: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_iterations: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rank: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bound_mm: Option<f64>,
+    // What it was trained on and measured there.
+    /// The takes it was trained on (ids), and their frames.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub takes: Option<Vec<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames: Option<u64>,
+    /// Training time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seconds: Option<f64>,
+    /// LSDT: the samples trained on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub samples: Option<usize>,
+    /// MDTT set: the clips trained on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clips: Option<usize>,
+    /// MDTT set: the sizes each basis count tried came to.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k_candidates: Option<Vec<SetSize>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub objective: Option<Objective>,
+}
+
+/// What an MDTT basis set of `k` bases cost on its training takes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SetSize {
+    pub k: usize,
+    pub takes_bytes: u64,
+    pub basis_bytes: u64,
+}
+
+/// The training objective, iteration by iteration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Objective {
+    /// LSDT trains one basis per coordinate.
+    PerAxis {
+        x: Vec<f64>,
+        y: Vec<f64>,
+        z: Vec<f64>,
+    },
+    /// MDTT's annealing distortion.
+    Series(Vec<f64>),
+}
+
+impl Provenance {
+    /// How the basis was trained, not what it measured on its takes: what a token limited
+    /// to some of those takes' libraries is shown, beside the takes it may see.
+    pub fn settings_only(&self) -> Provenance {
+        Provenance {
+            algorithm: self.algorithm.clone(),
+            sparsity: self.sparsity,
+            max_iterations: self.max_iterations,
+            tolerance: self.tolerance,
+            rank: self.rank,
+            k: self.k,
+            bound_mm: self.bound_mm,
+            ..Provenance::default()
+        }
+    }
+
+    /// As the store keeps it.
+    pub fn to_value(&self) -> Result<serde_json::Value> {
+        serde_json::to_value(self).map_err(|e| Error::Internal(format!("basis provenance: {e}")))
+    }
+}
+
+/// A stored basis's record (not its payload), parsed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BasisInfo {
+    /// BLAKE3 of the payload, hex.
+    pub id: String,
+    pub kind: BasisKind,
+    pub layout: String,
+    pub points: usize,
+    /// Shape, e.g. `3×31×31` (matrices × rows × columns).
+    pub dims: String,
+    pub provenance: Provenance,
+    /// Milliseconds since the Unix epoch.
+    pub created_at: i64,
+    /// How many takes reference it (that the caller may see).
+    pub used_by: u64,
+}
+
+impl BasisInfo {
+    /// A stored record whose kind or provenance does not parse is corrupt, not a default.
+    fn parse(row: BasisRow) -> Result<BasisInfo> {
+        let corrupt = |what: &str, e: &dyn std::fmt::Display| {
+            Error::Corrupt(format!("basis {}: {what}: {e}", row.id))
+        };
+        let kind = row.kind.parse().map_err(|e| corrupt("kind", &e))?;
+        let provenance =
+            Provenance::deserialize(&row.provenance).map_err(|e| corrupt("provenance", &e))?;
+        Ok(BasisInfo {
+            kind,
+            points: usize::try_from(row.points).map_err(|e| corrupt("points", &e))?,
+            provenance,
+            used_by: row.used_by.max(0) as u64,
+            id: row.id,
+            layout: row.layout,
+            dims: row.dims,
+            created_at: row.created_at,
+        })
+    }
+}
 
 /// Parse a stored basis, checking that its bytes still hash to its id.
 pub(super) fn parse(row: &BasisRow) -> Result<Basis> {
@@ -51,16 +179,24 @@ pub async fn list(
     layout: Option<&str>,
     kind: Option<BasisKind>,
     grant: &Grant,
-) -> Result<Vec<BasisRow>> {
+) -> Result<Vec<BasisInfo>> {
     let rows = store.bases(layout, kind.map(BasisKind::name)).await?;
-    scoped(store, rows, grant).await
+    let infos = rows
+        .into_iter()
+        .map(BasisInfo::parse)
+        .collect::<Result<_>>()?;
+    scoped(store, infos, grant).await
 }
 
 /// One stored basis; to a grant limited to libraries, only one of theirs ([`scoped`]; any
 /// other is `NotFound`, as if it did not exist).
-pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<BasisRow> {
+pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<BasisInfo> {
     let row = store.basis(id).await?;
-    scoped(store, row.into_iter().collect(), grant)
+    let infos = row
+        .into_iter()
+        .map(BasisInfo::parse)
+        .collect::<Result<_>>()?;
+    scoped(store, infos, grant)
         .await?
         .pop()
         .ok_or_else(|| Error::NotFound(format!("basis {id}")))
@@ -83,62 +219,102 @@ pub async fn delete(store: &Store, id: &str) -> Result<()> {
 /// another library: its takes (and their frame total) only those in the grant's libraries,
 /// and of the rest only how it was trained ([`SETTINGS`]), not what it measured on the
 /// whole selection (samples, clips, sizes, objective).
-async fn scoped(store: &Store, rows: Vec<BasisRow>, grant: &Grant) -> Result<Vec<BasisRow>> {
+async fn scoped(store: &Store, infos: Vec<BasisInfo>, grant: &Grant) -> Result<Vec<BasisInfo>> {
     let Some(within) = grant.within() else {
-        return Ok(rows);
+        return Ok(infos);
     };
     let uses = store.basis_use_within(&within).await?;
-    let trained = |row: &BasisRow| -> Vec<String> {
-        row.provenance["takes"]
-            .as_array()
-            .map(|a| {
-                a.iter()
-                    .filter_map(|v| v.as_str().map(str::to_string))
-                    .collect()
-            })
-            .unwrap_or_default()
-    };
+    let trained = |b: &BasisInfo| b.provenance.takes.clone().unwrap_or_default();
     // One lookup for every basis's takes, not one per basis.
-    let mut all: Vec<String> = rows.iter().flat_map(trained).collect();
+    let mut all: Vec<String> = infos.iter().flat_map(trained).collect();
     all.sort();
     all.dedup();
     let visible = store.take_frames_within(&all, &within).await?;
-    let mut out = Vec::with_capacity(rows.len());
-    for mut row in rows {
-        let takes: Vec<String> = trained(&row)
+    let mut out = Vec::with_capacity(infos.len());
+    for mut b in infos {
+        let takes: Vec<String> = trained(&b)
             .into_iter()
             .filter(|t| visible.contains_key(t))
             .collect();
-        let used = uses.get(&row.id).copied().unwrap_or(0);
+        let used = uses.get(&b.id).copied().unwrap_or(0);
         if used == 0 && takes.is_empty() {
             continue;
         }
-        row.used_by = used;
-        let frames: i64 = takes.iter().map(|t| visible[t]).sum();
-        let mut provenance = serde_json::Map::new();
-        for key in SETTINGS {
-            if let Some(v) = row.provenance.get(*key) {
-                provenance.insert((*key).to_string(), v.clone());
-            }
+        b.used_by = used.max(0) as u64;
+        let mut shown = b.provenance.settings_only();
+        if b.provenance.takes.is_some() {
+            shown.frames = Some(takes.iter().map(|t| visible[t].max(0) as u64).sum());
+            shown.takes = Some(takes);
         }
-        if row.provenance.get("takes").is_some() {
-            provenance.insert("takes".into(), serde_json::json!(takes));
-            provenance.insert("frames".into(), serde_json::json!(frames));
-        }
-        row.provenance = serde_json::Value::Object(provenance);
-        out.push(row);
+        b.provenance = shown;
+        out.push(b);
     }
     Ok(out)
 }
 
-/// The fields of a basis's provenance that say how it was trained, not what it measured on
-/// its takes: what a token limited to some of those takes' libraries is shown.
-const SETTINGS: &[&str] = &[
-    "algorithm",
-    "sparsity",
-    "max_iterations",
-    "tolerance",
-    "rank",
-    "k",
-    "bound_mm",
-];
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    /// Provenances as training and streams wrote them before they were typed read back
+    /// and are shown field for field as stored.
+    #[test]
+    fn stored_provenances_read_and_show_as_written() {
+        for stored in [
+            json!({
+                "samples": 1200, "algorithm": "LSDT (Hou et al. 2016, Algorithm 1)",
+                "sparsity": 8, "max_iterations": 30, "tolerance": 1e-4,
+                "objective": {"x": [3.0, 2.5], "y": [1.0], "z": [0.5]},
+                "takes": ["a", "b"], "frames": 900, "seconds": 1.5,
+            }),
+            json!({
+                "algorithm": "MDTT database mode", "clips": 40, "rank": 12,
+                "k_candidates": [{"k": 1, "takes_bytes": 900, "basis_bytes": 300}],
+                "k": 1, "bound_mm": 1.0, "objective": [9.0, 4.0, 3.5],
+                "takes": ["a"], "frames": 300, "seconds": 0.2,
+            }),
+            json!({ "algorithm": "DCT-II (untrained)" }),
+        ] {
+            let p = Provenance::deserialize(&stored).unwrap();
+            assert_eq!(p.to_value().unwrap(), stored);
+        }
+    }
+
+    #[test]
+    fn what_a_library_limited_token_sees_is_how_it_was_trained() {
+        let p = Provenance::deserialize(&json!({
+            "algorithm": "MDTT", "rank": 12, "k": 2, "bound_mm": 1.0, "clips": 40,
+            "objective": [1.0], "takes": ["a"], "frames": 3, "seconds": 1.0,
+        }))
+        .unwrap();
+        assert_eq!(
+            p.settings_only().to_value().unwrap(),
+            json!({"algorithm": "MDTT", "rank": 12, "k": 2, "bound_mm": 1.0})
+        );
+    }
+
+    #[test]
+    fn a_basis_record_that_does_not_parse_is_corrupt() {
+        let row = |kind: &str, provenance: serde_json::Value| BasisRow {
+            id: "b".into(),
+            kind: kind.into(),
+            layout: "l".into(),
+            points: 3,
+            dims: "1×3×3".into(),
+            payload: Vec::new(),
+            provenance,
+            created_at: 0,
+            used_by: 0,
+        };
+        let ok = json!({"algorithm": "x"});
+        assert!(BasisInfo::parse(row("lsdt", ok.clone())).is_ok());
+        for bad in [
+            row("zip", ok),
+            row("lsdt", json!({"rank": 3})),
+            row("lsdt", json!({"algorithm": "x", "objective": "low"})),
+        ] {
+            assert!(matches!(BasisInfo::parse(bad), Err(Error::Corrupt(_))));
+        }
+    }
+}

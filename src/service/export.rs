@@ -34,17 +34,18 @@ use serde::{Deserialize, Serialize};
 use zip::write::{SimpleFileOptions, StreamWriter};
 use zip::{CompressionMethod, ZipWriter};
 
+use super::access::Grant;
 use super::answer::{self, RangeRequest, PIECES_IN_FLIGHT, PIECE_BYTES};
 use super::budget::{Budget, Held, Holder, Reservation};
 use super::fetch::TimeRange;
-use super::library::MAX_PAGE;
+use super::library::{TakeQuery, MAX_PAGE};
 use super::prepared::ReadCaches;
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::limits::Limits;
 use crate::motion::formats::Format;
 use crate::motion::transform::Options;
-use crate::store::{Filter, SortKey, Store};
+use crate::store::{SortKey, Store};
 
 /// The manifest's file name, in the ZIP and in an export folder.
 pub const MANIFEST: &str = "manifest.csv";
@@ -83,7 +84,9 @@ pub const BUDGET_WAIT: Duration = Duration::from_secs(30);
 /// A library export, parsed: which takes, which format, which transforms.
 #[derive(Debug, Clone)]
 pub struct ExportRequest {
-    pub filter: Filter,
+    /// Which takes, among those `grant` reaches.
+    pub takes: TakeQuery,
+    pub grant: Grant,
     pub format: Format,
     pub transform: Options,
 }
@@ -420,19 +423,15 @@ pub async fn open(
 ) -> Result<Export> {
     // The same for every take: refused once, not skipped take by take.
     let transform = answer::transform_for(req.format, req.transform)?;
+    req.takes.check()?;
+    let filter = req.takes.filter(&req.grant);
     // A page of takes at a time, each kept as its entry only.
     let mut entries = Vec::new();
     let mut names = Names::default();
     let mut cursor = None;
     loop {
         let page = store
-            .list(
-                &req.filter,
-                SortKey::Created,
-                false,
-                MAX_PAGE,
-                cursor.as_ref(),
-            )
+            .list(&filter, SortKey::Created, false, MAX_PAGE, cursor.as_ref())
             .await?;
         for row in page.items {
             let file = names.file(&row.library, &row.name, req.format.name());

@@ -115,13 +115,7 @@ pub(super) async fn prepare(
     id: &str,
     range: TimeRange,
 ) -> Result<(Arc<Prepared>, (usize, usize))> {
-    if let Some(p) = caches.decoders.get(id) {
-        // Cached state may outlive a delete made through another server sharing the
-        // database: one indexed lookup keeps every answer true.
-        if !store.exists(id).await? {
-            caches.forget(id);
-            return Err(Error::NotFound(format!("sequence {id}")));
-        }
+    if let Some(p) = caches.current(store, id).await? {
         let r = range.resolve(p.frames, p.fps)?;
         return Ok((p, r));
     }

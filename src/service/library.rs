@@ -4,12 +4,100 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use super::prepared::ReadCaches;
+use super::access::Grant;
 use super::take::Take;
 use super::{Error, Result};
+use crate::codec::CodecId;
 use crate::store::{Cursor, Filter, SortKey, Store, TakeRow, Totals};
 
 pub const MAX_PAGE: usize = 500;
+
+/// Which takes a listing, statistics or an export is of, as a caller asks: each field a
+/// condition every take must meet, checked ([`TakeQuery::check`]) before the store sees it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TakeQuery {
+    pub library: Option<String>,
+    pub tag: Option<String>,
+    pub name_prefix: Option<String>,
+    pub layout: Option<String>,
+    pub codec: Option<CodecId>,
+    pub fps: Option<f64>,
+    pub points: Option<u64>,
+    pub min_duration_s: Option<f64>,
+    pub max_duration_s: Option<f64>,
+    pub min_frames: Option<u64>,
+    pub max_frames: Option<u64>,
+    pub min_ratio: Option<f64>,
+    /// Milliseconds since the Unix epoch.
+    pub created_after: Option<i64>,
+    pub created_before: Option<i64>,
+}
+
+impl TakeQuery {
+    /// A 400 for a condition no take could meet because it is not a value of its kind (a
+    /// negative duration, an fps out of range), rather than an empty answer.
+    pub fn check(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::InvalidRequest(m));
+        if let Some(c) = self.codec.filter(|c| c.is_analog()) {
+            return bad(format!("{c} codes analog channels, not takes"));
+        }
+        if let Some(f) = self.fps {
+            crate::limits::fps(f).map_err(Error::InvalidRequest)?;
+        }
+        for (name, v) in [
+            ("min_duration_s", self.min_duration_s),
+            ("max_duration_s", self.max_duration_s),
+            ("min_ratio", self.min_ratio),
+        ] {
+            if let Some(v) = v.filter(|v| !(v.is_finite() && *v >= 0.0)) {
+                return bad(format!("{name} must be a number ≥ 0, got {v}"));
+            }
+        }
+        // Beyond i64 a count matches no stored take, and would not bind.
+        for (name, v) in [
+            ("points", self.points),
+            ("min_frames", self.min_frames),
+            ("max_frames", self.max_frames),
+        ] {
+            if let Some(v) = v.filter(|v| i64::try_from(*v).is_err()) {
+                return bad(format!("{name} {v} is beyond any take"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The store's filter of these takes among those `grant` reaches.
+    pub fn filter(&self, grant: &Grant) -> Filter {
+        let count = |v: Option<u64>| v.map(|v| i64::try_from(v).unwrap_or(i64::MAX));
+        grant.restrict(Filter {
+            library: self.library.clone(),
+            tag: self.tag.clone(),
+            name_prefix: self.name_prefix.clone(),
+            fps: self.fps,
+            points: count(self.points),
+            layout: self.layout.clone(),
+            codec: self.codec.map(|c| c.to_string()),
+            min_duration_s: self.min_duration_s,
+            max_duration_s: self.max_duration_s,
+            min_frames: count(self.min_frames),
+            max_frames: count(self.max_frames),
+            min_ratio: self.min_ratio,
+            created_after: self.created_after,
+            created_before: self.created_before,
+            within: None,
+        })
+    }
+}
+
+/// How a listing is ordered and which page of it is asked for.
+#[derive(Debug, Clone, Default)]
+pub struct Page {
+    pub sort: SortKey,
+    /// `None`: newest first for the default sort, else ascending.
+    pub descending: Option<bool>,
+    pub limit: Option<usize>,
+    pub cursor: Option<String>,
+}
 
 /// One page of takes and the cursor of the next.
 #[derive(Debug, Clone, Serialize)]
@@ -18,14 +106,18 @@ pub struct Listing {
     pub next_cursor: Option<String>,
 }
 
-pub async fn list(
-    store: &Store,
-    filter: &Filter,
-    sort: SortKey,
-    descending: bool,
-    limit: Option<usize>,
-    cursor: Option<&str>,
-) -> Result<Listing> {
+/// One page of the takes of `query` that `grant` reaches.
+pub async fn list(store: &Store, grant: &Grant, query: &TakeQuery, page: Page) -> Result<Listing> {
+    query.check()?;
+    let filter = query.filter(grant);
+    let Page {
+        sort,
+        descending,
+        limit,
+        cursor,
+    } = page;
+    let descending = descending.unwrap_or(sort == SortKey::Created);
+    let cursor = cursor.as_deref();
     let limit = limit.unwrap_or(50);
     if limit == 0 || limit > MAX_PAGE {
         return Err(Error::InvalidRequest(format!(
@@ -47,7 +139,7 @@ pub async fn list(
         }
     };
     let page = store
-        .list(filter, sort, descending, limit, cursor.as_ref())
+        .list(&filter, sort, descending, limit, cursor.as_ref())
         .await?;
     let mut items = Vec::with_capacity(page.items.len());
     for row in page.items {
@@ -94,8 +186,10 @@ pub struct Stats {
     pub by_library: BTreeMap<String, Totals>,
 }
 
-pub async fn stats(store: &Store, filter: &Filter) -> Result<Stats> {
-    let rows = store.stat_rows(filter).await?;
+/// Statistics of the takes of `query` that `grant` reaches.
+pub async fn stats(store: &Store, grant: &Grant, query: &TakeQuery) -> Result<Stats> {
+    query.check()?;
+    let rows = store.stat_rows(&query.filter(grant)).await?;
     let mut codecs: Vec<&str> = rows.iter().map(|r| r.codec.as_str()).collect();
     codecs.sort();
     codecs.dedup();
@@ -125,9 +219,10 @@ pub async fn stats(store: &Store, filter: &Filter) -> Result<Stats> {
     })
 }
 
-/// Delete a take (its chunks and tags with it) and forget what this server kept of it. A
+/// Delete a take (its chunks and tags with it); what servers cached of it is dropped when
+/// next asked for ([`super::prepared::ReadCaches::current`]). A
 /// take a live stream is still recording is not deleted (409): finish the stream first.
-pub async fn delete(store: &Store, caches: &ReadCaches, id: &str) -> Result<()> {
+pub async fn delete(store: &Store, id: &str) -> Result<()> {
     if let Some(row) = store.get(id).await? {
         // Read as stored: a take whose record does not parse can still be deleted.
         if row.live_until.is_some() {
@@ -137,7 +232,6 @@ pub async fn delete(store: &Store, caches: &ReadCaches, id: &str) -> Result<()> 
         }
     }
     let deleted = store.delete(id).await?;
-    caches.forget(id);
     if deleted {
         Ok(())
     } else {

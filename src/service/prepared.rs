@@ -1,20 +1,68 @@
-//! What the server keeps ready between range requests. A stored take's bitstream never
-//! changes, so both are safe to keep until the take is deleted:
+//! What the server keeps ready between range requests:
 //! - a decoder per take ([`DecoderCache`]): building one parses the header and, for MDTT,
 //!   range-decodes the basis and tabulates the DCT — more work than decoding a second;
 //! - decoded chunks ([`ChunkCache`], bounded in bytes): a one-second request decodes up to
 //!   two whole chunks, so hot ranges are served from memory.
+//!
+//! Nobody has to tell the caches that a take changed. A cached decoder carries the
+//! [`Stamp`] of the coding it was built from, and [`ReadCaches::current`] checks it against
+//! the stored one before each use (one indexed lookup): a take re-encoded or deleted since,
+//! here or through another server sharing the database, is built again or answered 404.
+//! Decoded chunks are keyed by the decoder they came from ([`Prepared::generation`]), so a
+//! rebuilt decoder never meets its predecessor's chunks; those age out.
 
 use std::collections::{HashMap, VecDeque};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use super::take::Take;
 use crate::codec::container::Header;
-use crate::codec::{Reader, Shared};
+use crate::codec::{CodecId, Reader, Shared};
+use crate::store::{StampRow, Store};
+
+/// What tells one coding of a take from another: a re-encode keeps its result only if
+/// smaller, so it changes `stored_bytes`; a live take grows its `frames` (and is never
+/// cached meanwhile).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stamp {
+    codec: CodecId,
+    stored_bytes: u64,
+    frames: usize,
+}
+
+impl Stamp {
+    pub fn of(take: &Take) -> Stamp {
+        Stamp {
+            codec: take.codec,
+            stored_bytes: take.stored_bytes,
+            frames: take.frames,
+        }
+    }
+
+    /// A stored stamp: a codec id that does not parse is a corrupt record.
+    fn parse(id: &str, row: StampRow) -> super::Result<Stamp> {
+        let codec = row
+            .codec
+            .parse()
+            .map_err(|e| super::Error::Corrupt(format!("take {id}: codec: {e}")))?;
+        Ok(Stamp {
+            codec,
+            stored_bytes: row.stored_bytes.max(0) as u64,
+            frames: row.frames.max(0) as usize,
+        })
+    }
+}
+
+/// Each [`Prepared`] built in this process gets its own number, for the chunk cache's keys.
+static GENERATIONS: AtomicU64 = AtomicU64::new(0);
 
 /// What range requests of one take need, ready to use.
 pub struct Prepared {
     pub id: String,
+    /// The coding this was built from.
+    pub stamp: Stamp,
+    /// Unique to this [`Prepared`] within the process: decoded chunks are cached under it.
+    pub generation: u64,
     pub reader: Reader,
     pub point_names: Vec<String>,
     pub fps: f64,
@@ -36,6 +84,8 @@ impl Prepared {
             .map_err(|e| super::Error::Corrupt(format!("stored take {}: {e}", take.id)))?;
         Ok(Prepared {
             id: take.id.clone(),
+            stamp: Stamp::of(take),
+            generation: GENERATIONS.fetch_add(1, Ordering::Relaxed),
             reader,
             point_names: take.meta.point_names.clone(),
             fps: take.fps,
@@ -119,14 +169,31 @@ impl ReadCaches {
         }
     }
 
-    /// Forget a take (after it is deleted).
-    pub fn forget(&self, id: &str) {
-        self.decoders.remove(id);
-        self.chunks.remove_take(id);
+    /// The cached decoder of take `id` if it was built from the take's stored coding;
+    /// `Ok(None)` (and the entry dropped) if there is none or it is stale, so the caller
+    /// builds one; [`super::Error::NotFound`] if the take is gone.
+    pub async fn current(&self, store: &Store, id: &str) -> super::Result<Option<Arc<Prepared>>> {
+        let Some(p) = self.decoders.get(id) else {
+            return Ok(None);
+        };
+        match store.coding_stamp(id).await? {
+            None => {
+                self.decoders.remove(id);
+                Err(super::Error::NotFound(format!("sequence {id}")))
+            }
+            Some(row) => {
+                if Stamp::parse(id, row)? == p.stamp {
+                    return Ok(Some(p));
+                }
+                self.decoders.remove(id);
+                Ok(None)
+            }
+        }
     }
 }
 
-/// Decoded chunks by (take, chunk index), bounded in bytes, oldest evicted first.
+/// Decoded chunks by ([`Prepared::generation`], chunk index), bounded in bytes, oldest
+/// evicted first.
 pub struct ChunkCache {
     budget: usize,
     inner: Mutex<ChunkEntries>,
@@ -134,8 +201,8 @@ pub struct ChunkCache {
 
 #[derive(Default)]
 struct ChunkEntries {
-    map: HashMap<(String, usize), Arc<Vec<f32>>>,
-    order: VecDeque<(String, usize)>,
+    map: HashMap<(u64, usize), Arc<Vec<f32>>>,
+    order: VecDeque<(u64, usize)>,
     bytes: usize,
 }
 
@@ -147,23 +214,23 @@ impl ChunkCache {
         }
     }
 
-    pub fn get(&self, id: &str, index: usize) -> Option<Arc<Vec<f32>>> {
+    pub fn get(&self, generation: u64, index: usize) -> Option<Arc<Vec<f32>>> {
         self.inner
             .lock()
             .expect("cache lock")
             .map
-            .get(&(id.to_string(), index))
+            .get(&(generation, index))
             .cloned()
     }
 
-    pub fn insert(&self, id: &str, index: usize, frames: Arc<Vec<f32>>) {
+    pub fn insert(&self, generation: u64, index: usize, frames: Arc<Vec<f32>>) {
         let size = frames.len() * 4;
         if size > self.budget {
             return;
         }
         let mut g = self.inner.lock().expect("cache lock");
-        let key = (id.to_string(), index);
-        if let Some(old) = g.map.insert(key.clone(), frames) {
+        let key = (generation, index);
+        if let Some(old) = g.map.insert(key, frames) {
             g.bytes -= old.len() * 4;
         } else {
             g.order.push_back(key);
@@ -177,19 +244,6 @@ impl ChunkCache {
                 g.bytes -= v.len() * 4;
             }
         }
-    }
-
-    pub fn remove_take(&self, id: &str) {
-        let mut g = self.inner.lock().expect("cache lock");
-        let ChunkEntries { map, order, bytes } = &mut *g;
-        map.retain(|(k, _), v| {
-            let keep = k != id;
-            if !keep {
-                *bytes -= v.len() * 4;
-            }
-            keep
-        });
-        order.retain(|(k, _)| k != id);
     }
 
     pub fn bytes(&self) -> usize {
@@ -209,7 +263,7 @@ impl Default for DecoderCache {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::codec::{self, CodecId, ErrorBound};
+    use crate::codec::{self, ErrorBound};
     use crate::motion::synthetic::walker;
 
     fn prepared(id: &str) -> Arc<Prepared> {
@@ -221,6 +275,12 @@ mod tests {
         .unwrap();
         Arc::new(Prepared {
             id: id.into(),
+            stamp: Stamp {
+                codec: CodecId::Quant,
+                stored_bytes: 1,
+                frames: 20,
+            },
+            generation: 0,
             reader: Reader::new(enc.container.header, None).unwrap(),
             point_names: vec!["a".into(), "b".into()],
             fps: 30.0,
@@ -236,16 +296,15 @@ mod tests {
     #[test]
     fn chunk_cache_stays_within_its_budget() {
         let c = ChunkCache::new(100);
-        c.insert("a", 0, Arc::new(vec![0.0; 10])); // 40 bytes
-        c.insert("a", 1, Arc::new(vec![0.0; 10]));
-        c.insert("b", 0, Arc::new(vec![0.0; 10])); // 120 > 100: the oldest goes
-        assert!(c.get("a", 0).is_none() && c.get("a", 1).is_some() && c.get("b", 0).is_some());
+        c.insert(1, 0, Arc::new(vec![0.0; 10])); // 40 bytes
+        c.insert(1, 1, Arc::new(vec![0.0; 10]));
+        c.insert(2, 0, Arc::new(vec![0.0; 10])); // 120 > 100: the oldest goes
+        assert!(c.get(1, 0).is_none() && c.get(1, 1).is_some() && c.get(2, 0).is_some());
         assert_eq!(c.bytes(), 80);
-        c.insert("c", 0, Arc::new(vec![0.0; 100])); // larger than the budget: not kept
-        assert!(c.get("c", 0).is_none());
-        c.remove_take("a");
-        assert!(c.get("a", 1).is_none());
-        assert_eq!(c.bytes(), 40);
+        c.insert(3, 0, Arc::new(vec![0.0; 100])); // larger than the budget: not kept
+        assert!(c.get(3, 0).is_none());
+        c.insert(1, 1, Arc::new(vec![0.0; 5])); // replaced: counted once
+        assert_eq!(c.bytes(), 60);
     }
 
     #[test]
@@ -261,5 +320,77 @@ mod tests {
         assert!(c.get("b").is_none());
         c.insert(prepared("d"));
         assert!(c.get("c").is_some() && c.get("d").is_some());
+    }
+
+    /// A cached decoder is served only while the take is coded as when it was built: a
+    /// re-encode (here or through another server) drops it, a delete answers 404, and no
+    /// writer has to say so.
+    #[tokio::test]
+    async fn a_cached_decoder_is_checked_against_the_stored_coding() {
+        let dir = std::env::temp_dir().join(format!("mocapstore-prepared-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("stamp.db");
+        let _ = std::fs::remove_file(&path);
+        let store = Store::open(&format!("sqlite://{}", path.display()))
+            .await
+            .unwrap();
+        let enc = codec::encode(
+            &walker(20, 2, 30.0, 1, 0.0),
+            CodecId::Quant,
+            ErrorBound::max(1.0),
+        )
+        .unwrap();
+        let mut take = Take::sample();
+        take.header = enc.container.header.to_bytes();
+        let chunks = super::super::take::chunk_rows(&enc.container);
+        store
+            .insert(&crate::store::NewTake {
+                row: take.to_row().unwrap(),
+                chunks: chunks.clone(),
+                basis: None,
+                skeleton: None,
+                errors: None,
+                analog: None,
+                parameters: None,
+                stream: None,
+            })
+            .await
+            .unwrap();
+        let caches = ReadCaches::new(1 << 20);
+        let built = |take: &Take| {
+            Arc::new(Prepared::new(take, enc.container.header.clone(), Shared::default()).unwrap())
+        };
+        let p = built(&take);
+        caches.decoders.insert(p.clone());
+        let hit = caches.current(&store, &take.id).await.unwrap().unwrap();
+        assert!(Arc::ptr_eq(&hit, &p));
+
+        let mut recoded = take.clone();
+        recoded.stored_bytes -= 1;
+        let row = recoded.to_row().unwrap();
+        assert!(store
+            .update_encoding(&row, &chunks, true, None)
+            .await
+            .unwrap());
+        assert!(caches.current(&store, &take.id).await.unwrap().is_none());
+        assert!(
+            caches.decoders.get(&take.id).is_none(),
+            "the stale one is dropped"
+        );
+        let fresh = built(&recoded);
+        assert_ne!(
+            fresh.generation, p.generation,
+            "its chunks are cached apart"
+        );
+        caches.decoders.insert(fresh);
+        assert!(caches.current(&store, &take.id).await.unwrap().is_some());
+
+        assert!(store.delete(&take.id).await.unwrap());
+        assert!(matches!(
+            caches.current(&store, &take.id).await,
+            Err(super::super::Error::NotFound(_))
+        ));
+        store.close().await;
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

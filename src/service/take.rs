@@ -386,14 +386,24 @@ pub fn chunk_rows(c: &crate::codec::Container) -> Vec<crate::store::ChunkRow> {
         .iter()
         .zip(&c.chunks)
         .enumerate()
-        .map(|(i, (meta, payload))| crate::store::ChunkRow {
-            idx: i as i64,
-            first_frame: i64::from(meta.first_frame),
-            frames: i64::from(meta.frames),
-            crc32c: meta.crc32c,
-            payload: payload.clone(),
-        })
+        .map(|(i, (meta, payload))| chunk_row(i, meta, payload))
         .collect()
+}
+
+/// One coded chunk as the row that stores it: the one place a chunk row is made, for
+/// whole takes ([`chunk_rows`]) and live streams alike.
+pub fn chunk_row(
+    index: usize,
+    meta: &crate::codec::container::ChunkMeta,
+    payload: &[u8],
+) -> crate::store::ChunkRow {
+    crate::store::ChunkRow {
+        idx: index as i64,
+        first_frame: i64::from(meta.first_frame),
+        frames: i64::from(meta.frames),
+        crc32c: meta.crc32c,
+        payload: payload.to_vec(),
+    }
 }
 
 /// An [`ErrorBound`] as the stored columns' fields: `max_bound_mm`, `mean_bound_mm` (absent
@@ -445,12 +455,12 @@ mod bound_fields {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::motion::UnitSource;
+impl Take {
+    /// A small take's record, for tests.
+    #[cfg(test)]
+    pub(crate) fn sample() -> Take {
+        use crate::motion::UnitSource;
 
-    fn take() -> Take {
         Take {
             id: "t".into(),
             name: "walk".into(),
@@ -499,6 +509,15 @@ mod tests {
             live_until: None,
             skeleton: None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn take() -> Take {
+        Take::sample()
     }
 
     #[test]

@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::bases::{Objective, Provenance, SetSize};
 use super::jobs::{Job, Jobs, NewJob, Progress};
 use super::take::Take;
 use super::{blocking, Error, Result};
@@ -178,14 +179,14 @@ pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result
         frames_mm.push(f);
     }
     progress.report(0.5, format!("training {}", sel.kind));
-    let mut row = match sel.kind {
+    let (basis, mut provenance) = match sel.kind {
         BasisKind::Lsdt => train_lsdt(&sel, frames_mm, progress).await?,
         BasisKind::MdttSet => train_mdtt_set(&sel, frames_mm).await?,
     };
-    row.provenance["takes"] =
-        serde_json::json!(sel.takes.iter().map(|t| &t.id).collect::<Vec<_>>());
-    row.provenance["frames"] = serde_json::json!(sel.takes.iter().map(|t| t.frames).sum::<usize>());
-    row.provenance["seconds"] = serde_json::json!(t0.elapsed().as_secs_f64());
+    provenance.takes = Some(sel.takes.iter().map(|t| t.id.clone()).collect());
+    provenance.frames = Some(sel.takes.iter().map(|t| t.frames as u64).sum());
+    provenance.seconds = Some(t0.elapsed().as_secs_f64());
+    let row = basis_row(&sel, &basis, &provenance)?;
     if progress.is_lost() {
         return Err(Error::Conflict(
             "another server runs this job now (its lease ran out here)".into(),
@@ -195,26 +196,26 @@ pub async fn train(store: &Store, sel: Selection, progress: &Progress) -> Result
     Ok(row)
 }
 
-fn basis_row(sel: &Selection, basis: &Basis, provenance: serde_json::Value) -> BasisRow {
+fn basis_row(sel: &Selection, basis: &Basis, provenance: &Provenance) -> Result<BasisRow> {
     let m = &basis.matrices()[0];
-    BasisRow {
+    Ok(BasisRow {
         id: basis.id(),
         kind: sel.kind.name().to_string(),
         layout: sel.layout.clone(),
         points: sel.points as i64,
         dims: format!("{}×{}×{}", basis.matrices().len(), m.rows, m.cols),
         payload: basis.bytes().to_vec(),
-        provenance,
+        provenance: provenance.to_value()?,
         created_at: super::now_ms(),
         used_by: 0,
-    }
+    })
 }
 
 async fn train_lsdt(
     sel: &Selection,
     frames_mm: Vec<Vec<f32>>,
     progress: &Progress,
-) -> Result<BasisRow> {
+) -> Result<(Basis, Provenance)> {
     let (points, options, max_samples) = (sel.points, sel.options, sel.max_samples);
     let p2 = progress.clone();
     let trained = blocking(move || {
@@ -227,22 +228,24 @@ async fn train_lsdt(
         })
     })
     .await??;
-    let objective: Vec<&Vec<f64>> = trained.runs.iter().map(|r| &r.objective).collect();
-    Ok(basis_row(
-        sel,
-        &trained.basis,
-        serde_json::json!({
-            "samples": trained.samples,
-            "algorithm": "LSDT (Hou et al. 2016, Algorithm 1), DCT start, rows by energy",
-            "sparsity": options.sparsity,
-            "max_iterations": options.max_iterations,
-            "tolerance": options.tolerance,
-            "objective": { "x": objective[0], "y": objective[1], "z": objective[2] },
+    let axis = |d: usize| trained.runs[d].objective.clone();
+    let provenance = Provenance {
+        algorithm: "LSDT (Hou et al. 2016, Algorithm 1), DCT start, rows by energy".into(),
+        samples: Some(trained.samples),
+        sparsity: Some(options.sparsity),
+        max_iterations: Some(options.max_iterations),
+        tolerance: Some(options.tolerance),
+        objective: Some(Objective::PerAxis {
+            x: axis(0),
+            y: axis(1),
+            z: axis(2),
         }),
-    ))
+        ..Provenance::default()
+    };
+    Ok((trained.basis, provenance))
 }
 
-async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<BasisRow> {
+async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<(Basis, Provenance)> {
     let points = sel.points;
     let fps: Vec<f64> = sel.takes.iter().map(|t| t.fps).collect();
     let (set, bound_mm) = (sel.set.clone(), sel.bound_mm);
@@ -276,24 +279,27 @@ async fn train_mdtt_set(sel: &Selection, frames_mm: Vec<Vec<f32>>) -> Result<Bas
         train_set(&inputs, &targets, &set)
     })
     .await??;
-    let sizes: Vec<serde_json::Value> = trained
+    let sizes = trained
         .sizes
         .iter()
-        .map(|(k, takes, basis)| serde_json::json!({"k": k, "takes_bytes": takes, "basis_bytes": basis}))
+        .map(|&(k, takes_bytes, basis_bytes)| SetSize {
+            k,
+            takes_bytes: takes_bytes as u64,
+            basis_bytes: basis_bytes as u64,
+        })
         .collect();
-    Ok(basis_row(
-        sel,
-        &trained.basis,
-        serde_json::json!({
-            "algorithm": "MDTT database mode (Hou et al. 2015): deterministic annealing, k-means++ seeds",
-            "clips": trained.clips,
-            "rank": trained.rank,
-            "k_candidates": sizes,
-            "k": trained.basis.matrices().len(),
-            "bound_mm": sel.bound_mm,
-            "objective": trained.distortion,
-        }),
-    ))
+    let provenance = Provenance {
+        algorithm: "MDTT database mode (Hou et al. 2015): deterministic annealing, k-means++ seeds"
+            .into(),
+        clips: Some(trained.clips),
+        rank: Some(trained.rank),
+        k_candidates: Some(sizes),
+        k: Some(trained.basis.matrices().len()),
+        bound_mm: Some(sel.bound_mm),
+        objective: Some(Objective::Series(trained.distortion)),
+        ..Provenance::default()
+    };
+    Ok((trained.basis, provenance))
 }
 
 /// What training jobs are called in the job table.

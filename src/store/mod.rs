@@ -24,7 +24,8 @@ use sqlx::Row;
 
 pub use query::{Cursor, Filter, Part, SortKey, StatRow, Totals};
 pub use rows::{
-    disk_bytes, AnalogRows, ChunkEntry, ChunkRow, NewTake, ParametersRow, TakeRow, TakeTotals,
+    disk_bytes, AnalogRows, ChunkEntry, ChunkRow, NewTake, ParametersRow, StampRow, TakeRow,
+    TakeTotals,
 };
 
 /// Errors of the store layer.
@@ -589,6 +590,29 @@ impl Store {
                 .fetch_optional(pool)
                 .await?
                 .is_some())
+        })
+    }
+
+    /// What tells one coding of a take from another (its codec, stored bytes and frames),
+    /// `None` if there is no such take: one indexed lookup, which a cached decoder is checked
+    /// against before each use, as the take may have been re-encoded or deleted (here or
+    /// through another server) since it was cached.
+    pub async fn coding_stamp(&self, id: &str) -> Result<Option<StampRow>> {
+        dispatch!(self, pool => {
+            let row = sqlx::query(
+                "SELECT codec, stored_bytes, frames FROM sequences WHERE id = $1",
+            )
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+            row.map(|r| {
+                Ok(StampRow {
+                    codec: r.try_get("codec")?,
+                    stored_bytes: r.try_get("stored_bytes")?,
+                    frames: r.try_get("frames")?,
+                })
+            })
+            .transpose()
         })
     }
 

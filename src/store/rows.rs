@@ -14,6 +14,14 @@ pub struct ChunkRow {
     pub payload: Vec<u8>,
 }
 
+/// A take's codec, stored bytes and frames as stored ([`super::Store::coding_stamp`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StampRow {
+    pub codec: String,
+    pub stored_bytes: i64,
+    pub frames: i64,
+}
+
 /// Where a chunk sits and how to check it, without its payload.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ChunkEntry {

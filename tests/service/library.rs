@@ -134,6 +134,13 @@ async fn listings_pages_filters_stats_and_patches() {
             "/v1/sequences?order=sideways",
             "/v1/sequences?sort=colour",
             "/v1/sequences?min_frames=many",
+            // Conditions no take could meet because they are not values of their kind.
+            "/v1/sequences?codec=zip",
+            "/v1/sequences?min_duration_s=-1",
+            "/v1/sequences?fps=0",
+            "/v1/sequences?min_frames=-3",
+            "/v1/stats?codec=zip",
+            "/v1/export?codec=zip",
         ] {
             let (status, body) = json(&srv, path).await;
             assert_eq!(status, 400, "{path}: {body}");

@@ -241,3 +241,20 @@ async fn live_responses_match_the_contract() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// The contract names every codec a take can be coded with, and no other.
+#[test]
+fn the_codec_ids_are_the_registry() {
+    let spec = spec();
+    let listed: Vec<String> = spec["components"]["schemas"]["CodecId"]["enum"]
+        .as_array()
+        .expect("CodecId lists its values")
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    let registry: Vec<String> = mocapstore::codec::CodecId::ALL
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    assert_eq!(listed, registry);
+}

@@ -40,7 +40,8 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use tokio::sync::broadcast;
 
-use super::{meta_text, Live, Streams};
+use super::coding::meta_text;
+use super::{Live, Streams};
 use crate::codec::stream::{StreamEncoder, StreamSpec};
 use crate::codec::ErrorBound;
 use crate::limits::STREAM_WATCH_QUEUE;

@@ -1,0 +1,186 @@
+//! Coding and committing: each chunk coded on the blocking pool, checked, and committed in
+//! one transaction with the take's running totals (held in memory while the database is
+//! away); the shared basis a stream codes with; a finished take coded again whole.
+
+use std::sync::Arc;
+
+use super::handover::Resumable;
+use super::{Live, Streams};
+use crate::codec::stream::StreamChunk;
+use crate::codec::{self, Basis, CodecId, Latency};
+use crate::motion::Motion;
+use crate::service::bases::Provenance;
+use crate::service::choose::{CodecRequest, Keep};
+use crate::service::take::{Take, TakeMeta};
+use crate::service::{bases, blocking, ingest, take, Error, Result};
+use crate::store::{BasisRow, ChunkAppend, Store};
+
+/// The shared basis a stream coded with `codec` codes with, if the codec uses one: the
+/// newest of its kind trained for the layout, or else the codec's untrained basis (stored as
+/// a basis too, so the take references what decodes it).
+pub(super) async fn stream_basis(
+    store: &Store,
+    codec: CodecId,
+    layout: &str,
+    points: usize,
+) -> Result<Option<Arc<Basis>>> {
+    let Some(kind) = codec::codec(codec)?.basis_kind() else {
+        return Ok(None);
+    };
+    if let Some(b) = bases::latest_for(store, layout)
+        .await?
+        .into_iter()
+        .find(|b| b.kind() == kind)
+    {
+        return Ok(Some(b));
+    }
+    let (b, provenance) = blocking(move || codec::stream::untrained_basis(codec, points))
+        .await?
+        .ok_or_else(|| {
+            Error::Unsatisfiable(format!(
+                "{codec} streams code with a trained {kind} basis and none is trained for \
+                     this layout; train one first"
+            ))
+        })?;
+    if !store.basis_exists(&b.id()).await? {
+        let m = &b.matrices()[0];
+        store
+            .insert_basis(&BasisRow {
+                id: b.id(),
+                kind: kind.name().into(),
+                layout: layout.to_string(),
+                points: points as i64,
+                dims: format!("{}×{}×{}", b.matrices().len(), m.rows, m.cols),
+                payload: b.bytes().to_vec(),
+                provenance: Provenance {
+                    algorithm: provenance.into(),
+                    ..Provenance::default()
+                }
+                .to_value()?,
+                // Dated at the epoch, so that any basis trained later is the layout's newest.
+                created_at: 0,
+                used_by: 0,
+            })
+            .await?;
+    }
+    Ok(Some(Arc::new(b)))
+}
+
+impl Streams {
+    /// Store the chunks waiting for the database, in order; the first that cannot be stored
+    /// (the database still away) stays first, and its error is returned.
+    ///
+    /// A chunk leaves the queue only once stored: a request dropped while it commits (its
+    /// client gone) leaves it first in line, and storing it again is a no-op
+    /// ([`Store::append_chunk`] stores a chunk once).
+    pub(super) async fn save(&self, store: &Store, live: &mut Live) -> Result<()> {
+        while let Some(chunk) = live.unsaved.front().cloned() {
+            self.commit(store, live, &chunk).await?;
+            live.unsaved.pop_front();
+            live.encoder
+                .as_mut()
+                .ok_or_else(|| Error::Internal("stream encoder missing".into()))?
+                .confirm(chunk)?;
+        }
+        Ok(())
+    }
+
+    /// Code `frames` on the blocking pool and commit every chunk they finish, in order.
+    pub(super) async fn code_and_commit(
+        &self,
+        store: &Store,
+        live: &mut Live,
+        frames: Vec<f32>,
+        flush: bool,
+    ) -> Result<()> {
+        let mut encoder = live
+            .encoder
+            .take()
+            .ok_or_else(|| Error::Internal("stream encoder missing".into()))?;
+        let (encoder, chunks) = blocking(move || {
+            let chunks = encoder.push(&frames, flush);
+            (encoder, chunks)
+        })
+        .await?;
+        live.encoder = Some(encoder);
+        live.unsaved.extend(chunks?);
+        self.save(store, live).await
+    }
+
+    /// Commit one coded and checked chunk: one chunk row and the take's running totals,
+    /// nothing that grows with the stream.
+    pub(super) async fn commit(
+        &self,
+        store: &Store,
+        live: &mut Live,
+        chunk: &StreamChunk,
+    ) -> Result<()> {
+        let totals = live.encoder()?.totals_with(chunk);
+        let mut take = live.take.clone();
+        take.set_frames(totals.frames);
+        take.set_measured(totals.stored_bytes, &totals.stats);
+        let chunk_row = take::chunk_row(chunk.index, &chunk.meta, &chunk.payload);
+        let state = Resumable {
+            chunk_frames: live.chunk_frames,
+            reencode_on_finish: live.archive.is_some(),
+            errors: Some(chunk.running().clone()),
+        }
+        .to_text()?;
+        let until = self.lease_end();
+        let append = ChunkAppend {
+            server: &self.node.id,
+            live_until: until,
+            frames_received: live.received as i64,
+            state: &state,
+        };
+        if !store
+            .append_chunk(&take.id, &take.totals(), &chunk_row, &append)
+            .await?
+        {
+            return Err(Self::lost(&live.take.id));
+        }
+        live.take = take;
+        live.persisted = live.received;
+        live.lease_until = until;
+        Ok(())
+    }
+}
+
+/// A take's metadata as stored.
+pub(super) fn meta_text(id: &str, meta: &TakeMeta) -> Result<String> {
+    serde_json::to_string(meta).map_err(|e| Error::Internal(format!("take {id}: meta: {e}")))
+}
+
+/// Code a finished stream's take again, from the frames as sent, with every candidate
+/// codec; keep the result if it is smaller than the live coding.
+pub(super) async fn reencode_take(store: &Store, take: &Take, positions: Vec<f32>) -> Result<()> {
+    let (unit, names) = (take.meta.unit.clone(), take.meta.point_names.clone());
+    let motion = Arc::new(
+        Motion::new(take.fps, unit, names, positions, None)
+            .map_err(|e| Error::Internal(e.to_string()))?,
+    );
+    let coding = ingest::Coding {
+        codec: CodecRequest::Auto,
+        bound: take.bound,
+        latency: Latency::Sequence,
+        keep: Keep::default(),
+        hints: Default::default(),
+    };
+    let (decision, enc) = ingest::encode_best(store, motion, &take.layout, &coding, None).await?;
+    if enc.stored_bytes as u64 >= take.stored_bytes {
+        return Ok(());
+    }
+    let mut new = take.clone();
+    new.codec = decision.winner;
+    new.set_measured(enc.stored_bytes, &enc.stats);
+    new.header = enc.container.header.to_bytes();
+    new.meta.decision = decision;
+    new.meta.decoded_blake3 = Some(enc.decoded_digest.clone());
+    new.meta.reencoded_from = Some(take.codec);
+    let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
+    let chunks = take::chunk_rows(&enc.container);
+    store
+        .update_encoding(&new.to_row()?, &chunks, true, basis.as_deref())
+        .await?;
+    Ok(())
+}
