@@ -347,20 +347,7 @@ fn cors(origins: &[String]) -> tower_http::cors::CorsLayer {
         .filter_map(|o| HeaderValue::from_str(o).ok())
         .collect();
     let mut allow = vec![header::AUTHORIZATION, header::CONTENT_TYPE];
-    for f in [
-        "name",
-        "library",
-        "tags",
-        "unit",
-        "fps",
-        "codec",
-        "max-error-mm",
-        "mean-error-mm",
-        "latency",
-        "keep",
-        "torso",
-        "lenient",
-    ] {
+    for (f, _) in sequences::HEADER_FIELDS {
         allow.push(HeaderName::from_bytes(format!("x-mocap-{f}").as_bytes()).expect("ASCII"));
     }
     let expose: Vec<HeaderName> = ["x-frames", "x-points", "x-start-frame", "x-fps", API_HEADER]

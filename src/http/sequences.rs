@@ -31,7 +31,7 @@ use crate::service::ingest::{self, IngestRequest};
 use crate::service::ranges::{self, Part, Ranges, RangesRequest};
 use crate::service::take::Label;
 
-#[derive(Deserialize)]
+#[derive(Debug, Default, PartialEq, Deserialize)]
 pub struct IngestQuery {
     name: Option<String>,
     library: Option<String>,
@@ -68,55 +68,71 @@ fn content_type_format(headers: &HeaderMap) -> Option<Format> {
     sub.parse::<Format>().ok().filter(|f| f.can_read())
 }
 
-impl IngestQuery {
-    /// Fields may also come as `x-mocap-<field>` headers (e.g. `x-mocap-max-error-mm`);
-    /// the query wins where both are given.
-    fn with_headers(mut self, h: &HeaderMap) -> Result<Self, ApiError> {
-        let get = |name: &str| -> Option<String> {
-            h.get(format!("x-mocap-{name}"))
-                .and_then(|v| v.to_str().ok())
-                .map(str::to_string)
-        };
-        let num = |name: &str| -> Result<Option<f64>, ApiError> {
-            get(name)
-                .map(|v| {
-                    v.trim().parse::<f64>().map_err(|_| {
-                        ApiError::bad_request(format!(
-                            "header x-mocap-{name}: {v:?} is not a number"
-                        ))
-                    })
-                })
-                .transpose()
-        };
-        self.name = self.name.or_else(|| get("name"));
-        self.library = self.library.or_else(|| get("library"));
-        self.tags = self.tags.or_else(|| get("tags"));
-        self.unit = self.unit.or_else(|| get("unit"));
-        self.codec = self.codec.or_else(|| get("codec"));
-        self.latency = self.latency.or_else(|| get("latency"));
-        self.keep = self.keep.or_else(|| get("keep"));
-        self.torso = self.torso.or_else(|| get("torso"));
-        self.analog_bound = self.analog_bound.or_else(|| get("analog-bound"));
-        if self.fps.is_none() {
-            self.fps = num("fps")?;
-        }
-        if self.lenient.is_none() {
-            self.lenient = match get("lenient").as_deref().map(str::trim) {
-                None => None,
-                Some("true") => Some(true),
-                Some("false") => Some(false),
-                Some(v) => {
+/// Fills one field of an [`IngestQuery`] from its header's value, where the query left it out.
+type FromHeader = fn(&mut IngestQuery, &str) -> Result<(), ApiError>;
+
+/// The ingest fields a client may send as `x-mocap-<field>` headers (a browser's upload,
+/// where a long query is awkward), each with how it fills the query: what
+/// [`IngestQuery::with_headers`] reads and what CORS lets a page send, declared once.
+pub const HEADER_FIELDS: &[(&str, FromHeader)] = &[
+    ("name", |q, v| text(&mut q.name, v)),
+    ("library", |q, v| text(&mut q.library, v)),
+    ("tags", |q, v| text(&mut q.tags, v)),
+    ("unit", |q, v| text(&mut q.unit, v)),
+    ("fps", |q, v| number(&mut q.fps, "fps", v)),
+    ("codec", |q, v| text(&mut q.codec, v)),
+    ("max-error-mm", |q, v| {
+        number(&mut q.max_error_mm, "max-error-mm", v)
+    }),
+    ("mean-error-mm", |q, v| {
+        number(&mut q.mean_error_mm, "mean-error-mm", v)
+    }),
+    ("latency", |q, v| text(&mut q.latency, v)),
+    ("keep", |q, v| text(&mut q.keep, v)),
+    ("torso", |q, v| text(&mut q.torso, v)),
+    ("lenient", |q, v| {
+        if q.lenient.is_none() {
+            q.lenient = Some(match v.trim() {
+                "true" => true,
+                "false" => false,
+                _ => {
                     return Err(ApiError::bad_request(format!(
                         "header x-mocap-lenient: {v:?} is not true or false"
                     )))
                 }
-            };
+            });
         }
-        if self.max_error_mm.is_none() {
-            self.max_error_mm = num("max-error-mm")?;
-        }
-        if self.mean_error_mm.is_none() {
-            self.mean_error_mm = num("mean-error-mm")?;
+        Ok(())
+    }),
+    ("analog-bound", |q, v| text(&mut q.analog_bound, v)),
+];
+
+fn text(slot: &mut Option<String>, v: &str) -> Result<(), ApiError> {
+    slot.get_or_insert_with(|| v.to_string());
+    Ok(())
+}
+
+fn number(slot: &mut Option<f64>, name: &str, v: &str) -> Result<(), ApiError> {
+    if slot.is_none() {
+        let n = v.trim().parse::<f64>().map_err(|_| {
+            ApiError::bad_request(format!("header x-mocap-{name}: {v:?} is not a number"))
+        })?;
+        *slot = Some(n);
+    }
+    Ok(())
+}
+
+impl IngestQuery {
+    /// Fields may also come as `x-mocap-<field>` headers ([`HEADER_FIELDS`], e.g.
+    /// `x-mocap-max-error-mm`); the query wins where both are given.
+    fn with_headers(mut self, h: &HeaderMap) -> Result<Self, ApiError> {
+        for (name, fill) in HEADER_FIELDS {
+            if let Some(v) = h
+                .get(format!("x-mocap-{name}"))
+                .and_then(|v| v.to_str().ok())
+            {
+                fill(&mut self, v)?;
+            }
         }
         Ok(self)
     }
@@ -703,4 +719,53 @@ pub async fn parameters(
 ) -> Result<Response, ApiError> {
     let view = analog::parameters_view(&state.store, &id).await?;
     Ok(Json(view).into_response())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each header field fills its own field of the query (and CORS allows exactly these):
+    /// a field added to the table but wired to nothing, or twice, fails here.
+    #[test]
+    fn every_header_field_fills_its_own_field() {
+        let mut filled = Vec::new();
+        for (name, _) in HEADER_FIELDS {
+            let value = match *name {
+                "lenient" => "true",
+                _ => "1",
+            };
+            let mut h = HeaderMap::new();
+            h.insert(
+                header::HeaderName::from_bytes(format!("x-mocap-{name}").as_bytes()).unwrap(),
+                value.parse().unwrap(),
+            );
+            let q = IngestQuery::default().with_headers(&h).unwrap();
+            assert_ne!(q, IngestQuery::default(), "{name} fills nothing");
+            assert!(
+                !filled.contains(&format!("{q:?}")),
+                "{name} fills another's field"
+            );
+            filled.push(format!("{q:?}"));
+            // The query wins where both are given.
+            let asked = || IngestQuery {
+                name: Some("asked".into()),
+                fps: Some(30.0),
+                lenient: Some(false),
+                ..IngestQuery::default()
+            };
+            if ["name", "fps", "lenient"].contains(name) {
+                assert_eq!(asked().with_headers(&h).unwrap(), asked(), "{name}");
+            }
+        }
+        let bad = |name: &str, v: &str| {
+            let mut h = HeaderMap::new();
+            h.insert(
+                header::HeaderName::from_bytes(format!("x-mocap-{name}").as_bytes()).unwrap(),
+                v.parse().unwrap(),
+            );
+            IngestQuery::default().with_headers(&h).is_err()
+        };
+        assert!(bad("fps", "fast") && bad("max-error-mm", "x") && bad("lenient", "yes"));
+    }
 }
