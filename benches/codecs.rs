@@ -34,7 +34,8 @@ fn decode(c: &mut Criterion) {
         (CodecId::Mdtt, ErrorBound::max(1.0)),
         (CodecId::Mdtt, ErrorBound::mean(3.0)),
     ] {
-        let enc = codec::encode(&m, codec, bound).expect("encodes");
+        let enc =
+            codec::encode(&m, codec, bound, codec::EncodeOptions::default()).expect("encodes");
         g.bench_function(format!("{codec} {bound}"), |b| {
             b.iter(|| codec::decode_all(&enc.container).unwrap())
         });
@@ -72,7 +73,13 @@ fn decode(c: &mut Criterion) {
         (CodecId::MdttShared, ErrorBound::max(1.0), &set),
         (CodecId::MdttShared, ErrorBound::mean(3.0), &set),
     ] {
-        let enc = codec::encode_with(&m, codec, bound, Some(basis)).expect("encodes");
+        let enc = codec::encode(
+            &m,
+            codec,
+            bound,
+            codec::EncodeOptions::with_basis(Some(basis)),
+        )
+        .expect("encodes");
         let reader = codec::Reader::new(enc.container.header.clone(), Some(basis.clone())).unwrap();
         let chunks = codec::Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
         g.bench_function(format!("{codec} {bound}"), |b| {
@@ -116,10 +123,26 @@ fn encode(c: &mut Criterion) {
         })
     });
     g.bench_function("mdtt rate-controlled mean 3 mm", |b| {
-        b.iter(|| codec::encode(&m, CodecId::Mdtt, ErrorBound::mean(3.0)).unwrap())
+        b.iter(|| {
+            codec::encode(
+                &m,
+                CodecId::Mdtt,
+                ErrorBound::mean(3.0),
+                codec::EncodeOptions::default(),
+            )
+            .unwrap()
+        })
     });
     g.bench_function("quant rate-controlled max 1 mm", |b| {
-        b.iter(|| codec::encode(&m, CodecId::Quant, ErrorBound::max(1.0)).unwrap())
+        b.iter(|| {
+            codec::encode(
+                &m,
+                CodecId::Quant,
+                ErrorBound::max(1.0),
+                codec::EncodeOptions::default(),
+            )
+            .unwrap()
+        })
     });
     g.finish();
 }

@@ -28,8 +28,8 @@
 //! - [`codec`]: the codecs (`raw`, `quant`, `mdtt`, `mdtt-shared`, `lsdt-clip`,
 //!   `lsdt-frame`, `spca`, `pga`, `bvh-lossless`, `rot`, and the analog channels'
 //!   `analog-lossless` and `analog-bounded`), found by id in one registry ([`codec::codec`]);
-//!   the chunked container; the one encode path ([`codec::encode_with`], [`codec::stream`]
-//!   for live streams) and the one read path ([`codec::Reader`]); shared bases and
+//!   the chunked container; the one encode path ([`codec::encode`] and its
+//!   [`codec::EncodeOptions`], [`codec::stream`] for live streams) and the one read path ([`codec::Reader`]); shared bases and
 //!   skeletons; rate control to a bound. Pure.
 //!
 //! `docs/ARCHITECTURE.md` walks through these layers: an ingest and a range read end to

@@ -9,7 +9,8 @@
 //!
 //! [`Limits`] holds the tunable ones (`mocapstore serve --help` names their flags); the
 //! constants below are physical facts, not tuning. The layers take the parts they need:
-//! readers [`Limits::reader`], decoders [`Limits::decoder`], streams and uploads the fields.
+//! readers [`crate::motion::formats::ReadLimits`] and decoders
+//! [`crate::codec::DecodeLimits`] (each `From<&Limits>`), streams and uploads the fields.
 //! README ("Limits") and `openapi.yaml` quote the defaults; keep the three in step.
 
 use std::ops::RangeInclusive;

@@ -47,7 +47,7 @@ fn pruning_by_history_costs_no_byte_at_keep_animation_and_estimates_hold() {
                                 .iter()
                                 .filter(|c| codec::codec(**c).unwrap().unsuited(&m).is_none())
                                 .filter_map(|&c| {
-                                    codec::encode(&m, c, bound)
+                                    codec::encode(&m, c, bound, codec::EncodeOptions::default())
                                         .ok()
                                         .map(|e| (c, e.stored_bytes))
                                 })

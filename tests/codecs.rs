@@ -93,7 +93,7 @@ fn check_with(
     shared: Option<&Arc<Basis>>,
     rng: &mut Rng,
 ) {
-    let enc = codec::encode_with(m, codec, bound, shared)
+    let enc = codec::encode(m, codec, bound, codec::EncodeOptions::with_basis(shared))
         .unwrap_or_else(|e| panic!("{name} {codec} {bound}: {e}"));
     verify(name, m, codec, bound, enc, shared, rng);
 }
@@ -347,7 +347,7 @@ fn every_corpus_skeleton_take_pga_accepts_meets_bounds() {
                 ErrorBound::mean(3.0),
             ],
         ) {
-            match codec::encode(m, CodecId::Pga, bound) {
+            match codec::encode(m, CodecId::Pga, bound, codec::EncodeOptions::default()) {
                 Ok(enc) => verify(name, m, CodecId::Pga, bound, enc, None, rng),
                 Err(Error::BoundMissed { .. }) => {
                     missed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -411,7 +411,13 @@ fn every_corpus_take_meets_bounds_with_the_shared_basis_codecs() {
 fn lsdt_frame_decodes_a_range_starting_between_intra_frames() {
     let m = walker(700, 9, 120.0, 3, 0.1);
     let b = basis_for(&m);
-    let enc = codec::encode_with(&m, CodecId::LsdtFrame, ErrorBound::max(0.5), Some(&b)).unwrap();
+    let enc = codec::encode(
+        &m,
+        CodecId::LsdtFrame,
+        ErrorBound::max(0.5),
+        codec::EncodeOptions::with_basis(Some(&b)),
+    )
+    .unwrap();
     let c = &enc.container;
     assert!(c.header.chunks.len() >= 5, "one intra frame per second");
     let full = codec::decode_all_with(c, Some(b.clone())).unwrap();
@@ -436,10 +442,21 @@ fn a_take_decodes_only_with_the_basis_it_was_coded_with() {
     let other = Arc::new(dct_basis(5));
     for codec in [CodecId::LsdtClip, CodecId::LsdtFrame] {
         assert!(matches!(
-            codec::encode(&m, codec, ErrorBound::max(1.0)),
+            codec::encode(
+                &m,
+                codec,
+                ErrorBound::max(1.0),
+                codec::EncodeOptions::default()
+            ),
             Err(Error::Basis(_))
         ));
-        let enc = codec::encode_with(&m, codec, ErrorBound::max(1.0), Some(&b)).unwrap();
+        let enc = codec::encode(
+            &m,
+            codec,
+            ErrorBound::max(1.0),
+            codec::EncodeOptions::with_basis(Some(&b)),
+        )
+        .unwrap();
         assert_eq!(enc.container.header.basis, Some(b.hash()));
         let bytes = enc.container.to_bytes();
         let c = Container::parse(&bytes, &DecodeLimits::default()).unwrap();
@@ -452,7 +469,12 @@ fn a_take_decodes_only_with_the_basis_it_was_coded_with() {
         // A basis of the wrong size is refused before any coding.
         let wrong = Arc::new(dct_basis(4));
         assert!(matches!(
-            codec::encode_with(&m, codec, ErrorBound::max(1.0), Some(&wrong)),
+            codec::encode(
+                &m,
+                codec,
+                ErrorBound::max(1.0),
+                codec::EncodeOptions::with_basis(Some(&wrong))
+            ),
             Err(Error::Basis(_))
         ));
     }
@@ -472,7 +494,13 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
         } else {
             bases[0].clone()
         };
-        let enc = codec::encode_with(&m, codec, ErrorBound::max(1.0), Some(&basis)).unwrap();
+        let enc = codec::encode(
+            &m,
+            codec,
+            ErrorBound::max(1.0),
+            codec::EncodeOptions::with_basis(Some(&basis)),
+        )
+        .unwrap();
         mutate(&enc.container, &Some(basis).into(), &mut rng, &mut outcomes);
     }
     // The codecs that keep a skeleton's channels, read as positions and as channels.
@@ -483,12 +511,24 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
         rig: Some(rig),
     };
     for codec in SKELETON {
-        let enc = codec::encode(&m, codec, ErrorBound::max(1.0)).unwrap();
+        let enc = codec::encode(
+            &m,
+            codec,
+            ErrorBound::max(1.0),
+            codec::EncodeOptions::default(),
+        )
+        .unwrap();
         mutate(&enc.container, &shared, &mut rng, &mut outcomes);
     }
     // `spca` with torso normalisation, several segments and blends.
     let m = mocapstore::motion::synthetic::two_behaviours();
-    let enc = codec::encode(&m, CodecId::Spca, ErrorBound::max(1.0)).unwrap();
+    let enc = codec::encode(
+        &m,
+        CodecId::Spca,
+        ErrorBound::max(1.0),
+        codec::EncodeOptions::default(),
+    )
+    .unwrap();
     assert!(enc.container.chunks.len() >= 2);
     mutate(
         &enc.container,

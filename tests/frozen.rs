@@ -468,7 +468,13 @@ fn freeze_current_bitstreams() {
         (CodecId::LsdtFrame, Some(dct.clone())),
         (CodecId::Spca, None),
     ] {
-        let enc = codec::encode_with(&m, codec, bound, basis.as_ref()).unwrap();
+        let enc = codec::encode(
+            &m,
+            codec,
+            bound,
+            codec::EncodeOptions::with_basis(basis.as_ref()),
+        )
+        .unwrap();
         let c = enc.container;
         let version = match codec {
             CodecId::Raw | CodecId::Quant | CodecId::Mdtt => String::new(),
@@ -496,7 +502,13 @@ fn freeze_current_bitstreams() {
         (CodecId::LsdtFrame, Some(dct.clone())),
         (CodecId::Spca, None),
     ] {
-        let enc = codec::encode_with(&gappy, codec, bound, basis.as_ref()).unwrap();
+        let enc = codec::encode(
+            &gappy,
+            codec,
+            bound,
+            codec::EncodeOptions::with_basis(basis.as_ref()),
+        )
+        .unwrap();
         let c = enc.container;
         let version = match codec {
             CodecId::Raw | CodecId::Quant | CodecId::Mdtt => String::new(),
@@ -511,9 +523,16 @@ fn freeze_current_bitstreams() {
     }
     // quant's parameters version 2 (rANS tables), which the encoder keeps where it codes
     // smaller.
-    let enc = codec::encode_variant(&m, CodecId::Quant, bound, None, |i, t| {
-        codec::quant::encode_version(i, t, Some(2))
-    })
+    let enc = codec::encode(
+        &m,
+        CodecId::Quant,
+        bound,
+        codec::EncodeOptions {
+            basis: None,
+            encoder: Some(Box::new(|i, t| codec::quant::encode_version(i, t, Some(2)))),
+            ..Default::default()
+        },
+    )
     .unwrap();
     out.push((
         "quant-v2".into(),
@@ -559,7 +578,9 @@ fn freeze_current_bitstreams() {
     .unwrap();
     let mut skeletal = Vec::new();
     for codec in [CodecId::BvhLossless, CodecId::Rot, CodecId::Pga] {
-        let c = codec::encode(&bvh, codec, bound).unwrap().container;
+        let c = codec::encode(&bvh, codec, bound, codec::EncodeOptions::default())
+            .unwrap()
+            .container;
         let name = format!("{codec}-v{}", c.header.params[0]);
         skeletal.push((
             name,
@@ -587,10 +608,19 @@ fn freeze_current_bitstreams() {
             "the canonical model (means only)",
         ),
     ] {
-        let c = codec::encode_variant(&bvh, CodecId::Pga, bound, None, |input, t| {
-            let (rig, sk) = input.skeleton.unwrap();
-            Take::new(rig, sk, input)?.encode(t, &[directions], &[options])
-        })
+        let c = codec::encode(
+            &bvh,
+            CodecId::Pga,
+            bound,
+            codec::EncodeOptions {
+                basis: None,
+                encoder: Some(Box::new(|input, t| {
+                    let (rig, sk) = input.skeleton.unwrap();
+                    Take::new(rig, sk, input)?.encode(t, &[directions], &[options])
+                })),
+                ..Default::default()
+            },
+        )
         .unwrap()
         .container;
         skeletal.push((
@@ -601,9 +631,14 @@ fn freeze_current_bitstreams() {
     }
 
     // `spca` with its torso normalisation, segments and blends.
-    let c = codec::encode(&two_behaviours(), CodecId::Spca, bound)
-        .unwrap()
-        .container;
+    let c = codec::encode(
+        &two_behaviours(),
+        CodecId::Spca,
+        bound,
+        codec::EncodeOptions::default(),
+    )
+    .unwrap()
+    .container;
     out.push((
         format!("spca-v{}-torso", c.header.params[0]),
         c,

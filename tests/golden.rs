@@ -55,7 +55,13 @@ fn case(name: &str, m: &Motion, codec: CodecId, bound: ErrorBound) -> Case {
     } else {
         dct_basis(m.point_count())
     });
-    let enc = codec::encode_with(m, codec, bound, Some(&basis)).expect("encodes");
+    let enc = codec::encode(
+        m,
+        codec,
+        bound,
+        codec::EncodeOptions::with_basis(Some(&basis)),
+    )
+    .expect("encodes");
     let hash = blake3::hash(&enc.container.to_bytes());
     Case {
         name: format!("{name} {codec} {bound}"),
@@ -183,7 +189,8 @@ fn cases() -> Vec<Case> {
         (CodecId::Pga, ErrorBound::max(1.0)),
         (CodecId::Pga, ErrorBound::mean(3.0)),
     ] {
-        let enc = codec::encode(&bvh, codec, bound).expect("encodes");
+        let enc =
+            codec::encode(&bvh, codec, bound, codec::EncodeOptions::default()).expect("encodes");
         let hash = blake3::hash(&enc.container.to_bytes());
         out.push(Case {
             name: format!("dancer-300@60 {codec} {bound}"),

@@ -79,7 +79,12 @@ fn spca_segments_hand_over_without_a_velocity_spike() {
         let Ok(m) = formats::read(&bytes, &ReadOptions::default()).map(|l| l.motion) else {
             continue;
         };
-        let Ok(enc) = codec::encode(&m, CodecId::Spca, ErrorBound::mean(3.0)) else {
+        let Ok(enc) = codec::encode(
+            &m,
+            CodecId::Spca,
+            ErrorBound::mean(3.0),
+            codec::EncodeOptions::default(),
+        ) else {
             panic!("{}: spca refused it", e.path);
         };
         let chunks = &enc.container.header.chunks;

@@ -22,7 +22,7 @@
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
 //! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
 //!   that code channel values.
-//! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`], [`search`]: shared pieces of
+//! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`], [`rate`]: shared pieces of
 //!   the above. [`segment`]: PPCA motion segmentation (Barbič et al. 2004), for `spca` and
 //!   `mdtt`'s adaptive clips.
 
@@ -64,8 +64,8 @@ pub use container::{Container, DecodeLimits, Header};
 pub use error::{Error, Result};
 pub use id::{ErrorBound, Latency};
 pub use pipeline::{
-    decode_all, decode_all_with, decoded_digest, digest_update, encode, encode_hinted,
-    encode_variant, encode_with, Encoded,
+    decode_all, decode_all_with, decoded_digest, digest_update, encode, EncodeOptions, Encoded,
+    Encoder,
 };
 pub use read::{decode_chunk, decoder, ChunkSource, Reader, Shared, Stored};
 pub use rig::{Channels, Rig};

@@ -9,7 +9,7 @@ use super::id::ErrorBound;
 use super::read::{Reader, Shared, Stored};
 use super::rig::Rig;
 use super::CodecId;
-use super::{codec, gaps, Codec, Hints, Input, Target};
+use super::{codec, gaps, Codec, CodecOutput, Hints, Input, Target};
 use crate::motion::metrics::{self, ErrorSeries, ErrorStats};
 use crate::motion::Motion;
 
@@ -49,50 +49,59 @@ pub fn digest_update(h: &mut blake3::Hasher, frames: &[f32]) {
     }
 }
 
-/// Encode `motion` with `codec_id` so that its decoded output meets `bound`.
+/// A codec's encoder called in place of its own search ([`EncodeOptions::encoder`]).
+pub type Encoder<'a> = Box<dyn FnOnce(&Input<'_>, Target) -> Result<CodecOutput> + 'a>;
+
+/// What an [`encode`] may be given beyond the take, its codec and its bound; each part
+/// optional, `EncodeOptions::default()` none.
+#[derive(Default)]
+pub struct EncodeOptions<'a> {
+    /// The shared basis that codecs of [`Codec::basis_kind`] code with (ignored by the
+    /// others). The header records its hash.
+    pub basis: Option<&'a Arc<Basis>>,
+    /// What the request said about the take's points.
+    pub hints: Hints,
+    /// The codec's encoder called through this instead of the codec's own: for benchmarks
+    /// and tests of a codec's settings (a clip length, an intra period) that per-take
+    /// choice does not search. The result is checked and decodes like any other.
+    pub encoder: Option<Encoder<'a>>,
+}
+
+impl<'a> EncodeOptions<'a> {
+    /// With a shared basis (if any), nothing else.
+    pub fn with_basis(basis: Option<&'a Arc<Basis>>) -> Self {
+        EncodeOptions {
+            basis,
+            ..EncodeOptions::default()
+        }
+    }
+}
+
+/// Encode `motion` with `codec_id` so that its decoded output meets `bound`: the one
+/// entry point of encoding, whatever the codec and options.
 ///
 /// The returned statistics come from decoding the container just built with the same code
 /// a reader uses, so the bound is a measured fact, not a codec's claim.
-pub fn encode(motion: &Motion, codec_id: CodecId, bound: ErrorBound) -> Result<Encoded> {
-    encode_with(motion, codec_id, bound, None)
-}
-
-/// As [`encode`], with the shared basis that codecs of [`Codec::basis_kind`] code with
-/// (ignored by the others). The header records its hash.
-pub fn encode_with(
+pub fn encode(
     motion: &Motion,
     codec_id: CodecId,
     bound: ErrorBound,
-    shared: Option<&Arc<Basis>>,
+    options: EncodeOptions<'_>,
 ) -> Result<Encoded> {
-    encode_hinted(motion, codec_id, bound, shared, &Hints::default())
-}
-
-/// As [`encode_with`], with what the request said about the take's points.
-pub fn encode_hinted(
-    motion: &Motion,
-    codec_id: CodecId,
-    bound: ErrorBound,
-    shared: Option<&Arc<Basis>>,
-    hints: &Hints,
-) -> Result<Encoded> {
-    let c = codec(codec_id)?;
-    encode_checked(motion, codec_id, bound, shared, hints, |input, target| {
-        c.encode(input, target)
-    })
-}
-
-/// As [`encode_with`], with the codec's encoder called through `encoder`: for benchmarks
-/// and tests of a codec's own settings (a clip length, an intra period) that per-take
-/// choice does not search. The result is checked and decodes like any other.
-pub fn encode_variant(
-    motion: &Motion,
-    codec_id: CodecId,
-    bound: ErrorBound,
-    shared: Option<&Arc<Basis>>,
-    encoder: impl FnOnce(&Input<'_>, Target) -> Result<super::CodecOutput>,
-) -> Result<Encoded> {
-    encode_checked(motion, codec_id, bound, shared, &Hints::default(), encoder)
+    let EncodeOptions {
+        basis,
+        hints,
+        encoder,
+    } = options;
+    match encoder {
+        Some(encoder) => encode_checked(motion, codec_id, bound, basis, &hints, encoder),
+        None => {
+            let c = codec(codec_id)?;
+            encode_checked(motion, codec_id, bound, basis, &hints, |input, target| {
+                c.encode(input, target)
+            })
+        }
+    }
 }
 
 /// Encode through `encoder`, then decode the container as a reader will and check the bound.
@@ -102,7 +111,7 @@ fn encode_checked(
     bound: ErrorBound,
     shared: Option<&Arc<Basis>>,
     hints: &Hints,
-    encoder: impl FnOnce(&Input<'_>, Target) -> Result<super::CodecOutput>,
+    encoder: impl FnOnce(&Input<'_>, Target) -> Result<CodecOutput>,
 ) -> Result<Encoded> {
     let torso = hints.torso_points(&motion.point_names)?;
     let (frames, points) = (motion.frame_count(), motion.point_count());

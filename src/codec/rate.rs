@@ -15,7 +15,7 @@
 //!
 //! Every keep-the-smallest here keeps the first of equal sizes (a strict `<`): the order of
 //! trials decides ties, so a search's bytes do not depend on which helper it goes through.
-//! What a trial costs is [`container::estimated_bytes`], the container's own count.
+//! What a trial costs is [`super::container::estimated_bytes`], the container's own count.
 
 use std::ops::RangeInclusive;
 
@@ -272,7 +272,7 @@ pub fn with_fallback_residuals<S>(
 }
 
 /// One coding of a take and what it measured: its output, its stored size
-/// ([`container::estimated_bytes`]) and its max and mean error.
+/// ([`super::container::estimated_bytes`]) and its max and mean error.
 pub struct Trial {
     pub out: CodecOutput,
     pub bytes: usize,

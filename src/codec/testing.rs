@@ -90,7 +90,13 @@ pub fn measured(m: &Motion, enc: &Encoded) -> (f64, f64) {
 pub fn meets_bounds_and_shrinks(m: &Motion, codec: CodecId, bounds: [f64; 3]) {
     let mut last = usize::MAX;
     for mm in bounds {
-        let enc = encode(m, codec, ErrorBound::max(mm)).unwrap();
+        let enc = encode(
+            m,
+            codec,
+            ErrorBound::max(mm),
+            crate::codec::EncodeOptions::default(),
+        )
+        .unwrap();
         let (max, _) = measured(m, &enc);
         assert!(max <= mm, "{max} > {mm}");
         // The search lands close under the bound, not far below it.
@@ -98,7 +104,13 @@ pub fn meets_bounds_and_shrinks(m: &Motion, codec: CodecId, bounds: [f64; 3]) {
         assert!(enc.stored_bytes < last);
         last = enc.stored_bytes;
     }
-    let enc = encode(m, codec, ErrorBound::mean(2.0)).unwrap();
+    let enc = encode(
+        m,
+        codec,
+        ErrorBound::mean(2.0),
+        crate::codec::EncodeOptions::default(),
+    )
+    .unwrap();
     let (_, mean) = measured(m, &enc);
     assert!(mean <= 2.0, "{mean} > 2");
 }

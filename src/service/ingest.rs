@@ -293,7 +293,16 @@ pub async fn encode_best(
                     let hints = hints.clone();
                     tokio::task::spawn_blocking(move || {
                         let t0 = Instant::now();
-                        let r = codec::encode_hinted(&m, codec, bound, shared.as_ref(), &hints);
+                        let r = codec::encode(
+                            &m,
+                            codec,
+                            bound,
+                            codec::EncodeOptions {
+                                basis: shared.as_ref(),
+                                hints: (*hints).clone(),
+                                ..Default::default()
+                            },
+                        );
                         (codec, r, t0.elapsed().as_secs_f64() * 1e3)
                     })
                 })

@@ -271,6 +271,7 @@ mod tests {
             &walker(20, 2, 30.0, 1, 0.0),
             CodecId::Quant,
             ErrorBound::max(1.0),
+            codec::EncodeOptions::default(),
         )
         .unwrap();
         Arc::new(Prepared {
@@ -338,6 +339,7 @@ mod tests {
             &walker(20, 2, 30.0, 1, 0.0),
             CodecId::Quant,
             ErrorBound::max(1.0),
+            codec::EncodeOptions::default(),
         )
         .unwrap();
         let mut take = Take::sample();

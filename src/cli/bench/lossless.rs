@@ -55,7 +55,12 @@ pub fn run(files: &[PathBuf], out: &Path) -> ExitCode {
         };
         let m = loaded.motion;
         let t0 = Instant::now();
-        let enc = match codec::encode(&m, CodecId::BvhLossless, ErrorBound::max(0.0)) {
+        let enc = match codec::encode(
+            &m,
+            CodecId::BvhLossless,
+            ErrorBound::max(0.0),
+            codec::EncodeOptions::default(),
+        ) {
             Ok(e) => e,
             Err(e) => {
                 eprintln!("{}: {e}", path.display());

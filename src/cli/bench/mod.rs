@@ -192,27 +192,51 @@ impl Variant {
             }
         };
         match self {
-            Variant::Default(c) => codec::encode_with(motion, c, bound, shared),
-            Variant::Clip(s) => {
-                codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
-                    clip::encode_with_clip(i, t, frames_of(s))
-                })
+            Variant::Default(c) => {
+                codec::encode(motion, c, bound, codec::EncodeOptions::with_basis(shared))
             }
-            Variant::Intra(s) => {
-                codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
-                    frame::encode_with_period(i, t, frames_of(s))
-                })
-            }
-            Variant::Spca(o) => {
-                codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
-                    spca::encode_with(i, t, o)
-                })
-            }
-            Variant::Mdtt(mode) => {
-                codec::encode_variant(motion, self.codec(), bound, shared, |i, t| {
-                    mdtt::encode_clips(i, t, mode)
-                })
-            }
+            Variant::Clip(s) => codec::encode(
+                motion,
+                self.codec(),
+                bound,
+                codec::EncodeOptions {
+                    basis: shared,
+                    encoder: Some(Box::new(|i, t| clip::encode_with_clip(i, t, frames_of(s)))),
+                    ..Default::default()
+                },
+            ),
+            Variant::Intra(s) => codec::encode(
+                motion,
+                self.codec(),
+                bound,
+                codec::EncodeOptions {
+                    basis: shared,
+                    encoder: Some(Box::new(|i, t| {
+                        frame::encode_with_period(i, t, frames_of(s))
+                    })),
+                    ..Default::default()
+                },
+            ),
+            Variant::Spca(o) => codec::encode(
+                motion,
+                self.codec(),
+                bound,
+                codec::EncodeOptions {
+                    basis: shared,
+                    encoder: Some(Box::new(|i, t| spca::encode_with(i, t, o))),
+                    ..Default::default()
+                },
+            ),
+            Variant::Mdtt(mode) => codec::encode(
+                motion,
+                self.codec(),
+                bound,
+                codec::EncodeOptions {
+                    basis: shared,
+                    encoder: Some(Box::new(|i, t| mdtt::encode_clips(i, t, mode))),
+                    ..Default::default()
+                },
+            ),
         }
     }
 }

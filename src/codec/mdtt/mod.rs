@@ -505,12 +505,19 @@ mod tests {
 
     #[test]
     fn adaptive_clips_start_where_the_behaviour_changes_and_meet_the_bound() {
-        use crate::codec::{encode_variant, ErrorBound};
+        use crate::codec::{encode, EncodeOptions, ErrorBound};
         let m = crate::motion::synthetic::two_behaviours();
         let bound = ErrorBound::max(1.0);
-        let enc = encode_variant(&m, CodecId::Mdtt, bound, None, |i, t| {
-            encode_clips(i, t, ClipMode::Adaptive)
-        })
+        let enc = encode(
+            &m,
+            CodecId::Mdtt,
+            bound,
+            EncodeOptions {
+                basis: None,
+                encoder: Some(Box::new(|i, t| encode_clips(i, t, ClipMode::Adaptive))),
+                ..Default::default()
+            },
+        )
         .unwrap();
         let (max, _) = crate::codec::testing::measured(&m, &enc);
         assert!(max <= 1.0, "{max}");
@@ -524,9 +531,16 @@ mod tests {
             starts.iter().any(|&s| s.abs_diff(400) <= 60),
             "clips start at {starts:?}"
         );
-        let equal = encode_variant(&m, CodecId::Mdtt, bound, None, |i, t| {
-            encode_clips(i, t, ClipMode::Equal)
-        })
+        let equal = encode(
+            &m,
+            CodecId::Mdtt,
+            bound,
+            EncodeOptions {
+                basis: None,
+                encoder: Some(Box::new(|i, t| encode_clips(i, t, ClipMode::Equal))),
+                ..Default::default()
+            },
+        )
         .unwrap();
         assert_eq!(starts_of(&equal), vec![0, 280, 560]);
     }
@@ -606,7 +620,13 @@ mod tests {
     fn rows_of_a_clip_decode_as_the_whole_clip_does() {
         use crate::codec::{encode, ErrorBound, Shared};
         let m = crate::motion::synthetic::walker(700, 7, 120.0, 5, 0.0);
-        let enc = encode(&m, CodecId::Mdtt, ErrorBound::max(0.3)).unwrap();
+        let enc = encode(
+            &m,
+            CodecId::Mdtt,
+            ErrorBound::max(0.3),
+            crate::codec::EncodeOptions::default(),
+        )
+        .unwrap();
         let c = &enc.container;
         let dec = Mdtt
             .decoder(&c.header.params, 7, &Shared::default())

@@ -121,7 +121,7 @@ mod tests {
         damage_channels, first_chunk, measured, meets_bounds_and_shrinks, skeleton_shared,
     };
     use crate::codec::Error;
-    use crate::codec::{encode, encode_variant, ErrorBound};
+    use crate::codec::{encode, EncodeOptions, ErrorBound};
     use crate::motion::synthetic::dancer;
 
     #[test]
@@ -135,10 +135,19 @@ mod tests {
     fn ik_codes_smaller_than_coordinates_alone_at_a_loose_bound() {
         let m = dancer(600, 120.0, 7);
         let size = |options: Options| {
-            let enc = encode_variant(&m, CodecId::Pga, ErrorBound::max(12.5), None, |input, t| {
-                let (rig, sk) = input.skeleton.unwrap();
-                Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
-            })
+            let enc = encode(
+                &m,
+                CodecId::Pga,
+                ErrorBound::max(12.5),
+                EncodeOptions {
+                    basis: None,
+                    encoder: Some(Box::new(|input, t| {
+                        let (rig, sk) = input.skeleton.unwrap();
+                        Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
+                    })),
+                    ..Default::default()
+                },
+            )
             .unwrap();
             let (max, _) = measured(&m, &enc);
             assert!(max <= 12.5, "{max}");
@@ -157,10 +166,19 @@ mod tests {
             iterations: 3,
             ..Options::IK
         };
-        let enc = encode_variant(&m, CodecId::Pga, ErrorBound::max(5.0), None, |input, t| {
-            let (rig, sk) = input.skeleton.unwrap();
-            Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
-        })
+        let enc = encode(
+            &m,
+            CodecId::Pga,
+            ErrorBound::max(5.0),
+            EncodeOptions {
+                basis: None,
+                encoder: Some(Box::new(|input, t| {
+                    let (rig, sk) = input.skeleton.unwrap();
+                    Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
+                })),
+                ..Default::default()
+            },
+        )
         .unwrap();
         let (max, _) = measured(&m, &enc);
         assert!(max <= 5.0, "{max}");
@@ -190,14 +208,25 @@ mod tests {
     fn a_bound_pga_cannot_meet_is_reported_missed() {
         let m = with_position_channel(dancer(60, 60.0, 2), |f| 10.0 + 5e-6 * (f % 2) as f64);
         assert!(Pga.unsuited(&m).is_none());
-        match encode(&m, CodecId::Pga, ErrorBound::max(1e-6)) {
+        match encode(
+            &m,
+            CodecId::Pga,
+            ErrorBound::max(1e-6),
+            crate::codec::EncodeOptions::default(),
+        ) {
             Err(Error::BoundMissed { codec, detail }) => {
                 assert_eq!(codec, "pga");
                 assert!(detail.contains("finest step"), "{detail}");
             }
             other => panic!("{:?}", other.map(|e| e.stats.max_mm)),
         }
-        assert!(encode(&m, CodecId::Pga, ErrorBound::max(1.0)).is_ok());
+        assert!(encode(
+            &m,
+            CodecId::Pga,
+            ErrorBound::max(1.0),
+            crate::codec::EncodeOptions::default()
+        )
+        .is_ok());
     }
 
     /// `m` with an X position channel on joint 1 holding `value(frame)`, its positions by FK.
@@ -235,7 +264,13 @@ mod tests {
     #[test]
     fn damaged_parameters_and_chunks_fail_cleanly() {
         let m = dancer(200, 60.0, 3);
-        let enc = encode(&m, CodecId::Pga, ErrorBound::max(2.0)).unwrap();
+        let enc = encode(
+            &m,
+            CodecId::Pga,
+            ErrorBound::max(2.0),
+            crate::codec::EncodeOptions::default(),
+        )
+        .unwrap();
         let shared = skeleton_shared(&m);
         let params = &enc.container.header.params;
         let d = Pga.decoder(params, m.point_count(), &shared).unwrap();

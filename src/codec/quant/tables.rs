@@ -215,11 +215,17 @@ mod tests {
     fn version_2_round_trips_meets_the_bound_and_refuses_damage() {
         let m = walker(300, 7, 120.0, 5, 0.1);
         for version in [1u8, 2] {
-            let enc =
-                codec::encode_variant(&m, CodecId::Quant, ErrorBound::max(0.5), None, |i, t| {
-                    quant::encode_version(i, t, Some(version))
-                })
-                .unwrap();
+            let enc = codec::encode(
+                &m,
+                CodecId::Quant,
+                ErrorBound::max(0.5),
+                codec::EncodeOptions {
+                    basis: None,
+                    encoder: Some(Box::new(|i, t| quant::encode_version(i, t, Some(version)))),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
             let (max, _) = crate::codec::testing::measured(&m, &enc);
             assert!(max <= 0.5, "{max}");
             assert_eq!(enc.container.header.params.len() == 8, version == 1);

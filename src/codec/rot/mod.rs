@@ -478,7 +478,13 @@ mod tests {
         let m = read_as(Format::Bvh, t.as_bytes(), &ReadOptions::default())
             .unwrap()
             .motion;
-        let enc = encode(&m, CodecId::Rot, ErrorBound::max(0.5)).unwrap();
+        let enc = encode(
+            &m,
+            CodecId::Rot,
+            ErrorBound::max(0.5),
+            crate::codec::EncodeOptions::default(),
+        )
+        .unwrap();
         let (max, _) = measured(&m, &enc);
         assert!(max <= 0.5, "{max}");
     }
@@ -486,7 +492,13 @@ mod tests {
     #[test]
     fn damaged_chunks_fail_cleanly() {
         let m = dancer(200, 60.0, 3);
-        let enc = encode(&m, CodecId::Rot, ErrorBound::max(1.0)).unwrap();
+        let enc = encode(
+            &m,
+            CodecId::Rot,
+            ErrorBound::max(1.0),
+            crate::codec::EncodeOptions::default(),
+        )
+        .unwrap();
         let shared = skeleton_shared(&m);
         let d = Rot
             .decoder(&enc.container.header.params, m.point_count(), &shared)

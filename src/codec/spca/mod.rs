@@ -134,7 +134,13 @@ mod tests {
         // Points with no names to find a torso by: coded as they are.
         let w = walker(400, 9, 100.0, 4, 0.2);
         for bound in [ErrorBound::max(1.0), ErrorBound::mean(1.0)] {
-            let enc = encode(&w, CodecId::Spca, bound).unwrap();
+            let enc = encode(
+                &w,
+                CodecId::Spca,
+                bound,
+                crate::codec::EncodeOptions::default(),
+            )
+            .unwrap();
             let (max, mean) = crate::codec::testing::measured(&w, &enc);
             assert!(bound.holds(max, mean), "{bound}: max {max}, mean {mean}");
         }
@@ -164,7 +170,13 @@ mod tests {
         // Without the residual layer (a mean bound) the models alone make the frames. At
         // every cut the decoded motion moves no faster and turns no harder than the
         // original does anywhere.
-        let enc = encode(&m, CodecId::Spca, ErrorBound::mean(10.0)).unwrap();
+        let enc = encode(
+            &m,
+            CodecId::Spca,
+            ErrorBound::mean(10.0),
+            crate::codec::EncodeOptions::default(),
+        )
+        .unwrap();
         let cuts: Vec<usize> = enc.container.header.chunks[1..]
             .iter()
             .map(|c| c.first_frame as usize)
@@ -191,7 +203,13 @@ mod tests {
     fn a_torso_named_in_the_request_normalises_a_take_with_unknown_names() {
         let w = walker(300, 6, 100.0, 8, 0.1);
         let bound = ErrorBound::max(2.0);
-        let plain = encode(&w, CodecId::Spca, bound).unwrap();
+        let plain = encode(
+            &w,
+            CodecId::Spca,
+            bound,
+            crate::codec::EncodeOptions::default(),
+        )
+        .unwrap();
         assert_eq!(
             plain.container.header.params[1], 3,
             "no torso found by name"
@@ -200,7 +218,17 @@ mod tests {
         let hints = crate::codec::Hints {
             torso: Some([names[0].clone(), names[2].clone(), names[4].clone()]),
         };
-        let enc = crate::codec::encode_hinted(&w, CodecId::Spca, bound, None, &hints).unwrap();
+        let enc = crate::codec::encode(
+            &w,
+            CodecId::Spca,
+            bound,
+            crate::codec::EncodeOptions {
+                basis: None,
+                hints: hints.clone(),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         let p = Params::parse(&enc.container.header.params, w.point_count()).unwrap();
         assert_eq!(p.torso.map(|(_, t)| t), Some([0, 2, 4]));
         let (max, _) = crate::codec::testing::measured(&w, &enc);
@@ -208,14 +236,29 @@ mod tests {
         let bad = crate::codec::Hints {
             torso: Some(["nope".into(), names[2].clone(), names[4].clone()]),
         };
-        let err = crate::codec::encode_hinted(&w, CodecId::Spca, bound, None, &bad);
+        let err = crate::codec::encode(
+            &w,
+            CodecId::Spca,
+            bound,
+            crate::codec::EncodeOptions {
+                basis: None,
+                hints: bad.clone(),
+                ..Default::default()
+            },
+        );
         assert!(matches!(err, Err(Error::Invalid(e)) if e.contains("nope")));
     }
 
     #[test]
     fn damaged_chunks_and_headers_give_errors_not_panics() {
         let m = two_behaviours();
-        let enc = encode(&m, CodecId::Spca, ErrorBound::max(1.0)).unwrap();
+        let enc = encode(
+            &m,
+            CodecId::Spca,
+            ErrorBound::max(1.0),
+            crate::codec::EncodeOptions::default(),
+        )
+        .unwrap();
         let params = &enc.container.header.params;
         for i in 0..params.len() {
             let mut p = params.clone();

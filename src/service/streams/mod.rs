@@ -14,7 +14,7 @@
 //! the take's running totals. A live take's stored header carries no chunk index (its
 //! chunk rows are the index, [`crate::store::Store::chunk_index`]); the index is written
 //! into the header once, when the stream closes. Memory is bounded per stream (points,
-//! chunk length, the re-encoding copy) and per server (open streams), by [`Limits`].
+//! chunk length, the re-encoding copy) and per server (open streams), by [`crate::limits::Limits`].
 //!
 //! Watchers ([`Streams::watch`], the viewer's live page) get every append as it arrives,
 //! before it is coded, through a bounded broadcast: one that reads too slowly skips appends

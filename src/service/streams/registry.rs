@@ -206,7 +206,7 @@ impl Streams {
 
     /// Close every live take whose lease ran out a lease ago or more and that no stream
     /// here codes: its server stopped mid-stream, and no producer came back to go on
-    /// through another server within that lease ([`handover`]). What it committed stays,
+    /// through another server within that lease ([`super::handover`]). What it committed stays,
     /// indexed from its chunk rows; frames that were pending on that server are lost, and
     /// the take says so and how many.
     pub async fn close_orphans(&self, store: &Store) -> Result<usize> {

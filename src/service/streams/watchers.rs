@@ -75,7 +75,7 @@ impl Live {
 
 impl Streams {
     /// Watch an open stream for `holder`: every append from now on, as it arrives. At most
-    /// [`STREAM_WATCHERS`] at once per stream, [`Limits::watchers_per_caller`] of them one
+    /// [`STREAM_WATCHERS`] at once per stream, [`crate::limits::Limits::watchers_per_caller`] of them one
     /// caller's; the watch ends when the stream closes.
     pub async fn watch(&self, store: &Store, id: &str, holder: &Holder) -> Result<Watch> {
         let Some(entry) = self.entry(id) else {
