@@ -11,7 +11,7 @@ if [ "${1:-}" = "serve" ]; then
         printf '%s\n' "$created" | sed -n 's/^secret, shown this once: //p' > "$secret_file"
         echo "mocapstore: first start, so an admin token was created; its secret is in $secret_file."
         echo "  read it:   docker compose exec mocapstore cat $secret_file"
-        echo "  use it:    curl -H \"Authorization: Bearer \$(cat admin-token)\" http://localhost:8080/v1/sequences"
+        echo "  use it:    curl -H \"Authorization: Bearer \$(cat admin-token)\" http://localhost:8080/v1/takes"
         echo "  CLI:       MOCAP_TOKEN=\$(cat admin-token) mocapstore ingest --server http://localhost:8080 FOLDER"
         echo "  more:      docker compose exec mocapstore mocapstore token create --scope read --name NAME"
     fi

@@ -56,7 +56,7 @@ export async function json(path, opts) {
 /** Frames [start, end) of a take as positions: { start, count, points, data: Float32Array }. */
 export async function frames(id, start, end, signal) {
   const r = await request(
-    `/v1/sequences/${encodeURIComponent(id)}/frames?start=${start}&end=${end}&format=f32`,
+    `/v1/takes/${encodeURIComponent(id)}/frames?start=${start}&end=${end}&format=f32`,
     { signal },
   );
   const data = new Float32Array(await r.arrayBuffer());
@@ -120,7 +120,7 @@ export async function download(path, filename) {
 export function upload(file, query, progress) {
   return new Promise((resolve, reject) => {
     const x = new XMLHttpRequest();
-    x.open('POST', `/v1/sequences?${query}`);
+    x.open('POST', `/v1/takes?${query}`);
     x.setRequestHeader('Content-Type', 'application/octet-stream');
     const t = token.get();
     if (t) x.setRequestHeader('Authorization', `Bearer ${t}`);

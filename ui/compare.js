@@ -16,7 +16,7 @@ const MAX_TAKES = COLOURS.length;
 export async function comparePage(main, params) {
   const ids = [...new Set((params.get('ids') ?? '').split(',').filter(Boolean))].slice(0, MAX_TAKES);
   const mode = params.get('mode') === 'side' ? 'side' : 'overlay';
-  const takes = await Promise.all(ids.map((id) => json(`/v1/sequences/${encodeURIComponent(id)}`)));
+  const takes = await Promise.all(ids.map((id) => json(`/v1/takes/${encodeURIComponent(id)}`)));
   const shapes = await Promise.all(takes.map(shapeOf));
   let transport = null;
   const url = (changes = {}, q = transport ? transport.query() : params) => {
@@ -125,8 +125,8 @@ async function picker(takes, add) {
   const shown = new Set(takes.map((t) => t.id));
   const layout = takes[0]?.layout;
   const lists = await Promise.all([
-    layout ? json(`/v1/sequences?limit=100&layout=${encodeURIComponent(layout)}`) : { items: [] },
-    json('/v1/sequences?limit=100'),
+    layout ? json(`/v1/takes?limit=100&layout=${encodeURIComponent(layout)}`) : { items: [] },
+    json('/v1/takes?limit=100'),
   ]);
   const seen = new Set();
   for (const [label, list] of [['same points', lists[0]], ['all takes', lists[1]]]) {

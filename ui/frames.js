@@ -23,7 +23,7 @@ export async function shapeOf(take) {
 
 export class TakeFrames {
   /**
-   * @param {object} take the take as `GET /v1/sequences/{id}` gives it
+   * @param {object} take the take as `GET /v1/takes/{id}` gives it
    * @param {AbortSignal} signal ends every fetch when the page is left
    * @param {() => void} [onFetch] called when a range is requested
    */

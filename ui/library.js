@@ -52,7 +52,7 @@ export async function libraryPage(main, params) {
     const q = new URLSearchParams({ limit: '50', sort: state.sort, order: state.order });
     for (const f of FILTERS) if (state[f]) q.set(f, state[f]);
     if (cursors[page]) q.set('cursor', cursors[page]);
-    const list = await json(`/v1/sequences?${q}`);
+    const list = await json(`/v1/takes?${q}`);
     cursors[page + 1] = list.next_cursor;
     table.replaceChildren(
       el('thead', {}, el('tr', {}, ...['name', 'library', 'tags', 'duration', 'fps', 'points', 'codec', 'ratio', 'max mm', 'mean mm', 'compare'].map((h) => el('th', { scope: 'col' }, h)))),

@@ -19,7 +19,7 @@ import { Player } from './player.js';
 const DELAY_WINDOW_S = 5;
 
 export async function livePage(main, id) {
-  const take = await json(`/v1/sequences/${encodeURIComponent(id)}`);
+  const take = await json(`/v1/takes/${encodeURIComponent(id)}`);
   const link = el('a', { href: `#/take/${encodeURIComponent(id)}` }, 'the stored take');
   if (!take.live) {
     main.append(el('h1', {}, take.name || take.id), el('p', {}, 'This stream has finished: see ', link, '.'));
@@ -143,7 +143,7 @@ export async function livePage(main, id) {
     elsewhere = true;
     status.textContent = `${why}. Showing the newest stored frame, once a second.`;
     while (active) {
-      const t = await json(`/v1/sequences/${encodeURIComponent(id)}`, { signal: abort.signal });
+      const t = await json(`/v1/takes/${encodeURIComponent(id)}`, { signal: abort.signal });
       out.stored.textContent = String(t.frames);
       if (t.frames > 0 && t.frames - 1 !== shown) {
         const r = await fetchFrames(id, t.frames - 1, t.frames, abort.signal);
@@ -164,7 +164,7 @@ export async function livePage(main, id) {
   async function pollStored() {
     // Coded elsewhere, `pollCommitted` reads the same take each second and says it.
     while (active && !elsewhere) {
-      const t = await json(`/v1/sequences/${encodeURIComponent(id)}`, { signal: abort.signal });
+      const t = await json(`/v1/takes/${encodeURIComponent(id)}`, { signal: abort.signal });
       out.stored.textContent = t.frames ? `${t.frames} (${fmt.num(t.ratio, 1)}× smaller than raw)` : '0';
       if (!t.live) return;
       await new Promise((r) => setTimeout(r, 1000));

@@ -71,7 +71,7 @@ async function allTakes(cap) {
   do {
     const q = new URLSearchParams({ limit: '500' });
     if (cursor) q.set('cursor', cursor);
-    const page = await json(`/v1/sequences?${q}`);
+    const page = await json(`/v1/takes?${q}`);
     out.push(...page.items);
     cursor = page.next_cursor;
   } while (cursor && out.length < cap);

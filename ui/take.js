@@ -10,7 +10,7 @@ import { Player, GltfFigure } from './player.js';
 import { Transport } from './transport.js';
 
 export async function takePage(main, id, params) {
-  const take = await json(`/v1/sequences/${encodeURIComponent(id)}`);
+  const take = await json(`/v1/takes/${encodeURIComponent(id)}`);
   if (take.live) {
     // Still recording: the live page shows it as it arrives.
     location.replace(`#/live/${encodeURIComponent(id)}`);
@@ -139,12 +139,12 @@ export async function takePage(main, id, params) {
     el('p', {}, 'The loop range (or the whole take): ',
     ...formats.map((f) => el('button', { class: 'download', onclick: () => {
       const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];
-      download(`/v1/sequences/${encodeURIComponent(id)}/frames?start=${a}&end=${b}&format=${f}${transforms(f)}`, `${take.name || take.id}_${a}-${b}.${f}`).catch(showError);
+      download(`/v1/takes/${encodeURIComponent(id)}/frames?start=${a}&end=${b}&format=${f}${transforms(f)}`, `${take.name || take.id}_${a}-${b}.${f}`).catch(showError);
     } }, f.toUpperCase())),
     el('button', { class: 'open-glb', title: 'load the GLB the server writes (three.js GLTFLoader) beside the figure', onclick: async () => {
       try {
         glb?.dispose();
-        const r = await request(`/v1/sequences/${encodeURIComponent(id)}/frames?format=glb${transforms('glb')}`);
+        const r = await request(`/v1/takes/${encodeURIComponent(id)}/frames?format=glb${transforms('glb')}`);
         glb = await GltfFigure.load(player, await r.arrayBuffer(), 1.0);
         window.mocapstoreGlb = glb; // for tests: the loaded glTF's node positions
         glb.at(transport.t);
@@ -154,12 +154,12 @@ export async function takePage(main, id, params) {
     } }, 'Open GLB beside'),
     ...(analog ? [el('button', { class: 'download analog', onclick: () => {
       const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];
-      download(`/v1/sequences/${encodeURIComponent(id)}/analog?start=${a}&end=${b}&format=csv`, `${take.name || take.id}_analog_${a}-${b}.csv`).catch(showError);
+      download(`/v1/takes/${encodeURIComponent(id)}/analog?start=${a}&end=${b}&format=csv`, `${take.name || take.id}_analog_${a}-${b}.csv`).catch(showError);
     } }, 'ANALOG CSV')] : [])));
 
   // --- what compression did: the error second by second against the bound
   try {
-    const e = await json(`/v1/sequences/${encodeURIComponent(id)}/errors`);
+    const e = await json(`/v1/takes/${encodeURIComponent(id)}/errors`);
     moveMarker = errorChart(chart, e, total, (f) => transport.jump(f / fps));
   } catch (err) {
     chart.replaceChildren(el('p', { class: 'muted' }, `No error chart: ${err.message}`));

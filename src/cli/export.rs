@@ -4,7 +4,7 @@
 //!
 //! Names and the manifest are the service's own ([`export::plan`], [`Entry::csv_line`]), so
 //! the folder holds what the ZIP would. Each file is fetched through the one read path
-//! (`/v1/sequences/{id}/frames` with the format and transforms), written beside its place
+//! (`/v1/takes/{id}/frames` with the format and transforms), written beside its place
 //! as `.partial` and renamed when whole. A journal (`.mocapstore-export.jsonl`: the options,
 //! then a line per file written) lets a second run skip every file whose size and BLAKE3 are
 //! what was written; a file changed or cut short since is fetched again. `manifest.csv` is
@@ -186,7 +186,7 @@ async fn export_files(
             }
         }
         let (client, slots, bar) = (client.clone(), slots.clone(), bar.clone());
-        let url = format!("{server}/v1/sequences/{}/frames", entry.id);
+        let url = format!("{server}/v1/takes/{}/frames", entry.id);
         let (query, path) = (query.clone(), dir.join(&entry.file));
         tasks.push((
             i,
@@ -354,7 +354,7 @@ async fn list(
             q.push(("cursor", c.clone()));
         }
         let r = client
-            .get(format!("{server}/v1/sequences"))
+            .get(format!("{server}/v1/takes"))
             .query(&q)
             .send()
             .await

@@ -73,7 +73,7 @@ fn fetch(args: &FetchArgs) -> Result<usize, String> {
         }
     }
     let url = format!(
-        "{}/v1/sequences/{}/frames",
+        "{}/v1/takes/{}/frames",
         args.server.trim_end_matches('/'),
         args.id
     );

@@ -153,7 +153,7 @@ async fn upload_all(
     if args.lenient {
         fixed.push(("lenient", "true".into()));
     }
-    let url = format!("{}/v1/sequences", args.server.trim_end_matches('/'));
+    let url = format!("{}/v1/takes", args.server.trim_end_matches('/'));
     let mut tasks = Vec::new();
     for path in files {
         let (client, slots, bar, url) = (client.clone(), slots.clone(), bar.clone(), url.clone());

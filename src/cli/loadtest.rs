@@ -130,7 +130,7 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
     let t0 = Instant::now();
     let r = client
         .post(format!(
-            "{base}/v1/sequences?name=load&unit=mm&fps={}&max_error_mm=1",
+            "{base}/v1/takes?name=load&unit=mm&fps={}&max_error_mm=1",
             args.fps
         ))
         .body(body)
@@ -179,10 +179,7 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
     let seconds = args.seconds.max(2);
     let fps = args.fps;
     let codec_url = move |_client: usize, s: usize| {
-        format!(
-            "{base}/v1/sequences/{id}/frames?t0={s}&t1={}&format=f32",
-            s + 1
-        )
+        format!("{base}/v1/takes/{id}/frames?t0={s}&t1={}&format=f32", s + 1)
     };
     let raw_url = move |_client: usize, s: usize| format!("{raw_base}/raw?second={s}");
     let mut out = format!(
@@ -201,7 +198,7 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
         args.decoded_cache_mib
     );
     let codec_url: Arc<UrlOf> = Arc::new(codec_url);
-    let route = "GET /v1/sequences/{id}/frames?t0&t1&format=f32";
+    let route = "GET /v1/takes/{id}/frames?t0&t1&format=f32";
     for (name, url) in [
         (route.to_string(), codec_url.clone()),
         (
@@ -299,7 +296,7 @@ async fn load_servers(args: &LoadArgs) -> Result<String, String> {
     let t0 = Instant::now();
     let r = client
         .post(format!(
-            "{}/v1/sequences?name=loadtest&library=loadtest&unit=mm&fps={}&max_error_mm=1",
+            "{}/v1/takes?name=loadtest&library=loadtest&unit=mm&fps={}&max_error_mm=1",
             servers[0], args.fps
         ))
         .body(body)
@@ -325,7 +322,7 @@ async fn load_servers(args: &LoadArgs) -> Result<String, String> {
     let (urls, take) = (servers.clone(), id.clone());
     let url: Arc<UrlOf> = Arc::new(move |c: usize, s: usize| {
         format!(
-            "{}/v1/sequences/{take}/frames?t0={s}&t1={}&format=f32",
+            "{}/v1/takes/{take}/frames?t0={s}&t1={}&format=f32",
             urls[c % urls.len()],
             s + 1
         )
@@ -333,7 +330,7 @@ async fn load_servers(args: &LoadArgs) -> Result<String, String> {
     let result = hammer(&client, url, seconds - 1, args.clients, args.requests).await;
     // Leave no take behind (an admin token may delete it; others leave it, and say so).
     let deleted = client
-        .delete(format!("{}/v1/sequences/{id}", servers[servers.len() - 1]))
+        .delete(format!("{}/v1/takes/{id}", servers[servers.len() - 1]))
         .send()
         .await
         .is_ok_and(|r| r.status().is_success());

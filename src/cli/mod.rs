@@ -136,7 +136,7 @@ struct ServeArgs {
 #[derive(Args)]
 #[command(next_help_heading = "Limits")]
 struct LimitArgs {
-    /// Largest upload (POST /v1/sequences body), MiB: a larger Content-Length gets 413
+    /// Largest upload (POST /v1/takes body), MiB: a larger Content-Length gets 413
     /// before the body is read.
     #[arg(long, env = "MOCAP_MAX_UPLOAD_MIB", default_value_t = d().upload_bytes >> 20)]
     max_upload_mib: u64,

@@ -202,7 +202,7 @@ async fn test(args: &StreamArgs) -> Result<String, String> {
     // A basis for the layout, trained on a minute of another take of it.
     let training = walker((60.0 * fps) as usize, points, fps, 1, 0.0);
     let r = client
-        .post(format!("{base}/v1/sequences?library=training&codec=quant"))
+        .post(format!("{base}/v1/takes?library=training&codec=quant"))
         .body(formats::write(&training, Format::Json).map_err(|e| e.to_string())?)
         .send()
         .await
@@ -302,7 +302,7 @@ async fn measure(
                 // Fetchable from now: prove it with a range fetch of the newest frames.
                 let r = client
                     .get(format!(
-                        "{}/v1/sequences/{id}/frames?start={}&end={now_committed}&format=f32",
+                        "{}/v1/takes/{id}/frames?start={}&end={now_committed}&format=f32",
                         servers.pick(),
                         now_committed - 1
                     ))
@@ -348,7 +348,7 @@ async fn measure(
         let mut left = Vec::new();
         for id in opened {
             let r = client
-                .delete(format!("{}/v1/sequences/{id}", servers.first()))
+                .delete(format!("{}/v1/takes/{id}", servers.first()))
                 .send()
                 .await;
             if !r.is_ok_and(|r| r.status().is_success()) {

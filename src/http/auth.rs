@@ -19,8 +19,8 @@
 //! |---|---|
 //! | `GET /healthz`, `GET /readyz`, `GET /` and `GET /ui/…` (the viewer's files) | none |
 //! | every other `GET` | read |
-//! | `POST /v1/sequences`, `PATCH /v1/sequences/{id}`, `POST /v1/streams…` | write |
-//! | `DELETE /v1/sequences/{id}`, `POST`/`DELETE /v1/bases…`, `DELETE /v1/skeletons/{id}`, `/v1/tokens…`, `GET /v1/audit`, `GET /metrics` | admin |
+//! | `POST /v1/takes`, `PATCH /v1/takes/{id}`, `POST /v1/streams…` | write |
+//! | `DELETE /v1/takes/{id}`, `POST`/`DELETE /v1/bases…`, `DELETE /v1/skeletons/{id}`, `/v1/tokens…`, `GET /v1/audit`, `GET /metrics` | admin |
 //!
 //! A read or write token limited to libraries sees and changes only takes in them, and
 //! only the skeletons, bases, jobs and statistics of its libraries; a take of another

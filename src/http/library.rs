@@ -1,4 +1,4 @@
-//! `GET /v1/sequences` (listing), `PATCH /v1/sequences/{id}`, `GET /v1/stats`,
+//! `GET /v1/takes` (listing), `PATCH /v1/takes/{id}`, `GET /v1/stats`,
 //! `GET /v1/export` (a library as one ZIP).
 
 use axum::extract::rejection::{JsonRejection, QueryRejection};
@@ -11,7 +11,7 @@ use serde::Deserialize;
 use axum::http::{header, HeaderMap, HeaderValue};
 
 use super::error::ApiError;
-use super::sequences::{format_of, streamed, transform_of};
+use super::takes::{format_of, streamed, transform_of};
 use super::views::{ListingView, TakeView};
 use super::AppState;
 use crate::codec::CodecId;

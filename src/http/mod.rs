@@ -12,10 +12,10 @@ mod library;
 mod metrics;
 pub mod proxy;
 mod routes;
-mod sequences;
 pub mod serve;
 mod skeletons;
 mod streams;
+mod takes;
 mod tokens;
 mod ui;
 mod views;
@@ -187,29 +187,21 @@ fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
         .get("/", Public, ui::index)
         .get("/ui/{*path}", Public, ui::file)
         .get("/metrics", Needs(Admin), metrics::render)
-        .post(
-            "/v1/sequences",
-            Needs(Write),
-            sequences::create.layer(upload),
-        )
-        .get("/v1/sequences", Needs(Read), library::list)
-        .get("/v1/sequences/{id}", Take(Read), sequences::get)
-        .delete("/v1/sequences/{id}", Take(Admin), sequences::delete)
+        .post("/v1/takes", Needs(Write), takes::create.layer(upload))
+        .get("/v1/takes", Needs(Read), library::list)
+        .get("/v1/takes/{id}", Take(Read), takes::get)
+        .delete("/v1/takes/{id}", Take(Admin), takes::delete)
         .patch(
-            "/v1/sequences/{id}",
+            "/v1/takes/{id}",
             Take(Write),
             library::patch.layer(json.clone()),
         )
-        .get("/v1/sequences/{id}/frames", Take(Read), sequences::frames)
-        .get("/v1/sequences/{id}/errors", Take(Read), sequences::errors)
-        .get("/v1/sequences/{id}/analog", Take(Read), sequences::analog)
-        .get(
-            "/v1/sequences/{id}/parameters",
-            Take(Read),
-            sequences::parameters,
-        )
+        .get("/v1/takes/{id}/frames", Take(Read), takes::frames)
+        .get("/v1/takes/{id}/errors", Take(Read), takes::errors)
+        .get("/v1/takes/{id}/analog", Take(Read), takes::analog)
+        .get("/v1/takes/{id}/parameters", Take(Read), takes::parameters)
         .get("/v1/stats", Needs(Read), library::stats)
-        .get("/v1/ranges", Needs(Read), sequences::ranges)
+        .get("/v1/ranges", Needs(Read), takes::ranges)
         .get("/v1/export", Needs(Read), library::export)
         .get("/v1/bases", Needs(Read), bases::list)
         .post("/v1/bases", Needs(Admin), bases::train.layer(json.clone()))
@@ -347,7 +339,7 @@ fn cors(origins: &[String]) -> tower_http::cors::CorsLayer {
         .filter_map(|o| HeaderValue::from_str(o).ok())
         .collect();
     let mut allow = vec![header::AUTHORIZATION, header::CONTENT_TYPE];
-    for (f, _) in sequences::HEADER_FIELDS {
+    for (f, _) in takes::HEADER_FIELDS {
         allow.push(HeaderName::from_bytes(format!("x-mocap-{f}").as_bytes()).expect("ASCII"));
     }
     let expose: Vec<HeaderName> = ["x-frames", "x-points", "x-start-frame", "x-fps", API_HEADER]
@@ -632,11 +624,11 @@ pub mod fuzz {
                 headers.insert(name, value);
             }
         }
-        if let Ok(Query(q)) = Query::<super::sequences::IngestQuery>::try_from_uri(&uri) {
-            let _ = super::sequences::ingest_request(q, &headers, body.clone(), &Limits::default());
+        if let Ok(Query(q)) = Query::<super::takes::IngestQuery>::try_from_uri(&uri) {
+            let _ = super::takes::ingest_request(q, &headers, body.clone(), &Limits::default());
         }
-        if let Ok(Query(q)) = Query::<super::sequences::FramesQuery>::try_from_uri(&uri) {
-            let _ = super::sequences::frames_request(q);
+        if let Ok(Query(q)) = Query::<super::takes::FramesQuery>::try_from_uri(&uri) {
+            let _ = super::takes::frames_request(q);
         }
         let _ = Query::<super::library::ListQuery>::try_from_uri(&uri);
         let _ = crate::store::Cursor::decode(&query);

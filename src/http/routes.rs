@@ -42,13 +42,37 @@ impl Access {
     }
 }
 
+/// Older names of routes, kept so that clients written against them go on working: every
+/// route declared under the first prefix answers under the second too, with the same access
+/// and handler (docs/ARCHITECTURE.md, "Words": *sequence* was the API's word for a take).
+pub const ALIASES: &[(&str, &str)] = &[("/v1/takes", "/v1/sequences")];
+
+/// A route as declared: an alias's route named by the route it stands for (what logs,
+/// metrics and the audit log say, whichever name a client used).
+pub fn canonical(route: &str) -> String {
+    for (current, older) in ALIASES {
+        if let Some(rest) = route.strip_prefix(older) {
+            return format!("{current}{rest}");
+        }
+    }
+    route.to_string()
+}
+
+/// The older names a declared route also answers under ([`ALIASES`]).
+fn aliases_of(path: &str) -> impl Iterator<Item = String> + '_ {
+    ALIASES.iter().filter_map(move |(current, older)| {
+        let rest = path.strip_prefix(current)?;
+        (rest.is_empty() || rest.starts_with('/')).then(|| format!("{older}{rest}"))
+    })
+}
+
 /// Every route's access: by path as the router matches it, then by method.
-pub type Table = Arc<HashMap<&'static str, Vec<(Method, Access)>>>;
+pub type Table = Arc<HashMap<String, Vec<(Method, Access)>>>;
 
 /// Routes being declared.
 pub struct Routes {
     router: Router<AppState>,
-    table: HashMap<&'static str, Vec<(Method, Access)>>,
+    table: HashMap<String, Vec<(Method, Access)>>,
 }
 
 impl Routes {
@@ -59,9 +83,9 @@ impl Routes {
         }
     }
 
-    /// Route `method path` to `handler` for callers `access` lets in. Panics when the same
-    /// method and path is declared twice (a mistake in the table, found by every test that
-    /// builds a router).
+    /// Route `method path` (and its [`ALIASES`]) to `handler` for callers `access` lets in.
+    /// Panics when the same method and path is declared twice (a mistake in the table, found
+    /// by every test that builds a router).
     pub fn add<H, T>(
         mut self,
         method: Method,
@@ -74,13 +98,15 @@ impl Routes {
         T: 'static,
     {
         let filter = MethodFilter::try_from(method.clone()).expect("a method the router routes");
-        self.router = self.router.route(path, on(filter, handler));
-        let methods = self.table.entry(path).or_default();
-        assert!(
-            methods.iter().all(|(m, _)| *m != method),
-            "{method} {path} is declared twice"
-        );
-        methods.push((method, access));
+        for path in std::iter::once(path.to_string()).chain(aliases_of(path)) {
+            self.router = self.router.route(&path, on(filter, handler.clone()));
+            let methods = self.table.entry(path.clone()).or_default();
+            assert!(
+                methods.iter().all(|(m, _)| *m != method),
+                "{method} {path} is declared twice"
+            );
+            methods.push((method.clone(), access));
+        }
         self
     }
 
@@ -157,7 +183,7 @@ pub async fn require(
         Ok(()) => next.run(req).await,
         Err(e) => e.into_response(),
     };
-    response.extensions_mut().insert(Route(route));
+    response.extensions_mut().insert(Route(canonical(&route)));
     response
 }
 
@@ -201,18 +227,15 @@ mod tests {
         let s = |m: Method, r: &str| access_of(&t, &m, r).scope();
         assert_eq!(s(Method::GET, "/healthz"), None);
         assert_eq!(s(Method::HEAD, "/ui/{*path}"), None);
-        assert_eq!(
-            s(Method::GET, "/v1/sequences/{id}/frames"),
-            Some(Scope::Read)
-        );
+        assert_eq!(s(Method::GET, "/v1/takes/{id}/frames"), Some(Scope::Read));
         assert_eq!(s(Method::GET, "/metrics"), Some(Scope::Admin));
-        assert_eq!(s(Method::POST, "/v1/sequences"), Some(Scope::Write));
-        assert_eq!(s(Method::PATCH, "/v1/sequences/{id}"), Some(Scope::Write));
+        assert_eq!(s(Method::POST, "/v1/takes"), Some(Scope::Write));
+        assert_eq!(s(Method::PATCH, "/v1/takes/{id}"), Some(Scope::Write));
         assert_eq!(
             s(Method::POST, "/v1/streams/{id}/frames"),
             Some(Scope::Write)
         );
-        assert_eq!(s(Method::DELETE, "/v1/sequences/{id}"), Some(Scope::Admin));
+        assert_eq!(s(Method::DELETE, "/v1/takes/{id}"), Some(Scope::Admin));
         assert_eq!(s(Method::POST, "/v1/bases"), Some(Scope::Admin));
         assert_eq!(s(Method::GET, "/v1/bases"), Some(Scope::Read));
         assert_eq!(s(Method::GET, "/v1/tokens"), Some(Scope::Admin));
@@ -222,15 +245,16 @@ mod tests {
         assert_eq!(s(Method::PUT, "/v1/stats"), Some(Scope::Write));
     }
 
-    /// Every route whose `{id}` is a take (a sequence or a live stream's) checks the
-    /// caller's libraries.
+    /// Every route whose `{id}` is a take (a stored one, under either name, or a live
+    /// stream's) checks the caller's libraries.
     #[test]
     fn every_route_that_names_a_take_checks_its_library() {
         let t = table();
         let mut takes = 0;
         for (path, methods) in t.iter() {
-            let names_a_take =
-                path.starts_with("/v1/sequences/{id}") || path.starts_with("/v1/streams/{id}");
+            let names_a_take = ["/v1/takes/{id}", "/v1/sequences/{id}", "/v1/streams/{id}"]
+                .iter()
+                .any(|p| path.starts_with(p));
             for (method, access) in methods {
                 assert_eq!(
                     matches!(access, Access::Take(_)),
@@ -240,6 +264,31 @@ mod tests {
                 takes += usize::from(names_a_take);
             }
         }
-        assert_eq!(takes, 11);
+        assert_eq!(
+            takes,
+            11 + 7,
+            "the 7 take routes under their older name too"
+        );
+    }
+
+    /// An older route name answers as its route does: the same methods and access, and is
+    /// named by its route in logs; nothing else is renamed.
+    #[test]
+    fn older_route_names_answer_as_their_routes() {
+        let t = table();
+        let mut aliased = 0;
+        for (path, methods) in t.iter() {
+            let Some(rest) = path.strip_prefix("/v1/sequences") else {
+                continue;
+            };
+            let current = format!("/v1/takes{rest}");
+            assert_eq!(Some(methods), t.get(&current), "{path}");
+            assert_eq!(canonical(path), current);
+            aliased += methods.len();
+        }
+        assert_eq!(aliased, 9, "every /v1/takes route, each method");
+        assert_eq!(canonical("/v1/takes/{id}"), "/v1/takes/{id}");
+        assert_eq!(canonical("/v1/stats"), "/v1/stats");
+        assert_eq!(aliases_of("/v1/takesx").count(), 0, "a whole segment only");
     }
 }

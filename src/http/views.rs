@@ -12,8 +12,8 @@ use crate::service::library::Listing;
 use crate::service::take::{Take, TakeMeta};
 use crate::store::{AuditRow, SkeletonRow};
 
-/// A take as `GET /v1/sequences/{id}` and listings show it: the fields of its record the
-/// API promises (`openapi.yaml`'s `Sequence`), named here one by one so that a field added
+/// A take as `GET /v1/takes/{id}` and listings show it: the fields of its record the
+/// API promises (`openapi.yaml`'s `Take`), named here one by one so that a field added
 /// to [`Take`] stays inside until it is added here too; and whether a live stream is still
 /// recording it. `meta` is the take's stored record of what it is and how it was coded.
 #[derive(Serialize)]
@@ -226,7 +226,7 @@ pub struct AuditView<'a> {
     at: i64,
     token_id: Option<&'a str>,
     token_name: Option<&'a str>,
-    /// What was asked, e.g. `DELETE /v1/sequences/{id}` or `token create`.
+    /// What was asked, e.g. `DELETE /v1/takes/{id}` or `token create`.
     action: &'a str,
     /// What it was asked of: the request's path, or the token's id.
     target: &'a str,

@@ -153,7 +153,7 @@ pub async fn check_take(store: &Store, grant: &Grant, id: &str) -> Result<()> {
     }
     match store.library_of(id).await? {
         Some(library) if grant.library(&library).is_ok() => Ok(()),
-        _ => Err(Error::NotFound(format!("sequence {id}"))),
+        _ => Err(Error::NotFound(format!("take {id}"))),
     }
 }
 

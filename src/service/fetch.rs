@@ -60,7 +60,7 @@ pub async fn take(store: &Store, id: &str) -> Result<Take> {
     let row = store
         .get(id)
         .await?
-        .ok_or_else(|| Error::NotFound(format!("sequence {id}")))?;
+        .ok_or_else(|| Error::NotFound(format!("take {id}")))?;
     parse(store, row).await
 }
 
@@ -194,7 +194,7 @@ pub async fn whole_take(store: &Store, take: &Take) -> Result<Vec<f32>> {
     let shared = shared(store, &header).await?;
     let rows = store.chunks(id, 0, header.chunks.len() as i64).await?;
     if rows.len() != header.chunks.len() {
-        return Err(Error::NotFound(format!("sequence {id}")));
+        return Err(Error::NotFound(format!("take {id}")));
     }
     Ok(blocking(move || {
         Reader::new(header, shared)?.read_all(&Stored::new(0, rows.iter().map(|r| &r.payload[..])))

@@ -235,7 +235,7 @@ pub async fn delete(store: &Store, id: &str) -> Result<()> {
     if deleted {
         Ok(())
     } else {
-        Err(Error::NotFound(format!("sequence {id}")))
+        Err(Error::NotFound(format!("take {id}")))
     }
 }
 
@@ -252,7 +252,7 @@ pub async fn update(
     }
     let tags = tags.map(super::normalise_tags);
     if !store.update(id, name, library, tags.as_deref()).await? {
-        return Err(Error::NotFound(format!("sequence {id}")));
+        return Err(Error::NotFound(format!("take {id}")));
     }
     super::fetch::take(store, id).await
 }

@@ -179,7 +179,7 @@ impl ReadCaches {
         match store.coding_stamp(id).await? {
             None => {
                 self.decoders.remove(id);
-                Err(super::Error::NotFound(format!("sequence {id}")))
+                Err(super::Error::NotFound(format!("take {id}")))
             }
             Some(row) => {
                 if Stamp::parse(id, row)? == p.stamp {

@@ -4,7 +4,7 @@
 //! it (the Python client measured 1.6 ms of its own CPU per request against 0.6 ms of the
 //! server's); one request per batch pays that once.
 //!
-//! Each part is the answer `GET /v1/sequences/{id}/frames` gives for its range with the
+//! Each part is the answer `GET /v1/takes/{id}/frames` gives for its range with the
 //! request's points, format and transforms, opened one after the other: the answer holds
 //! one part's reservation at a time (two while the last pieces of one are written), never
 //! the batch's. Everything a part could be refused for is checked before the first is

@@ -32,7 +32,7 @@ pub struct AuditRow {
     pub at: i64,
     pub token_id: Option<String>,
     pub token_name: Option<String>,
-    /// What was asked, e.g. `DELETE /v1/sequences/{id}` or `token create`.
+    /// What was asked, e.g. `DELETE /v1/takes/{id}` or `token create`.
     pub action: String,
     /// What it was asked of: the request's path, or the token's id.
     pub target: String,

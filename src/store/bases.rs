@@ -35,7 +35,7 @@ pub enum Deletion {
 }
 
 const COLUMNS: &str = "id, kind, layout, points, dims, provenance, created_at, \
-    (SELECT COUNT(*) FROM sequence_bases sb WHERE sb.basis_id = bases.id) AS used_by";
+    (SELECT COUNT(*) FROM take_bases sb WHERE sb.basis_id = bases.id) AS used_by";
 
 fn basis_from_row<R: Row>(r: &R, with_payload: bool) -> Result<BasisRow>
 where
@@ -155,8 +155,8 @@ impl Store {
         libraries: &[String],
     ) -> Result<std::collections::HashMap<String, i64>> {
         let sql = format!(
-            "SELECT sb.basis_id AS id, COUNT(*) AS n FROM sequence_bases sb \
-             JOIN sequences s ON s.id = sb.sequence_id \
+            "SELECT sb.basis_id AS id, COUNT(*) AS n FROM take_bases sb \
+             JOIN takes s ON s.id = sb.take_id \
              WHERE s.library IN ({}) GROUP BY sb.basis_id",
             super::marks(1, libraries.len())
         );
@@ -166,7 +166,7 @@ impl Store {
     /// Delete a basis unless a take references it.
     pub async fn delete_basis(&self, id: &str) -> Result<Deletion> {
         self.delete_unreferenced(
-            "SELECT COUNT(*) AS n FROM sequence_bases WHERE basis_id = $1",
+            "SELECT COUNT(*) AS n FROM take_bases WHERE basis_id = $1",
             "DELETE FROM bases WHERE id = $1",
             id,
         )

@@ -179,11 +179,11 @@ impl Store {
                 .execute(&mut *tx)
                 .await;
             if let Err(e) = r {
-                return Err(conflict_or(e, &format!("sequence {}", s.id)));
+                return Err(conflict_or(e, &format!("take {}", s.id)));
             }
             if let Some(n) = &s.stream {
                 sqlx::query(
-                    "UPDATE sequences SET stream_server = $1, stream_url = $2, \
+                    "UPDATE takes SET stream_server = $1, stream_url = $2, \
                      frames_received = 0, stream_state = $3 WHERE id = $4",
                 )
                 .bind(&n.owner.server)
@@ -194,7 +194,7 @@ impl Store {
                 .await?;
             }
             for tag in &s.tags {
-                sqlx::query("INSERT INTO sequence_tags (sequence_id, tag) VALUES ($1, $2)")
+                sqlx::query("INSERT INTO take_tags (take_id, tag) VALUES ($1, $2)")
                     .bind(&s.id)
                     .bind(tag)
                     .execute(&mut *tx)
@@ -204,14 +204,14 @@ impl Store {
                 bind_chunk(sqlx::query(INSERT_CHUNK), &s.id, c).execute(&mut *tx).await?;
             }
             if let Some(b) = &s.basis {
-                sqlx::query("INSERT INTO sequence_bases (sequence_id, basis_id) VALUES ($1, $2)")
+                sqlx::query("INSERT INTO take_bases (take_id, basis_id) VALUES ($1, $2)")
                     .bind(&s.id)
                     .bind(b)
                     .execute(&mut *tx)
                     .await?;
             }
             if let Some(e) = &s.errors {
-                sqlx::query("INSERT INTO take_errors (sequence_id, series) VALUES ($1, $2)")
+                sqlx::query("INSERT INTO take_errors (take_id, series) VALUES ($1, $2)")
                     .bind(&s.id)
                     .bind(e)
                     .execute(&mut *tx)
@@ -219,7 +219,7 @@ impl Store {
             }
             if let Some(a) = &s.analog {
                 sqlx::query(
-                    "INSERT INTO take_analog (sequence_id, header, raw_bytes, stored_bytes) \
+                    "INSERT INTO take_analog (take_id, header, raw_bytes, stored_bytes) \
                      VALUES ($1, $2, $3, $4)",
                 )
                 .bind(&s.id)
@@ -236,7 +236,7 @@ impl Store {
             }
             if let Some(p) = &s.parameters {
                 sqlx::query(
-                    "INSERT INTO take_parameters (sequence_id, format, payload) VALUES ($1, $2, $3)",
+                    "INSERT INTO take_parameters (take_id, format, payload) VALUES ($1, $2, $3)",
                 )
                 .bind(&s.id)
                 .bind(&p.format)
@@ -253,7 +253,7 @@ impl Store {
     pub async fn error_series(&self, id: &str) -> Result<Option<Vec<u8>>> {
         dispatch!(self, pool => {
             Ok(sqlx::query_scalar::<_, Vec<u8>>(
-                "SELECT series FROM take_errors WHERE sequence_id = $1",
+                "SELECT series FROM take_errors WHERE take_id = $1",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -276,7 +276,7 @@ impl Store {
         dispatch!(self, pool => {
             let mut tx = pool.begin_write().await?;
             let sql = format!(
-                "UPDATE sequences SET {}, codec = $10, max_bound_mm = $11, mean_bound_mm = $12, \
+                "UPDATE takes SET {}, codec = $10, max_bound_mm = $11, mean_bound_mm = $12, \
                  header = $13, meta = $14 WHERE id = $15",
                 rows::SET_TOTALS
             );
@@ -294,8 +294,8 @@ impl Store {
             }
             if replace {
                 for sql in [
-                    "DELETE FROM chunks WHERE sequence_id = $1",
-                    "DELETE FROM sequence_bases WHERE sequence_id = $1",
+                    "DELETE FROM chunks WHERE take_id = $1",
+                    "DELETE FROM take_bases WHERE take_id = $1",
                 ] {
                     sqlx::query(sql).bind(&row.id).execute(&mut *tx).await?;
                 }
@@ -305,7 +305,7 @@ impl Store {
             }
             if let Some(b) = basis {
                 sqlx::query(
-                    "INSERT INTO sequence_bases (sequence_id, basis_id) VALUES ($1, $2) \
+                    "INSERT INTO take_bases (take_id, basis_id) VALUES ($1, $2) \
                      ON CONFLICT DO NOTHING",
                 )
                 .bind(&row.id)
@@ -335,7 +335,7 @@ impl Store {
         dispatch!(self, pool => {
             let mut tx = pool.begin_write().await?;
             let sql = format!(
-                "UPDATE sequences SET {}, live_until = $10, frames_received = $11, \
+                "UPDATE takes SET {}, live_until = $10, frames_received = $11, \
                  stream_state = $12 \
                  WHERE id = $13 AND live_until IS NOT NULL AND stream_server = $14",
                 rows::SET_TOTALS
@@ -353,11 +353,11 @@ impl Store {
             }
             // Once: a commit whose answer was lost (the connection dropped as it committed)
             // is sent again, and finds its chunk stored, with the same bytes.
-            let sql = format!("{INSERT_CHUNK} ON CONFLICT (sequence_id, idx) DO NOTHING");
+            let sql = format!("{INSERT_CHUNK} ON CONFLICT (take_id, idx) DO NOTHING");
             let inserted = bind_chunk(sqlx::query(&sql), id, chunk).execute(&mut *tx).await?;
             if inserted.rows_affected() == 0 {
                 let crc: i64 = sqlx::query_scalar(
-                    "SELECT crc32c FROM chunks WHERE sequence_id = $1 AND idx = $2",
+                    "SELECT crc32c FROM chunks WHERE take_id = $1 AND idx = $2",
                 )
                 .bind(id)
                 .bind(chunk.idx)
@@ -380,7 +380,7 @@ impl Store {
     pub async fn renew_lease(&self, id: &str, server: &str, live_until: i64) -> Result<bool> {
         dispatch!(self, pool => {
             let r = sqlx::query(
-                "UPDATE sequences SET live_until = $1 \
+                "UPDATE takes SET live_until = $1 \
                  WHERE id = $2 AND live_until IS NOT NULL AND stream_server = $3",
             )
             .bind(live_until)
@@ -395,7 +395,7 @@ impl Store {
     /// Live takes whose lease ran out before `now` (their server stopped mid-stream).
     pub async fn expired_live(&self, now: i64) -> Result<Vec<String>> {
         dispatch!(self, pool => {
-            sqlx::query("SELECT id FROM sequences WHERE live_until IS NOT NULL AND live_until < $1")
+            sqlx::query("SELECT id FROM takes WHERE live_until IS NOT NULL AND live_until < $1")
                 .bind(now)
                 .fetch_all(pool)
                 .await?
@@ -415,7 +415,7 @@ impl Store {
         by: Closer<'_>,
     ) -> Result<bool> {
         dispatch!(self, pool => {
-            const SET: &str = "UPDATE sequences SET header = $1, meta = $2, live_until = NULL \
+            const SET: &str = "UPDATE takes SET header = $1, meta = $2, live_until = NULL \
                  WHERE id = $3 AND live_until IS NOT NULL";
             let r = match by {
                 Closer::Owner(server) => {
@@ -448,7 +448,7 @@ impl Store {
         dispatch!(self, pool => {
             sqlx::query(
                 "SELECT idx, first_frame, frames, crc32c, length(payload) AS len FROM chunks \
-                 WHERE sequence_id = $1 ORDER BY idx",
+                 WHERE take_id = $1 ORDER BY idx",
             )
             .bind(id)
             .fetch_all(pool)
@@ -472,13 +472,13 @@ impl Store {
     /// A take's metadata and tags, without chunks.
     pub async fn get(&self, id: &str) -> Result<Option<TakeRow>> {
         dispatch!(self, pool => {
-            let row = sqlx::query(&format!("SELECT {} FROM sequences WHERE id = $1", rows::TAKE_COLUMNS))
+            let row = sqlx::query(&format!("SELECT {} FROM takes WHERE id = $1", rows::TAKE_COLUMNS))
                 .bind(id)
                 .fetch_optional(pool)
                 .await?;
             let Some(row) = row else { return Ok(None) };
             let mut s = rows::take_from_row(&row)?;
-            s.tags = sqlx::query("SELECT tag FROM sequence_tags WHERE sequence_id = $1 ORDER BY tag")
+            s.tags = sqlx::query("SELECT tag FROM take_tags WHERE take_id = $1 ORDER BY tag")
                 .bind(id)
                 .fetch_all(pool)
                 .await?
@@ -493,7 +493,7 @@ impl Store {
     pub async fn chunks(&self, id: &str, first: i64, end: i64) -> Result<Vec<ChunkRow>> {
         self.chunk_range(
             "SELECT idx, first_frame, frames, crc32c, payload FROM chunks \
-             WHERE sequence_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
+             WHERE take_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
             id,
             first,
             end,
@@ -526,7 +526,7 @@ impl Store {
     pub async fn analog(&self, id: &str) -> Result<Option<AnalogRows>> {
         dispatch!(self, pool => {
             let row = sqlx::query(
-                "SELECT header, raw_bytes, stored_bytes FROM take_analog WHERE sequence_id = $1",
+                "SELECT header, raw_bytes, stored_bytes FROM take_analog WHERE take_id = $1",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -547,7 +547,7 @@ impl Store {
     pub async fn analog_chunks(&self, id: &str, first: i64, end: i64) -> Result<Vec<ChunkRow>> {
         self.chunk_range(
             "SELECT idx, first_frame, frames, crc32c, payload FROM analog_chunks \
-             WHERE sequence_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
+             WHERE take_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
             id,
             first,
             end,
@@ -559,7 +559,7 @@ impl Store {
     pub async fn parameters(&self, id: &str) -> Result<Option<ParametersRow>> {
         dispatch!(self, pool => {
             let row = sqlx::query(
-                "SELECT format, payload FROM take_parameters WHERE sequence_id = $1",
+                "SELECT format, payload FROM take_parameters WHERE take_id = $1",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -585,7 +585,7 @@ impl Store {
     /// Whether a take exists (one indexed lookup).
     pub async fn exists(&self, id: &str) -> Result<bool> {
         dispatch!(self, pool => {
-            Ok(sqlx::query("SELECT 1 AS one FROM sequences WHERE id = $1")
+            Ok(sqlx::query("SELECT 1 AS one FROM takes WHERE id = $1")
                 .bind(id)
                 .fetch_optional(pool)
                 .await?
@@ -600,7 +600,7 @@ impl Store {
     pub async fn coding_stamp(&self, id: &str) -> Result<Option<StampRow>> {
         dispatch!(self, pool => {
             let row = sqlx::query(
-                "SELECT codec, stored_bytes, frames FROM sequences WHERE id = $1",
+                "SELECT codec, stored_bytes, frames FROM takes WHERE id = $1",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -620,7 +620,7 @@ impl Store {
     /// access checks read on every request, as the take may have moved since it was cached).
     pub async fn library_of(&self, id: &str) -> Result<Option<String>> {
         dispatch!(self, pool => {
-            Ok(sqlx::query_scalar::<_, String>("SELECT library FROM sequences WHERE id = $1")
+            Ok(sqlx::query_scalar::<_, String>("SELECT library FROM takes WHERE id = $1")
                 .bind(id)
                 .fetch_optional(pool)
                 .await?)
@@ -640,7 +640,7 @@ impl Store {
         // A few hundred ids per query: well within either database's bound on parameters.
         for part in ids.chunks(500) {
             let sql = format!(
-                "SELECT id, frames AS n FROM sequences WHERE library IN ({}) AND id IN ({})",
+                "SELECT id, frames AS n FROM takes WHERE library IN ({}) AND id IN ({})",
                 marks(1, libraries.len()),
                 marks(libraries.len() + 1, part.len())
             );
@@ -675,7 +675,7 @@ impl Store {
     /// Delete a take (chunks and tags cascade); false if there was none.
     pub async fn delete(&self, id: &str) -> Result<bool> {
         dispatch!(self, pool => {
-            let r = sqlx::query("DELETE FROM sequences WHERE id = $1").bind(id).execute(pool).await?;
+            let r = sqlx::query("DELETE FROM takes WHERE id = $1").bind(id).execute(pool).await?;
             Ok(r.rows_affected() > 0)
         })
     }
@@ -683,7 +683,7 @@ impl Store {
     /// Number of takes stored (operations and tests).
     pub async fn count(&self) -> Result<i64> {
         dispatch!(self, pool => {
-            let row = sqlx::query("SELECT COUNT(*) AS n FROM sequences").fetch_one(pool).await?;
+            let row = sqlx::query("SELECT COUNT(*) AS n FROM takes").fetch_one(pool).await?;
             Ok(row.try_get::<i64, _>("n")?)
         })
     }
@@ -692,7 +692,7 @@ impl Store {
     pub async fn counts(&self) -> Result<(i64, i64)> {
         dispatch!(self, pool => {
             let row = sqlx::query(
-                "SELECT (SELECT COUNT(*) FROM sequences) AS takes, (SELECT COUNT(*) FROM chunks) AS chunks",
+                "SELECT (SELECT COUNT(*) FROM takes) AS takes, (SELECT COUNT(*) FROM chunks) AS chunks",
             )
             .fetch_one(pool)
             .await?;
@@ -709,10 +709,10 @@ impl Store {
     }
 }
 
-const INSERT_CHUNK: &str = "INSERT INTO chunks (sequence_id, idx, first_frame, frames, crc32c, \
+const INSERT_CHUNK: &str = "INSERT INTO chunks (take_id, idx, first_frame, frames, crc32c, \
     payload) VALUES ($1, $2, $3, $4, $5, $6)";
 
-const INSERT_ANALOG_CHUNK: &str = "INSERT INTO analog_chunks (sequence_id, idx, first_frame, \
+const INSERT_ANALOG_CHUNK: &str = "INSERT INTO analog_chunks (take_id, idx, first_frame, \
     frames, crc32c, payload) VALUES ($1, $2, $3, $4, $5, $6)";
 
 /// Bind a chunk's columns, in [`INSERT_CHUNK`] order, to a query of either backend.
@@ -780,7 +780,7 @@ impl Store {
     ) -> Result<Page> {
         let w = query::where_clause(filter, cursor);
         let sql = format!(
-            "SELECT {} FROM sequences {} {} LIMIT {}",
+            "SELECT {} FROM takes {} {} LIMIT {}",
             rows::TAKE_COLUMNS,
             w.text,
             query::order_by(sort, descending),
@@ -811,7 +811,7 @@ impl Store {
         }
         let marks: Vec<String> = (1..=items.len()).map(|i| format!("${i}")).collect();
         let sql = format!(
-            "SELECT sequence_id, tag FROM sequence_tags WHERE sequence_id IN ({}) ORDER BY tag",
+            "SELECT take_id, tag FROM take_tags WHERE take_id IN ({}) ORDER BY tag",
             marks.join(", ")
         );
         let ids: Vec<query::Value> = items
@@ -821,7 +821,7 @@ impl Store {
         let pairs: Vec<(String, String)> = dispatch!(self, pool => {
             let rows = bind_all!(sqlx::query(&sql), &ids).fetch_all(pool).await?;
             rows.iter()
-                .map(|r| Ok((r.try_get::<String, _>("sequence_id")?, r.try_get::<String, _>("tag")?)))
+                .map(|r| Ok((r.try_get::<String, _>("take_id")?, r.try_get::<String, _>("tag")?)))
                 .collect::<Result<Vec<_>>>()?
         });
         for s in items.iter_mut() {
@@ -840,18 +840,18 @@ impl Store {
         let sql = format!(
             "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, \
              max_mm, id, name, layout, source_format, meta, skeleton_id, \
-             (SELECT COUNT(*) FROM chunks c WHERE c.sequence_id = sequences.id) \
-              + (SELECT COUNT(*) FROM analog_chunks c WHERE c.sequence_id = sequences.id) \
+             (SELECT COUNT(*) FROM chunks c WHERE c.take_id = takes.id) \
+              + (SELECT COUNT(*) FROM analog_chunks c WHERE c.take_id = takes.id) \
               AS chunk_rows, \
-             (SELECT a.raw_bytes FROM take_analog a WHERE a.sequence_id = sequences.id) \
+             (SELECT a.raw_bytes FROM take_analog a WHERE a.take_id = takes.id) \
               AS analog_raw_bytes, \
-             (SELECT a.stored_bytes FROM take_analog a WHERE a.sequence_id = sequences.id) \
+             (SELECT a.stored_bytes FROM take_analog a WHERE a.take_id = takes.id) \
               AS analog_stored_bytes, \
              (SELECT CAST(LENGTH(p.payload) AS BIGINT) FROM take_parameters p \
-              WHERE p.sequence_id = sequences.id) AS parameters_bytes, \
-             (SELECT COALESCE(SUM(LENGTH(t.tag) + LENGTH(t.sequence_id)), 0) \
-              FROM sequence_tags t WHERE t.sequence_id = sequences.id) AS tag_bytes \
-             FROM sequences {}",
+              WHERE p.take_id = takes.id) AS parameters_bytes, \
+             (SELECT COALESCE(SUM(LENGTH(t.tag) + LENGTH(t.take_id)), 0) \
+              FROM take_tags t WHERE t.take_id = takes.id) AS tag_bytes \
+             FROM takes {}",
             w.text
         );
         dispatch!(self, pool => {
@@ -911,7 +911,7 @@ impl Store {
     ) -> Result<bool> {
         dispatch!(self, pool => {
             let mut tx = pool.begin_write().await?;
-            let found = sqlx::query("SELECT id FROM sequences WHERE id = $1")
+            let found = sqlx::query("SELECT id FROM takes WHERE id = $1")
                 .bind(id)
                 .fetch_optional(&mut *tx)
                 .await?
@@ -920,15 +920,15 @@ impl Store {
                 return Ok(false);
             }
             if let Some(n) = name {
-                sqlx::query("UPDATE sequences SET name = $1 WHERE id = $2").bind(n).bind(id).execute(&mut *tx).await?;
+                sqlx::query("UPDATE takes SET name = $1 WHERE id = $2").bind(n).bind(id).execute(&mut *tx).await?;
             }
             if let Some(l) = library {
-                sqlx::query("UPDATE sequences SET library = $1 WHERE id = $2").bind(l).bind(id).execute(&mut *tx).await?;
+                sqlx::query("UPDATE takes SET library = $1 WHERE id = $2").bind(l).bind(id).execute(&mut *tx).await?;
             }
             if let Some(tags) = tags {
-                sqlx::query("DELETE FROM sequence_tags WHERE sequence_id = $1").bind(id).execute(&mut *tx).await?;
+                sqlx::query("DELETE FROM take_tags WHERE take_id = $1").bind(id).execute(&mut *tx).await?;
                 for t in tags {
-                    sqlx::query("INSERT INTO sequence_tags (sequence_id, tag) VALUES ($1, $2)")
+                    sqlx::query("INSERT INTO take_tags (take_id, tag) VALUES ($1, $2)")
                         .bind(id)
                         .bind(t)
                         .execute(&mut *tx)

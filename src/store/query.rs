@@ -129,7 +129,7 @@ pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
     }
     if let Some(v) = &f.tag {
         s.push(
-            "id IN (SELECT sequence_id FROM sequence_tags WHERE tag = ?)",
+            "id IN (SELECT take_id FROM take_tags WHERE tag = ?)",
             Value::Text(v.clone()),
         );
     }

@@ -159,7 +159,7 @@ pub const TAKE_COLUMNS: &str = "id, name, library, fps, frames, points, duration
 pub const SET_TOTALS: &str = "frames = $1, duration_s = $2, raw_bytes = $3, stored_bytes = $4, \
     ratio = $5, mean_mm = $6, rms_mm = $7, max_mm = $8, kg_percent = $9";
 
-pub const INSERT_TAKE: &str = "INSERT INTO sequences (frames, duration_s, raw_bytes, \
+pub const INSERT_TAKE: &str = "INSERT INTO takes (frames, duration_s, raw_bytes, \
     stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, id, name, library, fps, points, \
     metres_per_unit, layout, source_format, codec, max_bound_mm, mean_bound_mm, header, meta, \
     created_at, live_until, skeleton_id) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, \

@@ -24,7 +24,7 @@ pub struct SkeletonRow {
 }
 
 const COLUMNS: &str = "id, layout, joints, created_at, \
-    (SELECT COUNT(*) FROM sequences s WHERE s.skeleton_id = skeletons.id) AS used_by";
+    (SELECT COUNT(*) FROM takes s WHERE s.skeleton_id = skeletons.id) AS used_by";
 
 pub(super) const INSERT: &str = "INSERT INTO skeletons (id, layout, joints, payload, created_at) \
     VALUES ($1, $2, $3, $4, $5) ON CONFLICT (id) DO NOTHING";
@@ -89,7 +89,7 @@ impl Store {
         libraries: &[String],
     ) -> Result<std::collections::HashMap<String, i64>> {
         let sql = format!(
-            "SELECT skeleton_id AS id, COUNT(*) AS n FROM sequences \
+            "SELECT skeleton_id AS id, COUNT(*) AS n FROM takes \
              WHERE skeleton_id IS NOT NULL AND library IN ({}) GROUP BY skeleton_id",
             super::marks(1, libraries.len())
         );
@@ -99,7 +99,7 @@ impl Store {
     /// Delete a skeleton unless a take references it.
     pub async fn delete_skeleton(&self, id: &str) -> Result<Deletion> {
         self.delete_unreferenced(
-            "SELECT COUNT(*) AS n FROM sequences WHERE skeleton_id = $1",
+            "SELECT COUNT(*) AS n FROM takes WHERE skeleton_id = $1",
             "DELETE FROM skeletons WHERE id = $1",
             id,
         )

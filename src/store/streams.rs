@@ -85,7 +85,7 @@ impl Store {
             let row = sqlx::query(
                 "SELECT stream_server, stream_url, live_until, frames, \
                  COALESCE(frames_received, frames) AS received, stream_state \
-                 FROM sequences WHERE id = $1 AND live_until IS NOT NULL",
+                 FROM takes WHERE id = $1 AND live_until IS NOT NULL",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -110,7 +110,7 @@ impl Store {
     pub async fn claim_stream(&self, id: &str, claim: &StreamClaim<'_>) -> Result<bool> {
         dispatch!(self, pool => {
             let r = sqlx::query(
-                "UPDATE sequences SET stream_server = $1, stream_url = $2, live_until = $3, \
+                "UPDATE takes SET stream_server = $1, stream_url = $2, live_until = $3, \
                  frames_received = frames, meta = $4 \
                  WHERE id = $5 AND live_until IS NOT NULL \
                  AND (live_until < $6 OR stream_server = $1) \
@@ -141,7 +141,7 @@ impl Store {
     ) -> Result<bool> {
         dispatch!(self, pool => {
             let r = sqlx::query(
-                "UPDATE sequences SET frames_received = $1, live_until = $2 \
+                "UPDATE takes SET frames_received = $1, live_until = $2 \
                  WHERE id = $3 AND live_until IS NOT NULL AND stream_server = $4",
             )
             .bind(frames_received)

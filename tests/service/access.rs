@@ -160,7 +160,7 @@ async fn new_take(srv: &common::Server, admin: &str, seed: u64) -> String {
         srv,
         Some(admin),
         Method::POST,
-        "/v1/sequences?library=lab&codec=quant&max_error_mm=1",
+        "/v1/takes?library=lab&codec=quant&max_error_mm=1",
         Body::Bytes(take_bytes(seed)),
     )
     .await;
@@ -204,22 +204,16 @@ fn cases() -> Vec<Case> {
     };
     vec![
         c(Method::GET, "/metrics", "admin", false, 200),
-        c(Method::GET, "/v1/sequences", "read", false, 200),
-        c(Method::POST, "/v1/sequences", "write", true, 201),
-        c(Method::GET, "/v1/sequences/{id}", "read", true, 200),
-        c(Method::PATCH, "/v1/sequences/{id}", "write", true, 200),
-        c(Method::DELETE, "/v1/sequences/{id}", "admin", true, 204),
-        c(Method::GET, "/v1/sequences/{id}/frames", "read", true, 200),
-        c(Method::GET, "/v1/sequences/{id}/errors", "read", true, 200),
+        c(Method::GET, "/v1/takes", "read", false, 200),
+        c(Method::POST, "/v1/takes", "write", true, 201),
+        c(Method::GET, "/v1/takes/{id}", "read", true, 200),
+        c(Method::PATCH, "/v1/takes/{id}", "write", true, 200),
+        c(Method::DELETE, "/v1/takes/{id}", "admin", true, 204),
+        c(Method::GET, "/v1/takes/{id}/frames", "read", true, 200),
+        c(Method::GET, "/v1/takes/{id}/errors", "read", true, 200),
         // The matrix's take is no C3D: no analog channels, no parameters (409).
-        c(Method::GET, "/v1/sequences/{id}/analog", "read", true, 409),
-        c(
-            Method::GET,
-            "/v1/sequences/{id}/parameters",
-            "read",
-            true,
-            409,
-        ),
+        c(Method::GET, "/v1/takes/{id}/analog", "read", true, 409),
+        c(Method::GET, "/v1/takes/{id}/parameters", "read", true, 409),
         c(Method::GET, "/v1/stats", "read", false, 200),
         c(Method::GET, "/v1/export", "read", false, 200),
         // A batch naming a take of the lab: to another library's token it is not there.
@@ -278,19 +272,19 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
     let take = || async { new_take(srv, admin, n).await };
     let stream = || async { new_stream(srv, admin).await };
     match (case.method.as_str(), case.route) {
-        ("POST", "/v1/sequences") => (
-            "/v1/sequences?library=lab&codec=quant&max_error_mm=1".into(),
+        ("POST", "/v1/takes") => (
+            "/v1/takes?library=lab&codec=quant&max_error_mm=1".into(),
             Body::Bytes(take_bytes(n)),
         ),
-        ("GET", "/v1/sequences/{id}") => (format!("/v1/sequences/{}", take().await), Body::None),
+        ("GET", "/v1/takes/{id}") => (format!("/v1/takes/{}", take().await), Body::None),
         ("PATCH", _) => (
-            format!("/v1/sequences/{}", take().await),
+            format!("/v1/takes/{}", take().await),
             Body::Json(json!({"tags": ["seen"]})),
         ),
-        ("DELETE", "/v1/sequences/{id}") => (format!("/v1/sequences/{}", take().await), Body::None),
-        ("GET", "/v1/sequences/{id}/frames") => (
+        ("DELETE", "/v1/takes/{id}") => (format!("/v1/takes/{}", take().await), Body::None),
+        ("GET", "/v1/takes/{id}/frames") => (
             format!(
-                "/v1/sequences/{}/frames?start=0&end=10&format=f32",
+                "/v1/takes/{}/frames?start=0&end=10&format=f32",
                 take().await
             ),
             Body::None,
@@ -302,16 +296,15 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
                 Body::None,
             )
         }
-        ("GET", "/v1/sequences/{id}/errors") => {
-            (format!("/v1/sequences/{}/errors", take().await), Body::None)
+        ("GET", "/v1/takes/{id}/errors") => {
+            (format!("/v1/takes/{}/errors", take().await), Body::None)
         }
-        ("GET", "/v1/sequences/{id}/analog") => {
-            (format!("/v1/sequences/{}/analog", take().await), Body::None)
+        ("GET", "/v1/takes/{id}/analog") => {
+            (format!("/v1/takes/{}/analog", take().await), Body::None)
         }
-        ("GET", "/v1/sequences/{id}/parameters") => (
-            format!("/v1/sequences/{}/parameters", take().await),
-            Body::None,
-        ),
+        ("GET", "/v1/takes/{id}/parameters") => {
+            (format!("/v1/takes/{}/parameters", take().await), Body::None)
+        }
         ("POST", "/v1/bases") => (
             "/v1/bases".into(),
             Body::Json(json!({"library": "no such library"})),
@@ -416,7 +409,7 @@ async fn every_route_answers_every_caller_as_documented() {
             &srv,
             Some(&secrets.read),
             Method::GET,
-            "/v1/sequences",
+            "/v1/takes",
             Body::None,
         )
         .await;
@@ -424,7 +417,7 @@ async fn every_route_answers_every_caller_as_documented() {
             &srv,
             Some(&secrets.wrong),
             Method::GET,
-            "/v1/sequences",
+            "/v1/takes",
             Body::None,
         )
         .await;
@@ -453,12 +446,12 @@ async fn every_route_answers_every_caller_as_documented() {
         let entries = log.as_array().unwrap();
         assert!(entries
             .iter()
-            .any(|e| e["action"] == "DELETE /v1/sequences/{id}"
+            .any(|e| e["action"] == "DELETE /v1/takes/{id}"
                 && e["status"] == 204
                 && e["token_name"] == "admin"));
         assert!(entries
             .iter()
-            .any(|e| e["action"] == "DELETE /v1/sequences/{id}"
+            .any(|e| e["action"] == "DELETE /v1/takes/{id}"
                 && e["status"] == 403
                 && e["token_name"] == "writer"));
         assert!(entries
@@ -491,7 +484,7 @@ async fn assert_no_secret_stored(t: &common::TestStore, secrets: &[&str]) {
         }
         Store::Postgres(pool) => {
             let mut all = Vec::new();
-            for table in ["tokens", "audit_log", "sequences", "sequence_tags"] {
+            for table in ["tokens", "audit_log", "takes", "take_tags"] {
                 let rows: Vec<String> =
                     sqlx::query_scalar(&format!("SELECT t::text FROM {table} t"))
                         .fetch_all(pool)
@@ -541,13 +534,13 @@ async fn without_tokens_the_server_stays_on_loopback_and_refuses_other_hosts() {
     let srv = common::start(t.store.clone(), 1 << 20).await;
     let r = srv
         .client
-        .get(format!("{}/v1/sequences", srv.base))
+        .get(format!("{}/v1/takes", srv.base))
         .header("host", "evil.example")
         .send()
         .await
         .unwrap();
     assert_eq!(r.status(), 403);
-    let (status, _, _) = srv.get("/v1/sequences").await;
+    let (status, _, _) = srv.get("/v1/takes").await;
     assert_eq!(status, 200);
     // With a token, the same address may serve beyond loopback.
     token(&t.store, "ops", "admin", None).await;
@@ -576,7 +569,7 @@ async fn cross_origin_writes_are_refused_unless_the_origin_is_allowed() {
     .await;
     let post = |origin: &'static str| {
         srv.client
-            .post(format!("{}/v1/sequences?codec=quant", srv.base))
+            .post(format!("{}/v1/takes?codec=quant", srv.base))
             .header("origin", origin)
             .header("content-type", "text/plain")
             .body(take_bytes(1))
@@ -586,7 +579,7 @@ async fn cross_origin_writes_are_refused_unless_the_origin_is_allowed() {
     assert_eq!(r.status(), 403);
     let v: Value = r.json().await.unwrap();
     assert_eq!(v["error"]["code"], "cross_origin");
-    let (_, list) = srv.get_json("/v1/sequences").await;
+    let (_, list) = srv.get_json("/v1/takes").await;
     assert!(
         list["items"].as_array().unwrap().is_empty(),
         "nothing stored"
@@ -600,7 +593,7 @@ async fn cross_origin_writes_are_refused_unless_the_origin_is_allowed() {
     // A preflight from the allowed origin is answered; one from elsewhere gets no grant.
     let pre = |origin: &'static str| {
         srv.client
-            .request(Method::OPTIONS, format!("{}/v1/sequences", srv.base))
+            .request(Method::OPTIONS, format!("{}/v1/takes", srv.base))
             .header("origin", origin)
             .header("access-control-request-method", "POST")
             .header(
@@ -643,13 +636,13 @@ async fn the_rate_limit_answers_429_with_retry_after_and_recovers() {
         &srv,
         Some(&writer),
         Method::POST,
-        "/v1/sequences?codec=quant",
+        "/v1/takes?codec=quant",
         Body::Bytes(take_bytes(5)),
     )
     .await;
     assert_eq!(status, 201, "{v}");
     let frames = format!(
-        "/v1/sequences/{}/frames?start=0&end=5",
+        "/v1/takes/{}/frames?start=0&end=5",
         v["id"].as_str().unwrap()
     );
     let (status, v) = call(&srv, Some(&other), Method::GET, &frames, Body::None).await;
@@ -834,7 +827,7 @@ async fn token_commands_work_and_no_secret_reaches_the_server_log() {
     let wrong = format!("mcs_{}", "0".repeat(64));
     for s in [&secret, &wrong] {
         let _ = client
-            .post(format!("{base}/v1/sequences?library=lab&codec=quant"))
+            .post(format!("{base}/v1/takes?library=lab&codec=quant"))
             .bearer_auth(s)
             .body(take_bytes(3))
             .send()
@@ -842,7 +835,7 @@ async fn token_commands_work_and_no_secret_reaches_the_server_log() {
             .unwrap();
     }
     let r = client
-        .get(format!("{base}/v1/sequences"))
+        .get(format!("{base}/v1/takes"))
         .bearer_auth(&secret)
         .send()
         .await
@@ -853,7 +846,7 @@ async fn token_commands_work_and_no_secret_reaches_the_server_log() {
     let text = std::fs::read_to_string(&log).unwrap_or_default()
         + &std::fs::read_to_string(log.with_extension("err")).unwrap_or_default();
     assert!(
-        text.contains("/v1/sequences"),
+        text.contains("/v1/takes"),
         "the log has the requests: {text}"
     );
     for s in [&secret, &wrong] {
@@ -882,7 +875,7 @@ async fn token_commands_work_and_no_secret_reaches_the_server_log() {
         "{out}"
     );
     assert!(
-        out.contains("POST /v1/sequences") && out.contains("| lab-writer |"),
+        out.contains("POST /v1/takes") && out.contains("| lab-writer |"),
         "{out}"
     );
     assert!(!out.contains(&secret[4..]));
@@ -1052,7 +1045,7 @@ async fn a_revoked_token_stops_at_once_here_and_within_the_cache_time_everywhere
 /// The status of a read with `secret` on `srv`.
 async fn status(client: &reqwest::Client, srv: &common::Server, secret: &str) -> u16 {
     client
-        .get(format!("{}/v1/sequences", srv.base))
+        .get(format!("{}/v1/takes", srv.base))
         .bearer_auth(secret)
         .send()
         .await

@@ -170,7 +170,7 @@ async fn verify_names_a_damaged_take_and_export_import_round_trips_byte_for_byte
         unreachable!()
     };
     let (payload,): (Vec<u8>,) =
-        sqlx::query_as("SELECT payload FROM chunks WHERE sequence_id = $1 AND idx = 0")
+        sqlx::query_as("SELECT payload FROM chunks WHERE take_id = $1 AND idx = 0")
             .bind(victim)
             .fetch_one(pool)
             .await
@@ -178,7 +178,7 @@ async fn verify_names_a_damaged_take_and_export_import_round_trips_byte_for_byte
     let mut bad = payload.clone();
     let last = bad.len() - 1;
     bad[last] ^= 0x10;
-    sqlx::query("UPDATE chunks SET payload = $1 WHERE sequence_id = $2 AND idx = 0")
+    sqlx::query("UPDATE chunks SET payload = $1 WHERE take_id = $2 AND idx = 0")
         .bind(bad)
         .bind(victim)
         .execute(pool)

@@ -109,7 +109,7 @@ async fn bases_train_in_the_background_code_takes_and_are_kept_while_used() {
         assert_eq!(r["codec"], "lsdt-clip");
         let clip_id = r["id"].as_str().unwrap().to_string();
         let (status, _, served) = srv
-            .get(&format!("/v1/sequences/{clip_id}/frames?format=f32"))
+            .get(&format!("/v1/takes/{clip_id}/frames?format=f32"))
             .await;
         assert_eq!(status, 200);
         let served: Vec<f32> = served
@@ -159,7 +159,7 @@ async fn bases_train_in_the_background_code_takes_and_are_kept_while_used() {
         let shared_id = r["id"].as_str().unwrap().to_string();
         let (_, _, served) = srv
             .get(&format!(
-                "/v1/sequences/{shared_id}/frames?start=17&end=250&format=f32"
+                "/v1/takes/{shared_id}/frames?start=17&end=250&format=f32"
             ))
             .await;
         let served: Vec<f32> = served
@@ -168,15 +168,15 @@ async fn bases_train_in_the_background_code_takes_and_are_kept_while_used() {
             .collect();
         let s = metrics::compare(&fresh.positions()[17 * 24..250 * 24], &served, 8, 1.0).unwrap();
         assert!(s.max_mm <= 0.5, "{}", s.max_mm);
-        assert_eq!(srv.delete(&format!("/v1/sequences/{shared_id}")).await, 204);
+        assert_eq!(srv.delete(&format!("/v1/takes/{shared_id}")).await, 204);
 
         // In use: 409, and nothing deleted. Unused again: 204.
         let (status, b) = srv.get_json(&format!("/v1/bases/{id}")).await;
         assert!(b["used_by"].as_i64().unwrap() >= 1, "{status} {b}");
         assert_eq!(srv.delete(&format!("/v1/bases/{id}")).await, 409);
         assert_eq!(srv.get_json(&format!("/v1/bases/{id}")).await.0, 200);
-        assert_eq!(srv.delete(&format!("/v1/sequences/{clip_id}")).await, 204);
-        assert_eq!(srv.delete(&format!("/v1/sequences/{auto_id}")).await, 204);
+        assert_eq!(srv.delete(&format!("/v1/takes/{clip_id}")).await, 204);
+        assert_eq!(srv.delete(&format!("/v1/takes/{auto_id}")).await, 204);
         assert_eq!(srv.delete(&format!("/v1/bases/{id}")).await, 204);
         assert_eq!(srv.delete(&format!("/v1/bases/{id}")).await, 404);
         assert_eq!(srv.get_json("/v1/jobs/nope").await.0, 404);

@@ -116,9 +116,7 @@ async fn c3d_files_come_back_whole() {
         );
 
         // The whole analog answer is every value in its unit, as the file holds it.
-        let (status, _, body) = srv
-            .get(&format!("/v1/sequences/{id}/analog?format=json"))
-            .await;
+        let (status, _, body) = srv.get(&format!("/v1/takes/{id}/analog?format=json")).await;
         assert_eq!(status, 200, "{name}");
         let whole: Value = serde_json::from_slice(&body).unwrap();
         let rows = whole["values"].as_array().unwrap();
@@ -138,7 +136,7 @@ async fn c3d_files_come_back_whole() {
             let (s, e) = (frames / 3, frames / 3 + frames / 4 + 1);
             let (status, _, body) = srv
                 .get(&format!(
-                    "/v1/sequences/{id}/analog?format=json&start={s}&end={e}"
+                    "/v1/takes/{id}/analog?format=json&start={s}&end={e}"
                 ))
                 .await;
             assert_eq!(status, 200, "{name}");
@@ -152,9 +150,7 @@ async fn c3d_files_come_back_whole() {
         }
 
         // The file back, read by the independent readers.
-        let (status, _, c3d) = srv
-            .get(&format!("/v1/sequences/{id}/frames?format=c3d"))
-            .await;
+        let (status, _, c3d) = srv.get(&format!("/v1/takes/{id}/frames?format=c3d")).await;
         assert_eq!(status, 200, "{name}");
         if let Some(python) = &python {
             let bound_mm = report["decision"]["tried"]
@@ -199,9 +195,7 @@ async fn analog_bounds_and_analog_only_files() {
     );
     let id = report["id"].as_str().unwrap().to_string();
     let (status, _, body) = srv
-        .get(&format!(
-            "/v1/sequences/{id}/analog?format=csv&channels=MG-2"
-        ))
+        .get(&format!("/v1/takes/{id}/analog?format=csv&channels=MG-2"))
         .await;
     let text = String::from_utf8(body).unwrap();
     assert_eq!(status, 200, "{text}");
@@ -210,9 +204,7 @@ async fn analog_bounds_and_analog_only_files() {
         "{}",
         &text[..200.min(text.len())]
     );
-    let (status, _, c3d) = srv
-        .get(&format!("/v1/sequences/{id}/frames?format=c3d"))
-        .await;
+    let (status, _, c3d) = srv.get(&format!("/v1/takes/{id}/frames?format=c3d")).await;
     assert_eq!(status, 200);
     let back = formats::read(&c3d, &ReadOptions::default()).unwrap();
     assert_eq!(back.motion.point_count(), 0);
@@ -242,9 +234,7 @@ async fn analog_bounds_and_analog_only_files() {
         .analog
         .unwrap();
     let id = bounded["id"].as_str().unwrap();
-    let (_, _, body) = srv
-        .get(&format!("/v1/sequences/{id}/analog?format=json"))
-        .await;
+    let (_, _, body) = srv.get(&format!("/v1/takes/{id}/analog?format=json")).await;
     let v: Value = serde_json::from_slice(&body).unwrap();
     for (r, row) in v["values"].as_array().unwrap().iter().enumerate() {
         for (c, x) in row.as_array().unwrap().iter().enumerate() {
@@ -277,14 +267,14 @@ async fn analog_bounds_and_analog_only_files() {
     let trc = std::fs::read(root.join("trc/TRCSamples__Knee.trc")).unwrap();
     let (_, knee) = srv.post("name=knee&codec=quant", trc).await;
     let id = knee["id"].as_str().unwrap();
-    let (status, _, _) = srv.get(&format!("/v1/sequences/{id}/analog")).await;
+    let (status, _, _) = srv.get(&format!("/v1/takes/{id}/analog")).await;
     assert_eq!(status, 409);
-    let (status, _, _) = srv.get(&format!("/v1/sequences/{id}/parameters")).await;
+    let (status, _, _) = srv.get(&format!("/v1/takes/{id}/parameters")).await;
     assert_eq!(status, 409);
 
     // Parameters and events are kept and shown.
     let (status, view) = srv
-        .get_json(&format!("/v1/sequences/{}", exact["id"].as_str().unwrap()))
+        .get_json(&format!("/v1/takes/{}", exact["id"].as_str().unwrap()))
         .await;
     assert_eq!(status, 200);
     assert_eq!(
@@ -295,7 +285,7 @@ async fn analog_bounds_and_analog_only_files() {
     );
     let (status, p) = srv
         .get_json(&format!(
-            "/v1/sequences/{}/parameters",
+            "/v1/takes/{}/parameters",
             exact["id"].as_str().unwrap()
         ))
         .await;

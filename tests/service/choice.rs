@@ -124,9 +124,7 @@ async fn the_candidates_left_out_run_when_every_kept_one_fails() {
     assert!(report["max_mm"].as_f64().unwrap() <= 0.3);
     // Stored whole, and readable.
     let id = report["id"].as_str().unwrap();
-    let (status, _, _) = srv
-        .get(&format!("/v1/sequences/{id}/frames?format=json"))
-        .await;
+    let (status, _, _) = srv.get(&format!("/v1/takes/{id}/frames?format=json")).await;
     assert_eq!(status, 200);
     srv.stop().await;
     t.finish().await;

@@ -108,7 +108,7 @@ async fn jobs_are_seen_shared_and_taken_over_by_every_server() {
             let m = walker(1_200, 12, 120.0, i + 1, 0.0);
             let r = reqwest::Client::new()
                 .post(format!(
-                    "{}/v1/sequences?library=lab&name=t{i}",
+                    "{}/v1/takes?library=lab&name=t{i}",
                     base(i as usize)
                 ))
                 .body(formats::write(&m, Format::Json).unwrap())
@@ -297,7 +297,7 @@ async fn a_database_outage_is_503s_and_the_server_recovers_by_itself() {
     assert_eq!(status, 200);
     let first = walker(120, 6, 60.0, 1, 0.0);
     let r = client
-        .post(format!("{}/v1/sequences?codec=quant&name=first", srv.base))
+        .post(format!("{}/v1/takes?codec=quant&name=first", srv.base))
         .body(formats::write(&first, Format::Json).unwrap())
         .send()
         .await
@@ -326,12 +326,12 @@ async fn a_database_outage_is_503s_and_the_server_recovers_by_itself() {
                 let req = if ingest {
                     let m = walker(60, 6, 60.0, 100 * w + n, 0.0);
                     client
-                        .post(format!("{base}/v1/sequences?codec=quant&library=outage"))
+                        .post(format!("{base}/v1/takes?codec=quant&library=outage"))
                         .body(formats::write(&m, Format::Json).unwrap())
                 } else if n.is_multiple_of(2) {
-                    client.get(format!("{base}/v1/sequences/{known}/frames?format=f32"))
+                    client.get(format!("{base}/v1/takes/{known}/frames?format=f32"))
                 } else {
-                    client.get(format!("{base}/v1/sequences?library=outage"))
+                    client.get(format!("{base}/v1/takes?library=outage"))
                 };
                 let asked = std::time::Instant::now();
                 let r = req
@@ -542,7 +542,7 @@ async fn a_stream_keeps_its_frames_through_a_database_outage() {
         held > 60,
         "chunks (60 frames) were held while the database was away: {held}"
     );
-    let (status, _, body) = srv.get(&format!("/v1/sequences/{id}/frames")).await;
+    let (status, _, body) = srv.get(&format!("/v1/takes/{id}/frames")).await;
     assert_eq!(status, 200);
     let v: Value = serde_json::from_slice(&body).unwrap();
     let frames = v["frames"].as_array().unwrap();
@@ -720,7 +720,7 @@ async fn a_stream_goes_through_any_server_and_outlives_its_server() {
 
         // The take as sent, within its bound, read from either server left; stats agree.
         for base in &bases[1..] {
-            let (status, v) = get_json(base, &format!("/v1/sequences/{id}/frames")).await;
+            let (status, v) = get_json(base, &format!("/v1/takes/{id}/frames")).await;
             assert_eq!(status, 200);
             let got = v["frames"].as_array().unwrap();
             assert_eq!(got.len(), TOTAL);
@@ -742,12 +742,12 @@ async fn a_stream_goes_through_any_server_and_outlives_its_server() {
         let (ok, out, err) = common::mocapstore(&["verify", "--database-url", &url]);
         assert!(ok, "{}: verify: {out}\n{err}", t.name);
         let r = reqwest::Client::new()
-            .delete(format!("{}/v1/sequences/{id}", bases[1]))
+            .delete(format!("{}/v1/takes/{id}", bases[1]))
             .send()
             .await
             .unwrap();
         assert_eq!(r.status(), 204);
-        let (status, _) = get_json(&bases[2], &format!("/v1/sequences/{id}")).await;
+        let (status, _) = get_json(&bases[2], &format!("/v1/takes/{id}")).await;
         assert_eq!(
             status, 404,
             "a take deleted on one server is gone on the others"
@@ -789,7 +789,7 @@ async fn streamtest_spreads_its_requests_over_the_servers() {
         m["mocapstore_stream_requests_forwarded_total"] >= 4,
         "the second server forwarded its share: {m:?}"
     );
-    let (_, list) = a.get_json("/v1/sequences").await;
+    let (_, list) = a.get_json("/v1/takes").await;
     assert_eq!(
         list["items"].as_array().unwrap().len(),
         0,

@@ -215,7 +215,7 @@ impl Server {
     pub async fn post(&self, query: &str, body: Vec<u8>) -> (u16, Value) {
         let r = self
             .client
-            .post(format!("{}/v1/sequences?{query}", self.base))
+            .post(format!("{}/v1/takes?{query}", self.base))
             .body(body)
             .send()
             .await

@@ -90,7 +90,7 @@ async fn library_export_streams_the_corpus_bvh_as_one_zip() {
             set.spawn(async move {
                 let name = f.file_stem().unwrap().to_string_lossy().into_owned();
                 let r = client
-                    .post(format!("{base}/v1/sequences?name={name}&library=corpus"))
+                    .post(format!("{base}/v1/takes?name={name}&library=corpus"))
                     .body(std::fs::read(&f).unwrap())
                     .send()
                     .await
@@ -158,10 +158,7 @@ async fn library_export_streams_the_corpus_bvh_as_one_zip() {
     // The one read path: a file in the ZIP is the range answer, byte for byte.
     for (row, (_, bytes)) in rows.iter().zip(&all).step_by(12) {
         let (status, _, body) = srv
-            .get(&format!(
-                "/v1/sequences/{}/frames?format=glb&fps=30",
-                row["id"]
-            ))
+            .get(&format!("/v1/takes/{}/frames?format=glb&fps=30", row["id"]))
             .await;
         assert_eq!(status, 200);
         assert!(body == *bytes, "{}", row["file"]);
@@ -200,7 +197,7 @@ async fn library_export_streams_the_corpus_bvh_as_one_zip() {
     let alone = common::start(t.store.clone(), 64 << 20).await;
     for id in &ids {
         let (status, _, _) = alone
-            .get(&format!("/v1/sequences/{id}/frames?format=glb&fps=30"))
+            .get(&format!("/v1/takes/{id}/frames?format=glb&fps=30"))
             .await;
         assert_eq!(status, 200);
     }
@@ -348,7 +345,7 @@ async fn export_skips_a_damaged_take_and_writes_one_as_large_as_the_share_allows
     }
     // Alone, the large take's answer reserves past the 1 MiB share (one may).
     let (status, _, alone) = srv
-        .get(&format!("/v1/sequences/{}/frames?format=json", ids[1]))
+        .get(&format!("/v1/takes/{}/frames?format=json", ids[1]))
         .await;
     assert_eq!(status, 200);
     let one_peak = common::gauge(&srv, "mocapstore_answer_bytes_one_peak").await;
@@ -359,14 +356,14 @@ async fn export_skips_a_damaged_take_and_writes_one_as_large_as_the_share_allows
         unreachable!()
     };
     let (mut payload,): (Vec<u8>,) =
-        sqlx::query_as("SELECT payload FROM chunks WHERE sequence_id = $1 AND idx = 0")
+        sqlx::query_as("SELECT payload FROM chunks WHERE take_id = $1 AND idx = 0")
             .bind(&ids[0])
             .fetch_one(pool)
             .await
             .unwrap();
     let last = payload.len() - 1;
     payload[last] ^= 0x10;
-    sqlx::query("UPDATE chunks SET payload = $1 WHERE sequence_id = $2 AND idx = 0")
+    sqlx::query("UPDATE chunks SET payload = $1 WHERE take_id = $2 AND idx = 0")
         .bind(payload)
         .bind(&ids[0])
         .execute(pool)
@@ -398,10 +395,7 @@ async fn an_export_reaches_only_the_libraries_of_its_token() {
     for library in ["a", "b"] {
         let r = srv
             .client
-            .post(format!(
-                "{}/v1/sequences?name=walk&library={library}",
-                srv.base
-            ))
+            .post(format!("{}/v1/takes?name=walk&library={library}", srv.base))
             .bearer_auth(&writer)
             .body(formats::write(&walker(60, 6, 60.0, 1, 0.0), Format::Json).unwrap())
             .send()

@@ -54,7 +54,7 @@ async fn call(
 async fn ingest(srv: &common::Server, secret: &str, query: &str, body: Vec<u8>) -> String {
     let r = srv
         .client
-        .post(format!("{}/v1/sequences?{query}", srv.base))
+        .post(format!("{}/v1/takes?{query}", srv.base))
         .bearer_auth(secret)
         .body(body)
         .send()
@@ -84,7 +84,7 @@ async fn repeated_point_names_are_refused_and_answers_have_a_cap() {
     let (status, r) = srv.post("codec=raw", take).await;
     assert_eq!(status, 201, "{r}");
     let id = r["id"].as_str().unwrap();
-    let frames = |q: String| format!("/v1/sequences/{id}/frames?format=f32&{q}");
+    let frames = |q: String| format!("/v1/takes/{id}/frames?format=f32&{q}");
     // 5,000 repeats answered 12.5 MB on a 209-frame take; now nothing is decoded.
     let repeated = vec!["M1"; 5_000].join(",");
     let (status, body) = srv
@@ -138,7 +138,7 @@ async fn sixteen_whole_take_answers_hold_a_chunk_each_not_the_take() {
             let format = if i % 2 == 0 { "json" } else { "f32" };
             async move {
                 let r = client
-                    .get(format!("{base}/v1/sequences/{id}/frames?format={format}"))
+                    .get(format!("{base}/v1/takes/{id}/frames?format={format}"))
                     .send()
                     .await
                     .unwrap();
@@ -224,7 +224,7 @@ async fn a_flood_of_refusals_adds_under_a_megabyte_to_the_audit_log() {
         )
         .await;
         let before = audit_bytes(&t).await;
-        let path = format!("/v1/sequences/{}", "a".repeat(60_000));
+        let path = format!("/v1/takes/{}", "a".repeat(60_000));
         let request =
             format!("POST {path} HTTP/1.1\r\nHost: localhost\r\nContent-Length: 0\r\n\r\n");
         let (connections, each) = (4, 25_000);
@@ -422,7 +422,7 @@ async fn idle_uploads_hold_what_they_sent_time_out_and_leave_others_room() {
         async move {
             let mut s = TcpStream::connect(&addr).await.unwrap();
             let head = format!(
-                "POST /v1/sequences?name=idle HTTP/1.1\r\nHost: localhost\r\n\
+                "POST /v1/takes?name=idle HTTP/1.1\r\nHost: localhost\r\n\
                  Authorization: Bearer {secret}\r\nContent-Length: {}\r\n\r\n",
                 3u64 << 20
             );
@@ -458,7 +458,7 @@ async fn idle_uploads_hold_what_they_sent_time_out_and_leave_others_room() {
     );
     let r = srv
         .client
-        .post(format!("{}/v1/sequences?{query}", srv.base))
+        .post(format!("{}/v1/takes?{query}", srv.base))
         .bearer_auth(&a)
         .body(big.clone())
         .send()
@@ -672,7 +672,7 @@ async fn a_watch_ends_when_its_token_goes_or_its_take_moves_away() {
             &srv,
             &admin,
             reqwest::Method::PATCH,
-            &format!("/v1/sequences/{id}"),
+            &format!("/v1/takes/{id}"),
             Some(json!({"library": "elsewhere"})),
         )
         .await;
@@ -759,12 +759,12 @@ async fn a_limited_token_sees_only_what_comes_from_its_libraries() {
         let items = list["items"].as_array().unwrap();
         assert_eq!(items.len(), 1, "{list}");
         assert_eq!(items[0]["used_by"], 1);
-        let (_, a_take) = get(format!("/v1/sequences/{a_bvh}")).await;
+        let (_, a_take) = get(format!("/v1/takes/{a_bvh}")).await;
         let (_, b_take) = call(
             &srv,
             &admin,
             reqwest::Method::GET,
-            &format!("/v1/sequences/{b_bvh}"),
+            &format!("/v1/takes/{b_bvh}"),
             None,
         )
         .await;
@@ -776,11 +776,11 @@ async fn a_limited_token_sees_only_what_comes_from_its_libraries() {
         .await;
         assert_eq!(status, 200);
         // Another library's skeleton, take, basis and job answer as unknown ones do.
-        let (nf_status, nf) = get("/v1/sequences/no-such-take".into()).await;
+        let (nf_status, nf) = get("/v1/takes/no-such-take".into()).await;
         for path in [
             format!("/v1/skeletons/{}", b_take["skeleton"].as_str().unwrap()),
-            format!("/v1/sequences/{b_bvh}"),
-            format!("/v1/sequences/{b_bvh}/frames?format=bvh"),
+            format!("/v1/takes/{b_bvh}"),
+            format!("/v1/takes/{b_bvh}/frames?format=bvh"),
             format!("/v1/bases/{b_basis}"),
             format!("/v1/jobs/{b_job}"),
         ] {
@@ -839,7 +839,7 @@ async fn a_limited_token_sees_only_what_comes_from_its_libraries() {
             .contains("mocapstore_http_requests_total"));
         let r = srv
             .client
-            .get(format!("{metrics_base}/v1/sequences"))
+            .get(format!("{metrics_base}/v1/takes"))
             .send()
             .await
             .unwrap();
@@ -929,7 +929,7 @@ async fn without_tokens_a_server_answers_only_names_no_page_can_take() {
         ] {
             let r = srv
                 .client
-                .get(format!("{}/v1/sequences", srv.base))
+                .get(format!("{}/v1/takes", srv.base))
                 .header("host", host)
                 .send()
                 .await
@@ -1022,9 +1022,7 @@ async fn a_c3d_with_nan_samples_as_vicon_writes_them_stores_with_defaults() {
         "{r}"
     );
     let id = r["id"].as_str().unwrap();
-    let (status, _, bytes) = srv
-        .get(&format!("/v1/sequences/{id}/frames?format=f32"))
-        .await;
+    let (status, _, bytes) = srv.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
     assert_eq!(status, 200);
     let values: Vec<f32> = bytes
         .chunks_exact(4)

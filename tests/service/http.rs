@@ -93,9 +93,8 @@ async fn ingest_fetch_and_errors_on_every_backend() {
                 ReadOptions::default()
             };
             let original = load(bytes, &opts);
-            let (status, headers, served) = srv
-                .get(&format!("/v1/sequences/{id}/frames?format=f32"))
-                .await;
+            let (status, headers, served) =
+                srv.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
             assert_eq!(status, 200);
             assert_eq!(
                 headers["x-frames"].to_str().unwrap(),
@@ -127,7 +126,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
                 s.mean_mm
             );
             // The take states its bounds, the cap among them, and the max it measured.
-            let (_, _, meta) = srv.get(&format!("/v1/sequences/{id}")).await;
+            let (_, _, meta) = srv.get(&format!("/v1/takes/{id}")).await;
             let meta: Value = serde_json::from_slice(&meta).unwrap();
             assert_eq!(meta["max_bound_mm"].as_f64(), Some(max), "{query}");
             assert_eq!(meta["mean_bound_mm"].as_f64(), mean, "{query}");
@@ -146,12 +145,10 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         // Ranges: frames, seconds, a subset of points, every format.
         let (_, id, original) = &ids[0];
         let w = original.point_count() * 3;
-        let (_, _, full) = srv
-            .get(&format!("/v1/sequences/{id}/frames?format=f32"))
-            .await;
+        let (_, _, full) = srv.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
         let (status, h, part) = srv
             .get(&format!(
-                "/v1/sequences/{id}/frames?start=100&end=340&format=f32"
+                "/v1/takes/{id}/frames?start=100&end=340&format=f32"
             ))
             .await;
         assert_eq!(status, 200);
@@ -163,7 +160,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         // Seconds select frames whose time f / fps lies in [t0, t1): at 120.00048 fps (this
         // take's), frame 120 is at 0.999996 s, so 1 s starts at frame 121.
         let (status, h, secs) = srv
-            .get(&format!("/v1/sequences/{id}/frames?t0=1&t1=2&format=f32"))
+            .get(&format!("/v1/takes/{id}/frames?t0=1&t1=2&format=f32"))
             .await;
         assert_eq!(status, 200);
         let first: usize = h["x-start-frame"].to_str().unwrap().parse().unwrap();
@@ -172,7 +169,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         assert!(secs == full[first * w * 4..(first + n) * w * 4]);
         let (status, _, body) = srv
             .get(&format!(
-                "/v1/sequences/{id}/frames?start=5&end=7&points=Head,Hips"
+                "/v1/takes/{id}/frames?start=5&end=7&points=Head,Hips"
             ))
             .await;
         assert_eq!(status, 200);
@@ -187,7 +184,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         ] {
             let (status, _, body) = srv
                 .get(&format!(
-                    "/v1/sequences/{id}/frames?start=0&end=10&format={format}"
+                    "/v1/takes/{id}/frames?start=0&end=10&format={format}"
                 ))
                 .await;
             assert_eq!(status, 200, "{format}");
@@ -195,7 +192,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         }
         // One JSON shape, however the format is spelled; it reads back as a take.
         let json = |format: &'static str| {
-            let path = format!("/v1/sequences/{id}/frames?start=3&end=9{format}");
+            let path = format!("/v1/takes/{id}/frames?start=3&end=9{format}");
             let srv = &srv;
             async move {
                 let (status, _, body) = srv.get(&path).await;
@@ -216,9 +213,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         // A skeleton take keeps its animation by default: any range comes back as BVH, the
         // MOTION rows as uploaded; a point-data take cannot, and says why.
         let (status, h, body) = srv
-            .get(&format!(
-                "/v1/sequences/{id}/frames?start=3&end=9&format=bvh"
-            ))
+            .get(&format!("/v1/takes/{id}/frames?start=3&end=9&format=bvh"))
             .await;
         assert_eq!(status, 200);
         assert_eq!(h["x-frames"], "6");
@@ -230,7 +225,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         );
         let (_, c3d_id, _) = &ids[1];
         let (status, _, body) = srv
-            .get(&format!("/v1/sequences/{c3d_id}/frames?format=bvh"))
+            .get(&format!("/v1/takes/{c3d_id}/frames?format=bvh"))
             .await;
         let e: Value = serde_json::from_slice(&body).unwrap();
         assert_error(status, &e, 409);
@@ -243,7 +238,7 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         );
 
         // Metadata, with the decision record.
-        let (status, _, body) = srv.get(&format!("/v1/sequences/{id}")).await;
+        let (status, _, body) = srv.get(&format!("/v1/takes/{id}")).await;
         assert_eq!(status, 200);
         let meta: Value = serde_json::from_slice(&body).unwrap();
         assert_eq!(meta["tags"], serde_json::json!(["a", "b"]));
@@ -283,14 +278,14 @@ async fn ingest_fetch_and_errors_on_every_backend() {
             assert_error(status, &body, want);
         }
         for (path, want) in [
-            ("/v1/sequences/nope".to_string(), 404),
-            ("/v1/sequences/nope/frames".to_string(), 404),
-            (format!("/v1/sequences/{id}/frames?start=0&end=99999"), 416),
-            (format!("/v1/sequences/{id}/frames?start=9&end=3"), 400),
-            (format!("/v1/sequences/{id}/frames?start=x"), 400),
-            (format!("/v1/sequences/{id}/frames?t0=1&start=2"), 400),
-            (format!("/v1/sequences/{id}/frames?points=Nose"), 400),
-            (format!("/v1/sequences/{id}/frames?format=xls"), 400),
+            ("/v1/takes/nope".to_string(), 404),
+            ("/v1/takes/nope/frames".to_string(), 404),
+            (format!("/v1/takes/{id}/frames?start=0&end=99999"), 416),
+            (format!("/v1/takes/{id}/frames?start=9&end=3"), 400),
+            (format!("/v1/takes/{id}/frames?start=x"), 400),
+            (format!("/v1/takes/{id}/frames?t0=1&start=2"), 400),
+            (format!("/v1/takes/{id}/frames?points=Nose"), 400),
+            (format!("/v1/takes/{id}/frames?format=xls"), 400),
         ] {
             let (status, _, body) = srv.get(&path).await;
             assert_error(
@@ -308,8 +303,8 @@ async fn ingest_fetch_and_errors_on_every_backend() {
         );
 
         // Delete.
-        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 204);
-        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 404);
+        assert_eq!(srv.delete(&format!("/v1/takes/{id}")).await, 204);
+        assert_eq!(srv.delete(&format!("/v1/takes/{id}")).await, 404);
         let (_, _, metrics_text) = srv.get("/metrics").await;
         assert!(String::from_utf8(metrics_text)
             .unwrap()
@@ -329,7 +324,7 @@ async fn fields_may_come_as_headers() {
     let body = corpus_bytes("trc/TRCSamples__Knee.trc");
     let r = srv
         .client
-        .post(format!("{}/v1/sequences?library=q", srv.base))
+        .post(format!("{}/v1/takes?library=q", srv.base))
         .header("x-mocap-name", "knee")
         .header("x-mocap-library", "ignored: the query wins")
         .header("x-mocap-mean-error-mm", "2.5")
@@ -341,7 +336,7 @@ async fn fields_may_come_as_headers() {
     assert_eq!(r.status().as_u16(), 201);
     let v: Value = r.json().await.unwrap();
     let (_, _, meta) = srv
-        .get(&format!("/v1/sequences/{}", v["id"].as_str().unwrap()))
+        .get(&format!("/v1/takes/{}", v["id"].as_str().unwrap()))
         .await;
     let meta: Value = serde_json::from_slice(&meta).unwrap();
     assert_eq!(
@@ -357,7 +352,7 @@ async fn fields_may_come_as_headers() {
     );
     let r = srv
         .client
-        .post(format!("{}/v1/sequences", srv.base))
+        .post(format!("{}/v1/takes", srv.base))
         .header("x-mocap-max-error-mm", "lots")
         .body(body)
         .send()
@@ -385,7 +380,7 @@ async fn the_torso_for_spca_may_be_named_in_the_request() {
     assert!(report["max_mm"].as_f64().unwrap() <= 2.0, "{report}");
     let r = srv
         .client
-        .post(format!("{}/v1/sequences?codec=spca", srv.base))
+        .post(format!("{}/v1/takes?codec=spca", srv.base))
         .header("x-mocap-torso", "M1, M3, M5")
         .body(body.clone())
         .send()

@@ -34,7 +34,7 @@ async fn listings_pages_filters_stats_and_patches() {
 
         // Pages of 3, newest first, cover every take exactly once.
         let mut seen = Vec::new();
-        let mut path = "/v1/sequences?limit=3".to_string();
+        let mut path = "/v1/takes?limit=3".to_string();
         loop {
             let (status, page) = json(&srv, &path).await;
             assert_eq!(status, 200, "{page}");
@@ -42,7 +42,7 @@ async fn listings_pages_filters_stats_and_patches() {
             assert!(items.len() <= 3);
             seen.extend(items.iter().map(|s| s["id"].as_str().unwrap().to_string()));
             match page["next_cursor"].as_str() {
-                Some(c) => path = format!("/v1/sequences?limit=3&cursor={c}"),
+                Some(c) => path = format!("/v1/takes?limit=3&cursor={c}"),
                 None => break,
             }
         }
@@ -52,30 +52,20 @@ async fn listings_pages_filters_stats_and_patches() {
 
         // Filters.
         let count = |v: &Value| v["items"].as_array().unwrap().len();
-        assert_eq!(count(&json(&srv, "/v1/sequences?library=even").await.1), 5);
-        assert_eq!(count(&json(&srv, "/v1/sequences?tag=third").await.1), 4);
+        assert_eq!(count(&json(&srv, "/v1/takes?library=even").await.1), 5);
+        assert_eq!(count(&json(&srv, "/v1/takes?tag=third").await.1), 4);
+        assert_eq!(count(&json(&srv, "/v1/takes?min_frames=100").await.1), 4);
         assert_eq!(
-            count(&json(&srv, "/v1/sequences?min_frames=100").await.1),
-            4
-        );
-        assert_eq!(
-            count(&json(&srv, "/v1/sequences?name_prefix=take0").await.1),
+            count(&json(&srv, "/v1/takes?name_prefix=take0").await.1),
             10
         );
         assert_eq!(
-            count(
-                &json(&srv, "/v1/sequences?library=odd&max_frames=70")
-                    .await
-                    .1
-            ),
+            count(&json(&srv, "/v1/takes?library=odd&max_frames=70").await.1),
             2
         );
-        assert_eq!(
-            count(&json(&srv, "/v1/sequences?fps=120&points=5").await.1),
-            10
-        );
-        assert_eq!(count(&json(&srv, "/v1/sequences?codec=raw").await.1), 0);
-        let (_, by_name) = json(&srv, "/v1/sequences?sort=name&limit=500").await;
+        assert_eq!(count(&json(&srv, "/v1/takes?fps=120&points=5").await.1), 10);
+        assert_eq!(count(&json(&srv, "/v1/takes?codec=raw").await.1), 0);
+        let (_, by_name) = json(&srv, "/v1/takes?sort=name&limit=500").await;
         let names: Vec<&str> = by_name["items"]
             .as_array()
             .unwrap()
@@ -113,7 +103,7 @@ async fn listings_pages_filters_stats_and_patches() {
         // Edits.
         let r = srv
             .client
-            .patch(format!("{}/v1/sequences/{}", srv.base, ids[1]))
+            .patch(format!("{}/v1/takes/{}", srv.base, ids[1]))
             .json(&serde_json::json!({"name": "renamed", "tags": ["x", "x", " y "]}))
             .send()
             .await
@@ -124,21 +114,21 @@ async fn listings_pages_filters_stats_and_patches() {
             (row["name"].as_str(), &row["tags"]),
             (Some("renamed"), &serde_json::json!(["x", "y"]))
         );
-        assert_eq!(count(&json(&srv, "/v1/sequences?tag=x").await.1), 1);
+        assert_eq!(count(&json(&srv, "/v1/takes?tag=x").await.1), 1);
 
         // Bad requests.
         for path in [
-            "/v1/sequences?limit=0",
-            "/v1/sequences?limit=501",
-            "/v1/sequences?cursor=nothex",
-            "/v1/sequences?order=sideways",
-            "/v1/sequences?sort=colour",
-            "/v1/sequences?min_frames=many",
+            "/v1/takes?limit=0",
+            "/v1/takes?limit=501",
+            "/v1/takes?cursor=nothex",
+            "/v1/takes?order=sideways",
+            "/v1/takes?sort=colour",
+            "/v1/takes?min_frames=many",
             // Conditions no take could meet because they are not values of their kind.
-            "/v1/sequences?codec=zip",
-            "/v1/sequences?min_duration_s=-1",
-            "/v1/sequences?fps=0",
-            "/v1/sequences?min_frames=-3",
+            "/v1/takes?codec=zip",
+            "/v1/takes?min_duration_s=-1",
+            "/v1/takes?fps=0",
+            "/v1/takes?min_frames=-3",
             "/v1/stats?codec=zip",
             "/v1/export?codec=zip",
         ] {
@@ -146,10 +136,10 @@ async fn listings_pages_filters_stats_and_patches() {
             assert_eq!(status, 400, "{path}: {body}");
             assert!(body["error"]["message"].is_string());
         }
-        let (_, first) = json(&srv, "/v1/sequences?limit=2").await;
+        let (_, first) = json(&srv, "/v1/takes?limit=2").await;
         let c = first["next_cursor"].as_str().unwrap();
         assert_eq!(
-            json(&srv, &format!("/v1/sequences?sort=name&cursor={c}"))
+            json(&srv, &format!("/v1/takes?sort=name&cursor={c}"))
                 .await
                 .0,
             400
@@ -161,7 +151,7 @@ async fn listings_pages_filters_stats_and_patches() {
         ] {
             let r = srv
                 .client
-                .patch(format!("{}/v1/sequences/{id}", srv.base))
+                .patch(format!("{}/v1/takes/{id}", srv.base))
                 .json(&body)
                 .send()
                 .await
@@ -170,6 +160,47 @@ async fn listings_pages_filters_stats_and_patches() {
         }
         let unique: BTreeSet<_> = seen.iter().collect();
         assert_eq!(unique.len(), 10);
+
+        // The older name of the routes answers as /v1/takes does, every method.
+        for path in [
+            "/v1/takes?library=even".to_string(),
+            format!("/v1/takes/{}", ids[1]),
+            format!("/v1/takes/{}/frames?format=csv&start=0&end=5", ids[1]),
+            format!("/v1/takes/{}/errors", ids[1]),
+        ] {
+            let older = path.replace("/v1/takes", "/v1/sequences");
+            let (now, then) = (srv.get(&path).await, srv.get(&older).await);
+            assert_eq!((now.0, &now.2), (then.0, &then.2), "{older}");
+            assert_eq!(now.0, 200, "{path}");
+        }
+        let m = walker(50, 5, 120.0, 99, 0.0);
+        let body = formats::write(&m, Format::Json).unwrap();
+        let r = srv
+            .client
+            .post(format!("{}/v1/sequences?name=older&library=odd", srv.base))
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 201);
+        let id = r.json::<Value>().await.unwrap()["id"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        let r = srv
+            .client
+            .patch(format!("{}/v1/sequences/{id}", srv.base))
+            .json(&serde_json::json!({"tags": ["old"]}))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 200);
+        assert_eq!(
+            json(&srv, &format!("/v1/takes/{id}")).await.1["tags"][0],
+            "old"
+        );
+        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 204);
+        assert_eq!(json(&srv, &format!("/v1/takes/{id}")).await.0, 404);
         srv.stop().await;
         t.finish().await;
     }

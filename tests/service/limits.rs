@@ -81,7 +81,7 @@ async fn a_content_length_over_the_limit_is_refused_before_the_body_is_read() {
     let srv = common::start(t.store.clone(), 8 << 20).await;
     // 600 MiB declared, not one byte sent: the answer comes from the header alone.
     let head = format!(
-        "POST /v1/sequences?name=big HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
+        "POST /v1/takes?name=big HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
         600u64 << 20
     );
     let (status, text, _conn) = raw(&srv.base, &head, b"").await;
@@ -116,7 +116,7 @@ async fn uploads_past_the_server_budget_get_503_and_what_is_held_stays_bounded()
     for _ in 0..2 {
         let mut s = TcpStream::connect(&addr).await.unwrap();
         let head = format!(
-            "POST /v1/sequences?name=slow HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
+            "POST /v1/takes?name=slow HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
             2u64 << 20
         );
         s.write_all(head.as_bytes()).await.unwrap();
@@ -130,7 +130,7 @@ async fn uploads_past_the_server_budget_get_503_and_what_is_held_stays_bounded()
     // A third upload, declared or chunked, is refused at once with Retry-After.
     let take = formats::write(&walker(60, 4, 60.0, 1, 0.0), Format::Json).unwrap();
     let head = format!(
-        "POST /v1/sequences?name=third HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
+        "POST /v1/takes?name=third HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
         take.len()
     );
     let (status, text, _c) = raw(&srv.base, &head, &take).await;
@@ -146,7 +146,7 @@ async fn uploads_past_the_server_budget_get_503_and_what_is_held_stays_bounded()
     chunked.extend_from_slice(b"\r\n0\r\n\r\n");
     let (status, text, _c) = raw(
         &srv.base,
-        "POST /v1/sequences?name=chunked HTTP/1.1\r\nHost: localhost\r\nTransfer-Encoding: chunked\r\n\r\n",
+        "POST /v1/takes?name=chunked HTTP/1.1\r\nHost: localhost\r\nTransfer-Encoding: chunked\r\n\r\n",
         &chunked,
     )
     .await;
@@ -250,12 +250,12 @@ async fn a_live_take_header_is_not_rewritten_by_appends() {
         // While live, ranges are served from the chunk rows' index.
         let (status, _, body) = srv
             .get(&format!(
-                "/v1/sequences/{id}/frames?start=10&end=100&format=f32"
+                "/v1/takes/{id}/frames?start=10&end=100&format=f32"
             ))
             .await;
         assert_eq!((status, body.len()), (200, 90 * 12 * 4), "{}", t.name);
         // A take being recorded is not deleted from under its stream.
-        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 409);
+        assert_eq!(srv.delete(&format!("/v1/takes/{id}")).await, 409);
         let (status, _, done) = srv
             .post_json(&format!("/v1/streams/{id}/finish"), &json!({}))
             .await;
@@ -269,7 +269,7 @@ async fn a_live_take_header_is_not_rewritten_by_appends() {
         );
         let (status, _, again) = srv
             .get(&format!(
-                "/v1/sequences/{id}/frames?start=10&end=100&format=f32"
+                "/v1/takes/{id}/frames?start=10&end=100&format=f32"
             ))
             .await;
         assert_eq!((status, &again), (200, &body), "{}", t.name);
@@ -311,7 +311,7 @@ async fn a_stream_whose_server_died_is_closed_and_says_so_everywhere() {
         t.reopen().await;
 
         let b = common::start_with(t.store.clone(), config).await;
-        let (status, row) = b.get_json(&format!("/v1/sequences/{id}")).await;
+        let (status, row) = b.get_json(&format!("/v1/takes/{id}")).await;
         assert_eq!(status, 200);
         assert_eq!(row["live"], false, "{}: {row}", t.name);
         assert!(row["meta"]["interrupted"].is_string(), "{row}");
@@ -322,9 +322,7 @@ async fn a_stream_whose_server_died_is_closed_and_says_so_everywhere() {
             s["error"]["message"].as_str().unwrap().contains("finished"),
             "{s}"
         );
-        let (status, _, body) = b
-            .get(&format!("/v1/sequences/{id}/frames?format=f32"))
-            .await;
+        let (status, _, body) = b.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
         assert_eq!((status, body.len()), (200, 60 * 9 * 4));
         b.stop().await;
         t.finish().await;
@@ -405,7 +403,7 @@ async fn every_error_is_in_the_one_shape_and_the_contract_drift_is_closed() {
     assert!(is_error_shape(&v), "{v}");
     let r = srv
         .client
-        .put(format!("{}/v1/sequences", srv.base))
+        .put(format!("{}/v1/takes", srv.base))
         .send()
         .await
         .unwrap();
@@ -416,7 +414,7 @@ async fn every_error_is_in_the_one_shape_and_the_contract_drift_is_closed() {
     assert_eq!(status, 400, "{v}");
     let r = srv
         .client
-        .patch(format!("{}/v1/sequences/{id}", srv.base))
+        .patch(format!("{}/v1/takes/{id}", srv.base))
         .json(&json!({"name": null}))
         .send()
         .await
@@ -428,7 +426,7 @@ async fn every_error_is_in_the_one_shape_and_the_contract_drift_is_closed() {
         assert!(is_error_shape(&v));
     }
     let (status, v) = srv
-        .get_json(&format!("/v1/sequences/{id}/frames?start=0&t1=1"))
+        .get_json(&format!("/v1/takes/{id}/frames?start=0&t1=1"))
         .await;
     assert_eq!(status, 400, "{v}");
     let (status, _, v) = srv

@@ -111,13 +111,13 @@ async fn live_responses_match_the_contract() {
     let srv = common::start(t.store.clone(), 8 << 20).await;
     let take = formats::write(&walker(300, 6, 120.0, 3, 0.2), Format::Json).unwrap();
     let (status, report) = srv.post("name=a&tags=x,y&max_error_mm=1", take).await;
-    conforms(&spec, "/v1/sequences", "post", (status, 201), &report);
+    conforms(&spec, "/v1/takes", "post", (status, 201), &report);
     let id = report["id"].as_str().unwrap().to_string();
     for ((status, body), want) in [
         (srv.post("codec=zip", vec![1]).await, 400),
         (srv.post("", b"junk".to_vec()).await, 422),
     ] {
-        conforms(&spec, "/v1/sequences", "post", (status, want), &body);
+        conforms(&spec, "/v1/takes", "post", (status, want), &body);
     }
     let get = |p: String| {
         let srv = &srv;
@@ -130,23 +130,23 @@ async fn live_responses_match_the_contract() {
         }
     };
     for (route, path, want) in [
-        ("/v1/sequences", "/v1/sequences?limit=1".to_string(), 200),
-        ("/v1/sequences", "/v1/sequences?limit=0".to_string(), 400),
-        ("/v1/sequences/{id}", format!("/v1/sequences/{id}"), 200),
-        ("/v1/sequences/{id}", "/v1/sequences/nope".to_string(), 404),
+        ("/v1/takes", "/v1/takes?limit=1".to_string(), 200),
+        ("/v1/takes", "/v1/takes?limit=0".to_string(), 400),
+        ("/v1/takes/{id}", format!("/v1/takes/{id}"), 200),
+        ("/v1/takes/{id}", "/v1/takes/nope".to_string(), 404),
         (
-            "/v1/sequences/{id}/frames",
-            format!("/v1/sequences/{id}/frames?start=3&end=9"),
+            "/v1/takes/{id}/frames",
+            format!("/v1/takes/{id}/frames?start=3&end=9"),
             200,
         ),
         (
-            "/v1/sequences/{id}/frames",
-            format!("/v1/sequences/{id}/frames?end=9999"),
+            "/v1/takes/{id}/frames",
+            format!("/v1/takes/{id}/frames?end=9999"),
             416,
         ),
         (
-            "/v1/sequences/{id}/frames",
-            format!("/v1/sequences/{id}/frames?format=bvh"),
+            "/v1/takes/{id}/frames",
+            format!("/v1/takes/{id}/frames?format=bvh"),
             409,
         ),
         ("/v1/stats", "/v1/stats".to_string(), 200),
@@ -156,7 +156,7 @@ async fn live_responses_match_the_contract() {
     }
     let r = srv
         .client
-        .patch(format!("{}/v1/sequences/{id}", srv.base))
+        .patch(format!("{}/v1/takes/{id}", srv.base))
         .json(&serde_json::json!({"library": "moved"}))
         .send()
         .await
@@ -164,7 +164,7 @@ async fn live_responses_match_the_contract() {
     let status = r.status().as_u16();
     conforms(
         &spec,
-        "/v1/sequences/{id}",
+        "/v1/takes/{id}",
         "patch",
         (status, 200),
         &r.json().await.unwrap(),
@@ -232,8 +232,8 @@ async fn live_responses_match_the_contract() {
     // The basis codes no take (the stream, of another layout, codes with the DCT).
     let status = srv.delete(&format!("/v1/bases/{basis}")).await;
     assert!(status == 204 && documented("/v1/bases/{id}", "delete", status));
-    let status = srv.delete(&format!("/v1/sequences/{id}")).await;
-    assert!(status == 204 && documented("/v1/sequences/{id}", "delete", status));
+    let status = srv.delete(&format!("/v1/takes/{id}")).await;
+    assert!(status == 204 && documented("/v1/takes/{id}", "delete", status));
     for p in ["/healthz", "/metrics"] {
         let (status, _, _) = srv.get(p).await;
         assert!(status == 200 && documented(p, "get", status), "{p}");

@@ -124,7 +124,7 @@ async fn a_batch_is_each_range_as_its_own_request_gives_it() {
         let got = parts(ct, &body);
         assert_eq!(got.len(), ranges.len(), "{shared}");
         for ((id, s, e), (headers, part)) in ranges.iter().zip(&got) {
-            let path = format!("/v1/sequences/{id}/frames?start={s}&end={e}&{shared}");
+            let path = format!("/v1/takes/{id}/frames?start={s}&end={e}&{shared}");
             let path = if shared.contains("format=") {
                 path
             } else {
@@ -133,7 +133,8 @@ async fn a_batch_is_each_range_as_its_own_request_gives_it() {
             let (status, one_h, one) = srv.get(&path).await;
             assert_eq!(status, 200);
             assert_eq!(part, &one, "{path}: the part's bytes are the range's");
-            assert_eq!(header(headers, "x-sequence"), id.as_str());
+            assert_eq!(header(headers, "x-take"), id.as_str());
+            assert_eq!(header(headers, "x-sequence"), id.as_str(), "the older name");
             for name in [
                 "content-type",
                 "content-length",
@@ -271,7 +272,7 @@ async fn every_part_is_checked_as_its_own_request_would_be() {
     // Root motion is a skeleton's: a marker take after a skeleton take is refused before the
     // skeleton's part is written, as its own request would be.
     let (status, _, body) = srv
-        .get(&format!("/v1/sequences/{m}/frames?root=in-place"))
+        .get(&format!("/v1/takes/{m}/frames?root=in-place"))
         .await;
     assert_eq!(status, 400, "{}", String::from_utf8_lossy(&body));
     let (status, h, body) = srv
@@ -324,7 +325,7 @@ async fn a_take_the_token_does_not_reach_is_not_there_in_any_part() {
         let r = srv
             .client
             .post(format!(
-                "{}/v1/sequences?library={library}&codec=quant&max_error_mm=1&unit=mm",
+                "{}/v1/takes?library={library}&codec=quant&max_error_mm=1&unit=mm",
                 srv.base
             ))
             .bearer_auth(&admin)

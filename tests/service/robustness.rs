@@ -33,7 +33,7 @@ async fn sixteen_clients_ingest_and_read_at_once() {
                     assert_eq!(status, 201, "{r}");
                     let id = r["id"].as_str().unwrap().to_string();
                     let (status, _, body) = srv
-                        .get(&format!("/v1/sequences/{id}/frames?start=10&end=90"))
+                        .get(&format!("/v1/takes/{id}/frames?start=10&end=90"))
                         .await;
                     assert_eq!(status, 200);
                     let v: Value = serde_json::from_slice(&body).unwrap();
@@ -79,7 +79,7 @@ async fn interrupted_uploads_leave_nothing() {
                 let mut s = TcpStream::connect(&addr).unwrap();
                 write!(
                     s,
-                    "POST /v1/sequences?name=cut HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
+                    "POST /v1/takes?name=cut HTTP/1.1\r\nHost: localhost\r\nContent-Length: {}\r\n\r\n",
                     body.len()
                 )
                 .unwrap();
@@ -101,13 +101,11 @@ async fn interrupted_uploads_leave_nothing() {
             assert_eq!(chunks, 0, "{}: chunks without a take", t.name);
         } else {
             let (_, list) = {
-                let (s, _, b) = srv.get("/v1/sequences").await;
+                let (s, _, b) = srv.get("/v1/takes").await;
                 (s, serde_json::from_slice::<Value>(&b).unwrap())
             };
             let id = list["items"][0]["id"].as_str().unwrap().to_string();
-            let (status, h, _) = srv
-                .get(&format!("/v1/sequences/{id}/frames?format=f32"))
-                .await;
+            let (status, h, _) = srv.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
             assert_eq!(
                 (status, h["x-frames"].to_str().unwrap()),
                 (200, "600"),
@@ -130,12 +128,12 @@ async fn deletes_through_another_server_are_seen_despite_caches() {
         let (status, r) = a.post("name=shared", take_json(3, 300)).await;
         assert_eq!(status, 201, "{r}");
         let id = r["id"].as_str().unwrap().to_string();
-        let frames = format!("/v1/sequences/{id}/frames?start=0&end=100&format=f32");
+        let frames = format!("/v1/takes/{id}/frames?start=0&end=100&format=f32");
         let (s1, _, first) = a.get(&frames).await;
         let (s2, _, again) = a.get(&frames).await; // served from the caches
         assert_eq!((s1, s2), (200, 200));
         assert!(first == again);
-        assert_eq!(b.delete(&format!("/v1/sequences/{id}")).await, 204);
+        assert_eq!(b.delete(&format!("/v1/takes/{id}")).await, 204);
         let (status, _, _) = a.get(&frames).await;
         assert_eq!(status, 404, "{}", t.name);
         a.stop().await;
@@ -154,12 +152,12 @@ async fn long_reads_over_cached_chunks_are_whole() {
     let (status, r) = srv.post("name=long&codec=quant", take_json(9, 2400)).await;
     assert_eq!(status, 201, "{r}");
     let id = r["id"].as_str().unwrap().to_string();
-    let whole = format!("/v1/sequences/{id}/frames?format=f32");
+    let whole = format!("/v1/takes/{id}/frames?format=f32");
     let (status, _, before) = srv.get(&whole).await;
     assert_eq!(status, 200);
     let (status, _, _) = srv
         .get(&format!(
-            "/v1/sequences/{id}/frames?start=700&end=900&format=f32"
+            "/v1/takes/{id}/frames?start=700&end=900&format=f32"
         ))
         .await;
     assert_eq!(status, 200);

@@ -46,7 +46,7 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         let (status, one) = srv.get_json(&format!("/v1/skeletons/{sk}")).await;
         assert_eq!(status, 200);
         assert_eq!(one["hierarchy"][1]["name"], "LeftUpLeg");
-        let (status, take) = srv.get_json(&format!("/v1/sequences/{}", ids[0])).await;
+        let (status, take) = srv.get_json(&format!("/v1/takes/{}", ids[0])).await;
         assert_eq!(status, 200);
         assert_eq!(take["skeleton"], sk.as_str());
         assert_eq!(take["meta"]["point_names"].as_array().unwrap().len(), 24);
@@ -72,7 +72,7 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         for (start, end) in [(0, 500), (0, 1), (17, 260), (499, 500)] {
             let (status, _, body) = srv
                 .get(&format!(
-                    "/v1/sequences/{}/frames?start={start}&end={end}&format=bvh",
+                    "/v1/takes/{}/frames?start={start}&end={end}&format=bvh",
                     ids[0]
                 ))
                 .await;
@@ -86,7 +86,7 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         }
         let (status, _, _) = srv
             .get(&format!(
-                "/v1/sequences/{}/frames?format=bvh&points=Hips",
+                "/v1/takes/{}/frames?format=bvh&points=Hips",
                 ids[0]
             ))
             .await;
@@ -95,7 +95,7 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         // Protected while referenced; deletable once no take uses it.
         assert_eq!(srv.delete(&format!("/v1/skeletons/{sk}")).await, 409);
         for id in &ids {
-            assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 204);
+            assert_eq!(srv.delete(&format!("/v1/takes/{id}")).await, 204);
         }
         assert_eq!(srv.delete(&format!("/v1/skeletons/{sk}")).await, 204);
         assert_eq!(srv.delete(&format!("/v1/skeletons/{sk}")).await, 404);
@@ -107,9 +107,7 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         assert_eq!(status, 201, "{report}");
         let id = report["id"].as_str().unwrap();
         if report["codec"] != "bvh-lossless" {
-            let (status, _, body) = srv
-                .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
-                .await;
+            let (status, _, body) = srv.get(&format!("/v1/takes/{id}/frames?format=bvh")).await;
             assert_eq!(status, 409);
             let msg = String::from_utf8_lossy(&body);
             assert!(msg.contains("bvh-lossless"), "{msg}");
@@ -137,9 +135,7 @@ async fn a_pga_take_is_served_as_bvh_within_its_bound() {
         assert_eq!(report["codec"], "pga");
         assert!(report["max_mm"].as_f64().unwrap() <= 5.0, "{report}");
         let id = report["id"].as_str().unwrap();
-        let (status, _, body) = srv
-            .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
-            .await;
+        let (status, _, body) = srv.get(&format!("/v1/takes/{id}/frames?format=bvh")).await;
         assert_eq!(status, 200);
         let served = formats::read(&body, &ReadOptions::default())
             .unwrap()
@@ -153,7 +149,7 @@ async fn a_pga_take_is_served_as_bvh_within_its_bound() {
         let whole = motion_rows(&String::from_utf8_lossy(&body));
         let (status, _, part) = srv
             .get(&format!(
-                "/v1/sequences/{id}/frames?format=bvh&start=37&end=211"
+                "/v1/takes/{id}/frames?format=bvh&start=37&end=211"
             ))
             .await;
         assert_eq!(status, 200);
@@ -222,9 +218,7 @@ async fn every_corpus_bvh_comes_back_as_bvh() {
             assert_eq!(status, 201, "{}: {report}", e.path);
             let id = report["id"].as_str().unwrap();
             let codec = report["codec"].as_str().unwrap().to_string();
-            let (status, _, body) = srv
-                .get(&format!("/v1/sequences/{id}/frames?format=bvh"))
-                .await;
+            let (status, _, body) = srv.get(&format!("/v1/takes/{id}/frames?format=bvh")).await;
             assert_eq!(status, 200, "{}", e.path);
             let served = formats::read(&body, &ReadOptions::default())
                 .unwrap_or_else(|err| panic!("{}: served BVH: {err}", e.path))
@@ -275,7 +269,7 @@ async fn every_corpus_bvh_comes_back_as_bvh() {
             let (lo, hi) = (n / 3, (n / 3 + 50).min(n));
             let (status, _, part) = srv
                 .get(&format!(
-                    "/v1/sequences/{id}/frames?format=bvh&start={lo}&end={hi}"
+                    "/v1/takes/{id}/frames?format=bvh&start={lo}&end={hi}"
                 ))
                 .await;
             assert_eq!(status, 200);

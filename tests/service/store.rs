@@ -106,7 +106,7 @@ async fn takes_round_trip_atomically_on_every_backend() {
 async fn altered_chunks_fail_their_checksum() {
     for t in common::all().await {
         t.store.insert(&take("x", 2)).await.unwrap();
-        let q = "UPDATE chunks SET payload = $1 WHERE sequence_id = 'x' AND idx = 1";
+        let q = "UPDATE chunks SET payload = $1 WHERE take_id = 'x' AND idx = 1";
         match &t.store {
             Store::Sqlite(p) => sqlx::query(q)
                 .bind(vec![0u8; 5])
@@ -146,11 +146,11 @@ async fn a_corrupt_meta_row_is_an_error_not_an_empty_record() {
         let (status, report) = srv.post("max_error_mm=1", body).await;
         assert_eq!(status, 201, "{report}");
         let id = report["id"].as_str().unwrap().to_string();
-        let (status, ok) = srv.get_json(&format!("/v1/sequences/{id}")).await;
+        let (status, ok) = srv.get_json(&format!("/v1/takes/{id}")).await;
         assert_eq!(status, 200);
         assert_eq!(ok["meta"]["point_names"].as_array().unwrap().len(), 3);
 
-        let q = "UPDATE sequences SET meta = $1 WHERE id = $2";
+        let q = "UPDATE takes SET meta = $1 WHERE id = $2";
         let corrupt = r#"{"point_names": "not a list"}"#;
         match &t.store {
             Store::Sqlite(p) => sqlx::query(q)
@@ -168,9 +168,9 @@ async fn a_corrupt_meta_row_is_an_error_not_an_empty_record() {
         }
         .unwrap();
         for path in [
-            format!("/v1/sequences/{id}"),
-            format!("/v1/sequences/{id}/frames?start=0&end=5"),
-            "/v1/sequences".to_string(),
+            format!("/v1/takes/{id}"),
+            format!("/v1/takes/{id}/frames?start=0&end=5"),
+            "/v1/takes".to_string(),
         ] {
             let (status, body) = srv.get_json(&path).await;
             assert_eq!(status, 500, "{}: {path}: {body}", t.name);
@@ -185,17 +185,17 @@ async fn a_corrupt_meta_row_is_an_error_not_an_empty_record() {
             "{:?}",
             report.problems
         );
-        assert_eq!(srv.delete(&format!("/v1/sequences/{id}")).await, 204);
+        assert_eq!(srv.delete(&format!("/v1/takes/{id}")).await, 204);
         srv.stop().await;
         t.finish().await;
     }
 }
 
-/// Migration 0005 on a store written before it: a take under a max bound keeps it; one
+/// Migrations on a store written before them. 0005: a take under a max bound keeps it; one
 /// under a mean bound alone keeps its mean and gets the loosest max (it was coded to none),
 /// and both read back as typed bounds through the service.
 #[tokio::test]
-async fn migration_0005_gives_every_stored_take_a_max_bound() {
+async fn old_databases_migrate_bounds_and_table_names() {
     use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
     use std::str::FromStr;
 
@@ -236,11 +236,24 @@ async fn migration_0005_gives_every_stored_take_a_max_bound() {
             .await
             .unwrap();
         }
+        for q in [
+            "INSERT INTO chunks (sequence_id, idx, first_frame, frames, crc32c, payload) \
+             VALUES ('a', 0, 0, 1, 7, x'00')",
+            "INSERT INTO sequence_tags (sequence_id, tag) VALUES ('a', 'walk')",
+        ] {
+            sqlx::query(q).execute(&pool).await.unwrap();
+        }
         pool.close().await;
     }
     let store = Store::open(&url).await.unwrap();
     let a = store.get("a").await.unwrap().unwrap();
     assert_eq!((a.max_bound_mm, a.mean_bound_mm), (1.0, None));
+    // Migration 0012 renamed the tables (sequences → takes, sequence_id → take_id): the
+    // take keeps its chunk and tag, and deleting it still deletes them.
+    assert_eq!(a.tags, vec!["walk".to_string()]);
+    assert_eq!(store.chunk_index("a").await.unwrap().len(), 1);
+    assert!(store.delete("a").await.unwrap());
+    assert!(store.chunk_index("a").await.unwrap().is_empty());
     let b = store.get("b").await.unwrap().unwrap();
     assert_eq!(
         (b.max_bound_mm, b.mean_bound_mm),

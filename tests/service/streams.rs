@@ -27,7 +27,7 @@ async fn append(srv: &common::Server, id: &str, frames: &[f32], flush: bool) -> 
 async fn fetch(srv: &common::Server, id: &str, start: usize, end: usize) -> Vec<f32> {
     let (status, _, body) = srv
         .get(&format!(
-            "/v1/sequences/{id}/frames?start={start}&end={end}&format=f32"
+            "/v1/takes/{id}/frames?start={start}&end={end}&format=f32"
         ))
         .await;
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
@@ -86,7 +86,7 @@ async fn streams_commit_chunk_by_chunk_and_ranges_are_fetchable_while_live() {
         within(&all[..committed * w], &served, points, 1.0);
         let served = fetch(&srv, &id, 97, committed).await;
         within(&all[97 * w..committed * w], &served, points, 1.0);
-        let (_, row) = srv.get_json(&format!("/v1/sequences/{id}")).await;
+        let (_, row) = srv.get_json(&format!("/v1/takes/{id}")).await;
         assert_eq!(row["frames"].as_u64().unwrap() as usize, committed);
         assert_eq!(row["live"], true);
 
@@ -588,7 +588,7 @@ async fn numbered_appends_add_each_frame_once() {
     assert_eq!(status, 200, "{take}");
     // Frame 12 is the one sent as frame 12, once.
     let (_, _, body) = srv
-        .get(&format!("/v1/sequences/{id}/frames?start=12&end=13"))
+        .get(&format!("/v1/takes/{id}/frames?start=12&end=13"))
         .await;
     // Within the 1 mm bound: a frame appended twice would be off by 5.
     let v: Value = serde_json::from_slice(&body).unwrap();

@@ -83,7 +83,7 @@ async fn resampling_root_motion_axes_and_units() {
 
     // A CMU take at 120 fps.
     let (id, report) = ingest(&srv, &root, "bvh/cmu/131_01.bvh", "name=cmu").await;
-    let (status, _, body) = srv.get(&format!("/v1/sequences/{id}/frames")).await;
+    let (status, _, body) = srv.get(&format!("/v1/takes/{id}/frames")).await;
     assert_eq!(status, 200);
     let (names, full) = samples(&body);
     let mpu = mpu(&body);
@@ -91,7 +91,7 @@ async fn resampling_root_motion_axes_and_units() {
     assert_eq!(full.len(), 994);
 
     // 120 → 30 fps: every fourth frame of the full-rate decode.
-    let (status, h, body) = srv.get(&format!("/v1/sequences/{id}/frames?fps=30")).await;
+    let (status, h, body) = srv.get(&format!("/v1/takes/{id}/frames?fps=30")).await;
     assert_eq!(status, 200);
     assert_eq!(header(&h, "x-fps"), "30");
     // CMU's frame time, 0.0083333 s, is 120.00048 fps: the grid is 120's.
@@ -108,9 +108,7 @@ async fn resampling_root_motion_axes_and_units() {
     }
     // A range resampled is the same frames as the whole take's (its grid starts at t0).
     let (status, _, body) = srv
-        .get(&format!(
-            "/v1/sequences/{id}/frames?fps=30&start=400&end=600"
-        ))
+        .get(&format!("/v1/takes/{id}/frames?fps=30&start=400&end=600"))
         .await;
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
     let (_, part) = samples(&body);
@@ -120,7 +118,7 @@ async fn resampling_root_motion_axes_and_units() {
     // In place: the root's horizontal path is zero, its height and every point relative to
     // it unchanged (f32 answers: within a few ulps of centimetres).
     let (status, _, body) = srv
-        .get(&format!("/v1/sequences/{id}/frames?root=in-place"))
+        .get(&format!("/v1/takes/{id}/frames?root=in-place"))
         .await;
     assert_eq!(status, 200);
     let (_, inplace) = samples(&body);
@@ -141,7 +139,7 @@ async fn resampling_root_motion_axes_and_units() {
     // Extracted: the same, and the path as a `root_motion` point.
     let (status, _, body) = srv
         .get(&format!(
-            "/v1/sequences/{id}/frames?root=extract&points=Hips,LeftWrist"
+            "/v1/takes/{id}/frames?root=extract&points=Hips,LeftWrist"
         ))
         .await;
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
@@ -160,7 +158,7 @@ async fn resampling_root_motion_axes_and_units() {
 
     // Z up, in metres: (x, y, z) cm → (x, −z, y) / 100.
     let (status, h, body) = srv
-        .get(&format!("/v1/sequences/{id}/frames?up=z&unit=m&end=50"))
+        .get(&format!("/v1/takes/{id}/frames?up=z&unit=m&end=50"))
         .await;
     assert_eq!(status, 200);
     assert_eq!(header(&h, "x-metres-per-unit"), "1");
@@ -176,7 +174,7 @@ async fn resampling_root_motion_axes_and_units() {
     // BVH in place: the skeleton's channels, its root's horizontal path zero.
     let (status, _, body) = srv
         .get(&format!(
-            "/v1/sequences/{id}/frames?format=bvh&root=in-place&fps=60"
+            "/v1/takes/{id}/frames?format=bvh&root=in-place&fps=60"
         ))
         .await;
     assert_eq!(status, 200);
@@ -199,16 +197,16 @@ async fn resampling_root_motion_axes_and_units() {
         "unit=furlong",
         "format=c3d&up=z",
     ] {
-        let (status, _, body) = srv.get(&format!("/v1/sequences/{id}/frames?{q}")).await;
+        let (status, _, body) = srv.get(&format!("/v1/takes/{id}/frames?{q}")).await;
         assert_eq!(status, 400, "{q}: {}", String::from_utf8_lossy(&body));
     }
     let (status, _, _) = srv
-        .get(&format!("/v1/sequences/{id}/frames?format=glb&unit=mm"))
+        .get(&format!("/v1/takes/{id}/frames?format=glb&unit=mm"))
         .await;
     assert_eq!(status, 400);
     let (markers, _) = ingest(&srv, &root, "trc/MOTEK__T.trc", "name=markers").await;
     let (status, _, body) = srv
-        .get(&format!("/v1/sequences/{markers}/frames?root=in-place"))
+        .get(&format!("/v1/takes/{markers}/frames?root=in-place"))
         .await;
     assert_eq!(status, 400, "{}", String::from_utf8_lossy(&body));
     srv.stop().await;
@@ -231,11 +229,11 @@ async fn up_and_down_again_through_the_service() {
         "name=bow",
     )
     .await;
-    let (_, _, body) = srv.get(&format!("/v1/sequences/{id}/frames")).await;
+    let (_, _, body) = srv.get(&format!("/v1/takes/{id}/frames")).await;
     let (_, original) = samples(&body);
     let unit = mpu(&body);
     let (status, _, fine) = srv
-        .get(&format!("/v1/sequences/{id}/frames?format=bvh&fps=120"))
+        .get(&format!("/v1/takes/{id}/frames?format=bvh&fps=120"))
         .await;
     assert_eq!(status, 200);
     let (status, second) = srv.post("name=bow120", fine).await;
@@ -245,7 +243,7 @@ async fn up_and_down_again_through_the_service() {
         "{second}"
     );
     let id2 = second["id"].as_str().unwrap();
-    let (_, _, body) = srv.get(&format!("/v1/sequences/{id2}/frames?fps=30")).await;
+    let (_, _, body) = srv.get(&format!("/v1/takes/{id2}/frames?fps=30")).await;
     let (_, back) = samples(&body);
     assert_eq!(back.len(), original.len());
     let tol = measured_max(&first, unit) + measured_max(&second, unit) + 1e-3;
@@ -342,9 +340,7 @@ async fn gltf_reads_back_in_independent_readers() {
         let id = report["id"].as_str().unwrap().to_string();
         let skeleton = name.ends_with(".bvh");
         let bound_m = report["max_mm"].as_f64().unwrap() * 1e-3;
-        let (status, h, glb) = srv
-            .get(&format!("/v1/sequences/{id}/frames?format=glb"))
-            .await;
+        let (status, h, glb) = srv.get(&format!("/v1/takes/{id}/frames?format=glb")).await;
         assert_eq!(status, 200, "{name}: {}", String::from_utf8_lossy(&glb));
         assert_eq!(header(&h, "content-type"), "model/gltf-binary");
         let file = dir.join(format!("{name}.glb"));
@@ -355,9 +351,7 @@ async fn gltf_reads_back_in_independent_readers() {
         }
         if let Some(python) = &python {
             let ev = evaluate(python, &file);
-            let (_, _, body) = srv
-                .get(&format!("/v1/sequences/{id}/frames?unit=m&up=y"))
-                .await;
+            let (_, _, body) = srv.get(&format!("/v1/takes/{id}/frames?unit=m&up=y")).await;
             let (names, ours) = samples(&body);
             assert_eq!(ev["extras"]["mocapstore"]["id"], id.as_str());
             let nodes: Vec<&str> = ev["nodes"]
@@ -401,7 +395,7 @@ async fn gltf_reads_back_in_independent_readers() {
     assert_eq!(status, 201);
     let id = report["id"].as_str().unwrap();
     let (status, h, gltf) = srv
-        .get(&format!("/v1/sequences/{id}/frames?format=gltf&fps=10"))
+        .get(&format!("/v1/takes/{id}/frames?format=gltf&fps=10"))
         .await;
     assert_eq!(status, 200);
     assert_eq!(header(&h, "content-type"), "application/json");
@@ -485,11 +479,11 @@ async fn c3d_out_of_every_kind_of_take() {
         }
         let id = report["id"].as_str().unwrap().to_string();
         let (status, _, c3d) = srv
-            .get(&format!("/v1/sequences/{id}/frames?format=c3d{query}"))
+            .get(&format!("/v1/takes/{id}/frames?format=c3d{query}"))
             .await;
         assert_eq!(status, 200, "{name}: {}", String::from_utf8_lossy(&c3d));
         let (status, _, json) = srv
-            .get(&format!("/v1/sequences/{id}/frames?format=json{query}"))
+            .get(&format!("/v1/takes/{id}/frames?format=json{query}"))
             .await;
         assert_eq!(status, 200, "{name}");
         // Both hold the same f32 values (the C3D's in mm where the take's unit has no C3D
@@ -595,7 +589,7 @@ async fn assimp_opens_the_glb_and_bvh_exports() {
     for format in ["glb", "bvh"] {
         let (status, _, body) = srv
             .get(&format!(
-                "/v1/sequences/{id}/frames?format={format}&fps=30&root=in-place"
+                "/v1/takes/{id}/frames?format={format}&fps=30&root=in-place"
             ))
             .await;
         assert_eq!(status, 200, "{format}");
@@ -641,7 +635,7 @@ async fn a_take_of_no_points_resamples_its_frames() {
     let frames = report["frames"].as_u64().unwrap();
     let fps = report["fps"].as_f64().unwrap();
     let (status, h, body) = srv
-        .get(&format!("/v1/sequences/{id}/frames?fps={}", fps / 2.0))
+        .get(&format!("/v1/takes/{id}/frames?fps={}", fps / 2.0))
         .await;
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
     let out: usize = header(&h, "x-frames").parse().unwrap();
@@ -677,9 +671,7 @@ async fn numpy_reads_the_position_formats_with_transforms() {
         let mut shape = (0, 0);
         for format in ["json", "npy", "csv", "f32"] {
             let (status, h, body) = srv
-                .get(&format!(
-                    "/v1/sequences/{id}/frames?format={format}&{query}"
-                ))
+                .get(&format!("/v1/takes/{id}/frames?format={format}&{query}"))
                 .await;
             assert_eq!(status, 200, "{format} {query}");
             if format == "f32" {

@@ -344,7 +344,7 @@ fn corpus_bytes(rel: &str) -> Vec<u8> {
 /// Upload corpus file `rel` with `query`; the stored take's report.
 /// The frame of take `id`'s first event, as the page rounds it.
 async fn fp_events(srv: &common::Server, id: &str) -> i64 {
-    let (_, take) = srv.get_json(&format!("/v1/sequences/{id}")).await;
+    let (_, take) = srv.get_json(&format!("/v1/takes/{id}")).await;
     let f = take["meta"]["events"][0]["frame"].as_i64().unwrap();
     f.clamp(0, take["frames"].as_i64().unwrap() - 1)
 }
@@ -493,7 +493,7 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
         assert!(url.as_str().unwrap().contains(&bvh_id), "{url}");
 
         // The decision table is the take's decision record.
-        let (_, take) = srv.get_json(&format!("/v1/sequences/{bvh_id}")).await;
+        let (_, take) = srv.get_json(&format!("/v1/takes/{bvh_id}")).await;
         let table = browser
             .js(
                 "return [...document.querySelectorAll('table.decision tbody tr:not(.skipped)')].map(r => [r.cells[0].textContent, Number(r.cells[1].textContent)]);",
@@ -558,7 +558,7 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
         let outcome: Vec<String> = serde_json::from_value(outcome).unwrap();
         assert!(outcome[0].contains("stored as"), "{outcome:?}");
         assert!(outcome[1].contains("refused"), "{outcome:?}");
-        let (_, list) = srv.get_json("/v1/sequences?library=dropped").await;
+        let (_, list) = srv.get_json("/v1/takes?library=dropped").await;
         assert_eq!(list["items"][0]["name"], "gait", "{list}");
         browser.screenshot("upload").await;
         // The refused upload's 4xx is the page's message, not a console error of ours.
@@ -606,7 +606,7 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
 
         // A marker take with its markers named on screen, at their points.
         let gait_id = gait["id"].as_str().unwrap();
-        let (_, gait) = srv.get_json(&format!("/v1/sequences/{gait_id}")).await;
+        let (_, gait) = srv.get_json(&format!("/v1/takes/{gait_id}")).await;
         browser
             .visit(
                 // Second 2: the subject is in the capture volume (most markers are missing
@@ -721,7 +721,7 @@ async fn error_series_are_measured_at_ingest_and_served() {
         let srv = common::start(t.store.clone(), 64 << 20).await;
         let take = stored(&srv, "name=131_02&max_error_mm=1", "bvh/cmu/131_02.bvh").await;
         let id = take["id"].as_str().unwrap();
-        let (status, e) = srv.get_json(&format!("/v1/sequences/{id}/errors")).await;
+        let (status, e) = srv.get_json(&format!("/v1/takes/{id}/errors")).await;
         assert_eq!(status, 200, "{e}");
         let per = e["frames_per_bin"].as_u64().unwrap();
         assert_eq!(per, 120);
@@ -742,9 +742,9 @@ async fn error_series_are_measured_at_ingest_and_served() {
             .post_json("/v1/streams", &json!({"fps": 60.0, "points": 2}))
             .await;
         let sid = stream["id"].as_str().unwrap();
-        let (status, e) = srv.get_json(&format!("/v1/sequences/{sid}/errors")).await;
+        let (status, e) = srv.get_json(&format!("/v1/takes/{sid}/errors")).await;
         assert_eq!(status, 409, "{e}");
-        let (status, _) = srv.get_json("/v1/sequences/nope/errors").await;
+        let (status, _) = srv.get_json("/v1/takes/nope/errors").await;
         assert_eq!(status, 404);
         srv.stop().await;
         t.finish().await;
@@ -765,10 +765,10 @@ async fn the_live_page_shows_a_stream_as_it_arrives() {
     let src = stored(&srv, "name=131_02&max_error_mm=1", "bvh/cmu/131_02.bvh").await;
     let src_id = src["id"].as_str().unwrap();
     let (_, _, bytes) = srv
-        .get(&format!("/v1/sequences/{src_id}/frames?format=f32"))
+        .get(&format!("/v1/takes/{src_id}/frames?format=f32"))
         .await;
     let points = src["points"].as_u64().unwrap() as usize;
-    let (_, src) = srv.get_json(&format!("/v1/sequences/{src_id}")).await;
+    let (_, src) = srv.get_json(&format!("/v1/takes/{src_id}")).await;
     let (status, _, stream) = srv
         .post_json(
             "/v1/streams",
@@ -1088,7 +1088,7 @@ async fn the_take_page_opens_the_glb_it_would_download() {
     // The service's own positions of the first frame at or after 1 s, and its time.
     let (status, _, body) = srv
         .get(&format!(
-            "/v1/sequences/{id}/frames?unit=m&up=y&t0=1&t1=1.02&points=LeftWrist"
+            "/v1/takes/{id}/frames?unit=m&up=y&t0=1&t1=1.02&points=LeftWrist"
         ))
         .await;
     assert_eq!(status, 200);

@@ -64,10 +64,10 @@ def test_ingest_array_and_read_frames_bit_for_bit(client: mocapstore.Client, ser
     f = client.frames(take.id)
     assert f.shape == (120, 5, 3) and f.data.dtype == np.float32
     assert f.point_names == tuple(NAMES) and f.fps == 60 and f.start == 0
-    raw = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format=f32").content
+    raw = httpx.get(f"{server}/v1/takes/{take.id}/frames?format=f32").content
     assert f.data.tobytes() == raw, "the array is the f32 answer, bit for bit"
     # Gaps are NaN exactly where the JSON answer says null.
-    doc = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format=json").json()
+    doc = httpx.get(f"{server}/v1/takes/{take.id}/frames?format=json").json()
     nulls = np.array([[p is None for p in fr] for fr in doc["frames"]])
     assert (np.isnan(f.data).any(axis=2) == nulls).all()
     assert nulls[20:35, 1].all() and nulls.sum() == 15
@@ -86,7 +86,7 @@ def test_ranges_points_and_transforms_name_what_they_hold(
     take = client.ingest(walker(120), name="w", library=library(), fps=60, point_names=NAMES)
     f = client.frames(take.id, t0=0.5, t1=1.5, points=["rfoot", "head"], fps=30, unit="m", up="z")
     doc = httpx.get(
-        f"{server}/v1/sequences/{take.id}/frames",
+        f"{server}/v1/takes/{take.id}/frames",
         params={"t0": 0.5, "t1": 1.5, "points": "rfoot,head", "fps": 30, "unit": "m", "up": "z"},
     ).json()
     assert list(f.point_names) == doc["points"] == ["rfoot", "head"]
@@ -138,7 +138,7 @@ def test_a_batch_of_ranges_is_each_range_bit_for_bit(
 
 
 def test_a_batch_cut_short_is_an_error() -> None:
-    head = "--b\r\ncontent-length: 12\r\nx-sequence: t\r\n\r\n"
+    head = "--b\r\ncontent-length: 12\r\nx-take: t\r\n\r\n"
     whole = (head + "x" * 12 + "\r\n--b--\r\n").encode()
     r = _protocol.Response(200, {"content-type": "multipart/mixed; boundary=b"}, whole)
     assert [bytes(body) for _, body in _protocol.multipart(r)] == [b"x" * 12]
@@ -195,7 +195,7 @@ def test_export_writes_what_the_server_answers(
     # Every format the server writes for a marker take, by extension or named.
     for fmt in ["glb", "gltf", "c3d", "trc", "csv", "json", "npy", "f32"]:
         out = client.export(take.id, tmp_path / f"e.{fmt}", fps=30)
-        want = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format={fmt}&fps=30").content
+        want = httpx.get(f"{server}/v1/takes/{take.id}/frames?format={fmt}&fps=30").content
         assert out.read_bytes() == want and len(want) > 0, fmt
         named = client.export(take.id, tmp_path / f"e-{fmt}.bin", format=fmt, fps=30)
         assert named.read_bytes() == want, fmt
@@ -273,7 +273,7 @@ def test_channels_are_the_bvh_the_server_writes(
     path = corpus / "bvh" / "cmu" / "131_02.bvh"
     take = client.ingest(path, library=library(), codec="bvh-lossless")
     ch = client.channels(take.id, start=10, end=60)
-    bvh = httpx.get(f"{server}/v1/sequences/{take.id}/frames?format=bvh&start=10&end=60").content
+    bvh = httpx.get(f"{server}/v1/takes/{take.id}/frames?format=bvh&start=10&end=60").content
     assert ch.bvh == bvh and ch.to_bvh(tmp_path / "t.bvh").read_bytes() == bvh
     assert ch.start == 10 and len(ch) == 50 and abs(ch.fps - take.fps) < 1e-9
     sk = ch.skeleton

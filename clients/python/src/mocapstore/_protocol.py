@@ -134,7 +134,7 @@ def json_of(r: Response) -> Any:
 
 
 def take(id: str) -> Op[Take]:
-    r = yield Request("GET", f"/v1/sequences/{id}", [])
+    r = yield Request("GET", f"/v1/takes/{id}", [])
     return Take.from_json(json_of(r))
 
 
@@ -150,7 +150,7 @@ def page(filters: Params, cursor: str | None, limit: int) -> Op[Page]:
     q = [*filters, ("sort", "created"), ("order", "asc"), ("limit", str(limit))]
     if cursor is not None:
         q.append(("cursor", cursor))
-    r = yield Request("GET", "/v1/sequences", q)
+    r = yield Request("GET", "/v1/takes", q)
     v = json_of(r)
     return Page([Take.from_json(t) for t in v["items"]], v.get("next_cursor"))
 
@@ -163,12 +163,12 @@ def update(id: str, name: str | None, library: str | None, tags: Sequence[str] |
         body["library"] = library
     if tags is not None:
         body["tags"] = list(tags)
-    r = yield Request("PATCH", f"/v1/sequences/{id}", [], json=body, safe=False)
+    r = yield Request("PATCH", f"/v1/takes/{id}", [], json=body, safe=False)
     return Take.from_json(json_of(r))
 
 
 def delete(id: str) -> Op[None]:
-    r = yield Request("DELETE", f"/v1/sequences/{id}", [])
+    r = yield Request("DELETE", f"/v1/takes/{id}", [])
     raise_for(r)
 
 
@@ -209,7 +209,7 @@ def json_doc(array: npt.ArrayLike, fps: float, point_names: Sequence[str]) -> by
 
 def ingest(body: bytes, query: Params) -> Op[Take]:
     """Store a file's bytes; the take as stored."""
-    r = yield Request("POST", "/v1/sequences", query, content=body, safe=False)
+    r = yield Request("POST", "/v1/takes", query, content=body, safe=False)
     report = json_of(r)
     stored: Take = yield from take(report["id"])
     return stored
@@ -234,7 +234,7 @@ def header_float(h: Mapping[str, str], name: str) -> float:
 
 def frames(t: Take, query: Params, points: Sequence[str] | None, root: str | None) -> Op[Frames]:
     """A range of frames as float32 positions, from the raw f32 answer (no copy)."""
-    r = yield Request("GET", f"/v1/sequences/{t.id}/frames", [*query, ("format", "f32")])
+    r = yield Request("GET", f"/v1/takes/{t.id}/frames", [*query, ("format", "f32")])
     raise_for(r)
     return f32_answer(r.headers, r.content, frame_names(t, points, root))
 
@@ -316,8 +316,10 @@ def ranges(
         raise errors.MocapstoreError(f"asked for {len(parts)} ranges, the answer has {len(got)}")
     out: list[Frames] = []
     for (t, _, _), (h, body) in zip(parts, got, strict=True):
-        if h.get("x-sequence") != t.id:
-            raise errors.MocapstoreError(f"a part of take {h.get('x-sequence')}, not {t.id}")
+        # x-sequence: the header's older name, from servers before x-take.
+        named = h.get("x-take", h.get("x-sequence"))
+        if named != t.id:
+            raise errors.MocapstoreError(f"a part of take {named}, not {t.id}")
         out.append(f32_answer(h, body, frame_names(t, points, root)))
     return out
 
@@ -373,7 +375,7 @@ def finish_stream(id: str) -> Op[Take]:
 
 def channels(id: str, query: Params) -> Op[Channels]:
     """A skeleton take's channel values, from the BVH the server writes."""
-    r = yield Request("GET", f"/v1/sequences/{id}/frames", [*query, ("format", "bvh")])
+    r = yield Request("GET", f"/v1/takes/{id}/frames", [*query, ("format", "bvh")])
     raise_for(r)
     c = parse_bvh(r.content, start=header_int(r.headers, "x-start-frame"))
     return replace(c, fps=header_float(r.headers, "x-fps"))

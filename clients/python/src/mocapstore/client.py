@@ -589,7 +589,7 @@ class Client(_Base):
             *p.params(format=format or to.suffix.lstrip(".").lower() or None),
             *self._range_query(start, end, t0, t1, fps, root, up, unit),
         ]
-        return self._run(p.download(f"/v1/sequences/{id}/frames", query, to))
+        return self._run(p.download(f"/v1/takes/{id}/frames", query, to))
 
     def channels(
         self,
@@ -872,7 +872,7 @@ class AsyncClient(_Base):
             *p.params(format=format or to.suffix.lstrip(".").lower() or None),
             *self._range_query(start, end, t0, t1, fps, root, up, unit),
         ]
-        return await self._run(p.download(f"/v1/sequences/{id}/frames", query, to))
+        return await self._run(p.download(f"/v1/takes/{id}/frames", query, to))
 
     async def export_library(
         self,

@@ -1,4 +1,4 @@
-//! `/v1/sequences`: ingest, metadata, frame ranges, delete. Handlers parse the request into
+//! `/v1/takes`: ingest, metadata, frame ranges, delete. Handlers parse the request into
 //! domain types and call the service; no math, no SQL.
 
 use axum::body::{Body, Bytes};
@@ -252,7 +252,7 @@ pub async fn create(
     state
         .metrics
         .ingested(report.frames, uploaded, report.stored_bytes);
-    let location = format!("/v1/sequences/{}", report.id);
+    let location = format!("/v1/takes/{}", report.id);
     Ok((
         StatusCode::CREATED,
         [(header::LOCATION, location)],
@@ -277,7 +277,7 @@ pub async fn delete(
     Ok(StatusCode::NO_CONTENT.into_response())
 }
 
-/// `GET /v1/sequences/{id}/errors`: the take's error second by second and its bound.
+/// `GET /v1/takes/{id}/errors`: the take's error second by second and its bound.
 pub async fn errors(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -466,8 +466,9 @@ fn ranges_request(q: RangesQuery) -> Result<RangesRequest, ApiError> {
 }
 
 /// `GET /v1/ranges`: several ranges, of one take or many, as one `multipart/mixed` answer
-/// (RFC 2046): each part has the headers and the body `/v1/sequences/{id}/frames` gives
-/// for its range, and `x-sequence` naming its take, in the order asked.
+/// (RFC 2046): each part has the headers and the body `/v1/takes/{id}/frames` gives
+/// for its range, and `x-take` (and its older name `x-sequence`) naming its take, in the
+/// order asked.
 pub async fn ranges(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -549,7 +550,9 @@ impl Multipart {
         let id = HeaderValue::from_str(&a.id).map_err(|_| {
             crate::service::Error::Corrupt(format!("take id {:?} is no header value", a.id))
         })?;
-        headers.insert("x-sequence", id);
+        // `x-sequence` is the header's older name, kept for clients that read it.
+        headers.insert("x-sequence", id.clone());
+        headers.insert("x-take", id);
         for (name, value) in &headers {
             head.extend_from_slice(b"\r\n");
             head.extend_from_slice(name.as_str().as_bytes());
@@ -628,7 +631,7 @@ pub struct AnalogQuery {
     format: Option<String>,
 }
 
-/// `GET /v1/sequences/{id}/analog`: analog channels over a range, in their units.
+/// `GET /v1/takes/{id}/analog`: analog channels over a range, in their units.
 pub async fn analog(
     State(state): State<AppState>,
     Extension(holder): Extension<Holder>,
@@ -711,7 +714,7 @@ fn held_body(bytes: Vec<u8>, reservation: crate::service::budget::Reservation) -
     ))
 }
 
-/// `GET /v1/sequences/{id}/parameters`: the uploaded file's parameter section as a typed
+/// `GET /v1/takes/{id}/parameters`: the uploaded file's parameter section as a typed
 /// tree (groups of typed, dimensioned parameters), with its force plates read out.
 pub async fn parameters(
     State(state): State<AppState>,
