@@ -100,6 +100,13 @@ pub struct TakeMeta {
     pub up: Option<crate::motion::transform::Up>,
 }
 
+impl TakeMeta {
+    /// As the take's row stores it (JSON text).
+    pub fn to_text(&self, id: &str) -> Result<String> {
+        serde_json::to_string(self).map_err(|e| Error::Internal(format!("take {id}: meta: {e}")))
+    }
+}
+
 fn is_zero(n: &usize) -> bool {
     *n == 0
 }
@@ -253,14 +260,14 @@ impl Take {
     pub fn to_row(&self) -> Result<TakeRow> {
         let meta = if self.skeleton.is_some() {
             // The skeleton names the points; a row need not repeat them.
-            serde_json::to_string(&TakeMeta {
+            TakeMeta {
                 point_names: Vec::new(),
                 ..self.meta.clone()
-            })
+            }
+            .to_text(&self.id)?
         } else {
-            serde_json::to_string(&self.meta)
-        }
-        .map_err(|e| Error::Internal(format!("take {}: meta: {e}", self.id)))?;
+            self.meta.to_text(&self.id)?
+        };
         Ok(TakeRow {
             id: self.id.clone(),
             name: self.name.clone(),

@@ -11,7 +11,7 @@ use crate::codec::{self, Basis, CodecId, Latency};
 use crate::motion::Motion;
 use crate::service::bases::Provenance;
 use crate::service::choose::{CodecRequest, Keep};
-use crate::service::take::{Take, TakeMeta};
+use crate::service::take::Take;
 use crate::service::{bases, blocking, ingest, take, Error, Result};
 use crate::store::{BasisRow, ChunkAppend, Store};
 
@@ -144,11 +144,6 @@ impl Streams {
         live.lease_until = until;
         Ok(())
     }
-}
-
-/// A take's metadata as stored.
-pub(super) fn meta_text(id: &str, meta: &TakeMeta) -> Result<String> {
-    serde_json::to_string(meta).map_err(|e| Error::Internal(format!("take {id}: meta: {e}")))
 }
 
 /// Code a finished stream's take again, from the frames as sent, with every candidate

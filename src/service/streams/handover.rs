@@ -40,7 +40,6 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use tokio::sync::broadcast;
 
-use super::coding::meta_text;
 use super::{Live, Streams};
 use crate::codec::stream::{StreamEncoder, StreamSpec};
 use crate::codec::ErrorBound;
@@ -298,7 +297,7 @@ impl Streams {
                     live_until,
                     frames: row.frames,
                     frames_received: row.frames_received,
-                    meta: &meta_text(id, &meta)?,
+                    meta: &meta.to_text(id)?,
                 },
             )
             .await?;

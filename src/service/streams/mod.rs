@@ -50,7 +50,7 @@ use crate::codec::stream::{StreamChunk, StreamEncoder, StreamSpec};
 use crate::limits::{STREAM_UNSAVED_BYTES, STREAM_WATCH_QUEUE};
 use crate::motion::Motion;
 use crate::store::{Closer, NewStream, NewTake, Store};
-use coding::{meta_text, reencode_take, stream_basis};
+use coding::{reencode_take, stream_basis};
 use handover::Resumable;
 use registry::{unavailable, LEASE_MARGIN_MS};
 use request::Plan;
@@ -397,7 +397,7 @@ impl Streams {
             .close_live(
                 id,
                 &take.header,
-                &meta_text(id, &take.meta)?,
+                &take.meta.to_text(id)?,
                 Closer::Owner(&self.node.id),
             )
             .await?;

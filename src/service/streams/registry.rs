@@ -9,7 +9,6 @@ use std::time::Duration;
 
 use tokio::sync::{watch, OwnedSemaphorePermit, Semaphore};
 
-use super::coding::meta_text;
 use super::{Entry, Live};
 use crate::limits::Limits;
 use crate::service::budget::{Holder, Share, Shares};
@@ -239,7 +238,7 @@ impl Streams {
                 frames: take.frames as i64,
             };
             if store
-                .close_live(&id, &header.to_bytes(), &meta_text(&id, &meta)?, orphan)
+                .close_live(&id, &header.to_bytes(), &meta.to_text(&id)?, orphan)
                 .await?
             {
                 tracing::warn!(stream = %id, frames = take.frames, "closed a stream whose server stopped");
