@@ -103,6 +103,17 @@ pub const MAX_TOKEN_LIBRARIES: usize = 100;
 /// Audit entries one request may ask for.
 pub const MAX_AUDIT_PAGE: usize = 1_000;
 
+/// Takes one listing page may ask for (`limit=`); also the page an export or a training
+/// selection reads the library by.
+pub const MAX_TAKES_PAGE: usize = 500;
+
+/// Jobs one listing answers at most.
+pub const MAX_JOBS_LISTED: usize = 1_000;
+
+/// The longest a client may ask a job's answer to wait for it to finish (`wait_s=`),
+/// seconds.
+pub const MAX_JOB_WAIT_S: u64 = 600;
+
 /// Ranges one `GET /v1/ranges` may ask for: a training batch. Each part is checked before
 /// the first is written and opened again when its turn comes, so a batch of more takes than
 /// the server keeps decoders for ([`crate::service::prepared::DECODERS`]) would build each

@@ -469,7 +469,8 @@ fn choose_prediction(p: &PrintedValues, first: usize, stride: usize, frames: usi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::codec::{decode_all_with, encode, ErrorBound, Reader, Stored};
+    use crate::codec::testing::encoded;
+    use crate::codec::{decode_all_with, ErrorBound, Reader, Stored};
     use crate::motion::format::Format;
     use crate::motion::formats::{read_as, ReadOptions};
     use crate::motion::synthetic::{dancer, dancer_bvh};
@@ -506,13 +507,7 @@ mod tests {
         let head = &text[..text.find("Frame Time").unwrap()];
         let text = format!("{head}Frame Time: 0.008333\n{}\n", rows.join("\n"));
         let m = load(&text);
-        let enc = encode(
-            &m,
-            CodecId::BvhLossless,
-            ErrorBound::max(0.0),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::BvhLossless, ErrorBound::max(0.0));
         let rig = Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
         assert_eq!(enc.container.header.rig, Some(rig.hash()));
         let shared = Shared {
@@ -550,13 +545,7 @@ mod tests {
     fn codes_smooth_channels_in_a_few_bits_each() {
         let text = dancer_bvh(1200, 120.0, 5, 4);
         let m = load(&text);
-        let enc = encode(
-            &m,
-            CodecId::BvhLossless,
-            ErrorBound::max(0.0),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::BvhLossless, ErrorBound::max(0.0));
         let values = m.skeleton.as_ref().unwrap().values.len();
         let bits = 8.0 * enc.stored_bytes as f64 / values as f64;
         // The jitter alone (0.05 wide at 4 decimals) is ~9 bits of noise per value, ~11 after a
@@ -573,13 +562,7 @@ mod tests {
     #[test]
     fn damaged_chunks_fail_cleanly() {
         let m = dancer(300, 60.0, 9);
-        let enc = encode(
-            &m,
-            CodecId::BvhLossless,
-            ErrorBound::max(0.0),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::BvhLossless, ErrorBound::max(0.0));
         let rig = Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
         let d = BvhLossless
             .decoder(

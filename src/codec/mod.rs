@@ -54,7 +54,7 @@ pub mod skeletal;
 pub mod spca;
 pub mod stream;
 #[cfg(test)]
-mod testing;
+pub(crate) mod testing;
 mod wire;
 
 use crate::motion::{Motion, Skeleton};

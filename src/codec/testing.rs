@@ -3,8 +3,16 @@
 use std::sync::Arc;
 
 use super::pipeline::Encoded;
-use super::{encode, ChunkDecoder, CodecId, ErrorBound, Reader, Rig, Shared, Stored};
+use super::{
+    encode, ChunkDecoder, CodecId, EncodeOptions, ErrorBound, Reader, Rig, Shared, Stored,
+};
 use crate::motion::Motion;
+
+/// `m` encoded with `codec` to `bound`, no options: the tests' usual encode.
+pub fn encoded(m: &Motion, codec: CodecId, bound: ErrorBound) -> Encoded {
+    encode(m, codec, bound, EncodeOptions::default())
+        .unwrap_or_else(|e| panic!("{codec} {bound}: {e}"))
+}
 
 /// What a reader of a skeleton take `m` needs: its rig.
 pub fn skeleton_shared(m: &Motion) -> Shared {
@@ -90,13 +98,7 @@ pub fn measured(m: &Motion, enc: &Encoded) -> (f64, f64) {
 pub fn meets_bounds_and_shrinks(m: &Motion, codec: CodecId, bounds: [f64; 3]) {
     let mut last = usize::MAX;
     for mm in bounds {
-        let enc = encode(
-            m,
-            codec,
-            ErrorBound::max(mm),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(m, codec, ErrorBound::max(mm));
         let (max, _) = measured(m, &enc);
         assert!(max <= mm, "{max} > {mm}");
         // The search lands close under the bound, not far below it.
@@ -104,13 +106,7 @@ pub fn meets_bounds_and_shrinks(m: &Motion, codec: CodecId, bounds: [f64; 3]) {
         assert!(enc.stored_bytes < last);
         last = enc.stored_bytes;
     }
-    let enc = encode(
-        m,
-        codec,
-        ErrorBound::mean(2.0),
-        crate::codec::EncodeOptions::default(),
-    )
-    .unwrap();
+    let enc = encoded(m, codec, ErrorBound::mean(2.0));
     let (_, mean) = measured(m, &enc);
     assert!(mean <= 2.0, "{mean} > 2");
 }

@@ -11,9 +11,10 @@ use super::error::ApiError;
 use super::views::BasisView;
 use super::AppState;
 use crate::codec::BasisKind;
+use crate::limits::{MAX_JOBS_LISTED, MAX_JOB_WAIT_S};
 use crate::service::access::Caller;
 use crate::service::bases;
-use crate::service::jobs::{Job, JobState, MAX_LIST, MAX_WAIT_S};
+use crate::service::jobs::{Job, JobState};
 use crate::service::training::{self, TrainRequest};
 use crate::service::Error;
 
@@ -83,9 +84,9 @@ pub async fn job(
 ) -> Result<Json<Job>, ApiError> {
     let Query(q) = query?;
     let wait = q.wait_s.unwrap_or(0);
-    if wait > MAX_WAIT_S {
+    if wait > MAX_JOB_WAIT_S {
         return Err(ApiError::bad_request(format!(
-            "wait_s must be at most {MAX_WAIT_S}, got {wait}"
+            "wait_s must be at most {MAX_JOB_WAIT_S}, got {wait}"
         )));
     }
     state
@@ -117,9 +118,9 @@ pub async fn jobs(
         .transpose()
         .map_err(ApiError::bad_request)?;
     let limit = q.limit.unwrap_or(100);
-    if limit == 0 || limit > MAX_LIST {
+    if limit == 0 || limit > MAX_JOBS_LISTED {
         return Err(ApiError::bad_request(format!(
-            "limit must be 1 to {MAX_LIST}, got {limit}"
+            "limit must be 1 to {MAX_JOBS_LISTED}, got {limit}"
         )));
     }
     let items = state.jobs.list(&caller.grant, job_state, limit).await?;

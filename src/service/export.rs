@@ -38,11 +38,11 @@ use super::access::Grant;
 use super::answer::{self, RangeRequest, PIECES_IN_FLIGHT, PIECE_BYTES};
 use super::budget::{Budget, Held, Holder, Reservation};
 use super::fetch::TimeRange;
-use super::library::{TakeQuery, MAX_PAGE};
+use super::library::TakeQuery;
 use super::prepared::ReadCaches;
 use super::take::Take;
 use super::{blocking, Error, Result};
-use crate::limits::Limits;
+use crate::limits::{Limits, MAX_TAKES_PAGE};
 use crate::motion::formats::Format;
 use crate::motion::transform::Options;
 use crate::store::{SortKey, Store};
@@ -431,7 +431,13 @@ pub async fn open(
     let mut cursor = None;
     loop {
         let page = store
-            .list(&filter, SortKey::Created, false, MAX_PAGE, cursor.as_ref())
+            .list(
+                &filter,
+                SortKey::Created,
+                false,
+                MAX_TAKES_PAGE,
+                cursor.as_ref(),
+            )
             .await?;
         for row in page.items {
             let file = names.file(&row.library, &row.name, req.format.name());

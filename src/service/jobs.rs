@@ -20,6 +20,7 @@ use serde::Serialize;
 
 use super::access::Grant;
 use super::{now_ms, Error, Result};
+use crate::limits::MAX_JOBS_LISTED;
 use crate::store::{JobRow, Store};
 
 /// How often a runner writes its progress and renews its lease.
@@ -35,12 +36,6 @@ pub const MIN_LEASE: Duration = Duration::from_secs(5);
 
 /// Finished jobs are kept this long for inspection, then forgotten (what they made stays).
 pub const KEEP_FINISHED: Duration = Duration::from_secs(7 * 24 * 3600);
-
-/// The longest a client may ask [`Jobs::wait_for`] to wait, seconds.
-pub const MAX_WAIT_S: u64 = 600;
-
-/// Jobs one listing answers at most.
-pub const MAX_LIST: usize = 1_000;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -300,10 +295,13 @@ impl Jobs {
         state: Option<JobState>,
         limit: usize,
     ) -> Result<Vec<Job>> {
-        let limit = limit.min(MAX_LIST);
+        let limit = limit.min(MAX_JOBS_LISTED);
         let mut out = Vec::new();
         // A limited token sees a part of the rows: read more than asked, up to the cap.
-        let rows = self.store.jobs(state.map(JobState::name), MAX_LIST).await?;
+        let rows = self
+            .store
+            .jobs(state.map(JobState::name), MAX_JOBS_LISTED)
+            .await?;
         for r in rows {
             let job = Job::from_row(r)?;
             if job.visible_to(grant) {

@@ -8,9 +8,8 @@ use super::access::Grant;
 use super::take::Take;
 use super::{Error, Result};
 use crate::codec::CodecId;
+use crate::limits::MAX_TAKES_PAGE;
 use crate::store::{Cursor, Filter, SortKey, Store, TakeRow, Totals};
-
-pub const MAX_PAGE: usize = 500;
 
 /// Which takes a listing, statistics or an export is of, as a caller asks: each field a
 /// condition every take must meet, checked ([`TakeQuery::check`]) before the store sees it.
@@ -119,9 +118,9 @@ pub async fn list(store: &Store, grant: &Grant, query: &TakeQuery, page: Page) -
     let descending = descending.unwrap_or(sort == SortKey::Created);
     let cursor = cursor.as_deref();
     let limit = limit.unwrap_or(50);
-    if limit == 0 || limit > MAX_PAGE {
+    if limit == 0 || limit > MAX_TAKES_PAGE {
         return Err(Error::InvalidRequest(format!(
-            "limit must be 1..={MAX_PAGE}, got {limit}"
+            "limit must be 1..={MAX_TAKES_PAGE}, got {limit}"
         )));
     }
     let cursor = match cursor {
@@ -168,7 +167,13 @@ pub async fn all_rows(store: &Store, filter: &Filter) -> Result<Vec<TakeRow>> {
     let mut cursor = None;
     loop {
         let page = store
-            .list(filter, SortKey::Created, false, MAX_PAGE, cursor.as_ref())
+            .list(
+                filter,
+                SortKey::Created,
+                false,
+                MAX_TAKES_PAGE,
+                cursor.as_ref(),
+            )
             .await?;
         out.extend(page.items);
         match page.next {

@@ -266,14 +266,17 @@ mod tests {
     use crate::codec::{self, ErrorBound};
     use crate::motion::synthetic::walker;
 
-    fn prepared(id: &str) -> Arc<Prepared> {
-        let enc = codec::encode(
+    /// A short take, coded.
+    fn encoded() -> codec::Encoded {
+        codec::testing::encoded(
             &walker(20, 2, 30.0, 1, 0.0),
             CodecId::Quant,
             ErrorBound::max(1.0),
-            codec::EncodeOptions::default(),
         )
-        .unwrap();
+    }
+
+    fn prepared(id: &str) -> Arc<Prepared> {
+        let enc = encoded();
         Arc::new(Prepared {
             id: id.into(),
             stamp: Stamp {
@@ -335,13 +338,7 @@ mod tests {
         let store = Store::open(&format!("sqlite://{}", path.display()))
             .await
             .unwrap();
-        let enc = codec::encode(
-            &walker(20, 2, 30.0, 1, 0.0),
-            CodecId::Quant,
-            ErrorBound::max(1.0),
-            codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded();
         let mut take = Take::sample();
         take.header = enc.container.header.to_bytes();
         let chunks = super::super::take::chunk_rows(&enc.container);

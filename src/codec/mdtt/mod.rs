@@ -618,15 +618,10 @@ mod tests {
     /// wherever they lie (first, middle, last rows; a short last clip), residual layer on.
     #[test]
     fn rows_of_a_clip_decode_as_the_whole_clip_does() {
-        use crate::codec::{encode, ErrorBound, Shared};
+        use crate::codec::testing::encoded;
+        use crate::codec::{ErrorBound, Shared};
         let m = crate::motion::synthetic::walker(700, 7, 120.0, 5, 0.0);
-        let enc = encode(
-            &m,
-            CodecId::Mdtt,
-            ErrorBound::max(0.3),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::Mdtt, ErrorBound::max(0.3));
         let c = &enc.container;
         let dec = Mdtt
             .decoder(&c.header.params, 7, &Shared::default())

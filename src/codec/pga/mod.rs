@@ -118,7 +118,7 @@ impl ChannelDecoder for PgaDecoder {
 mod tests {
     use super::*;
     use crate::codec::testing::{
-        damage_channels, first_chunk, measured, meets_bounds_and_shrinks, skeleton_shared,
+        damage_channels, encoded, first_chunk, measured, meets_bounds_and_shrinks, skeleton_shared,
     };
     use crate::codec::Error;
     use crate::codec::{encode, EncodeOptions, ErrorBound};
@@ -129,26 +129,26 @@ mod tests {
         meets_bounds_and_shrinks(&dancer(600, 120.0, 7), CodecId::Pga, [0.5, 2.0, 10.0]);
     }
 
+    /// `m` coded by pga to `max_mm` with `options` only (settings its search does not try).
+    fn coded_with(m: &Motion, max_mm: f64, options: Options) -> crate::codec::Encoded {
+        let encoder = move |input: &Input<'_>, t| {
+            let (rig, sk) = input.skeleton.unwrap();
+            Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
+        };
+        let options = EncodeOptions {
+            encoder: Some(Box::new(encoder)),
+            ..Default::default()
+        };
+        encode(m, CodecId::Pga, ErrorBound::max(max_mm), options).unwrap()
+    }
+
     /// At a loose bound the paper's decoder (end points sent, coarser coordinates, IK) codes
     /// smaller than coordinates alone: the reason `auto` tries it ([`Options::IK`]).
     #[test]
     fn ik_codes_smaller_than_coordinates_alone_at_a_loose_bound() {
         let m = dancer(600, 120.0, 7);
         let size = |options: Options| {
-            let enc = encode(
-                &m,
-                CodecId::Pga,
-                ErrorBound::max(12.5),
-                EncodeOptions {
-                    basis: None,
-                    encoder: Some(Box::new(|input, t| {
-                        let (rig, sk) = input.skeleton.unwrap();
-                        Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
-                    })),
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let enc = coded_with(&m, 12.5, options);
             let (max, _) = measured(&m, &enc);
             assert!(max <= 12.5, "{max}");
             enc.stored_bytes
@@ -166,20 +166,7 @@ mod tests {
             iterations: 3,
             ..Options::IK
         };
-        let enc = encode(
-            &m,
-            CodecId::Pga,
-            ErrorBound::max(5.0),
-            EncodeOptions {
-                basis: None,
-                encoder: Some(Box::new(|input, t| {
-                    let (rig, sk) = input.skeleton.unwrap();
-                    Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
-                })),
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let enc = coded_with(&m, 5.0, options);
         let (max, _) = measured(&m, &enc);
         assert!(max <= 5.0, "{max}");
         let params = &enc.container.header.params;
@@ -264,13 +251,7 @@ mod tests {
     #[test]
     fn damaged_parameters_and_chunks_fail_cleanly() {
         let m = dancer(200, 60.0, 3);
-        let enc = encode(
-            &m,
-            CodecId::Pga,
-            ErrorBound::max(2.0),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::Pga, ErrorBound::max(2.0));
         let shared = skeleton_shared(&m);
         let params = &enc.container.header.params;
         let d = Pga.decoder(params, m.point_count(), &shared).unwrap();

@@ -450,9 +450,9 @@ impl ChannelDecoder for RotDecoder {
 mod tests {
     use super::*;
     use crate::codec::testing::{
-        damage_channels, first_chunk, measured, meets_bounds_and_shrinks, skeleton_shared,
+        damage_channels, encoded, first_chunk, measured, meets_bounds_and_shrinks, skeleton_shared,
     };
-    use crate::codec::{encode, ErrorBound};
+    use crate::codec::ErrorBound;
     use crate::motion::format::Format;
     use crate::motion::formats::{read_as, ReadOptions};
     use crate::motion::synthetic::dancer;
@@ -478,13 +478,7 @@ mod tests {
         let m = read_as(Format::Bvh, t.as_bytes(), &ReadOptions::default())
             .unwrap()
             .motion;
-        let enc = encode(
-            &m,
-            CodecId::Rot,
-            ErrorBound::max(0.5),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::Rot, ErrorBound::max(0.5));
         let (max, _) = measured(&m, &enc);
         assert!(max <= 0.5, "{max}");
     }
@@ -492,13 +486,7 @@ mod tests {
     #[test]
     fn damaged_chunks_fail_cleanly() {
         let m = dancer(200, 60.0, 3);
-        let enc = encode(
-            &m,
-            CodecId::Rot,
-            ErrorBound::max(1.0),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::Rot, ErrorBound::max(1.0));
         let shared = skeleton_shared(&m);
         let d = Rot
             .decoder(&enc.container.header.params, m.point_count(), &shared)

@@ -123,8 +123,8 @@ impl ChunkDecoder for SpcaDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::codec::testing::meets_bounds_and_shrinks;
-    use crate::codec::{encode, gaps, ErrorBound};
+    use crate::codec::testing::{encoded, meets_bounds_and_shrinks};
+    use crate::codec::{gaps, ErrorBound};
     use crate::motion::metrics::{accelerations, speeds};
     use crate::motion::synthetic::{dancer, two_behaviours, walker};
 
@@ -134,13 +134,7 @@ mod tests {
         // Points with no names to find a torso by: coded as they are.
         let w = walker(400, 9, 100.0, 4, 0.2);
         for bound in [ErrorBound::max(1.0), ErrorBound::mean(1.0)] {
-            let enc = encode(
-                &w,
-                CodecId::Spca,
-                bound,
-                crate::codec::EncodeOptions::default(),
-            )
-            .unwrap();
+            let enc = encoded(&w, CodecId::Spca, bound);
             let (max, mean) = crate::codec::testing::measured(&w, &enc);
             assert!(bound.holds(max, mean), "{bound}: max {max}, mean {mean}");
         }
@@ -170,13 +164,7 @@ mod tests {
         // Without the residual layer (a mean bound) the models alone make the frames. At
         // every cut the decoded motion moves no faster and turns no harder than the
         // original does anywhere.
-        let enc = encode(
-            &m,
-            CodecId::Spca,
-            ErrorBound::mean(10.0),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::Spca, ErrorBound::mean(10.0));
         let cuts: Vec<usize> = enc.container.header.chunks[1..]
             .iter()
             .map(|c| c.first_frame as usize)
@@ -203,13 +191,7 @@ mod tests {
     fn a_torso_named_in_the_request_normalises_a_take_with_unknown_names() {
         let w = walker(300, 6, 100.0, 8, 0.1);
         let bound = ErrorBound::max(2.0);
-        let plain = encode(
-            &w,
-            CodecId::Spca,
-            bound,
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let plain = encoded(&w, CodecId::Spca, bound);
         assert_eq!(
             plain.container.header.params[1], 3,
             "no torso found by name"
@@ -252,13 +234,7 @@ mod tests {
     #[test]
     fn damaged_chunks_and_headers_give_errors_not_panics() {
         let m = two_behaviours();
-        let enc = encode(
-            &m,
-            CodecId::Spca,
-            ErrorBound::max(1.0),
-            crate::codec::EncodeOptions::default(),
-        )
-        .unwrap();
+        let enc = encoded(&m, CodecId::Spca, ErrorBound::max(1.0));
         let params = &enc.container.header.params;
         for i in 0..params.len() {
             let mut p = params.clone();
