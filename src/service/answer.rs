@@ -1018,7 +1018,7 @@ impl Answer {
         // away): the blocking pool finishes the work, and its memory stays reserved.
         let block = match selected {
             Some(selected) => {
-                let cached = self.caches.chunks.get(self.prepared.generation, i);
+                let cached = self.caches.chunks.get(&self.prepared, i);
                 let (chunk, payload_held) = match cached {
                     Some(d) => (OneChunk::Decoded(d), None),
                     None => {
@@ -1046,9 +1046,7 @@ impl Answer {
                 })
                 .await?;
                 if let Some(fresh) = fresh {
-                    self.caches
-                        .chunks
-                        .insert(self.prepared.generation, i, fresh);
+                    self.caches.chunks.insert(&self.prepared, i, fresh);
                 }
                 let (data, frames) = data?;
                 self.shaper = shaper;

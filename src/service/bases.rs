@@ -91,8 +91,20 @@ impl Provenance {
         }
     }
 
-    /// As the store keeps it.
+    /// As the store keeps it. A training whose objective is not finite (it diverged) is
+    /// refused: JSON would store null, which no reader could take for a number.
     pub fn to_value(&self) -> Result<serde_json::Value> {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        let objective_finite = match &self.objective {
+            None => true,
+            Some(Objective::Series(s)) => finite(s),
+            Some(Objective::PerAxis { x, y, z }) => finite(x) && finite(y) && finite(z),
+        };
+        if !objective_finite {
+            return Err(Error::Internal(
+                "training diverged: its objective is not finite".into(),
+            ));
+        }
         serde_json::to_value(self).map_err(|e| Error::Internal(format!("basis provenance: {e}")))
     }
 }
@@ -181,22 +193,14 @@ pub async fn list(
     grant: &Grant,
 ) -> Result<Vec<BasisInfo>> {
     let rows = store.bases(layout, kind.map(BasisKind::name)).await?;
-    let infos = rows
-        .into_iter()
-        .map(BasisInfo::parse)
-        .collect::<Result<_>>()?;
-    scoped(store, infos, grant).await
+    scoped(store, rows, grant).await
 }
 
 /// One stored basis; to a grant limited to libraries, only one of theirs ([`scoped`]; any
 /// other is `NotFound`, as if it did not exist).
 pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<BasisInfo> {
     let row = store.basis(id).await?;
-    let infos = row
-        .into_iter()
-        .map(BasisInfo::parse)
-        .collect::<Result<_>>()?;
-    scoped(store, infos, grant)
+    scoped(store, row.into_iter().collect(), grant)
         .await?
         .pop()
         .ok_or_else(|| Error::NotFound(format!("basis {id}")))
@@ -217,29 +221,41 @@ pub async fn delete(store: &Store, id: &str) -> Result<()> {
 /// stored. Limited to libraries: those that takes of its libraries use or were trained
 /// from, with `used_by` counting only those takes, and a provenance that says nothing of
 /// another library: its takes (and their frame total) only those in the grant's libraries,
-/// and of the rest only how it was trained ([`SETTINGS`]), not what it measured on the
+/// and of the rest only how it was trained ([`Provenance::settings_only`]), not what it measured on the
 /// whole selection (samples, clips, sizes, objective).
-async fn scoped(store: &Store, infos: Vec<BasisInfo>, grant: &Grant) -> Result<Vec<BasisInfo>> {
+async fn scoped(store: &Store, rows: Vec<BasisRow>, grant: &Grant) -> Result<Vec<BasisInfo>> {
     let Some(within) = grant.within() else {
-        return Ok(infos);
+        return rows.into_iter().map(BasisInfo::parse).collect();
+    };
+    // Which rows the grant reaches is read from the stored takes list alone, so that a
+    // record it does not reach cannot fail its listing; those it reaches are parsed whole.
+    let trained = |row: &BasisRow| -> Vec<String> {
+        row.provenance["takes"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|v| v.as_str().map(str::to_string))
+                    .collect()
+            })
+            .unwrap_or_default()
     };
     let uses = store.basis_use_within(&within).await?;
-    let trained = |b: &BasisInfo| b.provenance.takes.clone().unwrap_or_default();
     // One lookup for every basis's takes, not one per basis.
-    let mut all: Vec<String> = infos.iter().flat_map(trained).collect();
+    let mut all: Vec<String> = rows.iter().flat_map(trained).collect();
     all.sort();
     all.dedup();
     let visible = store.take_frames_within(&all, &within).await?;
-    let mut out = Vec::with_capacity(infos.len());
-    for mut b in infos {
-        let takes: Vec<String> = trained(&b)
+    let mut out = Vec::with_capacity(rows.len());
+    for row in rows {
+        let takes: Vec<String> = trained(&row)
             .into_iter()
             .filter(|t| visible.contains_key(t))
             .collect();
-        let used = uses.get(&b.id).copied().unwrap_or(0);
+        let used = uses.get(&row.id).copied().unwrap_or(0);
         if used == 0 && takes.is_empty() {
             continue;
         }
+        let mut b = BasisInfo::parse(row)?;
         b.used_by = used.max(0) as u64;
         let mut shown = b.provenance.settings_only();
         if b.provenance.takes.is_some() {
@@ -316,5 +332,10 @@ mod tests {
         ] {
             assert!(matches!(BasisInfo::parse(bad), Err(Error::Corrupt(_))));
         }
+        let diverged = Provenance {
+            objective: Some(Objective::Series(vec![1.0, f64::NAN])),
+            ..Provenance::default()
+        };
+        assert!(diverged.to_value().is_err());
     }
 }

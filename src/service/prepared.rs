@@ -8,8 +8,8 @@
 //! [`Stamp`] of the coding it was built from, and [`ReadCaches::current`] checks it against
 //! the stored one before each use (one indexed lookup): a take re-encoded or deleted since,
 //! here or through another server sharing the database, is built again or answered 404.
-//! Decoded chunks are keyed by the decoder they came from ([`Prepared::generation`]), so a
-//! rebuilt decoder never meets its predecessor's chunks; those age out.
+//! Decoded chunks are keyed by the take, its stamp and the chunk, so chunks of an older
+//! coding (or of a live take before its last commit) are never read again; those age out.
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -23,7 +23,7 @@ use crate::store::{StampRow, Store};
 /// What tells one coding of a take from another: a re-encode keeps its result only if
 /// smaller, so it changes `stored_bytes`; a live take grows its `frames` (and is never
 /// cached meanwhile).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Stamp {
     codec: CodecId,
     stored_bytes: u64,
@@ -53,7 +53,7 @@ impl Stamp {
     }
 }
 
-/// Each [`Prepared`] built in this process gets its own number, for the chunk cache's keys.
+/// Each [`Prepared`] built in this process gets its own number.
 static GENERATIONS: AtomicU64 = AtomicU64::new(0);
 
 /// What range requests of one take need, ready to use.
@@ -61,7 +61,8 @@ pub struct Prepared {
     pub id: String,
     /// The coding this was built from.
     pub stamp: Stamp,
-    /// Unique to this [`Prepared`] within the process: decoded chunks are cached under it.
+    /// Unique to this [`Prepared`] within the process: which of two decoders of a take a
+    /// cache entry is.
     pub generation: u64,
     pub reader: Reader,
     pub point_names: Vec<String>,
@@ -153,6 +154,15 @@ impl DecoderCache {
         g.0.remove(id);
         g.1.retain(|k| k != id);
     }
+
+    /// Remove `id`'s entry if it is still the decoder of `generation`.
+    pub fn remove_if(&self, id: &str, generation: u64) {
+        let mut g = self.inner.lock().expect("cache lock");
+        if g.0.get(id).is_some_and(|p| p.generation == generation) {
+            g.0.remove(id);
+            g.1.retain(|k| k != id);
+        }
+    }
 }
 
 /// Both caches, as the read path uses them.
@@ -178,31 +188,34 @@ impl ReadCaches {
         };
         match store.coding_stamp(id).await? {
             None => {
-                self.decoders.remove(id);
+                self.decoders.remove_if(id, p.generation);
                 Err(super::Error::NotFound(format!("take {id}")))
             }
             Some(row) => {
                 if Stamp::parse(id, row)? == p.stamp {
                     return Ok(Some(p));
                 }
-                self.decoders.remove(id);
+                // Only this stale one: another request may have cached a fresh one since.
+                self.decoders.remove_if(id, p.generation);
                 Ok(None)
             }
         }
     }
 }
 
-/// Decoded chunks by ([`Prepared::generation`], chunk index), bounded in bytes, oldest
-/// evicted first.
+/// Decoded chunks by (take, [`Stamp`], chunk index), bounded in bytes, oldest evicted first.
 pub struct ChunkCache {
     budget: usize,
     inner: Mutex<ChunkEntries>,
 }
 
+/// A decoded chunk's key: the take, the coding it was decoded from, the chunk.
+type ChunkKey = (String, Stamp, usize);
+
 #[derive(Default)]
 struct ChunkEntries {
-    map: HashMap<(u64, usize), Arc<Vec<f32>>>,
-    order: VecDeque<(u64, usize)>,
+    map: HashMap<ChunkKey, Arc<Vec<f32>>>,
+    order: VecDeque<ChunkKey>,
     bytes: usize,
 }
 
@@ -214,23 +227,25 @@ impl ChunkCache {
         }
     }
 
-    pub fn get(&self, generation: u64, index: usize) -> Option<Arc<Vec<f32>>> {
+    /// Chunk `index` of the take `p` reads, as decoded from its coding now.
+    pub fn get(&self, p: &Prepared, index: usize) -> Option<Arc<Vec<f32>>> {
+        let key = (p.id.clone(), p.stamp, index);
         self.inner
             .lock()
             .expect("cache lock")
             .map
-            .get(&(generation, index))
+            .get(&key)
             .cloned()
     }
 
-    pub fn insert(&self, generation: u64, index: usize, frames: Arc<Vec<f32>>) {
+    pub fn insert(&self, p: &Prepared, index: usize, frames: Arc<Vec<f32>>) {
         let size = frames.len() * 4;
         if size > self.budget {
             return;
         }
         let mut g = self.inner.lock().expect("cache lock");
-        let key = (generation, index);
-        if let Some(old) = g.map.insert(key, frames) {
+        let key: ChunkKey = (p.id.clone(), p.stamp, index);
+        if let Some(old) = g.map.insert(key.clone(), frames) {
             g.bytes -= old.len() * 4;
         } else {
             g.order.push_back(key);
@@ -251,7 +266,7 @@ impl ChunkCache {
     }
 }
 
-/// Takes whose decoders a server keeps ready (least recently used dropped first).
+/// Takes whose decoders a server keeps ready (the one cached first dropped first).
 pub const DECODERS: usize = 256;
 
 impl Default for DecoderCache {
@@ -300,15 +315,21 @@ mod tests {
     #[test]
     fn chunk_cache_stays_within_its_budget() {
         let c = ChunkCache::new(100);
-        c.insert(1, 0, Arc::new(vec![0.0; 10])); // 40 bytes
-        c.insert(1, 1, Arc::new(vec![0.0; 10]));
-        c.insert(2, 0, Arc::new(vec![0.0; 10])); // 120 > 100: the oldest goes
-        assert!(c.get(1, 0).is_none() && c.get(1, 1).is_some() && c.get(2, 0).is_some());
+        let (a, b, d) = (prepared("a"), prepared("b"), prepared("d"));
+        c.insert(&a, 0, Arc::new(vec![0.0; 10])); // 40 bytes
+        c.insert(&a, 1, Arc::new(vec![0.0; 10]));
+        c.insert(&b, 0, Arc::new(vec![0.0; 10])); // 120 > 100: the oldest goes
+        assert!(c.get(&a, 0).is_none() && c.get(&a, 1).is_some() && c.get(&b, 0).is_some());
         assert_eq!(c.bytes(), 80);
-        c.insert(3, 0, Arc::new(vec![0.0; 100])); // larger than the budget: not kept
-        assert!(c.get(3, 0).is_none());
-        c.insert(1, 1, Arc::new(vec![0.0; 5])); // replaced: counted once
+        c.insert(&d, 0, Arc::new(vec![0.0; 100])); // larger than the budget: not kept
+        assert!(c.get(&d, 0).is_none());
+        c.insert(&a, 1, Arc::new(vec![0.0; 5])); // replaced: counted once
         assert_eq!(c.bytes(), 60);
+        // Another decoder of the same coding shares the chunks; another coding does not.
+        assert!(c.get(&prepared("a"), 1).is_some());
+        let mut recoded = prepared("a");
+        Arc::get_mut(&mut recoded).unwrap().stamp.stored_bytes += 1;
+        assert!(c.get(&recoded, 1).is_none());
     }
 
     #[test]
@@ -382,6 +403,8 @@ mod tests {
             "its chunks are cached apart"
         );
         caches.decoders.insert(fresh);
+        // A request that found the stale one late drops only that one.
+        caches.decoders.remove_if(&take.id, p.generation);
         assert!(caches.current(&store, &take.id).await.unwrap().is_some());
 
         assert!(store.delete(&take.id).await.unwrap());

@@ -255,6 +255,7 @@ impl Streams {
     /// pending too (the next chunk then starts with an intra frame: lower delay, a few more
     /// bytes).
     pub async fn append(&self, store: &Store, id: &str, append: Append) -> Result<StreamInfo> {
+        append.check_time()?;
         let entry = match self.entry(id) {
             Some(e) => e,
             None => return Err(Self::not_open(store, id).await),
@@ -265,7 +266,7 @@ impl Streams {
                 "stream {id} failed ({why}); what was committed is kept: finish it"
             )));
         }
-        append.check(live.take.points, live.take.metres_per_unit)?;
+        append.check_frames(live.take.points, live.take.metres_per_unit)?;
         let Append {
             frames,
             first,

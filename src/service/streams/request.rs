@@ -141,9 +141,8 @@ pub struct Append {
 }
 
 impl Append {
-    /// Check an append against its stream (`points`, stored units of `metres_per_unit`):
-    /// a capture time that is one, whole frames, finite values of a physical scale.
-    pub(super) fn check(&self, points: usize, metres_per_unit: f64) -> Result<()> {
+    /// A capture time that is one: checked before the stream is looked up.
+    pub(super) fn check_time(&self) -> Result<()> {
         if let Some(t) = self
             .captured_ms
             .filter(|t| !(0..=MAX_CAPTURE_MS).contains(t))
@@ -152,6 +151,12 @@ impl Append {
                 "captured_ms {t} is not a time in ms since the Unix epoch (0..={MAX_CAPTURE_MS})"
             )));
         }
+        Ok(())
+    }
+
+    /// Check an append's frames against its stream (`points`, stored units of
+    /// `metres_per_unit`): whole frames, finite values of a physical scale.
+    pub(super) fn check_frames(&self, points: usize, metres_per_unit: f64) -> Result<()> {
         let frames = &self.frames;
         if !frames.len().is_multiple_of(points * 3) {
             return Err(Error::InvalidRequest(format!(
