@@ -195,12 +195,12 @@ pub fn decode(codec: CodecId, data: &[u8]) {
 
 /// The skeleton the skeleton codecs' targets decode against: the synthetic dancer's, the one
 /// the frozen `rot`, `pga` and `bvh-lossless` bitstreams (their seeds) were coded on.
-fn dancer_rig() -> Arc<codec::Rig> {
-    static RIG: OnceLock<Arc<codec::Rig>> = OnceLock::new();
+fn dancer_rig() -> Arc<codec::Skeleton> {
+    static RIG: OnceLock<Arc<codec::Skeleton>> = OnceLock::new();
     RIG.get_or_init(|| {
         let m = crate::motion::synthetic::dancer(2, 60.0, 11);
         let joints = m.skeleton.expect("the dancer has a skeleton").joints;
-        Arc::new(codec::Rig::new(joints).expect("the dancer's skeleton is a rig"))
+        Arc::new(codec::Skeleton::new(joints).expect("the dancer's skeleton is a rig"))
     })
     .clone()
 }

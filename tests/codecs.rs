@@ -505,7 +505,7 @@ fn mutated_bitstreams_give_typed_errors_never_panics() {
     }
     // The codecs that keep a skeleton's channels, read as positions and as channels.
     let m = mocapstore::motion::synthetic::dancer(300, 120.0, 5);
-    let rig = Arc::new(codec::Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
+    let rig = Arc::new(codec::Skeleton::new(m.skeleton.clone().unwrap().joints).unwrap());
     let shared = codec::Shared {
         basis: None,
         rig: Some(rig),

@@ -78,7 +78,7 @@ fn shared_of(c: &Container, path: &Path) -> codec::Shared {
         let id = codec::basis::hex(&h);
         let b = std::fs::read(dir().join("skeletons").join(format!("{id}.mcsk")))
             .unwrap_or_else(|e| panic!("{}: skeleton {id}: {e}", path.display()));
-        Arc::new(codec::Rig::parse(&b, 10_000).unwrap())
+        Arc::new(codec::Skeleton::parse(&b, 10_000).unwrap())
     });
     codec::Shared { basis, rig }
 }
@@ -347,7 +347,7 @@ fn every_frozen_file_is_indexed_and_unchanged() {
     }
     for f in std::fs::read_dir(dir().join("skeletons")).unwrap() {
         let path = f.unwrap().path();
-        let r = codec::Rig::parse(&std::fs::read(&path).unwrap(), 10_000).unwrap();
+        let r = codec::Skeleton::parse(&std::fs::read(&path).unwrap(), 10_000).unwrap();
         assert_eq!(
             format!("{}.mcsk", r.id()),
             path.file_name().unwrap().to_string_lossy(),
@@ -569,7 +569,7 @@ fn freeze_current_bitstreams() {
 
     // The codecs that keep a skeleton's channels, on a small BVH take.
     let bvh = mocapstore::motion::synthetic::dancer(150, 60.0, 11);
-    let rig = Arc::new(codec::Rig::new(bvh.skeleton.clone().unwrap().joints).unwrap());
+    let rig = Arc::new(codec::Skeleton::new(bvh.skeleton.clone().unwrap().joints).unwrap());
     std::fs::create_dir_all(dir().join("skeletons")).unwrap();
     std::fs::write(
         dir().join("skeletons").join(format!("{}.mcsk", rig.id())),

@@ -20,8 +20,8 @@ use super::entropy::ints::IntModel;
 use super::entropy::io::{code_residual, Io};
 use super::entropy::rangecoder::{Bit, Decoder, Encoder};
 use super::error::{malformed, Error, Result};
-use super::rig::{Channels, Rig};
 use super::skeletal::{no_skeleton, rig_of, ChannelDecoder, Posed};
+use super::skeleton::{Channels, Skeleton};
 use super::{ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared, Target};
 use crate::motion::decimal::{Notation, Printed, PrintedValues};
 
@@ -134,11 +134,11 @@ impl Codec for BvhLossless {
 }
 
 struct LosslessDecoder {
-    rig: Arc<Rig>,
+    rig: Arc<Skeleton>,
 }
 
 impl ChannelDecoder for LosslessDecoder {
-    fn rig(&self) -> &Rig {
+    fn rig(&self) -> &Skeleton {
         &self.rig
     }
 
@@ -508,7 +508,7 @@ mod tests {
         let text = format!("{head}Frame Time: 0.008333\n{}\n", rows.join("\n"));
         let m = load(&text);
         let enc = encoded(&m, CodecId::BvhLossless, ErrorBound::max(0.0));
-        let rig = Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
+        let rig = Arc::new(Skeleton::new(m.skeleton.clone().unwrap().joints).unwrap());
         assert_eq!(enc.container.header.rig, Some(rig.hash()));
         let shared = Shared {
             basis: None,
@@ -563,7 +563,7 @@ mod tests {
     fn damaged_chunks_fail_cleanly() {
         let m = dancer(300, 60.0, 9);
         let enc = encoded(&m, CodecId::BvhLossless, ErrorBound::max(0.0));
-        let rig = Arc::new(Rig::new(m.skeleton.clone().unwrap().joints).unwrap());
+        let rig = Arc::new(Skeleton::new(m.skeleton.clone().unwrap().joints).unwrap());
         let d = BvhLossless
             .decoder(
                 &[VERSION],

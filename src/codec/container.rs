@@ -99,7 +99,7 @@ pub struct Header {
     pub params: Vec<u8>,
     /// Content hash of a shared basis the chunks were coded with, if any.
     pub basis: Option<[u8; 32]>,
-    /// Content hash of the skeleton ([`super::Rig`]) a codec that keeps channel values
+    /// Content hash of the skeleton ([`super::Skeleton`]) a codec that keeps channel values
     /// decodes with, if the codec is one.
     pub rig: Option<[u8; 32]>,
     pub chunks: Vec<ChunkMeta>,

@@ -20,7 +20,7 @@
 //! - [`analog`]: analog channels (force plates, EMG) by linear prediction, lossless or
 //!   bounded per channel.
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
-//! - [`rig`]: skeletons — stored once, content addressed, named by the headers of the codecs
+//! - [`skeleton`]: skeletons — stored once, content addressed, named by the headers of the codecs
 //!   that code channel values.
 //! - [`dct`], [`residual`], [`gaps`], [`measure`], [`linalg`], [`rate`]: shared pieces of
 //!   the above. [`segment`]: PPCA motion segmentation (Barbič et al. 2004), for `spca` and
@@ -46,18 +46,18 @@ pub mod rate;
 pub mod raw;
 pub mod read;
 pub mod residual;
-pub mod rig;
 pub mod rot;
 pub mod segment;
 pub mod simd;
 pub mod skeletal;
+pub mod skeleton;
 pub mod spca;
 pub mod stream;
 #[cfg(test)]
 pub(crate) mod testing;
 mod wire;
 
-use crate::motion::{Motion, Skeleton};
+use crate::motion::{Animation, Motion};
 
 pub use basis::{Basis, BasisKind};
 pub use container::{Container, DecodeLimits, Header};
@@ -68,7 +68,7 @@ pub use pipeline::{
     Encoder,
 };
 pub use read::{decode_chunk, decoder, ChunkSource, Reader, Shared, Stored};
-pub use rig::{Channels, Rig};
+pub use skeleton::{Channels, Skeleton};
 
 /// What an encoder sees: gap-filled positions (`frames × points × 3`, the take's units) and
 /// which samples are real, so that errors are judged on those only.
@@ -82,7 +82,7 @@ pub struct Input<'a> {
     pub shared: Option<&'a Basis>,
     /// The take's skeleton and channel values, for codecs that code them
     /// ([`Codec::codes_channels`]); its rig is the one the header names.
-    pub skeleton: Option<(&'a Rig, &'a Skeleton)>,
+    pub skeleton: Option<(&'a Skeleton, &'a Animation)>,
     /// The points' names (empty when unknown): codecs that treat some points apart (`spca`'s
     /// torso and feet) find them by name.
     pub names: &'a [String],
@@ -128,7 +128,7 @@ impl<'a> Input<'a> {
 
     /// The take's rig and skeleton, for a codec that codes channel values; `Invalid`, naming
     /// `codec`, for a take of points only.
-    pub fn skeleton_for(&self, codec: CodecId) -> Result<(&'a Rig, &'a Skeleton)> {
+    pub fn skeleton_for(&self, codec: CodecId) -> Result<(&'a Skeleton, &'a Animation)> {
         self.skeleton
             .ok_or_else(|| Error::Invalid(format!("{codec} needs a skeleton take")))
     }
@@ -221,7 +221,7 @@ pub trait Codec: Send + Sync {
     }
     /// Whether it codes a skeleton's channel values (rotations kept: the take can be served
     /// as BVH) rather than point positions. Such a codec needs a skeleton take, names the
-    /// take's [`Rig`] in its header, decodes with it, and implements
+    /// take's [`Skeleton`] in its header, decodes with it, and implements
     /// [`ChunkDecoder::decode_channels`]; the bound still holds on the FK positions.
     fn codes_channels(&self) -> bool {
         false

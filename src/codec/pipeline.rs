@@ -7,7 +7,7 @@ use super::container::{pack_chunks, Container, Header};
 use super::error::{Error, Result};
 use super::id::ErrorBound;
 use super::read::{Reader, Shared, Stored};
-use super::rig::Rig;
+use super::skeleton::Skeleton;
 use super::CodecId;
 use super::{codec, gaps, Codec, CodecOutput, Hints, Input, Target};
 use crate::motion::metrics::{self, ErrorSeries, ErrorStats};
@@ -25,7 +25,7 @@ pub struct Encoded {
     pub decoded_digest: String,
     /// The skeleton the header names (codecs that code channel values): with the basis,
     /// what a reader of this container needs.
-    pub rig: Option<Arc<Rig>>,
+    pub rig: Option<Arc<Skeleton>>,
     /// The error second by second, measured on the same decode as `stats`.
     pub series: ErrorSeries,
 }
@@ -273,7 +273,7 @@ pub(crate) fn usable_basis<'a>(
 }
 
 /// The skeleton codec `c` codes with, if it codes channel values: the take must have one.
-fn rig_for(c: &dyn Codec, motion: &Motion) -> Result<Option<Arc<Rig>>> {
+fn rig_for(c: &dyn Codec, motion: &Motion) -> Result<Option<Arc<Skeleton>>> {
     if !c.codes_channels() {
         return Ok(None);
     }
@@ -283,7 +283,7 @@ fn rig_for(c: &dyn Codec, motion: &Motion) -> Result<Option<Arc<Rig>>> {
             c.id()
         ))
     })?;
-    Ok(Some(Arc::new(Rig::new(s.joints.clone())?)))
+    Ok(Some(Arc::new(Skeleton::new(s.joints.clone())?)))
 }
 
 /// Decode every frame.

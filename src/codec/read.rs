@@ -9,7 +9,7 @@ use std::sync::Arc;
 use super::basis::{hex, Basis};
 use super::container::{unpack_chunk, verify_chunk, Header};
 use super::error::{malformed, Error, Result};
-use super::rig::{Channels, Rig};
+use super::skeleton::{Channels, Skeleton};
 use super::{codec, ChunkDecoder};
 use crate::motion::decimal::PrintedValues;
 
@@ -19,7 +19,7 @@ use crate::motion::decimal::PrintedValues;
 #[derive(Debug, Clone, Default)]
 pub struct Shared {
     pub basis: Option<Arc<Basis>>,
-    pub rig: Option<Arc<Rig>>,
+    pub rig: Option<Arc<Skeleton>>,
 }
 
 impl From<Option<Arc<Basis>>> for Shared {

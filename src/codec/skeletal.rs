@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use super::entropy::rangecoder::Decoder;
 use super::error::{malformed, Error, Result};
-use super::{Channels, ChunkDecoder, CodecId, Rig, Shared};
+use super::{Channels, ChunkDecoder, CodecId, Shared, Skeleton};
 use crate::motion::Motion;
 
 /// The rig a skeleton codec's reader was given; an error naming `codec` without one.
-pub fn rig_of(shared: &Shared, codec: CodecId) -> Result<Arc<Rig>> {
+pub fn rig_of(shared: &Shared, codec: CodecId) -> Result<Arc<Skeleton>> {
     shared
         .rig
         .clone()
@@ -41,7 +41,7 @@ pub fn read_whole(dec: &Decoder<'_>, values: Vec<f64>, codec: CodecId) -> Result
 
 pub trait ChannelDecoder: Send + Sync {
     /// The rig the values drive.
-    fn rig(&self) -> &Rig;
+    fn rig(&self) -> &Skeleton;
     /// `frames` frames of channel values from one chunk's bytes.
     fn channels(&self, bytes: &[u8], frames: usize) -> Result<Channels>;
 }

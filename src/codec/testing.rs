@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use super::pipeline::Encoded;
 use super::{
-    encode, ChunkDecoder, CodecId, EncodeOptions, ErrorBound, Reader, Rig, Shared, Stored,
+    encode, ChunkDecoder, CodecId, EncodeOptions, ErrorBound, Reader, Shared, Skeleton, Stored,
 };
 use crate::motion::Motion;
 
@@ -19,7 +19,7 @@ pub fn skeleton_shared(m: &Motion) -> Shared {
     Shared {
         basis: None,
         rig: Some(Arc::new(
-            Rig::new(m.skeleton.clone().unwrap().joints).unwrap(),
+            Skeleton::new(m.skeleton.clone().unwrap().joints).unwrap(),
         )),
     }
 }
@@ -57,7 +57,7 @@ pub fn measured(m: &Motion, enc: &Encoded) -> (f64, f64) {
         .skeleton
         .as_ref()
         .filter(|_| container.header.rig.is_some())
-        .map(|s| Arc::new(Rig::new(s.joints.clone()).unwrap()));
+        .map(|s| Arc::new(Skeleton::new(s.joints.clone()).unwrap()));
     let reader = Reader::new(container.header.clone(), Shared { basis: None, rig }).unwrap();
     let source = Stored::new(0, container.chunks.iter().map(Vec::as_slice));
     let frames = m.frame_count();

@@ -9,14 +9,14 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use super::skeleton::Skeleton;
+use super::skeleton::Animation;
 
 /// 128 bits of BLAKE3 over a canonical description of the layout, shown as hex.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct LayoutSignature(pub [u8; 16]);
 
 impl LayoutSignature {
-    pub fn of(point_names: &[String], skeleton: Option<&Skeleton>) -> Self {
+    pub fn of(point_names: &[String], skeleton: Option<&Animation>) -> Self {
         let mut h = blake3::Hasher::new();
         h.update(b"mocapstore-layout-v1\0");
         h.update(&(point_names.len() as u64).to_le_bytes());

@@ -7,7 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::error::{Error, Result};
-use super::skeleton::Skeleton;
+use super::skeleton::Animation;
 
 /// Distortion of a reconstruction against its original.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -188,7 +188,7 @@ pub struct BoneDrift {
 
 /// Bone-length drift of `positions` (`frames × joints × 3`, the skeleton's own units).
 pub fn bone_length_drift(
-    skeleton: &Skeleton,
+    skeleton: &Animation,
     positions: &[f64],
     mm_per_unit: f64,
 ) -> Result<BoneDrift> {
@@ -413,8 +413,8 @@ mod tests {
 
     #[test]
     fn bone_drift_measures_stretch_against_offsets() {
-        use crate::motion::skeleton::{Channel, Joint, Skeleton};
-        let s = Skeleton::new(
+        use crate::motion::skeleton::{Animation, Channel, Joint};
+        let s = Animation::new(
             vec![
                 Joint {
                     name: "root".into(),

@@ -19,5 +19,5 @@ pub mod units;
 pub use error::{Error, Location, Result};
 pub use layout::LayoutSignature;
 pub use model::Motion;
-pub use skeleton::{Channel, Joint, Skeleton};
+pub use skeleton::{Animation, Channel, Joint};
 pub use units::{Unit, UnitSource};

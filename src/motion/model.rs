@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::{Error, Result};
 use super::layout::LayoutSignature;
-use super::skeleton::Skeleton;
+use super::skeleton::Animation;
 use super::units::Unit;
 
 /// One take: `frames × points × 3` positions, a frame contiguous.
@@ -22,7 +22,7 @@ pub struct Motion {
     /// Kept explicitly because a take may have no points at all (an EMG-only C3D) and
     /// still have a length.
     frames: usize,
-    pub skeleton: Option<Skeleton>,
+    pub skeleton: Option<Animation>,
 }
 
 impl Motion {
@@ -31,7 +31,7 @@ impl Motion {
         unit: Unit,
         point_names: Vec<String>,
         positions: Vec<f32>,
-        skeleton: Option<Skeleton>,
+        skeleton: Option<Animation>,
     ) -> Result<Self> {
         crate::limits::fps(fps).map_err(Error::Invalid)?;
         let n = point_names.len();

@@ -80,7 +80,7 @@ pub struct Joint {
 ///
 /// Joints are stored parents-first (the order of the BVH file), so FK is one forward pass.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Skeleton {
+pub struct Animation {
     pub joints: Vec<Joint>,
     /// `frames × channel_count()` values in file order: degrees for rotations, file units
     /// for positions.
@@ -91,7 +91,7 @@ pub struct Skeleton {
     pub printed: Option<PrintedValues>,
 }
 
-impl Skeleton {
+impl Animation {
     pub fn new(joints: Vec<Joint>, values: Vec<f64>) -> Result<Self> {
         for (i, j) in joints.iter().enumerate() {
             if let Some(p) = j.parent {
@@ -120,7 +120,7 @@ impl Skeleton {
                 )));
             }
         }
-        let s = Skeleton {
+        let s = Animation {
             joints,
             values,
             printed: None,
@@ -157,9 +157,9 @@ impl Skeleton {
     }
 
     /// Keep frames `start..end` only.
-    pub fn slice_frames(&self, start: usize, end: usize) -> Skeleton {
+    pub fn slice_frames(&self, start: usize, end: usize) -> Animation {
         let cc = self.channel_count();
-        Skeleton {
+        Animation {
             joints: self.joints.clone(),
             values: self.values[start * cc..end * cc].to_vec(),
             printed: self.printed.as_ref().map(|p| p.slice(start, end, cc)),
@@ -167,7 +167,7 @@ impl Skeleton {
     }
 
     /// Keep the values as printed (`printed.values` one per value, in file order).
-    pub fn with_printed(mut self, printed: PrintedValues) -> Result<Skeleton> {
+    pub fn with_printed(mut self, printed: PrintedValues) -> Result<Animation> {
         if printed.values.len() != self.values.len() {
             return Err(Error::Invalid(format!(
                 "{} printed values for {} channel values",
@@ -231,7 +231,7 @@ impl Skeleton {
 }
 
 /// The translation of each joint relative to its parent in one frame (`vals`, that frame's
-/// channel values): see [`Skeleton::local_translations`].
+/// channel values): see [`Animation::local_translations`].
 pub fn local_translations(joints: &[Joint], vals: &[f64], out: &mut Vec<[f64; 3]>) {
     out.clear();
     let mut k = 0;
@@ -312,10 +312,10 @@ fn axis_rotation(axis: usize, a: f64) -> Matrix3<f64> {
 mod tests {
     use super::*;
 
-    fn chain(channels: Vec<Channel>, values: Vec<f64>) -> Skeleton {
+    fn chain(channels: Vec<Channel>, values: Vec<f64>) -> Animation {
         let mut root_channels = vec![Channel::Xposition, Channel::Yposition, Channel::Zposition];
         root_channels.extend(channels);
-        Skeleton::new(
+        Animation::new(
             vec![
                 Joint {
                     name: "root".into(),
@@ -378,7 +378,7 @@ mod tests {
             channels: vec![],
             end_site: false,
         };
-        assert!(Skeleton::new(vec![j("a", None), j("b", Some(1))], vec![]).is_err());
-        assert!(Skeleton::new(vec![j("a", None), j("b", None)], vec![]).is_err());
+        assert!(Animation::new(vec![j("a", None), j("b", Some(1))], vec![]).is_err());
+        assert!(Animation::new(vec![j("a", None), j("b", None)], vec![]).is_err());
     }
 }

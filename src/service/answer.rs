@@ -240,7 +240,7 @@ struct Block {
 
 enum Decoded {
     Positions(Vec<f32>),
-    Channels(codec::rig::Channels),
+    Channels(codec::skeleton::Channels),
 }
 
 /// The transforms of a request as `format` takes them, checked: glTF is metres and +Y up
@@ -775,7 +775,7 @@ impl Plan {
 
     /// A skeleton's channels, as BVH (shaped by `shaper` when transforms are asked for).
     fn channels(
-        rig: &codec::Rig,
+        rig: &codec::Skeleton,
         prepared: &Prepared,
         shaper: Option<Shaper>,
         frames: usize,
@@ -875,7 +875,7 @@ fn point_indices(prepared: &Prepared, names: &[String]) -> Result<Vec<usize>> {
 
 /// The skeleton a take's channels decode with, if its codec keeps them; `Unsatisfiable`,
 /// saying why and which codecs would, if not.
-async fn channels_rig(store: &Store, prepared: &Prepared) -> Result<Arc<codec::Rig>> {
+async fn channels_rig(store: &Store, prepared: &Prepared) -> Result<Arc<codec::Skeleton>> {
     let header = prepared.reader.header();
     let keeps = codec::codec(header.codec).is_ok_and(|c| c.codes_channels());
     let id = &prepared.id;
@@ -1071,7 +1071,7 @@ impl Answer {
                     let decoded = p.reader.read_channels(part, channels, &one).map(|d| {
                         match &mut shaper {
                             // Shaped values are new values: nothing was printed for them.
-                            Some(s) => codec::rig::Channels {
+                            Some(s) => codec::skeleton::Channels {
                                 values: s.channel_values(&d.values),
                                 printed: None,
                             },

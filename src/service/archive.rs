@@ -16,7 +16,7 @@ use super::fetch::TimeRange;
 use super::prepared::ReadCaches;
 use super::take::Take;
 use super::{blocking, Error, Result};
-use crate::codec::{self, basis::hex, Basis, CodecId, Container, Header, Rig, Shared};
+use crate::codec::{self, basis::hex, Basis, CodecId, Container, Header, Shared, Skeleton};
 use crate::limits::Limits;
 use crate::motion::formats::Format;
 use crate::motion::transform::Options;
@@ -236,7 +236,7 @@ pub struct ExportedTake {
     pub container: Container,
     pub bases: Vec<BasisRow>,
     /// The take's skeleton, if it is a skeleton take.
-    pub skeleton: Option<Arc<Rig>>,
+    pub skeleton: Option<Arc<Skeleton>>,
     pub format: Format,
     /// The open-format file, through the one read path (as `GET …/frames` writes it).
     pub file: Answer,
@@ -429,7 +429,7 @@ pub async fn import_take(
     let skeleton = match (&line.take.skeleton, skeleton) {
         (None, None) => None,
         (Some(id), Some(bytes)) => {
-            let rig = Rig::parse(&bytes, crate::limits::Limits::default().points)
+            let rig = Skeleton::parse(&bytes, crate::limits::Limits::default().points)
                 .map_err(|e| Error::InvalidRequest(format!("skeleton {id}: {e}")))?;
             if rig.id() != *id {
                 return Err(Error::InvalidRequest(format!(

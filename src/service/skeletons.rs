@@ -1,5 +1,5 @@
 //! Skeletons as stored objects: one per distinct joint hierarchy, referenced by every take
-//! of it ([`crate::codec::Rig`]). Ingest stores a take's with the take; reads load the one a
+//! of it ([`crate::codec::Skeleton`]). Ingest stores a take's with the take; reads load the one a
 //! take or header names, through a small cache (a skeleton never changes: its id is the hash
 //! of its bytes).
 
@@ -8,23 +8,23 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use super::access::Grant;
 use super::{blocking, Error, Result};
-use crate::codec::Rig;
+use crate::codec::Skeleton;
 use crate::limits;
-use crate::motion::Skeleton;
+use crate::motion::Animation;
 use crate::store::{Deletion, SkeletonRow, Store};
 
 /// Skeletons kept parsed; past this many the cache starts over.
 const CACHED: usize = 256;
 
-fn cache() -> &'static Mutex<HashMap<String, Arc<Rig>>> {
-    static CACHE: OnceLock<Mutex<HashMap<String, Arc<Rig>>>> = OnceLock::new();
+fn cache() -> &'static Mutex<HashMap<String, Arc<Skeleton>>> {
+    static CACHE: OnceLock<Mutex<HashMap<String, Arc<Skeleton>>>> = OnceLock::new();
     CACHE.get_or_init(|| Mutex::new(HashMap::new()))
 }
 
 /// Parse a stored skeleton, checking that its bytes still hash to its id.
-pub(super) fn parse(row: &SkeletonRow) -> Result<Rig> {
+pub(super) fn parse(row: &SkeletonRow) -> Result<Skeleton> {
     let corrupt = |what: String| Error::Corrupt(format!("stored skeleton {}: {what}", row.id));
-    let rig = Rig::parse(&row.payload, limits::Limits::default().points)
+    let rig = Skeleton::parse(&row.payload, limits::Limits::default().points)
         .map_err(|e| corrupt(e.to_string()))?;
     if rig.id() != row.id {
         return Err(corrupt(format!("its bytes hash to {}", rig.id())));
@@ -33,7 +33,7 @@ pub(super) fn parse(row: &SkeletonRow) -> Result<Rig> {
 }
 
 /// The skeleton with this id (a take or a header names it).
-pub async fn load(store: &Store, id: &str) -> Result<Arc<Rig>> {
+pub async fn load(store: &Store, id: &str) -> Result<Arc<Skeleton>> {
     if let Some(r) = cache().lock().ok().and_then(|c| c.get(id).cloned()) {
         return Ok(r);
     }
@@ -52,15 +52,15 @@ pub async fn load(store: &Store, id: &str) -> Result<Arc<Rig>> {
 }
 
 /// The rig of a take's skeleton and the row that stores it.
-pub fn of(skeleton: &Skeleton, layout: &str, now_ms: i64) -> Result<(Rig, SkeletonRow)> {
-    let rig = Rig::new(skeleton.joints.clone())
+pub fn of(skeleton: &Animation, layout: &str, now_ms: i64) -> Result<(Skeleton, SkeletonRow)> {
+    let rig = Skeleton::new(skeleton.joints.clone())
         .map_err(|e| Error::InvalidRequest(format!("skeleton: {e}")))?;
     let row = row_of(&rig, layout, now_ms);
     Ok((rig, row))
 }
 
 /// The row that stores a rig (of takes of `layout`).
-pub fn row_of(rig: &Rig, layout: &str, now_ms: i64) -> SkeletonRow {
+pub fn row_of(rig: &Skeleton, layout: &str, now_ms: i64) -> SkeletonRow {
     SkeletonRow {
         id: rig.id(),
         layout: layout.to_string(),
@@ -90,7 +90,7 @@ pub async fn list(store: &Store, layout: Option<&str>, grant: &Grant) -> Result<
 
 /// One stored skeleton, parsed; to a grant limited to libraries, only one of their takes'
 /// (any other is `NotFound`, as if it did not exist).
-pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<(SkeletonRow, Arc<Rig>)> {
+pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<(SkeletonRow, Arc<Skeleton>)> {
     let missing = || Error::NotFound(format!("skeleton {id}"));
     let mut row = store.skeleton(id).await?.ok_or_else(missing)?;
     if let Some(within) = grant.within() {

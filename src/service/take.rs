@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::choose::Decision;
 use super::{Error, Result};
-use crate::codec::Rig;
+use crate::codec::Skeleton;
 use crate::codec::{CodecId, ErrorBound};
 use crate::motion::Unit;
 use crate::store::{TakeRow, TakeTotals};
@@ -179,7 +179,7 @@ impl Take {
 
     /// Parse a stored row; `Corrupt` names the take and what does not parse. `rig` is the
     /// skeleton the row names (`row.skeleton_id`), which names its points.
-    pub fn from_row(row: TakeRow, rig: Option<&Rig>) -> Result<Take> {
+    pub fn from_row(row: TakeRow, rig: Option<&Skeleton>) -> Result<Take> {
         let id = row.id.clone();
         let corrupt = |what: String| Error::Corrupt(format!("stored take {id}: {what}"));
         let mut meta: TakeMeta =

@@ -6,7 +6,7 @@ use sqlx::Row;
 
 use super::{Deletion, Result, Store};
 
-/// A stored skeleton. `payload` (the `codec::Rig` bytes) is empty in listings.
+/// A stored skeleton. `payload` (the `codec::Skeleton` bytes) is empty in listings.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SkeletonRow {
     /// BLAKE3 of the payload, hex.

@@ -70,7 +70,7 @@ pub fn run(files: &[PathBuf], out: &Path) -> ExitCode {
         encode_s += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         let rig = std::sync::Arc::new(
-            codec::Rig::new(
+            codec::Skeleton::new(
                 m.skeleton
                     .clone()
                     .expect("a BVH take has a skeleton")

@@ -10,7 +10,7 @@ use super::params::Params;
 use super::scale::{alpha, Scale};
 use crate::codec::entropy::io::Io;
 use crate::codec::error::Result;
-use crate::codec::rig::printed;
+use crate::codec::skeleton::printed;
 
 /// What codes and decodes chunks: the layout, the parameters, and what follows from them.
 pub struct Coder {

@@ -18,9 +18,9 @@ use crate::codec::entropy::rangecoder::Encoder;
 use crate::codec::error::{Error, Result};
 use crate::codec::measure::max_mean;
 use crate::codec::rate::{narrow, ChunkSteps, Smallest};
-use crate::codec::rig::{printed, Rig};
+use crate::codec::skeleton::{printed, Skeleton};
 use crate::codec::{default_chunk_frames, ChunkOut, CodecOutput, Input, Target};
-use crate::motion::Skeleton;
+use crate::motion::Animation;
 
 /// How a take is coded and decoded, beyond its model and steps.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,7 +70,7 @@ const TRUNCATION_SHARE: f64 = 0.5;
 
 /// A take being encoded.
 pub struct Take<'a> {
-    rig: &'a Rig,
+    rig: &'a Skeleton,
     input: &'a Input<'a>,
     layout: Layout,
     values: &'a [f64],
@@ -88,7 +88,11 @@ pub struct Take<'a> {
 const MODEL_SHARE: f64 = 0.05;
 
 impl<'a> Take<'a> {
-    pub fn new(rig: &'a Rig, skeleton: &'a Skeleton, input: &'a Input<'a>) -> Result<Take<'a>> {
+    pub fn new(
+        rig: &'a Skeleton,
+        skeleton: &'a Animation,
+        input: &'a Input<'a>,
+    ) -> Result<Take<'a>> {
         let frames = skeleton.frame_count();
         let values = &skeleton.values[..];
         let layout = Layout::new(rig, values, frames).map_err(Error::Invalid)?;

@@ -96,7 +96,7 @@ mod tests {
     use super::*;
     use crate::codec::entropy::rangecoder::{Decoder, Encoder};
     use crate::codec::pga::chunk::{self, Steps};
-    use crate::codec::Rig;
+    use crate::codec::Skeleton;
     use crate::motion::synthetic::dancer;
 
     /// The acceptance check of the issue: with every direction and trajectories coded
@@ -106,7 +106,7 @@ mod tests {
         let frames = 90;
         let m = dancer(frames, 60.0, 8);
         let sk = m.skeleton.as_ref().unwrap();
-        let rig = Rig::new(sk.joints.clone()).unwrap();
+        let rig = Skeleton::new(sk.joints.clone()).unwrap();
         let layout = Layout::new(&rig, &sk.values, frames).unwrap();
         let n = layout.inner_count();
         let cc = rig.channel_count();

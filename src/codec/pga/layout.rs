@@ -12,7 +12,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use super::ik::{Chain, Link};
-use crate::codec::rig::Rig;
+use crate::codec::skeleton::Skeleton;
 use crate::motion::rotation::{euler_order, from_euler, to_euler};
 
 /// A joint whose rotation is three Euler channels.
@@ -48,7 +48,7 @@ impl Layout {
     /// The root PGA codes from is the joint that moves: the rig's root, or the one joint
     /// below it whose position channels move when everything above it holds still (Bandai
     /// Namco's files hang `Hips` under a `joint_Root` that never moves).
-    pub fn new(rig: &Rig, values: &[f64], frames: usize) -> Result<Layout, String> {
+    pub fn new(rig: &Skeleton, values: &[f64], frames: usize) -> Result<Layout, String> {
         let joints = rig.joints();
         let cc = rig.channel_count();
         if frames == 0 {
@@ -129,7 +129,7 @@ impl Layout {
     /// channel order: what [`Layout::constants`] gives and the stored parameters keep); the
     /// reason when PGA cannot code the rig or the list does not name exactly those channels.
     pub fn with_constants(
-        rig: &Rig,
+        rig: &Skeleton,
         root: usize,
         constants: &[(usize, f64)],
     ) -> Result<Layout, String> {
@@ -311,7 +311,7 @@ impl Layout {
 
 /// Whether the joints above `root` form one chain down to it and every other joint hangs
 /// below it.
-fn everything_below(rig: &Rig, root: usize) -> bool {
+fn everything_below(rig: &Skeleton, root: usize) -> bool {
     let joints = rig.joints();
     root < joints.len()
         && (1..=root).all(|j| joints[j].parent == Some(j - 1))
@@ -322,7 +322,7 @@ fn everything_below(rig: &Rig, root: usize) -> bool {
 
 /// The channels [`Layout::with_constants`] wants values for, in channel order: every
 /// channel above `root`, and the channels below it that do not turn a joint.
-fn constant_channels(rig: &Rig, root: usize) -> Vec<usize> {
+fn constant_channels(rig: &Skeleton, root: usize) -> Vec<usize> {
     let mut out = Vec::new();
     let mut first = 0;
     for (j, joint) in rig.joints().iter().enumerate() {
@@ -352,7 +352,7 @@ mod tests {
     fn split_and_join_give_the_same_pose_back() {
         let m = dancer(30, 60.0, 2);
         let sk = m.skeleton.as_ref().unwrap();
-        let rig = Rig::new(sk.joints.clone()).unwrap();
+        let rig = Skeleton::new(sk.joints.clone()).unwrap();
         let l = Layout::new(&rig, &sk.values, 30).unwrap();
         let turning = sk.joints[1..]
             .iter()
@@ -409,7 +409,7 @@ mod tests {
             values.extend_from_slice(&still);
             values.extend_from_slice(sk.frame_values(f));
         }
-        let rig = Rig::new(joints).unwrap();
+        let rig = Skeleton::new(joints).unwrap();
         let l = Layout::new(&rig, &values, frames).unwrap();
         assert_eq!(l.root(), 1);
         assert_eq!(
@@ -445,7 +445,7 @@ mod tests {
         joints[1]
             .channels
             .insert(0, crate::motion::skeleton::Channel::Xposition);
-        let rig = Rig::new(joints.clone()).unwrap();
+        let rig = Skeleton::new(joints.clone()).unwrap();
         let cc = rig.channel_count();
         let first: usize = joints[0].channels.len();
         let mut values = vec![0.0; 10 * cc];

@@ -42,8 +42,8 @@ use self::layout::Layout;
 use self::params::Params;
 use super::entropy::rangecoder::Decoder;
 use super::error::Result;
-use super::rig::{Channels, Rig};
 use super::skeletal::{no_skeleton, read_whole, rig_of, ChannelDecoder, Posed};
+use super::skeleton::{Channels, Skeleton};
 use super::{ChunkDecoder, Codec, CodecId, CodecOutput, Input, Shared, Target};
 use crate::motion::Motion;
 
@@ -89,7 +89,7 @@ impl Codec for Pga {
         let Some(sk) = &motion.skeleton else {
             return no_skeleton(motion);
         };
-        let rig = match Rig::new(sk.joints.clone()) {
+        let rig = match Skeleton::new(sk.joints.clone()) {
             Ok(r) => r,
             Err(e) => return Some(e.to_string()),
         };
@@ -98,12 +98,12 @@ impl Codec for Pga {
 }
 
 struct PgaDecoder {
-    rig: Arc<Rig>,
+    rig: Arc<Skeleton>,
     coder: Coder,
 }
 
 impl ChannelDecoder for PgaDecoder {
-    fn rig(&self) -> &Rig {
+    fn rig(&self) -> &Skeleton {
         &self.rig
     }
 
@@ -185,7 +185,7 @@ mod tests {
         assert!(ch
             .values
             .iter()
-            .all(|v| *v == crate::codec::rig::printed(*v)));
+            .all(|v| *v == crate::codec::skeleton::printed(*v)));
     }
 
     /// Where no model and step meet the bound, `pga` says so with the typed error that
@@ -232,7 +232,7 @@ mod tests {
             sk.values.push(value(f));
             sk.values.extend_from_slice(&row[first..]);
         }
-        let rig = Rig::new(sk.joints.clone()).unwrap();
+        let rig = Skeleton::new(sk.joints.clone()).unwrap();
         let mut positions = vec![0f32; m.positions().len()];
         rig.positions(&sk.values, &mut positions);
         Motion::new(m.fps, m.unit, m.point_names.clone(), positions, Some(sk)).unwrap()

@@ -11,7 +11,7 @@
 use super::layout::Layout;
 use super::model::Geodesics;
 use crate::codec::error::{malformed, Result};
-use crate::codec::rig::Rig;
+use crate::codec::skeleton::Skeleton;
 use crate::codec::wire::{Reader, Writer};
 
 /// What the encoder writes. Version 2 added the model's kind byte (the canonical model);
@@ -56,7 +56,7 @@ impl Params {
 
     /// The parameters of a take of `rig`, and its layout; `rho` and `lambda` come back as
     /// the f32 they were stored as.
-    pub fn parse(bytes: &[u8], rig: &Rig) -> Result<(Params, Layout)> {
+    pub fn parse(bytes: &[u8], rig: &Skeleton) -> Result<(Params, Layout)> {
         let channels = rig.channel_count();
         let mut r = Reader::named(bytes, "pga parameters");
         let version = r.u8()?;

@@ -12,7 +12,7 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
-use crate::codec::rig::Rig;
+use crate::codec::skeleton::Skeleton;
 use crate::motion::skeleton::{self, Joint};
 
 /// What aiming needs of the rig, once per take.
@@ -30,7 +30,7 @@ struct Bone {
 }
 
 impl Bones {
-    pub(super) fn new(rig: &Rig) -> Bones {
+    pub(super) fn new(rig: &Skeleton) -> Bones {
         let mut first = 0;
         let mut joints: Vec<Bone> = rig
             .joints()
@@ -251,7 +251,7 @@ mod tests {
     fn aimed_joints_point_their_children_at_the_original_positions() {
         let m = dancer(3, 60.0, 4);
         let sk = m.skeleton.as_ref().unwrap();
-        let rig = Rig::new(sk.joints.clone()).unwrap();
+        let rig = Skeleton::new(sk.joints.clone()).unwrap();
         let bones = Bones::new(&rig);
         let given = sk.frame_values(1).to_vec();
         let original: Vec<f32> = m.positions()[m.point_count() * 3..m.point_count() * 6].to_vec();

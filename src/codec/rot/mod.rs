@@ -27,9 +27,9 @@ use super::entropy::rangecoder::{Decoder, Encoder};
 use super::error::{malformed, Error, Result};
 use super::measure::max_mean;
 use super::rate::{ChunkSteps, Smallest};
-pub(super) use super::rig::printed;
-use super::rig::{Channels, Rig};
 use super::skeletal::{no_skeleton, read_whole, rig_of, ChannelDecoder, Posed};
+pub(super) use super::skeleton::printed;
+use super::skeleton::{Channels, Skeleton};
 use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared,
     Target,
@@ -69,7 +69,7 @@ pub(super) struct Plan {
 }
 
 impl Plan {
-    fn new(rig: &Rig, version: Version, distance: &[f64], alpha: f64) -> Plan {
+    fn new(rig: &Skeleton, version: Version, distance: &[f64], alpha: f64) -> Plan {
         let mut parts = Vec::new();
         let mut k = 0;
         for (j, joint) in rig.joints().iter().enumerate() {
@@ -140,7 +140,7 @@ impl Version {
 /// Each joint's distance for `version`'s step rule, in the rest pose; at least 5 % of the
 /// largest, so that joints that move nothing still keep their rotations to a sensible
 /// precision (the BVH served is the animation, not only its FK).
-fn distances(rig: &Rig, version: Version) -> Vec<f64> {
+fn distances(rig: &Skeleton, version: Version) -> Vec<f64> {
     let joints = rig.joints();
     let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(joints.len());
     for j in joints {
@@ -236,7 +236,7 @@ struct Steps {
 }
 
 impl Steps {
-    fn new(rig: &Rig, version: Version, base: f64) -> Steps {
+    fn new(rig: &Skeleton, version: Version, base: f64) -> Steps {
         Steps {
             version,
             distance: distances(rig, version),
@@ -244,7 +244,7 @@ impl Steps {
         }
     }
 
-    fn plan(&self, rig: &Rig, k: u32) -> Plan {
+    fn plan(&self, rig: &Skeleton, k: u32) -> Plan {
         let alpha = self.base * 2f64.powf((f64::from(k) - 224.0) / 8.0);
         Plan::new(rig, self.version, &self.distance, alpha)
     }
@@ -263,7 +263,7 @@ pub(super) struct Given<'a> {
 fn code<I: Io>(
     mode: Mode,
     io: &mut I,
-    rig: &Rig,
+    rig: &Skeleton,
     steps: &Steps,
     k: u32,
     frames: usize,
@@ -293,7 +293,7 @@ struct How {
 /// A take being encoded: its rig, channel values, the input positions the bound is judged
 /// on, and its chunks with their (step-independent) analysis.
 struct Take<'a> {
-    rig: &'a Rig,
+    rig: &'a Skeleton,
     values: &'a [f64],
     input: &'a Input<'a>,
     steps: Steps,
@@ -305,8 +305,8 @@ struct Take<'a> {
 
 impl<'a> Take<'a> {
     fn new(
-        rig: &'a Rig,
-        skeleton: &'a crate::motion::Skeleton,
+        rig: &'a Skeleton,
+        skeleton: &'a crate::motion::Animation,
         input: &'a Input<'a>,
         base: f64,
         per: usize,
@@ -420,12 +420,12 @@ pub(super) fn quantise(x: f64) -> i64 {
 }
 
 struct RotDecoder {
-    rig: Arc<Rig>,
+    rig: Arc<Skeleton>,
     steps: Steps,
 }
 
 impl ChannelDecoder for RotDecoder {
-    fn rig(&self) -> &Rig {
+    fn rig(&self) -> &Skeleton {
         &self.rig
     }
 

@@ -15,7 +15,7 @@ use super::{perr, unsettled_unit, Format, Parsed, ReadLimits};
 use crate::motion::decimal::PrintedValues;
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
-use crate::motion::skeleton::{Channel, Joint, Skeleton};
+use crate::motion::skeleton::{Animation, Channel, Joint};
 
 const FMT: Format = Format::Bvh;
 
@@ -203,7 +203,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     }
 
     let names = joints.iter().map(|j| j.name.clone()).collect();
-    let skeleton = Skeleton::new(joints, values)?.with_printed(printed)?;
+    let skeleton = Animation::new(joints, values)?.with_printed(printed)?;
     let positions: Vec<f32> = skeleton
         .forward_kinematics()
         .into_iter()
@@ -392,7 +392,7 @@ pub fn write(motion: &Motion) -> Result<Vec<u8>> {
 }
 
 /// Write a skeleton and its channel values at `fps` as BVH.
-pub fn write_skeleton(s: &Skeleton, fps: f64) -> Vec<u8> {
+pub fn write_skeleton(s: &Animation, fps: f64) -> Vec<u8> {
     let w = ChannelWriter::new(s.joints.clone(), fps, s.frame_count());
     let mut out = Vec::with_capacity(64 * s.joints.len() + 12 * s.values.len());
     w.head(&mut out);

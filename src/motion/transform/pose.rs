@@ -305,10 +305,10 @@ impl SkeletonPose {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::motion::skeleton::Skeleton;
+    use crate::motion::skeleton::Animation;
     use crate::motion::synthetic::dancer_bvh;
 
-    fn skeleton() -> Skeleton {
+    fn skeleton() -> Animation {
         crate::motion::formats::read(dancer_bvh(40, 120.0, 3, 6).as_bytes(), &Default::default())
             .unwrap()
             .motion
@@ -317,12 +317,12 @@ mod tests {
     }
 
     fn fk(joints: &[Joint], values: &[f64]) -> Vec<f64> {
-        Skeleton::new(joints.to_vec(), values.to_vec())
+        Animation::new(joints.to_vec(), values.to_vec())
             .unwrap()
             .forward_kinematics()
     }
 
-    fn apply(pose: &mut SkeletonPose, s: &Skeleton) -> Vec<f64> {
+    fn apply(pose: &mut SkeletonPose, s: &Animation) -> Vec<f64> {
         let mut out = Vec::new();
         for f in 0..s.frame_count() {
             pose.frame(s.frame_values(f), &mut out);

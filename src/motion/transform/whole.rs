@@ -5,7 +5,7 @@ use super::channels::Channels;
 use super::pose::{PointPose, SkeletonPose};
 use super::resample::{Positions, Resampler};
 use super::{infer_up, Options, Root, Up, ROOT_MOTION};
-use crate::motion::skeleton::Skeleton;
+use crate::motion::skeleton::Animation;
 use crate::motion::units::{Unit, UnitSource};
 use crate::motion::Motion;
 
@@ -40,7 +40,7 @@ pub fn apply(m: &Motion, options: &Options) -> Result<Motion, String> {
         for f in values.chunks_exact(pose.channels_in().max(1)) {
             pose.frame(f, &mut shaped);
         }
-        let skeleton = Skeleton::new(pose.joints().to_vec(), shaped).map_err(|e| e.to_string())?;
+        let skeleton = Animation::new(pose.joints().to_vec(), shaped).map_err(|e| e.to_string())?;
         let names = skeleton.joints.iter().map(|j| j.name.clone()).collect();
         let positions = skeleton
             .forward_kinematics()

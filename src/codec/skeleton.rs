@@ -18,7 +18,7 @@ use super::basis::hex;
 use super::error::{malformed, Error, Result};
 use super::wire::{Reader, Writer};
 use crate::motion::decimal::PrintedValues;
-use crate::motion::skeleton::{Channel, Fk, Joint, Skeleton};
+use crate::motion::skeleton::{Animation, Channel, Fk, Joint};
 
 const MAGIC: &[u8; 4] = b"MCSK";
 const VERSION: u16 = 1;
@@ -33,18 +33,18 @@ const CHANNELS: [Channel; 6] = [
 
 /// A joint hierarchy with its canonical bytes and content hash.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Rig {
+pub struct Skeleton {
     joints: Vec<Joint>,
     channels: usize,
     bytes: Vec<u8>,
     hash: [u8; 32],
 }
 
-impl Rig {
+impl Skeleton {
     /// The rig of these joints, checked as a skeleton is (parents first, one root, no
     /// channels on End Sites).
-    pub fn new(joints: Vec<Joint>) -> Result<Rig> {
-        let joints = Skeleton::new(joints, Vec::new())
+    pub fn new(joints: Vec<Joint>) -> Result<Skeleton> {
+        let joints = Animation::new(joints, Vec::new())
             .map_err(|e| Error::Invalid(format!("skeleton: {e}")))?
             .joints;
         if joints.is_empty() {
@@ -72,7 +72,7 @@ impl Rig {
         let bytes = w.0;
         let hash = *blake3::hash(&bytes).as_bytes();
         let channels = joints.iter().map(|j| j.channels.len()).sum();
-        Ok(Rig {
+        Ok(Skeleton {
             joints,
             channels,
             bytes,
@@ -81,7 +81,7 @@ impl Rig {
     }
 
     /// Parse stored bytes; at most `max_joints` joints are allocated.
-    pub fn parse(bytes: &[u8], max_joints: u64) -> Result<Rig> {
+    pub fn parse(bytes: &[u8], max_joints: u64) -> Result<Skeleton> {
         let mut r = Reader::named(bytes, "skeleton");
         r.opening(MAGIC, VERSION, "skeleton")?;
         let n = r.u32()?;
@@ -131,7 +131,7 @@ impl Rig {
             });
         }
         r.finish()?;
-        let rig = Rig::new(joints).map_err(|e| malformed(e.to_string()))?;
+        let rig = Skeleton::new(joints).map_err(|e| malformed(e.to_string()))?;
         if rig.bytes != bytes {
             return Err(malformed("skeleton bytes are not in canonical form"));
         }
@@ -201,28 +201,31 @@ mod tests {
     use super::*;
     use crate::motion::synthetic::chain_bvh;
 
-    fn rig() -> Rig {
+    fn rig() -> Skeleton {
         let m = crate::motion::formats::read(chain_bvh(5).as_bytes(), &Default::default())
             .unwrap()
             .motion;
-        Rig::new(m.skeleton.unwrap().joints).unwrap()
+        Skeleton::new(m.skeleton.unwrap().joints).unwrap()
     }
 
     #[test]
     fn parses_back_to_the_same_rig_and_refuses_damage() {
         let r = rig();
-        let again = Rig::parse(r.bytes(), 100).unwrap();
+        let again = Skeleton::parse(r.bytes(), 100).unwrap();
         assert_eq!(again, r);
         assert_eq!(r.id().len(), 64);
-        assert!(matches!(Rig::parse(r.bytes(), 2), Err(Error::Limit { .. })));
+        assert!(matches!(
+            Skeleton::parse(r.bytes(), 2),
+            Err(Error::Limit { .. })
+        ));
         for cut in 0..r.bytes().len() {
-            assert!(Rig::parse(&r.bytes()[..cut], 100).is_err());
+            assert!(Skeleton::parse(&r.bytes()[..cut], 100).is_err());
         }
         for i in 0..r.bytes().len() {
             let mut b = r.bytes().to_vec();
             b[i] ^= 0x5a;
             // Either refused, or a different rig (a changed name or offset).
-            if let Ok(other) = Rig::parse(&b, 100) {
+            if let Ok(other) = Skeleton::parse(&b, 100) {
                 assert_ne!(other.hash(), r.hash());
             }
         }
