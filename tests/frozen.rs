@@ -527,11 +527,9 @@ fn freeze_current_bitstreams() {
         &m,
         CodecId::Quant,
         bound,
-        codec::EncodeOptions {
-            basis: None,
-            encoder: Some(Box::new(|i, t| codec::quant::encode_version(i, t, Some(2)))),
-            ..Default::default()
-        },
+        codec::EncodeOptions::with_encoder(None, |i, t| {
+            codec::quant::encode_version(i, t, Some(2))
+        }),
     )
     .unwrap();
     out.push((
@@ -612,14 +610,10 @@ fn freeze_current_bitstreams() {
             &bvh,
             CodecId::Pga,
             bound,
-            codec::EncodeOptions {
-                basis: None,
-                encoder: Some(Box::new(|input, t| {
-                    let (rig, sk) = input.skeleton.unwrap();
-                    Take::new(rig, sk, input)?.encode(t, &[directions], &[options])
-                })),
-                ..Default::default()
-            },
+            codec::EncodeOptions::with_encoder(None, |input, t| {
+                let (rig, sk) = input.skeleton.unwrap();
+                Take::new(rig, sk, input)?.encode(t, &[directions], &[options])
+            }),
         )
         .unwrap()
         .container;

@@ -75,6 +75,18 @@ impl<'a> EncodeOptions<'a> {
             ..EncodeOptions::default()
         }
     }
+
+    /// With a shared basis (if any), and `encoder` called in place of the codec's own.
+    pub fn with_encoder(
+        basis: Option<&'a Arc<Basis>>,
+        encoder: impl FnOnce(&Input<'_>, Target) -> Result<CodecOutput> + 'a,
+    ) -> Self {
+        EncodeOptions {
+            basis,
+            encoder: Some(Box::new(encoder)),
+            ..EncodeOptions::default()
+        }
+    }
 }
 
 /// Encode `motion` with `codec_id` so that its decoded output meets `bound`: the one

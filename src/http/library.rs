@@ -21,24 +21,9 @@ use crate::service::export::{self, ExportRequest};
 use crate::service::library::{self, Page, Stats, TakeQuery};
 use crate::store::SortKey;
 
-/// Query of a listing: the filter fields, then sort, order, limit and cursor. Written out
-/// rather than flattened: urlencoded flattening cannot parse numbers.
+/// A listing's order and page; its filter is the same query string read as a [`TakeQuery`].
 #[derive(Deserialize)]
-pub struct ListQuery {
-    library: Option<String>,
-    tag: Option<String>,
-    name_prefix: Option<String>,
-    fps: Option<f64>,
-    points: Option<u64>,
-    layout: Option<String>,
-    codec: Option<CodecId>,
-    min_duration_s: Option<f64>,
-    max_duration_s: Option<f64>,
-    min_frames: Option<u64>,
-    max_frames: Option<u64>,
-    min_ratio: Option<f64>,
-    created_after: Option<i64>,
-    created_before: Option<i64>,
+pub struct PageQuery {
     sort: Option<SortKey>,
     order: Option<Order>,
     limit: Option<usize>,
@@ -55,25 +40,10 @@ enum Order {
 pub async fn list(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
-    query: Result<Query<ListQuery>, QueryRejection>,
+    takes: Result<Query<TakeQuery>, QueryRejection>,
+    page: Result<Query<PageQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let Query(q) = query?;
-    let takes = TakeQuery {
-        library: q.library,
-        tag: q.tag,
-        name_prefix: q.name_prefix,
-        layout: q.layout,
-        codec: q.codec,
-        fps: q.fps,
-        points: q.points,
-        min_duration_s: q.min_duration_s,
-        max_duration_s: q.max_duration_s,
-        min_frames: q.min_frames,
-        max_frames: q.max_frames,
-        min_ratio: q.min_ratio,
-        created_after: q.created_after,
-        created_before: q.created_before,
-    };
+    let (Query(takes), Query(q)) = (takes?, page?);
     let page = Page {
         sort: q.sort.unwrap_or_default(),
         descending: q.order.map(|o| matches!(o, Order::Desc)),

@@ -630,7 +630,10 @@ pub mod fuzz {
         if let Ok(Query(q)) = Query::<super::takes::FramesQuery>::try_from_uri(&uri) {
             let _ = super::takes::frames_request(q);
         }
-        let _ = Query::<super::library::ListQuery>::try_from_uri(&uri);
+        let _ = Query::<super::library::PageQuery>::try_from_uri(&uri);
+        if let Ok(Query(q)) = Query::<crate::service::library::TakeQuery>::try_from_uri(&uri) {
+            let _ = q.check();
+        }
         let _ = crate::store::Cursor::decode(&query);
         let mut json = HeaderMap::new();
         json.insert(

@@ -13,7 +13,8 @@ use crate::store::{Cursor, Filter, SortKey, Store, TakeRow, Totals};
 
 /// Which takes a listing, statistics or an export is of, as a caller asks: each field a
 /// condition every take must meet, checked ([`TakeQuery::check`]) before the store sees it.
-#[derive(Debug, Clone, Default, PartialEq)]
+/// A listing's query string reads as one (its other fields are the page's).
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
 pub struct TakeQuery {
     pub library: Option<String>,
     pub tag: Option<String>,

@@ -191,53 +191,21 @@ impl Variant {
                 ((s * motion.fps).round() as usize).max(1)
             }
         };
-        match self {
-            Variant::Default(c) => {
-                codec::encode(motion, c, bound, codec::EncodeOptions::with_basis(shared))
+        use codec::EncodeOptions as O;
+        let options = match self {
+            Variant::Default(_) => O::with_basis(shared),
+            Variant::Clip(s) => O::with_encoder(shared, move |i, t| {
+                clip::encode_with_clip(i, t, frames_of(s))
+            }),
+            Variant::Intra(s) => O::with_encoder(shared, move |i, t| {
+                frame::encode_with_period(i, t, frames_of(s))
+            }),
+            Variant::Spca(o) => O::with_encoder(shared, move |i, t| spca::encode_with(i, t, o)),
+            Variant::Mdtt(mode) => {
+                O::with_encoder(shared, move |i, t| mdtt::encode_clips(i, t, mode))
             }
-            Variant::Clip(s) => codec::encode(
-                motion,
-                self.codec(),
-                bound,
-                codec::EncodeOptions {
-                    basis: shared,
-                    encoder: Some(Box::new(|i, t| clip::encode_with_clip(i, t, frames_of(s)))),
-                    ..Default::default()
-                },
-            ),
-            Variant::Intra(s) => codec::encode(
-                motion,
-                self.codec(),
-                bound,
-                codec::EncodeOptions {
-                    basis: shared,
-                    encoder: Some(Box::new(|i, t| {
-                        frame::encode_with_period(i, t, frames_of(s))
-                    })),
-                    ..Default::default()
-                },
-            ),
-            Variant::Spca(o) => codec::encode(
-                motion,
-                self.codec(),
-                bound,
-                codec::EncodeOptions {
-                    basis: shared,
-                    encoder: Some(Box::new(|i, t| spca::encode_with(i, t, o))),
-                    ..Default::default()
-                },
-            ),
-            Variant::Mdtt(mode) => codec::encode(
-                motion,
-                self.codec(),
-                bound,
-                codec::EncodeOptions {
-                    basis: shared,
-                    encoder: Some(Box::new(|i, t| mdtt::encode_clips(i, t, mode))),
-                    ..Default::default()
-                },
-            ),
-        }
+        };
+        codec::encode(motion, self.codec(), bound, options)
     }
 }
 

@@ -512,11 +512,7 @@ mod tests {
             &m,
             CodecId::Mdtt,
             bound,
-            EncodeOptions {
-                basis: None,
-                encoder: Some(Box::new(|i, t| encode_clips(i, t, ClipMode::Adaptive))),
-                ..Default::default()
-            },
+            EncodeOptions::with_encoder(None, |i, t| encode_clips(i, t, ClipMode::Adaptive)),
         )
         .unwrap();
         let (max, _) = crate::codec::testing::measured(&m, &enc);
@@ -535,11 +531,7 @@ mod tests {
             &m,
             CodecId::Mdtt,
             bound,
-            EncodeOptions {
-                basis: None,
-                encoder: Some(Box::new(|i, t| encode_clips(i, t, ClipMode::Equal))),
-                ..Default::default()
-            },
+            EncodeOptions::with_encoder(None, |i, t| encode_clips(i, t, ClipMode::Equal)),
         )
         .unwrap();
         assert_eq!(starts_of(&equal), vec![0, 280, 560]);

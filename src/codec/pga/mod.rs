@@ -135,10 +135,7 @@ mod tests {
             let (rig, sk) = input.skeleton.unwrap();
             Take::new(rig, sk, input)?.encode(t, &[Directions::Principal], &[options])
         };
-        let options = EncodeOptions {
-            encoder: Some(Box::new(encoder)),
-            ..Default::default()
-        };
+        let options = EncodeOptions::with_encoder(None, encoder);
         encode(m, CodecId::Pga, ErrorBound::max(max_mm), options).unwrap()
     }
 

@@ -219,11 +219,9 @@ mod tests {
                 &m,
                 CodecId::Quant,
                 ErrorBound::max(0.5),
-                codec::EncodeOptions {
-                    basis: None,
-                    encoder: Some(Box::new(|i, t| quant::encode_version(i, t, Some(version)))),
-                    ..Default::default()
-                },
+                codec::EncodeOptions::with_encoder(None, |i, t| {
+                    quant::encode_version(i, t, Some(version))
+                }),
             )
             .unwrap();
             let (max, _) = crate::codec::testing::measured(&m, &enc);

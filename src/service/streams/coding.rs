@@ -77,10 +77,7 @@ impl Streams {
         while let Some(chunk) = live.unsaved.front().cloned() {
             self.commit(store, live, &chunk).await?;
             live.unsaved.pop_front();
-            live.encoder
-                .as_mut()
-                .ok_or_else(|| Error::Internal("stream encoder missing".into()))?
-                .confirm(chunk)?;
+            live.encoder_mut()?.confirm(chunk)?;
         }
         Ok(())
     }
@@ -93,10 +90,7 @@ impl Streams {
         frames: Vec<f32>,
         flush: bool,
     ) -> Result<()> {
-        let mut encoder = live
-            .encoder
-            .take()
-            .ok_or_else(|| Error::Internal("stream encoder missing".into()))?;
+        let mut encoder = live.encoder.take().ok_or_else(super::encoder_missing)?;
         let (encoder, chunks) = blocking(move || {
             let chunks = encoder.push(&frames, flush);
             (encoder, chunks)

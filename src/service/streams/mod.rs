@@ -111,13 +111,20 @@ impl Live {
     }
 
     fn encoder(&self) -> Result<&StreamEncoder> {
-        self.encoder
-            .as_ref()
-            .ok_or_else(|| Error::Internal("stream encoder missing".into()))
+        self.encoder.as_ref().ok_or_else(encoder_missing)
+    }
+
+    fn encoder_mut(&mut self) -> Result<&mut StreamEncoder> {
+        self.encoder.as_mut().ok_or_else(encoder_missing)
     }
 }
 
 type Entry = Arc<tokio::sync::Mutex<Live>>;
+
+/// The encoder is taken out of a stream only while it codes, under the stream's lock.
+fn encoder_missing() -> Error {
+    Error::Internal("stream encoder missing".into())
+}
 
 impl Streams {
     /// Open a stream for `holder`: the take exists (with no frames) from now on.
