@@ -7,6 +7,7 @@ use clap::Args;
 use serde::Serialize;
 
 use super::ReadArgs;
+use mocapstore::motion::body::{Body, Given};
 use mocapstore::motion::formats::{self, Loaded};
 
 #[derive(Args)]
@@ -34,6 +35,8 @@ struct Summary {
     gaps_percent: f64,
     skeleton_joints: Option<usize>,
     layout: String,
+    /// The body: up, forward, floor, roles ([`mocapstore::motion::body`]), or why not.
+    body: Result<Body, String>,
     warnings: Vec<String>,
 }
 
@@ -51,6 +54,7 @@ fn summarise(file: String, l: &Loaded) -> Summary {
         gaps_percent: 100.0 * m.gap_fraction(),
         skeleton_joints: m.skeleton.as_ref().map(|s| s.joint_count()),
         layout: m.layout_signature().to_hex()[..12].to_string(),
+        body: Body::of(m, Given::default(), l.up.as_ref()),
         warnings: l.warnings.clone(),
     }
 }
@@ -66,8 +70,19 @@ pub fn run(args: &InspectArgs) -> ExitCode {
     let mut failed = 0;
     if !args.json {
         println!(
-            "{:<40} {:<5} {:>6} {:>8} {:>8} {:>9} {:<10} {:>6}  warnings",
-            "file", "fmt", "points", "frames", "fps", "seconds", "unit", "gaps%"
+            "{:<40} {:<5} {:>6} {:>8} {:>8} {:>9} {:<10} {:>6} {:<4} {:<4} {:<13} {:>5}  warnings",
+            "file",
+            "fmt",
+            "points",
+            "frames",
+            "fps",
+            "seconds",
+            "unit",
+            "gaps%",
+            "up",
+            "fwd",
+            "roles",
+            "limbs"
         );
     }
     for path in &args.files {
@@ -82,8 +97,20 @@ pub fn run(args: &InspectArgs) -> ExitCode {
                     println!("{}", serde_json::to_string(&s).expect("serialisable"));
                 } else {
                     let unit = format!("{}{}", s.unit, if s.unit_inferred { "?" } else { "" });
+                    let axis = |a: Option<mocapstore::motion::body::Axis>| {
+                        a.map_or("-".to_string(), |a| a.to_string())
+                    };
+                    let (up, fwd, convention, limbs) = match &s.body {
+                        Ok(b) => (
+                            axis(b.axes.up),
+                            axis(b.axes.forward),
+                            b.roles.convention.clone().unwrap_or_else(|| "-".into()),
+                            14 - b.roles.missing_limbs().len(),
+                        ),
+                        Err(e) => (format!("({e})"), String::new(), String::new(), 0),
+                    };
                     println!(
-                        "{:<40} {:<5} {:>6} {:>8} {:>8.3} {:>9.3} {:<10} {:>6.2}  {}",
+                        "{:<40} {:<5} {:>6} {:>8} {:>8.3} {:>9.3} {:<10} {:>6.2} {:<4} {:<4} {:<13} {:>5}  {}",
                         s.file,
                         s.format,
                         s.points,
@@ -92,6 +119,10 @@ pub fn run(args: &InspectArgs) -> ExitCode {
                         s.duration_s,
                         unit,
                         s.gaps_percent,
+                        up,
+                        fwd,
+                        convention,
+                        limbs,
                         s.warnings.join("; ")
                     );
                 }

@@ -2,6 +2,7 @@
 //! numbers in, bytes and numbers out; no files, no async, no database.
 
 pub mod analog;
+pub mod body;
 pub mod decimal;
 pub mod error;
 pub mod events;

@@ -106,6 +106,9 @@ pub struct ReadOptions {
 pub struct Loaded {
     pub motion: Motion,
     pub format: Format,
+    /// What the format says of the up axis (BVH's convention, a C3D's parameters), for
+    /// when the body cannot tell ([`super::body`]).
+    pub up: Option<super::body::Prior>,
     pub warnings: Vec<String>,
     pub extras: Extras,
 }
@@ -263,9 +266,18 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         )),
         None => {}
     }
+    let up = match format {
+        Format::Bvh => Some(super::body::Prior {
+            up: super::body::Axis::Y,
+            says: "BVH is Y-up by convention".into(),
+        }),
+        Format::C3d => Some(c3d::up_prior(extras.parameters.as_ref())),
+        _ => None,
+    };
     Ok(Loaded {
         motion,
         format,
+        up,
         warnings,
         extras,
     })

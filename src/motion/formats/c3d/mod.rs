@@ -496,6 +496,27 @@ fn read_analog(
 }
 
 /// `base`, or `base_2`, `base_3`… if taken.
+/// What a C3D says of its up axis: `POINT:Y_SCREEN` names the axis a viewer shows
+/// pointing up (`+Z`, `-Y`, …), as Vicon, Qualisys and Motion Analysis write it; without
+/// it, the lab convention (ISB, c3d.org) of Z up.
+pub(crate) fn up_prior(params: Option<&Parameters>) -> crate::motion::body::Prior {
+    use crate::motion::body::{Axis, Prior};
+    let stated = params
+        .and_then(|p| p.strings("POINT", "Y_SCREEN"))
+        .and_then(|v| v.first().map(|s| s.trim().to_string()))
+        .and_then(|s| s.parse::<Axis>().ok().map(|a| (a, s)));
+    match stated {
+        Some((up, s)) => Prior {
+            up,
+            says: format!("the file's POINT:Y_SCREEN is {s}"),
+        },
+        None => Prior {
+            up: Axis::Z,
+            says: "a lab C3D is Z-up by convention".into(),
+        },
+    }
+}
+
 fn unique(taken: &[String], base: &str) -> String {
     let mut name = base.to_string();
     let mut k = 2;

@@ -1,0 +1,508 @@
+//! A take's body: which of its points play which anatomical role ([`Roles`]), and what
+//! the body says of the coordinates ([`Axes`]: up, forward, the floor). Everything that
+//! turns, moves or maps a take reads these instead of guessing from the figure's extent.
+//!
+//! Roles are a function of names (and a skeleton's shape), so they are read again from a
+//! take's point names or stored skeleton whenever needed; axes need the frames, so they are
+//! derived once (at ingest, or at the first read of a take stored before) and stored.
+//!
+//! Up is anatomy's call: the head above the pelvis above the ankles, frame after frame. A
+//! file format's convention (BVH is Y-up, lab C3D Z-up) is only the prior used when
+//! anatomy cannot decide, and what a user states wins over both.
+
+pub mod axis;
+pub mod names;
+pub mod roles;
+mod topology;
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+pub use axis::Axis;
+pub use roles::{Part, Role, RoleMap, Side};
+
+use crate::motion::skeleton::Joint;
+use crate::motion::Motion;
+
+/// Which points play which role, and by what convention they were read.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Roles {
+    /// The naming convention that placed the roles (`cmu`, `mixamo`, `plug-in-gait`, …);
+    /// `topology` when only the hierarchy's shape did; absent when nothing did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub convention: Option<String>,
+    pub roles: RoleMap,
+    /// Roles no point plays, in [`Role::all`]'s order.
+    pub unplaced: Vec<Role>,
+}
+
+impl Roles {
+    fn finish(convention: Option<String>, roles: RoleMap) -> Roles {
+        let unplaced = Role::all()
+            .into_iter()
+            .filter(|r| !roles.contains_key(r))
+            .collect();
+        Roles {
+            convention,
+            roles,
+            unplaced,
+        }
+    }
+
+    /// The roles of a marker take: its point names read by the convention that places the
+    /// most.
+    pub fn of_markers(names: &[String]) -> Roles {
+        match names::resolve(names) {
+            Some((c, roles)) => Roles::finish(Some(c.name.to_string()), roles),
+            None => Roles::finish(None, RoleMap::new()),
+        }
+    }
+
+    /// The roles of a skeleton: its joints' names read by the convention that places the
+    /// most; roles still unplaced are taken from the hierarchy's shape where it places them
+    /// on joints no role has yet.
+    pub fn of_skeleton(joints: &[Joint]) -> Roles {
+        let names: Vec<String> = joints.iter().map(|j| j.name.clone()).collect();
+        let (convention, mut roles) = match names::resolve(&names) {
+            Some((c, roles)) => (Some(c.name.to_string()), roles),
+            None => (None, RoleMap::new()),
+        };
+        if roles.len() < Role::all().len() {
+            let shaped = topology::roles(joints);
+            let mut used: Vec<String> = roles.values().flatten().cloned().collect();
+            let mut added = false;
+            for (role, idx) in shaped {
+                let names: Vec<String> = idx.iter().map(|&i| joints[i].name.clone()).collect();
+                if roles.contains_key(&role) || names.iter().any(|n| used.contains(n)) {
+                    continue;
+                }
+                used.extend(names.iter().cloned());
+                roles.insert(role, names);
+                added = true;
+            }
+            if added && convention.is_none() {
+                return Roles::finish(Some("topology".into()), roles);
+            }
+        }
+        Roles::finish(convention, roles)
+    }
+
+    /// The points that play `role` (indices into `names`).
+    pub fn points(&self, role: Role, names: &[String]) -> Vec<usize> {
+        self.roles.get(&role).map_or_else(Vec::new, |want| {
+            want.iter()
+                .filter_map(|w| names.iter().position(|n| n == w))
+                .collect()
+        })
+    }
+
+    /// The moving root: the points whose centroid is the pelvis, whatever joint carries
+    /// the translation channels.
+    pub fn root(&self) -> Option<&[String]> {
+        self.roles.get(&Role::Pelvis).map(Vec::as_slice)
+    }
+
+    /// The limb roles ([`Role::limbs`]) not placed.
+    pub fn missing_limbs(&self) -> Vec<Role> {
+        Role::limbs()
+            .into_iter()
+            .filter(|r| !self.roles.contains_key(r))
+            .collect()
+    }
+}
+
+/// A take's body: its axes and its roles, as the API shows them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Body {
+    #[serde(flatten)]
+    pub axes: Axes,
+    #[serde(flatten)]
+    pub roles: Roles,
+}
+
+impl Body {
+    /// The roles of take `m` (its skeleton's, or its point names'), and its axes by them.
+    pub fn of(m: &Motion, given: Given, prior: Option<&Prior>) -> Result<Body, String> {
+        let roles = roles_of(m);
+        let axes = derive(m, &roles, given, prior)?;
+        Ok(Body { axes, roles })
+    }
+}
+
+/// The roles of take `m`: its skeleton's, or its point names'.
+pub fn roles_of(m: &Motion) -> Roles {
+    match &m.skeleton {
+        Some(s) => Roles::of_skeleton(&s.joints),
+        None => Roles::of_markers(&m.point_names),
+    }
+}
+
+/// What settled an axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Source {
+    /// The body's own posture across the take.
+    Anatomy,
+    /// The file format's convention (BVH Y-up, C3D Z-up or its `POINT:Y_SCREEN`).
+    Format,
+    /// The user, at ingest or by a correction.
+    Given,
+}
+
+/// What a file format says of up, before anatomy is looked at.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prior {
+    pub up: Axis,
+    /// Why, for the record: "BVH is Y-up by convention".
+    pub says: String,
+}
+
+/// What a user states: it wins over anatomy and format.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Given {
+    pub up: Option<Axis>,
+    pub forward: Option<Axis>,
+}
+
+impl Given {
+    /// Up and forward must lie across each other.
+    pub fn check(&self) -> Result<(), String> {
+        match (self.up, self.forward) {
+            (Some(u), Some(f)) if u.index() == f.index() => Err(format!(
+                "forward={f} lies along up={u}: forward must be horizontal"
+            )),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// A take's axes in its own coordinates, and how each was settled.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Axes {
+    /// The axis pointing up; `None` when nothing decided (see `reason`).
+    pub up: Option<Axis>,
+    /// The horizontal axis the body faces along over the take (or at its start).
+    pub forward: Option<Axis>,
+    /// The floor's height along `up` (the coordinate along it, signed as it is), in metres:
+    /// where the lowest foot points stand.
+    pub floor_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up_from: Option<Source>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub forward_from: Option<Source>,
+    /// What settled up, or why nothing did; and what was not settled.
+    pub reason: String,
+}
+
+/// Frames looked at when deriving axes: evenly spread, the ends included.
+const SAMPLED_FRAMES: usize = 600;
+/// The share of looked-at frames that must agree on up for anatomy to decide it.
+const UP_AGREEMENT: f64 = 0.6;
+/// How consistently the body must face one way over the take for that to be its forward
+/// (the length of the mean facing direction); else its first second decides.
+const FACING_AGREEMENT: f64 = 0.5;
+
+/// The axes of take `m` by its `roles` (a skeleton's: the floor is found under the
+/// ankles' children too). `given` wins, then anatomy, then `prior`. Err: what was given
+/// contradicts itself.
+pub fn derive(
+    m: &Motion,
+    roles: &Roles,
+    given: Given,
+    prior: Option<&Prior>,
+) -> Result<Axes, String> {
+    given.check()?;
+    let joints = m.skeleton.as_ref().map(|s| s.joints.as_slice());
+    let figure = Figure::new(m.positions(), &m.point_names, roles, joints);
+    let (metres_per_unit, fps) = (m.unit.metres_per_unit, m.fps);
+    let mut notes = Vec::new();
+    let (up, up_from) = match (given.up, figure.up()) {
+        (Some(u), _) => {
+            notes.push(format!("up {u} as given"));
+            (Some(u), Some(Source::Given))
+        }
+        (None, Ok((u, share))) => {
+            notes.push(format!(
+                "up {u}: the head stands over the ankles along {u} in {:.0}% of frames",
+                share * 100.0
+            ));
+            (Some(u), Some(Source::Anatomy))
+        }
+        (None, Err(why)) => match prior {
+            Some(p) => {
+                notes.push(format!("up {} because {}: {why}", p.up, p.says));
+                (Some(p.up), Some(Source::Format))
+            }
+            None => {
+                notes.push(format!("up unknown: {why}, and the format has no convention; give up= at ingest or by PATCH"));
+                (None, None)
+            }
+        },
+    };
+    let (forward, forward_from) = match (given.forward, up) {
+        (Some(f), _) => (Some(f), Some(Source::Given)),
+        (None, Some(u)) => match figure.forward(u, fps) {
+            Ok(f) => (Some(f), Some(Source::Anatomy)),
+            Err(why) => {
+                notes.push(format!("forward unknown: {why}"));
+                (None, None)
+            }
+        },
+        (None, None) => (None, None),
+    };
+    let floor_m = up
+        .and_then(|u| figure.floor(u))
+        .map(|h| h * metres_per_unit);
+    Ok(Axes {
+        up,
+        forward,
+        floor_m,
+        up_from,
+        forward_from,
+        reason: notes.join("; "),
+    })
+}
+
+/// The frames of a take as its roles' places.
+struct Figure<'a> {
+    positions: &'a [f32],
+    points: usize,
+    head: Vec<usize>,
+    pelvis: Vec<usize>,
+    ankles: Vec<usize>,
+    /// Left then right of a pair of the same part, for telling the body's sides apart.
+    sides: Vec<(Vec<usize>, Vec<usize>)>,
+    /// Toes and the ankles they belong to, for the way the feet point.
+    toes: Vec<(Vec<usize>, Vec<usize>)>,
+    /// Points at the bottom of the legs: the floor is under them.
+    feet: Vec<usize>,
+}
+
+impl<'a> Figure<'a> {
+    fn new(
+        positions: &'a [f32],
+        names: &[String],
+        roles: &Roles,
+        joints: Option<&[Joint]>,
+    ) -> Figure<'a> {
+        let at = |r: Role| roles.points(r, names);
+        let first = |rs: &[Role]| {
+            rs.iter()
+                .map(|&r| at(r))
+                .find(|v| !v.is_empty())
+                .unwrap_or_default()
+        };
+        let limb = |p: Part| -> Vec<usize> {
+            let mut v = at(Role::left(p));
+            v.extend(at(Role::right(p)));
+            v
+        };
+        let head = first(&[Role::Head, Role::Neck]);
+        let mut ankles = limb(Part::Ankle);
+        if ankles.is_empty() {
+            ankles = limb(Part::Toe);
+        }
+        let sides = [Part::Hip, Part::Shoulder]
+            .into_iter()
+            .map(|p| (at(Role::left(p)), at(Role::right(p))))
+            .filter(|(l, r)| !l.is_empty() && !r.is_empty())
+            .collect();
+        let toes = Side::BOTH
+            .into_iter()
+            .map(|s| (at(Role::Limb(s, Part::Ankle)), at(Role::Limb(s, Part::Toe))))
+            .filter(|(a, t)| !a.is_empty() && !t.is_empty())
+            .collect();
+        let mut feet = limb(Part::Ankle);
+        feet.extend(limb(Part::Toe));
+        if let Some(joints) = joints {
+            // The end sites and joints below an ankle: a toe's tip, a heel.
+            for (i, j) in joints.iter().enumerate() {
+                if let Some(p) = j.parent {
+                    if feet.contains(&p) && !feet.contains(&i) {
+                        feet.push(i);
+                    }
+                }
+            }
+        }
+        Figure {
+            positions,
+            points: names.len(),
+            head,
+            pelvis: at(Role::Pelvis),
+            ankles,
+            sides,
+            toes,
+            feet,
+        }
+    }
+
+    fn frames(&self) -> usize {
+        match self.points {
+            0 => 0,
+            n => self.positions.len() / (n * 3),
+        }
+    }
+
+    /// Up to [`SAMPLED_FRAMES`] frames, evenly spread over `range`.
+    fn sampled(range: std::ops::Range<usize>) -> impl Iterator<Item = usize> {
+        let n = range.len();
+        let k = n.min(SAMPLED_FRAMES);
+        (0..k).map(move |i| range.start + if k > 1 { i * (n - 1) / (k - 1) } else { 0 })
+    }
+
+    /// The centroid of the points of `set` present in frame `f`.
+    fn centroid(&self, f: usize, set: &[usize]) -> Option<Vector3<f64>> {
+        let mut sum = Vector3::zeros();
+        let mut k = 0;
+        for &p in set {
+            let i = (f * self.points + p) * 3;
+            let v = &self.positions[i..i + 3];
+            if v.iter().all(|x| x.is_finite()) {
+                sum += Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+                k += 1;
+            }
+        }
+        (k > 0).then(|| sum / k as f64)
+    }
+
+    /// Up from anatomy and the share of frames that agree, or why anatomy cannot say.
+    fn up(&self) -> Result<(Axis, f64), String> {
+        if self.head.is_empty() || self.ankles.is_empty() {
+            return Err("no head and ankles to tell up by".into());
+        }
+        let mut votes = [0usize; 6];
+        let mut looked = 0;
+        for f in Self::sampled(0..self.frames()) {
+            let (Some(top), Some(bottom)) =
+                (self.centroid(f, &self.head), self.centroid(f, &self.ankles))
+            else {
+                continue;
+            };
+            looked += 1;
+            let Some(a) = Axis::nearest(&(top - bottom)) else {
+                continue;
+            };
+            // The pelvis between them along that axis, where there is one.
+            if let Some(p) = self.centroid(f, &self.pelvis) {
+                let along = |v: Vector3<f64>| a.vector().dot(&v);
+                if along(top - p) <= 0.0 || along(p - bottom) <= 0.0 {
+                    continue;
+                }
+            }
+            votes[Axis::all()
+                .iter()
+                .position(|x| *x == a)
+                .expect("one of six")] += 1;
+        }
+        if looked == 0 {
+            return Err("no frame has the head and an ankle".into());
+        }
+        let (best, &count) = votes
+            .iter()
+            .enumerate()
+            .max_by_key(|&(i, c)| (*c, std::cmp::Reverse(i)))
+            .expect("six counts");
+        let share = count as f64 / looked as f64;
+        if share < UP_AGREEMENT {
+            return Err(format!(
+                "the head stands over the pelvis and ankles along one axis in only {:.0}% \
+                 of frames",
+                share * 100.0
+            ));
+        }
+        Ok((Axis::all()[best], share))
+    }
+
+    /// The way the body faces in frame `f` across `up` (unit), from its left-right pairs
+    /// (forward = up × (right − left)), or from the feet.
+    fn facing(&self, f: usize, up: &Vector3<f64>) -> Option<Vector3<f64>> {
+        let flat = |v: Vector3<f64>| v - up * v.dot(up);
+        let mut across = Vector3::zeros();
+        for (l, r) in &self.sides {
+            if let (Some(a), Some(b)) = (self.centroid(f, l), self.centroid(f, r)) {
+                let d = flat(b - a);
+                if d.norm() > 0.0 {
+                    across += d.normalize();
+                }
+            }
+        }
+        let dir = if across.norm() > 0.0 {
+            up.cross(&across)
+        } else {
+            let mut ahead = Vector3::zeros();
+            for (a, t) in &self.toes {
+                if let (Some(a), Some(t)) = (self.centroid(f, a), self.centroid(f, t)) {
+                    ahead += flat(t - a);
+                }
+            }
+            ahead
+        };
+        (dir.norm() > 0.0).then(|| dir.normalize())
+    }
+
+    /// Forward from the way the body faces: over the take when it keeps to one way, else
+    /// over its first second.
+    fn forward(&self, up: Axis, fps: f64) -> Result<Axis, String> {
+        if self.sides.is_empty() && self.toes.is_empty() {
+            return Err("no hips, shoulders or feet to tell it by".into());
+        }
+        let u = up.vector();
+        let mean = |range: std::ops::Range<usize>| {
+            let (mut sum, mut k) = (Vector3::zeros(), 0usize);
+            for f in Self::sampled(range) {
+                if let Some(d) = self.facing(f, &u) {
+                    sum += d;
+                    k += 1;
+                }
+            }
+            (k > 0).then(|| sum / k as f64)
+        };
+        let frames = self.frames();
+        let first_second = 0..frames.min((fps.round() as usize).max(1));
+        let dir = match mean(0..frames) {
+            Some(m) if m.norm() >= FACING_AGREEMENT => m,
+            Some(_) => match mean(first_second) {
+                Some(m) if m.norm() >= FACING_AGREEMENT => m,
+                _ => return Err("the body faces no one way, even in its first second".into()),
+            },
+            None => return Err("no frame has both sides of the body".into()),
+        };
+        let mut flat = dir;
+        flat[up.index()] = 0.0;
+        Axis::nearest(&flat).ok_or_else(|| "the body faces straight up".into())
+    }
+
+    /// The floor's height along `up` (file units): a low percentile of each looked-at
+    /// frame's lowest foot point (all points when no feet are known), so that a glitch
+    /// does not sink it and a jump does not lift it.
+    fn floor(&self, up: Axis) -> Option<f64> {
+        let all: Vec<usize>;
+        let feet = if self.feet.is_empty() {
+            all = (0..self.points).collect();
+            &all
+        } else {
+            &self.feet
+        };
+        let mut lows: Vec<f64> = Self::sampled(0..self.frames())
+            .filter_map(|f| {
+                feet.iter()
+                    .filter_map(|&p| {
+                        let i = (f * self.points + p) * 3;
+                        let v = &self.positions[i..i + 3];
+                        v.iter()
+                            .all(|x| x.is_finite())
+                            .then(|| up.along(&[f64::from(v[0]), f64::from(v[1]), f64::from(v[2])]))
+                    })
+                    .min_by(f64::total_cmp)
+            })
+            .collect();
+        if lows.is_empty() {
+            return None;
+        }
+        lows.sort_by(f64::total_cmp);
+        Some(lows[lows.len() / 50])
+    }
+}
+
+#[cfg(test)]
+mod tests;

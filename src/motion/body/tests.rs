@@ -1,0 +1,174 @@
+use super::*;
+use crate::motion::synthetic::dancer;
+
+/// `m`'s points (and nothing else: no skeleton) moved by `f`.
+fn moved(m: &Motion, f: impl Fn([f32; 3]) -> [f32; 3]) -> Motion {
+    let positions = m
+        .positions()
+        .chunks_exact(3)
+        .flat_map(|p| f([p[0], p[1], p[2]]))
+        .collect();
+    Motion::new(
+        m.fps,
+        m.unit.clone(),
+        m.point_names.clone(),
+        positions,
+        None,
+    )
+    .unwrap()
+}
+
+fn axes(m: &Motion, roles: &Roles) -> Axes {
+    derive(m, roles, Given::default(), None).unwrap()
+}
+
+/// The dancer stands on +Y and faces +Z (its toes point there, its left is +X); turned to
+/// Z-up, it stands on +Z and faces −Y. The floor is under its feet.
+#[test]
+fn up_and_forward_from_the_body() {
+    let m = dancer(240, 120.0, 1);
+    let roles = Roles::of_skeleton(&m.skeleton.as_ref().unwrap().joints);
+    assert!(roles
+        .missing_limbs()
+        .iter()
+        .all(|r| matches!(r, Role::Limb(_, Part::Toe))));
+    let a = axes(&m, &roles);
+    assert_eq!(
+        (a.up, a.forward),
+        (Some(Axis::Y), Some(Axis::Z)),
+        "{}",
+        a.reason
+    );
+    assert_eq!(a.up_from, Some(Source::Anatomy));
+    let lowest = m
+        .positions()
+        .chunks_exact(3)
+        .map(|s| f64::from(s[1]))
+        .fold(f64::MAX, f64::min);
+    let floor = a.floor_m.unwrap() / m.unit.metres_per_unit;
+    assert!(
+        floor >= lowest && floor < lowest + 5.0,
+        "{floor} vs {lowest}"
+    );
+
+    let turned = moved(&m, |[x, y, z]| [x, -z, y]);
+    let a = axes(&turned, &Roles::of_markers(&m.point_names));
+    assert_eq!(a.up, Some(Axis::Z), "{}", a.reason);
+    assert_eq!(a.forward, Some(Axis::Y.flipped()), "{}", a.reason);
+    let upside_down = moved(&m, |[x, y, z]| [x, -y, -z]);
+    let a = axes(&upside_down, &Roles::of_markers(&m.point_names));
+    assert_eq!(a.up, Some(Axis::Y.flipped()), "{}", a.reason);
+}
+
+/// A long walk along Z, Y-up: the figure spans metres along Z and under two along Y, which
+/// fooled the extent rule; the body is not fooled.
+#[test]
+fn a_long_walk_stands_upright() {
+    let m = dancer(1200, 30.0, 2);
+    let walk = moved(&m, |[x, y, z]| [z, y, -x]);
+    let span = |axis: usize| {
+        let v: Vec<f32> = walk.positions().chunks_exact(3).map(|p| p[axis]).collect();
+        v.iter().cloned().fold(f32::MIN, f32::max) - v.iter().cloned().fold(f32::MAX, f32::min)
+    };
+    assert!(span(2) > 10.0 * span(1), "a walk much longer than tall");
+    let a = axes(&walk, &Roles::of_markers(&m.point_names));
+    assert_eq!(a.up, Some(Axis::Y), "{}", a.reason);
+    assert_eq!(a.forward, Some(Axis::X), "{}", a.reason);
+}
+
+/// Nothing to stand on: the format's convention, or nothing, saying why; what a user gives
+/// wins, and must make sense.
+#[test]
+fn without_a_body_the_prior_or_nothing() {
+    let m = dancer(30, 30.0, 3);
+    let names: Vec<String> = (0..m.point_count()).map(|i| format!("m{i}")).collect();
+    let anon = Motion::new(
+        m.fps,
+        m.unit.clone(),
+        names.clone(),
+        m.positions().to_vec(),
+        None,
+    )
+    .unwrap();
+    let roles = Roles::of_markers(&names);
+    assert_eq!(roles.convention, None);
+    assert_eq!(roles.unplaced.len(), 20);
+    let a = axes(&anon, &roles);
+    assert_eq!((a.up, a.forward, a.up_from), (None, None, None));
+    assert!(
+        a.reason.contains("no head and ankles") && a.reason.contains("up="),
+        "{}",
+        a.reason
+    );
+    let prior = Prior {
+        up: Axis::Z,
+        says: "C3D is Z-up by convention".into(),
+    };
+    let a = derive(&anon, &roles, Given::default(), Some(&prior)).unwrap();
+    assert_eq!((a.up, a.up_from), (Some(Axis::Z), Some(Source::Format)));
+    assert!(a.reason.contains("C3D is Z-up"), "{}", a.reason);
+    // Given wins over anatomy.
+    let named = Roles::of_markers(&m.point_names);
+    let given = Given {
+        up: Some(Axis::X),
+        forward: Some(Axis::Y),
+    };
+    let a = derive(&m, &named, given, Some(&prior)).unwrap();
+    assert_eq!((a.up, a.forward), (Some(Axis::X), Some(Axis::Y)));
+    assert_eq!(
+        (a.up_from, a.forward_from),
+        (Some(Source::Given), Some(Source::Given))
+    );
+    let bad = Given {
+        up: Some(Axis::Y),
+        forward: Some(Axis::Y.flipped()),
+    };
+    assert!(derive(&m, &named, bad, None).is_err());
+}
+
+/// A rig whose names nothing knows gets its roles from its shape: the same joints the names
+/// give, and the sides the right way round.
+#[test]
+fn roles_from_the_shape_of_an_unnamed_rig() {
+    let m = dancer(2, 30.0, 4);
+    let joints = &m.skeleton.as_ref().unwrap().joints;
+    let named = Roles::of_skeleton(joints);
+    let mut anon = joints.clone();
+    for (i, j) in anon.iter_mut().enumerate() {
+        j.name = format!("j{i}");
+    }
+    let shaped = Roles::of_skeleton(&anon);
+    assert_eq!(shaped.convention.as_deref(), Some("topology"));
+    let index = |names: &[String], all: &[Joint]| -> Vec<usize> {
+        names
+            .iter()
+            .map(|n| all.iter().position(|j| &j.name == n).unwrap())
+            .collect()
+    };
+    for (role, names) in &named.roles {
+        let got = shaped
+            .roles
+            .get(role)
+            .unwrap_or_else(|| panic!("{role} unplaced"));
+        if *role == Role::Spine {
+            // The names know Spine; the shape finds the chain to the chest.
+            assert!(index(names, joints)
+                .iter()
+                .all(|i| index(got, &anon).contains(i)));
+        } else {
+            assert_eq!(index(got, &anon), index(names, joints), "{role}");
+        }
+    }
+    // The toes are the feet's end sites, which names did not place.
+    assert!(shaped.missing_limbs().is_empty(), "{:?}", shaped.unplaced);
+    // Mirrored left to right (x negated), the sides follow the body, not the order.
+    let mut mirrored = anon.clone();
+    for j in &mut mirrored {
+        j.offset[0] = -j.offset[0];
+    }
+    let m = Roles::of_skeleton(&mirrored);
+    assert_eq!(
+        m.roles[&Role::left(Part::Knee)],
+        shaped.roles[&Role::right(Part::Knee)]
+    );
+}
