@@ -7,9 +7,10 @@ use clap::Args;
 
 use super::ReadArgs;
 use mocapstore::motion::analog::per_frame_at;
+use mocapstore::motion::body::{Axis, Body, Given};
 use mocapstore::motion::formats::{self, Format};
 use mocapstore::motion::transform::resample::trial_frame_at;
-use mocapstore::motion::transform::{whole, Options, Root, Up};
+use mocapstore::motion::transform::{whole, Options, Root};
 use mocapstore::motion::units::parse_unit;
 
 #[derive(Args)]
@@ -30,9 +31,15 @@ pub struct ConvertArgs {
     /// Root motion: keep, in-place or extract.
     #[arg(long, default_value = "keep")]
     root: Root,
-    /// Up axis of the output (y or z); glTF is always y.
+    /// Up axis of the output (y, z, or signed: -z); glTF is always y.
     #[arg(long)]
-    up: Option<Up>,
+    up: Option<Axis>,
+    /// The input's up axis, when its body does not tell (`inspect` shows what it tells).
+    #[arg(long)]
+    source_up: Option<Axis>,
+    /// The input's forward axis, when its body does not tell.
+    #[arg(long)]
+    source_forward: Option<Axis>,
     /// Unit of the output (mm, cm, m, in, ft, cmu or metres per unit); glTF is always m.
     /// (The input's unit is --unit.)
     #[arg(long)]
@@ -88,13 +95,28 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
     }
     let gltf = matches!(format, Format::Glb | Format::Gltf);
     if gltf {
-        if transform.metres_per_unit.is_some_and(|m| m != 1.0) || transform.up == Some(Up::Z) {
+        if transform.metres_per_unit.is_some_and(|m| m != 1.0)
+            || transform.up.is_some_and(|u| u != Axis::Y)
+        {
             return Err("glTF is in metres and +Y up: leave out --out-unit and --up".into());
         }
         transform.metres_per_unit = Some(1.0);
-        transform.up = Some(Up::Y);
+        transform.up = Some(Axis::Y);
     }
-    let motion = whole::apply(&loaded.motion, &transform).map_err(|e| format!("{input}: {e}"))?;
+    let given = Given {
+        up: args.source_up,
+        forward: args.source_forward,
+    };
+    let body = Body::of(&loaded.motion, given, loaded.up.as_ref())?;
+    let motion = whole::apply(&loaded.motion, &body, &transform).map_err(|e| {
+        let hint = match e {
+            mocapstore::motion::Error::Unsupported(_) => {
+                " (state the input's axes with --source-up)"
+            }
+            _ => "",
+        };
+        format!("{input}: {e}{hint}")
+    })?;
     let out = if gltf {
         let name = args
             .input

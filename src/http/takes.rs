@@ -49,6 +49,9 @@ pub struct IngestQuery {
     /// Bounds on analog channels, each in its own unit: `0.5`, or `Fz1=0.5,EMG1=1e-6`
     /// (`*=` for the rest). None: analog values are kept exactly.
     analog_bound: Option<String>,
+    /// The take's up and forward axes (signed: `y`, `-z`), winning over anatomy.
+    up: Option<String>,
+    forward: Option<String>,
 }
 
 /// Format named by `Content-Type` (e.g. `application/x-bvh`, `text/x-trc`), used only when
@@ -105,6 +108,8 @@ pub const HEADER_FIELDS: &[(&str, FromHeader)] = &[
         Ok(())
     }),
     ("analog-bound", |q, v| text(&mut q.analog_bound, v)),
+    ("up", |q, v| text(&mut q.up, v)),
+    ("forward", |q, v| text(&mut q.forward, v)),
 ];
 
 fn text(slot: &mut Option<String>, v: &str) -> Result<(), ApiError> {
@@ -179,12 +184,25 @@ impl IngestQuery {
         if let Some(f) = self.fps {
             crate::limits::fps(f).map_err(ApiError::bad_request)?;
         }
+        let axis = |name: &str, v: Option<&str>| {
+            v.map(|a| {
+                a.parse::<crate::motion::body::Axis>()
+                    .map_err(|e| ApiError::bad_request(format!("{name}: {e}")))
+            })
+            .transpose()
+        };
+        let axes = crate::motion::body::Given {
+            up: axis("up", self.up.as_deref())?,
+            forward: axis("forward", self.forward.as_deref())?,
+        };
+        axes.check().map_err(ApiError::bad_request)?;
         if body.is_empty() {
             return Err(ApiError::bad_request(
                 "empty body: send the file as the request body",
             ));
         }
         Ok(IngestRequest {
+            axes,
             bytes: body,
             label: Label {
                 name: self.name,
@@ -265,7 +283,7 @@ pub async fn get(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    let take = fetch::take(&state.store, &id).await?;
+    let take = fetch::take_with_body(&state.store, &id).await?;
     Ok(Json(TakeView::from(&take)).into_response())
 }
 

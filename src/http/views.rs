@@ -53,6 +53,10 @@ pub struct TakeView<'a> {
     /// What the take costs on disk (container, metadata row and keys), beside
     /// `stored_bytes` (the container alone).
     disk_bytes: u64,
+    /// Its body: up, forward, floor, how each was settled, and which points play which
+    /// role. Null only for a listing's take whose axes are not derived yet (its own
+    /// `GET` derives them).
+    body: Option<crate::motion::body::Body>,
 }
 
 impl<'a> From<&'a Take> for TakeView<'a> {
@@ -85,6 +89,7 @@ impl<'a> From<&'a Take> for TakeView<'a> {
             skeleton: t.skeleton.as_deref(),
             live: t.is_live(),
             disk_bytes: t.disk_bytes().unwrap_or(t.stored_bytes),
+            body: t.body(),
         }
     }
 }
@@ -296,6 +301,7 @@ mod tests {
             "skeleton",
             "live",
             "disk_bytes",
+            "body",
         ];
         want.sort_unstable();
         assert_eq!(keys, want);
@@ -303,6 +309,7 @@ mod tests {
             match k.as_str() {
                 "live" => assert_eq!(v, false),
                 "disk_bytes" => assert!(v.as_u64().unwrap() > take.stored_bytes),
+                "body" => assert_eq!(v, &serde_json::to_value(take.body()).unwrap()),
                 _ => assert_eq!(Some(v), record.get(k), "{k}"),
             }
         }

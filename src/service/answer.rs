@@ -37,7 +37,7 @@ use crate::codec::{self, basis::hex, ChunkSource};
 use crate::limits::Limits;
 use crate::motion::formats::bvh::ChannelWriter;
 use crate::motion::formats::{frame_writer, Format, FrameWriter, Shape};
-use crate::motion::transform::{Options, Up};
+use crate::motion::transform::{Axis, Options};
 use crate::motion::{Unit, UnitSource};
 use crate::store::{ChunkRow, Store};
 
@@ -255,11 +255,11 @@ pub fn transform_for(format: Format, mut transform: Options) -> Result<Options> 
                     "glTF is in metres: leave out unit".into(),
                 ));
             }
-            if transform.up == Some(Up::Z) {
+            if transform.up.is_some_and(|u| u != Axis::Y) {
                 return Err(Error::InvalidRequest("glTF is +Y up: leave out up".into()));
             }
             transform.metres_per_unit = Some(1.0);
-            transform.up = Some(Up::Y);
+            transform.up = Some(Axis::Y);
         }
         Format::C3d
             if transform.root != crate::motion::transform::Root::Keep

@@ -289,6 +289,9 @@ impl Default for ReadWith {
 /// Read one take whole: bitstream, bases, and its frames as an open file (an answer of
 /// [`answer::open`], the path every output takes).
 pub async fn export_take(store: &Store, with: &ReadWith, take: Take) -> Result<ExportedTake> {
+    // Its record as reading it leaves it: a take stored before bodies were kept gets its
+    // axes now, so that the manifest and the database agree.
+    let take = super::body::ensure(store, take).await?;
     let (header, _) = super::fetch::header_of(store, &take).await?;
     let chunks = store
         .chunks(&take.id, 0, header.chunks.len() as i64)

@@ -64,6 +64,12 @@ pub async fn take(store: &Store, id: &str) -> Result<Take> {
     parse(store, row).await
 }
 
+/// The take stored under `id`, parsed, with its body's axes (derived now, once, for a take
+/// stored before bodies were kept: [`super::body::ensure`]).
+pub async fn take_with_body(store: &Store, id: &str) -> Result<Take> {
+    super::body::ensure(store, take(store, id).await?).await
+}
+
 /// A stored row parsed, with the skeleton it names (which names its points).
 pub async fn parse(store: &Store, row: TakeRow) -> Result<Take> {
     let rig = match &row.skeleton_id {
@@ -119,7 +125,7 @@ pub(super) async fn prepare(
         let r = range.resolve(p.frames, p.fps)?;
         return Ok((p, r));
     }
-    let row = take(store, id).await?;
+    let row = take_with_body(store, id).await?;
     let r = range.resolve(row.frames as usize, row.fps)?;
     let (header, live) = header_of(store, &row).await?;
     let shared = shared(store, &header).await?;

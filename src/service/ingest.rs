@@ -13,6 +13,7 @@ use super::skeletons;
 use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
 use crate::codec::{self, CodecId, Encoded, ErrorBound, Hints, Latency};
+use crate::motion::body::{Body, Given};
 use crate::motion::formats::{self, Format, ReadLimits, ReadOptions};
 use crate::motion::Motion;
 use crate::store::{NewTake, Store};
@@ -41,6 +42,8 @@ pub struct IngestRequest {
     pub hints: Hints,
     /// Bounds on the analog channels, each in its own unit; none: kept exactly.
     pub analog_bounds: AnalogBounds,
+    /// The take's up and forward axes as the user states them: they win over anatomy.
+    pub axes: Given,
 }
 
 /// How a take is to be coded: the codec asked for (or auto), its bound and latency, what a
@@ -99,6 +102,14 @@ pub async fn ingest(
     .await??;
     let motion = Arc::new(loaded.motion);
     let extras = loaded.extras;
+    // The body before any coding: a contradiction in what was given is the caller's 400.
+    let given = req.axes;
+    let prior = loaded.up;
+    let body = {
+        let m = motion.clone();
+        blocking(move || Body::of(&m, given, prior.as_ref())).await?
+    }
+    .map_err(Error::InvalidRequest)?;
     let analog_only = motion.point_count() == 0 && extras.analog.is_some();
     if motion.frame_count() == 0
         || !analog_only && (motion.point_count() == 0 || motion.gap_fraction() >= 1.0)
@@ -178,7 +189,7 @@ pub async fn ingest(
         events: extras.events,
         first_frame: extras.first_frame,
         analog: analog.as_ref().map(|a| a.meta.clone()),
-        up: crate::motion::transform::infer_up(m.positions(), m.point_count()),
+        axes: Some(body.axes.clone()),
     };
     let format = loaded.format.name();
     let mut take = Take::new(
@@ -190,6 +201,7 @@ pub async fn ingest(
         req.bound,
         meta,
     );
+    take.roles = body.roles;
     take.set_frames(m.frame_count());
     take.header = enc.container.header.to_bytes();
     take.set_measured(enc.stored_bytes, &enc.stats);

@@ -25,6 +25,7 @@ pub mod analog;
 pub mod answer;
 pub mod archive;
 pub mod bases;
+pub mod body;
 pub mod budget;
 pub mod choose;
 pub mod export;

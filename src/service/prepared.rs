@@ -74,8 +74,8 @@ pub struct Prepared {
     /// What a file written of it names (glTF's extras): the take's name and bound.
     pub name: String,
     pub bound: crate::codec::ErrorBound,
-    /// The stored coordinates' up axis, where the take's record keeps it.
-    pub up: Option<crate::motion::transform::Up>,
+    /// What transforms need of the take's body: up, the pelvis, the floor.
+    pub stance: crate::motion::transform::Stance,
 }
 
 impl Prepared {
@@ -95,7 +95,14 @@ impl Prepared {
             skeleton: take.skeleton.is_some(),
             name: take.name.clone(),
             bound: take.bound,
-            up: take.meta.up,
+            stance: match take.body() {
+                Some(b) => crate::motion::transform::Stance::of(
+                    &b,
+                    &take.meta.point_names,
+                    take.metres_per_unit,
+                ),
+                None => crate::motion::transform::Stance::default(),
+            },
         })
     }
 
@@ -308,7 +315,7 @@ mod tests {
             skeleton: false,
             name: id.into(),
             bound: ErrorBound::max(1.0),
-            up: None,
+            stance: Default::default(),
         })
     }
 

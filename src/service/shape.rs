@@ -9,7 +9,7 @@ use crate::motion::skeleton::Joint;
 use crate::motion::transform::channels::Channels;
 use crate::motion::transform::pose::{PointPose, SkeletonPose};
 use crate::motion::transform::resample::{output_frames, Positions, Resampler};
-use crate::motion::transform::{infer_up, Options, Root, Up, ROOT_MOTION};
+use crate::motion::transform::{Options, Root, ROOT_MOTION};
 
 /// The transforms of one answer, and the state they keep between blocks.
 pub enum Shaper {
@@ -18,12 +18,8 @@ pub enum Shaper {
     Points {
         options: Options,
         resampler: Option<Resampler<Positions>>,
-        /// Built at the first block when the take's record has no up axis (inferred from
-        /// the frames then).
-        pose: Option<PointPose>,
+        pose: PointPose,
         points: usize,
-        root_point: Option<usize>,
-        metres_per_unit: f64,
         /// Indices into the transformed frame's points.
         selected: Vec<usize>,
     },
@@ -31,8 +27,17 @@ pub enum Shaper {
     Channels {
         fps: Option<f64>,
         resampler: Option<Resampler<Channels>>,
-        pose: SkeletonPose,
+        pose: Box<SkeletonPose>,
     },
+}
+
+/// A transform the take's body cannot make (409, naming what to give) or one that makes
+/// no sense (400).
+fn refused(e: crate::motion::Error) -> Error {
+    match e {
+        crate::motion::Error::Unsupported(m) => Error::Unsatisfiable(m),
+        other => Error::InvalidRequest(other.to_string()),
+    }
 }
 
 /// The options every answer shares, checked ([`Options::check`]): a 400 saying why not.
@@ -71,29 +76,17 @@ impl Shaper {
     ) -> Result<Shaper> {
         check(options)?;
         let points = prepared.point_names.len();
-        // A skeleton take's root joint is its first point.
-        let root_point = prepared.skeleton.then_some(0);
-        let pose = |up| {
-            PointPose::new(options, points, root_point, up, prepared.metres_per_unit)
-                .map_err(Error::InvalidRequest)
-        };
-        // A skeleton take stored before takes kept their up axis is Y-up (BVH's), as its
-        // channels are; a marker take's is inferred from its first frames.
-        let known = prepared.up.or(prepared.skeleton.then_some(Up::Y));
-        // Refused options are refused now, whatever the axis turns out to be.
-        let probe = pose(known.unwrap_or(Up::Y))?;
-        let extract = options.root == Root::Extract;
+        let pose = PointPose::new(options, points, &prepared.stance, prepared.metres_per_unit)
+            .map_err(refused)?;
         let mut selected = selected.unwrap_or_else(|| (0..points).collect());
-        if extract {
+        if options.root == Root::Extract {
             selected.push(points);
         }
         Ok(Shaper::Points {
             options: *options,
             resampler: resampler(Positions { points }, prepared, options, frames),
-            pose: known.map(|_| probe),
+            pose,
             points,
-            root_point,
-            metres_per_unit: prepared.metres_per_unit,
             selected,
         })
     }
@@ -117,8 +110,7 @@ impl Shaper {
         }
     }
 
-    /// The shaper of a skeleton's channels (`joints`) of `frames` source frames. A take
-    /// whose record has no up axis is taken as Y-up (BVH's).
+    /// The shaper of a skeleton's channels (`joints`) of `frames` source frames.
     pub fn channels(
         prepared: &Prepared,
         joints: &[Joint],
@@ -126,17 +118,12 @@ impl Shaper {
         frames: usize,
     ) -> Result<Shaper> {
         check(options)?;
-        let pose = SkeletonPose::new(
-            options,
-            joints,
-            prepared.up.unwrap_or(Up::Y),
-            prepared.metres_per_unit,
-        )
-        .map_err(Error::Unsatisfiable)?;
+        let pose = SkeletonPose::new(options, joints, &prepared.stance, prepared.metres_per_unit)
+            .map_err(refused)?;
         Ok(Shaper::Channels {
             fps: options.fps,
             resampler: resampler(Channels::new(joints), prepared, options, frames),
-            pose,
+            pose: Box::new(pose),
         })
     }
 
@@ -169,23 +156,16 @@ impl Shaper {
     /// ones, as many frames as are ready, and how many (a take of no points has frames too).
     pub fn positions(&mut self, decoded: &[f32], count: usize) -> (Vec<f32>, usize) {
         let Shaper::Points {
-            options,
             resampler,
             pose,
             points,
-            root_point,
-            metres_per_unit,
             selected,
+            ..
         } = self
         else {
             unreachable!("a positions block is shaped by a points shaper")
         };
         let w = *points * 3;
-        let pose = pose.get_or_insert_with(|| {
-            let up = infer_up(decoded, *points).unwrap_or(Up::Y);
-            PointPose::new(options, *points, *root_point, up, *metres_per_unit)
-                .expect("the options were checked when the answer opened")
-        });
         let src: Vec<f64> = decoded.iter().map(|&v| f64::from(v)).collect();
         let (frames, count) = match resampler {
             Some(r) => {

@@ -10,6 +10,7 @@ use super::choose::Decision;
 use super::{Error, Result};
 use crate::codec::Skeleton;
 use crate::codec::{CodecId, ErrorBound};
+use crate::motion::body::{Axes, Body, Roles};
 use crate::motion::Unit;
 use crate::store::{TakeRow, TakeTotals};
 
@@ -51,6 +52,10 @@ pub struct Take {
     /// The stored skeleton of a skeleton take (its id): its hierarchy, and the point names.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub skeleton: Option<String>,
+    /// Which points play which role: read from the skeleton's joints (or the point names)
+    /// whenever a take is parsed, not stored in its row ([`Roles`]).
+    #[serde(skip)]
+    pub roles: Roles,
 }
 
 /// What is kept with a take beside its numbers.
@@ -93,11 +98,13 @@ pub struct TakeMeta {
     /// The take's analog channels, how they were coded and what that cost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analog: Option<AnalogMeta>,
-    /// The axis that points up in the stored coordinates, inferred from the figure when it
-    /// was ingested (what `up=` turns from). Absent for takes stored before it was kept and
-    /// for live ones: then read paths infer it from the frames they decode.
+    /// The body's axes in the stored coordinates (up, forward, floor), from anatomy at
+    /// ingest, or as given ([`crate::motion::body`]). Absent for live takes and for takes
+    /// stored before bodies were kept: the first read derives and stores them
+    /// ([`super::body`]). (Such takes may carry `up`, the figure's extent's guess, which
+    /// is wrong for long walks: it is not read.)
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub up: Option<crate::motion::transform::Up>,
+    pub axes: Option<Axes>,
 }
 
 impl TakeMeta {
@@ -174,6 +181,7 @@ impl Take {
             header: Vec::new(),
             live_until: None,
             skeleton: None,
+            roles: Roles::default(),
         }
     }
 
@@ -199,6 +207,10 @@ impl Take {
             |what: &str, v: i64| usize::try_from(v).map_err(|_| corrupt(format!("{what} is {v}")));
         let bytes =
             |what: &str, v: i64| u64::try_from(v).map_err(|_| corrupt(format!("{what} is {v}")));
+        let roles = match rig {
+            Some(r) => Roles::of_skeleton(r.joints()),
+            None => Roles::of_markers(&meta.point_names),
+        };
         let take = Take {
             frames: count("frames", row.totals.frames)?,
             points: count("points", row.points)?,
@@ -229,6 +241,7 @@ impl Take {
             header: row.header,
             live_until: row.live_until,
             skeleton: row.skeleton_id,
+            roles,
         };
         take.check()?;
         Ok(take)
@@ -315,6 +328,14 @@ impl Take {
             max_mm: self.max_mm,
             kg_percent: self.kg_percent,
         }
+    }
+
+    /// The take's body: its stored axes with its roles; `None` until its axes are derived.
+    pub fn body(&self) -> Option<Body> {
+        self.meta.axes.clone().map(|axes| Body {
+            axes,
+            roles: self.roles.clone(),
+        })
     }
 
     /// Whether a live stream is still coding the take.
@@ -509,12 +530,20 @@ impl Take {
                 first_frame: None,
                 events: Vec::new(),
                 analog: None,
-                up: Some(crate::motion::transform::Up::Z),
+                axes: Some(Axes {
+                    up: Some(crate::motion::body::Axis::Z),
+                    forward: None,
+                    floor_m: Some(0.0),
+                    up_from: Some(crate::motion::body::Source::Format),
+                    forward_from: None,
+                    reason: "a lab C3D is Z-up by convention".into(),
+                }),
             },
             created_at: 1,
             header: vec![1, 2, 3],
             live_until: None,
             skeleton: None,
+            roles: Roles::of_markers(&["a".into(), "b".into()]),
         }
     }
 }

@@ -900,6 +900,31 @@ impl Store {
         })
     }
 
+    /// Replace a closed take's meta, if its coding is still the one it was read with
+    /// (`codec`, `stored_bytes`): a re-encode meanwhile wrote a meta of its own, which this
+    /// must not undo. False when the take is gone, live or re-encoded.
+    pub async fn set_meta(
+        &self,
+        id: &str,
+        meta: &str,
+        codec: &str,
+        stored_bytes: i64,
+    ) -> Result<bool> {
+        dispatch!(self, pool => {
+            let done = sqlx::query(
+                "UPDATE takes SET meta = $1 WHERE id = $2 AND codec = $3 AND stored_bytes = $4 \
+                 AND live_until IS NULL",
+            )
+            .bind(meta)
+            .bind(id)
+            .bind(codec)
+            .bind(stored_bytes)
+            .execute(pool)
+            .await?;
+            Ok(done.rows_affected() == 1)
+        })
+    }
+
     /// Change a take's name, library and/or tags (tags replace the old set); false if no
     /// such take.
     pub async fn update(

@@ -146,9 +146,22 @@ async fn resampling_root_motion_axes_and_units() {
     let (named, extract) = samples(&body);
     assert_eq!(named, ["Hips", "LeftWrist", "root_motion"]);
     let hand = names.iter().position(|n| n == "LeftWrist").unwrap();
+    // The path runs on the body's floor, under the lowest foot point.
+    let (_, _, record) = srv.get(&format!("/v1/takes/{id}")).await;
+    let record: Value = serde_json::from_slice(&record).unwrap();
+    let floor = record["body"]["floor_m"].as_f64().unwrap() / mpu;
+    let lowest = full
+        .iter()
+        .flatten()
+        .map(|p| p.unwrap()[1])
+        .fold(f64::MAX, f64::min);
+    assert!(
+        floor >= lowest && floor < lowest + 3.0,
+        "{floor} vs {lowest}"
+    );
     for (f, e) in extract.iter().enumerate() {
         let (hips, path) = (e[0].unwrap(), e[2].unwrap());
-        assert_eq!(path[1], 0.0);
+        assert!((path[1] - floor).abs() < 1e-4, "{path:?}");
         let original = full[f][0].unwrap();
         assert!(dist([hips[0] + path[0], hips[1], hips[2] + path[2]], original) < 1e-3);
         let h = full[f][hand].unwrap();
@@ -186,14 +199,14 @@ async fn resampling_root_motion_axes_and_units() {
         assert!(r[0].abs() < 1e-4 && r[2].abs() < 1e-4, "{r:?}");
     }
 
-    // Refused: a rate that is no rate, root motion of a marker take, glTF in millimetres.
+    // Refused: a rate that is no rate, an axis that is none, glTF in millimetres.
     for q in [
         "fps=0",
         "fps=-1",
         "fps=0.001",
         "fps=1e-310",
         "root=sideways",
-        "up=x",
+        "up=w",
         "unit=furlong",
         "format=c3d&up=z",
     ] {
@@ -204,11 +217,27 @@ async fn resampling_root_motion_axes_and_units() {
         .get(&format!("/v1/takes/{id}/frames?format=glb&unit=mm"))
         .await;
     assert_eq!(status, 400);
+    // A marker take's root motion follows its pelvis markers' centroid.
     let (markers, _) = ingest(&srv, &root, "trc/MOTEK__T.trc", "name=markers").await;
+    let pelvis = "LFWT,RFWT,LBWT,RBWT";
     let (status, _, body) = srv
-        .get(&format!("/v1/takes/{markers}/frames?root=in-place"))
+        .get(&format!(
+            "/v1/takes/{markers}/frames?root=in-place&points={pelvis}"
+        ))
         .await;
-    assert_eq!(status, 400, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(
+        status,
+        200,
+        "{}",
+        String::from_utf8_lossy(&body[..body.len().min(300)])
+    );
+    let (_, inplace) = samples(&body);
+    for f in &inplace {
+        let c: Vec<[f64; 3]> = f.iter().flatten().copied().collect();
+        let mean = |a: usize| c.iter().map(|p| p[a]).sum::<f64>() / c.len() as f64;
+        // MOTEK's TRC is Y-up: x and z are the ground.
+        assert!(mean(0).abs() < 1e-3 && mean(2).abs() < 1e-3, "{c:?}");
+    }
     srv.stop().await;
     t.finish().await;
 }

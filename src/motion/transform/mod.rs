@@ -15,90 +15,57 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-/// The axis that points up: BVH and glTF use +Y, most marker systems (and C3D) +Z. The
-/// other two are horizontal; the frame stays right-handed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Up {
-    Y,
-    Z,
+pub use crate::motion::body::Axis;
+use crate::motion::Error;
+
+/// What transforms need of a take's body ([`crate::motion::body`]): its up axis, its moving
+/// root and its floor. Read from the take's stored body, never guessed from the frames.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Stance {
+    /// The take's up axis; `None` when its body could not tell (then every transform that
+    /// turns or moves the take over the ground is refused, naming `up=`).
+    pub up: Option<Axis>,
+    /// The points (a skeleton's joints) whose centroid is the pelvis: root motion follows
+    /// it, whatever joint carries the translation channels. Empty: no pelvis was found.
+    pub pelvis: Vec<usize>,
+    /// The floor's height along `up`, in the take's units: where an extracted root motion
+    /// runs.
+    pub floor: f64,
 }
 
-impl Up {
-    /// The axis index (1 = y, 2 = z).
-    pub fn axis(self) -> usize {
-        match self {
-            Up::Y => 1,
-            Up::Z => 2,
+impl Stance {
+    /// The stance of a take whose body is `body`, whose points are `names`, in units of
+    /// `metres_per_unit`.
+    pub fn of(body: &crate::motion::body::Body, names: &[String], metres_per_unit: f64) -> Stance {
+        Stance {
+            up: body.axes.up,
+            pelvis: body.roles.points(crate::motion::body::Role::Pelvis, names),
+            floor: body.axes.floor_m.map_or(0.0, |m| m / metres_per_unit),
         }
     }
 
-    pub fn name(self) -> &'static str {
-        match self {
-            Up::Y => "y",
-            Up::Z => "z",
-        }
+    /// The up axis, or why a transform `what` cannot be made without it (409).
+    pub fn up_for(&self, what: &str) -> Result<Axis, Error> {
+        self.up.ok_or_else(|| {
+            Error::Unsupported(format!(
+                "{what} needs the take's up axis, which its body does not tell (see the \
+                 take's body.reason): give it with up= at ingest or by PATCH /v1/takes/{{id}} \
+                 {{\"body\": {{\"up\": \"y\"}}}}"
+            ))
+        })
     }
 
-    /// The up axis of a figure whose points span `y` along Y and `z` along Z: the taller,
-    /// Y unless Z is clearly taller (what the viewer assumes too).
-    pub fn of_extents(y: f64, z: f64) -> Up {
-        if z > y * 1.2 {
-            Up::Z
-        } else {
-            Up::Y
+    /// The pelvis, or why root motion cannot be moved without it (409).
+    pub fn pelvis_for(&self, root: Root) -> Result<&[usize], Error> {
+        if self.pelvis.is_empty() {
+            return Err(Error::Unsupported(format!(
+                "root={root} follows the pelvis, and no point of this take is known to be \
+                 one (see the take's body.unplaced): name its pelvis by PATCH \
+                 /v1/takes/{{id}} {{\"body\": {{\"roles\": {{\"pelvis\": [\"…\"]}}}}}}"
+            )));
         }
+        Ok(&self.pelvis)
     }
-}
-
-impl fmt::Display for Up {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for Up {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Up, String> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "y" | "+y" => Ok(Up::Y),
-            "z" | "+z" => Ok(Up::Z),
-            other => Err(format!("up is y or z, not {other:?}")),
-        }
-    }
-}
-
-/// The up axis of frames of `points` points (`frames × points × 3`, NaN where missing):
-/// of Y and Z, the axis along which the figure stands taller in the frames where it is
-/// tallest (up to 32 frames looked at); `None` without two points present in a frame.
-pub fn infer_up(positions: &[f32], points: usize) -> Option<Up> {
-    let w = points * 3;
-    if w == 0 || positions.len() < w {
-        return None;
-    }
-    let frames = positions.len() / w;
-    let step = frames.div_ceil(32).max(1);
-    let (mut y, mut z) = (0.0f64, 0.0f64);
-    let mut seen = false;
-    for f in (0..frames).step_by(step) {
-        let present: Vec<&[f32]> = positions[f * w..(f + 1) * w]
-            .chunks_exact(3)
-            .filter(|p| p.iter().all(|v| v.is_finite()))
-            .collect();
-        if present.len() < 2 {
-            continue;
-        }
-        seen = true;
-        let extent = |axis: usize| {
-            let (lo, hi) = present.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| {
-                (lo.min(p[axis]), hi.max(p[axis]))
-            });
-            f64::from(hi - lo)
-        };
-        y = y.max(extent(1));
-        z = z.max(extent(2));
-    }
-    seen.then(|| Up::of_extents(y, z))
 }
 
 /// What happens to the root's motion over the ground.
@@ -148,7 +115,7 @@ pub struct Options {
     pub fps: Option<f64>,
     pub root: Root,
     /// Output up axis; `None` keeps the take's.
-    pub up: Option<Up>,
+    pub up: Option<Axis>,
     /// Output metres per unit; `None` keeps the take's.
     pub metres_per_unit: Option<f64>,
 }
@@ -179,25 +146,23 @@ mod tests {
 
     #[test]
     fn names_parse() {
-        assert_eq!("Z".parse::<Up>().unwrap(), Up::Z);
-        assert!("x".parse::<Up>().is_err());
-        assert_eq!("in-place".parse::<Root>().unwrap(), Root::InPlace);
         assert!("drop".parse::<Root>().is_err());
-        assert_eq!(Up::of_extents(1.7, 0.4), Up::Y);
-        assert_eq!(Up::of_extents(0.4, 1.7), Up::Z);
+        assert_eq!("in-place".parse::<Root>().unwrap(), Root::InPlace);
     }
 
+    /// What a take's body does not tell is refused with the parameter that tells it.
     #[test]
-    fn the_taller_axis_is_up() {
-        use crate::motion::synthetic::dancer;
-        let m = dancer(20, 30.0, 1);
-        assert_eq!(infer_up(m.positions(), m.point_count()), Some(Up::Y));
-        let turned: Vec<f32> = m
-            .positions()
-            .chunks_exact(3)
-            .flat_map(|p| [p[0], -p[2], p[1]])
-            .collect();
-        assert_eq!(infer_up(&turned, m.point_count()), Some(Up::Z));
-        assert_eq!(infer_up(&[f32::NAN; 6], 2), None);
+    fn an_unknown_body_names_what_to_give() {
+        let s = Stance::default();
+        let e = s.up_for("glTF").unwrap_err();
+        assert!(
+            matches!(&e, Error::Unsupported(m) if m.contains("up=")),
+            "{e}"
+        );
+        let e = s.pelvis_for(Root::InPlace).unwrap_err();
+        assert!(
+            matches!(&e, Error::Unsupported(m) if m.contains("pelvis")),
+            "{e}"
+        );
     }
 }

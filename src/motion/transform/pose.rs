@@ -1,31 +1,35 @@
 //! Root motion, up axis and unit: frame by frame, on positions ([`PointPose`]) or on a
 //! skeleton's channels ([`SkeletonPose`]).
 //!
-//! Another up axis is a quarter turn about X (right-handed, X kept): Z-up to Y-up takes
-//! `(x, y, z)` to `(x, z, −y)`. On a skeleton it turns the root (its translation and its
-//! rotation); every other joint lies in its parent's frame and follows.
+//! Root motion follows the pelvis ([`Stance::pelvis`]), whatever joint carries the
+//! translation channels: in place, its horizontal position is zero in every frame (its
+//! height kept); extracted, that path runs on the floor as one more point or joint.
+//!
+//! Another up axis is the shortest turn from the take's ([`Axis::turn_to`]): Z-up to Y-up
+//! takes `(x, y, z)` to `(x, z, −y)`. On a skeleton it turns the root (its translation and
+//! its rotation); every other joint lies in its parent's frame and follows.
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
-use super::{Options, Root, Up, ROOT_MOTION};
+use super::{Axis, Options, Root, Stance, ROOT_MOTION};
 use crate::motion::rotation::{euler_order, from_euler, to_euler};
-use crate::motion::skeleton::{translation, Channel, Joint};
+use crate::motion::skeleton::{Channel, Fk, Joint};
+use crate::motion::Error;
 
-/// The turn from `from`-up coordinates to `to`-up ones; `None` when they are the same.
-pub fn axes(from: Up, to: Up) -> Option<Matrix3<f64>> {
-    match (from, to) {
-        (Up::Z, Up::Y) => Some(Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0)),
-        (Up::Y, Up::Z) => Some(Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0)),
-        _ => None,
+/// The up axis a transform of `options` works in: the take's, which must be known when
+/// root motion is moved or the take is turned (else the 409 that says how to give it).
+fn working_up(options: &Options, stance: &Stance) -> Result<Axis, Error> {
+    match (options.root, options.up) {
+        (Root::Keep, None) => Ok(stance.up.unwrap_or(Axis::Y)),
+        (Root::Keep, Some(to)) => stance.up_for(&format!("turning it {to} up (glTF, up=)")),
+        (root, _) => stance.up_for(&format!("root={root}")),
     }
 }
 
-/// The horizontal axes when `up` is up.
-fn horizontal(up: Up) -> [usize; 2] {
-    match up {
-        Up::Y => [0, 2],
-        Up::Z => [0, 1],
-    }
+/// `v` with its component along `up` set to `height` (a coordinate, signed as `up` is).
+fn on_level(mut v: [f64; 3], up: Axis, height: f64) -> [f64; 3] {
+    v[up.index()] = height * up.sign();
+    v
 }
 
 /// Root motion, axes and unit on positions (`points × 3` a frame, NaN where missing).
@@ -33,43 +37,48 @@ fn horizontal(up: Up) -> [usize; 2] {
 pub struct PointPose {
     points: usize,
     root: Root,
-    /// The point root motion follows (a skeleton take's root joint).
-    root_point: usize,
-    up: Up,
+    /// The points whose centroid root motion follows.
+    pelvis: Vec<usize>,
+    up: Axis,
+    floor: f64,
     turn: Option<Matrix3<f64>>,
     scale: f64,
+    /// The pelvis's last horizontal place, held through frames where all its points are
+    /// missing.
+    held: Option<[f64; 3]>,
 }
 
 impl PointPose {
-    /// The transform of `options` for `points` points of a take `up`-up in units of
-    /// `metres_per_unit`, whose root is point `root_point` (`None`: a marker take, which has
-    /// no root, and root motion is refused).
+    /// The transform of `options` for `points` points of a take whose body is `stance`, in
+    /// units of `metres_per_unit`. Unsupported (409): the body does not tell what the
+    /// options need.
     pub fn new(
         options: &Options,
         points: usize,
-        root_point: Option<usize>,
-        up: Up,
+        stance: &Stance,
         metres_per_unit: f64,
-    ) -> Result<PointPose, String> {
-        let root_point = match (options.root, root_point) {
-            (Root::Keep, _) => 0,
-            (_, Some(p)) if p < points => p,
-            _ => {
-                return Err(format!(
-                    "root={} needs a skeleton take: a marker take has no root joint",
-                    options.root
-                ))
-            }
+    ) -> Result<PointPose, Error> {
+        let up = working_up(options, stance)?;
+        let pelvis = match options.root {
+            Root::Keep => Vec::new(),
+            root => stance.pelvis_for(root)?.to_vec(),
         };
+        if let Some(&p) = pelvis.iter().find(|&&p| p >= points) {
+            return Err(Error::Invalid(format!(
+                "the pelvis is point {p} of a take of {points}"
+            )));
+        }
         Ok(PointPose {
             points,
             root: options.root,
-            root_point,
+            pelvis,
             up,
-            turn: options.up.and_then(|to| axes(up, to)),
+            floor: stance.floor,
+            turn: options.up.and_then(|to| up.turn_to(to)),
             scale: options
                 .metres_per_unit
                 .map_or(1.0, |out| metres_per_unit / out),
+            held: None,
         })
     }
 
@@ -83,30 +92,42 @@ impl PointPose {
         self.root == Root::Keep && self.turn.is_none() && self.scale == 1.0
     }
 
+    /// The pelvis's place across `up` in frame `src` (up component zero): the centroid of
+    /// its points present, or the last one known.
+    fn pelvis_at(&mut self, src: &[f64]) -> Option<[f64; 3]> {
+        let mut sum = [0.0; 3];
+        let mut k = 0;
+        for &p in &self.pelvis {
+            let v = &src[p * 3..p * 3 + 3];
+            if v.iter().all(|x| x.is_finite()) {
+                for a in 0..3 {
+                    sum[a] += v[a];
+                }
+                k += 1;
+            }
+        }
+        if k > 0 {
+            self.held = Some(on_level(sum.map(|s| s / k as f64), self.up, 0.0));
+        }
+        self.held
+    }
+
     /// One frame, appended to `out` (`points_out() × 3` values).
-    pub fn frame(&self, src: &[f64], out: &mut Vec<f64>) {
+    pub fn frame(&mut self, src: &[f64], out: &mut Vec<f64>) {
         let at = out.len();
         out.extend_from_slice(&src[..self.points * 3]);
         if self.root != Root::Keep {
-            let r = self.root_point * 3;
-            let root = [src[r], src[r + 1], src[r + 2]];
-            let mut moved = [0.0; 3];
-            if root.iter().all(|v| v.is_finite()) {
-                for a in horizontal(self.up) {
-                    moved[a] = root[a];
-                }
-            } else {
-                moved = [f64::NAN; 3];
-            }
-            if moved[0].is_finite() {
+            let path = self.pelvis_at(src);
+            if let Some(h) = path {
                 for p in out[at..].chunks_exact_mut(3) {
-                    for a in horizontal(self.up) {
-                        p[a] -= moved[a];
+                    for a in self.up.across() {
+                        p[a] -= h[a];
                     }
                 }
             }
             if self.root == Root::Extract {
-                out.extend_from_slice(&moved);
+                let ground = path.map_or([f64::NAN; 3], |h| on_level(h, self.up, self.floor));
+                out.extend_from_slice(&ground);
             }
         }
         for p in out[at..].chunks_exact_mut(3) {
@@ -122,12 +143,18 @@ impl PointPose {
 
 /// Root motion, axes and unit on a skeleton's channel values: its joints as they are
 /// written ([`SkeletonPose::joints`]) and each frame's values for them.
-#[derive(Debug, Clone)]
 pub struct SkeletonPose {
     joints: Vec<Joint>,
     source: Vec<Joint>,
     root: Root,
-    up: Up,
+    up: Axis,
+    floor: f64,
+    /// The pelvis joint, and FK to find it each frame (root motion only).
+    pelvis: usize,
+    fk: Fk,
+    placed: Vec<f64>,
+    /// The root's position channel of each axis (root motion only).
+    root_position: [Option<usize>; 3],
     turn: Option<Turn>,
     scale: f64,
     /// Channels of the written skeleton that are positions (scaled).
@@ -148,29 +175,66 @@ struct Turn {
     last: Option<[f64; 3]>,
 }
 
+/// `joint`'s channels, spelled out for an error message.
+fn channel_list(joint: &Joint) -> String {
+    joint
+        .channels
+        .iter()
+        .map(|c| c.name())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 impl SkeletonPose {
-    /// The transform of `options` for `joints` of a take `up`-up in `metres_per_unit`.
-    /// Other axes need a root with three Euler channels and three position channels (what
-    /// BVH roots have); another root is refused, saying why.
+    /// The transform of `options` for `joints` of a take whose body is `stance` (its pelvis
+    /// a joint index), in `metres_per_unit`. Other axes need a root with three Euler
+    /// channels and three position channels (what BVH roots have), root motion a root with
+    /// position channels across up (and along it, to extract); another root is refused,
+    /// saying why, as is a body that does not tell what the options need.
     pub fn new(
         options: &Options,
         joints: &[Joint],
-        up: Up,
+        stance: &Stance,
         metres_per_unit: f64,
-    ) -> Result<SkeletonPose, String> {
+    ) -> Result<SkeletonPose, Error> {
         let root = joints
             .first()
-            .ok_or_else(|| "the skeleton has no joints".to_string())?;
-        let turn = match options.up.and_then(|to| axes(up, to)) {
+            .ok_or_else(|| Error::Invalid("the skeleton has no joints".into()))?;
+        let up = working_up(options, stance)?;
+        let pos = |axis: usize| root.channels.iter().position(|c| c.axis() == (axis, false));
+        let root_position = [pos(0), pos(1), pos(2)];
+        let pelvis = match options.root {
+            Root::Keep => 0,
+            r => {
+                let p = stance.pelvis_for(r)?[0];
+                if p >= joints.len() {
+                    return Err(Error::Invalid(format!(
+                        "the pelvis is joint {p} of a skeleton of {}",
+                        joints.len()
+                    )));
+                }
+                let mut needed = up.across().to_vec();
+                if r == Root::Extract {
+                    needed.push(up.index());
+                }
+                if needed.iter().any(|&a| root_position[a].is_none()) {
+                    return Err(Error::Unsupported(format!(
+                        "root={r} moves the root joint's position channels, and {:?} has {}",
+                        root.name,
+                        channel_list(root)
+                    )));
+                }
+                p
+            }
+        };
+        let turn = match options.up.and_then(|to| up.turn_to(to)) {
             None => None,
             Some(m) => {
                 let rot: Vec<usize> = (0..root.channels.len())
                     .filter(|&c| root.channels[c].rotation_axis().is_some())
                     .collect();
-                let pos =
-                    |axis: usize| root.channels.iter().position(|c| c.axis() == (axis, false));
-                match (euler_order(&root.channels), pos(0), pos(1), pos(2)) {
-                    (Some(order), Some(x), Some(y), Some(z)) if rot.len() == 3 => Some(Turn {
+                match (euler_order(&root.channels), root_position) {
+                    (Some(order), [Some(x), Some(y), Some(z)]) if rot.len() == 3 => Some(Turn {
                         m,
                         q: UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
                             m,
@@ -181,17 +245,13 @@ impl SkeletonPose {
                         last: None,
                     }),
                     _ => {
-                        return Err(format!(
+                        return Err(Error::Unsupported(format!(
                             "up={} needs a root joint with three rotation and three position \
                              channels; {:?} has {}",
-                            options.up.map_or("", Up::name),
+                            options.up.map_or("", Axis::name),
                             root.name,
-                            root.channels
-                                .iter()
-                                .map(|c| c.name())
-                                .collect::<Vec<_>>()
-                                .join(" ")
-                        ))
+                            channel_list(root)
+                        )))
                     }
                 }
             }
@@ -202,13 +262,6 @@ impl SkeletonPose {
         let mut out: Vec<Joint> = joints.to_vec();
         for j in &mut out {
             j.offset = j.offset.map(|v| v * scale);
-        }
-        if options.root != Root::Keep {
-            // The offset's horizontal part is root motion too (a root without position
-            // channels on an axis stands at its offset there).
-            for a in horizontal(up) {
-                out[0].offset[a] = 0.0;
-            }
         }
         if options.root == Root::Extract {
             for j in &mut out {
@@ -234,6 +287,11 @@ impl SkeletonPose {
             source: joints.to_vec(),
             root: options.root,
             up,
+            floor: stance.floor,
+            pelvis,
+            fk: Fk::new(joints),
+            placed: vec![0.0; joints.len() * 3],
+            root_position,
             turn,
             scale,
             positions,
@@ -258,19 +316,22 @@ impl SkeletonPose {
     /// One frame of the source's channel values, appended to `out` as the written
     /// skeleton's (`channels_out()` values).
     pub fn frame(&mut self, src: &[f64], out: &mut Vec<f64>) {
-        let root = &self.source[0];
-        let n = root.channels.len();
-        let mut moved = [0.0; 3];
+        let mut ground = [0.0; 3];
         let mut vals = src.to_vec();
         if self.root != Root::Keep {
-            let t = translation(root, &src[..n]);
-            for a in horizontal(self.up) {
-                moved[a] = t[a];
+            // The root's translation is in world coordinates: moving it by the pelvis's
+            // horizontal place moves the whole body so that the pelvis stands over zero.
+            self.fk.frame(&self.source, src, &mut self.placed);
+            let p = self.pelvis * 3;
+            let mut path = [self.placed[p], self.placed[p + 1], self.placed[p + 2]];
+            path[self.up.index()] = 0.0;
+            if self.root == Root::Extract {
+                ground = on_level(path, self.up, self.floor);
+                path = ground;
             }
-            for (c, ch) in root.channels.iter().enumerate() {
-                let (axis, rot) = ch.axis();
-                if !rot && horizontal(self.up).contains(&axis) {
-                    vals[c] = 0.0;
+            for (a, moved) in path.iter().enumerate() {
+                if let Some(c) = self.root_position[a] {
+                    vals[c] -= moved;
                 }
             }
         }
@@ -287,11 +348,11 @@ impl SkeletonPose {
             for (k, v) in turn.at.iter().zip(e) {
                 vals[*k] = v;
             }
-            moved = (turn.m * Vector3::from(moved)).into();
+            ground = (turn.m * Vector3::from(ground)).into();
         }
         let at = out.len();
         if self.root == Root::Extract {
-            out.extend_from_slice(&moved);
+            out.extend_from_slice(&ground);
         }
         out.extend_from_slice(&vals);
         for (v, &is_pos) in out[at..].iter_mut().zip(&self.positions) {
@@ -322,6 +383,15 @@ mod tests {
             .forward_kinematics()
     }
 
+    /// Y-up, the pelvis the root (joint 0), the floor at zero.
+    fn stance() -> Stance {
+        Stance {
+            up: Some(Axis::Y),
+            pelvis: vec![0],
+            floor: 0.0,
+        }
+    }
+
     fn apply(pose: &mut SkeletonPose, s: &Animation) -> Vec<f64> {
         let mut out = Vec::new();
         for f in 0..s.frame_count() {
@@ -342,7 +412,8 @@ mod tests {
             root,
             ..Options::default()
         };
-        let mut inplace = SkeletonPose::new(&opts(Root::InPlace), &s.joints, Up::Y, 0.01).unwrap();
+        let mut inplace =
+            SkeletonPose::new(&opts(Root::InPlace), &s.joints, &stance(), 0.01).unwrap();
         let vals = apply(&mut inplace, &s);
         let pos = fk(inplace.joints(), &vals);
         for f in 0..s.frame_count() {
@@ -360,7 +431,8 @@ mod tests {
                 }
             }
         }
-        let mut extract = SkeletonPose::new(&opts(Root::Extract), &s.joints, Up::Y, 0.01).unwrap();
+        let mut extract =
+            SkeletonPose::new(&opts(Root::Extract), &s.joints, &stance(), 0.01).unwrap();
         assert_eq!(extract.joints()[0].name, ROOT_MOTION);
         let vals = apply(&mut extract, &s);
         let pos = fk(extract.joints(), &vals);
@@ -372,13 +444,26 @@ mod tests {
             }
         }
         // Points: the same, with the path as one more point.
-        let pp = PointPose::new(&opts(Root::Extract), n, Some(0), Up::Y, 0.01).unwrap();
+        let mut pp = PointPose::new(&opts(Root::Extract), n, &stance(), 0.01).unwrap();
         let mut out = Vec::new();
         pp.frame(&src[..n * 3], &mut out);
         assert_eq!(out.len(), (n + 1) * 3);
         assert_eq!(out[0], 0.0);
         assert_eq!(&out[n * 3..], &[src[0], 0.0, src[2]]);
-        assert!(PointPose::new(&opts(Root::InPlace), n, None, Up::Y, 0.01).is_err());
+        let no_pelvis = Stance {
+            pelvis: Vec::new(),
+            ..stance()
+        };
+        assert!(matches!(
+            PointPose::new(&opts(Root::InPlace), n, &no_pelvis, 0.01),
+            Err(Error::Unsupported(_))
+        ));
+        let no_up = Stance {
+            up: None,
+            ..stance()
+        };
+        assert!(PointPose::new(&opts(Root::InPlace), n, &no_up, 0.01).is_err());
+        assert!(PointPose::new(&opts(Root::Keep), n, &no_up, 0.01).is_ok());
     }
 
     /// Another up axis and unit on the channels gives FK's positions turned and scaled.
@@ -387,14 +472,14 @@ mod tests {
         let s = skeleton();
         let src = s.forward_kinematics();
         let opts = Options {
-            up: Some(Up::Z),
+            up: Some(Axis::Z),
             metres_per_unit: Some(0.001),
             ..Options::default()
         };
-        let mut pose = SkeletonPose::new(&opts, &s.joints, Up::Y, 0.01).unwrap();
+        let mut pose = SkeletonPose::new(&opts, &s.joints, &stance(), 0.01).unwrap();
         let vals = apply(&mut pose, &s);
         let pos = fk(pose.joints(), &vals);
-        let pp = PointPose::new(&opts, src.len() / 3, None, Up::Y, 0.01).unwrap();
+        let mut pp = PointPose::new(&opts, src.len() / 3, &stance(), 0.01).unwrap();
         let mut want = Vec::new();
         pp.frame(&src, &mut want);
         for (i, (a, b)) in want.iter().zip(&pos).enumerate() {
@@ -402,5 +487,94 @@ mod tests {
         }
         // Y-up (x, y, z) is Z-up (x, −z, y), in ten times as many units.
         assert!((want[1] + src[2] * 10.0).abs() < 1e-9 && (want[2] - src[1] * 10.0).abs() < 1e-9);
+    }
+
+    /// A rig whose root joint stays at the origin while its child, the pelvis, walks (as
+    /// Bandai Namco's `joint_Root` and `Hips`): in place, the pelvis stands over zero in
+    /// every frame and every joint keeps its place relative to it; extracted, the path runs
+    /// on the floor and FK gives back the source.
+    #[test]
+    fn root_motion_follows_the_pelvis_not_the_root_joint() {
+        let s = skeleton();
+        let mut joints = vec![Joint {
+            name: "joint_Root".into(),
+            parent: None,
+            offset: [0.0; 3],
+            channels: vec![
+                Channel::Xposition,
+                Channel::Yposition,
+                Channel::Zposition,
+                Channel::Zrotation,
+                Channel::Xrotation,
+                Channel::Yrotation,
+            ],
+            end_site: false,
+        }];
+        joints.extend(s.joints.iter().cloned().map(|mut j| {
+            j.parent = Some(j.parent.map_or(0, |p| p + 1));
+            j
+        }));
+        let cc = s.channel_count();
+        let values: Vec<f64> = (0..s.frame_count())
+            .flat_map(|f| {
+                [0.0; 6]
+                    .into_iter()
+                    .chain(s.values[f * cc..(f + 1) * cc].iter().copied())
+            })
+            .collect();
+        let rig = Animation::new(joints, values).unwrap();
+        let n = rig.joints.len();
+        let src = rig.forward_kinematics();
+        let walked = (src[(s.frame_count() - 1) * n * 3 + 3] - src[3]).abs();
+        assert!(walked > 1.0, "the pelvis walks {walked}");
+        let stance = Stance {
+            up: Some(Axis::Y),
+            pelvis: vec![1],
+            floor: -90.0,
+        };
+        let opts = |root| Options {
+            root,
+            ..Options::default()
+        };
+        let mut inplace =
+            SkeletonPose::new(&opts(Root::InPlace), &rig.joints, &stance, 0.01).unwrap();
+        let vals = apply(&mut inplace, &rig);
+        let pos = fk(inplace.joints(), &vals);
+        for f in 0..rig.frame_count() {
+            let (a, b) = (&src[f * n * 3..][..n * 3], &pos[f * n * 3..][..n * 3]);
+            assert!(
+                b[3].abs() < 1e-9 && b[5].abs() < 1e-9,
+                "frame {f}: {:?}",
+                &b[3..6]
+            );
+            assert!((a[4] - b[4]).abs() < 1e-9, "height kept");
+            for j in 0..n {
+                for k in 0..3 {
+                    let rel = |v: &[f64]| v[j * 3 + k] - v[3 + k];
+                    assert!((rel(a) - rel(b)).abs() < 1e-9);
+                }
+            }
+        }
+        let mut extract =
+            SkeletonPose::new(&opts(Root::Extract), &rig.joints, &stance, 0.01).unwrap();
+        let vals = apply(&mut extract, &rig);
+        let pos = fk(extract.joints(), &vals);
+        for f in 0..rig.frame_count() {
+            let b = &pos[f * (n + 1) * 3..][..(n + 1) * 3];
+            let a = &src[f * n * 3..][..n * 3];
+            assert_eq!(
+                [b[0], b[1], b[2]],
+                [a[3], -90.0, a[5]],
+                "the path on the floor"
+            );
+            for (x, y) in a.iter().zip(&b[3..]) {
+                assert!((x - y).abs() < 1e-9);
+            }
+        }
+        // Positions: the same, by the pelvis point.
+        let mut pp = PointPose::new(&opts(Root::InPlace), n, &stance, 0.01).unwrap();
+        let mut out = Vec::new();
+        pp.frame(&src[(rig.frame_count() - 1) * n * 3..], &mut out);
+        assert!(out[3].abs() < 1e-9 && out[5].abs() < 1e-9);
     }
 }

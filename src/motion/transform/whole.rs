@@ -4,29 +4,31 @@
 use super::channels::Channels;
 use super::pose::{PointPose, SkeletonPose};
 use super::resample::{Positions, Resampler};
-use super::{infer_up, Options, Root, Up, ROOT_MOTION};
+use super::{Options, Root, Stance, ROOT_MOTION};
+use crate::motion::body::Body;
 use crate::motion::skeleton::Animation;
 use crate::motion::units::{Unit, UnitSource};
+use crate::motion::Error;
 use crate::motion::Motion;
 
-/// `m` with `options` applied. A skeleton take is transformed through its channels (its
-/// positions are then its joints' FK); any other through its positions. The take's up
-/// axis is inferred from its figure (Y when there is none to measure).
-pub fn apply(m: &Motion, options: &Options) -> Result<Motion, String> {
-    options.check()?;
+/// `m`, whose body is `body`, with `options` applied. A skeleton take is transformed
+/// through its channels (its positions are then its joints' FK); any other through its
+/// positions. Root motion follows the body's pelvis; axes turn from its up.
+pub fn apply(m: &Motion, body: &Body, options: &Options) -> Result<Motion, Error> {
+    options.check().map_err(Error::Invalid)?;
     if options.is_identity() {
         return Ok(m.clone());
     }
-    let up = infer_up(m.positions(), m.point_count()).unwrap_or(Up::Y);
+    let stance = Stance::of(body, &m.point_names, m.unit.metres_per_unit);
     let fps = options.fps.unwrap_or(m.fps);
     let unit = match options.metres_per_unit {
-        Some(mpu) => Unit::new(mpu, UnitSource::Explicit).map_err(|e| e.to_string())?,
+        Some(mpu) => Unit::new(mpu, UnitSource::Explicit)?,
         None => m.unit.clone(),
     };
     let frames = m.frame_count();
     let resample = options.fps.filter(|&f| f != m.fps);
     if let Some(s) = &m.skeleton {
-        let mut pose = SkeletonPose::new(options, &s.joints, up, m.unit.metres_per_unit)?;
+        let mut pose = SkeletonPose::new(options, &s.joints, &stance, m.unit.metres_per_unit)?;
         let values = match resample {
             Some(to) => {
                 let mut r = Resampler::new(Channels::new(&s.joints), frames, m.fps, to);
@@ -40,17 +42,17 @@ pub fn apply(m: &Motion, options: &Options) -> Result<Motion, String> {
         for f in values.chunks_exact(pose.channels_in().max(1)) {
             pose.frame(f, &mut shaped);
         }
-        let skeleton = Animation::new(pose.joints().to_vec(), shaped).map_err(|e| e.to_string())?;
+        let skeleton = Animation::new(pose.joints().to_vec(), shaped)?;
         let names = skeleton.joints.iter().map(|j| j.name.clone()).collect();
         let positions = skeleton
             .forward_kinematics()
             .into_iter()
             .map(|v| v as f32)
             .collect();
-        return Motion::new(fps, unit, names, positions, Some(skeleton)).map_err(|e| e.to_string());
+        return Motion::new(fps, unit, names, positions, Some(skeleton));
     }
     let points = m.point_count();
-    let pose = PointPose::new(options, points, None, up, m.unit.metres_per_unit)?;
+    let mut pose = PointPose::new(options, points, &stance, m.unit.metres_per_unit)?;
     let src: Vec<f64> = m.positions().iter().map(|&v| f64::from(v)).collect();
     let (frames_in, count) = match resample {
         Some(to) => {
@@ -63,7 +65,7 @@ pub fn apply(m: &Motion, options: &Options) -> Result<Motion, String> {
     };
     if points == 0 {
         // Frames of no points (a C3D of analog channels only) are still frames.
-        return Motion::without_points(fps, unit, count).map_err(|e| e.to_string());
+        return Motion::without_points(fps, unit, count);
     }
     let mut shaped = Vec::with_capacity(frames_in.len());
     for f in frames_in.chunks_exact(points * 3) {
@@ -74,7 +76,7 @@ pub fn apply(m: &Motion, options: &Options) -> Result<Motion, String> {
         names.push(ROOT_MOTION.into());
     }
     let positions = shaped.into_iter().map(|v| v as f32).collect();
-    Motion::new(fps, unit, names, positions, None).map_err(|e| e.to_string())
+    Motion::new(fps, unit, names, positions, None)
 }
 
 #[cfg(test)]
@@ -99,7 +101,8 @@ mod tests {
             metres_per_unit: Some(1.0),
             up: None,
         };
-        let t = apply(&m, &o).unwrap();
+        let body = Body::of(&m, Default::default(), None).unwrap();
+        let t = apply(&m, &body, &o).unwrap();
         assert_eq!(t.frame_count(), 31);
         assert_eq!(t.fps, 60.0);
         assert_eq!(t.unit.metres_per_unit, 1.0);

@@ -187,7 +187,7 @@ impl Streams {
             events: Vec::new(),
             first_frame: None,
             analog: None,
-            up: None,
+            axes: None,
         };
         let mut take = Take::new(
             &plan.label,
