@@ -24,6 +24,7 @@ use crate::motion::units::parse_unit;
 use crate::service::access::Caller;
 use crate::service::analog;
 use crate::service::answer::{self, Answer, Pieces, RangeRequest};
+use crate::service::body;
 use crate::service::budget::Holder;
 use crate::service::choose::{CodecRequest, Keep};
 use crate::service::fetch::{self, TimeRange};
@@ -283,7 +284,7 @@ pub async fn get(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    let take = fetch::take_with_body(&state.store, &id).await?;
+    let take = body::take(&state.store, &id).await?;
     Ok(Json(TakeView::from(&take)).into_response())
 }
 

@@ -28,7 +28,8 @@ use std::sync::{Arc, Mutex};
 use bytes::Bytes;
 
 use super::budget::{Budget, Held, Holder, Reservation};
-use super::fetch::{prepare, TimeRange};
+use super::fetch::TimeRange;
+use super::prepared::prepare;
 use super::prepared::{Prepared, ReadCaches};
 use super::shape::Shaper;
 use super::{blocking, Error, Result};

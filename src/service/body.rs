@@ -22,6 +22,12 @@ use crate::store::Store;
 /// included (its first second tells the way the body faces when it turns about).
 const SAMPLED_CHUNKS: usize = 12;
 
+/// The take stored under `id`, parsed, with its body's axes (derived now, once, for a take
+/// stored before bodies were kept: [`ensure`]).
+pub async fn take(store: &Store, id: &str) -> Result<Take> {
+    ensure(store, super::fetch::take(store, id).await?).await
+}
+
 /// `take` with its axes: as stored, or derived now (and stored, unless it is live).
 pub async fn ensure(store: &Store, mut take: Take) -> Result<Take> {
     if take.meta.axes.is_some() {

@@ -1,9 +1,6 @@
 //! Read side: a take's metadata and error series, and the readers range answers decode
 //! with ([`super::answer`]), kept per take.
 
-use std::sync::Arc;
-
-use super::prepared::{Prepared, ReadCaches};
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::container::ChunkMeta;
@@ -64,12 +61,6 @@ pub async fn take(store: &Store, id: &str) -> Result<Take> {
     parse(store, row).await
 }
 
-/// The take stored under `id`, parsed, with its body's axes (derived now, once, for a take
-/// stored before bodies were kept: [`super::body::ensure`]).
-pub async fn take_with_body(store: &Store, id: &str) -> Result<Take> {
-    super::body::ensure(store, take(store, id).await?).await
-}
-
 /// A stored row parsed, with the skeleton it names (which names its points).
 pub async fn parse(store: &Store, row: TakeRow) -> Result<Take> {
     let rig = match &row.skeleton_id {
@@ -111,30 +102,6 @@ pub async fn errors(store: &Store, id: &str) -> Result<TakeErrors> {
         mean_bound_mm: take.bound.mean_mm(),
         series,
     })
-}
-
-/// The take's reader (cached, or built and cached unless the take is live) and `range`
-/// resolved against it; the range is checked before a reader is built.
-pub(super) async fn prepare(
-    store: &Store,
-    caches: &ReadCaches,
-    id: &str,
-    range: TimeRange,
-) -> Result<(Arc<Prepared>, (usize, usize))> {
-    if let Some(p) = caches.current(store, id).await? {
-        let r = range.resolve(p.frames, p.fps)?;
-        return Ok((p, r));
-    }
-    let row = take_with_body(store, id).await?;
-    let r = range.resolve(row.frames as usize, row.fps)?;
-    let (header, live) = header_of(store, &row).await?;
-    let shared = shared(store, &header).await?;
-    let p = Arc::new(blocking(move || Prepared::new(&row, header, shared)).await??);
-    // A live take's index grows with every commit (here or on another server).
-    if !live {
-        caches.decoders.insert(p.clone());
-    }
-    Ok((p, r))
 }
 
 /// What a header names (a shared basis, a skeleton), loaded by id.

@@ -282,6 +282,30 @@ impl Default for DecoderCache {
     }
 }
 
+/// The take's reader (cached, or built and cached unless the take is live) and `range`
+/// resolved against it; the range is checked before a reader is built.
+pub(super) async fn prepare(
+    store: &Store,
+    caches: &ReadCaches,
+    id: &str,
+    range: super::fetch::TimeRange,
+) -> super::Result<(Arc<Prepared>, (usize, usize))> {
+    if let Some(p) = caches.current(store, id).await? {
+        let r = range.resolve(p.frames, p.fps)?;
+        return Ok((p, r));
+    }
+    let row = super::body::take(store, id).await?;
+    let r = range.resolve(row.frames as usize, row.fps)?;
+    let (header, live) = super::fetch::header_of(store, &row).await?;
+    let shared = super::fetch::shared(store, &header).await?;
+    let p = Arc::new(super::blocking(move || Prepared::new(&row, header, shared)).await??);
+    // A live take's index grows with every commit (here or on another server).
+    if !live {
+        caches.decoders.insert(p.clone());
+    }
+    Ok((p, r))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
