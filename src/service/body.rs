@@ -14,7 +14,9 @@ use super::fetch::{header_of, shared};
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::Reader;
-use crate::motion::body::{derive, Axes, Axis, Given, Prior};
+use crate::motion::body::{derive, Axes, Given, Prior};
+use crate::motion::format::Format;
+use crate::motion::formats::up_prior;
 use crate::motion::Motion;
 use crate::store::Store;
 
@@ -45,20 +47,17 @@ pub async fn ensure(store: &Store, mut take: Take) -> Result<Take> {
     Ok(take)
 }
 
-/// What the take's source format says of up, as ingest would have read it: BVH's
-/// convention, a C3D's `POINT:Y_SCREEN` (from its stored parameters) or Z-up.
+/// What the take's source format says of up, as ingest would have read it (a C3D's from
+/// its stored parameters).
 async fn prior(store: &Store, take: &Take) -> Result<Option<Prior>> {
-    Ok(match take.source_format.as_str() {
-        "bvh" => Some(Prior {
-            up: Axis::Y,
-            says: "BVH is Y-up by convention".into(),
-        }),
-        "c3d" => {
-            let params = analog::parameters(store, &take.id).await?;
-            Some(crate::motion::formats::c3d::up_prior(params.as_ref()))
-        }
+    let Ok(format) = take.source_format.parse::<Format>() else {
+        return Ok(None);
+    };
+    let params = match format {
+        Format::C3d => analog::parameters(store, &take.id).await?,
         _ => None,
-    })
+    };
+    Ok(up_prior(format, params.as_ref()))
 }
 
 /// The axes of a stored take, from up to [`SAMPLED_CHUNKS`] of its chunks decoded.

@@ -96,7 +96,7 @@ fn without_a_body_the_prior_or_nothing() {
     let a = axes(&anon, &roles);
     assert_eq!((a.up, a.forward, a.up_from), (None, None, None));
     assert!(
-        a.reason.contains("no head and ankles") && a.reason.contains("up="),
+        a.reason.contains("no head over feet") && a.reason.contains("up="),
         "{}",
         a.reason
     );
@@ -170,5 +170,141 @@ fn roles_from_the_shape_of_an_unnamed_rig() {
     assert_eq!(
         m.roles[&Role::left(Part::Knee)],
         shaped.roles[&Role::right(Part::Knee)]
+    );
+}
+
+/// Plug-in Gait markers (millimetres, Y-up, facing +Z, left +X) on a figure stepping in
+/// place for `frames` frames, one foot lifted 10 cm at a time; leaning `lean` degrees
+/// forward, each frame set down on y = 0, and carried `run` mm along +Z over the take.
+fn stepper(frames: usize, lean: f32, run: f32) -> Motion {
+    const MARKERS: [(&str, [f32; 3]); 17] = [
+        ("LFHD", [80.0, 1700.0, 60.0]),
+        ("RFHD", [-80.0, 1700.0, 60.0]),
+        ("C7", [0.0, 1500.0, -60.0]),
+        ("LSHO", [180.0, 1450.0, 0.0]),
+        ("RSHO", [-180.0, 1450.0, 0.0]),
+        ("LASI", [120.0, 1000.0, 60.0]),
+        ("RASI", [-120.0, 1000.0, 60.0]),
+        ("LPSI", [50.0, 1000.0, -100.0]),
+        ("RPSI", [-50.0, 1000.0, -100.0]),
+        ("LKNE", [100.0, 500.0, 0.0]),
+        ("RKNE", [-100.0, 500.0, 0.0]),
+        ("LANK", [100.0, 80.0, 0.0]),
+        ("RANK", [-100.0, 80.0, 0.0]),
+        ("LTOE", [100.0, 30.0, 150.0]),
+        ("RTOE", [-100.0, 30.0, 150.0]),
+        ("LELB", [250.0, 1150.0, 0.0]),
+        ("RELB", [-250.0, 1150.0, 0.0]),
+    ];
+    let (sin, cos) = lean.to_radians().sin_cos();
+    let mut positions = Vec::new();
+    for f in 0..frames {
+        let phase = std::f32::consts::TAU * f as f32 / 100.0;
+        let pose: Vec<[f32; 3]> = MARKERS
+            .iter()
+            .map(|(name, [x, y, z])| {
+                let lift = match name.as_bytes()[0] {
+                    b'L' if name.ends_with("ANK") || name.ends_with("TOE") => phase.sin(),
+                    b'R' if name.ends_with("ANK") || name.ends_with("TOE") => -phase.sin(),
+                    _ => 0.0,
+                };
+                let y = y + 100.0 * lift.max(0.0);
+                [*x, y * cos - z * sin, z * cos + y * sin]
+            })
+            .collect();
+        let lowest = pose.iter().map(|p| p[1]).fold(f32::MAX, f32::min);
+        let along = run * f as f32 / frames as f32;
+        positions.extend(
+            pose.iter()
+                .flat_map(|p| [p[0], p[1] - lowest, p[2] + along]),
+        );
+    }
+    let names = MARKERS.iter().map(|(n, _)| n.to_string()).collect();
+    Motion::new(
+        100.0,
+        crate::motion::units::Unit::millimetres(),
+        names,
+        positions,
+        None,
+    )
+    .unwrap()
+}
+
+/// Markers no role names, standing on the lab's floor at the origin, a person's height
+/// tall: the floor tells up. Lifted off the origin's floor, nothing does.
+#[test]
+fn unnamed_points_stand_up_by_the_lab_floor() {
+    let m = moved(&stepper(300, 0.0, 0.0), |[x, y, z]| [x, -z, y]);
+    let names: Vec<String> = (0..m.point_count()).map(|i| format!("m{i}")).collect();
+    let anon = Motion::new(
+        m.fps,
+        m.unit.clone(),
+        names.clone(),
+        m.positions().to_vec(),
+        None,
+    )
+    .unwrap();
+    let roles = Roles::of_markers(&names);
+    let a = axes(&anon, &roles);
+    assert_eq!(
+        (a.up, a.up_from),
+        (Some(Axis::Z), Some(Source::Floor)),
+        "{}",
+        a.reason
+    );
+    let lifted = moved(&anon, |[x, y, z]| [x, y, z + 800.0]);
+    let a = axes(&lifted, &roles);
+    assert_eq!(a.up, None, "{}", a.reason);
+}
+
+/// A sprint start: the body leans 65° along the run (+Z) and travels 3 m along it, its
+/// feet on the floor (Y-up): head over feet is nearer Z than Y in every frame, but the
+/// feet keep a floor only along Y. Upright, the same figure stands along Y plainly.
+#[test]
+fn a_sprinter_leaning_along_the_run_stands_on_the_floor() {
+    let names = stepper(1, 0.0, 0.0).point_names;
+    let sprint = stepper(300, 65.0, 3000.0);
+    let a = axes(&sprint, &Roles::of_markers(&names));
+    assert_eq!(
+        (a.up, a.forward),
+        (Some(Axis::Y), Some(Axis::Z)),
+        "{}",
+        a.reason
+    );
+    assert!(a.reason.contains("leans along z"), "{}", a.reason);
+    let a = axes(&stepper(300, 5.0, 3000.0), &Roles::of_markers(&names));
+    assert_eq!(a.up, Some(Axis::Y), "{}", a.reason);
+    assert!(!a.reason.contains("leans"), "{}", a.reason);
+}
+
+/// A marker left at exactly the origin in every frame (never seen, written as 0, 0, 0
+/// with a valid residual) is missing, not a head on the floor: up comes from what is seen.
+#[test]
+fn markers_at_the_origin_are_missing() {
+    let m = moved(&stepper(120, 0.0, 0.0), |[x, y, z]| [x, -z, y]);
+    let roles = Roles::of_markers(&m.point_names);
+    let head = roles.points(Role::Head, &m.point_names);
+    let neck = roles.points(Role::Neck, &m.point_names);
+    let n = m.point_count();
+    let mut positions = m.positions().to_vec();
+    for f in 0..m.frame_count() {
+        for &p in head.iter().chain(&neck) {
+            positions[(f * n + p) * 3..(f * n + p) * 3 + 3].fill(0.0);
+        }
+    }
+    let blind = Motion::new(
+        m.fps,
+        m.unit.clone(),
+        m.point_names.clone(),
+        positions,
+        None,
+    )
+    .unwrap();
+    let a = axes(&blind, &roles);
+    assert_eq!(a.up, Some(Axis::Z), "{}", a.reason);
+    assert!(
+        a.reason.contains("shoulders above the ankles"),
+        "{}",
+        a.reason
     );
 }

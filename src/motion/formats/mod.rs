@@ -4,6 +4,7 @@
 //! Readers take bytes, not paths, so the HTTP layer can hand them a request body and tests
 //! can hand them mutations.
 
+use super::body::{Axis, Prior};
 use super::error::{Error, Location, Result};
 pub use super::format::Format;
 use super::model::Motion;
@@ -108,7 +109,7 @@ pub struct Loaded {
     pub format: Format,
     /// What the format says of the up axis (BVH's convention, a C3D's parameters), for
     /// when the body cannot tell ([`super::body`]).
-    pub up: Option<super::body::Prior>,
+    pub up: Option<Prior>,
     pub warnings: Vec<String>,
     pub extras: Extras,
 }
@@ -266,14 +267,7 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         )),
         None => {}
     }
-    let up = match format {
-        Format::Bvh => Some(super::body::Prior {
-            up: super::body::Axis::Y,
-            says: "BVH is Y-up by convention".into(),
-        }),
-        Format::C3d => Some(c3d::up_prior(extras.parameters.as_ref())),
-        _ => None,
-    };
+    let up = up_prior(format, extras.parameters.as_ref());
     Ok(Loaded {
         motion,
         format,
@@ -281,6 +275,22 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         warnings,
         extras,
     })
+}
+
+/// What a file of `format` says of its up axis before its body is looked at (a C3D by its
+/// `parameters`): BVH and TRC are Y-up by convention (BVH's viewers, OpenSim's TRC), a C3D
+/// says it in `POINT:Y_SCREEN` or is Z-up; the other formats say nothing.
+pub fn up_prior(format: Format, parameters: Option<&c3d::params::Parameters>) -> Option<Prior> {
+    let convention = |says: &str| Prior {
+        up: Axis::Y,
+        says: says.into(),
+    };
+    match format {
+        Format::Bvh => Some(convention("BVH is Y-up by convention")),
+        Format::Trc => Some(convention("a TRC is Y-up by OpenSim's convention")),
+        Format::C3d => Some(c3d::up_prior(parameters)),
+        _ => None,
+    }
 }
 
 fn settle_unit(

@@ -495,12 +495,19 @@ fn read_analog(
     Ok(Some(Analog::new(per_frame, gen_scale, channels, samples)?))
 }
 
-/// `base`, or `base_2`, `base_3`… if taken.
-/// What a C3D says of its up axis: `POINT:Y_SCREEN` names the axis a viewer shows
-/// pointing up (`+Z`, `-Y`, …), as Vicon, Qualisys and Motion Analysis write it; without
-/// it, the lab convention (ISB, c3d.org) of Z up.
+/// What a C3D says of its up axis. Its force plates lie in the floor: when
+/// `FORCE_PLATFORM:CORNERS` lie in one plane across an axis, that axis is up (the
+/// positive way: labs put the origin on the floor, the subject above it). Else
+/// `POINT:Y_SCREEN` names the axis a viewer shows pointing up (`+Z`, `-Y`, …), as Vicon,
+/// Qualisys and Motion Analysis write it; else the lab convention (ISB, c3d.org) of Z up.
 pub(crate) fn up_prior(params: Option<&Parameters>) -> crate::motion::body::Prior {
     use crate::motion::body::{Axis, Prior};
+    if let Some(up) = params.and_then(plates_normal) {
+        return Prior {
+            up,
+            says: format!("the file's force plates lie in a plane across {up} (the floor)"),
+        };
+    }
     let stated = params
         .and_then(|p| p.strings("POINT", "Y_SCREEN"))
         .and_then(|v| v.first().map(|s| s.trim().to_string()))
@@ -517,6 +524,30 @@ pub(crate) fn up_prior(params: Option<&Parameters>) -> crate::motion::body::Prio
     }
 }
 
+/// The axis across which every force plate corner lies in one plane: their coordinates
+/// along it spread less than 5% of their widest spread along another.
+fn plates_normal(params: &Parameters) -> Option<crate::motion::body::Axis> {
+    use crate::motion::body::Axis;
+    let corners = params.get("FORCE_PLATFORM", "CORNERS")?.numbers();
+    if corners.len() < 12 || corners.len() % 3 != 0 || corners.iter().any(|c| !c.is_finite()) {
+        return None;
+    }
+    let spread = |k: usize| {
+        let v = corners.iter().skip(k).step_by(3);
+        let (lo, hi) = v.fold((f64::MAX, f64::MIN), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+        hi - lo
+    };
+    let spreads = [spread(0), spread(1), spread(2)];
+    let (flat, &least) = spreads
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))?;
+    let others = spreads.iter().enumerate().filter(|(k, _)| *k != flat);
+    let wide = others.map(|(_, s)| *s).fold(0.0, f64::max);
+    (wide > 0.0 && least <= 0.05 * wide).then(|| [Axis::X, Axis::Y, Axis::Z][flat])
+}
+
+/// `base`, or `base_2`, `base_3`… if taken.
 fn unique(taken: &[String], base: &str) -> String {
     let mut name = base.to_string();
     let mut k = 2;
@@ -598,6 +629,42 @@ pub(crate) fn labels(params: &Parameters, group: &str, n: usize, prefix: &str) -
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Force plates lie in the floor: their corners' plane is up, whatever Y_SCREEN says;
+    /// plates standing on edge across no axis say nothing.
+    #[test]
+    fn force_plates_tell_up() {
+        use crate::motion::body::Axis;
+        use params::{Parameter, Values};
+        let with = |corners: Vec<f32>, screen: Option<&str>| {
+            let mut p = Parameters::default();
+            let n = (corners.len() / 12) as u8;
+            p.set(
+                "FORCE_PLATFORM",
+                Parameter::new("CORNERS", vec![3, 4, n], Values::Float(corners)),
+            );
+            if let Some(s) = screen {
+                let v = s.as_bytes().to_vec();
+                p.set(
+                    "POINT",
+                    Parameter::new("Y_SCREEN", vec![v.len() as u8], Values::Char(v)),
+                );
+            }
+            up_prior(Some(&p))
+        };
+        // Two plates in the y ≈ 0 plane (MotionMonitor's, metres).
+        let flat_y = vec![
+            0.5, 0.003, 0.4, -0.5, 0.001, 0.4, -0.5, -0.02, -0.2, 0.5, -0.029, -0.2, //
+            1.5, 0.0, 0.4, 0.6, 0.0, 0.4, 0.6, -0.01, -0.2, 1.5, 0.0, -0.2,
+        ];
+        let p = with(flat_y, Some("+Z"));
+        assert_eq!(p.up, Axis::Y, "{}", p.says);
+        assert!(p.says.contains("force plates"), "{}", p.says);
+        // A tilted plate: no plane across an axis; Y_SCREEN then.
+        let tilted = vec![0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 0.0];
+        assert_eq!(with(tilted, Some("+Z")).up, Axis::Z);
+        assert_eq!(with(vec![0.0; 12], None).up, Axis::Z);
+    }
 
     #[test]
     fn dec_floats_convert() {
