@@ -6,66 +6,17 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+#[path = "bodies/manifest.rs"]
+mod manifest;
+
+use manifest::manifest;
 use mocapstore::corpus::{self, Entry};
-use mocapstore::motion::body::{Axis, Body, Given, Role};
+use mocapstore::motion::body::{Body, Given, Role};
 use mocapstore::motion::formats::{self, Loaded, ReadOptions};
 use mocapstore::motion::transform::{whole, Options, Root};
 
 /// Takes that are no body: no role can be placed on them, and why.
 const NOT_BODIES: &[(&str, &str)] = &[("bvh/misc/two_joint_toy.bvh", "two joints, Base and End")];
-
-/// One manifest row: the true up axis of a corpus file and the frames where the head is
-/// not above the ankles (handstands, falls, lying down; end inclusive).
-#[allow(dead_code)]
-struct Truth {
-    up: Axis,
-    upside_down: Vec<(usize, usize)>,
-}
-
-fn manifest() -> BTreeMap<String, Truth> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/bodies/up.csv");
-    let text = std::fs::read_to_string(&path).expect("tests/bodies/up.csv");
-    let mut rows = csv_rows(&text).into_iter();
-    let head = rows.next().expect("a header");
-    let col = |name: &str| head.iter().position(|h| h == name).expect(name);
-    let (p, u, d) = (col("path"), col("up"), col("upside_down_frames"));
-    rows.map(|r| {
-        let upside_down = r[d]
-            .split(';')
-            .filter(|s| !s.trim().is_empty())
-            .map(|s| {
-                let (a, b) = s.trim().split_once('-').expect("a-b");
-                (a.parse().unwrap(), b.parse().unwrap())
-            })
-            .collect();
-        let up = r[u].parse().unwrap_or_else(|e| panic!("{}: {e}", r[p]));
-        (r[p].clone(), Truth { up, upside_down })
-    })
-    .collect()
-}
-
-/// Rows of a CSV with quoted fields.
-fn csv_rows(text: &str) -> Vec<Vec<String>> {
-    let mut rows = Vec::new();
-    for line in text.lines().filter(|l| !l.trim().is_empty()) {
-        let (mut row, mut field, mut quoted) = (Vec::new(), String::new(), false);
-        let mut chars = line.chars().peekable();
-        while let Some(c) = chars.next() {
-            match c {
-                '"' if quoted && chars.peek() == Some(&'"') => {
-                    field.push('"');
-                    chars.next();
-                }
-                '"' => quoted = !quoted,
-                ',' if !quoted => row.push(std::mem::take(&mut field)),
-                _ => field.push(c),
-            }
-        }
-        row.push(field);
-        rows.push(row);
-    }
-    rows
-}
 
 fn corpus() -> Option<(PathBuf, Vec<Entry>)> {
     corpus::for_tests()

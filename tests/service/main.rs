@@ -5,9 +5,13 @@
 
 mod common;
 
+#[path = "../bodies/manifest.rs"]
+mod manifest;
+
 mod access;
 mod archive;
 mod bases;
+mod bodies;
 mod c3d;
 mod choice;
 mod cli;
