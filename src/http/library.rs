@@ -15,7 +15,9 @@ use super::takes::{format_of, streamed, transform_of};
 use super::views::{ListingView, TakeView};
 use super::AppState;
 use crate::codec::CodecId;
+use crate::motion::body::{Axis, RoleMap};
 use crate::service::access::Caller;
+use crate::service::body;
 use crate::service::budget::Holder;
 use crate::service::export::{self, ExportRequest};
 use crate::service::library::{self, Page, Stats, TakeQuery};
@@ -173,6 +175,21 @@ pub struct Patch {
     library: Option<String>,
     #[serde(default, deserialize_with = "present")]
     tags: Option<Vec<String>>,
+    #[serde(default, deserialize_with = "present")]
+    body: Option<BodyPatch>,
+}
+
+/// `body` of a PATCH: what the user says of the take's body, which wins over what was
+/// read (`up`, `forward`: signed axes; `roles`: role → point names, `[]` for none).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodyPatch {
+    #[serde(default, deserialize_with = "present")]
+    up: Option<Axis>,
+    #[serde(default, deserialize_with = "present")]
+    forward: Option<Axis>,
+    #[serde(default, deserialize_with = "present")]
+    roles: Option<RoleMap>,
 }
 
 /// A PATCH field is absent (kept as it is) or a value: `null` is refused rather than read
@@ -197,7 +214,7 @@ pub async fn patch(
     if let Some(to) = &p.library {
         caller.grant.library(to)?;
     }
-    let row = library::update(
+    let mut take = library::update(
         &state.store,
         &id,
         p.name.as_deref(),
@@ -205,5 +222,13 @@ pub async fn patch(
         p.tags.as_deref(),
     )
     .await?;
-    Ok(Json(TakeView::from(&row)).into_response())
+    if let Some(b) = p.body {
+        let correction = body::Correction {
+            up: b.up,
+            forward: b.forward,
+            roles: b.roles.unwrap_or_default(),
+        };
+        take = body::correct(&state.store, &id, correction).await?;
+    }
+    Ok(Json(TakeView::from(&take)).into_response())
 }

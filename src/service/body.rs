@@ -14,7 +14,7 @@ use super::fetch::{header_of, shared};
 use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::Reader;
-use crate::motion::body::{derive, Axes, Given, Prior};
+use crate::motion::body::{derive, Axes, Axis, Given, Prior, RoleMap, Source};
 use crate::motion::format::Format;
 use crate::motion::formats::up_prior;
 use crate::motion::Motion;
@@ -35,15 +35,75 @@ pub async fn ensure(store: &Store, mut take: Take) -> Result<Take> {
     if take.meta.axes.is_some() {
         return Ok(take);
     }
-    let axes = derive_stored(store, &take).await?;
+    let axes = derive_stored(store, &take, Given::default()).await?;
     take.meta.axes = Some(axes);
     if !take.is_live() {
         let row = take.to_row()?;
         // Lost to a re-encode meanwhile: the next read derives them again.
-        store
+        if store
             .set_meta(&take.id, &row.meta, &row.codec, row.totals.stored_bytes)
-            .await?;
+            .await?
+        {
+            take.body_rev += 1;
+        }
     }
+    Ok(take)
+}
+
+/// A user's correction of a take's body: what it gives wins over what was read.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Correction {
+    pub up: Option<Axis>,
+    pub forward: Option<Axis>,
+    /// Roles and the points that play them (none: nothing does), over the ones read.
+    pub roles: RoleMap,
+}
+
+/// Correct take `id`'s body: the roles given replace the ones read (and earlier given
+/// ones), the axes are derived again with what is given winning (an up or forward given
+/// before stays unless given anew), and stored. A live take's body is derived at its
+/// finish: it is corrected after.
+pub async fn correct(store: &Store, id: &str, c: Correction) -> Result<Take> {
+    let mut take = super::fetch::take(store, id).await?;
+    if take.is_live() {
+        return Err(Error::Unsatisfiable(format!(
+            "take {id} is live: its body is derived when its stream finishes; correct it then"
+        )));
+    }
+    for (role, names) in &c.roles {
+        if let Some(n) = names.iter().find(|n| !take.meta.point_names.contains(n)) {
+            return Err(Error::InvalidRequest(format!(
+                "body.roles.{role}: the take has no point named {n:?}"
+            )));
+        }
+    }
+    let before = take.meta.axes.clone();
+    let kept = |pick: fn(&Axes) -> (Option<Axis>, Option<Source>)| {
+        before
+            .as_ref()
+            .map(pick)
+            .and_then(|(a, from)| a.filter(|_| from == Some(Source::Given)))
+    };
+    let given = Given {
+        up: c.up.or_else(|| kept(|a| (a.up, a.up_from))),
+        forward: c.forward.or_else(|| kept(|a| (a.forward, a.forward_from))),
+    };
+    given
+        .check()
+        .map_err(|e| Error::InvalidRequest(format!("body: {e}")))?;
+    take.meta.roles_given.extend(c.roles);
+    take.roles = std::mem::take(&mut take.roles).with_given(&take.meta.roles_given);
+    take.meta.axes = Some(derive_stored(store, &take, given).await?);
+    let row = take.to_row()?;
+    if !store
+        .set_meta(&take.id, &row.meta, &row.codec, row.totals.stored_bytes)
+        .await?
+    {
+        return Err(Error::Conflict(format!(
+            "take {id} was re-encoded or deleted while its body was corrected; send it again"
+        )));
+    }
+    take.body_rev += 1;
     Ok(take)
 }
 
@@ -61,7 +121,7 @@ async fn prior(store: &Store, take: &Take) -> Result<Option<Prior>> {
 }
 
 /// The axes of a stored take, from up to [`SAMPLED_CHUNKS`] of its chunks decoded.
-async fn derive_stored(store: &Store, take: &Take) -> Result<Axes> {
+async fn derive_stored(store: &Store, take: &Take, given: Given) -> Result<Axes> {
     let prior = prior(store, take).await?;
     let (header, _) = header_of(store, take).await?;
     let shared = shared(store, &header).await?;
@@ -97,7 +157,7 @@ async fn derive_stored(store: &Store, take: &Take) -> Result<Axes> {
             positions,
             None,
         )?;
-        derive(&m, &take.roles, Given::default(), prior.as_ref()).map_err(Error::Internal)
+        derive(&m, &take.roles, given, prior.as_ref()).map_err(Error::InvalidRequest)
     })
     .await?
 }

@@ -190,6 +190,7 @@ pub async fn ingest(
         first_frame: extras.first_frame,
         analog: analog.as_ref().map(|a| a.meta.clone()),
         axes: Some(body.axes.clone()),
+        roles_given: Default::default(),
     };
     let format = loaded.format.name();
     let mut take = Take::new(

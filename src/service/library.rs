@@ -260,5 +260,5 @@ pub async fn update(
     if !store.update(id, name, library, tags.as_deref()).await? {
         return Err(Error::NotFound(format!("take {id}")));
     }
-    super::fetch::take(store, id).await
+    super::body::take(store, id).await
 }

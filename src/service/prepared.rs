@@ -22,12 +22,14 @@ use crate::store::{StampRow, Store};
 
 /// What tells one coding of a take from another: a re-encode keeps its result only if
 /// smaller, so it changes `stored_bytes`; a live take grows its `frames` (and is never
-/// cached meanwhile).
+/// cached meanwhile); a body derived or corrected after storing bumps `body_rev`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Stamp {
     codec: CodecId,
     stored_bytes: u64,
     frames: usize,
+    /// The body's revision: a corrected body changes the stance transforms read.
+    body_rev: u64,
 }
 
 impl Stamp {
@@ -36,6 +38,7 @@ impl Stamp {
             codec: take.codec,
             stored_bytes: take.stored_bytes,
             frames: take.frames,
+            body_rev: take.body_rev,
         }
     }
 
@@ -49,6 +52,7 @@ impl Stamp {
             codec,
             stored_bytes: row.stored_bytes.max(0) as u64,
             frames: row.frames.max(0) as usize,
+            body_rev: row.body_rev.max(0) as u64,
         })
     }
 }
@@ -329,6 +333,7 @@ mod tests {
                 codec: CodecId::Quant,
                 stored_bytes: 1,
                 frames: 20,
+                body_rev: 0,
             },
             generation: 0,
             reader: Reader::new(enc.container.header, None).unwrap(),

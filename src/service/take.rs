@@ -10,7 +10,7 @@ use super::choose::Decision;
 use super::{Error, Result};
 use crate::codec::Skeleton;
 use crate::codec::{CodecId, ErrorBound};
-use crate::motion::body::{Axes, Body, Roles};
+use crate::motion::body::{Axes, Body, RoleMap, Roles};
 use crate::motion::Unit;
 use crate::store::{TakeRow, TakeTotals};
 
@@ -56,6 +56,10 @@ pub struct Take {
     /// whenever a take is parsed, not stored in its row ([`Roles`]).
     #[serde(skip)]
     pub roles: Roles,
+    /// How many times its body changed since it was stored (what tells a cached decoder,
+    /// which holds the body's stance, that it is stale).
+    #[serde(skip)]
+    pub body_rev: u64,
 }
 
 /// What is kept with a take beside its numbers.
@@ -105,6 +109,10 @@ pub struct TakeMeta {
     /// is wrong for long walks: it is not read.)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub axes: Option<Axes>,
+    /// Roles a user set by PATCH (an empty list: played by nothing), applied over the ones
+    /// read from the names or shape whenever the take is parsed.
+    #[serde(default, skip_serializing_if = "RoleMap::is_empty")]
+    pub roles_given: RoleMap,
 }
 
 impl TakeMeta {
@@ -182,6 +190,7 @@ impl Take {
             live_until: None,
             skeleton: None,
             roles: Roles::default(),
+            body_rev: 0,
         }
     }
 
@@ -210,7 +219,8 @@ impl Take {
         let roles = match rig {
             Some(r) => Roles::of_skeleton(r.joints()),
             None => Roles::of_markers(&meta.point_names),
-        };
+        }
+        .with_given(&meta.roles_given);
         let take = Take {
             frames: count("frames", row.totals.frames)?,
             points: count("points", row.points)?,
@@ -238,6 +248,7 @@ impl Take {
             kg_percent: row.totals.kg_percent,
             meta,
             created_at: row.created_at,
+            body_rev: bytes("body_rev", row.body_rev)?,
             header: row.header,
             live_until: row.live_until,
             skeleton: row.skeleton_id,
@@ -298,6 +309,7 @@ impl Take {
             header: self.header.clone(),
             meta,
             created_at: self.created_at,
+            body_rev: self.body_rev as i64,
             live_until: self.live_until,
             skeleton_id: self.skeleton.clone(),
         })
@@ -538,12 +550,14 @@ impl Take {
                     forward_from: None,
                     reason: "a lab C3D is Z-up by convention".into(),
                 }),
+                roles_given: RoleMap::new(),
             },
             created_at: 1,
             header: vec![1, 2, 3],
             live_until: None,
             skeleton: None,
             roles: Roles::of_markers(&["a".into(), "b".into()]),
+            body_rev: 0,
         }
     }
 }

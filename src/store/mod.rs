@@ -600,7 +600,7 @@ impl Store {
     pub async fn coding_stamp(&self, id: &str) -> Result<Option<StampRow>> {
         dispatch!(self, pool => {
             let row = sqlx::query(
-                "SELECT codec, stored_bytes, frames FROM takes WHERE id = $1",
+                "SELECT codec, stored_bytes, frames, body_rev FROM takes WHERE id = $1",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -610,6 +610,7 @@ impl Store {
                     codec: r.try_get("codec")?,
                     stored_bytes: r.try_get("stored_bytes")?,
                     frames: r.try_get("frames")?,
+                    body_rev: r.try_get("body_rev")?,
                 })
             })
             .transpose()
@@ -900,9 +901,10 @@ impl Store {
         })
     }
 
-    /// Replace a closed take's meta, if its coding is still the one it was read with
-    /// (`codec`, `stored_bytes`): a re-encode meanwhile wrote a meta of its own, which this
-    /// must not undo. False when the take is gone, live or re-encoded.
+    /// Replace a closed take's meta when its body changed, if its coding is still the one it
+    /// was read with (`codec`, `stored_bytes`): a re-encode meanwhile wrote a meta of its
+    /// own, which this must not undo. Counts the change in `body_rev`. False when the take is
+    /// gone, live or re-encoded.
     pub async fn set_meta(
         &self,
         id: &str,
@@ -912,7 +914,8 @@ impl Store {
     ) -> Result<bool> {
         dispatch!(self, pool => {
             let done = sqlx::query(
-                "UPDATE takes SET meta = $1 WHERE id = $2 AND codec = $3 AND stored_bytes = $4 \
+                "UPDATE takes SET meta = $1, body_rev = body_rev + 1 WHERE id = $2 AND codec = $3 \
+                 AND stored_bytes = $4 \
                  AND live_until IS NULL",
             )
             .bind(meta)

@@ -20,6 +20,7 @@ pub struct StampRow {
     pub codec: String,
     pub stored_bytes: i64,
     pub frames: i64,
+    pub body_rev: i64,
 }
 
 /// Where a chunk sits and how to check it, without its payload.
@@ -62,10 +63,12 @@ pub struct TakeRow {
     pub live_until: Option<i64>,
     /// The stored skeleton of a skeleton take (its id).
     pub skeleton_id: Option<String>,
+    /// How many times its body (in `meta`) changed after it was stored.
+    pub body_rev: i64,
 }
 
 /// Numeric columns of a take's row (8 bytes each on disk).
-const NUMERIC_COLUMNS: i64 = 20;
+const NUMERIC_COLUMNS: i64 = 21;
 /// A chunk row beside its payload: the take's id (36 characters) and four integers.
 const CHUNK_ROW: i64 = 36 + 4 * 8;
 
@@ -152,7 +155,7 @@ impl std::ops::Deref for NewTake {
 
 pub const TAKE_COLUMNS: &str = "id, name, library, fps, frames, points, duration_s, \
     metres_per_unit, layout, source_format, codec, max_bound_mm, mean_bound_mm, raw_bytes, \
-    stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at, live_until, skeleton_id";
+    stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, header, meta, created_at, live_until, skeleton_id, body_rev";
 
 /// The running totals' columns as `$1..$9`, in the order [`bind_totals`] binds them: every
 /// statement that writes them starts with them.
@@ -259,6 +262,7 @@ where
         created_at: r.try_get("created_at")?,
         live_until: r.try_get("live_until")?,
         skeleton_id: r.try_get("skeleton_id")?,
+        body_rev: r.try_get("body_rev")?,
     })
 }
 

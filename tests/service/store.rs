@@ -50,6 +50,7 @@ fn take(id: &str, n: usize) -> NewTake {
             created_at: 1_700_000_000_000,
             live_until: None,
             skeleton_id: None,
+            body_rev: 0,
         },
         chunks,
         basis: None,

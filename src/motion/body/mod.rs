@@ -34,6 +34,9 @@ pub struct Roles {
     pub roles: RoleMap,
     /// Roles no point plays, in [`Role::all`]'s order.
     pub unplaced: Vec<Role>,
+    /// Roles a user set (by PATCH), which no convention or shape overrides.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub given: Vec<Role>,
 }
 
 impl Roles {
@@ -46,6 +49,27 @@ impl Roles {
             convention,
             roles,
             unplaced,
+            given: Vec::new(),
+        }
+    }
+
+    /// These roles with `given` ones in their place: a role listed with points is played
+    /// by them, one listed with none is played by nothing.
+    pub fn with_given(self, given: &RoleMap) -> Roles {
+        if given.is_empty() {
+            return self;
+        }
+        let mut roles = self.roles;
+        for (role, names) in given {
+            if names.is_empty() {
+                roles.remove(role);
+            } else {
+                roles.insert(*role, names.clone());
+            }
+        }
+        Roles {
+            given: given.keys().copied().collect(),
+            ..Roles::finish(self.convention, roles)
         }
     }
 

@@ -188,6 +188,7 @@ impl Streams {
             first_frame: None,
             analog: None,
             axes: None,
+            roles_given: Default::default(),
         };
         let mut take = Take::new(
             &plan.label,
