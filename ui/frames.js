@@ -7,7 +7,17 @@ import { frames as fetchFrames, json } from './api.js';
 /** Seconds of frames kept in memory at most, per take. */
 const KEPT_WINDOWS = 120;
 
-/** What the 3-D view needs of a take: points, bones (from its skeleton) and its unit. */
+/** The indices of the points that play `role` in the take's body (none when unplaced). */
+function playing(take, role) {
+  const names = take.body?.roles?.[role] ?? [];
+  return names.map((n) => take.meta.point_names.indexOf(n)).filter((i) => i >= 0);
+}
+
+/**
+ * What the 3-D view needs of a take: points, bones (from its skeleton), its unit, and its
+ * body: the up axis it stands along (`null` when nothing told), the floor's height along it
+ * (metres), and the points of its pelvis, head (or neck) and ankles.
+ */
 export async function shapeOf(take) {
   const bones = [];
   if (take.skeleton) {
@@ -18,7 +28,17 @@ export async function shapeOf(take) {
       });
     }
   }
-  return { points: take.points, bones, metres: take.metres_per_unit };
+  return {
+    points: take.points,
+    bones,
+    metres: take.metres_per_unit,
+    up: take.body?.up ?? null,
+    floor: take.body?.floor_m ?? null,
+    pelvis: playing(take, 'pelvis'),
+    // The top of the body: its head, or its neck where no head marker was worn.
+    head: playing(take, 'head').length ? playing(take, 'head') : playing(take, 'neck'),
+    feet: [...playing(take, 'left_ankle'), ...playing(take, 'right_ankle')],
+  };
 }
 
 export class TakeFrames {

@@ -12,6 +12,15 @@ export const COLOURS = ['#1f5fbf', '#c0392b', '#1e8449', '#8e44ad', '#d35400', '
 
 const finite = (x, y, z) => Number.isFinite(x) && Number.isFinite(y) && Number.isFinite(z);
 
+/** A signed axis as the API writes it (`y`, `-z`) as a unit vector; null for none. */
+function axisVector(axis) {
+  const m = /^([+-]?)([xyz])$/.exec(axis ?? '');
+  if (!m) return null;
+  const v = new THREE.Vector3();
+  v.setComponent('xyz'.indexOf(m[2]), m[1] === '-' ? -1 : 1);
+  return v;
+}
+
 class Figure {
   constructor(player, shape, colour) {
     this.player = player;
@@ -39,13 +48,31 @@ class Figure {
     this.group.add(this.bones);
   }
 
-  /** Turn Z-up takes Y-up (BVH is Y-up, most marker systems Z-up: the taller is up). */
-  orient(xyz) {
-    const box = this.localBox(xyz);
-    if (box.isEmpty()) return;
-    const size = box.getSize(new THREE.Vector3());
-    this.group.rotation.x = size.z > size.y * 1.2 ? -Math.PI / 2 : 0;
+  /**
+   * Turn the take's up (its body's, as the server derived or was told it) onto the view's
+   * +Y. A take whose up nothing told is shown as stored: never a guess from its extent.
+   */
+  orient() {
+    const up = axisVector(this.shape.up);
+    if (up) this.group.quaternion.setFromUnitVectors(up, new THREE.Vector3(0, 1, 0));
     this.group.updateMatrixWorld();
+  }
+
+  /** The world position (metres) of the centroid of points `set` in the frame set, or null. */
+  centroid(set) {
+    const xyz = this.xyz;
+    if (!xyz || !set?.length) return null;
+    const m = this.shape.metres;
+    const sum = new THREE.Vector3();
+    let k = 0;
+    for (const p of set) {
+      const [x, y, z] = [xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]];
+      if (finite(x, y, z)) {
+        sum.add(new THREE.Vector3(x * m, y * m, z * m));
+        k += 1;
+      }
+    }
+    return k ? sum.divideScalar(k).applyMatrix4(this.group.matrixWorld) : null;
   }
 
   localBox(xyz) {
@@ -119,9 +146,10 @@ class Figure {
     this.bones.geometry.attributes.position.needsUpdate = true;
   }
 
-  /** Set one frame and draw. */
+  /** Set one frame and draw (the camera following the pelvis, when asked to). */
   show(xyz) {
     this.set(xyz);
+    if (this.player.following === this) this.player.follow(this.centroid(this.shape.pelvis));
     this.player.draw();
   }
 }
@@ -189,6 +217,8 @@ export class Player {
     this.scene.add(this.root);
     this.grid = new THREE.GridHelper(10, 20, 0x9aa3ad, 0xd5d9de);
     this.scene.add(this.grid);
+    /** The figure whose pelvis the camera keeps in view as it moves, or null. */
+    this.following = null;
     this.resize = new ResizeObserver(() => this.fit());
     this.resize.observe(canvas);
     this.fit();
@@ -220,15 +250,18 @@ export class Player {
    */
   frame(pairs) {
     const world = new THREE.Box3();
+    let floor = null;
     for (const [fig, xyz] of pairs) {
-      fig.orient(xyz);
+      fig.orient();
       const b = fig.localBox(xyz);
       if (!b.isEmpty()) world.union(b.applyMatrix4(fig.group.matrixWorld));
+      // The body's floor, along its up: after the turn, a height along +Y.
+      if (fig.shape.up && fig.shape.floor !== null) floor = Math.min(floor ?? Infinity, fig.shape.floor);
     }
     if (world.isEmpty()) return false;
     const c = world.getCenter(new THREE.Vector3());
     const r = Math.max(world.getSize(new THREE.Vector3()).length(), 0.5);
-    this.grid.position.set(c.x, world.min.y, c.z);
+    this.grid.position.set(c.x, floor ?? world.min.y, c.z);
     this.controls.target.copy(c);
     this.camera.position.set(c.x + r * 0.9, c.y + r * 0.35, c.z + r * 1.2);
     this.camera.near = r / 100;
@@ -236,6 +269,31 @@ export class Player {
     this.camera.updateProjectionMatrix();
     this.controls.update();
     return true;
+  }
+
+  /**
+   * Keep `figure`'s pelvis in view as it moves (the camera and its target carried along
+   * the floor by as much as the pelvis moved), or stop (`null`).
+   */
+  followFigure(figure) {
+    this.following = figure;
+    this.followed = null;
+  }
+
+  /** Carry the camera along the floor with `at` (the followed pelvis, world metres). */
+  follow(at) {
+    if (!at) return;
+    if (this.followed) {
+      const d = at.clone().sub(this.followed);
+      d.y = 0;
+      this.camera.position.add(d);
+      this.controls.target.add(d);
+      // The grid moves in whole cells, so the floor stays still under a walking figure.
+      this.grid.position.x = Math.round(this.controls.target.x / 0.5) * 0.5;
+      this.grid.position.z = Math.round(this.controls.target.z / 0.5) * 0.5;
+      this.controls.update();
+    }
+    this.followed = at;
   }
 
   draw() {

@@ -44,6 +44,12 @@ export async function takePage(main, id, params) {
     // with every marker missing).
     if (!framed) framed = player.frame([[figure, xyz]]);
     figure.show(xyz);
+    // Where the head and the lower ankle stand in the view (metres, +Y up), for anyone
+    // checking that the figure stands up (the browser test does).
+    const head = figure.centroid(shape.head);
+    const feet = shape.feet.map((p) => figure.centroid([p])).filter(Boolean);
+    canvas.dataset.head = head ? head.y.toFixed(4) : '';
+    canvas.dataset.feet = feet.length ? Math.min(...feet.map((v) => v.y)).toFixed(4) : '';
     // Time to first frame, for anyone measuring the page (performance.getEntriesByName).
     if (!canvas.dataset.frame) performance.mark('mocapstore:first-frame');
     canvas.dataset.frame = String(f);
@@ -64,6 +70,11 @@ export async function takePage(main, id, params) {
   const labels = el('input', { type: 'checkbox', class: 'labels-toggle', disabled: names.length ? null : '' });
   labels.addEventListener('change', () => figure.label(labels.checked ? names : null, labelBox));
   transport.loopBar.prepend(el('label', {}, 'point names ', labels));
+  // The camera walks along with the pelvis, when the body names one.
+  const follow = el('input', { type: 'checkbox', class: 'follow-toggle', disabled: shape.pelvis.length && shape.up ? null : '' });
+  follow.addEventListener('change', () => player.followFigure(follow.checked ? figure : null));
+  transport.loopBar.prepend(el('label', { title: 'keep the camera on the pelvis as the body moves' }, 'follow ', follow));
+  canvas.dataset.up = shape.up ?? 'unknown';
   const compare = el('a', { href: `#/compare?ids=${encodeURIComponent(id)}` }, 'compare with another take');
   main.append(
     el('h1', {}, take.name || take.id, ' ', el('small', { class: 'muted' }, take.library ? `in ${take.library}` : '')),
@@ -91,10 +102,23 @@ export async function takePage(main, id, params) {
       ['points alone', `${take.stored_bytes - analog.stored_bytes} bytes of ${take.raw_bytes - analog.raw_bytes} raw, with the file's parameters`],
     );
   }
+  const body = take.body;
+  if (body) {
+    const roles = body.roles ?? {};
+    const placed = Object.keys(roles).length;
+    facts.push(
+      ['up', body.up ? `${body.up} (${body.up_from})` : 'unknown'],
+      ['forward', body.forward ? `${body.forward} (${body.forward_from})` : 'unknown'],
+      ['floor', body.floor_m === null || body.floor_m === undefined ? '—' : `${fmt.num(body.floor_m, 3)} m along up`],
+      ['pelvis (the moving root)', (roles.pelvis ?? []).join(', ') || '—'],
+      ['roles', `${placed} of ${placed + (body.unplaced?.length ?? 0)} placed${body.convention ? ` by ${body.convention} names` : ''}${body.given?.length ? `; given: ${body.given.join(', ')}` : ''}`],
+    );
+  }
   const events = take.meta?.events ?? [];
   if (events.length) facts.push(['events', events.map((e) => `${e.context} ${e.label} ${fmt.num(e.time_s, 2)} s`.trim()).join('; ')]);
   main.append(el('h2', {}, 'Take'), el('div', { class: 'scroll' }, el('table', { class: 'facts' }, el('tbody', {}, ...facts.map(([k, v]) => el('tr', {}, el('th', { scope: 'row' }, k), el('td', {}, v)))))));
   const d = take.meta?.decision;
+  if (body) main.append(el('p', { class: `reason body-reason${body.up ? '' : ' warning'}` }, `Body: ${body.reason}`));
   if (analog) main.append(el('p', { class: 'reason analog-reason' }, `Analog: ${analog.reason}`));
   if (d) {
     main.append(
@@ -121,9 +145,11 @@ export async function takePage(main, id, params) {
   const pick = (cls, title, options) => el('select', { class: cls, title },
     ...options.map(([v, label]) => el('option', { value: v }, label)));
   const root = pick('out-root', 'root motion', [['keep', 'root: as captured'], ['in-place', 'root: in place'], ['extract', 'root: extracted']]);
-  const up = pick('out-up', 'up axis', [['', 'up: as stored'], ['y', 'up: +Y'], ['z', 'up: +Z']]);
+  const up = pick('out-up', 'up axis', [['', 'up: as stored'], ['y', 'up: +Y'], ['z', 'up: +Z'], ['-y', 'up: −Y'], ['-z', 'up: −Z'], ['x', 'up: +X'], ['-x', 'up: −X']]);
   const unit = pick('out-unit', 'unit', [['', 'unit: as stored'], ['mm', 'mm'], ['cm', 'cm'], ['m', 'm'], ['in', 'in']]);
-  if (!take.skeleton) root.disabled = true;
+  // Root motion follows the pelvis along the floor: it needs both.
+  if (!(body?.up && body.roles?.pelvis)) root.disabled = true;
+  if (!body?.up) up.disabled = true;
   /** The query of the chosen transforms (those that apply to format `f`). */
   const transforms = (f) => {
     const q = [];

@@ -214,21 +214,19 @@ pub async fn patch(
     if let Some(to) = &p.library {
         caller.grant.library(to)?;
     }
-    let mut take = library::update(
+    let correction = p.body.map(|b| body::Correction {
+        up: b.up,
+        forward: b.forward,
+        roles: b.roles.unwrap_or_default(),
+    });
+    let take = library::update(
         &state.store,
         &id,
         p.name.as_deref(),
         p.library.as_deref(),
         p.tags.as_deref(),
+        correction,
     )
     .await?;
-    if let Some(b) = p.body {
-        let correction = body::Correction {
-            up: b.up,
-            forward: b.forward,
-            roles: b.roles.unwrap_or_default(),
-        };
-        take = body::correct(&state.store, &id, correction).await?;
-    }
     Ok(Json(TakeView::from(&take)).into_response())
 }

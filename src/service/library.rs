@@ -245,16 +245,22 @@ pub async fn delete(store: &Store, id: &str) -> Result<()> {
     }
 }
 
-/// Rename, move to another library and/or replace the tags of a take.
+/// Rename, move to another library and/or replace the tags of a take, and/or correct its
+/// body. Everything is checked before anything is written: a refused request changes
+/// nothing.
 pub async fn update(
     store: &Store,
     id: &str,
     name: Option<&str>,
     library: Option<&str>,
     tags: Option<&[String]>,
+    body: Option<super::body::Correction>,
 ) -> Result<Take> {
     if name.is_some_and(|n| n.trim().is_empty()) {
         return Err(Error::InvalidRequest("name must not be empty".into()));
+    }
+    if let Some(c) = body {
+        super::body::correct(store, id, c).await?;
     }
     let tags = tags.map(super::normalise_tags);
     if !store.update(id, name, library, tags.as_deref()).await? {

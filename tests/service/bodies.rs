@@ -254,6 +254,18 @@ async fn a_body_nothing_tells_is_given_by_patch() {
         assert_eq!(status, 400, "{bad}: {err}");
         assert!(err.to_string().contains(names), "{bad}: {err}");
     }
+    // A refused correction changes nothing, the rest of its PATCH included.
+    let r = a
+        .client
+        .patch(format!("{}/v1/takes/{id}", a.base))
+        .json(&serde_json::json!({"name": "renamed", "body": {"roles": {"pelvis": ["nope"]}}}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 400);
+    let (_, take) = a.get_json(&format!("/v1/takes/{id}")).await;
+    assert_eq!(take["name"], "floating", "{take}");
+    assert_eq!(take["body"]["roles"]["pelvis"], Value::Null, "{take}");
     // Up given, and the pelvis: glTF and in-place answer.
     let (status, take) = correct(
         &a,

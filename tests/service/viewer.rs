@@ -1126,3 +1126,69 @@ async fn the_take_page_opens_the_glb_it_would_download() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// Issue 48: takes stand up in the browser, whatever axis they were captured along. The
+/// take page turns each by its body's up (never by its extent): a Bandai walk and a CMU
+/// walk (Y-up, long walks that once lay on their side) and a Plug-in Gait C3D (Z-up) show
+/// the head above the feet in three.js's world at frame 0, and the GLB three.js's
+/// GLTFLoader opens does too.
+#[tokio::test(flavor = "multi_thread")]
+async fn takes_stand_up_in_the_viewer() {
+    let Some(browser) = Browser::with_corpus().await else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    // (file, its up, the second looked at and its frame (where the markers are seen), the
+    // head and ankle nodes of its GLB).
+    let bandai = "bvh/bandai/dataset-1_walk_normal_001.bvh";
+    for (rel, up, (t, frame), head, ankle) in [
+        (bandai, "y", (0.0, 0), Some("Head"), "Foot_L"),
+        ("bvh/cmu/01_01.bvh", "y", (0.0, 0), Some("Head"), "LeftFoot"),
+        ("c3d/btkdata__others__Gait.c3d", "z", (2.0, 200), None, ""),
+    ] {
+        let take = stored(&srv, "max_error_mm=1", rel).await;
+        let id = take["id"].as_str().unwrap().to_string();
+        let seen = browser
+            .visit(
+                &format!("{}/#/take/{id}?t={t}", srv.base),
+                "the frame",
+                &format!("const c = document.querySelector('canvas.view'); return c?.dataset.frame === '{frame}' && [c.dataset.up, c.dataset.head, c.dataset.feet];"),
+            )
+            .await;
+        assert_eq!(seen[0], up, "{rel}: {seen}");
+        let y = |v: &Value| -> f64 {
+            v.as_str()
+                .and_then(|s| s.parse().ok())
+                .unwrap_or_else(|| panic!("{rel}: {seen}"))
+        };
+        let (h, f) = (y(&seen[1]), y(&seen[2]));
+        assert!(
+            h - f > 1.0,
+            "{rel}: head at {h} m, feet at {f} m in the view"
+        );
+        if let Some(head) = head {
+            // The last page's GLB is not this one's.
+            browser.js("window.mocapstoreGlb = null;", json!([])).await;
+            browser.click("button.open-glb").await;
+            browser
+                .until("the GLB loaded", "return !!window.mocapstoreGlb;")
+                .await;
+            let ys = browser
+                .js(
+                    "const g = window.mocapstoreGlb; g.at(0); return [g.position(arguments[0])[1], g.position(arguments[1])[1]];",
+                    json!([head, ankle]),
+                )
+                .await;
+            let (h, a) = (ys[0].as_f64().unwrap(), ys[1].as_f64().unwrap());
+            assert!(
+                h - a > 1.0,
+                "{rel}: in the GLB the head is at {h} m, the ankle at {a} m"
+            );
+        }
+    }
+    assert!(browser.console_errors().await.is_empty());
+    browser.quit().await;
+    srv.stop().await;
+    t.finish().await;
+}
