@@ -11,9 +11,10 @@ mod manifest;
 
 use manifest::manifest;
 use mocapstore::corpus::{self, Entry};
-use mocapstore::motion::body::{Body, Given, Role};
+use mocapstore::motion::body::{Body, Given, Part, Role};
 use mocapstore::motion::formats::{self, Loaded, ReadOptions};
 use mocapstore::motion::transform::{whole, Options, Root};
+use nalgebra::{UnitQuaternion, Vector3};
 
 /// Takes that are no body: no role can be placed on them, and why.
 const NOT_BODIES: &[(&str, &str)] = &[("bvh/misc/two_joint_toy.bvh", "two joints, Base and End")];
@@ -172,6 +173,44 @@ fn root_motion_follows_the_pelvis_on_every_corpus_skeleton() {
             let path = &out[..3];
             let floor = b.axes.floor_m.unwrap() as f32 * up.sign() as f32;
             assert!((path[up.index()] - floor).abs() < 1e-5);
+        }
+        // The heading apart: the root motion turns about up, and in its frame the body
+        // (its hips and shoulders, left to right) faces its forward in every frame.
+        let rig = extract.skeleton.as_ref().unwrap();
+        let channels = &rig.joints[0].channels;
+        assert_eq!(channels.len(), 4, "{}: {channels:?}", e.path);
+        assert_eq!(channels[3].rotation_axis(), Some(up.index()), "{}", e.path);
+        let forward = b
+            .axes
+            .forward
+            .expect("every corpus skeleton faces a way")
+            .vector();
+        let joint = |role: Role| b.roles.points(role, &m.point_names)[0] + 1;
+        let pairs =
+            [Part::Hip, Part::Shoulder].map(|p| (joint(Role::left(p)), joint(Role::right(p))));
+        let u = up.vector();
+        for f in 0..m.frame_count() {
+            let out = extract.frame(f);
+            let at =
+                |j: usize| Vector3::new(out[j * 3], out[j * 3 + 1], out[j * 3 + 2]).cast::<f64>();
+            let across: Vector3<f64> = pairs
+                .iter()
+                .map(|&(l, r)| {
+                    let d = at(r) - at(l);
+                    (d - u * d.dot(&u)).normalize()
+                })
+                .sum();
+            let facing = u.cross(&across).normalize();
+            let yaw = rig.frame_values(f)[3].to_radians() * up.sign();
+            let turn_back =
+                UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(u), -yaw);
+            let off = (turn_back * facing).dot(&forward).clamp(-1.0, 1.0).acos();
+            assert!(
+                off.to_degrees() < 0.1,
+                "{} frame {f}: the body faces {:.2}° off forward",
+                e.path,
+                off.to_degrees()
+            );
         }
         checked += 1;
     }

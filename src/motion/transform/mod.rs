@@ -31,16 +31,30 @@ pub struct Stance {
     /// The floor's height along `up`, in the take's units: where an extracted root motion
     /// runs.
     pub floor: f64,
+    /// The way the body faces over the take: an extracted root motion's heading is the
+    /// turn from it about `up`.
+    pub forward: Option<Axis>,
+    /// Left and right points of the hips, then of the shoulders (those the body places):
+    /// the body faces `up × (right − left)`.
+    pub sides: Vec<(Vec<usize>, Vec<usize>)>,
 }
 
 impl Stance {
     /// The stance of a take whose body is `body`, whose points are `names`, in units of
     /// `metres_per_unit`.
     pub fn of(body: &crate::motion::body::Body, names: &[String], metres_per_unit: f64) -> Stance {
+        use crate::motion::body::{Part, Role};
+        let at = |r: Role| body.roles.points(r, names);
         Stance {
             up: body.axes.up,
-            pelvis: body.roles.points(crate::motion::body::Role::Pelvis, names),
+            pelvis: at(Role::Pelvis),
             floor: body.axes.floor_m.map_or(0.0, |m| m / metres_per_unit),
+            forward: body.axes.forward,
+            sides: [Part::Hip, Part::Shoulder]
+                .into_iter()
+                .map(|p| (at(Role::left(p)), at(Role::right(p))))
+                .filter(|(l, r)| !l.is_empty() && !r.is_empty())
+                .collect(),
         }
     }
 

@@ -156,14 +156,66 @@ pub struct SkeletonPose {
     /// The root's position channel of each axis (root motion only).
     root_position: [Option<usize>; 3],
     turn: Option<Turn>,
+    /// Extract's heading, when the body tells which way it faces and the root has three
+    /// Euler channels to take the turn back from.
+    heading: Option<Heading>,
     scale: f64,
     /// Channels of the written skeleton that are positions (scaled).
     positions: Vec<bool>,
 }
 
+/// The turn of an extracted root motion about up: from the body's forward to the way its
+/// hips and shoulders face in each frame. The root motion joint carries it, and the root
+/// has it taken back, so that every joint stays where it was.
+#[derive(Debug, Clone)]
+struct Heading {
+    forward: Vector3<f64>,
+    sides: Vec<(Vec<usize>, Vec<usize>)>,
+    /// The root's three Euler channels (offsets in its channels) and their order.
+    at: [usize; 3],
+    order: [usize; 3],
+    /// The last frame's heading (radians), for continuity across ±180°.
+    last: Option<f64>,
+}
+
+impl Heading {
+    /// The heading (radians about `up`) of the frame whose joints are `placed`, or the
+    /// last one when no side pair is placed there.
+    fn of(&mut self, placed: &[f64], up: &Vector3<f64>) -> f64 {
+        let at = |set: &[usize]| -> Vector3<f64> {
+            set.iter()
+                .map(|&j| Vector3::new(placed[j * 3], placed[j * 3 + 1], placed[j * 3 + 2]))
+                .sum::<Vector3<f64>>()
+                / set.len() as f64
+        };
+        let mut across = Vector3::zeros();
+        for (l, r) in &self.sides {
+            let d = at(r) - at(l);
+            let flat = d - up * d.dot(up);
+            if flat.norm() > 0.0 {
+                across += flat.normalize();
+            }
+        }
+        let facing = up.cross(&across);
+        let last = self.last.unwrap_or(0.0);
+        if facing.norm() == 0.0 {
+            return last;
+        }
+        let mut h = up
+            .dot(&self.forward.cross(&facing))
+            .atan2(self.forward.dot(&facing));
+        // The nearest turn to the last one: no jump of 360° when the body turns about.
+        h += std::f64::consts::TAU * ((last - h) / std::f64::consts::TAU).round();
+        self.last = Some(h);
+        h
+    }
+}
+
 /// How the root turns to other axes.
 #[derive(Debug, Clone)]
 struct Turn {
+    /// The up axis turned to.
+    to: Axis,
     m: Matrix3<f64>,
     q: UnitQuaternion<f64>,
     /// The root's three Euler channels (offsets in its channels) and their order.
@@ -235,6 +287,7 @@ impl SkeletonPose {
                     .collect();
                 match (euler_order(&root.channels), root_position) {
                     (Some(order), [Some(x), Some(y), Some(z)]) if rot.len() == 3 => Some(Turn {
+                        to: options.up.expect("a turn has a target"),
                         m,
                         q: UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
                             m,
@@ -263,9 +316,34 @@ impl SkeletonPose {
         for j in &mut out {
             j.offset = j.offset.map(|v| v * scale);
         }
+        let rotations: Vec<usize> = (0..root.channels.len())
+            .filter(|&c| root.channels[c].rotation_axis().is_some())
+            .collect();
+        let heading = match (options.root, stance.forward, euler_order(&root.channels)) {
+            (Root::Extract, Some(f), Some(order))
+                if rotations.len() == 3 && !stance.sides.is_empty() =>
+            {
+                Some(Heading {
+                    forward: f.vector(),
+                    sides: stance.sides.clone(),
+                    at: [rotations[0], rotations[1], rotations[2]],
+                    order,
+                    last: None,
+                })
+            }
+            _ => None,
+        };
         if options.root == Root::Extract {
             for j in &mut out {
                 j.parent = Some(j.parent.map_or(0, |p| p + 1));
+            }
+            let mut channels = vec![Channel::Xposition, Channel::Yposition, Channel::Zposition];
+            if heading.is_some() {
+                // About the written up: the take's, or the one it is turned to.
+                let written = options.up.unwrap_or(up);
+                channels.push(
+                    [Channel::Xrotation, Channel::Yrotation, Channel::Zrotation][written.index()],
+                );
             }
             out.insert(
                 0,
@@ -273,7 +351,7 @@ impl SkeletonPose {
                     name: ROOT_MOTION.into(),
                     parent: None,
                     offset: [0.0; 3],
-                    channels: vec![Channel::Xposition, Channel::Yposition, Channel::Zposition],
+                    channels,
                     end_site: false,
                 },
             );
@@ -293,6 +371,7 @@ impl SkeletonPose {
             placed: vec![0.0; joints.len() * 3],
             root_position,
             turn,
+            heading,
             scale,
             positions,
         })
@@ -317,6 +396,7 @@ impl SkeletonPose {
     /// skeleton's (`channels_out()` values).
     pub fn frame(&mut self, src: &[f64], out: &mut Vec<f64>) {
         let mut ground = [0.0; 3];
+        let mut yaw = None;
         let mut vals = src.to_vec();
         if self.root != Root::Keep {
             // The root's translation is in world coordinates: moving it by the pelvis's
@@ -333,6 +413,27 @@ impl SkeletonPose {
                 if let Some(c) = self.root_position[a] {
                     vals[c] -= moved;
                 }
+            }
+            if let Some(h) = &mut self.heading {
+                // The root, now the root motion's child, in its frame: its place and its
+                // rotation turned back by the heading.
+                let u = self.up.vector();
+                let angle = h.of(&self.placed, &u);
+                let back =
+                    UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(u), -angle);
+                let p = self
+                    .root_position
+                    .map(|c| c.expect("extract has all three"));
+                let t = back * Vector3::new(vals[p[0]], vals[p[1]], vals[p[2]]);
+                for a in 0..3 {
+                    vals[p[a]] = t[a];
+                }
+                let e = [vals[h.at[0]], vals[h.at[1]], vals[h.at[2]]];
+                let e = to_euler(&(back * from_euler(h.order, e)), h.order, Some(e));
+                for (k, v) in h.at.iter().zip(e) {
+                    vals[*k] = v;
+                }
+                yaw = Some(angle);
             }
         }
         if let Some(turn) = &mut self.turn {
@@ -353,6 +454,11 @@ impl SkeletonPose {
         let at = out.len();
         if self.root == Root::Extract {
             out.extend_from_slice(&ground);
+            if let Some(angle) = yaw {
+                // About the written up axis, signed as it is.
+                let written = self.turn.as_ref().map_or(self.up, |t| t.to);
+                out.push(angle.to_degrees() * written.sign());
+            }
         }
         out.extend_from_slice(&vals);
         for (v, &is_pos) in out[at..].iter_mut().zip(&self.positions) {
@@ -389,6 +495,7 @@ mod tests {
             up: Some(Axis::Y),
             pelvis: vec![0],
             floor: 0.0,
+            ..Stance::default()
         }
     }
 
@@ -531,6 +638,7 @@ mod tests {
             up: Some(Axis::Y),
             pelvis: vec![1],
             floor: -90.0,
+            ..Stance::default()
         };
         let opts = |root| Options {
             root,
