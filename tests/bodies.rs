@@ -104,6 +104,182 @@ fn every_corpus_body_knows_its_limbs() {
     assert!(missing.is_empty(), "{}", missing.join("\n"));
 }
 
+/// Marker takes whose set is not full body: the limb parts it has no markers for, and why
+/// (from each file's labels, `POINT:DESCRIPTIONS` and its source's readme). Parts: `arms`
+/// (shoulders, elbows, wrists), `forearms` (elbows, wrists), `legs` (hips down), `shins`
+/// (knees down), and single parts.
+const PARTIAL_SETS: &[(&[&str], &[&str], &str)] = &[
+    (
+        &[
+            "c3d/btkdata__PiG__PiG_Calibration3_FF.c3d",
+            "c3d/btkdata__PiG__PiG_Calibration3_FF_N18.c3d",
+            "c3d/btkdata__PiG__PiG_Calibration3_noFF.c3d",
+            "c3d/btkdata__PiG__PiG_Motion3_FF.c3d",
+            "c3d/btkdata__PiG__PiG_Motion3_FF_N18.c3d",
+            "c3d/btkdata__PiG__PiG_Motion3_noFF.c3d",
+            "c3d/btkdata__sample04__sub_labels.c3d",
+            "c3d/btkdata__sample09__PlugInC3D.c3d",
+            "c3d/c3dio__sample_03__gait-pig-nz.c3d",
+            "c3d/c3dio__sample_03__gait-pig.c3d",
+            "c3d/c3dio__sample_07__16bitanalog.c3d",
+            "c3d/c3dio__sample_09__VER4C3D.c3d",
+            "c3d/c3dio__sample_10__TYPE-3.c3d",
+            "c3d/c3dio__sample_11__2198928.c3d",
+            "c3d/c3dio__sample_14__sample14.c3d",
+            "c3d/c3dio__sample_25__analogfpscale03.c3d",
+            "c3d/c3dio__sample_25__analogfpscale04.c3d",
+            "c3d/c3dio__sample_25__analogfpscale04i.c3d",
+            "c3d/c3dio__sample_33__bigparlove.c3d",
+            "c3d/c3dio__Innovative_Sports_Training__Gait_with_EMG.c3d",
+            "c3d/c3dio__Innovative_Sports_Training__Static_Pose.c3d",
+            "c3d/btkdata__others__ADemo1_rewrite_c3d_pc_float.c3d",
+            "c3d/btkdata__others__ADemo1_rewrite_c3d_pc_integer.c3d",
+            "c3d/c3dio__Codamotion__codamotion_gaitwands_19970212.c3d",
+            "c3d/c3dio__Codamotion__codamotion_gaitwands_20150204.c3d",
+            "c3d/c3dio__sample_26__Standing_Hybrid_1.c3d",
+            "c3d/c3dio__sample_26__Standing_Hybrid_2.c3d",
+        ],
+        &["arms"],
+        "lower-body sets (Plug-in Gait and Helen Hayes lower body, Codamotion gait wands, \
+         MotionMonitor, Qualisys clusters): no arm markers; a clavicle marker is no arm joint",
+    ),
+    (
+        &[
+            "c3d/c3dio__sample_26__Walking_Hybrid_1_1.c3d",
+            "c3d/c3dio__sample_26__Walking_Hybrid_1_2.c3d",
+            "c3d/c3dio__sample_26__Walking_Hybrid_1_3.c3d",
+            "c3d/c3dio__sample_26__Walking_Hybrid_1_4.c3d",
+            "c3d/c3dio__sample_26__Walking_Hybrid_1_5.c3d",
+            "c3d/c3dio__sample_26__Walking_Hybrid_2.c3d",
+        ],
+        &["arms", "knee", "ankle"],
+        "Qualisys lower-limb clusters: the joint landmarks are only in the static trials",
+    ),
+    (
+        &[
+            "c3d/c3dio__sample_26__Capture0002.c3d",
+            "c3d/c3dio__sample_26__Capture0003.c3d",
+            "c3d/c3dio__sample_26__Capture0004.c3d",
+            "c3d/c3dio__sample_26__Capture0008_Standing.c3d",
+            "c3d/c3dio__sample_23__Vicon_analysis.c3d",
+            "c3d/c3dio__sample_30__admarche2.c3d",
+        ],
+        &["forearms"],
+        "the shoulder is the only arm marker",
+    ),
+    (
+        &["c3d/c3dio__sample_30__marche281.c3d"],
+        &["ankle"],
+        "no malleolus markers (TB is mid-tibia, TLN the heel)",
+    ),
+    (
+        &["c3d/c3dio__sample_27__kyowadengyo.c3d"],
+        &["forearms", "hip"],
+        "a Kyowa Dengyo set: shoulders but no forearm markers, trochanters but no ASIS",
+    ),
+    (
+        &["c3d/btkdata__others__shd01.c3d"],
+        &["shins"],
+        "an upper-body Plug-in Gait shoulder trial: no leg markers below the pelvis",
+    ),
+    (
+        &["c3d/btkdata__sample21__sample21.c3d"],
+        &["arms", "left_knee", "left_ankle", "left_toe"],
+        "a right-leg set",
+    ),
+    (
+        &[
+            "trc/TRCSamples__Anto.trc",
+            "trc/TRCSamples__UpperLimbStatic.trc",
+        ],
+        &["legs"],
+        "an upper-limb wheelchair set (Roue is the wheel, Dossier the backrest)",
+    ),
+    (
+        &[
+            "c3d/c3dio__sample_37__ART-Human_2persons_integer.c3d",
+            "c3d/c3dio__sample_37__ART-Human_hands_real_no6dof.c3d",
+            "c3d/c3dio__sample_37__ART-Human_real.c3d",
+            "c3d/c3dio__sample_37__ART-Human_tools_integer_6dofLimbs.c3d",
+        ],
+        &["toe"],
+        "the A.R.T. DTrack body model ends at the foot segment",
+    ),
+    (
+        &["c3d/btkdata__others__mocap36.c3d"],
+        &["arms", "legs"],
+        "OptiTrack Arena's numbered markers (Hip1, LUArm1…): no documented numbering to read",
+    ),
+    (
+        &["c3d/btkdata__sample22__BKINtechnologies.c3d"],
+        &["arms", "legs"],
+        "a KINARM robot: two hand points",
+    ),
+];
+
+/// Whether limb role `role` is among `parts` (see [`PARTIAL_SETS`]).
+fn lacks(parts: &[&str], role: Role) -> bool {
+    let name = role.to_string();
+    parts.iter().any(|&p| match p {
+        "arms" => ["shoulder", "elbow", "wrist"]
+            .iter()
+            .any(|w| name.ends_with(w)),
+        "forearms" => ["elbow", "wrist"].iter().any(|w| name.ends_with(w)),
+        "legs" => ["hip", "knee", "ankle", "toe"]
+            .iter()
+            .any(|w| name.ends_with(w)),
+        "shins" => ["knee", "ankle", "toe"].iter().any(|w| name.ends_with(w)),
+        // One side's part (left_knee), or both sides' (knee).
+        one if one.contains('_') => name == one,
+        one => name.ends_with(one),
+    })
+}
+
+/// Every marker take laid out by a known marker set places all its limb roles, but the
+/// sets [`PARTIAL_SETS`] lists, which lack only what they say.
+#[test]
+fn every_corpus_marker_set_knows_its_limbs() {
+    let Some((root, entries)) = corpus() else {
+        return;
+    };
+    let mut wrong = Vec::new();
+    let mut full = BTreeMap::<String, usize>::new();
+    for e in entries
+        .iter()
+        .filter(|e| e.format == "c3d" || e.format == "trc")
+    {
+        let Some(l) = read(&root, e) else { continue };
+        let b = body(&l);
+        let Some(convention) = b.roles.convention.clone() else {
+            // Unlabelled or unnamed points: no set to place roles by.
+            assert!(b.roles.roles.is_empty(), "{}", e.path);
+            continue;
+        };
+        let missing = b.roles.missing_limbs();
+        match PARTIAL_SETS
+            .iter()
+            .find(|(files, _, _)| files.contains(&e.path.as_str()))
+        {
+            Some((_, parts, why)) => {
+                let extra: Vec<_> = missing.iter().filter(|r| !lacks(parts, **r)).collect();
+                if !extra.is_empty() {
+                    wrong.push(format!("{}: {extra:?} missing, beyond {why}", e.path));
+                }
+                if missing.is_empty() {
+                    wrong.push(format!("{}: listed as partial, places every limb", e.path));
+                }
+            }
+            None if !missing.is_empty() => {
+                wrong.push(format!("{} ({convention}): {missing:?} missing", e.path));
+            }
+            None => *full.entry(convention).or_default() += 1,
+        }
+    }
+    eprintln!("marker takes placing every limb, per set: {full:?}");
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    assert!(full.values().sum::<usize>() >= 25, "{full:?}");
+}
+
 /// `root=in-place` on every corpus skeleton: the pelvis's horizontal path within 1 mm of
 /// zero in every frame, every joint where it was relative to the pelvis; `extract` gives
 /// the path back (FK of its skeleton is the source). Checked against the source's own FK.

@@ -319,22 +319,47 @@ pub static CONVENTIONS: &[Convention] = &[
         sides: ["L", "R"],
         namespace: None,
         roles: &[
+            // VSAC: Motion Analysis's V.Sacral cut to four characters.
             (
                 PELVIS,
                 &[
-                    "LASI", "RASI", "LPSI", "RPSI", "SACR", "LFWT", "RFWT", "LBWT", "RBWT",
+                    "LASI", "RASI", "LPSI", "RPSI", "SACR", "LFWT", "RFWT", "LBWT", "RBWT", "VSAC",
                 ],
             ),
             (SPINE, &["C7", "T10", "CLAV", "STRN"]),
             (NECK, &["C7", "CLAV"]),
-            (HEAD, &["LFHD", "RFHD", "LBHD", "RBHD"]),
+            // THEA, FHEA, RHEA: Motion Analysis's top, front and rear head.
+            (
+                HEAD,
+                &["LFHD", "RFHD", "LBHD", "RBHD", "THEA", "FHEA", "RHEA"],
+            ),
             (Limb(Shoulder), &["{s}SHO"]),
             (Limb(Elbow), &["{s}ELB"]),
-            (Limb(Wrist), &["{s}WRA", "{s}WRB"]),
-            (Limb(Hip), &["{s}ASI", "{s}PSI", "{s}FWT", "{s}BWT"]),
-            (Limb(Knee), &["{s}KNE"]),
-            (Limb(Ankle), &["{s}ANK"]),
-            (Limb(Toe), &["{s}TOE"]),
+            // WRI: the Helen Hayes upper-limb wrist (Motion Analysis, OrthoTrak).
+            (Limb(Wrist), &["{s}WRA", "{s}WRB", "{s}WRI"]),
+            // HIP: Motion Analysis's ASIS; HJC, KJC, AJC: joint centres of Nexus models.
+            (
+                Limb(Hip),
+                &["{s}ASI", "{s}PSI", "{s}FWT", "{s}BWT", "{s}HIP", "{s}HJC"],
+            ),
+            // Lateral and medial knee (c3d.org's TYPE-3), femoral condyles (MotionMonitor).
+            (
+                Limb(Knee),
+                &[
+                    "{s}KNE", "{s}LKN", "{s}MKN", "{s}LFC", "{s}MFC", "{s}KneL", "{s}KneM",
+                    "{s}KJC",
+                ],
+            ),
+            // Lateral and medial malleoli.
+            (
+                Limb(Ankle),
+                &["{s}ANK", "{s}LMA", "{s}MMA", "{s}AnkL", "{s}AnkM", "{s}AJC"],
+            ),
+            // TO: Motion Analysis's R.Toe cut to four characters; MT5: the fifth metatarsal.
+            (
+                Limb(Toe),
+                &["{s}TOE", "{s}TO", "{s}ToeL", "{s}ToeM", "{s}Toe2", "{s}MT5"],
+            ),
         ],
     },
     Convention {
@@ -355,7 +380,7 @@ pub static CONVENTIONS: &[Convention] = &[
                 HEAD,
                 &[
                     "Top.Head", "Head", "R.TETE", "L.TETE", "Tete.H", "Tete.D", "Tete.G",
-                    "R.Temple", "L.Temple",
+                    "R.Temple", "L.Temple", "R.TET", "L.TET",
                 ],
             ),
             (
@@ -378,6 +403,7 @@ pub static CONVENTIONS: &[Convention] = &[
                     "{s}Epi.Med",
                     "{s}COUD",
                     "{s}COUDInt",
+                    "{s}COU",
                 ],
             ),
             (
@@ -391,6 +417,7 @@ pub static CONVENTIONS: &[Convention] = &[
                     "{s}Wrist.Lat",
                     "{s}MAIN",
                     "{s}MAINInt",
+                    "{s}MAI",
                 ],
             ),
             (
@@ -407,6 +434,7 @@ pub static CONVENTIONS: &[Convention] = &[
                     "{s}Knee.Lateral",
                     "{s}Knee.Med",
                     "{s}Knee.Lat",
+                    "{s}KnJntLn",
                     "{s}CL",
                     "{s}CM",
                 ],
@@ -427,6 +455,27 @@ pub static CONVENTIONS: &[Convention] = &[
                 Limb(Toe),
                 &["{s}Toe", "{s}MT1", "{s}MT5", "{s}Foot.Med", "{s}Foot.Lat"],
             ),
+        ],
+    },
+    Convention {
+        name: "biogesta",
+        used_by: "French lab names with a G/D (gauche/droite) suffix, as Biogesta SAGA-3RT \
+                  writes them (GD genou droit, CDG coude gauche)",
+        kind: Kind::Markers,
+        sides: ["G", "D"],
+        namespace: None,
+        roles: &[
+            (PELVIS, &["BG", "BD", "SS"]),
+            (SPINE, &["C7"]),
+            (NECK, &["C7"]),
+            (HEAD, &["TMPG", "TMPD", "MNTN"]),
+            (Limb(Shoulder), &["E{s}", "EPL{s}"]),
+            (Limb(Elbow), &["CD{s}"]),
+            (Limb(Wrist), &["PGT{s}"]),
+            (Limb(Hip), &["B{s}", "GT{s}"]),
+            (Limb(Knee), &["G{s}", "CDI{s}", "CDE{s}"]),
+            (Limb(Ankle), &["C{s}"]),
+            (Limb(Toe), &["P{s}", "MT1{s}", "MT5{s}"]),
         ],
     },
     Convention {
