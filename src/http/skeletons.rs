@@ -36,7 +36,8 @@ pub async fn get(
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     let (row, rig) = skeletons::get(&state.store, &id, &caller.grant).await?;
-    Ok(Json(SkeletonView::of(&row, Some(rig.joints()))).into_response())
+    let roles = skeletons::roles(&rig);
+    Ok(Json(SkeletonView::of(&row, Some((rig.joints(), roles)))).into_response())
 }
 
 /// 204, 404, or 409 while takes still reference the skeleton.

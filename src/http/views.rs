@@ -159,10 +159,18 @@ pub struct SkeletonView<'a> {
     used_by: i64,
     #[serde(skip_serializing_if = "Option::is_none")]
     hierarchy: Option<&'a [Joint]>,
+    /// Which joints play which role, with the hierarchy.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    roles: Option<crate::motion::body::Roles>,
 }
 
 impl<'a> SkeletonView<'a> {
-    pub fn of(r: &'a SkeletonRow, hierarchy: Option<&'a [Joint]>) -> Self {
+    /// A listing's row (`hierarchy: None`), or one skeleton with its joints and their roles.
+    pub fn of(
+        r: &'a SkeletonRow,
+        hierarchy: Option<(&'a [Joint], crate::motion::body::Roles)>,
+    ) -> Self {
+        let (hierarchy, roles) = hierarchy.unzip();
         SkeletonView {
             id: &r.id,
             layout: &r.layout,
@@ -170,6 +178,7 @@ impl<'a> SkeletonView<'a> {
             created_at: r.created_at,
             used_by: r.used_by,
             hierarchy,
+            roles,
         }
     }
 }

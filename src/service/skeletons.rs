@@ -10,6 +10,7 @@ use super::access::Grant;
 use super::{blocking, Error, Result};
 use crate::codec::Skeleton;
 use crate::limits;
+use crate::motion::body::Roles;
 use crate::motion::Animation;
 use crate::store::{Deletion, SkeletonRow, Store};
 
@@ -86,6 +87,12 @@ pub async fn list(store: &Store, layout: Option<&str>, grant: &Grant) -> Result<
             Some(r)
         })
         .collect())
+}
+
+/// The roles of a stored skeleton's joints, as every take of it has them (before a take's
+/// own corrections): read from its names, or its shape.
+pub fn roles(rig: &Skeleton) -> Roles {
+    Roles::of_skeleton(rig.joints())
 }
 
 /// One stored skeleton, parsed; to a grant limited to libraries, only one of their takes'

@@ -46,6 +46,13 @@ async fn a_skeleton_is_stored_once_served_as_bvh_and_kept_while_referenced() {
         let (status, one) = srv.get_json(&format!("/v1/skeletons/{sk}")).await;
         assert_eq!(status, 200);
         assert_eq!(one["hierarchy"][1]["name"], "LeftUpLeg");
+        // Its joints' roles, as its takes show them.
+        assert_eq!(one["roles"]["roles"]["pelvis"], serde_json::json!(["Hips"]));
+        assert_eq!(
+            one["roles"]["roles"]["left_knee"],
+            serde_json::json!(["LeftLeg"])
+        );
+        assert!(items[0].get("roles").is_none(), "a listing row has none");
         let (status, take) = srv.get_json(&format!("/v1/takes/{}", ids[0])).await;
         assert_eq!(status, 200);
         assert_eq!(take["skeleton"], sk.as_str());

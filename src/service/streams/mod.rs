@@ -366,7 +366,7 @@ impl Streams {
 
     /// Close a stream: commit what is pending, write the chunk index into the take's header
     /// and mark it finished, and if the stream kept its frames, code the whole take again
-    /// with per-take choice, keeping that if it is smaller.
+    /// with per-take choice, keeping that if it is smaller; then derive its body.
     pub async fn finish(&self, store: &Store, id: &str) -> Result<Take> {
         let entry = match self.entry(id) {
             Some(e) => e,
@@ -433,6 +433,7 @@ impl Streams {
                 reencode_take(store, &take, frames[..committed].to_vec()).await?;
             }
         }
-        super::fetch::take(store, id).await
+        // Closed: its body is derived now from what it holds, and stored.
+        super::body::take(store, id).await
     }
 }
