@@ -9,7 +9,7 @@ use crate::motion::skeleton::Joint;
 use crate::motion::transform::channels::Channels;
 use crate::motion::transform::pose::{PointPose, SkeletonPose};
 use crate::motion::transform::resample::{output_frames, Positions, Resampler};
-use crate::motion::transform::{Options, Root, ROOT_MOTION};
+use crate::motion::transform::Options;
 
 /// The transforms of one answer, and the state they keep between blocks.
 pub enum Shaper {
@@ -79,9 +79,7 @@ impl Shaper {
         let pose = PointPose::new(options, points, &prepared.stance, prepared.metres_per_unit)
             .map_err(refused)?;
         let mut selected = selected.unwrap_or_else(|| (0..points).collect());
-        if options.root == Root::Extract {
-            selected.push(points);
-        }
+        selected.extend(points..pose.points_out());
         Ok(Shaper::Points {
             options: *options,
             resampler: resampler(Positions { points }, prepared, options, frames),
@@ -95,15 +93,15 @@ impl Shaper {
     pub fn point_names(&self, prepared: &Prepared) -> Vec<String> {
         match self {
             Shaper::Points {
-                selected, points, ..
+                selected,
+                points,
+                pose,
+                ..
             } => selected
                 .iter()
-                .map(|&i| {
-                    if i == *points {
-                        ROOT_MOTION.to_string()
-                    } else {
-                        prepared.point_names[i].clone()
-                    }
+                .map(|&i| match i.checked_sub(*points) {
+                    Some(extra) => pose.extra_names()[extra].to_string(),
+                    None => prepared.point_names[i].clone(),
                 })
                 .collect(),
             Shaper::Channels { .. } => Vec::new(),

@@ -89,9 +89,10 @@ async fn a_batch_is_each_range_as_its_own_request_gives_it() {
     let srv = common::start(t.store.clone(), 64 << 20).await;
     let mut ids = Vec::new();
     for (points, frames, seed) in [(4, 300, 0.0), (6, 250, 1.0)] {
+        // Points no convention names: their up is given, as a user would.
         let (status, report) = srv
             .post(
-                "codec=quant&max_error_mm=0.5&unit=mm",
+                "codec=quant&max_error_mm=0.5&unit=mm&up=y",
                 take_json(points, frames, seed),
             )
             .await;
@@ -269,18 +270,19 @@ async fn every_part_is_checked_as_its_own_request_would_be() {
         markers["id"].as_str().unwrap(),
         skeleton["id"].as_str().unwrap(),
     );
-    // Root motion is a skeleton's: a marker take after a skeleton take is refused before the
-    // skeleton's part is written, as its own request would be.
+    // Root motion follows a body's pelvis: a take whose body names none (nor its up), after a
+    // skeleton take, is refused before the skeleton's part is written, as its own request
+    // would be.
     let (status, _, body) = srv
         .get(&format!("/v1/takes/{m}/frames?root=in-place"))
         .await;
-    assert_eq!(status, 400, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(status, 409, "{}", String::from_utf8_lossy(&body));
     let (status, h, body) = srv
         .get(&format!(
             "/v1/ranges?ranges={k}:0-30,{m}:0-10&root=in-place"
         ))
         .await;
-    assert_eq!(status, 400, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(status, 409, "{}", String::from_utf8_lossy(&body));
     assert_eq!(h["content-type"], "application/json");
     let (status, _, _) = srv
         .get(&format!("/v1/ranges?ranges={k}:0-30,{k}:5-10&root=extract"))

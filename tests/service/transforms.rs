@@ -144,7 +144,10 @@ async fn resampling_root_motion_axes_and_units() {
         .await;
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
     let (named, extract) = samples(&body);
-    assert_eq!(named, ["Hips", "LeftWrist", "root_motion"]);
+    assert_eq!(
+        named,
+        ["Hips", "LeftWrist", "root_motion", "root_motion_forward"]
+    );
     let hand = names.iter().position(|n| n == "LeftWrist").unwrap();
     // The path runs on the body's floor, under the lowest foot point.
     let (_, _, record) = srv.get(&format!("/v1/takes/{id}")).await;
@@ -159,14 +162,36 @@ async fn resampling_root_motion_axes_and_units() {
         floor >= lowest && floor < lowest + 3.0,
         "{floor} vs {lowest}"
     );
+    // The heading apart: the body turned to face its forward, the heading as a point half
+    // a metre ahead of the path; turned back and carried along the path, it is the take.
+    let forward = match record["body"]["forward"].as_str().unwrap() {
+        "x" => [1.0, 0.0],
+        "-x" => [-1.0, 0.0],
+        "z" => [0.0, 1.0],
+        "-z" => [0.0, -1.0],
+        other => panic!("forward {other}"),
+    };
     for (f, e) in extract.iter().enumerate() {
-        let (hips, path) = (e[0].unwrap(), e[2].unwrap());
+        let (hips, path, ahead) = (e[0].unwrap(), e[2].unwrap(), e[3].unwrap());
         assert!((path[1] - floor).abs() < 1e-4, "{path:?}");
+        assert!((ahead[1] - floor).abs() < 1e-4, "{ahead:?}");
+        let d = [ahead[0] - path[0], ahead[2] - path[2]];
+        assert!(((d[0].hypot(d[1])) * mpu - 0.5).abs() < 1e-6, "{d:?}");
+        // The turn about +Y that takes forward (x, z) to d: x' = x cos + z sin, z' = −x sin + z cos.
+        let angle =
+            (forward[1] * d[0] - forward[0] * d[1]).atan2(forward[0] * d[0] + forward[1] * d[1]);
+        let (sin, cos) = angle.sin_cos();
+        let world = |p: [f64; 3]| {
+            [
+                p[0] * cos + p[2] * sin + path[0],
+                p[1],
+                -p[0] * sin + p[2] * cos + path[2],
+            ]
+        };
         let original = full[f][0].unwrap();
-        assert!(dist([hips[0] + path[0], hips[1], hips[2] + path[2]], original) < 1e-3);
+        assert!(dist(world(hips), original) < 1e-3, "frame {f}");
         let h = full[f][hand].unwrap();
-        let got = e[1].unwrap();
-        assert!(dist([got[0] + path[0], got[1], got[2] + path[2]], h) < 1e-3);
+        assert!(dist(world(e[1].unwrap()), h) < 1e-3, "frame {f}");
     }
 
     // Z up, in metres: (x, y, z) cm → (x, −z, y) / 100.

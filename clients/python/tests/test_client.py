@@ -154,7 +154,11 @@ def test_a_skeleton_take_extracts_its_root(client: mocapstore.Client, corpus: Pa
     take = client.ingest(corpus / "bvh" / "cmu" / "131_02.bvh", library=library())
     assert take.name == "131_02" and take.skeleton is not None
     f = client.frames(take.id, end=50, root="extract")
-    assert f.point_names[-1] == "root_motion" and f.shape == (50, take.points + 1, 3)
+    # The path on the floor, and the heading as a point half a metre ahead of it.
+    assert f.point_names[-2:] == ("root_motion", "root_motion_forward")
+    assert f.shape == (50, take.points + 2, 3)
+    ahead = (f.data[:, -1] - f.data[:, -2]) * f.metres_per_unit
+    assert np.allclose(np.linalg.norm(ahead, axis=1), 0.5, atol=1e-4)
     still = client.frames(take.id, end=50, root="in-place")
     assert np.allclose(still.data[:, 0, [0, 2]], 0.0, atol=1e-4)
 

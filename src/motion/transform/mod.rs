@@ -121,6 +121,11 @@ impl fmt::Display for Root {
 
 /// The name of the point or joint that carries an extracted root motion.
 pub const ROOT_MOTION: &str = "root_motion";
+/// The name of the point, half a metre ahead of [`ROOT_MOTION`] on the floor, that gives an
+/// extracted root motion's heading in the position formats (a point has no rotation).
+pub const ROOT_MOTION_FORWARD: &str = "root_motion_forward";
+/// How far ahead of the root motion [`ROOT_MOTION_FORWARD`] lies, in metres.
+pub const ROOT_MOTION_FORWARD_M: f64 = 0.5;
 
 /// What a request asks of the frames before they are written.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

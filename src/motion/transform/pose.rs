@@ -11,7 +11,7 @@
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
-use super::{Axis, Options, Root, Stance, ROOT_MOTION};
+use super::{Axis, Options, Root, Stance, ROOT_MOTION, ROOT_MOTION_FORWARD, ROOT_MOTION_FORWARD_M};
 use crate::motion::rotation::{euler_order, from_euler, to_euler};
 use crate::motion::skeleton::{Channel, Fk, Joint};
 use crate::motion::Error;
@@ -46,6 +46,11 @@ pub struct PointPose {
     /// The pelvis's last horizontal place, held through frames where all its points are
     /// missing.
     held: Option<[f64; 3]>,
+    /// Extract's heading, when the body tells which way it faces: the points are turned
+    /// back by it about the pelvis, and it is given as a point ahead of the root motion.
+    heading: Option<Facing>,
+    /// [`ROOT_MOTION_FORWARD_M`] in the take's units.
+    ahead: f64,
 }
 
 impl PointPose {
@@ -68,6 +73,24 @@ impl PointPose {
                 "the pelvis is point {p} of a take of {points}"
             )));
         }
+        if let Some(&p) = stance
+            .sides
+            .iter()
+            .flat_map(|(l, r)| l.iter().chain(r))
+            .find(|&&p| p >= points)
+        {
+            return Err(Error::Invalid(format!(
+                "a side is point {p} of a take of {points}"
+            )));
+        }
+        let heading = match (options.root, stance.forward) {
+            (Root::Extract, Some(f)) if !stance.sides.is_empty() => Some(Facing {
+                forward: f.vector(),
+                sides: stance.sides.clone(),
+                last: None,
+            }),
+            _ => None,
+        };
         Ok(PointPose {
             points,
             root: options.root,
@@ -79,12 +102,24 @@ impl PointPose {
                 .metres_per_unit
                 .map_or(1.0, |out| metres_per_unit / out),
             held: None,
+            heading,
+            ahead: ROOT_MOTION_FORWARD_M / metres_per_unit,
         })
     }
 
-    /// Points a frame has once transformed: one more with an extracted root motion.
+    /// The names of the points a frame has after the take's own: an extracted root motion,
+    /// and the point ahead of it that gives its heading when the body tells one.
+    pub fn extra_names(&self) -> &'static [&'static str] {
+        match (self.root, &self.heading) {
+            (Root::Extract, Some(_)) => &[ROOT_MOTION, ROOT_MOTION_FORWARD],
+            (Root::Extract, None) => &[ROOT_MOTION],
+            _ => &[],
+        }
+    }
+
+    /// Points a frame has once transformed.
     pub fn points_out(&self) -> usize {
-        self.points + usize::from(self.root == Root::Extract)
+        self.points + self.extra_names().len()
     }
 
     /// Whether frames go through unchanged.
@@ -128,6 +163,26 @@ impl PointPose {
             if self.root == Root::Extract {
                 let ground = path.map_or([f64::NAN; 3], |h| on_level(h, self.up, self.floor));
                 out.extend_from_slice(&ground);
+                if let Some(h) = &mut self.heading {
+                    // The body turned back about the pelvis (now over the origin), and the
+                    // heading as a point ahead of the root motion.
+                    let u = self.up.vector();
+                    let mut placed = |p: usize| {
+                        let v = &src[p * 3..p * 3 + 3];
+                        v.iter()
+                            .all(|x| x.is_finite())
+                            .then(|| Vector3::new(v[0], v[1], v[2]))
+                    };
+                    let angle = h.angle(&mut placed, &u);
+                    let axis = nalgebra::Unit::new_unchecked(u);
+                    let back = UnitQuaternion::from_axis_angle(&axis, -angle);
+                    for p in out[at..at + self.points * 3].chunks_exact_mut(3) {
+                        let v = back * Vector3::new(p[0], p[1], p[2]);
+                        p.copy_from_slice(v.as_slice());
+                    }
+                    let ahead = UnitQuaternion::from_axis_angle(&axis, angle) * h.forward;
+                    out.extend((0..3).map(|a| ground[a] + ahead[a] * self.ahead));
+                }
             }
         }
         for p in out[at..].chunks_exact_mut(3) {
@@ -165,32 +220,43 @@ pub struct SkeletonPose {
 }
 
 /// The turn of an extracted root motion about up: from the body's forward to the way its
-/// hips and shoulders face in each frame. The root motion joint carries it, and the root
-/// has it taken back, so that every joint stays where it was.
+/// hips and shoulders face in each frame. A skeleton's root motion joint carries it, and
+/// its root has it taken back, so that every joint stays where it was.
 #[derive(Debug, Clone)]
 struct Heading {
-    forward: Vector3<f64>,
-    sides: Vec<(Vec<usize>, Vec<usize>)>,
+    facing: Facing,
     /// The root's three Euler channels (offsets in its channels) and their order.
     at: [usize; 3],
     order: [usize; 3],
+}
+
+/// The way a body faces, frame after frame: the turn about up from its forward.
+#[derive(Debug, Clone)]
+struct Facing {
+    forward: Vector3<f64>,
+    sides: Vec<(Vec<usize>, Vec<usize>)>,
     /// The last frame's heading (radians), for continuity across ±180°.
     last: Option<f64>,
 }
 
-impl Heading {
-    /// The heading (radians about `up`) of the frame whose joints are `placed`, or the
-    /// last one when no side pair is placed there.
-    fn of(&mut self, placed: &[f64], up: &Vector3<f64>) -> f64 {
-        let at = |set: &[usize]| -> Vector3<f64> {
-            set.iter()
-                .map(|&j| Vector3::new(placed[j * 3], placed[j * 3 + 1], placed[j * 3 + 2]))
-                .sum::<Vector3<f64>>()
-                / set.len() as f64
+impl Facing {
+    /// The heading (radians about `up`) of the frame whose points are placed by `placed`
+    /// (`None`: missing there), or the last one when no side pair is placed.
+    fn angle(
+        &mut self,
+        placed: &mut dyn FnMut(usize) -> Option<Vector3<f64>>,
+        up: &Vector3<f64>,
+    ) -> f64 {
+        let mut at = |set: &[usize]| -> Option<Vector3<f64>> {
+            let found: Vec<Vector3<f64>> = set.iter().filter_map(|&j| placed(j)).collect();
+            (!found.is_empty()).then(|| found.iter().sum::<Vector3<f64>>() / found.len() as f64)
         };
         let mut across = Vector3::zeros();
         for (l, r) in &self.sides {
-            let d = at(r) - at(l);
+            let (Some(a), Some(b)) = (at(l), at(r)) else {
+                continue;
+            };
+            let d = b - a;
             let flat = d - up * d.dot(up);
             if flat.norm() > 0.0 {
                 across += flat.normalize();
@@ -324,11 +390,13 @@ impl SkeletonPose {
                 if rotations.len() == 3 && !stance.sides.is_empty() =>
             {
                 Some(Heading {
-                    forward: f.vector(),
-                    sides: stance.sides.clone(),
+                    facing: Facing {
+                        forward: f.vector(),
+                        sides: stance.sides.clone(),
+                        last: None,
+                    },
                     at: [rotations[0], rotations[1], rotations[2]],
                     order,
-                    last: None,
                 })
             }
             _ => None,
@@ -418,7 +486,17 @@ impl SkeletonPose {
                 // The root, now the root motion's child, in its frame: its place and its
                 // rotation turned back by the heading.
                 let u = self.up.vector();
-                let angle = h.of(&self.placed, &u);
+                let placed = &self.placed;
+                let angle = h.facing.angle(
+                    &mut |j| {
+                        Some(Vector3::new(
+                            placed[j * 3],
+                            placed[j * 3 + 1],
+                            placed[j * 3 + 2],
+                        ))
+                    },
+                    &u,
+                );
                 let back =
                     UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(u), -angle);
                 let p = self

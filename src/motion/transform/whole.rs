@@ -4,7 +4,7 @@
 use super::channels::Channels;
 use super::pose::{PointPose, SkeletonPose};
 use super::resample::{Positions, Resampler};
-use super::{Options, Root, Stance, ROOT_MOTION};
+use super::{Options, Stance};
 use crate::motion::body::Body;
 use crate::motion::skeleton::Animation;
 use crate::motion::units::{Unit, UnitSource};
@@ -72,9 +72,7 @@ pub fn apply(m: &Motion, body: &Body, options: &Options) -> Result<Motion, Error
         pose.frame(f, &mut shaped);
     }
     let mut names = m.point_names.clone();
-    if options.root == Root::Extract {
-        names.push(ROOT_MOTION.into());
-    }
+    names.extend(pose.extra_names().iter().map(|n| n.to_string()));
     let positions = shaped.into_iter().map(|v| v as f32).collect();
     Motion::new(fps, unit, names, positions, None)
 }

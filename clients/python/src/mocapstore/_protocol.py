@@ -217,7 +217,8 @@ def ingest(body: bytes, query: Params) -> Op[Take]:
 
 def frame_names(t: Take, points: Sequence[str] | None, root: str | None) -> tuple[str, ...]:
     """The point names of a positions answer: those asked for in their order (else the
-    take's), and ``root_motion`` after them when the root's path is extracted."""
+    take's), and ``root_motion`` after them when the root's path is extracted (and
+    ``root_motion_forward``, its heading, when the answer holds it: see ``f32_answer``)."""
     names = tuple(points) if points is not None else t.point_names
     if root == "extract":
         names = (*names, "root_motion")
@@ -248,6 +249,9 @@ def f32_answer(h: Mapping[str, str], body: bytes | memoryview, names: tuple[str,
         raise errors.MocapstoreError(
             f"the answer holds {data.size} values, not {n} frames x {p} points x 3"
         )
+    if len(names) + 1 == p and names[-1:] == ("root_motion",):
+        # The body tells which way it faces: the heading comes as a point ahead of the path.
+        names = (*names, "root_motion_forward")
     if len(names) != p:
         raise errors.MocapstoreError(f"the answer has {p} points, the take names {len(names)}")
     return Frames(
