@@ -18,7 +18,7 @@ pub enum Shaper {
     Points {
         options: Options,
         resampler: Option<Resampler<Positions>>,
-        pose: PointPose,
+        pose: Box<PointPose>,
         points: usize,
         /// Indices into the transformed frame's points.
         selected: Vec<usize>,
@@ -83,7 +83,7 @@ impl Shaper {
         Ok(Shaper::Points {
             options: *options,
             resampler: resampler(Positions { points }, prepared, options, frames),
-            pose,
+            pose: Box::new(pose),
             points,
             selected,
         })

@@ -81,6 +81,7 @@ pub fn apply(m: &Motion, body: &Body, options: &Options) -> Result<Motion, Error
 mod tests {
     use super::*;
     use crate::motion::synthetic::dancer_bvh;
+    use crate::motion::transform::Root;
 
     /// A whole take transformed is what FK of its transformed channels gives: root in place,
     /// 60 fps, in metres; its positions are its joints'.
