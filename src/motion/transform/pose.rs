@@ -763,4 +763,59 @@ mod tests {
         pp.frame(&src[(rig.frame_count() - 1) * n * 3..], &mut out);
         assert!(out[3].abs() < 1e-9 && out[5].abs() < 1e-9);
     }
+
+    /// Extract with the heading apart and another up: the root motion turns about the
+    /// written up, and every joint lands where the source's FK turned puts it, in every
+    /// frame of a dancer turning about; its point form gives the same body back.
+    #[test]
+    fn the_heading_apart_turned_to_another_up() {
+        let m = crate::motion::synthetic::dancer(240, 60.0, 8);
+        let body = crate::motion::body::Body::of(&m, Default::default(), None).unwrap();
+        let stance = Stance::of(&body, &m.point_names, m.unit.metres_per_unit);
+        assert!(stance.forward.is_some() && !stance.sides.is_empty());
+        let s = m.skeleton.as_ref().unwrap();
+        let options = Options {
+            root: Root::Extract,
+            up: Some(Axis::Z.flipped()),
+            ..Options::default()
+        };
+        let mut pose = SkeletonPose::new(&options, &s.joints, &stance, 0.01).unwrap();
+        let root_motion = &pose.joints()[0];
+        assert_eq!(root_motion.channels.len(), 4);
+        assert_eq!(root_motion.channels[3].rotation_axis(), Some(2));
+        let out = Animation::new(pose.joints().to_vec(), apply(&mut pose, s)).unwrap();
+        let (a, b) = (s.forward_kinematics(), out.forward_kinematics());
+        let n = s.joints.len();
+        let turn = Axis::Y.turn_to(Axis::Z.flipped()).unwrap();
+        let mut yaws = Vec::new();
+        for f in 0..s.frame_count() {
+            for j in 0..n {
+                let i = (f * n + j) * 3;
+                let want = turn * Vector3::new(a[i], a[i + 1], a[i + 2]);
+                let k = (f * (n + 1) + j + 1) * 3;
+                let got = Vector3::new(b[k], b[k + 1], b[k + 2]);
+                assert!(
+                    (want - got).norm() < 1e-6,
+                    "frame {f} joint {j}: {want} vs {got}"
+                );
+            }
+            yaws.push(out.frame_values(f)[3]);
+        }
+        let span = yaws.iter().cloned().fold(f64::MIN, f64::max)
+            - yaws.iter().cloned().fold(f64::MAX, f64::min);
+        assert!(span > 5.0, "the dancer turns: {span}°");
+        // The points: the body turned back about its pelvis, the path and the heading ahead.
+        let mut points = PointPose::new(&options, n, &stance, 0.01).unwrap();
+        assert_eq!(points.extra_names(), [ROOT_MOTION, ROOT_MOTION_FORWARD]);
+        let mut got = Vec::new();
+        points.frame(&a[..n * 3], &mut got);
+        assert_eq!(got.len(), (n + 2) * 3);
+        let (path, ahead) = (&got[n * 3..n * 3 + 3], &got[n * 3 + 3..]);
+        let d = Vector3::new(ahead[0] - path[0], ahead[1] - path[1], ahead[2] - path[2]);
+        assert!(
+            (d.norm() - ROOT_MOTION_FORWARD_M / 0.01).abs() < 1e-6,
+            "{d}"
+        );
+        assert!(d[2].abs() < 1e-9, "on the floor of the written up: {d}");
+    }
 }
