@@ -172,28 +172,30 @@ impl Entry {
         }
     }
 
-    /// The manifest's line for this entry (CSV, RFC 4180 quoting, tags joined by `;`).
+    /// The manifest's line for this entry (CSV, RFC 4180 quoting, tags joined by `;`; text
+    /// a spreadsheet would run as a formula made inert: [`csv_text`]).
     pub fn csv_line(&self) -> String {
         let opt = |v: Option<String>| v.unwrap_or_default();
         let fields = [
-            self.file.clone(),
-            self.id.clone(),
-            self.name.clone(),
-            self.library.clone(),
-            self.tags.join(";"),
+            csv_text(&self.file),
+            csv_text(&self.id),
+            csv_text(&self.name),
+            csv_text(&self.library),
+            csv_text(&self.tags.join(";")),
             self.frames.to_string(),
             self.fps.to_string(),
             self.source_fps.to_string(),
-            self.codec.clone(),
+            csv_text(&self.codec),
             self.max_bound_mm.to_string(),
             opt(self.mean_bound_mm.map(|m| m.to_string())),
             self.max_error_mm.to_string(),
             self.mean_error_mm.to_string(),
             opt(self.bytes.map(|b| b.to_string())),
             opt(self.blake3.clone()),
-            opt(self.skipped.clone()),
+            csv_text(&opt(self.skipped.clone())),
         ];
-        let mut line = fields.map(|f| csv_field(&f)).join(",");
+        // Text is encoded above; numbers and hex hashes need no quotes.
+        let mut line = fields.join(",");
         line.push_str("\r\n");
         line
     }
@@ -212,6 +214,18 @@ fn csv_field(s: &str) -> String {
         format!("\"{}\"", s.replace('"', "\"\""))
     } else {
         s.to_string()
+    }
+}
+
+/// A text field of the manifest: one a spreadsheet would run as a formula (it starts with
+/// `=`, `+`, `-`, `@`, a tab or a carriage return: a take named `=cmd|'/C calc'!A0`) gets a
+/// `'` before it and is always quoted, as OWASP's advice on CSV injection has it; any other
+/// is quoted where CSV must ([`csv_field`]).
+fn csv_text(s: &str) -> String {
+    if s.starts_with(['=', '+', '-', '@', '\t', '\r']) {
+        format!("\"'{}\"", s.replace('"', "\"\""))
+    } else {
+        csv_field(s)
     }
 }
 
@@ -699,5 +713,19 @@ mod tests {
         assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
         assert_eq!(csv_field("two\nlines"), "\"two\nlines\"");
         assert_eq!(manifest_head().trim_end().split(',').count(), COLUMNS.len());
+    }
+
+    /// Text a spreadsheet would run is made inert; plain text and numbers are as they were.
+    #[test]
+    fn manifest_text_never_runs_as_a_formula() {
+        assert_eq!(csv_text("=cmd|'/C calc'!A0"), "\"'=cmd|'/C calc'!A0\"");
+        for danger in ["+1+1", "-2+3", "@SUM(A1)", "\tx", "\rx", "=\"q\""] {
+            let cell = csv_text(danger);
+            assert!(cell.starts_with("\"'"), "{danger:?} → {cell}");
+        }
+        assert_eq!(csv_text("=\"q\""), "\"'=\"\"q\"\"\"");
+        assert_eq!(csv_text("walk_01"), "walk_01");
+        assert_eq!(csv_text("a,b"), "\"a,b\"");
+        assert_eq!(csv_text(""), "");
     }
 }

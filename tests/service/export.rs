@@ -13,6 +13,18 @@ use mocapstore::motion::formats::{self, Format};
 use mocapstore::motion::synthetic::walker;
 use mocapstore::service::export::{self, COLUMNS, MANIFEST, ZIP_BYTES};
 
+/// `s` as a query string value.
+fn urlencode(s: &str) -> String {
+    s.bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'_' | b'.' => {
+                char::from(b).to_string()
+            }
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
+}
+
 /// A manifest's lines as column → value maps (RFC 4180: quoted fields may hold commas).
 fn manifest_rows(text: &str) -> Vec<BTreeMap<String, String>> {
     let mut rows = Vec::new();
@@ -234,6 +246,23 @@ async fn export_skips_what_a_format_cannot_hold_and_refuses_what_none_can() {
     assert_eq!(rows[0]["id"], r["id"].as_str().unwrap());
     assert!(rows[0]["skipped"].contains("no skeleton"), "{rows:?}");
     assert_eq!(rows[0]["bytes"], "");
+
+    // A name a spreadsheet would run as a formula is written inert (OWASP: a ' before it).
+    let formula = "=cmd|'/C calc'!A0";
+    let query: String = format!("name={}&library=x", urlencode(formula));
+    let (status, r) = srv
+        .post(
+            &query,
+            formats::write(&walker(30, 3, 60.0, 2, 0.0), Format::Json).unwrap(),
+        )
+        .await;
+    assert_eq!(status, 201, "{r}");
+    assert_eq!(r["name"], formula, "the take keeps its name");
+    let (_, _, zip) = srv.get("/v1/export?library=x&format=json").await;
+    let all = entries(&zip);
+    let text = std::str::from_utf8(&all.last().unwrap().1).unwrap();
+    assert!(text.contains("\"'=cmd|'/C calc'!A0\""), "{text}");
+    assert_eq!(manifest_rows(text)[0]["name"], format!("'{formula}"));
 
     // An empty selection is an empty export: the manifest's header alone.
     let (status, _, zip) = srv.get("/v1/export?library=none").await;
