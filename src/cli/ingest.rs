@@ -1,7 +1,14 @@
 //! `mocapstore ingest DIR|FILE… --server URL`: upload a folder of takes with a progress
-//! bar and a few uploads in flight, then a summary; exit non-zero if any file failed.
+//! bar and a few uploads in flight, then a summary; exit non-zero if any motion file failed.
+//!
+//! A dataset folder as it is published holds more than motion: label files beside each
+//! take (Bandai Namco's `{"content": 7, "style": 0}`), readmes, scripts. Files are told by
+//! content ([`formats::is_motion`]), not by extension: what is not motion is skipped and
+//! counted once in the summary, never uploaded and never a failure.
 
-use std::path::PathBuf;
+use std::collections::HashSet;
+use std::io::Read;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
@@ -10,9 +17,11 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::Value;
 use tokio::sync::Semaphore;
 
+use mocapstore::motion::formats;
+
 #[derive(Args)]
 pub struct IngestArgs {
-    /// Files or folders (searched recursively for .bvh .c3d .trc .json .npy).
+    /// Files or folders (searched recursively; motion is told by content, the rest skipped).
     #[arg(required = true)]
     paths: Vec<PathBuf>,
     /// The service to upload to.
@@ -64,10 +73,92 @@ struct Outcome {
     result: Result<Value, String>,
 }
 
+/// Bytes read of a file to tell whether it is motion (all of a JSON file, which must be
+/// parsed to tell a take from a label file).
+const SNIFF_BYTES: u64 = 64 << 10;
+
+/// The files under the paths given, sorted into those to upload and those skipped.
+#[derive(Default)]
+struct Gathered {
+    motion: Vec<PathBuf>,
+    /// Files beside a take with its name (`walk_001.json` beside `walk_001.bvh`): labels.
+    sidecars: Vec<PathBuf>,
+    /// Anything else that is not motion, and why.
+    other: Vec<(PathBuf, String)>,
+}
+
+/// Whether the file at `path` is motion, by its content; Err: it cannot be read.
+fn sniff(path: &Path) -> std::io::Result<bool> {
+    let mut head = Vec::new();
+    std::fs::File::open(path)?
+        .take(SNIFF_BYTES)
+        .read_to_end(&mut head)?;
+    if matches!(formats::detect(&head), Ok(formats::Format::Json)) {
+        return Ok(formats::is_motion(&std::fs::read(path)?));
+    }
+    Ok(formats::is_motion(&head))
+}
+
+/// Every file under `paths` (folders recursively; hidden files and folders left out),
+/// sorted by what it is.
+fn gather(paths: &[PathBuf]) -> Gathered {
+    let mut files = Vec::new();
+    let mut stack: Vec<PathBuf> = paths.to_vec();
+    while let Some(p) = stack.pop() {
+        let hidden = p
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with('.'));
+        if p.is_dir() {
+            if let Ok(rd) = std::fs::read_dir(&p) {
+                stack.extend(rd.flatten().map(|e| e.path()));
+            }
+        } else if !hidden || paths.contains(&p) {
+            files.push(p);
+        }
+    }
+    files.sort();
+    let mut g = Gathered::default();
+    let mut rest = Vec::new();
+    for f in files {
+        // A file named as motion is uploaded whatever it holds: if it is none, that is a
+        // failure the server names (an empty .trc), not a file to pass over.
+        let named = f
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| MOTION_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()));
+        match sniff(&f) {
+            Ok(true) => g.motion.push(f),
+            _ if named => g.motion.push(f),
+            Ok(false) => rest.push((f, "not motion".to_string())),
+            Err(e) => rest.push((f, format!("cannot be read: {e}"))),
+        }
+    }
+    let takes: HashSet<PathBuf> = g.motion.iter().map(|p| p.with_extension("")).collect();
+    for (f, why) in rest {
+        if why == "not motion" && takes.contains(&f.with_extension("")) {
+            g.sidecars.push(f);
+        } else {
+            g.other.push((f, why));
+        }
+    }
+    g
+}
+
+/// Extensions only motion files have (`.json` may be labels or anything else).
+const MOTION_EXTENSIONS: &[&str] = &["bvh", "c3d", "trc", "npy"];
+
+/// Skipped files named in the summary; the rest are counted.
+const SKIPPED_LISTED: usize = 20;
+
 pub fn run(args: &IngestArgs) -> ExitCode {
-    let files = super::bench::collect_files(&args.paths);
+    let gathered = gather(&args.paths);
+    let files = gathered.motion;
     if files.is_empty() {
-        eprintln!("mocapstore ingest: no mocap files under {:?}", args.paths);
+        eprintln!(
+            "mocapstore ingest: no motion files under {:?} ({} other files)",
+            args.paths,
+            gathered.sidecars.len() + gathered.other.len()
+        );
         return ExitCode::FAILURE;
     }
     let runtime = match tokio::runtime::Runtime::new() {
@@ -103,10 +194,23 @@ pub fn run(args: &IngestArgs) -> ExitCode {
         }
     }
     println!(
-        "{} stored, {} failed",
+        "{} stored, {} failed, {} skipped ({} beside takes with their names, {} other files \
+         that are not motion)",
         outcomes.len() - failed.len(),
-        failed.len()
+        failed.len(),
+        gathered.sidecars.len() + gathered.other.len(),
+        gathered.sidecars.len(),
+        gathered.other.len()
     );
+    for (f, why) in gathered.other.iter().take(SKIPPED_LISTED) {
+        println!("skipped {}: {why}", f.display());
+    }
+    if gathered.other.len() > SKIPPED_LISTED {
+        println!(
+            "… and {} more skipped",
+            gathered.other.len() - SKIPPED_LISTED
+        );
+    }
     for o in &failed {
         if let Err(e) = &o.result {
             eprintln!("{}: {e}", o.file);

@@ -113,6 +113,58 @@ async fn ingest_uploads_a_folder_and_lists_failures() {
     t.finish().await;
 }
 
+/// A dataset folder as it is published (Bandai Namco's: a label `.json` beside each take,
+/// a readme, a script, a hidden file): the takes are stored, everything else is skipped and
+/// counted once, and the exit status is zero.
+#[tokio::test]
+async fn ingest_passes_a_dataset_folder_with_label_files() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let dir = std::env::temp_dir().join(format!("mocapstore-dataset-{}", uuid::Uuid::now_v7()));
+    std::fs::create_dir_all(dir.join("data")).unwrap();
+    std::fs::create_dir_all(dir.join("utils")).unwrap();
+    let takes = [
+        "dataset-1_walk_normal_001",
+        "dataset-1_bow_active_001",
+        "dataset-1_dance-short_normal_001",
+    ];
+    for (k, name) in takes.iter().enumerate() {
+        let bvh = root.join("bvh/bandai").join(format!("{name}.bvh"));
+        std::fs::copy(&bvh, dir.join("data").join(format!("{name}.bvh"))).unwrap();
+        let labels = format!("{{\"content\": {k}, \"style\": 0}}");
+        std::fs::write(dir.join("data").join(format!("{name}.json")), labels).unwrap();
+    }
+    std::fs::write(dir.join("README.md"), "# a dataset\n").unwrap();
+    std::fs::write(dir.join("utils/convert.py"), "print('hi')\n").unwrap();
+    std::fs::write(dir.join("data/.DS_Store"), [0u8, 1, 2]).unwrap();
+    let (base, path) = (srv.base.clone(), dir.display().to_string());
+    let out = tokio::task::spawn_blocking(move || {
+        Command::new(env!("CARGO_BIN_EXE_mocapstore"))
+            .args(["ingest", &path, "--server", &base, "--library", "bandai"])
+            .output()
+            .expect("binary runs")
+    })
+    .await
+    .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains(
+            "3 stored, 0 failed, 5 skipped (3 beside takes with their names, 2 other files"
+        ),
+        "{stdout}"
+    );
+    assert!(stdout.contains("README.md: not motion"), "{stdout}");
+    assert_eq!(t.store.count().await.unwrap(), 3);
+    std::fs::remove_dir_all(&dir).unwrap();
+    srv.stop().await;
+    t.finish().await;
+}
+
 /// `mocapstore fetch` writes a range of a take to a file in its extension's format: a BVH
 /// take's rows as uploaded; a take without its animation is refused, naming the reason.
 #[tokio::test]

@@ -191,6 +191,23 @@ pub fn detect(bytes: &[u8]) -> Result<Format> {
     ))
 }
 
+/// Whether `bytes` hold motion this crate reads, by content: [`detect`]'s answer, and for
+/// JSON a document with `points` and `frames` (a label file beside a take, such as
+/// `{"content": 7, "style": 0}`, is JSON but no take). Parses nothing it does not need to.
+pub fn is_motion(bytes: &[u8]) -> bool {
+    #[derive(serde::Deserialize)]
+    struct Shape {
+        points: Option<serde::de::IgnoredAny>,
+        frames: Option<serde::de::IgnoredAny>,
+    }
+    match detect(bytes) {
+        Ok(Format::Json) => serde_json::from_slice::<Shape>(bytes)
+            .is_ok_and(|s| s.points.is_some() && s.frames.is_some()),
+        Ok(_) => true,
+        Err(_) => false,
+    }
+}
+
 fn skip_bom_and_space(bytes: &[u8]) -> &[u8] {
     let b = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     let start = b
@@ -382,6 +399,18 @@ pub(crate) fn unsettled_unit() -> Unit {
 mod tests {
     use super::*;
     use crate::motion::synthetic::walker;
+
+    /// A label file is JSON but no take; a take's JSON is motion, whatever its keys' order.
+    #[test]
+    fn motion_is_told_from_other_files_by_content() {
+        assert!(is_motion(
+            b"{\"frames\": [[[1,2,3]]], \"fps\": 30, \"points\": [\"a\"]}"
+        ));
+        assert!(!is_motion(b"{\"content\": 7, \"style\": 0}"));
+        assert!(!is_motion(b"{\"points\": [\"a\"]"));
+        assert!(!is_motion(b"just text"));
+        assert!(is_motion(b"HIERARCHY\nROOT Hips"));
+    }
 
     #[test]
     fn detects_from_content() {
