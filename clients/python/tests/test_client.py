@@ -303,6 +303,9 @@ def test_a_folder_is_ingested_with_its_refusals_reported(
     np.save(tmp_path / "sub" / "b.npy", walker(40))
     (tmp_path / "bad.trc").write_text("not a trc\n")
     (tmp_path / "notes.txt").write_text("ignored")
+    # A dataset's label file beside a take, and a hidden file: neither is a take.
+    (tmp_path / "a.json").write_text('{"content": 7, "style": 0}')
+    (tmp_path / ".b.npy").write_bytes(b"hidden")
     lib = library()
     out = client.ingest_folder(tmp_path, library=lib, fps=60, progress=False)
     assert [o.path.name for o in out] == ["a.npy", "bad.trc", "b.npy"]

@@ -385,12 +385,31 @@ def channels(id: str, query: Params) -> Op[Channels]:
     return replace(c, fps=header_float(r.headers, "x-fps"))
 
 
-#: The files a folder's ingest picks up.
+#: The files a folder's ingest picks up (a ``.json`` only when it holds a take).
 TAKE_SUFFIXES = (".bvh", ".c3d", ".trc", ".json", ".npy")
 
 
+def is_take_json(path: Path) -> bool:
+    """Whether a JSON file holds a take (``points`` and ``frames``), not labels or settings:
+    a dataset's label file beside each take (``{"content": 7, "style": 0}``) is none."""
+    try:
+        with path.open("rb") as f:
+            doc = json.load(f)
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and "points" in doc and "frames" in doc
+
+
 def take_files(root: Path) -> list[Path]:
-    """The take files under ``root`` (or ``root`` itself), sorted."""
+    """The take files under ``root`` (or ``root`` itself), sorted; hidden files, and JSON
+    that holds no take, left out."""
     if root.is_file():
         return [root]
-    return sorted(p for p in root.rglob("*") if p.suffix.lower() in TAKE_SUFFIXES)
+    return sorted(
+        p
+        for p in root.rglob("*")
+        if p.is_file()
+        and p.suffix.lower() in TAKE_SUFFIXES
+        and not any(part.startswith(".") for part in p.relative_to(root).parts)
+        and (p.suffix.lower() != ".json" or is_take_json(p))
+    )

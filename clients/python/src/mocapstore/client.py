@@ -618,7 +618,8 @@ class Client(_Base):
         progress: bool = True,
         **fields: Any,
     ) -> list[Ingested]:
-        """Store every take file under ``path`` (.bvh .c3d .trc .json .npy), ``concurrency``
+        """Store every take file under ``path`` (.bvh .c3d .trc .npy, and .json holding a take;
+        label files and hidden files are passed over), ``concurrency``
         at a time, each named after its file, with ``fields`` as [`Client.ingest`] takes
         them; a progress bar when ``tqdm`` is installed. A file the server refuses is
         reported in its result, not raised."""
