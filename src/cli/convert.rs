@@ -107,7 +107,7 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
         up: args.source_up,
         forward: args.source_forward,
     };
-    let body = Body::of(&loaded.motion, given, loaded.up.as_ref())?;
+    let body = Body::of(&loaded.motion, given, loaded.up.as_ref()).map_err(|e| e.to_string())?;
     let motion = whole::apply(&loaded.motion, &body, &transform).map_err(|e| {
         let hint = match e {
             mocapstore::motion::Error::Unsupported(_) => {

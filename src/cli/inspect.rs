@@ -54,7 +54,7 @@ fn summarise(file: String, l: &Loaded) -> Summary {
         gaps_percent: 100.0 * m.gap_fraction(),
         skeleton_joints: m.skeleton.as_ref().map(|s| s.joint_count()),
         layout: m.layout_signature().to_hex()[..12].to_string(),
-        body: Body::of(m, Given::default(), l.up.as_ref()),
+        body: Body::of(m, Given::default(), l.up.as_ref()).map_err(|e| e.to_string()),
         warnings: l.warnings.clone(),
     }
 }

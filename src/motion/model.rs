@@ -74,6 +74,11 @@ impl Motion {
         })
     }
 
+    /// Its positions, given back (a caller that built it to look at them keeps them).
+    pub fn into_positions(self) -> Vec<f32> {
+        self.positions
+    }
+
     /// A take with a length but no points (e.g. a C3D file holding only analog channels).
     pub fn without_points(fps: f64, unit: Unit, frames: usize) -> Result<Self> {
         let mut m = Motion::new(fps, unit, vec![], vec![], None)?;

@@ -4,8 +4,12 @@
 //!
 //! A take stored before bodies were kept gets its axes at its first read, from a sample
 //! of its decoded chunks, without re-encoding; they are stored then, so that it happens
-//! once. A live take's are derived from what it holds so far and not stored (every commit
-//! rewrites its record; its finish derives them for good).
+//! once. A live stream's are derived from its first chunk's frames as it commits it
+//! ([`opening`]), and again from the whole take when it finishes ([`closing`]).
+//!
+//! Every write of a body is conditional on the record being the one it was derived from
+//! (`body_rev`, [`Store::set_meta`]): a correction is never undone by a derivation that
+//! started before it, on this server or another.
 
 use std::sync::Arc;
 
@@ -24,30 +28,80 @@ use crate::store::Store;
 /// included (its first second tells the way the body faces when it turns about).
 const SAMPLED_CHUNKS: usize = 12;
 
+/// How often a correction is tried again when the record changed under it (another
+/// server derived or corrected the same body at the same moment).
+const CORRECT_ATTEMPTS: usize = 3;
+
 /// The take stored under `id`, parsed, with its body's axes (derived now, once, for a take
 /// stored before bodies were kept: [`ensure`]).
 pub async fn take(store: &Store, id: &str) -> Result<Take> {
     ensure(store, super::fetch::take(store, id).await?).await
 }
 
-/// `take` with its axes: as stored, or derived now (and stored, unless it is live).
+/// `take` with its axes: as stored, or derived now and stored. A live take's are stored
+/// by its stream (none before its first commit): it is given back as it is.
 pub async fn ensure(store: &Store, mut take: Take) -> Result<Take> {
-    if take.meta.axes.is_some() {
+    if take.meta.axes.is_some() || take.is_live() {
         return Ok(take);
     }
-    let axes = derive_stored(store, &take, Given::default()).await?;
-    take.meta.axes = Some(axes);
-    if !take.is_live() {
-        let row = take.to_row()?;
-        // Lost to a re-encode meanwhile: the next read derives them again.
-        if store
-            .set_meta(&take.id, &row.meta, &row.codec, row.totals.stored_bytes)
-            .await?
-        {
-            take.body_rev += 1;
-        }
+    let given = given_before(&take);
+    take.meta.axes = Some(derive_stored(store, &take, given).await?);
+    // Lost to a re-encode or another derivation meanwhile: what is stored then wins, and
+    // a later read finds it.
+    if store.set_meta(&take.to_row()?).await? {
+        take.body_rev += 1;
     }
     Ok(take)
+}
+
+/// A live stream's axes from the frames of its first chunk (`positions`, as sent): what
+/// readers of the live take turn and move it by until it finishes.
+pub fn opening(take: &Take, positions: Vec<f32>) -> Result<Axes> {
+    Ok(of_frames(take, positions)?.0)
+}
+
+/// A finishing stream's axes from the whole take: from `positions` (every frame as sent,
+/// when the stream kept them; given back, for its re-encoding) or from a sample of its
+/// committed chunks.
+pub async fn closing(
+    store: &Store,
+    take: &Take,
+    positions: Option<Vec<f32>>,
+) -> Result<(Axes, Option<Vec<f32>>)> {
+    match positions {
+        Some(p) => {
+            let take = take.clone();
+            let (axes, p) = blocking(move || of_frames(&take, p)).await??;
+            Ok((axes, Some(p)))
+        }
+        None => Ok((derive_stored(store, take, given_before(take)).await?, None)),
+    }
+}
+
+/// The axes of `take` from its frames `positions` (given back).
+fn of_frames(take: &Take, positions: Vec<f32>) -> Result<(Axes, Vec<f32>)> {
+    let m = Motion::new(
+        take.fps,
+        take.meta.unit.clone(),
+        take.meta.point_names.clone(),
+        positions,
+        None,
+    )?;
+    let axes = derive(&m, None, &take.roles, given_before(take), None)?;
+    Ok((axes, m.into_positions()))
+}
+
+/// What a user gave of the take's axes before (at ingest or by PATCH): it stays when the
+/// axes are derived again.
+fn given_before(take: &Take) -> Given {
+    let kept = |a: Option<Axis>, from: Option<Source>| a.filter(|_| from == Some(Source::Given));
+    match &take.meta.axes {
+        Some(a) => Given {
+            up: kept(a.up, a.up_from),
+            forward: kept(a.forward, a.forward_from),
+        },
+        None => Given::default(),
+    }
 }
 
 /// A user's correction of a take's body: what it gives wins over what was read.
@@ -64,55 +118,53 @@ pub struct Correction {
 /// before stays unless given anew), and stored. A live take's body is derived at its
 /// finish: it is corrected after.
 pub async fn correct(store: &Store, id: &str, c: Correction) -> Result<Take> {
-    let mut take = super::fetch::take(store, id).await?;
-    if take.is_live() {
-        return Err(Error::Unsatisfiable(format!(
-            "take {id} is live: its body is derived when its stream finishes; correct it then"
-        )));
-    }
-    for (role, names) in &c.roles {
-        if let Some(n) = names.iter().find(|n| !take.meta.point_names.contains(n)) {
-            return Err(Error::InvalidRequest(format!(
-                "body.roles.{role}: the take has no point named {n:?}"
+    for _ in 0..CORRECT_ATTEMPTS {
+        let mut take = super::fetch::take(store, id).await?;
+        if take.is_live() {
+            return Err(Error::Unsatisfiable(format!(
+                "take {id} is live: its body is derived when its stream finishes; correct it then"
             )));
         }
+        for (role, names) in &c.roles {
+            if let Some(n) = names.iter().find(|n| !take.meta.point_names.contains(n)) {
+                return Err(Error::InvalidRequest(format!(
+                    "body.roles.{role}: the take has no point named {n:?}"
+                )));
+            }
+        }
+        let before = given_before(&take);
+        let given = Given {
+            up: c.up.or(before.up),
+            forward: c.forward.or(before.forward),
+        };
+        given
+            .check()
+            .map_err(|e| Error::InvalidRequest(format!("body: {e}")))?;
+        take.meta.roles_given.extend(c.roles.clone());
+        take.roles = std::mem::take(&mut take.roles).with_given(&take.meta.roles_given);
+        take.meta.axes = Some(derive_stored(store, &take, given).await?);
+        if store.set_meta(&take.to_row()?).await? {
+            take.body_rev += 1;
+            return Ok(take);
+        }
+        // Re-encoded, derived or corrected meanwhile: correct what is stored now.
     }
-    let before = take.meta.axes.clone();
-    let kept = |pick: fn(&Axes) -> (Option<Axis>, Option<Source>)| {
-        before
-            .as_ref()
-            .map(pick)
-            .and_then(|(a, from)| a.filter(|_| from == Some(Source::Given)))
-    };
-    let given = Given {
-        up: c.up.or_else(|| kept(|a| (a.up, a.up_from))),
-        forward: c.forward.or_else(|| kept(|a| (a.forward, a.forward_from))),
-    };
-    given
-        .check()
-        .map_err(|e| Error::InvalidRequest(format!("body: {e}")))?;
-    take.meta.roles_given.extend(c.roles);
-    take.roles = std::mem::take(&mut take.roles).with_given(&take.meta.roles_given);
-    take.meta.axes = Some(derive_stored(store, &take, given).await?);
-    let row = take.to_row()?;
-    if !store
-        .set_meta(&take.id, &row.meta, &row.codec, row.totals.stored_bytes)
-        .await?
-    {
-        return Err(Error::Conflict(format!(
-            "take {id} was re-encoded or deleted while its body was corrected; send it again"
-        )));
-    }
-    take.body_rev += 1;
-    Ok(take)
+    Err(Error::Conflict(format!(
+        "take {id} kept changing while its body was corrected; send the correction again"
+    )))
 }
 
 /// What the take's source format says of up, as ingest would have read it (a C3D's from
 /// its stored parameters).
 async fn prior(store: &Store, take: &Take) -> Result<Option<Prior>> {
-    let Ok(format) = take.source_format.parse::<Format>() else {
+    // A stream's frames come in no file format: no convention.
+    if take.source_format == "stream" {
         return Ok(None);
-    };
+    }
+    let format = take
+        .source_format
+        .parse::<Format>()
+        .map_err(|e| Error::Corrupt(format!("take {}: source format: {e}", take.id)))?;
     let params = match format {
         Format::C3d => analog::parameters(store, &take.id).await?,
         _ => None,
@@ -123,6 +175,11 @@ async fn prior(store: &Store, take: &Take) -> Result<Option<Prior>> {
 /// The axes of a stored take, from up to [`SAMPLED_CHUNKS`] of its chunks decoded.
 async fn derive_stored(store: &Store, take: &Take, given: Given) -> Result<Axes> {
     let prior = prior(store, take).await?;
+    // The skeleton's joints, whatever the codec keeps: a toe's end site finds the floor.
+    let rig = match &take.skeleton {
+        Some(id) => Some(super::skeletons::load(store, id).await?),
+        None => None,
+    };
     let (header, _) = header_of(store, take).await?;
     let shared = shared(store, &header).await?;
     let n = header.chunks.len();
@@ -157,7 +214,8 @@ async fn derive_stored(store: &Store, take: &Take, given: Given) -> Result<Axes>
             positions,
             None,
         )?;
-        derive(&m, &take.roles, given, prior.as_ref()).map_err(Error::InvalidRequest)
+        let joints = rig.as_ref().map(|r| r.joints());
+        Ok(derive(&m, joints, &take.roles, given, prior.as_ref())?)
     })
     .await?
 }

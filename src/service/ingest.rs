@@ -109,7 +109,7 @@ pub async fn ingest(
         let m = motion.clone();
         blocking(move || Body::of(&m, given, prior.as_ref())).await?
     }
-    .map_err(Error::InvalidRequest)?;
+    .map_err(|e| Error::InvalidRequest(e.to_string()))?;
     let analog_only = motion.point_count() == 0 && extras.analog.is_some();
     if motion.frame_count() == 0
         || !analog_only && (motion.point_count() == 0 || motion.gap_fraction() >= 1.0)

@@ -8,7 +8,8 @@
 //! [`Stamp`] of the coding it was built from, and [`ReadCaches::current`] checks it against
 //! the stored one before each use (one indexed lookup): a take re-encoded or deleted since,
 //! here or through another server sharing the database, is built again or answered 404.
-//! Decoded chunks are keyed by the take, its stamp and the chunk, so chunks of an older
+//! Decoded chunks are keyed by the take, its coding's stamp (a corrected body decodes the same
+//! chunks) and the chunk, so chunks of an older
 //! coding (or of a live take before its last commit) are never read again; those age out.
 
 use std::collections::{HashMap, VecDeque};
@@ -42,17 +43,29 @@ impl Stamp {
         }
     }
 
-    /// A stored stamp: a codec id that does not parse is a corrupt record.
+    /// The stamp of the coding alone: a body corrected changes what transforms read, not
+    /// the chunks decoded.
+    fn coding(self) -> Stamp {
+        Stamp {
+            body_rev: 0,
+            ..self
+        }
+    }
+
+    /// A stored stamp: a codec id that does not parse, or a negative count, is a corrupt
+    /// record.
     fn parse(id: &str, row: StampRow) -> super::Result<Stamp> {
+        let corrupt = |what: &str, v: i64| super::Error::Corrupt(format!("take {id}: {what} {v}"));
         let codec = row
             .codec
             .parse()
             .map_err(|e| super::Error::Corrupt(format!("take {id}: codec: {e}")))?;
         Ok(Stamp {
             codec,
-            stored_bytes: row.stored_bytes.max(0) as u64,
-            frames: row.frames.max(0) as usize,
-            body_rev: row.body_rev.max(0) as u64,
+            stored_bytes: u64::try_from(row.stored_bytes)
+                .map_err(|_| corrupt("stored_bytes", row.stored_bytes))?,
+            frames: usize::try_from(row.frames).map_err(|_| corrupt("frames", row.frames))?,
+            body_rev: u64::try_from(row.body_rev).map_err(|_| corrupt("body_rev", row.body_rev))?,
         })
     }
 }
@@ -214,7 +227,7 @@ impl ReadCaches {
     }
 }
 
-/// Decoded chunks by (take, [`Stamp`], chunk index), bounded in bytes, oldest evicted first.
+/// Decoded chunks by (take, its coding's [`Stamp`], chunk index), bounded in bytes, oldest evicted first.
 pub struct ChunkCache {
     budget: usize,
     inner: Mutex<ChunkEntries>,
@@ -240,7 +253,7 @@ impl ChunkCache {
 
     /// Chunk `index` of the take `p` reads, as decoded from its coding now.
     pub fn get(&self, p: &Prepared, index: usize) -> Option<Arc<Vec<f32>>> {
-        let key = (p.id.clone(), p.stamp, index);
+        let key = (p.id.clone(), p.stamp.coding(), index);
         self.inner
             .lock()
             .expect("cache lock")
@@ -255,7 +268,7 @@ impl ChunkCache {
             return;
         }
         let mut g = self.inner.lock().expect("cache lock");
-        let key: ChunkKey = (p.id.clone(), p.stamp, index);
+        let key: ChunkKey = (p.id.clone(), p.stamp.coding(), index);
         if let Some(old) = g.map.insert(key.clone(), frames) {
             g.bytes -= old.len() * 4;
         } else {

@@ -31,11 +31,12 @@ pub enum Shaper {
     },
 }
 
-/// A transform the take's body cannot make (409, naming what to give) or one that makes
-/// no sense (400).
+/// A transform the take's body cannot make (409, naming what to give), a stored body that
+/// contradicts its take (corrupt), or a transform that makes no sense (400).
 fn refused(e: crate::motion::Error) -> Error {
     match e {
         crate::motion::Error::Unsupported(m) => Error::Unsatisfiable(m),
+        crate::motion::Error::Contradiction(m) => Error::Corrupt(m),
         other => Error::InvalidRequest(other.to_string()),
     }
 }

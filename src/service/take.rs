@@ -148,7 +148,8 @@ pub struct Label {
 
 impl Take {
     /// A new take of no frames yet, coded with `codec` to `bound` (its shape and unit from
-    /// `meta`); ingest and streams fill in frames, sizes and errors as they code it.
+    /// `meta`, its roles from its point names); ingest and streams fill in frames, sizes
+    /// and errors as they code it (and a skeleton take's skeleton and roles).
     pub fn new(
         label: &Label,
         source_format: &str,
@@ -159,6 +160,7 @@ impl Take {
         meta: TakeMeta,
     ) -> Take {
         let id = uuid::Uuid::now_v7().to_string();
+        let roles = Roles::of_markers(&meta.point_names).with_given(&meta.roles_given);
         Take {
             name: label
                 .name
@@ -189,7 +191,7 @@ impl Take {
             header: Vec::new(),
             live_until: None,
             skeleton: None,
-            roles: Roles::default(),
+            roles,
             body_rev: 0,
         }
     }

@@ -263,9 +263,10 @@ impl Store {
 
     /// Extend or replace a take's encoding in one transaction: its row's encoding columns
     /// (frames, codec, sizes, statistics, header, meta) take `row`'s values and `chunks` are
-    /// added; with `replace`, its old chunks and basis reference go first. Live streams
-    /// commit chunk by chunk this way; a finished stream's re-encoding replaces them.
-    /// False if there is no such take.
+    /// added; with `replace`, its old chunks and basis reference go first (a finished
+    /// stream's re-encoding). Only while its body is the one `row` was read with
+    /// (`row.body_rev`): a body corrected meanwhile is not undone. False if there is no such
+    /// take or its body changed.
     pub async fn update_encoding(
         &self,
         row: &TakeRow,
@@ -277,7 +278,7 @@ impl Store {
             let mut tx = pool.begin_write().await?;
             let sql = format!(
                 "UPDATE takes SET {}, codec = $10, max_bound_mm = $11, mean_bound_mm = $12, \
-                 header = $13, meta = $14 WHERE id = $15",
+                 header = $13, meta = $14 WHERE id = $15 AND body_rev = $16",
                 rows::SET_TOTALS
             );
             let r = rows::bind_totals(sqlx::query(&sql), &row.totals)
@@ -287,6 +288,7 @@ impl Store {
             .bind(&row.header)
             .bind(&row.meta)
             .bind(&row.id)
+            .bind(row.body_rev)
             .execute(&mut *tx)
             .await?;
             if r.rows_affected() == 0 {
@@ -336,7 +338,7 @@ impl Store {
             let mut tx = pool.begin_write().await?;
             let sql = format!(
                 "UPDATE takes SET {}, live_until = $10, frames_received = $11, \
-                 stream_state = $12 \
+                 stream_state = $12, meta = COALESCE($15, meta) \
                  WHERE id = $13 AND live_until IS NOT NULL AND stream_server = $14",
                 rows::SET_TOTALS
             );
@@ -346,6 +348,7 @@ impl Store {
             .bind(append.state)
             .bind(id)
             .bind(append.server)
+            .bind(append.meta)
             .execute(&mut *tx)
             .await?;
             if r.rows_affected() == 0 {
@@ -901,27 +904,22 @@ impl Store {
         })
     }
 
-    /// Replace a closed take's meta when its body changed, if its coding is still the one it
-    /// was read with (`codec`, `stored_bytes`): a re-encode meanwhile wrote a meta of its
-    /// own, which this must not undo. Counts the change in `body_rev`. False when the take is
-    /// gone, live or re-encoded.
-    pub async fn set_meta(
-        &self,
-        id: &str,
-        meta: &str,
-        codec: &str,
-        stored_bytes: i64,
-    ) -> Result<bool> {
+    /// Replace a closed take's meta when its body changed, if the record is still the one
+    /// `row` was read from: the same coding (`codec`, `stored_bytes`: a re-encode meanwhile
+    /// wrote a meta of its own, which this must not undo) and the same `body_rev` (a body
+    /// derived or corrected meanwhile, by this server or another, wins). Counts the change
+    /// in `body_rev`. False when the take is gone, live, re-encoded or its body changed.
+    pub async fn set_meta(&self, row: &TakeRow) -> Result<bool> {
         dispatch!(self, pool => {
             let done = sqlx::query(
                 "UPDATE takes SET meta = $1, body_rev = body_rev + 1 WHERE id = $2 AND codec = $3 \
-                 AND stored_bytes = $4 \
-                 AND live_until IS NULL",
+                 AND stored_bytes = $4 AND body_rev = $5 AND live_until IS NULL",
             )
-            .bind(meta)
-            .bind(id)
-            .bind(codec)
-            .bind(stored_bytes)
+            .bind(&row.meta)
+            .bind(&row.id)
+            .bind(&row.codec)
+            .bind(row.totals.stored_bytes)
+            .bind(row.body_rev)
             .execute(pool)
             .await?;
             Ok(done.rows_affected() == 1)

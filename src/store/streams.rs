@@ -28,6 +28,9 @@ pub struct ChunkAppend<'a> {
     pub frames_received: i64,
     /// [`StreamRow::state`] after this chunk.
     pub state: &'a str,
+    /// The take's meta, when it changed (its body, derived from its first chunk's frames);
+    /// `None` keeps it.
+    pub meta: Option<&'a str>,
 }
 
 /// A new stream's take's owner and coder state, inserted with it

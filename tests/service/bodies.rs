@@ -310,3 +310,151 @@ async fn a_body_nothing_tells_is_given_by_patch() {
     }
     t.finish().await;
 }
+
+/// The body of `id` as GET /v1/takes/{id} shows it.
+async fn body_of(srv: &common::Server, id: &str) -> Value {
+    let (status, take) = srv.get_json(&format!("/v1/takes/{id}")).await;
+    assert_eq!(status, 200, "{take}");
+    take["body"].clone()
+}
+
+/// A take stored before bodies were kept (its record without axes) gets its body at its
+/// first read, from a sample of its chunks and its skeleton's joints (the floor under the
+/// toes' end sites, as at ingest), stored, its bitstream untouched; a correction keeps the
+/// floor where it was.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_take_stored_before_gets_its_body_at_its_first_read() {
+    let Some((root, entries)) = corpus::for_tests() else {
+        return;
+    };
+    let mut walks: Vec<&str> = entries
+        .iter()
+        .filter(|e| e.path.starts_with("bvh/bandai/") && e.path.contains("walk"))
+        .map(|e| e.path.as_str())
+        .collect();
+    walks.sort();
+    let rel = walks.first().expect("a Bandai walk in the corpus");
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let (status, report) = srv
+        .post("lenient=true", std::fs::read(root.join(rel)).unwrap())
+        .await;
+    assert_eq!(status, 201, "{rel}: {report}");
+    let id = report["id"].as_str().unwrap().to_string();
+    let at_ingest = body_of(&srv, &id).await;
+    assert_eq!(at_ingest["up"], "y", "{rel}: {at_ingest}");
+    let floor = at_ingest["floor_m"].as_f64().unwrap();
+
+    // As a take stored before bodies were kept: no axes in its meta.
+    let mut row = t.store.get(&id).await.unwrap().unwrap();
+    let mut meta: Value = serde_json::from_str(&row.meta).unwrap();
+    meta.as_object_mut().unwrap().remove("axes").unwrap();
+    row.meta = meta.to_string();
+    assert!(t.store.set_meta(&row).await.unwrap());
+    let before = t.store.get(&id).await.unwrap().unwrap();
+    assert!(!before.meta.contains("\"axes\""));
+
+    let derived = body_of(&srv, &id).await;
+    for k in ["up", "forward", "up_from", "convention"] {
+        assert_eq!(derived[k], at_ingest[k], "{rel} {k}: {derived}");
+    }
+    let d = derived["floor_m"].as_f64().unwrap();
+    assert!(
+        (d - floor).abs() < 0.02,
+        "{rel}: floor {d} m, at ingest {floor} m"
+    );
+    let after = t.store.get(&id).await.unwrap().unwrap();
+    assert!(after.meta.contains("\"axes\""), "stored once");
+    assert_eq!(after.body_rev, before.body_rev + 1);
+    assert_eq!(
+        (&after.header, after.totals.stored_bytes, &after.codec),
+        (&before.header, before.totals.stored_bytes, &before.codec),
+        "no bitstream changes"
+    );
+    // Read again: nothing derived or written.
+    body_of(&srv, &id).await;
+    assert_eq!(
+        t.store.get(&id).await.unwrap().unwrap().body_rev,
+        after.body_rev
+    );
+
+    // A correction of forward derives the rest again: the floor stays under the toes.
+    let (status, take) = correct(&srv, &id, serde_json::json!({"forward": "-x"})).await;
+    assert_eq!(status, 200, "{take}");
+    assert_eq!(take["body"]["forward"], "-x");
+    let c = take["body"]["floor_m"].as_f64().unwrap();
+    assert!(
+        (c - floor).abs() < 0.02,
+        "{rel}: corrected floor {c} m, at ingest {floor} m"
+    );
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// A live stream's take has its body from its first commit (a glTF of the live take stands
+/// up), and again from all of it at its finish; a body corrected after the finish stays
+/// through the finish's re-encoding, and is what every later read turns by.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_live_take_has_its_body_from_its_first_chunk() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    // A dancer, Z-up (its +Y turned to +Z), in metres.
+    let m = mocapstore::motion::synthetic::dancer(480, 120.0, 5);
+    let k = m.unit.metres_per_unit as f32;
+    let frames: Vec<f32> = m
+        .positions()
+        .chunks_exact(3)
+        .flat_map(|p| [p[0] * k, -p[2] * k, p[1] * k])
+        .collect();
+    let w = m.point_count() * 3;
+    let (status, _, info) = srv
+        .post_json(
+            "/v1/streams",
+            &serde_json::json!({"name": "live dancer", "fps": 120.0, "points": m.point_names,
+                    "unit": "m", "max_error_mm": 1.0, "chunk_seconds": 1.0,
+                    "reencode_on_finish": true}),
+        )
+        .await;
+    assert_eq!(status, 201, "{info}");
+    let id = info["id"].as_str().unwrap().to_string();
+    let send = |from: usize, to: usize| {
+        let body: Vec<u8> = frames[from * w..to * w]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        srv.client
+            .post(format!("{}/v1/streams/{id}/frames", srv.base))
+            .header("content-type", "application/octet-stream")
+            .body(body)
+            .send()
+    };
+    assert_eq!(send(0, 60).await.unwrap().status().as_u16(), 200);
+    assert_eq!(
+        body_of(&srv, &id).await,
+        Value::Null,
+        "no frame committed yet"
+    );
+    assert_eq!(send(60, 240).await.unwrap().status().as_u16(), 200);
+    let live = body_of(&srv, &id).await;
+    assert_eq!(live["up"], "z", "{live}");
+    let (status, _, glb) = srv.get(&format!("/v1/takes/{id}/frames?format=glb")).await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&glb));
+    assert_eq!(send(240, 480).await.unwrap().status().as_u16(), 200);
+    let (status, _, row) = srv
+        .post_json(&format!("/v1/streams/{id}/finish"), &serde_json::json!({}))
+        .await;
+    assert_eq!(status, 200, "{row}");
+    let done = body_of(&srv, &id).await;
+    assert_eq!(
+        (&done["up"], &done["up_from"]),
+        (&Value::from("z"), &Value::from("anatomy"))
+    );
+    // The body stays as corrected: the finish's re-encoding wrote before it, or not at all.
+    let (status, take) = correct(&srv, &id, serde_json::json!({"up": "-x"})).await;
+    assert_eq!(status, 200, "{take}");
+    let stored = t.store.get(&id).await.unwrap().unwrap();
+    assert!(stored.meta.contains("\"up\":\"-x\""), "{}", stored.meta);
+    assert_eq!(body_of(&srv, &id).await["up"], "-x");
+    srv.stop().await;
+    t.finish().await;
+}

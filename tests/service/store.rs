@@ -103,6 +103,48 @@ async fn takes_round_trip_atomically_on_every_backend() {
     }
 }
 
+/// A body is written only over the record it was derived from: a meta or a re-encoding
+/// written from a record read before a correction does not undo it, on every backend.
+#[tokio::test]
+async fn a_body_write_from_a_stale_record_changes_nothing() {
+    for t in common::all().await {
+        let s = &t.store;
+        let new = take("body", 2);
+        s.insert(&new).await.unwrap();
+        let read = s.get("body").await.unwrap().unwrap();
+        let mut corrected = read.clone();
+        corrected.meta = r#"{"points": ["a", "b"], "axes": {"up": "y"}}"#.into();
+        assert!(s.set_meta(&corrected).await.unwrap(), "{}", t.name);
+        let stored = s.get("body").await.unwrap().unwrap();
+        assert_eq!(stored.body_rev, read.body_rev + 1, "{}", t.name);
+        // Derived from the record read before: refused, the correction stays.
+        let mut stale = read.clone();
+        stale.meta = r#"{"points": ["a", "b"], "axes": {"up": "z"}}"#.into();
+        assert!(!s.set_meta(&stale).await.unwrap(), "{}", t.name);
+        stale.totals.stored_bytes = 50;
+        assert!(
+            !s.update_encoding(&stale, &new.chunks, true, None)
+                .await
+                .unwrap(),
+            "{}",
+            t.name
+        );
+        assert_eq!(s.get("body").await.unwrap().unwrap(), stored, "{}", t.name);
+        // From the record as it is now: written.
+        let mut fresh = stored.clone();
+        fresh.totals.stored_bytes = 50;
+        assert!(s
+            .update_encoding(&fresh, &new.chunks, true, None)
+            .await
+            .unwrap());
+        assert_eq!(
+            s.get("body").await.unwrap().unwrap().totals.stored_bytes,
+            50
+        );
+        t.finish().await;
+    }
+}
+
 #[tokio::test]
 async fn altered_chunks_fail_their_checksum() {
     for t in common::all().await {
@@ -292,6 +334,7 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
             live_until: 2_000,
             frames_received: 130,
             state: "{\"n\": 1}",
+            meta: None,
         };
         assert!(s
             .append_chunk("live", &totals, &chunk, &append("a"))

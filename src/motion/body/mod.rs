@@ -146,9 +146,10 @@ pub struct Body {
 
 impl Body {
     /// The roles of take `m` (its skeleton's, or its point names'), and its axes by them.
-    pub fn of(m: &Motion, given: Given, prior: Option<&Prior>) -> Result<Body, String> {
+    pub fn of(m: &Motion, given: Given, prior: Option<&Prior>) -> crate::motion::Result<Body> {
         let roles = roles_of(m);
-        let axes = derive(m, &roles, given, prior)?;
+        let joints = m.skeleton.as_ref().map(|s| s.joints.as_slice());
+        let axes = derive(m, joints, &roles, given, prior)?;
         Ok(Body { axes, roles })
     }
 }
@@ -245,17 +246,18 @@ const FLOOR_HEIGHT_M: std::ops::RangeInclusive<f64> = 1.0..=2.3;
 /// (the length of the mean facing direction); else its first second decides.
 const FACING_AGREEMENT: f64 = 0.5;
 
-/// The axes of take `m` by its `roles` (a skeleton's: the floor is found under the
-/// ankles' children too). `given` wins, then anatomy, then `prior`. Err: what was given
-/// contradicts itself.
+/// The axes of take `m` by its `roles`. `joints`, a skeleton take's (whether `m` carries
+/// its animation or only its points), let the floor be found under the ankles' children
+/// too: the end sites of toes and heels. `given` wins, then anatomy, then `prior`.
+/// `Invalid`: what was given contradicts itself.
 pub fn derive(
     m: &Motion,
+    joints: Option<&[Joint]>,
     roles: &Roles,
     given: Given,
     prior: Option<&Prior>,
-) -> Result<Axes, String> {
-    given.check()?;
-    let joints = m.skeleton.as_ref().map(|s| s.joints.as_slice());
+) -> crate::motion::Result<Axes> {
+    given.check().map_err(crate::motion::Error::Invalid)?;
     let figure = Figure::new(m.positions(), &m.point_names, roles, joints);
     let (metres_per_unit, fps) = (m.unit.metres_per_unit, m.fps);
     let mut notes = Vec::new();
@@ -281,7 +283,8 @@ pub fn derive(
         }
         (None, Ok(Upright::Floor { up, height_m })) => {
             notes.push(format!(
-                "up {up}: no roles, but the points stand on the floor at the origin along                  {up}, {height_m:.2} m tall"
+                "up {up}: no roles, but the points stand on the floor at the origin along \
+                 {up}, {height_m:.2} m tall"
             ));
             (Some(up), Some(Source::Floor))
         }

@@ -18,8 +18,15 @@ fn moved(m: &Motion, f: impl Fn([f32; 3]) -> [f32; 3]) -> Motion {
     .unwrap()
 }
 
+/// `m`'s points under names no convention knows (`m0`, `m1`, …), without its skeleton.
+fn anonymous(m: &Motion) -> Motion {
+    let names: Vec<String> = (0..m.point_count()).map(|i| format!("m{i}")).collect();
+    Motion::new(m.fps, m.unit.clone(), names, m.positions().to_vec(), None).unwrap()
+}
+
 fn axes(m: &Motion, roles: &Roles) -> Axes {
-    derive(m, roles, Given::default(), None).unwrap()
+    let joints = m.skeleton.as_ref().map(|s| s.joints.as_slice());
+    derive(m, joints, roles, Given::default(), None).unwrap()
 }
 
 /// The dancer stands on +Y and faces +Z (its toes point there, its left is +X); turned to
@@ -81,15 +88,8 @@ fn a_long_walk_stands_upright() {
 #[test]
 fn without_a_body_the_prior_or_nothing() {
     let m = dancer(30, 30.0, 3);
-    let names: Vec<String> = (0..m.point_count()).map(|i| format!("m{i}")).collect();
-    let anon = Motion::new(
-        m.fps,
-        m.unit.clone(),
-        names.clone(),
-        m.positions().to_vec(),
-        None,
-    )
-    .unwrap();
+    let anon = anonymous(&m);
+    let names = anon.point_names.clone();
     let roles = Roles::of_markers(&names);
     assert_eq!(roles.convention, None);
     assert_eq!(roles.unplaced.len(), 20);
@@ -104,7 +104,7 @@ fn without_a_body_the_prior_or_nothing() {
         up: Axis::Z,
         says: "C3D is Z-up by convention".into(),
     };
-    let a = derive(&anon, &roles, Given::default(), Some(&prior)).unwrap();
+    let a = derive(&anon, None, &roles, Given::default(), Some(&prior)).unwrap();
     assert_eq!((a.up, a.up_from), (Some(Axis::Z), Some(Source::Format)));
     assert!(a.reason.contains("C3D is Z-up"), "{}", a.reason);
     // Given wins over anatomy.
@@ -113,7 +113,7 @@ fn without_a_body_the_prior_or_nothing() {
         up: Some(Axis::X),
         forward: Some(Axis::Y),
     };
-    let a = derive(&m, &named, given, Some(&prior)).unwrap();
+    let a = derive(&m, None, &named, given, Some(&prior)).unwrap();
     assert_eq!((a.up, a.forward), (Some(Axis::X), Some(Axis::Y)));
     assert_eq!(
         (a.up_from, a.forward_from),
@@ -123,7 +123,7 @@ fn without_a_body_the_prior_or_nothing() {
         up: Some(Axis::Y),
         forward: Some(Axis::Y.flipped()),
     };
-    assert!(derive(&m, &named, bad, None).is_err());
+    assert!(derive(&m, None, &named, bad, None).is_err());
 }
 
 /// A rig whose names nothing knows gets its roles from its shape: the same joints the names
@@ -235,15 +235,8 @@ fn stepper(frames: usize, lean: f32, run: f32) -> Motion {
 #[test]
 fn unnamed_points_stand_up_by_the_lab_floor() {
     let m = moved(&stepper(300, 0.0, 0.0), |[x, y, z]| [x, -z, y]);
-    let names: Vec<String> = (0..m.point_count()).map(|i| format!("m{i}")).collect();
-    let anon = Motion::new(
-        m.fps,
-        m.unit.clone(),
-        names.clone(),
-        m.positions().to_vec(),
-        None,
-    )
-    .unwrap();
+    let anon = anonymous(&m);
+    let names = anon.point_names.clone();
     let roles = Roles::of_markers(&names);
     let a = axes(&anon, &roles);
     assert_eq!(

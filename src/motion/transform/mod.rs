@@ -29,7 +29,8 @@ pub struct Stance {
     /// it, whatever joint carries the translation channels. Empty: no pelvis was found.
     pub pelvis: Vec<usize>,
     /// The floor's height along `up`, in the take's units: where an extracted root motion
-    /// runs.
+    /// runs. The origin's level when the body tells none, which happens only when it has
+    /// no up (then nothing runs on a floor) or no point is ever present.
     pub floor: f64,
     /// The way the body faces over the take: an extracted root motion's heading is the
     /// turn from it about `up`.

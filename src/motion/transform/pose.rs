@@ -69,7 +69,7 @@ impl PointPose {
             root => stance.pelvis_for(root)?.to_vec(),
         };
         if let Some(&p) = pelvis.iter().find(|&&p| p >= points) {
-            return Err(Error::Invalid(format!(
+            return Err(Error::Contradiction(format!(
                 "the pelvis is point {p} of a take of {points}"
             )));
         }
@@ -79,7 +79,7 @@ impl PointPose {
             .flat_map(|(l, r)| l.iter().chain(r))
             .find(|&&p| p >= points)
         {
-            return Err(Error::Invalid(format!(
+            return Err(Error::Contradiction(format!(
                 "a side is point {p} of a take of {points}"
             )));
         }
@@ -204,8 +204,9 @@ pub struct SkeletonPose {
     root: Root,
     up: Axis,
     floor: f64,
-    /// The pelvis joint, and FK to find it each frame (root motion only).
-    pelvis: usize,
+    /// The pelvis's joints (their centroid is its place, as a marker take's pelvis points
+    /// are), and FK to find them each frame (root motion only).
+    pelvis: Vec<usize>,
     fk: Fk,
     placed: Vec<f64>,
     /// The root's position channel of each axis (root motion only).
@@ -317,17 +318,28 @@ impl SkeletonPose {
     ) -> Result<SkeletonPose, Error> {
         let root = joints
             .first()
-            .ok_or_else(|| Error::Invalid("the skeleton has no joints".into()))?;
+            .ok_or_else(|| Error::Contradiction("the skeleton has no joints".into()))?;
         let up = working_up(options, stance)?;
         let pos = |axis: usize| root.channels.iter().position(|c| c.axis() == (axis, false));
         let root_position = [pos(0), pos(1), pos(2)];
+        if let Some(&p) = stance
+            .sides
+            .iter()
+            .flat_map(|(l, r)| l.iter().chain(r))
+            .find(|&&p| p >= joints.len())
+        {
+            return Err(Error::Contradiction(format!(
+                "a side is joint {p} of a skeleton of {}",
+                joints.len()
+            )));
+        }
         let pelvis = match options.root {
-            Root::Keep => 0,
+            Root::Keep => Vec::new(),
             r => {
-                let p = stance.pelvis_for(r)?[0];
-                if p >= joints.len() {
-                    return Err(Error::Invalid(format!(
-                        "the pelvis is joint {p} of a skeleton of {}",
+                let p = stance.pelvis_for(r)?.to_vec();
+                if let Some(&j) = p.iter().find(|&&j| j >= joints.len()) {
+                    return Err(Error::Contradiction(format!(
+                        "the pelvis is joint {j} of a skeleton of {}",
                         joints.len()
                     )));
                 }
@@ -470,8 +482,12 @@ impl SkeletonPose {
             // The root's translation is in world coordinates: moving it by the pelvis's
             // horizontal place moves the whole body so that the pelvis stands over zero.
             self.fk.frame(&self.source, src, &mut self.placed);
-            let p = self.pelvis * 3;
-            let mut path = [self.placed[p], self.placed[p + 1], self.placed[p + 2]];
+            let mut path = [0.0; 3];
+            for &j in &self.pelvis {
+                for (a, v) in path.iter_mut().enumerate() {
+                    *v += self.placed[j * 3 + a] / self.pelvis.len() as f64;
+                }
+            }
             path[self.up.index()] = 0.0;
             if self.root == Root::Extract {
                 ground = on_level(path, self.up, self.floor);

@@ -11,8 +11,7 @@ use crate::codec::{self, Basis, CodecId, Latency};
 use crate::motion::Motion;
 use crate::service::bases::Provenance;
 use crate::service::choose::{CodecRequest, Keep};
-use crate::service::take::Take;
-use crate::service::{bases, blocking, ingest, take, Error, Result};
+use crate::service::{bases, blocking, body, ingest, take, Error, Result};
 use crate::store::{BasisRow, ChunkAppend, Store};
 
 /// The shared basis a stream coded with `codec` codes with, if the codec uses one: the
@@ -111,6 +110,14 @@ impl Streams {
     ) -> Result<()> {
         let totals = live.encoder()?.totals_with(chunk);
         let mut take = live.take.clone();
+        // The first commit gives the take its body, for readers of the live take.
+        let meta = if take.meta.axes.is_none() && !live.opening.is_empty() {
+            let (t, opening) = (take.clone(), live.opening.clone());
+            take.meta.axes = Some(blocking(move || body::opening(&t, opening)).await??);
+            Some(take.meta.to_text(&take.id)?)
+        } else {
+            None
+        };
         take.set_frames(totals.frames);
         take.set_measured(totals.stored_bytes, &totals.stats);
         let chunk_row = take::chunk_row(chunk.index, &chunk.meta, &chunk.payload);
@@ -126,12 +133,16 @@ impl Streams {
             live_until: until,
             frames_received: live.received as i64,
             state: &state,
+            meta: meta.as_deref(),
         };
         if !store
             .append_chunk(&take.id, &take.totals(), &chunk_row, &append)
             .await?
         {
             return Err(Self::lost(&live.take.id));
+        }
+        if take.meta.axes.is_some() {
+            live.opening = Vec::new();
         }
         live.take = take;
         live.persisted = live.received;
@@ -141,35 +152,55 @@ impl Streams {
 }
 
 /// Code a finished stream's take again, from the frames as sent, with every candidate
-/// codec; keep the result if it is smaller than the live coding.
-pub(super) async fn reencode_take(store: &Store, take: &Take, positions: Vec<f32>) -> Result<()> {
-    let (unit, names) = (take.meta.unit.clone(), take.meta.point_names.clone());
+/// codec; keep the result if it is smaller than the live coding. Written over the record as
+/// it is then, unless it was re-encoded meanwhile: a body corrected since the stream closed
+/// stays.
+pub(super) async fn reencode_take(store: &Store, id: &str, positions: Vec<f32>) -> Result<()> {
+    let closed = crate::service::fetch::take(store, id).await?;
+    let (unit, names) = (closed.meta.unit.clone(), closed.meta.point_names.clone());
     let motion = Arc::new(
-        Motion::new(take.fps, unit, names, positions, None)
+        Motion::new(closed.fps, unit, names, positions, None)
             .map_err(|e| Error::Internal(e.to_string()))?,
     );
     let coding = ingest::Coding {
         codec: CodecRequest::Auto,
-        bound: take.bound,
+        bound: closed.bound,
         latency: Latency::Sequence,
         keep: Keep::default(),
         hints: Default::default(),
     };
-    let (decision, enc) = ingest::encode_best(store, motion, &take.layout, &coding, None).await?;
-    if enc.stored_bytes as u64 >= take.stored_bytes {
+    let (decision, enc) = ingest::encode_best(store, motion, &closed.layout, &coding, None).await?;
+    if enc.stored_bytes as u64 >= closed.stored_bytes {
         return Ok(());
     }
-    let mut new = take.clone();
-    new.codec = decision.winner;
-    new.set_measured(enc.stored_bytes, &enc.stats);
-    new.header = enc.container.header.to_bytes();
-    new.meta.decision = decision;
-    new.meta.decoded_blake3 = Some(enc.decoded_digest.clone());
-    new.meta.reencoded_from = Some(take.codec);
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
     let chunks = take::chunk_rows(&enc.container);
-    store
-        .update_encoding(&new.to_row()?, &chunks, true, basis.as_deref())
-        .await?;
+    for _ in 0..REENCODE_ATTEMPTS {
+        let now = crate::service::fetch::take(store, id).await?;
+        if (now.codec, now.stored_bytes) != (closed.codec, closed.stored_bytes) {
+            return Ok(()); // coded again elsewhere
+        }
+        let mut new = now;
+        new.codec = decision.winner;
+        new.set_measured(enc.stored_bytes, &enc.stats);
+        new.header = enc.container.header.to_bytes();
+        new.meta.decision = decision.clone();
+        new.meta.decoded_blake3 = Some(enc.decoded_digest.clone());
+        new.meta.reencoded_from = Some(closed.codec);
+        if store
+            .update_encoding(&new.to_row()?, &chunks, true, basis.as_deref())
+            .await?
+        {
+            return Ok(());
+        }
+        // Its body was corrected as this wrote: written again over the corrected record.
+    }
+    tracing::warn!(
+        take = id,
+        "the body kept changing while the re-encoding was stored; the take stays as coded live"
+    );
     Ok(())
 }
+
+/// How often a re-encoding is written again over a record whose body changed under it.
+const REENCODE_ATTEMPTS: usize = 3;

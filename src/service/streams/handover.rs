@@ -340,6 +340,7 @@ impl Streams {
             failed: None,
             last_activity: Instant::now(),
             archive: None,
+            opening: Vec::new(),
             warnings,
             watchers: broadcast::Sender::new(STREAM_WATCH_QUEUE),
             latest: None,

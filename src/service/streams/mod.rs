@@ -41,6 +41,7 @@ use std::time::Instant;
 
 use tokio::sync::{broadcast, OwnedSemaphorePermit};
 
+use super::body;
 use super::budget::{Holder, Share, Shares};
 use super::choose::Decision;
 use super::take::{Take, TakeMeta};
@@ -77,6 +78,9 @@ struct Live {
     last_activity: Instant,
     /// Every frame as sent, for re-encoding on finish (if asked for).
     archive: Option<Vec<f32>>,
+    /// The frames sent since the stream opened, up to one chunk's worth, until the take
+    /// has a body: its first commit derives the body from them ([`body::opening`]).
+    opening: Vec<f32>,
     warnings: Vec<String>,
     /// Every append, to this stream's watchers; dropped (which ends them) when it closes.
     watchers: broadcast::Sender<Arc<Arrival>>,
@@ -235,6 +239,7 @@ impl Streams {
             failed: None,
             last_activity: Instant::now(),
             archive: plan.reencode_on_finish.then(Vec::new),
+            opening: Vec::new(),
             warnings: Vec::new(),
             watchers: broadcast::Sender::new(STREAM_WATCH_QUEUE),
             latest: None,
@@ -324,6 +329,11 @@ impl Streams {
         let first = live.received;
         live.received += frames.len() / w;
         live.show_watchers(first, &frames, captured_ms);
+        if live.take.meta.axes.is_none() {
+            let room = (live.chunk_frames * w).saturating_sub(live.opening.len());
+            live.opening
+                .extend_from_slice(&frames[..room.min(frames.len())]);
+        }
         let limit = self.limits.stream_archive_bytes as usize;
         if let Some(a) = &mut live.archive {
             if (a.len() + frames.len()) * 4 > limit {
@@ -365,8 +375,9 @@ impl Streams {
     }
 
     /// Close a stream: commit what is pending, write the chunk index into the take's header
-    /// and mark it finished, and if the stream kept its frames, code the whole take again
-    /// with per-take choice, keeping that if it is smaller; then derive its body.
+    /// and mark it finished with its body derived from the whole take; and if the stream
+    /// kept its frames, code the whole take again with per-take choice, keeping that if it
+    /// is smaller.
     pub async fn finish(&self, store: &Store, id: &str) -> Result<Take> {
         let entry = match self.entry(id) {
             Some(e) => e,
@@ -396,12 +407,28 @@ impl Streams {
         let encoder = live.encoder()?;
         let (closed, digest) = (encoder.closed_header(), encoder.decoded_digest());
         // The take as this stream closes it (what the store holds unless another server
-        // closed it first, from the same committed chunks).
+        // closed it first, from the same committed chunks), its body derived from all of it.
         let mut take = live.take.clone();
         take.meta.decoded_blake3 = Some(digest);
         take.meta.warnings.extend(live.warnings.iter().cloned());
         take.header = closed.to_bytes();
         take.live_until = None;
+        let committed = take.frames * take.points * 3;
+        let archive = live
+            .archive
+            .take()
+            .filter(|a| take.frames > 0 && a.len() >= committed)
+            .map(|mut a| {
+                a.truncate(committed);
+                a
+            });
+        let archive = if take.frames > 0 {
+            let (axes, archive) = body::closing(store, &take, archive).await?;
+            take.meta.axes = Some(axes);
+            archive
+        } else {
+            None
+        };
         let closed = store
             .close_live(
                 id,
@@ -427,13 +454,9 @@ impl Streams {
             );
             return super::fetch::take(store, id).await;
         }
-        if let Some(frames) = live.archive.take().filter(|_| take.frames > 0) {
-            let committed = take.frames * take.points * 3;
-            if frames.len() >= committed {
-                reencode_take(store, &take, frames[..committed].to_vec()).await?;
-            }
+        if let Some(frames) = archive {
+            reencode_take(store, id, frames).await?;
         }
-        // Closed: its body is derived now from what it holds, and stored.
-        super::body::take(store, id).await
+        super::fetch::take(store, id).await
     }
 }
