@@ -40,7 +40,8 @@
 //!   decoder and writer ([`motion::transform`]: resampling, root motion, axes, units). Pure: no I/O, no async, no database.
 //!
 //! Beside them, depending on nothing: [`limits`] holds every bound on untrusted input and
-//! server memory (one place; each layer converts it to its own), [`rng`] the deterministic
+//! server memory (one place; each layer converts it to its own), [`labels`] a take's
+//! key → value labels and how they are read (queries, sidecar files, name patterns), [`rng`] the deterministic
 //! generator trainers and test motions draw from, [`dates`] the calendar of the Unix clock,
 //! and [`corpus`] says where the real-data corpus and its manifest are (tests and benchmarks).
 
@@ -50,6 +51,7 @@ pub mod dates;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod http;
+pub mod labels;
 pub mod limits;
 pub mod motion;
 pub mod rng;

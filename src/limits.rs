@@ -21,6 +21,14 @@ use std::time::Duration;
 /// millimetres would overflow or vanish.
 pub const UNIT_METRES: RangeInclusive<f64> = 1e-6..=1e3;
 
+/// Labels a take may carry ([`crate::labels`]): a dataset's sidecar has a handful; a
+/// hundred would be a document, which belongs in a file beside the take, not in its record.
+pub const MAX_LABELS: usize = 64;
+/// Characters of a label's key (`content`, `subject.id`).
+pub const MAX_LABEL_KEY_CHARS: usize = 64;
+/// Characters of a label's text value.
+pub const MAX_LABEL_VALUE_CHARS: usize = 256;
+
 /// The largest coordinate magnitude, in metres, that motion capture can mean: 10 km. A
 /// value beyond it is not a position but a corrupt or hostile number, and refused.
 pub const MAX_COORDINATE_M: f64 = 1e4;

@@ -15,6 +15,7 @@ use super::takes::{format_of, streamed, transform_of};
 use super::views::{ListingView, TakeView};
 use super::AppState;
 use crate::codec::CodecId;
+use crate::labels::LabelChanges;
 use crate::motion::body::{Axis, RoleMap};
 use crate::service::access::Caller;
 use crate::service::body;
@@ -44,8 +45,10 @@ pub async fn list(
     Extension(caller): Extension<Caller>,
     takes: Result<Query<TakeQuery>, QueryRejection>,
     page: Result<Query<PageQuery>, QueryRejection>,
+    pairs: Result<Query<Pairs>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let (Query(takes), Query(q)) = (takes?, page?);
+    let (Query(takes), Query(q), Query(pairs)) = (takes?, page?, pairs?);
+    let takes = takes.with_labels(pairs.iter().map(|(k, v)| (k.as_str(), v.as_str())));
     let page = Page {
         sort: q.sort.unwrap_or_default(),
         descending: q.order.map(|o| matches!(o, Order::Desc)),
@@ -55,6 +58,9 @@ pub async fn list(
     let listing = library::list(&state.store, &caller.grant, &takes, page).await?;
     Ok(Json(ListingView::from(&listing)).into_response())
 }
+
+/// A query string's pairs in order: where `label.<key>=<value>` conditions are read from.
+type Pairs = Vec<(String, String)>;
 
 #[derive(Deserialize)]
 pub struct StatsQuery {
@@ -67,14 +73,16 @@ pub async fn stats(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     query: Result<Query<StatsQuery>, QueryRejection>,
+    pairs: Result<Query<Pairs>, QueryRejection>,
 ) -> Result<Json<Stats>, ApiError> {
-    let Query(q) = query?;
+    let (Query(q), Query(pairs)) = (query?, pairs?);
     let takes = TakeQuery {
         library: q.library,
         tag: q.tag,
         codec: q.codec,
         ..TakeQuery::default()
-    };
+    }
+    .with_labels(pairs.iter().map(|(k, v)| (k.as_str(), v.as_str())));
     Ok(Json(
         library::stats(&state.store, &caller.grant, &takes).await?,
     ))
@@ -101,8 +109,9 @@ pub async fn export(
     Extension(caller): Extension<Caller>,
     Extension(holder): Extension<Holder>,
     query: Result<Query<ExportQuery>, QueryRejection>,
+    pairs: Result<Query<Pairs>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let Query(q) = query?;
+    let (Query(q), Query(pairs)) = (query?, pairs?);
     let format = format_of(q.format.as_deref())?;
     let transform = transform_of(q.fps, q.root.as_deref(), q.up.as_deref(), q.unit.as_deref())?;
     let file = format!(
@@ -117,7 +126,8 @@ pub async fn export(
         codec: q.codec,
         layout: q.layout,
         ..TakeQuery::default()
-    };
+    }
+    .with_labels(pairs.iter().map(|(k, v)| (k.as_str(), v.as_str())));
     let request = ExportRequest {
         takes,
         grant: caller.grant.clone(),
@@ -175,6 +185,9 @@ pub struct Patch {
     library: Option<String>,
     #[serde(default, deserialize_with = "present")]
     tags: Option<Vec<String>>,
+    /// Labels set (key → text or number) or removed (key → null).
+    #[serde(default, deserialize_with = "present")]
+    labels: Option<serde_json::Value>,
     #[serde(default, deserialize_with = "present")]
     body: Option<BodyPatch>,
 }
@@ -214,19 +227,23 @@ pub async fn patch(
     if let Some(to) = &p.library {
         caller.grant.library(to)?;
     }
-    let correction = p.body.map(|b| body::Correction {
-        up: b.up,
-        forward: b.forward,
-        roles: b.roles.unwrap_or_default(),
-    });
-    let take = library::update(
-        &state.store,
-        &id,
-        p.name.as_deref(),
-        p.library.as_deref(),
-        p.tags.as_deref(),
-        correction,
-    )
-    .await?;
+    let labels = p
+        .labels
+        .as_ref()
+        .map(LabelChanges::from_json)
+        .transpose()
+        .map_err(ApiError::bad_request)?;
+    let edit = library::Edit {
+        name: p.name,
+        library: p.library,
+        tags: p.tags,
+        labels,
+        body: p.body.map(|b| body::Correction {
+            up: b.up,
+            forward: b.forward,
+            roles: b.roles.unwrap_or_default(),
+        }),
+    };
+    let take = library::update(&state.store, &id, edit).await?;
     Ok(Json(TakeView::from(&take)).into_response())
 }

@@ -17,6 +17,7 @@ use super::metrics::Metrics;
 use super::views::TakeView;
 use super::AppState;
 use crate::codec::{CodecId, ErrorBound, Hints, Latency};
+use crate::labels::Labels;
 use crate::limits::Limits;
 use crate::motion::formats::{self, Format};
 use crate::motion::transform::Options;
@@ -37,6 +38,8 @@ pub struct IngestQuery {
     name: Option<String>,
     library: Option<String>,
     tags: Option<String>,
+    /// `content:walk,style:happy`, or a JSON object.
+    labels: Option<String>,
     unit: Option<String>,
     fps: Option<f64>,
     codec: Option<String>,
@@ -82,6 +85,7 @@ pub const HEADER_FIELDS: &[(&str, FromHeader)] = &[
     ("name", |q, v| text(&mut q.name, v)),
     ("library", |q, v| text(&mut q.library, v)),
     ("tags", |q, v| text(&mut q.tags, v)),
+    ("labels", |q, v| text(&mut q.labels, v)),
     ("unit", |q, v| text(&mut q.unit, v)),
     ("fps", |q, v| number(&mut q.fps, "fps", v)),
     ("codec", |q, v| text(&mut q.codec, v)),
@@ -211,6 +215,13 @@ impl IngestQuery {
                 tags: self
                     .tags
                     .map(|t| t.split(',').map(str::to_string).collect())
+                    .unwrap_or_default(),
+                labels: self
+                    .labels
+                    .as_deref()
+                    .map(Labels::parse)
+                    .transpose()
+                    .map_err(ApiError::bad_request)?
                     .unwrap_or_default(),
             },
             unit,

@@ -46,7 +46,8 @@ pub enum Error {
         actual: u64,
         limit: u64,
     },
-    /// The data contradicts the file's own header or physical sense (strict reading).
+    /// The data contradicts the file's own header or physical sense (strict reading), or
+    /// a take's stored body contradicts the take (a pelvis beyond its points).
     #[error("{0}")]
     Contradiction(String),
     /// The request makes no sense for this take (e.g. BVH output without a skeleton).

@@ -5,7 +5,8 @@
 //! A take stored before bodies were kept gets its axes at its first read, from a sample
 //! of its decoded chunks, without re-encoding; they are stored then, so that it happens
 //! once. A live stream's are derived from its first chunk's frames as it commits it
-//! ([`opening`]), and again from the whole take when it finishes ([`closing`]).
+//! ([`opening`]), and again from the whole take when it finishes or its server's lease
+//! runs out and another closes it ([`closing`]).
 //!
 //! Every write of a body is conditional on the record being the one it was derived from
 //! (`body_rev`, [`Store::set_meta`]): a correction is never undone by a derivation that
@@ -57,38 +58,27 @@ pub async fn ensure(store: &Store, mut take: Take) -> Result<Take> {
 /// A live stream's axes from the frames of its first chunk (`positions`, as sent): what
 /// readers of the live take turn and move it by until it finishes.
 pub fn opening(take: &Take, positions: Vec<f32>) -> Result<Axes> {
-    Ok(of_frames(take, positions)?.0)
-}
-
-/// A finishing stream's axes from the whole take: from `positions` (every frame as sent,
-/// when the stream kept them; given back, for its re-encoding) or from a sample of its
-/// committed chunks.
-pub async fn closing(
-    store: &Store,
-    take: &Take,
-    positions: Option<Vec<f32>>,
-) -> Result<(Axes, Option<Vec<f32>>)> {
-    match positions {
-        Some(p) => {
-            let take = take.clone();
-            let (axes, p) = blocking(move || of_frames(&take, p)).await??;
-            Ok((axes, Some(p)))
-        }
-        None => Ok((derive_stored(store, take, given_before(take)).await?, None)),
-    }
-}
-
-/// The axes of `take` from its frames `positions` (given back).
-fn of_frames(take: &Take, positions: Vec<f32>) -> Result<(Axes, Vec<f32>)> {
     let m = Motion::new(
         take.fps,
         take.meta.unit.clone(),
         take.meta.point_names.clone(),
         positions,
         None,
-    )?;
-    let axes = derive(&m, None, &take.roles, given_before(take), None)?;
-    Ok((axes, m.into_positions()))
+    )
+    .map_err(|e| stored(take, e))?;
+    derive(&m, None, &take.roles, given_before(take), None).map_err(|e| stored(take, e))
+}
+
+/// A finishing stream's axes from the whole take, from a sample of its committed chunks
+/// (as a take stored before bodies were kept gets them): what it is read by from then on.
+pub async fn closing(store: &Store, take: &Take) -> Result<Axes> {
+    derive_stored(store, take, given_before(take)).await
+}
+
+/// A stored take whose body cannot be derived: its record contradicts itself (what was
+/// given is checked before it is stored).
+fn stored(take: &Take, e: crate::motion::Error) -> Error {
+    Error::Corrupt(format!("take {}: its body: {e}", take.id))
 }
 
 /// What a user gave of the take's axes before (at ingest or by PATCH): it stays when the
@@ -213,9 +203,10 @@ async fn derive_stored(store: &Store, take: &Take, given: Given) -> Result<Axes>
             take.meta.point_names.clone(),
             positions,
             None,
-        )?;
+        )
+        .map_err(|e| stored(&take, e))?;
         let joints = rig.as_ref().map(|r| r.joints());
-        Ok(derive(&m, joints, &take.roles, given, prior.as_ref())?)
+        derive(&m, joints, &take.roles, given, prior.as_ref()).map_err(|e| stored(&take, e))
     })
     .await?
 }

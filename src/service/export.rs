@@ -51,12 +51,13 @@ use crate::store::{SortKey, Store};
 pub const MANIFEST: &str = "manifest.csv";
 
 /// The manifest's columns, in order.
-pub const COLUMNS: [&str; 16] = [
+pub const COLUMNS: [&str; 17] = [
     "file",
     "id",
     "name",
     "library",
     "tags",
+    "labels",
     "frames",
     "fps",
     "source_fps",
@@ -100,6 +101,9 @@ pub struct Entry {
     pub name: String,
     pub library: String,
     pub tags: Vec<String>,
+    /// The take's labels (a JSON object in the manifest, empty when it has none).
+    #[serde(default)]
+    pub labels: crate::labels::Labels,
     /// The file's frames and their rate (resampled, if asked); the take's own until written.
     pub frames: usize,
     pub fps: f64,
@@ -127,6 +131,7 @@ impl Entry {
             name: take.name.clone(),
             library: take.library.clone(),
             tags: take.tags.clone(),
+            labels: take.labels.clone(),
             frames: take.frames,
             fps: take.fps,
             source_fps: take.fps,
@@ -157,6 +162,7 @@ impl Entry {
             name,
             library,
             tags,
+            labels: Default::default(),
             frames: 0,
             fps: 0.0,
             source_fps: 0.0,
@@ -172,7 +178,8 @@ impl Entry {
         }
     }
 
-    /// The manifest's line for this entry (CSV, RFC 4180 quoting, tags joined by `;`; text
+    /// The manifest's line for this entry (CSV, RFC 4180 quoting, tags joined by `;`, labels
+    /// as a JSON object; text
     /// a spreadsheet would run as a formula made inert: [`csv_text`]).
     pub fn csv_line(&self) -> String {
         let opt = |v: Option<String>| v.unwrap_or_default();
@@ -182,6 +189,11 @@ impl Entry {
             csv_text(&self.name),
             csv_text(&self.library),
             csv_text(&self.tags.join(";")),
+            csv_text(&if self.labels.is_empty() {
+                String::new()
+            } else {
+                serde_json::to_string(&self.labels).unwrap_or_default()
+            }),
             self.frames.to_string(),
             self.fps.to_string(),
             self.source_fps.to_string(),

@@ -193,8 +193,15 @@ pub async fn ingest(
         roles_given: Default::default(),
     };
     let format = loaded.format.name();
+    // The file's labels, and over them the request's.
+    let mut label = req.label.clone();
+    label.labels = extras.labels.clone();
+    label
+        .labels
+        .merge(&req.label.labels)
+        .map_err(Error::InvalidRequest)?;
     let mut take = Take::new(
-        &req.label,
+        &label,
         format,
         m.fps,
         layout,

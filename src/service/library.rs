@@ -18,6 +18,10 @@ use crate::store::{Cursor, Filter, SortKey, Store, TakeRow, Totals};
 pub struct TakeQuery {
     pub library: Option<String>,
     pub tag: Option<String>,
+    /// `label.<key>=<value>` conditions, as (key, value) given: not a field of the query
+    /// string's shape, so the HTTP layer reads them apart ([`TakeQuery::with_labels`]).
+    #[serde(skip)]
+    pub labels: Vec<(String, String)>,
     pub name_prefix: Option<String>,
     pub layout: Option<String>,
     pub codec: Option<CodecId>,
@@ -34,10 +38,30 @@ pub struct TakeQuery {
 }
 
 impl TakeQuery {
+    /// This query with the `label.<key>=<value>` pairs of `pairs` (a query string's, in
+    /// order; others ignored).
+    pub fn with_labels<'a>(mut self, pairs: impl IntoIterator<Item = (&'a str, &'a str)>) -> Self {
+        self.labels = pairs
+            .into_iter()
+            .filter_map(|(k, v)| Some((k.strip_prefix("label.")?.to_string(), v.to_string())))
+            .collect();
+        self
+    }
+
     /// A 400 for a condition no take could meet because it is not a value of its kind (a
     /// negative duration, an fps out of range), rather than an empty answer.
     pub fn check(&self) -> Result<()> {
         let bad = |m: String| Err(Error::InvalidRequest(m));
+        if self.labels.len() > crate::limits::MAX_LABELS {
+            return bad(format!(
+                "at most {} label conditions, not {}",
+                crate::limits::MAX_LABELS,
+                self.labels.len()
+            ));
+        }
+        for (k, _) in &self.labels {
+            crate::labels::check_key(k).map_err(Error::InvalidRequest)?;
+        }
         if let Some(c) = self.codec.filter(|c| c.is_analog()) {
             return bad(format!("{c} codes analog channels, not takes"));
         }
@@ -72,6 +96,11 @@ impl TakeQuery {
         grant.restrict(Filter {
             library: self.library.clone(),
             tag: self.tag.clone(),
+            labels: self
+                .labels
+                .iter()
+                .map(|(k, v)| (k.clone(), crate::labels::Label::from_text(v).canonical()))
+                .collect(),
             name_prefix: self.name_prefix.clone(),
             fps: self.fps,
             points: count(self.points),
@@ -245,25 +274,45 @@ pub async fn delete(store: &Store, id: &str) -> Result<()> {
     }
 }
 
-/// Rename, move to another library and/or replace the tags of a take, and/or correct its
-/// body. Everything is checked before anything is written: a refused request changes
-/// nothing.
-pub async fn update(
-    store: &Store,
-    id: &str,
-    name: Option<&str>,
-    library: Option<&str>,
-    tags: Option<&[String]>,
-    body: Option<super::body::Correction>,
-) -> Result<Take> {
-    if name.is_some_and(|n| n.trim().is_empty()) {
+/// What a `PATCH` of a take changes: each field given, the rest kept.
+#[derive(Debug, Clone, Default)]
+pub struct Edit {
+    pub name: Option<String>,
+    pub library: Option<String>,
+    /// Its tags, all of them.
+    pub tags: Option<Vec<String>>,
+    /// Labels set or removed; the others kept.
+    pub labels: Option<crate::labels::LabelChanges>,
+    pub body: Option<super::body::Correction>,
+}
+
+/// Rename, move to another library, replace the tags of, relabel and/or correct the body
+/// of a take. Everything is checked before anything is written: a refused request changes
+/// nothing. Labels are merged into the take's as read: of two edits of one take's labels
+/// at the same moment, the later one's set stands (as with tags).
+pub async fn update(store: &Store, id: &str, edit: Edit) -> Result<Take> {
+    if edit.name.as_ref().is_some_and(|n| n.trim().is_empty()) {
         return Err(Error::InvalidRequest("name must not be empty".into()));
     }
-    if let Some(c) = body {
+    let labels = match &edit.labels {
+        Some(changes) => {
+            let take = super::fetch::take(store, id).await?;
+            let labels = changes.apply(&take.labels).map_err(Error::InvalidRequest)?;
+            Some(super::take::label_rows(&labels))
+        }
+        None => None,
+    };
+    if let Some(c) = edit.body {
         super::body::correct(store, id, c).await?;
     }
-    let tags = tags.map(super::normalise_tags);
-    if !store.update(id, name, library, tags.as_deref()).await? {
+    let tags = edit.tags.as_deref().map(super::normalise_tags);
+    let change = crate::store::TakeEdit {
+        name: edit.name.as_deref(),
+        library: edit.library.as_deref(),
+        tags: tags.as_deref(),
+        labels: labels.as_deref(),
+    };
+    if !store.update(id, &change).await? {
         return Err(Error::NotFound(format!("take {id}")));
     }
     super::body::take(store, id).await

@@ -90,9 +90,23 @@ pub async fn list(store: &Store, layout: Option<&str>, grant: &Grant) -> Result<
 }
 
 /// The roles of a stored skeleton's joints, as every take of it has them (before a take's
-/// own corrections): read from its names, or its shape.
+/// own corrections): read from its names, or its shape, once per skeleton (a listing parses
+/// many takes of a few skeletons).
 pub fn roles(rig: &Skeleton) -> Roles {
-    Roles::of_skeleton(rig.joints())
+    static ROLES: OnceLock<Mutex<HashMap<String, Roles>>> = OnceLock::new();
+    let cache = ROLES.get_or_init(|| Mutex::new(HashMap::new()));
+    let id = rig.id();
+    if let Some(r) = cache.lock().ok().and_then(|c| c.get(&id).cloned()) {
+        return r;
+    }
+    let roles = Roles::of_skeleton(rig.joints());
+    if let Ok(mut c) = cache.lock() {
+        if c.len() >= CACHED {
+            c.clear();
+        }
+        c.insert(id, roles.clone());
+    }
+    roles
 }
 
 /// One stored skeleton, parsed; to a grant limited to libraries, only one of their takes'

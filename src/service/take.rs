@@ -10,6 +10,7 @@ use super::choose::Decision;
 use super::{Error, Result};
 use crate::codec::Skeleton;
 use crate::codec::{CodecId, ErrorBound};
+use crate::labels::Labels;
 use crate::motion::body::{Axes, Body, RoleMap, Roles};
 use crate::motion::Unit;
 use crate::store::{TakeRow, TakeTotals};
@@ -21,6 +22,9 @@ pub struct Take {
     pub name: String,
     pub library: String,
     pub tags: Vec<String>,
+    /// What the take is of, key → value ([`Labels`]).
+    #[serde(default)]
+    pub labels: Labels,
     pub fps: f64,
     pub frames: usize,
     pub points: usize,
@@ -144,6 +148,8 @@ pub struct Label {
     pub name: Option<String>,
     pub library: String,
     pub tags: Vec<String>,
+    /// What the take is of ([`Labels`], checked).
+    pub labels: Labels,
 }
 
 impl Take {
@@ -170,6 +176,7 @@ impl Take {
             id,
             library: label.library.clone(),
             tags: super::normalise_tags(&label.tags),
+            labels: label.labels.clone(),
             fps,
             frames: 0,
             points: meta.point_names.len(),
@@ -218,8 +225,16 @@ impl Take {
             |what: &str, v: i64| usize::try_from(v).map_err(|_| corrupt(format!("{what} is {v}")));
         let bytes =
             |what: &str, v: i64| u64::try_from(v).map_err(|_| corrupt(format!("{what} is {v}")));
+        let mut labels = Labels::new();
+        for l in &row.labels {
+            let value = crate::labels::Label::from_stored(&l.value, l.number)
+                .map_err(|e| corrupt(format!("label {}: {e}", l.key)))?;
+            labels
+                .insert(&l.key, value)
+                .map_err(|e| corrupt(e.to_string()))?;
+        }
         let roles = match rig {
-            Some(r) => Roles::of_skeleton(r.joints()),
+            Some(r) => super::skeletons::roles(r),
             None => Roles::of_markers(&meta.point_names),
         }
         .with_given(&meta.roles_given);
@@ -238,6 +253,7 @@ impl Take {
             name: row.name,
             library: row.library,
             tags: row.tags,
+            labels,
             fps: row.fps,
             duration_s: row.totals.duration_s,
             metres_per_unit: row.metres_per_unit,
@@ -299,6 +315,7 @@ impl Take {
             name: self.name.clone(),
             library: self.library.clone(),
             tags: self.tags.clone(),
+            labels: label_rows(&self.labels),
             fps: self.fps,
             totals: self.totals(),
             points: self.points as i64,
@@ -421,6 +438,18 @@ pub struct AnalogMeta {
     pub encode_ms: f64,
 }
 
+/// A take's labels as the rows that store them.
+pub fn label_rows(labels: &Labels) -> Vec<crate::store::LabelRow> {
+    labels
+        .iter()
+        .map(|(k, v)| crate::store::LabelRow {
+            key: k.clone(),
+            value: v.canonical(),
+            number: v.is_number(),
+        })
+        .collect()
+}
+
 /// A container's chunks as rows to store.
 pub fn chunk_rows(c: &crate::codec::Container) -> Vec<crate::store::ChunkRow> {
     c.header
@@ -508,6 +537,7 @@ impl Take {
             name: "walk".into(),
             library: "lib".into(),
             tags: vec!["a".into()],
+            labels: Labels::parse("content:walk,n:3").unwrap(),
             fps: 120.0,
             frames: 10,
             points: 2,

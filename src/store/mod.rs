@@ -24,8 +24,8 @@ use sqlx::Row;
 
 pub use query::{Cursor, Filter, Part, SortKey, StatRow, Totals};
 pub use rows::{
-    disk_bytes, AnalogRows, ChunkEntry, ChunkRow, NewTake, ParametersRow, StampRow, TakeRow,
-    TakeTotals,
+    disk_bytes, AnalogRows, ChunkEntry, ChunkRow, LabelRow, NewTake, ParametersRow, StampRow,
+    TakeRow, TakeTotals,
 };
 
 /// Errors of the store layer.
@@ -200,6 +200,15 @@ impl Store {
                     .execute(&mut *tx)
                     .await?;
             }
+            for l in &s.labels {
+                sqlx::query(INSERT_LABEL)
+                    .bind(&s.id)
+                    .bind(&l.key)
+                    .bind(&l.value)
+                    .bind(l.number)
+                    .execute(&mut *tx)
+                    .await?;
+            }
             for c in &s.chunks {
                 bind_chunk(sqlx::query(INSERT_CHUNK), &s.id, c).execute(&mut *tx).await?;
             }
@@ -321,8 +330,9 @@ impl Store {
     }
 
     /// Add one chunk to a live take and update its running totals (frames, sizes,
-    /// statistics) and lease, in one transaction. Nothing else is rewritten: the cost of an
-    /// append does not grow with the take. False if the take is gone or no longer live.
+    /// statistics) and lease, in one transaction; and its meta once, when it has a body
+    /// ([`ChunkAppend::meta`]). Nothing else is rewritten: the cost of an append does not
+    /// grow with the take. False if the take is gone or no longer live.
     ///
     /// Only `append.server`, the stream's owner, may: false too if another server took the
     /// stream over. The producer's count of frames and the coder's state go with the chunk
@@ -472,24 +482,23 @@ impl Store {
         })
     }
 
-    /// A take's metadata and tags, without chunks.
+    /// A take's metadata, tags and labels, without chunks.
     pub async fn get(&self, id: &str) -> Result<Option<TakeRow>> {
-        dispatch!(self, pool => {
+        let row = dispatch!(self, pool => {
             let row = sqlx::query(&format!("SELECT {} FROM takes WHERE id = $1", rows::TAKE_COLUMNS))
                 .bind(id)
                 .fetch_optional(pool)
                 .await?;
-            let Some(row) = row else { return Ok(None) };
-            let mut s = rows::take_from_row(&row)?;
-            s.tags = sqlx::query("SELECT tag FROM take_tags WHERE take_id = $1 ORDER BY tag")
-                .bind(id)
-                .fetch_all(pool)
-                .await?
-                .iter()
-                .map(|r| r.try_get::<String, _>("tag"))
-                .collect::<Result<_, _>>()?;
-            Ok(Some(s))
-        })
+            match row {
+                Some(row) => Some(rows::take_from_row(&row)?),
+                None => None,
+            }
+        });
+        let Some(row) = row else { return Ok(None) };
+        let mut items = [row];
+        self.attach_sets(&mut items).await?;
+        let [row] = items;
+        Ok(Some(row))
     }
 
     /// Chunks `first..end` (indices) of a take, checked against their CRC-32C.
@@ -713,6 +722,9 @@ impl Store {
     }
 }
 
+const INSERT_LABEL: &str =
+    "INSERT INTO take_labels (take_id, key, value, number) VALUES ($1, $2, $3, $4)";
+
 const INSERT_CHUNK: &str = "INSERT INTO chunks (take_id, idx, first_frame, frames, crc32c, \
     payload) VALUES ($1, $2, $3, $4, $5, $6)";
 
@@ -796,7 +808,7 @@ impl Store {
         });
         let more = items.len() > limit;
         items.truncate(limit);
-        self.attach_tags(&mut items).await?;
+        self.attach_sets(&mut items).await?;
         let next = match (more, items.last()) {
             (true, Some(last)) => Some(Cursor {
                 sort,
@@ -809,30 +821,58 @@ impl Store {
         Ok(Page { items, next })
     }
 
-    async fn attach_tags(&self, items: &mut [TakeRow]) -> Result<()> {
+    /// The tags and labels of `items`, read in one query each.
+    async fn attach_sets(&self, items: &mut [TakeRow]) -> Result<()> {
         if items.is_empty() {
             return Ok(());
         }
         let marks: Vec<String> = (1..=items.len()).map(|i| format!("${i}")).collect();
-        let sql = format!(
-            "SELECT take_id, tag FROM take_tags WHERE take_id IN ({}) ORDER BY tag",
-            marks.join(", ")
-        );
         let ids: Vec<query::Value> = items
             .iter()
             .map(|s| query::Value::Text(s.id.clone()))
             .collect();
-        let pairs: Vec<(String, String)> = dispatch!(self, pool => {
-            let rows = bind_all!(sqlx::query(&sql), &ids).fetch_all(pool).await?;
-            rows.iter()
+        let tags_sql = format!(
+            "SELECT take_id, tag FROM take_tags WHERE take_id IN ({}) ORDER BY tag",
+            marks.join(", ")
+        );
+        let labels_sql = format!(
+            "SELECT take_id, key, value, number FROM take_labels WHERE take_id IN ({}) \
+             ORDER BY key",
+            marks.join(", ")
+        );
+        type ById<T> = Vec<(String, T)>;
+        let (tags, labels): (ById<String>, ById<LabelRow>) = dispatch!(self, pool => {
+            let rows = bind_all!(sqlx::query(&tags_sql), &ids).fetch_all(pool).await?;
+            let tags = rows
+                .iter()
                 .map(|r| Ok((r.try_get::<String, _>("take_id")?, r.try_get::<String, _>("tag")?)))
-                .collect::<Result<Vec<_>>>()?
+                .collect::<Result<Vec<_>>>()?;
+            let rows = bind_all!(sqlx::query(&labels_sql), &ids).fetch_all(pool).await?;
+            let labels = rows
+                .iter()
+                .map(|r| {
+                    Ok((
+                        r.try_get::<String, _>("take_id")?,
+                        LabelRow {
+                            key: r.try_get("key")?,
+                            value: r.try_get("value")?,
+                            number: r.try_get("number")?,
+                        },
+                    ))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            (tags, labels)
         });
         for s in items.iter_mut() {
-            s.tags = pairs
+            s.tags = tags
                 .iter()
                 .filter(|(id, _)| *id == s.id)
                 .map(|(_, t)| t.clone())
+                .collect();
+            s.labels = labels
+                .iter()
+                .filter(|(id, _)| *id == s.id)
+                .map(|(_, l)| l.clone())
                 .collect();
         }
         Ok(())
@@ -854,7 +894,9 @@ impl Store {
              (SELECT CAST(LENGTH(p.payload) AS BIGINT) FROM take_parameters p \
               WHERE p.take_id = takes.id) AS parameters_bytes, \
              (SELECT COALESCE(SUM(LENGTH(t.tag) + LENGTH(t.take_id)), 0) \
-              FROM take_tags t WHERE t.take_id = takes.id) AS tag_bytes \
+              FROM take_tags t WHERE t.take_id = takes.id) AS tag_bytes, \
+             (SELECT COALESCE(SUM(LENGTH(l.key) + LENGTH(l.value) + LENGTH(l.take_id)), 0) \
+              FROM take_labels l WHERE l.take_id = takes.id) AS label_bytes \
              FROM takes {}",
             w.text
         );
@@ -876,7 +918,8 @@ impl Store {
                         + text("source_format")?
                         + text("meta")?
                         + text("skeleton_id")?
-                        + r.try_get::<i64, _>("tag_bytes")?;
+                        + r.try_get::<i64, _>("tag_bytes")?
+                        + r.try_get::<i64, _>("label_bytes")?;
                     let stored_bytes: i64 = r.try_get("stored_bytes")?;
                     Ok(StatRow {
                         disk_bytes: rows::disk_bytes(stored_bytes, text_bytes, r.try_get("chunk_rows")?),
@@ -926,15 +969,9 @@ impl Store {
         })
     }
 
-    /// Change a take's name, library and/or tags (tags replace the old set); false if no
-    /// such take.
-    pub async fn update(
-        &self,
-        id: &str,
-        name: Option<&str>,
-        library: Option<&str>,
-        tags: Option<&[String]>,
-    ) -> Result<bool> {
+    /// Change a take's name, library, tags and/or labels (each set given replaces the old
+    /// one), in one transaction; false if no such take.
+    pub async fn update(&self, id: &str, edit: &TakeEdit<'_>) -> Result<bool> {
         dispatch!(self, pool => {
             let mut tx = pool.begin_write().await?;
             let found = sqlx::query("SELECT id FROM takes WHERE id = $1")
@@ -945,13 +982,13 @@ impl Store {
             if !found {
                 return Ok(false);
             }
-            if let Some(n) = name {
+            if let Some(n) = edit.name {
                 sqlx::query("UPDATE takes SET name = $1 WHERE id = $2").bind(n).bind(id).execute(&mut *tx).await?;
             }
-            if let Some(l) = library {
+            if let Some(l) = edit.library {
                 sqlx::query("UPDATE takes SET library = $1 WHERE id = $2").bind(l).bind(id).execute(&mut *tx).await?;
             }
-            if let Some(tags) = tags {
+            if let Some(tags) = edit.tags {
                 sqlx::query("DELETE FROM take_tags WHERE take_id = $1").bind(id).execute(&mut *tx).await?;
                 for t in tags {
                     sqlx::query("INSERT INTO take_tags (take_id, tag) VALUES ($1, $2)")
@@ -961,10 +998,33 @@ impl Store {
                         .await?;
                 }
             }
+            if let Some(labels) = edit.labels {
+                sqlx::query("DELETE FROM take_labels WHERE take_id = $1").bind(id).execute(&mut *tx).await?;
+                for l in labels {
+                    sqlx::query(INSERT_LABEL)
+                        .bind(id)
+                        .bind(&l.key)
+                        .bind(&l.value)
+                        .bind(l.number)
+                        .execute(&mut *tx)
+                        .await?;
+                }
+            }
             tx.commit().await?;
             Ok(true)
         })
     }
+}
+
+/// What [`Store::update`] changes of a take: each field given, the rest kept.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TakeEdit<'a> {
+    pub name: Option<&'a str>,
+    pub library: Option<&'a str>,
+    /// The take's tags, all of them.
+    pub tags: Option<&'a [String]>,
+    /// The take's labels, all of them.
+    pub labels: Option<&'a [LabelRow]>,
 }
 
 /// A unique violation as a `Conflict` naming `what`; any other error as it is.

@@ -9,6 +9,9 @@ use serde::{Deserialize, Serialize};
 pub struct Filter {
     pub library: Option<String>,
     pub tag: Option<String>,
+    /// Labels every take has: (key, canonical value) pairs.
+    #[serde(default)]
+    pub labels: Vec<(String, String)>,
     pub name_prefix: Option<String>,
     pub fps: Option<f64>,
     pub points: Option<i64>,
@@ -130,6 +133,14 @@ pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
     if let Some(v) = &f.tag {
         s.push(
             "id IN (SELECT take_id FROM take_tags WHERE tag = ?)",
+            Value::Text(v.clone()),
+        );
+    }
+    for (k, v) in &f.labels {
+        s.values.push(Value::Text(k.clone()));
+        let key = s.values.len();
+        s.push(
+            &format!("id IN (SELECT take_id FROM take_labels WHERE key = ${key} AND value = ?)"),
             Value::Text(v.clone()),
         );
     }

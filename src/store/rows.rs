@@ -42,6 +42,8 @@ pub struct TakeRow {
     pub name: String,
     pub library: String,
     pub tags: Vec<String>,
+    /// Its labels, by key.
+    pub labels: Vec<LabelRow>,
     pub fps: f64,
     /// Frames, sizes and errors: what a live take's commits update.
     pub totals: TakeTotals,
@@ -67,6 +69,16 @@ pub struct TakeRow {
     pub body_rev: i64,
 }
 
+/// One label of a take (`take_labels`): `value` is its canonical text
+/// ([`crate::labels::Label::canonical`]), what filters compare; `number` whether it was
+/// given as a number.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LabelRow {
+    pub key: String,
+    pub value: String,
+    pub number: bool,
+}
+
 /// Numeric columns of a take's row (8 bytes each on disk).
 const NUMERIC_COLUMNS: i64 = 21;
 /// A chunk row beside its payload: the take's id (36 characters) and four integers.
@@ -81,9 +93,18 @@ pub fn disk_bytes(stored_bytes: i64, text_bytes: i64, chunk_rows: i64) -> i64 {
 }
 
 impl TakeRow {
-    /// Bytes of the row's text columns (and tags).
+    /// Bytes of the row's text columns (and tags and labels).
     pub fn text_bytes(&self) -> i64 {
-        let tags: usize = self.tags.iter().map(|t| t.len() + self.id.len()).sum();
+        let tags: usize = self
+            .tags
+            .iter()
+            .map(|t| t.len() + self.id.len())
+            .sum::<usize>()
+            + self
+                .labels
+                .iter()
+                .map(|l| l.key.len() + l.value.len() + self.id.len())
+                .sum::<usize>();
         (self.id.len()
             + self.name.len()
             + self.library.len()
@@ -238,6 +259,7 @@ where
         name: r.try_get("name")?,
         library: r.try_get("library")?,
         tags: Vec::new(),
+        labels: Vec::new(),
         fps: r.try_get("fps")?,
         totals: TakeTotals {
             frames: r.try_get("frames")?,

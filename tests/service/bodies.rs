@@ -6,31 +6,10 @@
 use crate::common;
 use crate::manifest::manifest;
 
-use std::path::Path;
-
 use mocapstore::corpus;
 use mocapstore::motion::body::Axis;
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
-
-/// Runs a script of `scripts/` with the test Python: its JSON line.
-fn script(python: &Path, name: &str, args: &[&Path]) -> Value {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("scripts")
-        .join(name);
-    let o = std::process::Command::new(python)
-        .arg(path)
-        .args(args)
-        .output()
-        .unwrap();
-    serde_json::from_slice(o.stdout.trim_ascii()).unwrap_or_else(|_| {
-        panic!(
-            "{name} said {} {}",
-            String::from_utf8_lossy(&o.stdout),
-            String::from_utf8_lossy(&o.stderr)
-        )
-    })
-}
 
 fn point(v: &Value) -> Vector3<f64> {
     Vector3::new(
@@ -101,8 +80,8 @@ async fn glb_stands_up_as_an_independent_reading_of_the_source() {
         assert_eq!(status, 200, "{rel}: {}", String::from_utf8_lossy(&glb));
         let file = dir.join("take.glb");
         std::fs::write(&file, &glb).unwrap();
-        let shown = script(&python, "gltf-eval.py", &[&file]);
-        let source = script(&python, "bvh-fk.py", &[&path]);
+        let shown = common::script(&python, "gltf-eval.py", [&file]);
+        let source = common::script(&python, "bvh-fk.py", [&path]);
         // The manifest's up turned to +Y: a rotation of whole axes.
         let turn: Matrix3<f64> = want.up.turn_to(Axis::Y).unwrap_or_else(Matrix3::identity);
         let nodes: Vec<&str> = shown["nodes"]
@@ -391,22 +370,30 @@ async fn a_take_stored_before_gets_its_body_at_its_first_read() {
     t.finish().await;
 }
 
-/// A live stream's take has its body from its first commit (a glTF of the live take stands
-/// up), and again from all of it at its finish; a body corrected after the finish stays
-/// through the finish's re-encoding, and is what every later read turns by.
+/// A live stream's take has its body from its first chunk (a glTF of the live take stands
+/// up by it), and from all of it once it finishes; a body corrected after the finish is
+/// what every later read turns by.
 #[tokio::test(flavor = "multi_thread")]
 async fn a_live_take_has_its_body_from_its_first_chunk() {
     let t = common::sqlite().await;
     let srv = common::start(t.store.clone(), 64 << 20).await;
-    // A dancer, Z-up (its +Y turned to +Z), in metres.
+    // A dancer in metres, its first second X-up (its +Y turned to +X), the three after Z-up
+    // (+Y turned to +Z): the first chunk stands along x, the take along z.
     let m = mocapstore::motion::synthetic::dancer(480, 120.0, 5);
     let k = m.unit.metres_per_unit as f32;
+    let w = m.point_count() * 3;
     let frames: Vec<f32> = m
         .positions()
         .chunks_exact(3)
-        .flat_map(|p| [p[0] * k, -p[2] * k, p[1] * k])
+        .enumerate()
+        .flat_map(|(i, p)| {
+            if i < 120 * w / 3 {
+                [p[1] * k, -p[0] * k, p[2] * k]
+            } else {
+                [p[0] * k, -p[2] * k, p[1] * k]
+            }
+        })
         .collect();
-    let w = m.point_count() * 3;
     let (status, _, info) = srv
         .post_json(
             "/v1/streams",
@@ -436,7 +423,7 @@ async fn a_live_take_has_its_body_from_its_first_chunk() {
     );
     assert_eq!(send(60, 240).await.unwrap().status().as_u16(), 200);
     let live = body_of(&srv, &id).await;
-    assert_eq!(live["up"], "z", "{live}");
+    assert_eq!(live["up"], "x", "{live}");
     let (status, _, glb) = srv.get(&format!("/v1/takes/{id}/frames?format=glb")).await;
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&glb));
     assert_eq!(send(240, 480).await.unwrap().status().as_u16(), 200);

@@ -56,22 +56,11 @@ fn compare(python: &Path, original: &Path, returned: &[u8], extra: &[String]) ->
         original.file_stem().unwrap().to_string_lossy()
     ));
     std::fs::write(&out, returned).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/c3d-compare.py");
-    let o = std::process::Command::new(python)
-        .arg(&script)
-        .arg(original)
-        .arg(&out)
-        .args(extra)
-        .output()
-        .unwrap();
+    let mut args: Vec<std::ffi::OsString> = vec![original.into(), out.clone().into()];
+    args.extend(extra.iter().map(Into::into));
+    let v = common::script(python, "c3d-compare.py", args);
     let _ = std::fs::remove_file(&out);
-    let text = String::from_utf8_lossy(&o.stdout);
-    serde_json::from_str(text.lines().last().unwrap_or("")).unwrap_or_else(|_| {
-        panic!(
-            "c3d-compare.py said {text} {}",
-            String::from_utf8_lossy(&o.stderr)
-        )
-    })
+    v
 }
 
 #[tokio::test(flavor = "multi_thread")]

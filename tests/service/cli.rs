@@ -2,8 +2,6 @@
 
 use crate::common;
 
-use std::process::Command;
-
 use mocapstore::corpus;
 
 use common::mocapstore;
@@ -79,23 +77,21 @@ async fn ingest_uploads_a_folder_and_lists_failures() {
     let srv = common::start(t.store.clone(), 8 << 20).await;
     let base = srv.base.clone();
     let trc = corpus::root().join("trc").display().to_string();
-    let out = tokio::task::spawn_blocking(move || {
-        Command::new(env!("CARGO_BIN_EXE_mocapstore"))
-            .args([
-                "ingest",
-                &trc,
-                "--server",
-                &base,
-                "--library",
-                "trc",
-                "--max-error-mm",
-                "2",
-            ])
-            .output()
-            .expect("binary runs")
-    })
-    .await
-    .unwrap();
+    let out = common::mocapstore_beside(
+        [
+            "ingest",
+            &trc,
+            "--server",
+            &base,
+            "--library",
+            "trc",
+            "--max-error-mm",
+            "2",
+        ]
+        .map(String::from)
+        .to_vec(),
+    )
+    .await;
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     // Empty.trc and Truncated.trc cannot be read; the other 11 store.
@@ -141,14 +137,12 @@ async fn ingest_passes_a_dataset_folder_with_label_files() {
     std::fs::write(dir.join("utils/convert.py"), "print('hi')\n").unwrap();
     std::fs::write(dir.join("data/.DS_Store"), [0u8, 1, 2]).unwrap();
     let (base, path) = (srv.base.clone(), dir.display().to_string());
-    let out = tokio::task::spawn_blocking(move || {
-        Command::new(env!("CARGO_BIN_EXE_mocapstore"))
-            .args(["ingest", &path, "--server", &base, "--library", "bandai"])
-            .output()
-            .expect("binary runs")
-    })
-    .await
-    .unwrap();
+    let out = common::mocapstore_beside(
+        ["ingest", &path, "--server", &base, "--library", "bandai"]
+            .map(String::from)
+            .to_vec(),
+    )
+    .await;
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stdout}\n{stderr}");
@@ -183,14 +177,7 @@ async fn fetch_writes_a_range_as_bvh_and_explains_a_refusal() {
     let dir = std::env::temp_dir().join(format!("mocapstore-fetch-{}", uuid::Uuid::now_v7()));
     std::fs::create_dir_all(&dir).unwrap();
     let (base, out) = (srv.base.clone(), dir.join("part.bvh"));
-    let run = |args: Vec<String>| {
-        tokio::task::spawn_blocking(move || {
-            Command::new(env!("CARGO_BIN_EXE_mocapstore"))
-                .args(&args)
-                .output()
-                .expect("binary runs")
-        })
-    };
+    let run = common::mocapstore_beside;
     let o = run(vec![
         "fetch".into(),
         id.clone(),
@@ -202,8 +189,7 @@ async fn fetch_writes_a_range_as_bvh_and_explains_a_refusal() {
         "--end".into(),
         "160".into(),
     ])
-    .await
-    .unwrap();
+    .await;
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let rows = |s: &str| -> Vec<String> {
         let at = s.find("Frame Time").unwrap();
@@ -218,8 +204,7 @@ async fn fetch_writes_a_range_as_bvh_and_explains_a_refusal() {
         "--server".into(),
         base,
     ])
-    .await
-    .unwrap();
+    .await;
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
         !o.status.success() && err.contains("keeps joint positions only"),

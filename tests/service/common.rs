@@ -433,6 +433,38 @@ pub fn python() -> Option<std::path::PathBuf> {
     Some(p)
 }
 
+/// Runs `scripts/{name}` with the test Python and `args`: the JSON of the last line it
+/// prints (the scripts print one JSON line; a failure panics with what they said).
+pub fn script<S: AsRef<std::ffi::OsStr>>(
+    python: &std::path::Path,
+    name: &str,
+    args: impl IntoIterator<Item = S>,
+) -> Value {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scripts")
+        .join(name);
+    let o = std::process::Command::new(python)
+        .arg(path)
+        .args(args)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    serde_json::from_str(text.trim().lines().last().unwrap_or(""))
+        .unwrap_or_else(|_| panic!("{name} said {text} {}", String::from_utf8_lossy(&o.stderr)))
+}
+
+/// [`mocapstore`] on the blocking pool, for a test whose server runs on this runtime.
+pub async fn mocapstore_beside(args: Vec<String>) -> std::process::Output {
+    tokio::task::spawn_blocking(move || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_mocapstore"))
+            .args(&args)
+            .output()
+            .expect("binary runs")
+    })
+    .await
+    .unwrap()
+}
+
 /// Run the `mocapstore` binary: success, stdout, stderr.
 pub fn mocapstore(args: &[&str]) -> (bool, String, String) {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_mocapstore"))

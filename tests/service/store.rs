@@ -3,8 +3,8 @@
 use crate::common;
 
 use mocapstore::store::{
-    ChunkAppend, ChunkRow, Closer, Error, NewStream, NewTake, Store, StreamClaim, StreamOwnerRow,
-    TakeRow, TakeTotals,
+    ChunkAppend, ChunkRow, Closer, Error, LabelRow, NewStream, NewTake, Store, StreamClaim,
+    StreamOwnerRow, TakeRow, TakeTotals,
 };
 
 fn take(id: &str, n: usize) -> NewTake {
@@ -26,6 +26,18 @@ fn take(id: &str, n: usize) -> NewTake {
             name: format!("take {id}"),
             library: "lib".into(),
             tags: vec!["walk".into(), "test".into()],
+            labels: vec![
+                LabelRow {
+                    key: "content".into(),
+                    value: "walk".into(),
+                    number: false,
+                },
+                LabelRow {
+                    key: "style".into(),
+                    value: "0".into(),
+                    number: true,
+                },
+            ],
             fps: 120.0,
             totals: TakeTotals {
                 frames: 120 * n as i64,
@@ -340,12 +352,27 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
             .append_chunk("live", &totals, &chunk, &append("a"))
             .await
             .unwrap());
-        // Sent again (its answer lost): stored once.
+        // Sent again (its answer lost): stored once; with the take's meta, which it writes.
+        let meta = r#"{"points": ["a", "b"], "axes": {"up": "y"}}"#;
         assert!(s
-            .append_chunk("live", &totals, &chunk, &append("a"))
+            .append_chunk(
+                "live",
+                &totals,
+                &chunk,
+                &ChunkAppend {
+                    meta: Some(meta),
+                    ..append("a")
+                }
+            )
             .await
             .unwrap());
         assert_eq!(s.chunk_index("live").await.unwrap().len(), 1, "{}", t.name);
+        assert_eq!(
+            s.get("live").await.unwrap().unwrap().meta,
+            meta,
+            "{}",
+            t.name
+        );
         let row = s.stream("live").await.unwrap().unwrap();
         assert_eq!(
             (row.frames, row.frames_received, row.live_until, row.owner),

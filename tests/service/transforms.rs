@@ -331,19 +331,7 @@ fn validate(modules: &Path, file: &Path) -> Value {
 
 /// pygltflib's evaluation of a file (scripts/gltf-eval.py).
 fn evaluate(python: &Path, file: &Path) -> Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/gltf-eval.py");
-    let o = std::process::Command::new(python)
-        .arg(script)
-        .arg(file)
-        .output()
-        .unwrap();
-    serde_json::from_slice(o.stdout.trim_ascii()).unwrap_or_else(|_| {
-        panic!(
-            "gltf-eval.py said {} {}",
-            String::from_utf8_lossy(&o.stdout),
-            String::from_utf8_lossy(&o.stderr)
-        )
-    })
+    common::script(python, "gltf-eval.py", [file])
 }
 
 /// The Node modules of the independent glTF tools, when the tests are given them.
@@ -481,22 +469,11 @@ fn check_c3d(python: &Path, c3d: &[u8], json: &[u8], tol: f64, tag: &str) -> Val
     );
     std::fs::write(&c, c3d).unwrap();
     std::fs::write(&j, json).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/c3d-check.py");
-    let o = std::process::Command::new(python)
-        .arg(script)
-        .arg(&c)
-        .arg(&j)
-        .args(["--tol", &tol.to_string()])
-        .output()
-        .unwrap();
+    let tol = tol.to_string();
+    let args = [c.as_os_str(), j.as_os_str(), "--tol".as_ref(), tol.as_ref()];
+    let v = common::script(python, "c3d-check.py", args);
     let _ = (std::fs::remove_file(&c), std::fs::remove_file(&j));
-    serde_json::from_slice(o.stdout.trim_ascii()).unwrap_or_else(|_| {
-        panic!(
-            "c3d-check.py said {} {}",
-            String::from_utf8_lossy(&o.stdout),
-            String::from_utf8_lossy(&o.stderr)
-        )
-    })
+    v
 }
 
 /// C3D out of every kind of take, through the one read path: every corpus TRC, BVH takes

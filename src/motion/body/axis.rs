@@ -70,11 +70,6 @@ impl Axis {
         v
     }
 
-    /// The component of `v` along this axis.
-    pub fn along(self, v: &[f64; 3]) -> f64 {
-        v[self.index()] * self.sign()
-    }
-
     /// The two coordinate indices across this axis (the horizontal ones when it is up).
     pub fn across(self) -> [usize; 2] {
         match self.index {

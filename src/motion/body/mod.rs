@@ -120,12 +120,6 @@ impl Roles {
         })
     }
 
-    /// The moving root: the points whose centroid is the pelvis, whatever joint carries
-    /// the translation channels.
-    pub fn root(&self) -> Option<&[String]> {
-        self.roles.get(&Role::Pelvis).map(Vec::as_slice)
-    }
-
     /// The limb roles ([`Role::limbs`]) not placed.
     pub fn missing_limbs(&self) -> Vec<Role> {
         Role::limbs()

@@ -1,6 +1,7 @@
 //! JSON point arrays: `{"fps": 120, "unit": "mm", "points": ["a", …],
 //! "frames": [[[x, y, z], …], …]}`; a missing sample is `null`. `unit` may be a name or a
-//! number of metres per unit and may be omitted (then it is inferred).
+//! number of metres per unit and may be omitted (then it is inferred). An optional
+//! `"labels": {"content": "walk", …}` labels the take ([`crate::labels`]).
 
 use serde::Deserialize;
 
@@ -24,6 +25,8 @@ struct Doc {
     unit: Option<UnitField>,
     points: Vec<String>,
     frames: Vec<Vec<Option<[f32; 3]>>>,
+    #[serde(default)]
+    labels: Option<serde_json::Value>,
 }
 
 fn err(at: Location, reason: impl Into<String>) -> Error {
@@ -56,6 +59,10 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         Some(UnitField::Name(s)) => Some(parse_unit(&s)?),
         Some(UnitField::Metres(m)) => Some(parse_unit(&m.to_string())?),
     };
+    let labels = match &doc.labels {
+        None => Default::default(),
+        Some(v) => crate::labels::Labels::from_json(v).map_err(|e| err(Location::Whole, e))?,
+    };
     let motion = if n == 0 {
         Motion::without_points(doc.fps, unsettled_unit(), doc.frames.len())?
     } else {
@@ -68,7 +75,10 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         // JSON has no NaN or infinity, and serde refuses a number past f32 as out of
         // range: what parses is finite.
         contradictions: Vec::new(),
-        extras: Default::default(),
+        extras: super::Extras {
+            labels,
+            ..Default::default()
+        },
     })
 }
 

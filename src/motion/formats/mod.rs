@@ -124,6 +124,8 @@ pub struct Extras {
     pub analog: Option<super::analog::Analog>,
     pub events: Vec<super::events::Event>,
     pub parameters: Option<c3d::params::Parameters>,
+    /// What the file says the take is of (a JSON document's `labels`).
+    pub labels: crate::labels::Labels,
 }
 
 /// What a format reader returns before units are settled.

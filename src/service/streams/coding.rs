@@ -110,11 +110,26 @@ impl Streams {
     ) -> Result<()> {
         let totals = live.encoder()?.totals_with(chunk);
         let mut take = live.take.clone();
-        // The first commit gives the take its body, for readers of the live take.
-        let meta = if take.meta.axes.is_none() && !live.opening.is_empty() {
-            let (t, opening) = (take.clone(), live.opening.clone());
-            take.meta.axes = Some(blocking(move || body::opening(&t, opening)).await??);
-            Some(take.meta.to_text(&take.id)?)
+        // The first commit after a chunk's worth of frames arrived gives the take its body,
+        // for readers of the live take (a flushed first chunk of a few frames would tell
+        // too little: a body's forward needs it to move).
+        let w = take.points * 3;
+        let meta = if take.meta.axes.is_none()
+            && w > 0
+            && live.opening.len() >= live.chunk_frames * w
+        {
+            let (t, opening) = (take.clone(), std::mem::take(&mut live.opening));
+            match blocking(move || body::opening(&t, opening)).await? {
+                Ok(axes) => {
+                    take.meta.axes = Some(axes);
+                    Some(take.meta.to_text(&take.id)?)
+                }
+                // Its finish derives it from what it committed.
+                Err(e) => {
+                    tracing::warn!(stream = %take.id, error = %e, "a live take's body could not be derived");
+                    None
+                }
+            }
         } else {
             None
         };
@@ -141,9 +156,6 @@ impl Streams {
         {
             return Err(Self::lost(&live.take.id));
         }
-        if take.meta.axes.is_some() {
-            live.opening = Vec::new();
-        }
         live.take = take;
         live.persisted = live.received;
         live.lease_until = until;
@@ -156,7 +168,10 @@ impl Streams {
 /// it is then, unless it was re-encoded meanwhile: a body corrected since the stream closed
 /// stays.
 pub(super) async fn reencode_take(store: &Store, id: &str, positions: Vec<f32>) -> Result<()> {
-    let closed = crate::service::fetch::take(store, id).await?;
+    let closed = match crate::service::fetch::take(store, id).await {
+        Err(Error::NotFound(_)) => return Ok(()), // deleted since it closed
+        r => r?,
+    };
     let (unit, names) = (closed.meta.unit.clone(), closed.meta.point_names.clone());
     let motion = Arc::new(
         Motion::new(closed.fps, unit, names, positions, None)
@@ -176,7 +191,10 @@ pub(super) async fn reencode_take(store: &Store, id: &str, positions: Vec<f32>) 
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
     let chunks = take::chunk_rows(&enc.container);
     for _ in 0..REENCODE_ATTEMPTS {
-        let now = crate::service::fetch::take(store, id).await?;
+        let now = match crate::service::fetch::take(store, id).await {
+            Err(Error::NotFound(_)) => return Ok(()),
+            r => r?,
+        };
         if (now.codec, now.stored_bytes) != (closed.codec, closed.stored_bytes) {
             return Ok(()); // coded again elsewhere
         }

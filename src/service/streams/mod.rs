@@ -413,22 +413,9 @@ impl Streams {
         take.meta.warnings.extend(live.warnings.iter().cloned());
         take.header = closed.to_bytes();
         take.live_until = None;
-        let committed = take.frames * take.points * 3;
-        let archive = live
-            .archive
-            .take()
-            .filter(|a| take.frames > 0 && a.len() >= committed)
-            .map(|mut a| {
-                a.truncate(committed);
-                a
-            });
-        let archive = if take.frames > 0 {
-            let (axes, archive) = body::closing(store, &take, archive).await?;
-            take.meta.axes = Some(axes);
-            archive
-        } else {
-            None
-        };
+        if take.frames > 0 {
+            take.meta.axes = Some(body::closing(store, &take).await?);
+        }
         let closed = store
             .close_live(
                 id,
@@ -454,8 +441,13 @@ impl Streams {
             );
             return super::fetch::take(store, id).await;
         }
-        if let Some(frames) = archive {
-            reencode_take(store, id, frames).await?;
+        if let Some(frames) = live.archive.take().filter(|_| take.frames > 0) {
+            let committed = take.frames * take.points * 3;
+            if frames.len() >= committed {
+                let mut frames = frames;
+                frames.truncate(committed);
+                reencode_take(store, id, frames).await?;
+            }
         }
         super::fetch::take(store, id).await
     }

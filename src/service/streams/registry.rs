@@ -227,6 +227,17 @@ impl Streams {
             let header = fetch::header_from_index(&take, &store.chunk_index(&id).await?)?;
             let received = store.stream(&id).await?.map_or(0, |s| s.frames_received);
             let mut meta = take.meta.clone();
+            // Its body from all it committed, as a finish would have derived it (it has the
+            // first chunk's until then).
+            if take.frames > 0 {
+                match super::super::body::closing(store, &take).await {
+                    Ok(axes) => meta.axes = Some(axes),
+                    Err(e) if unavailable(&e) => return Err(e),
+                    Err(e) => {
+                        tracing::warn!(stream = %id, error = %e, "an orphaned live take's body could not be derived");
+                    }
+                }
+            }
             meta.frames_lost += (received - take.frames as i64).max(0) as usize;
             meta.interrupted = Some(
                 "the server coding this stream stopped before it finished; the take keeps the \

@@ -27,6 +27,9 @@ pub struct OpenRequest {
     pub library: String,
     #[serde(default)]
     pub tags: Vec<String>,
+    /// What the take is of ([`crate::labels`]): key → text or number.
+    #[serde(default)]
+    pub labels: Option<serde_json::Value>,
     pub fps: f64,
     pub points: PointsSpec,
     /// mm (default), cm, m, in, cmu, or metres per unit.
@@ -110,11 +113,16 @@ impl Plan {
         ) {
             return bad(format!("{why}: ask for shorter chunk_seconds"));
         }
+        let labels = match &req.labels {
+            Some(v) => crate::labels::Labels::from_json(v).map_err(Error::InvalidRequest)?,
+            None => Default::default(),
+        };
         Ok(Plan {
             label: Label {
                 name: req.name,
                 library: req.library,
                 tags: req.tags,
+                labels,
             },
             fps: req.fps,
             names,

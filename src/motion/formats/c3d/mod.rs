@@ -307,6 +307,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
             analog,
             events,
             parameters: Some(params),
+            labels: Default::default(),
         },
     })
 }
@@ -496,22 +497,32 @@ fn read_analog(
 }
 
 /// What a C3D says of its up axis. Its force plates lie in the floor: when
-/// `FORCE_PLATFORM:CORNERS` lie in one plane across an axis, that axis is up (the
-/// positive way: labs put the origin on the floor, the subject above it). Else
-/// `POINT:Y_SCREEN` names the axis a viewer shows pointing up (`+Z`, `-Y`, …), as Vicon,
-/// Qualisys and Motion Analysis write it; else the lab convention (ISB, c3d.org) of Z up.
+/// `FORCE_PLATFORM:CORNERS` lie in one plane across an axis, that axis is up, the way
+/// `POINT:Y_SCREEN` points along it if it names that axis, else the positive way (labs put
+/// the origin on the floor, the subject above it). Else `POINT:Y_SCREEN` names the axis a
+/// viewer shows pointing up (`+Z`, `-Y`, …), as Vicon, Qualisys and Motion Analysis write
+/// it; else the lab convention (ISB, c3d.org) of Z up.
 pub(crate) fn up_prior(params: Option<&Parameters>) -> crate::motion::body::Prior {
     use crate::motion::body::{Axis, Prior};
-    if let Some(up) = params.and_then(plates_normal) {
-        return Prior {
-            up,
-            says: format!("the file's force plates lie in a plane across {up} (the floor)"),
-        };
-    }
     let stated = params
         .and_then(|p| p.strings("POINT", "Y_SCREEN"))
         .and_then(|v| v.first().map(|s| s.trim().to_string()))
         .and_then(|s| s.parse::<Axis>().ok().map(|a| (a, s)));
+    if let Some(plane) = params.and_then(plates_normal) {
+        return match &stated {
+            Some((up, s)) if up.index() == plane.index() => Prior {
+                up: *up,
+                says: format!(
+                    "the file's force plates lie in a plane across {plane} (the floor), and \
+                     its POINT:Y_SCREEN is {s}"
+                ),
+            },
+            _ => Prior {
+                up: plane,
+                says: format!("the file's force plates lie in a plane across {plane} (the floor)"),
+            },
+        };
+    }
     match stated {
         Some((up, s)) => Prior {
             up,
@@ -630,8 +641,9 @@ pub(crate) fn labels(params: &Parameters, group: &str, n: usize, prefix: &str) -
 mod tests {
     use super::*;
 
-    /// Force plates lie in the floor: their corners' plane is up, whatever Y_SCREEN says;
-    /// plates standing on edge across no axis say nothing.
+    /// Force plates lie in the floor: their corners' plane is up, whatever axis Y_SCREEN
+    /// names (its sign counts when it names the same one); plates standing on edge across
+    /// no axis say nothing.
     #[test]
     fn force_plates_tell_up() {
         use crate::motion::body::Axis;
@@ -657,9 +669,11 @@ mod tests {
             0.5, 0.003, 0.4, -0.5, 0.001, 0.4, -0.5, -0.02, -0.2, 0.5, -0.029, -0.2, //
             1.5, 0.0, 0.4, 0.6, 0.0, 0.4, 0.6, -0.01, -0.2, 1.5, 0.0, -0.2,
         ];
-        let p = with(flat_y, Some("+Z"));
+        let p = with(flat_y.clone(), Some("+Z"));
         assert_eq!(p.up, Axis::Y, "{}", p.says);
         assert!(p.says.contains("force plates"), "{}", p.says);
+        let p = with(flat_y, Some("-Y"));
+        assert_eq!(p.up, Axis::Y.flipped(), "{}", p.says);
         // A tilted plate: no plane across an axis; Y_SCREEN then.
         let tilted = vec![0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 0.0];
         assert_eq!(with(tilted, Some("+Z")).up, Axis::Z);
