@@ -15,12 +15,23 @@ use serde::{Deserialize, Serialize};
 
 use crate::limits::{MAX_LABELS, MAX_LABEL_KEY_CHARS, MAX_LABEL_VALUE_CHARS};
 
-/// A label's value.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// A label's value. A whole number is written as one (`7`, not `7.0`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(untagged)]
 pub enum Label {
     Number(f64),
     Text(String),
+}
+
+impl Serialize for Label {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            // Exactly representable: below 2^53 every whole f64 is an integer.
+            Label::Number(n) if n.fract() == 0.0 && n.abs() < 9.0e15 => s.serialize_i64(*n as i64),
+            Label::Number(n) => s.serialize_f64(*n),
+            Label::Text(t) => s.serialize_str(t),
+        }
+    }
 }
 
 impl Label {
@@ -41,7 +52,7 @@ impl Label {
     /// (`7`), another number in Rust's shortest round-trip form (`0.5`), text as it is.
     pub fn canonical(&self) -> String {
         match self {
-            Label::Number(n) if n.fract() == 0.0 && n.abs() < 1e15 => format!("{}", *n as i64),
+            Label::Number(n) if n.fract() == 0.0 && n.abs() < 9.0e15 => format!("{}", *n as i64),
             Label::Number(n) => format!("{n}"),
             Label::Text(t) => t.clone(),
         }
@@ -396,6 +407,11 @@ mod tests {
         assert_eq!(Label::Number(7.0).canonical(), "7");
         assert_eq!(Label::from_text("7e0").canonical(), "7");
         assert_eq!(Label::Number(0.25).canonical(), "0.25");
+        let l = Labels::parse("n:7,x:0.5,t:walk").unwrap();
+        assert_eq!(
+            serde_json::to_string(&l).unwrap(),
+            r#"{"n":7,"t":"walk","x":0.5}"#
+        );
         assert_eq!(Label::from_stored("7", true), Ok(Label::Number(7.0)));
         assert!(Label::from_stored("seven", true).is_err());
     }

@@ -5,8 +5,13 @@
 //! take (Bandai Namco's `{"content": 7, "style": 0}`), readmes, scripts. Files are told by
 //! content ([`formats::is_motion`]), not by extension: what is not motion is skipped and
 //! counted once in the summary, never uploaded and never a failure.
+//!
+//! Labels ([`mocapstore::labels`]) come from three places, each over the one before: the
+//! file's name read by `--labels-from-name`, a sidecar beside it with its name (`.json`,
+//! `.yaml`, `.yml`: an object of key → value, nested objects as `outer.inner`), and
+//! `--labels` for every file.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -17,6 +22,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::Value;
 use tokio::sync::Semaphore;
 
+use mocapstore::labels::{Labels, NamePattern};
 use mocapstore::motion::formats;
 
 #[derive(Args)]
@@ -35,6 +41,18 @@ pub struct IngestArgs {
     /// Comma-separated tags for every file.
     #[arg(long)]
     tags: Option<String>,
+    /// Labels for every file: `key:value,…` (or a JSON object); over a sidecar's and the
+    /// name's.
+    #[arg(long)]
+    labels: Option<String>,
+    /// Label each take by its file name: `{dataset}_{content}_{style}_{n}` reads
+    /// `dataset-1_walk_happy_001` as dataset, content, style and n (`{}` matches without
+    /// labelling). A name that does not fit gets no labels from it, and is counted.
+    #[arg(long = "labels-from-name", value_name = "PATTERN")]
+    labels_from_name: Option<String>,
+    /// Leave label files beside the takes unread (they are read by default).
+    #[arg(long = "no-sidecar-labels")]
+    no_sidecar_labels: bool,
     /// No decoded sample farther than this, mm (default 1; 10× the mean when only a mean
     /// is given: the default cap).
     #[arg(long = "max-error-mm")]
@@ -81,8 +99,9 @@ const SNIFF_BYTES: u64 = 64 << 10;
 #[derive(Default)]
 struct Gathered {
     motion: Vec<PathBuf>,
-    /// Files beside a take with its name (`walk_001.json` beside `walk_001.bvh`): labels.
-    sidecars: Vec<PathBuf>,
+    /// Files beside a take with its name (`walk_001.json` beside `walk_001.bvh`): labels,
+    /// by the take's path without its extension.
+    sidecars: HashMap<PathBuf, Vec<PathBuf>>,
     /// Anything else that is not motion, and why.
     other: Vec<(PathBuf, String)>,
 }
@@ -135,8 +154,9 @@ fn gather(paths: &[PathBuf]) -> Gathered {
     }
     let takes: HashSet<PathBuf> = g.motion.iter().map(|p| p.with_extension("")).collect();
     for (f, why) in rest {
-        if why == "not motion" && takes.contains(&f.with_extension("")) {
-            g.sidecars.push(f);
+        let stem = f.with_extension("");
+        if why == "not motion" && takes.contains(&stem) {
+            g.sidecars.entry(stem).or_default().push(f);
         } else {
             g.other.push((f, why));
         }
@@ -150,16 +170,121 @@ const MOTION_EXTENSIONS: &[&str] = &["bvh", "c3d", "trc", "npy"];
 /// Skipped files named in the summary; the rest are counted.
 const SKIPPED_LISTED: usize = 20;
 
+/// The largest label file read: a dataset's sidecar is a few lines.
+const SIDECAR_BYTES: u64 = 1 << 20;
+
+/// A sidecar's labels: a JSON or YAML object of key → value. Err: the file and why.
+fn sidecar_labels(path: &Path) -> Result<Labels, String> {
+    let named = |e: String| format!("label file {}: {e}", path.display());
+    let len = std::fs::metadata(path)
+        .map_err(|e| named(e.to_string()))?
+        .len();
+    if len > SIDECAR_BYTES {
+        return Err(named(format!(
+            "{len} bytes, more than a label file's {SIDECAR_BYTES}"
+        )));
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| named(e.to_string()))?;
+    let yaml = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "yaml" | "yml"));
+    let value: Value = if yaml {
+        serde_yaml_ng::from_str(&text).map_err(|e| named(e.to_string()))?
+    } else {
+        serde_json::from_str(&text).map_err(|e| named(e.to_string()))?
+    };
+    Labels::from_json(&value).map_err(named)
+}
+
+/// What labels a file: the parts of `--labels-from-name`, `--labels` and the sidecars.
+struct Labelling {
+    pattern: Option<NamePattern>,
+    given: Labels,
+    sidecars: HashMap<PathBuf, Vec<PathBuf>>,
+    /// Files whose names did not fit the pattern, and takes labelled by a sidecar.
+    unfit: Vec<PathBuf>,
+    from_sidecar: usize,
+}
+
+impl Labelling {
+    fn new(args: &IngestArgs, sidecars: HashMap<PathBuf, Vec<PathBuf>>) -> Result<Self, String> {
+        Ok(Labelling {
+            pattern: args
+                .labels_from_name
+                .as_deref()
+                .map(NamePattern::parse)
+                .transpose()?,
+            given: args
+                .labels
+                .as_deref()
+                .map(Labels::parse)
+                .transpose()
+                .map_err(|e| format!("--labels: {e}"))?
+                .unwrap_or_default(),
+            sidecars: if args.no_sidecar_labels {
+                HashMap::new()
+            } else {
+                sidecars
+            },
+            unfit: Vec::new(),
+            from_sidecar: 0,
+        })
+    }
+
+    /// The labels of the take at `path` (its name's, its sidecars' over them, the given
+    /// ones over those), as the JSON the server reads; `None` when it has none.
+    fn of(&mut self, path: &Path) -> Result<Option<String>, String> {
+        let mut labels = Labels::new();
+        if let Some(p) = &self.pattern {
+            let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+            match stem.as_deref().and_then(|s| p.labels(s)) {
+                Some(l) => labels = l,
+                None => self.unfit.push(path.to_path_buf()),
+            }
+        }
+        if let Some(files) = self.sidecars.get(&path.with_extension("")) {
+            for f in files {
+                labels.merge(&sidecar_labels(f)?)?;
+            }
+            self.from_sidecar += 1;
+        }
+        labels.merge(&self.given)?;
+        Ok((!labels.is_empty()).then(|| serde_json::to_string(&labels).expect("labels serialise")))
+    }
+}
+
 pub fn run(args: &IngestArgs) -> ExitCode {
     let gathered = gather(&args.paths);
     let files = gathered.motion;
+    let sidecar_files: usize = gathered.sidecars.values().map(Vec::len).sum();
     if files.is_empty() {
         eprintln!(
             "mocapstore ingest: no motion files under {:?} ({} other files)",
             args.paths,
-            gathered.sidecars.len() + gathered.other.len()
+            sidecar_files + gathered.other.len()
         );
         return ExitCode::FAILURE;
+    }
+    let mut labelling = match Labelling::new(args, gathered.sidecars) {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("mocapstore ingest: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    // A take whose labels cannot be read is a failure named with its label file, and not
+    // uploaded: stored without them, it would pass for an unlabelled take.
+    let mut outcomes = Vec::new();
+    let mut jobs = Vec::new();
+    for f in files {
+        match labelling.of(&f) {
+            Ok(labels) => jobs.push((f, labels)),
+            Err(e) => outcomes.push(Outcome {
+                file: f.display().to_string(),
+                result: Err(e),
+            }),
+        }
     }
     let runtime = match tokio::runtime::Runtime::new() {
         Ok(r) => r,
@@ -175,7 +300,7 @@ pub fn run(args: &IngestArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let outcomes = runtime.block_on(upload_all(args, &client, files));
+    outcomes.extend(runtime.block_on(upload_all(args, &client, jobs)));
     let failed: Vec<&Outcome> = outcomes.iter().filter(|o| o.result.is_err()).collect();
     println!(
         "{:<48} {:<8} {:>8} {:>9} {:>9}",
@@ -198,10 +323,23 @@ pub fn run(args: &IngestArgs) -> ExitCode {
          that are not motion)",
         outcomes.len() - failed.len(),
         failed.len(),
-        gathered.sidecars.len() + gathered.other.len(),
-        gathered.sidecars.len(),
+        sidecar_files + gathered.other.len(),
+        sidecar_files,
         gathered.other.len()
     );
+    if labelling.from_sidecar > 0 {
+        println!(
+            "{} takes labelled from the files beside them",
+            labelling.from_sidecar
+        );
+    }
+    if let Some(first) = labelling.unfit.first() {
+        println!(
+            "{} names do not fit --labels-from-name (the first: {}): no labels from their names",
+            labelling.unfit.len(),
+            first.display()
+        );
+    }
     for (f, why) in gathered.other.iter().take(SKIPPED_LISTED) {
         println!("skipped {}: {why}", f.display());
     }
@@ -223,10 +361,11 @@ pub fn run(args: &IngestArgs) -> ExitCode {
     }
 }
 
+/// Upload each file with its labels (JSON), a few at a time.
 async fn upload_all(
     args: &IngestArgs,
     client: &reqwest::Client,
-    files: Vec<PathBuf>,
+    files: Vec<(PathBuf, Option<String>)>,
 ) -> Vec<Outcome> {
     let bar = ProgressBar::new(files.len() as u64);
     bar.set_style(
@@ -259,7 +398,7 @@ async fn upload_all(
     }
     let url = format!("{}/v1/takes", args.server.trim_end_matches('/'));
     let mut tasks = Vec::new();
-    for path in files {
+    for (path, labels) in files {
         let (client, slots, bar, url) = (client.clone(), slots.clone(), bar.clone(), url.clone());
         let mut query = fixed.clone();
         let name = path
@@ -267,6 +406,9 @@ async fn upload_all(
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
         query.push(("name", name));
+        if let Some(l) = labels {
+            query.push(("labels", l));
+        }
         tasks.push(tokio::spawn(async move {
             let _slot = slots.acquire().await.expect("semaphore open");
             let file = path.display().to_string();

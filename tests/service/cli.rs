@@ -159,6 +159,165 @@ async fn ingest_passes_a_dataset_folder_with_label_files() {
     t.finish().await;
 }
 
+/// The Bandai Namco folder as a dataset publishes it, a label file beside each BVH (JSON
+/// or YAML, written here from the dataset's own naming): every take is stored with its
+/// labels, none fails; read again by `--labels-from-name`, the same content and style. All
+/// 174 takes (quant: two seconds). A label file that holds no labels fails its take, named.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_dataset_folder_is_labelled_by_its_sidecars_and_its_names() {
+    let Some((root, entries)) = corpus::for_tests() else {
+        return;
+    };
+    let mut names: Vec<String> = entries
+        .iter()
+        .filter_map(|e| e.path.strip_prefix("bvh/bandai/"))
+        .filter_map(|p| p.strip_suffix(".bvh"))
+        .map(str::to_string)
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 174);
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 8 << 20).await;
+    let dir = std::env::temp_dir().join(format!("mocapstore-labels-{}", uuid::Uuid::now_v7()));
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    // dataset-1_walk_normal_001: content walk, style normal.
+    let split = |n: &str| -> (String, String) {
+        let p: Vec<&str> = n.split('_').collect();
+        (p[1].to_string(), p[2].to_string())
+    };
+    for (i, name) in names.iter().enumerate() {
+        std::fs::copy(
+            root.join("bvh/bandai").join(format!("{name}.bvh")),
+            data.join(format!("{name}.bvh")),
+        )
+        .unwrap();
+        let (content, style) = split(name);
+        if i % 2 == 0 {
+            let json = serde_json::json!({"content": content, "style": style});
+            std::fs::write(data.join(format!("{name}.json")), json.to_string()).unwrap();
+        } else {
+            let yaml = format!("content: {content}\nstyle: {style}\n");
+            std::fs::write(data.join(format!("{name}.yaml")), yaml).unwrap();
+        }
+    }
+    let run = |extra: &[&str]| {
+        let mut args: Vec<String> = vec![
+            "ingest".into(),
+            data.display().to_string(),
+            "--server".into(),
+            srv.base.clone(),
+            "--codec".into(),
+            "quant".into(),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        common::mocapstore_beside(args)
+    };
+    let out = run(&["--library", "sidecars"]).await;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let n = names.len();
+    assert!(
+        stdout.contains(&format!("{n} stored, 0 failed")),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(&format!("{n} takes labelled from the files beside them")),
+        "{stdout}"
+    );
+    let pattern = "{dataset}_{content}_{style}_{n}";
+    let out = run(&[
+        "--library",
+        "names",
+        "--no-sidecar-labels",
+        "--labels-from-name",
+        pattern,
+    ])
+    .await;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(!stdout.contains("do not fit"), "{stdout}");
+
+    let server = &srv;
+    let listed = |library: &str, filter: &str| {
+        let path = format!("/v1/takes?library={library}&limit=500{filter}");
+        async move {
+            let (status, page) = server.get_json(&path).await;
+            assert_eq!(status, 200, "{page}");
+            page["items"].as_array().unwrap().clone()
+        }
+    };
+    let from_sidecars = listed("sidecars", "").await;
+    let from_names = listed("names", "").await;
+    assert_eq!((from_sidecars.len(), from_names.len()), (n, n));
+    for take in &from_sidecars {
+        let name = take["name"].as_str().unwrap();
+        let (content, style) = split(name);
+        assert_eq!(
+            take["labels"],
+            serde_json::json!({"content": content, "style": style}),
+            "{name}"
+        );
+        let same = from_names.iter().find(|t| t["name"] == name).unwrap();
+        let l = &same["labels"];
+        assert_eq!(
+            (&l["content"], &l["style"]),
+            (&take["labels"]["content"], &take["labels"]["style"]),
+            "{name}"
+        );
+        assert_eq!(l["dataset"], "dataset-1", "{name}");
+        assert!(l["n"].is_number(), "{name}: {l}");
+    }
+    // Found by their labels.
+    let walks = names.iter().filter(|n| split(n).0 == "walk").count();
+    assert!(walks > 0);
+    assert_eq!(listed("sidecars", "&label.content=walk").await.len(), walks);
+    assert_eq!(
+        listed("names", "&label.content=walk&label.dataset=dataset-1")
+            .await
+            .len(),
+        walks
+    );
+    let firsts = names.iter().filter(|n| n.ends_with("_001")).count();
+    assert!(firsts > 0);
+    assert_eq!(listed("names", "&label.n=1").await.len(), firsts);
+    assert_eq!(
+        listed("names", "&label.n=01").await.len(),
+        firsts,
+        "numbers by value"
+    );
+    assert!(listed("sidecars", "&label.content=nothing")
+        .await
+        .is_empty());
+
+    // A label file that holds no labels: its take fails, named with it, and is not stored.
+    let bad = dir.join("bad");
+    std::fs::create_dir_all(&bad).unwrap();
+    std::fs::copy(data.join(format!("{}.bvh", names[0])), bad.join("take.bvh")).unwrap();
+    std::fs::write(bad.join("take.json"), r#"{"content": [1, 2]}"#).unwrap();
+    let before = t.store.count().await.unwrap();
+    let out = common::mocapstore_beside(
+        ["ingest", &bad.display().to_string(), "--server", &srv.base]
+            .map(String::from)
+            .to_vec(),
+    )
+    .await;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("take.json") && stderr.contains("list"),
+        "{stderr}"
+    );
+    assert_eq!(t.store.count().await.unwrap(), before);
+    std::fs::remove_dir_all(&dir).unwrap();
+    srv.stop().await;
+    t.finish().await;
+}
+
 /// `mocapstore fetch` writes a range of a take to a file in its extension's format: a BVH
 /// take's rows as uploaded; a take without its animation is refused, naming the reason.
 #[tokio::test]

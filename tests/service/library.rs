@@ -205,3 +205,153 @@ async fn listings_pages_filters_stats_and_patches() {
         t.finish().await;
     }
 }
+
+/// Labels on every backend: given at ingest (a query, a header, a JSON take's own, the
+/// query over the file's), changed by PATCH (set, removed, the rest kept), found by
+/// `label.<key>=` in listings, statistics and exports (numbers by value), written in the
+/// export's manifest; what cannot be a label is a 400 that changes nothing.
+#[tokio::test]
+async fn labels_are_given_changed_and_found() {
+    for t in common::all().await {
+        let srv = common::start(t.store.clone(), 8 << 20).await;
+        let take = |seed: u64| {
+            let m = walker(40, 4, 120.0, seed, 0.0);
+            formats::write(&m, Format::Json).unwrap()
+        };
+        let (status, a) = srv
+            .post(
+                "name=a&library=lab&labels=content:walk,style:happy,n:1",
+                take(1),
+            )
+            .await;
+        assert_eq!(status, 201, "{a}");
+        let a = a["id"].as_str().unwrap().to_string();
+        // A JSON take's own labels, and the query's over them.
+        let mut doc: Value = serde_json::from_slice(&take(2)).unwrap();
+        doc["labels"] = serde_json::json!({"content": "run", "subject": {"id": 7}});
+        let (status, b) = srv
+            .post(
+                "name=b&library=lab&labels=%7B%22content%22%3A%22jog%22%7D",
+                doc.to_string().into_bytes(),
+            )
+            .await;
+        assert_eq!(status, 201, "{b}");
+        let b = b["id"].as_str().unwrap().to_string();
+        // A header.
+        let r = srv
+            .client
+            .post(format!("{}/v1/takes?name=c&library=lab", srv.base))
+            .header("x-mocap-labels", "content:walk,style:sad")
+            .body(take(3))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 201);
+        let (_, got) = json(&srv, &format!("/v1/takes/{a}")).await;
+        assert_eq!(
+            got["labels"],
+            serde_json::json!({"content": "walk", "style": "happy", "n": 1}),
+            "{got}"
+        );
+        let (_, got) = json(&srv, &format!("/v1/takes/{b}")).await;
+        assert_eq!(
+            got["labels"],
+            serde_json::json!({"content": "jog", "subject.id": 7}),
+            "{got}"
+        );
+
+        let names = |page: &Value| -> BTreeSet<String> {
+            page["items"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|t| t["name"].as_str().unwrap().to_string())
+                .collect()
+        };
+        let set = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<BTreeSet<_>>();
+        let (_, page) = json(&srv, "/v1/takes?label.content=walk").await;
+        assert_eq!(names(&page), set(&["a", "c"]));
+        let (_, page) = json(&srv, "/v1/takes?label.content=walk&label.style=sad").await;
+        assert_eq!(names(&page), set(&["c"]));
+        let (_, page) = json(&srv, "/v1/takes?label.n=1.0&library=lab").await;
+        assert_eq!(names(&page), set(&["a"]), "numbers by value");
+        let (_, page) = json(&srv, "/v1/takes?label.subject.id=7").await;
+        assert_eq!(names(&page), set(&["b"]));
+        let (_, stats) = json(&srv, "/v1/stats?label.content=walk").await;
+        assert_eq!(stats["total"]["takes"], 2, "{stats}");
+
+        // PATCH: set, remove, keep.
+        let patch = |id: String, body: Value| {
+            let (client, base) = (srv.client.clone(), srv.base.clone());
+            async move {
+                let r = client
+                    .patch(format!("{base}/v1/takes/{id}"))
+                    .json(&body)
+                    .send()
+                    .await
+                    .unwrap();
+                (r.status().as_u16(), r.json::<Value>().await.unwrap())
+            }
+        };
+        let (status, got) = patch(
+            a.clone(),
+            serde_json::json!({"labels": {"style": null, "take": 3}}),
+        )
+        .await;
+        assert_eq!(status, 200, "{got}");
+        assert_eq!(
+            got["labels"],
+            serde_json::json!({"content": "walk", "n": 1, "take": 3})
+        );
+        // Refused, naming why; nothing changed, the rest of the PATCH included.
+        for (bad, why) in [
+            (serde_json::json!({"labels": {"a b": 1}}), "a b"),
+            (serde_json::json!({"labels": {"k": [1]}}), "list"),
+            (serde_json::json!({"labels": {"k": ""}}), "1 to"),
+            (serde_json::json!({"labels": ["k"]}), "object"),
+            (
+                serde_json::json!({"name": "renamed", "labels": {"k": "x".repeat(300)}}),
+                "256",
+            ),
+        ] {
+            let (status, err) = patch(a.clone(), bad.clone()).await;
+            assert_eq!(status, 400, "{bad}: {err}");
+            assert!(err.to_string().contains(why), "{bad}: {err}");
+        }
+        let too_many: serde_json::Map<String, Value> =
+            (0..70).map(|i| (format!("k{i}"), Value::from(i))).collect();
+        let (status, err) = patch(a.clone(), serde_json::json!({ "labels": too_many })).await;
+        assert_eq!(status, 400, "{err}");
+        let (_, got) = json(&srv, &format!("/v1/takes/{a}")).await;
+        assert_eq!(got["name"], "a");
+        assert_eq!(got["labels"]["take"], 3);
+        for bad in ["labels=content", "labels=a%20b:1", "labels=%5B1%5D"] {
+            let (status, err) = srv.post(&format!("name=x&{bad}"), take(4)).await;
+            assert_eq!(status, 400, "{bad}: {err}");
+        }
+        let (status, err) = json(&srv, "/v1/takes?label.a%20b=1").await;
+        assert_eq!(status, 400, "{err}");
+
+        // The export's manifest carries them; its label filter picks the takes.
+        let (status, _, zip) = srv
+            .get("/v1/export?library=lab&label.content=walk&format=json")
+            .await;
+        assert_eq!(status, 200);
+        let mut archive = zip::ZipArchive::new(std::io::Cursor::new(zip)).unwrap();
+        let mut manifest = String::new();
+        std::io::Read::read_to_string(&mut archive.by_name("manifest.csv").unwrap(), &mut manifest)
+            .unwrap();
+        let lines: Vec<&str> = manifest.lines().collect();
+        assert!(
+            lines[0].starts_with("file,id,name,library,tags,labels,"),
+            "{manifest}"
+        );
+        assert_eq!(lines.len(), 3, "{manifest}");
+        assert!(
+            manifest.contains(r#""{""content"":""walk"",""n"":1,""take"":3}""#),
+            "{manifest}"
+        );
+        srv.stop().await;
+        t.finish().await;
+    }
+}
