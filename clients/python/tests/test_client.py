@@ -316,6 +316,43 @@ def test_a_folder_is_ingested_with_its_refusals_reported(
     assert sorted(t.name for t in client.takes(library=lib)) == ["a", "b"]
 
 
+def test_labels_from_files_names_and_edits(client: mocapstore.Client, tmp_path: Path) -> None:
+    lib = library()
+    np.save(tmp_path / "d1_walk_happy_001.npy", walker(30))
+    np.save(tmp_path / "d1_run_sad_002.npy", walker(30))
+    (tmp_path / "d1_walk_happy_001.json").write_text('{"content": "stroll", "subject": {"id": 4}}')
+    out = client.ingest_folder(
+        tmp_path,
+        library=lib,
+        fps=60,
+        progress=False,
+        labels_from_name="{dataset}_{content}_{style}_{n}",
+        labels={"session": "s1"},
+    )
+    assert all(o.take is not None for o in out), out
+    by = {t.name: t for t in client.takes(library=lib)}
+    # The label file over the name, the given labels over both; numbers as numbers.
+    assert by["d1_walk_happy_001"].labels == {
+        "dataset": "d1",
+        "content": "stroll",
+        "style": "happy",
+        "n": 1,
+        "subject.id": 4,
+        "session": "s1",
+    }
+    assert by["d1_run_sad_002"].labels["n"] == 2
+    assert [t.name for t in client.takes(library=lib, labels={"content": "run"})] == [
+        "d1_run_sad_002"
+    ]
+    assert client.stats(library=lib, labels={"session": "s1"})["total"]["takes"] == 2
+    t = client.update(by["d1_run_sad_002"].id, labels={"style": None, "take": 3.0})
+    assert t.labels == {"dataset": "d1", "content": "run", "n": 2, "session": "s1", "take": 3}
+    one = client.ingest(walker(20), library=lib, fps=60, labels={"content": "bow", "n": 1.5})
+    assert one.labels == {"content": "bow", "n": 1.5}
+    assert _protocol.name_labels("{a}-{}-x{b}", "p-q-x7") == {"a": "p", "b": 7}
+    assert _protocol.name_labels("{a}-{b}", "nothing") is None
+
+
 def test_frames_as_a_table(client: mocapstore.Client) -> None:
     take = client.ingest(walker(40, gaps=True), library=library(), fps=60, point_names=NAMES)
     f = client.frames(take.id, end=30)

@@ -57,6 +57,28 @@ Op = Generator[Request, Response, T]
 
 Scalar = str | int | float | bool | None
 
+#: A take's labels as given: key → text or number.
+Labels = Mapping[str, str | int | float]
+
+
+def label_text(v: str | int | float) -> str:
+    """A label value as a query writes it (a whole number without a point)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float) and v.is_integer():
+        return str(int(v))
+    return str(v)
+
+
+def label_filters(labels: Labels | None) -> Params:
+    """``label.<key>=<value>`` conditions: takes with every one of these labels."""
+    return [(f"label.{k}", label_text(v)) for k, v in (labels or {}).items()]
+
+
+def labels_json(labels: Labels | None) -> str | None:
+    """Labels as the ``labels`` ingest field carries them (a JSON object), or ``None``."""
+    return json.dumps(dict(labels)) if labels else None
+
 
 def params(**fields: Scalar | Sequence[str]) -> Params:
     """Query fields, leaving out those that are ``None``; sequences joined by commas."""
@@ -155,8 +177,16 @@ def page(filters: Params, cursor: str | None, limit: int) -> Op[Page]:
     return Page([Take.from_json(t) for t in v["items"]], v.get("next_cursor"))
 
 
-def update(id: str, name: str | None, library: str | None, tags: Sequence[str] | None) -> Op[Take]:
+def update(
+    id: str,
+    name: str | None,
+    library: str | None,
+    tags: Sequence[str] | None,
+    labels: Mapping[str, str | int | float | None] | None = None,
+) -> Op[Take]:
     body: dict[str, Any] = {}
+    if labels is not None:
+        body["labels"] = dict(labels)
     if name is not None:
         body["name"] = name
     if library is not None:
@@ -398,6 +428,85 @@ def is_take_json(path: Path) -> bool:
     except (OSError, ValueError):
         return False
     return isinstance(doc, dict) and "points" in doc and "frames" in doc
+
+
+#: The files beside a take, with its name, that may hold its labels.
+LABEL_SUFFIXES = (".json", ".yaml", ".yml")
+
+
+def sidecar_labels(take: Path) -> dict[str, Any] | None:
+    """The labels in the files beside ``take`` with its name (``walk_001.json`` beside
+    ``walk_001.bvh``: an object of key → value; YAML when PyYAML is installed), merged;
+    ``None`` when there are none. A file that is not such an object raises ``ValueError``
+    naming it."""
+    out: dict[str, Any] = {}
+    found = False
+    for suffix in LABEL_SUFFIXES:
+        f = take.with_suffix(suffix)
+        if f == take or not f.is_file():
+            continue
+        text = f.read_text()
+        if suffix == ".json":
+            doc = json.loads(text)
+        else:
+            try:
+                import yaml  # type: ignore[import-untyped]
+            except ImportError:
+                continue
+            doc = yaml.safe_load(text)
+        if not isinstance(doc, dict):
+            raise ValueError(f"label file {f}: not an object of key → value")
+        out.update(doc)
+        found = True
+    return out if found else None
+
+
+def name_labels(pattern: str, stem: str) -> dict[str, Any] | None:
+    """The labels a file name gives by ``pattern`` (``{dataset}_{content}_{style}_{n}``:
+    each field the shortest text up to the literal after it, the last one the rest; ``{}``
+    matched, not kept; a value written as a number is one), or ``None`` if it does not
+    fit. The server's ``mocapstore ingest --labels-from-name`` reads names the same way."""
+    import re
+
+    parts = re.split(r"(\{[^{}]*\})", pattern)
+    regex = ""
+    keys: list[tuple[str, str | None]] = []
+    for i, part in enumerate(parts):
+        if part.startswith("{") and part.endswith("}"):
+            key = part[1:-1]
+            last = all(not q for q in parts[i + 1 :])
+            group = f"g{len(keys)}"
+            keys.append((group, key if key not in ("", "_") else None))
+            regex += f"(?P<{group}>.+)" if last else f"(?P<{group}>.+?)"
+        else:
+            regex += re.escape(part)
+    m = re.fullmatch(regex, stem)
+    if m is None:
+        return None
+    number = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+    out: dict[str, Any] = {}
+    for group, key in keys:
+        if key is None:
+            continue
+        v = m.group(group)
+        out[key] = float(v) if number.fullmatch(v) else v
+        if isinstance(out[key], float) and out[key].is_integer():
+            out[key] = int(out[key])
+    return out
+
+
+def folder_labels(
+    take: Path, pattern: str | None, sidecars: bool, given: Labels | None
+) -> dict[str, Any] | None:
+    """A take file's labels as a folder's ingest gives them: its name's by ``pattern``,
+    its label files' over them, ``given`` over those; ``None`` when it has none."""
+    out: dict[str, Any] = {}
+    if pattern is not None:
+        out.update(name_labels(pattern, take.stem) or {})
+    if sidecars:
+        out.update(sidecar_labels(take) or {})
+    out.update(given or {})
+    return out or None
 
 
 def take_files(root: Path) -> list[Path]:

@@ -14,7 +14,7 @@ import asyncio
 import importlib
 import os
 import time
-from collections.abc import AsyncIterator, Iterator, Sequence
+from collections.abc import AsyncIterator, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -229,11 +229,14 @@ def _stream_body(
     mean_error_mm: float | None,
     codec: str | None,
     chunk_seconds: float | None,
+    labels: p.Labels | None = None,
 ) -> dict[str, Any]:
     body: dict[str, Any] = {
         "fps": fps,
         "points": points if isinstance(points, int) else list(points),
     }
+    if labels:
+        body["labels"] = dict(labels)
     for k, v in [
         ("name", name),
         ("library", library),
@@ -453,13 +456,15 @@ class Client(_Base):
         name_prefix: str | None = None,
         codec: str | None = None,
         layout: str | None = None,
+        labels: p.Labels | None = None,
         page_size: int = 500,
     ) -> Iterator[Take]:
         """Every take of a selection, oldest first, fetched a page at a time as the iterator
-        is read (takes stored meanwhile come at the end; none twice)."""
+        is read (takes stored meanwhile come at the end; none twice). ``labels``: takes
+        with every one of these labels (``{"content": "walk"}``)."""
         filters = self._filters(
             library=library, tag=tag, name_prefix=name_prefix, codec=codec, layout=layout
-        )
+        ) + p.label_filters(labels)
         cursor: str | None = None
         while True:
             page = self._run(p.page(filters, cursor, page_size))
@@ -475,9 +480,11 @@ class Client(_Base):
         name: str | None = None,
         library: str | None = None,
         tags: Sequence[str] | None = None,
+        labels: Mapping[str, str | int | float | None] | None = None,
     ) -> Take:
-        """Rename a take, move it to another library and/or replace its tags."""
-        t = self._run(p.update(id, name, library, tags))
+        """Rename a take, move it to another library, replace its tags and/or set its
+        ``labels`` (a value of ``None`` removes that label; the others are kept)."""
+        t = self._run(p.update(id, name, library, tags, labels))
         self._takes.pop(id, None)
         return t
 
@@ -487,10 +494,16 @@ class Client(_Base):
         self._takes.pop(id, None)
 
     def stats(
-        self, *, library: str | None = None, tag: str | None = None, codec: str | None = None
+        self,
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        codec: str | None = None,
+        labels: p.Labels | None = None,
     ) -> dict[str, Any]:
         """Totals over the library, by codec and by library."""
-        return self._run(p.stats(self._filters(library=library, tag=tag, codec=codec)))
+        filters = self._filters(library=library, tag=tag, codec=codec)
+        return self._run(p.stats(filters + p.label_filters(labels)))
 
     def ingest(
         self,
@@ -506,6 +519,7 @@ class Client(_Base):
         keep: str | None = None,
         codec: str | None = None,
         point_names: Sequence[str] | None = None,
+        labels: p.Labels | None = None,
     ) -> Take:
         """Store a file (BVH, C3D, TRC, JSON, NPY; named after the file unless ``name`` is
         given) or an array of positions ``(frames, points, 3)`` with its ``fps`` (NaN where
@@ -523,6 +537,7 @@ class Client(_Base):
             mean_error_mm=mean_error_mm,
             keep=keep,
             codec=codec,
+            labels=p.labels_json(labels),
         )
         return self._run(p.ingest(body, query))
 
@@ -616,21 +631,31 @@ class Client(_Base):
         *,
         concurrency: int = 4,
         progress: bool = True,
+        labels_from_name: str | None = None,
+        sidecar_labels: bool = True,
         **fields: Any,
     ) -> list[Ingested]:
         """Store every take file under ``path`` (.bvh .c3d .trc .npy, and .json holding a take;
         label files and hidden files are passed over), ``concurrency``
         at a time, each named after its file, with ``fields`` as [`Client.ingest`] takes
         them; a progress bar when ``tqdm`` is installed. A file the server refuses is
-        reported in its result, not raised."""
+        reported in its result, not raised.
+
+        Each take is labelled as ``mocapstore ingest`` labels it: by its name read with
+        ``labels_from_name`` (``"{dataset}_{content}_{style}_{n}"``), then the label file
+        beside it with its name (``.json``, or ``.yaml`` with PyYAML), then ``labels``."""
         files = p.take_files(Path(path))
         bar = _progress(len(files), progress)
+        given = dict(fields.pop("labels", None) or {})
 
         def one(f: Path) -> Ingested:
             try:
-                return Ingested(f, self.ingest(f, **fields), None)
+                labels = p.folder_labels(f, labels_from_name, sidecar_labels, given)
+                return Ingested(f, self.ingest(f, labels=labels, **fields), None)
             except errors.MocapstoreError as e:
                 return Ingested(f, None, e)
+            except ValueError as e:  # a label file that holds no labels
+                return Ingested(f, None, errors.MocapstoreError(str(e)))
             finally:
                 bar.update(1)
 
@@ -654,6 +679,7 @@ class Client(_Base):
         mean_error_mm: float | None = None,
         codec: str | None = None,
         chunk_seconds: float | None = None,
+        labels: p.Labels | None = None,
     ) -> Stream:
         """Open a live take of ``points`` (a count, or their names) at ``fps``; use it as a
         context manager (finished when the block ends)."""
@@ -668,6 +694,7 @@ class Client(_Base):
             mean_error_mm,
             codec,
             chunk_seconds,
+            labels,
         )
         return Stream(self, self._run(p.open_stream(body)))
 
@@ -682,12 +709,13 @@ class Client(_Base):
         root: str | None = None,
         up: str | None = None,
         unit: str | None = None,
+        labels: p.Labels | None = None,
     ) -> Path:
         """Every take of a selection in one format, as the server's ZIP (a file per take and
         ``manifest.csv``), streamed to ``path``."""
         query = p.params(
             library=library, tag=tag, format=format, fps=fps, root=root, up=up, unit=unit
-        )
+        ) + p.label_filters(labels)
         return self._run(p.download("/v1/export", query, Path(path)))
 
 
@@ -782,12 +810,13 @@ class AsyncClient(_Base):
         name_prefix: str | None = None,
         codec: str | None = None,
         layout: str | None = None,
+        labels: p.Labels | None = None,
         page_size: int = 500,
     ) -> AsyncIterator[Take]:
         """Every take of a selection, oldest first, a page at a time."""
         filters = self._filters(
             library=library, tag=tag, name_prefix=name_prefix, codec=codec, layout=layout
-        )
+        ) + p.label_filters(labels)
         cursor: str | None = None
         while True:
             page = await self._run(p.page(filters, cursor, page_size))
@@ -804,9 +833,11 @@ class AsyncClient(_Base):
         name: str | None = None,
         library: str | None = None,
         tags: Sequence[str] | None = None,
+        labels: Mapping[str, str | int | float | None] | None = None,
     ) -> Take:
-        """Rename a take, move it to another library and/or replace its tags."""
-        t = await self._run(p.update(id, name, library, tags))
+        """Rename a take, move it to another library, replace its tags and/or set its
+        ``labels`` (a value of ``None`` removes that label; the others are kept)."""
+        t = await self._run(p.update(id, name, library, tags, labels))
         self._takes.pop(id, None)
         return t
 
@@ -816,10 +847,16 @@ class AsyncClient(_Base):
         self._takes.pop(id, None)
 
     async def stats(
-        self, *, library: str | None = None, tag: str | None = None, codec: str | None = None
+        self,
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        codec: str | None = None,
+        labels: p.Labels | None = None,
     ) -> dict[str, Any]:
         """Totals over the library, by codec and by library."""
-        return await self._run(p.stats(self._filters(library=library, tag=tag, codec=codec)))
+        filters = self._filters(library=library, tag=tag, codec=codec)
+        return await self._run(p.stats(filters + p.label_filters(labels)))
 
     async def ingest(
         self,
@@ -835,6 +872,7 @@ class AsyncClient(_Base):
         keep: str | None = None,
         codec: str | None = None,
         point_names: Sequence[str] | None = None,
+        labels: p.Labels | None = None,
     ) -> Take:
         """Store a file or an array of positions (see [`Client.ingest`])."""
         # Reading a file (or serialising an array) off the event loop.
@@ -849,6 +887,7 @@ class AsyncClient(_Base):
             mean_error_mm=mean_error_mm,
             keep=keep,
             codec=codec,
+            labels=p.labels_json(labels),
         )
         return await self._run(p.ingest(body, query))
 
@@ -886,11 +925,12 @@ class AsyncClient(_Base):
         root: str | None = None,
         up: str | None = None,
         unit: str | None = None,
+        labels: p.Labels | None = None,
     ) -> Path:
         """Every take of a selection as the server's ZIP (see [`Client.export_library`])."""
         query = p.params(
             library=library, tag=tag, format=format, fps=fps, root=root, up=up, unit=unit
-        )
+        ) + p.label_filters(labels)
         return await self._run(p.download("/v1/export", query, Path(path)))
 
     async def frames(
@@ -936,6 +976,7 @@ class AsyncClient(_Base):
         mean_error_mm: float | None = None,
         codec: str | None = None,
         chunk_seconds: float | None = None,
+        labels: p.Labels | None = None,
     ) -> AsyncStream:
         """Open a live take (see [`Client.stream`])."""
         body = _stream_body(
@@ -949,6 +990,7 @@ class AsyncClient(_Base):
             mean_error_mm,
             codec,
             chunk_seconds,
+            labels,
         )
         return AsyncStream(self, await self._run(p.open_stream(body)))
 
@@ -975,19 +1017,27 @@ class AsyncClient(_Base):
         *,
         concurrency: int = 4,
         progress: bool = True,
+        labels_from_name: str | None = None,
+        sidecar_labels: bool = True,
         **fields: Any,
     ) -> list[Ingested]:
         """Store every take file under ``path`` (see [`Client.ingest_folder`])."""
         files = p.take_files(Path(path))
         bar = _progress(len(files), progress)
         slots = asyncio.Semaphore(max(1, concurrency))
+        given = dict(fields.pop("labels", None) or {})
 
         async def one(f: Path) -> Ingested:
             async with slots:
                 try:
-                    return Ingested(f, await self.ingest(f, **fields), None)
+                    labels = await asyncio.to_thread(
+                        p.folder_labels, f, labels_from_name, sidecar_labels, given
+                    )
+                    return Ingested(f, await self.ingest(f, labels=labels, **fields), None)
                 except errors.MocapstoreError as e:
                     return Ingested(f, None, e)
+                except ValueError as e:  # a label file that holds no labels
+                    return Ingested(f, None, errors.MocapstoreError(str(e)))
                 finally:
                     bar.update(1)
 

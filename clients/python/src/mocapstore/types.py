@@ -43,6 +43,8 @@ class Take:
     skeleton: str | None
     live: bool
     raw: dict[str, Any] = field(repr=False, compare=False)
+    #: What the take is of: key → text or number.
+    labels: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def from_json(cls, v: dict[str, Any]) -> Take:
@@ -75,6 +77,7 @@ class Take:
             skeleton=v.get("skeleton"),
             live=bool(v.get("live", False)),
             raw=v,
+            labels=dict(v.get("labels") or {}),
         )
 
 
