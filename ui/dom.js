@@ -32,4 +32,6 @@ export function svg(tag, attrs = {}, text) {
 export const fmt = {
   num: (v, d = 1) => (Number.isFinite(v) ? v.toFixed(d) : '—'),
   secs: (s) => (s >= 60 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s` : `${s.toFixed(1)} s`),
+  /** A take's labels as `key: value, …` (what the library's labels filter reads back). */
+  labels: (l) => Object.entries(l || {}).map(([k, v]) => `${k}: ${v}`).join(', '),
 };

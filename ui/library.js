@@ -5,7 +5,7 @@ import { json, upload } from './api.js';
 import { showError } from './app.js';
 import { el, fmt } from './dom.js';
 
-const FILTERS = ['library', 'tag', 'layout', 'codec'];
+const FILTERS = ['library', 'tag', 'layout', 'codec', 'labels'];
 const SORTS = ['created', 'name', 'duration', 'frames', 'ratio', 'max_mm'];
 
 
@@ -50,12 +50,17 @@ export async function libraryPage(main, params) {
 
   async function load() {
     const q = new URLSearchParams({ limit: '50', sort: state.sort, order: state.order });
-    for (const f of FILTERS) if (state[f]) q.set(f, state[f]);
+    for (const f of FILTERS) if (state[f] && f !== 'labels') q.set(f, state[f]);
+    // `content: walk, style: happy` (as the table shows them): each a label.<key> filter.
+    for (const pair of (state.labels || '').split(',')) {
+      const at = pair.indexOf(':');
+      if (at > 0) q.set(`label.${pair.slice(0, at).trim()}`, pair.slice(at + 1).trim());
+    }
     if (cursors[page]) q.set('cursor', cursors[page]);
     const list = await json(`/v1/takes?${q}`);
     cursors[page + 1] = list.next_cursor;
     table.replaceChildren(
-      el('thead', {}, el('tr', {}, ...['name', 'library', 'tags', 'duration', 'fps', 'points', 'codec', 'ratio', 'max mm', 'mean mm', 'compare'].map((h) => el('th', { scope: 'col' }, h)))),
+      el('thead', {}, el('tr', {}, ...['name', 'library', 'tags', 'labels', 'duration', 'fps', 'points', 'codec', 'ratio', 'max mm', 'mean mm', 'compare'].map((h) => el('th', { scope: 'col' }, h)))),
       el('tbody', {}, ...list.items.map(row)),
     );
     if (list.items.length === 0) table.append(el('caption', {}, 'No takes match.'));
@@ -75,6 +80,7 @@ export async function libraryPage(main, params) {
         : el('a', { href: `#/take/${encodeURIComponent(t.id)}` }, t.name || t.id)),
       el('td', {}, t.library || '—'),
       el('td', {}, (t.tags || []).join(', ')),
+      el('td', {}, fmt.labels(t.labels)),
       el('td', { class: 'n' }, fmt.secs(t.duration_s)),
       el('td', { class: 'n' }, fmt.num(t.fps, 1)),
       el('td', { class: 'n' }, String(t.points)),

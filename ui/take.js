@@ -88,6 +88,7 @@ export async function takePage(main, id, params) {
   // --- numbers, decision, downloads
   const facts = [
     ['id', take.id], ['library', take.library || '—'], ['tags', (take.tags || []).join(', ') || '—'],
+    ['labels', fmt.labels(take.labels) || '—'],
     ['source format', take.source_format], ['frames', `${total} at ${fmt.num(fps, 3)} fps (${fmt.secs(take.duration_s)})`],
     ['points', String(take.points)], ['codec', take.codec], ['ratio', fmt.num(take.ratio, 1)],
     ['bound', `max ${take.max_bound_mm} mm${take.mean_bound_mm ? `, mean ${take.mean_bound_mm} mm` : ''}`],

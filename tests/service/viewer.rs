@@ -648,7 +648,7 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
         // channels among the facts; a click on an event seeks to it.
         let fp = stored(
             &srv,
-            "name=flatfoot&codec=quant",
+            "name=flatfoot&codec=quant&labels=subject:s1,trial:3",
             "c3d/btkdata__PiG__PiG_Motion-FlatFoot-Full.c3d",
         )
         .await;
@@ -669,9 +669,28 @@ async fn the_viewer_lists_plays_and_uploads_in_a_real_browser() {
             .await;
         assert!(
             facts.as_str().unwrap().contains("analog channels")
-                && facts.as_str().unwrap().contains("analog-lossless"),
+                && facts.as_str().unwrap().contains("analog-lossless")
+                && facts.as_str().unwrap().contains("subject: s1, trial: 3"),
             "{facts}"
         );
+        // The library filtered by a label: that take alone, its labels in their column.
+        let rows = browser
+            .visit(
+                &format!("{}/#/?labels=subject:%20s1", srv.base),
+                "the library filtered by a label",
+                "const r = document.querySelectorAll('table.takes tbody tr'); return r.length > 0 && [...r].map(t => t.textContent);",
+            )
+            .await;
+        let rows = rows.as_array().unwrap();
+        assert_eq!(rows.len(), 1, "{rows:?}");
+        assert!(rows[0].as_str().unwrap().contains("flatfoot"), "{rows:?}");
+        browser
+            .visit(
+                &format!("{}/#/take/{fp_id}", srv.base),
+                "the events strip again",
+                "const e = document.querySelectorAll('svg.events g.event'); return e.length > 0 && e.length;",
+            )
+            .await;
         let first = &fp_events(&srv, fp_id).await;
         browser
             .js(
