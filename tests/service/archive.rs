@@ -51,7 +51,10 @@ async fn fill(srv: &common::Server) -> Vec<String> {
     ];
     for (name, body, q) in uploads {
         let (status, r) = srv
-            .post(&format!("name={name}&library=lib&tags=a,b&{q}"), body)
+            .post(
+                &format!("name={name}&library=lib&tags=a,b&labels=content:walk,n:2&{q}"),
+                body,
+            )
             .await;
         assert_eq!(status, 201, "{name}: {r}");
         ids.push(r["id"].as_str().unwrap().to_string());
