@@ -294,6 +294,68 @@ async fn a_dataset_folder_is_labelled_by_its_sidecars_and_its_names() {
         .await
         .is_empty());
 
+    // The same folder as a ZIP (as a dataset is downloaded, with macOS's shadow entries
+    // and a readme): read entry by entry, the same takes and labels.
+    let zipped = dir.join("dataset.zip");
+    {
+        use std::io::Write;
+        let mut z = zip::ZipWriter::new(std::fs::File::create(&zipped).unwrap());
+        let opts = zip::write::SimpleFileOptions::default();
+        let mut files: Vec<_> = std::fs::read_dir(&data)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        files.sort();
+        for f in &files {
+            let name = f.file_name().unwrap().to_string_lossy().into_owned();
+            z.start_file(format!("data/{name}"), opts).unwrap();
+            z.write_all(&std::fs::read(f).unwrap()).unwrap();
+        }
+        z.start_file("__MACOSX/data/._x.bvh", opts).unwrap();
+        z.write_all(b"\0\x05\x16\x07").unwrap();
+        z.start_file("README.txt", opts).unwrap();
+        z.write_all(b"a dataset").unwrap();
+        z.finish().unwrap();
+    }
+    let out = common::mocapstore_beside(
+        [
+            "ingest",
+            &zipped.display().to_string(),
+            "--server",
+            &srv.base,
+            "--codec",
+            "quant",
+            "--library",
+            "zipped",
+        ]
+        .map(String::from)
+        .to_vec(),
+    )
+    .await;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains(&format!(
+            "{n} stored, 0 failed, {} skipped ({n} beside takes with their names, 1 other",
+            n + 1
+        )),
+        "{stdout}"
+    );
+    let from_zip = listed("zipped", "").await;
+    assert_eq!(from_zip.len(), n);
+    for take in &from_zip {
+        let same = from_sidecars
+            .iter()
+            .find(|t| t["name"] == take["name"])
+            .unwrap();
+        assert_eq!(take["labels"], same["labels"]);
+        assert_eq!(take["frames"], same["frames"]);
+    }
+
     // A label file that holds no labels: its take fails, named with it, and is not stored.
     let bad = dir.join("bad");
     std::fs::create_dir_all(&bad).unwrap();

@@ -6,13 +6,13 @@
 //! content ([`formats::is_motion`]), not by extension: what is not motion is skipped and
 //! counted once in the summary, never uploaded and never a failure.
 //!
-//! Labels ([`mocapstore::labels`]) come from three places, each over the one before: the
-//! file's name read by `--labels-from-name`, a sidecar beside it with its name (`.json`,
-//! `.yaml`, `.yml`: an object of key → value, nested objects as `outer.inner`), and
-//! `--labels` for every file.
+//! A ZIP of such a folder is read the same way, entry by entry, never unpacked to disk
+//! ([`files`]). Labels come from the file's name, the label files beside it and
+//! `--labels` ([`labelling`]).
 
-use std::collections::{HashMap, HashSet};
-use std::io::Read;
+mod files;
+mod labelling;
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -22,12 +22,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::Value;
 use tokio::sync::Semaphore;
 
-use mocapstore::labels::{Labels, NamePattern};
-use mocapstore::motion::formats;
+use files::{gather, Sources};
+use labelling::Labelling;
 
 #[derive(Args)]
 pub struct IngestArgs {
-    /// Files or folders (searched recursively; motion is told by content, the rest skipped).
+    /// Files, folders (searched recursively) or ZIP archives of them; motion is told by
+    /// content, the rest skipped.
     #[arg(required = true)]
     paths: Vec<PathBuf>,
     /// The service to upload to.
@@ -91,168 +92,8 @@ struct Outcome {
     result: Result<Value, String>,
 }
 
-/// Bytes read of a file to tell whether it is motion (all of a JSON file, which must be
-/// parsed to tell a take from a label file).
-const SNIFF_BYTES: u64 = 64 << 10;
-
-/// The files under the paths given, sorted into those to upload and those skipped.
-#[derive(Default)]
-struct Gathered {
-    motion: Vec<PathBuf>,
-    /// Files beside a take with its name (`walk_001.json` beside `walk_001.bvh`): labels,
-    /// by the take's path without its extension.
-    sidecars: HashMap<PathBuf, Vec<PathBuf>>,
-    /// Anything else that is not motion, and why.
-    other: Vec<(PathBuf, String)>,
-}
-
-/// Whether the file at `path` is motion, by its content; Err: it cannot be read.
-fn sniff(path: &Path) -> std::io::Result<bool> {
-    let mut head = Vec::new();
-    std::fs::File::open(path)?
-        .take(SNIFF_BYTES)
-        .read_to_end(&mut head)?;
-    if matches!(formats::detect(&head), Ok(formats::Format::Json)) {
-        return Ok(formats::is_motion(&std::fs::read(path)?));
-    }
-    Ok(formats::is_motion(&head))
-}
-
-/// Every file under `paths` (folders recursively; hidden files and folders left out),
-/// sorted by what it is.
-fn gather(paths: &[PathBuf]) -> Gathered {
-    let mut files = Vec::new();
-    let mut stack: Vec<PathBuf> = paths.to_vec();
-    while let Some(p) = stack.pop() {
-        let hidden = p
-            .file_name()
-            .is_some_and(|n| n.to_string_lossy().starts_with('.'));
-        if p.is_dir() {
-            if let Ok(rd) = std::fs::read_dir(&p) {
-                stack.extend(rd.flatten().map(|e| e.path()));
-            }
-        } else if !hidden || paths.contains(&p) {
-            files.push(p);
-        }
-    }
-    files.sort();
-    let mut g = Gathered::default();
-    let mut rest = Vec::new();
-    for f in files {
-        // A file named as motion is uploaded whatever it holds: if it is none, that is a
-        // failure the server names (an empty .trc), not a file to pass over.
-        let named = f
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| MOTION_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()));
-        match sniff(&f) {
-            Ok(true) => g.motion.push(f),
-            _ if named => g.motion.push(f),
-            Ok(false) => rest.push((f, "not motion".to_string())),
-            Err(e) => rest.push((f, format!("cannot be read: {e}"))),
-        }
-    }
-    let takes: HashSet<PathBuf> = g.motion.iter().map(|p| p.with_extension("")).collect();
-    for (f, why) in rest {
-        let stem = f.with_extension("");
-        if why == "not motion" && takes.contains(&stem) {
-            g.sidecars.entry(stem).or_default().push(f);
-        } else {
-            g.other.push((f, why));
-        }
-    }
-    g
-}
-
-/// Extensions only motion files have (`.json` may be labels or anything else).
-const MOTION_EXTENSIONS: &[&str] = &["bvh", "c3d", "trc", "npy"];
-
 /// Skipped files named in the summary; the rest are counted.
 const SKIPPED_LISTED: usize = 20;
-
-/// The largest label file read: a dataset's sidecar is a few lines.
-const SIDECAR_BYTES: u64 = 1 << 20;
-
-/// A sidecar's labels: a JSON or YAML object of key → value. Err: the file and why.
-fn sidecar_labels(path: &Path) -> Result<Labels, String> {
-    let named = |e: String| format!("label file {}: {e}", path.display());
-    let len = std::fs::metadata(path)
-        .map_err(|e| named(e.to_string()))?
-        .len();
-    if len > SIDECAR_BYTES {
-        return Err(named(format!(
-            "{len} bytes, more than a label file's {SIDECAR_BYTES}"
-        )));
-    }
-    let text = std::fs::read_to_string(path).map_err(|e| named(e.to_string()))?;
-    let yaml = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "yaml" | "yml"));
-    let value: Value = if yaml {
-        serde_yaml_ng::from_str(&text).map_err(|e| named(e.to_string()))?
-    } else {
-        serde_json::from_str(&text).map_err(|e| named(e.to_string()))?
-    };
-    Labels::from_json(&value).map_err(named)
-}
-
-/// What labels a file: the parts of `--labels-from-name`, `--labels` and the sidecars.
-struct Labelling {
-    pattern: Option<NamePattern>,
-    given: Labels,
-    sidecars: HashMap<PathBuf, Vec<PathBuf>>,
-    /// Files whose names did not fit the pattern, and takes labelled by a sidecar.
-    unfit: Vec<PathBuf>,
-    from_sidecar: usize,
-}
-
-impl Labelling {
-    fn new(args: &IngestArgs, sidecars: HashMap<PathBuf, Vec<PathBuf>>) -> Result<Self, String> {
-        Ok(Labelling {
-            pattern: args
-                .labels_from_name
-                .as_deref()
-                .map(NamePattern::parse)
-                .transpose()?,
-            given: args
-                .labels
-                .as_deref()
-                .map(Labels::parse)
-                .transpose()
-                .map_err(|e| format!("--labels: {e}"))?
-                .unwrap_or_default(),
-            sidecars: if args.no_sidecar_labels {
-                HashMap::new()
-            } else {
-                sidecars
-            },
-            unfit: Vec::new(),
-            from_sidecar: 0,
-        })
-    }
-
-    /// The labels of the take at `path` (its name's, its sidecars' over them, the given
-    /// ones over those), as the JSON the server reads; `None` when it has none.
-    fn of(&mut self, path: &Path) -> Result<Option<String>, String> {
-        let mut labels = Labels::new();
-        if let Some(p) = &self.pattern {
-            let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
-            match stem.as_deref().and_then(|s| p.labels(s)) {
-                Some(l) => labels = l,
-                None => self.unfit.push(path.to_path_buf()),
-            }
-        }
-        if let Some(files) = self.sidecars.get(&path.with_extension("")) {
-            for f in files {
-                labels.merge(&sidecar_labels(f)?)?;
-            }
-            self.from_sidecar += 1;
-        }
-        labels.merge(&self.given)?;
-        Ok((!labels.is_empty()).then(|| serde_json::to_string(&labels).expect("labels serialise")))
-    }
-}
 
 pub fn run(args: &IngestArgs) -> ExitCode {
     let gathered = gather(&args.paths);
@@ -278,7 +119,7 @@ pub fn run(args: &IngestArgs) -> ExitCode {
     let mut outcomes = Vec::new();
     let mut jobs = Vec::new();
     for f in files {
-        match labelling.of(&f) {
+        match labelling.of(&gathered.sources, &f) {
             Ok(labels) => jobs.push((f, labels)),
             Err(e) => outcomes.push(Outcome {
                 file: f.display().to_string(),
@@ -300,7 +141,8 @@ pub fn run(args: &IngestArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    outcomes.extend(runtime.block_on(upload_all(args, &client, jobs)));
+    let sources = Arc::new(gathered.sources);
+    outcomes.extend(runtime.block_on(upload_all(args, &client, sources, jobs)));
     let failed: Vec<&Outcome> = outcomes.iter().filter(|o| o.result.is_err()).collect();
     println!(
         "{:<48} {:<8} {:>8} {:>9} {:>9}",
@@ -365,6 +207,7 @@ pub fn run(args: &IngestArgs) -> ExitCode {
 async fn upload_all(
     args: &IngestArgs,
     client: &reqwest::Client,
+    sources: Arc<Sources>,
     files: Vec<(PathBuf, Option<String>)>,
 ) -> Vec<Outcome> {
     let bar = ProgressBar::new(files.len() as u64);
@@ -400,6 +243,7 @@ async fn upload_all(
     let mut tasks = Vec::new();
     for (path, labels) in files {
         let (client, slots, bar, url) = (client.clone(), slots.clone(), bar.clone(), url.clone());
+        let sources = sources.clone();
         let mut query = fixed.clone();
         let name = path
             .file_stem()
@@ -413,7 +257,7 @@ async fn upload_all(
             let _slot = slots.acquire().await.expect("semaphore open");
             let file = path.display().to_string();
             bar.set_message(file.clone());
-            let result = upload(&client, &url, &query, &path).await;
+            let result = upload(&client, &url, &query, &sources, &path).await;
             bar.inc(1);
             Outcome { file, result }
         }));
@@ -432,9 +276,14 @@ async fn upload(
     client: &reqwest::Client,
     url: &str,
     query: &[(&str, String)],
-    path: &PathBuf,
+    sources: &Arc<Sources>,
+    path: &Path,
 ) -> Result<Value, String> {
-    let body = tokio::fs::read(path).await.map_err(|e| e.to_string())?;
+    let (sources, p) = (sources.clone(), path.to_path_buf());
+    let body = tokio::task::spawn_blocking(move || sources.read(&p, None))
+        .await
+        .map_err(|e| e.to_string())?
+        .map_err(|e| e.to_string())?;
     let resp = client
         .post(url)
         .query(query)
