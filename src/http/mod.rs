@@ -632,7 +632,24 @@ pub mod fuzz {
         }
         let _ = Query::<super::library::PageQuery>::try_from_uri(&uri);
         if let Ok(Query(q)) = Query::<crate::service::library::TakeQuery>::try_from_uri(&uri) {
+            let pairs = Query::<Vec<(String, String)>>::try_from_uri(&uri)
+                .map(|Query(p)| p)
+                .unwrap_or_default();
+            let q = q.with_labels(pairs.iter().map(|(k, v)| (k.as_str(), v.as_str())));
             let _ = q.check();
+        }
+        // Labels as a query, a file-name pattern and a name, and as JSON (PATCH, sidecars).
+        let _ = crate::labels::Labels::parse(&query);
+        if let Some((pattern, name)) = query.split_once('&') {
+            if let Ok(p) = crate::labels::NamePattern::parse(pattern) {
+                let _ = p.labels(name);
+            }
+        }
+        if let Ok(v) = serde_json::from_slice::<serde_json::Value>(&body) {
+            let _ = crate::labels::Labels::from_json(&v);
+            if let Ok(c) = crate::labels::LabelChanges::from_json(&v) {
+                let _ = c.apply(&crate::labels::Labels::new());
+            }
         }
         let _ = crate::store::Cursor::decode(&query);
         let mut json = HeaderMap::new();
