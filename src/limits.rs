@@ -29,6 +29,11 @@ pub const MAX_LABEL_KEY_CHARS: usize = 64;
 /// Characters of a label's text value.
 pub const MAX_LABEL_VALUE_CHARS: usize = 256;
 
+/// The most memory the FBX reader's library may allocate for one file (its node tree and
+/// curves; geometry is never loaded), and again for each frame it evaluates: a hostile file
+/// that claims more is refused, not allocated.
+pub const MAX_FBX_MEMORY: usize = 1 << 30;
+
 /// The largest coordinate magnitude, in metres, that motion capture can mean: 10 km. A
 /// value beyond it is not a position but a corrupt or hostile number, and refused.
 pub const MAX_COORDINATE_M: f64 = 1e4;

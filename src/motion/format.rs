@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 /// A format name we do not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown format {0:?} (bvh, c3d, trc, json, npy, csv, f32, glb, gltf)")]
+#[error("unknown format {0:?} (bvh, c3d, trc, json, npy, fbx, csv, f32, glb, gltf)")]
 pub struct UnknownFormat(pub String);
 
 /// A file format we read and/or write.
@@ -21,6 +21,8 @@ pub enum Format {
     Trc,
     Json,
     Npy,
+    /// Autodesk FBX (binary or ASCII); read only, for now.
+    Fbx,
     Csv,
     /// Bare little-endian f32, `frames × points × 3`; write only (it has no header).
     F32,
@@ -38,6 +40,7 @@ impl Format {
             Format::Trc => "trc",
             Format::Json => "json",
             Format::Npy => "npy",
+            Format::Fbx => "fbx",
             Format::Csv => "csv",
             Format::F32 => "f32",
             Format::Glb => "glb",
@@ -71,6 +74,7 @@ impl FromStr for Format {
             "trc" => Format::Trc,
             "json" => Format::Json,
             "npy" => Format::Npy,
+            "fbx" => Format::Fbx,
             "csv" => Format::Csv,
             "f32" | "bin" | "raw" => Format::F32,
             "glb" => Format::Glb,

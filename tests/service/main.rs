@@ -17,6 +17,7 @@ mod choice;
 mod cli;
 mod cluster;
 mod export;
+mod fbx;
 mod hostile;
 mod http;
 mod library;

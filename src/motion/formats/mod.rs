@@ -14,6 +14,7 @@ pub mod bvh;
 pub mod c3d;
 pub mod columns;
 pub mod csv;
+pub mod fbx;
 pub mod gltf;
 pub mod json;
 pub mod npy;
@@ -126,6 +127,9 @@ pub struct Extras {
     pub parameters: Option<c3d::params::Parameters>,
     /// What the file says the take is of (a JSON document's `labels`).
     pub labels: crate::labels::Labels,
+    /// The up axis the file states (an FBX's `GlobalSettings`), over its format's
+    /// convention.
+    pub up: Option<crate::motion::body::Prior>,
 }
 
 /// What a format reader returns before units are settled.
@@ -172,6 +176,9 @@ pub fn detect(bytes: &[u8]) -> Result<Format> {
     if bytes.starts_with(b"\x93NUMPY") {
         return Ok(Format::Npy);
     }
+    if bytes.starts_with(b"Kaydara FBX Binary") {
+        return Ok(Format::Fbx);
+    }
     // C3D: byte 2 of the header is the key 0x50, byte 1 points at the parameter block.
     if bytes.len() >= 512 && bytes[1] == 0x50 && bytes[0] >= 2 {
         return Ok(Format::C3d);
@@ -184,11 +191,16 @@ pub fn detect(bytes: &[u8]) -> Result<Format> {
     if starts(b"PathFileType") {
         return Ok(Format::Trc);
     }
+    // ASCII FBX opens with its comment line: "; FBX 7.4.0 project file".
+    if starts(b"; FBX") {
+        return Ok(Format::Fbx);
+    }
     if trimmed[0] == b'{' {
         return Ok(Format::Json);
     }
     Err(Error::UnknownFormat(
-        "not BVH (HIERARCHY), C3D (0x50 key), TRC (PathFileType), JSON ({) or NPY (\\x93NUMPY)"
+        "not BVH (HIERARCHY), C3D (0x50 key), TRC (PathFileType), JSON ({), NPY (\\x93NUMPY) \
+         or FBX (Kaydara FBX Binary, ; FBX)"
             .into(),
     ))
 }
@@ -236,6 +248,7 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         Format::Trc => trc::read(bytes, limits)?,
         Format::Json => json::read(bytes, limits)?,
         Format::Npy => npy::read(bytes, limits)?,
+        Format::Fbx => fbx::read(bytes, limits)?,
         Format::Csv | Format::F32 | Format::Glb | Format::Gltf => {
             return Err(Error::Unsupported(format!(
                 "{format} is an output format only"
@@ -286,7 +299,11 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         )),
         None => {}
     }
-    let up = up_prior(format, extras.parameters.as_ref());
+    // What the file states (an FBX's GlobalSettings), else its format's convention.
+    let up = extras
+        .up
+        .clone()
+        .or_else(|| up_prior(format, extras.parameters.as_ref()));
     Ok(Loaded {
         motion,
         format,
@@ -371,6 +388,11 @@ pub fn frame_writer(
             return Err(Error::Unsupported(format!(
                 "{format} is written whole, not frame by frame"
             )))
+        }
+        Format::Fbx => {
+            return Err(Error::Unsupported(
+                "FBX is read, not written yet: ask for glb, bvh or c3d".into(),
+            ))
         }
     })
 }

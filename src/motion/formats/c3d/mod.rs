@@ -307,7 +307,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
             analog,
             events,
             parameters: Some(params),
-            labels: Default::default(),
+            ..Default::default()
         },
     })
 }
