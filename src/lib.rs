@@ -1,5 +1,5 @@
 //! mocapstore archives motion-capture libraries with error-bounded compression: it reads
-//! takes (BVH, C3D, TRC, JSON, NPY), codes each with the smallest codec that meets the user's
+//! takes (BVH, C3D, TRC, JSON, NPY, FBX), codes each with the smallest codec that meets the user's
 //! error bound, stores independently decodable chunks in SQLite or Postgres, and serves any
 //! frame range of any take.
 //!
@@ -35,7 +35,7 @@
 //! `docs/ARCHITECTURE.md` walks through these layers: an ingest and a range read end to
 //! end, the words the code uses, and how to add a codec or a file format.
 //! - [`motion`]: the `Motion` model (positions, units, gaps, skeletons), forward kinematics,
-//!   error metrics and the file formats in [`motion::formats`] (BVH, C3D, TRC, JSON, NPY in;
+//!   error metrics and the file formats in [`motion::formats`] (BVH, C3D, TRC, JSON, NPY, FBX in;
 //!   BVH, C3D, TRC, JSON, NPY, CSV, raw f32, glTF out) and the transforms between
 //!   decoder and writer ([`motion::transform`]: resampling, root motion, axes, units). Pure: no I/O, no async, no database.
 //!

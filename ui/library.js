@@ -35,7 +35,7 @@ export async function libraryPage(main, params) {
   });
 
   const drop = el('div', { class: 'drop', tabindex: '0', role: 'button', 'aria-label': 'Upload files' },
-    'Drop mocap files here (BVH, C3D, TRC, JSON, NPY) or ',
+    'Drop mocap files here (BVH, C3D, TRC, JSON, NPY, FBX) or ',
     el('label', { class: 'link' }, 'choose files', el('input', { type: 'file', multiple: '', hidden: '' })));
   const uploads = el('ul', { class: 'uploads' });
   const table = el('table', { class: 'takes' });

@@ -80,80 +80,98 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         file_format: ufbx::FileFormat::Fbx,
         ..Default::default()
     };
-    let scene = ufbx::load_memory(bytes, opts).map_err(|e| err(e.description.to_string()))?;
+    let scene = ufbx::load_memory(bytes, opts).map_err(|e| {
+        let info = e.info();
+        err(if info.is_empty() {
+            e.description.to_string()
+        } else {
+            format!("{}: {info}", e.description)
+        })
+    })?;
     let mut warnings = Vec::new();
 
-    // The joints: every node that is a bone, parents first, under the bone that heads the
-    // largest hierarchy (others are named and left out).
+    // The joints: the bones of the file's largest skeleton and the nodes between them (an
+    // exporter may put a plain node among its bones, as assimp does with a BVH's root),
+    // headed by the lowest node above all of them; parents first.
     let nodes: &[ufbx::Ref<ufbx::Node>] = &scene.nodes;
-    let is_bone = |n: &ufbx::Node| n.bone.is_some();
-    let bone_parent = |n: &ufbx::Node| -> Option<usize> {
-        let mut p = n.parent.as_ref();
-        let mut steps = 0u64;
-        while let Some(node) = p {
-            if is_bone(node) {
-                return Some(node.element.typed_id as usize);
-            }
-            steps += 1;
-            if steps > limits.max_depth.saturating_add(8) {
-                return None;
-            }
-            p = node.parent.as_ref();
-        }
-        None
-    };
-    let parents: Vec<Option<usize>> = nodes.iter().map(|n| bone_parent(n)).collect();
-    let mut children: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
-    let mut roots = Vec::new();
-    for (i, n) in nodes.iter().enumerate() {
-        if !is_bone(n) {
-            continue;
-        }
-        match parents[i] {
-            Some(p) if p < nodes.len() => children[p].push(i),
-            _ => roots.push(i),
+    let count = nodes.len();
+    let index = |n: &ufbx::Node| (n.element.typed_id as usize).min(count);
+    if let Some(deep) = nodes
+        .iter()
+        .find(|n| u64::from(n.node_depth) > limits.max_depth)
+    {
+        return Err(Error::Limit {
+            what: "skeleton depth",
+            actual: u64::from(deep.node_depth),
+            limit: limits.max_depth,
+        });
+    }
+    // Bones in each node's subtree, children counted before their parents.
+    let mut deepest_first: Vec<usize> = (0..count).collect();
+    deepest_first.sort_by_key(|&i| std::cmp::Reverse(nodes[i].node_depth));
+    let mut below = vec![0usize; count + 1];
+    for &i in &deepest_first {
+        below[i] += usize::from(nodes[i].bone.is_some());
+        if let Some(p) = nodes[i].parent.as_ref() {
+            let (p, n) = (index(p), below[i]);
+            below[p] += n;
         }
     }
-    let size = |root: usize| {
-        let (mut n, mut stack) = (0usize, vec![root]);
-        while let Some(i) = stack.pop() {
-            n += 1;
-            stack.extend(&children[i]);
-        }
-        n
-    };
-    let root = *roots
+    let with_bones = |n: &ufbx::Node| below[index(n)] > 0;
+    let tops: Vec<usize> = scene
+        .root_node
+        .children
         .iter()
-        .max_by_key(|&&r| size(r))
+        .filter(|c| with_bones(c))
+        .map(|c| index(c))
+        .collect();
+    let mut head = *tops
+        .iter()
+        .max_by_key(|&&t| below[t])
         .ok_or_else(|| err("the file holds no skeleton (no bone or limb nodes)"))?;
-    for &other in roots.iter().filter(|&&r| r != root) {
+    for &other in tops.iter().filter(|&&t| t != head) {
         warnings.push(format!(
-            "skeleton under {:?} left out: a take holds one skeleton, the largest ({:?})",
+            "the skeleton under {:?} left out: a take holds one skeleton, the largest ({:?})",
             nodes[other].element.name.to_string(),
-            nodes[root].element.name.to_string()
+            nodes[head].element.name.to_string()
         ));
     }
-    // Parents first, depth-first in the file's order.
+    // Down to the lowest node above every bone: a plain node above a single branch (an
+    // armature, a scene's grouping) is not a joint.
+    while nodes[head].bone.is_none() {
+        let mut branches = nodes[head].children.iter().filter(|c| with_bones(c));
+        match (branches.next(), branches.next()) {
+            (Some(only), None) => head = index(only),
+            _ => break,
+        }
+    }
     let mut order = Vec::new();
-    let mut depth = vec![0u64; nodes.len()];
-    let mut stack = vec![root];
-    depth[root] = 1;
+    let mut stack = vec![head];
     while let Some(i) = stack.pop() {
-        if depth[i] > limits.max_depth {
-            return Err(Error::Limit {
-                what: "skeleton depth",
-                actual: depth[i],
-                limit: limits.max_depth,
-            });
-        }
         order.push(i);
-        for &c in children[i].iter().rev() {
-            depth[c] = depth[i] + 1;
-            stack.push(c);
-        }
+        let kids: Vec<usize> = nodes[i]
+            .children
+            .iter()
+            .filter(|c| with_bones(c))
+            .map(|c| index(c))
+            .collect();
+        stack.extend(kids.into_iter().rev());
     }
     let index_of: std::collections::HashMap<usize, usize> =
         order.iter().enumerate().map(|(k, &i)| (i, k)).collect();
+    let parents: Vec<Option<usize>> = order
+        .iter()
+        .map(|&i| {
+            nodes[i]
+                .parent
+                .as_ref()
+                .and_then(|p| index_of.get(&index(p)).copied())
+        })
+        .collect();
+    let mut leaf = vec![true; order.len()];
+    for p in parents.iter().flatten() {
+        leaf[*p] = false;
+    }
 
     // The animation: the first stack, sampled at the file's frame rate.
     let stacks: &[ufbx::Ref<ufbx::AnimStack>] = &scene.anim_stacks;
@@ -207,9 +225,9 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     // The skeleton: each joint's translation and rotation relative to its parent's.
     let local = |f: usize, k: usize| -> (Vector3<f64>, UnitQuaternion<f64>) {
         let (p, q) = places[f * n + k];
-        match parents[order[k]].and_then(|p| index_of.get(&p)) {
+        match parents[k] {
             None => (p, q),
-            Some(&pk) => {
+            Some(pk) => {
                 let (pp, pq) = places[f * n + pk];
                 (pq.inverse() * (p - pp), pq.inverse() * q)
             }
@@ -221,7 +239,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     for (k, &i) in order.iter().enumerate() {
         let (t0, _) = local(0, k);
         moves[k] = k == 0 || (1..frames).any(|f| (local(f, k).0 - t0).amax() > FIXED);
-        let leaf = children[i].is_empty();
+        let leaf = leaf[k];
         let mut channels = Vec::new();
         if moves[k] {
             channels.extend(POSITIONS);
@@ -233,7 +251,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         }
         joints.push(Joint {
             name: nodes[i].element.name.to_string(),
-            parent: parents[i].and_then(|p| index_of.get(&p).copied()),
+            parent: parents[k],
             offset: if k == 0 { [0.0; 3] } else { t0.into() },
             end_site: channels.is_empty(),
             channels,

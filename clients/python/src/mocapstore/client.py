@@ -521,7 +521,7 @@ class Client(_Base):
         point_names: Sequence[str] | None = None,
         labels: p.Labels | None = None,
     ) -> Take:
-        """Store a file (BVH, C3D, TRC, JSON, NPY; named after the file unless ``name`` is
+        """Store a file (BVH, C3D, TRC, JSON, NPY, FBX; named after the file unless ``name`` is
         given) or an array of positions ``(frames, points, 3)`` with its ``fps`` (NaN where
         missing; with ``point_names`` it keeps them, else points are numbered). A slow
         upload is not retried: if it times out, look for the take before sending it again
