@@ -195,14 +195,15 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         )));
     }
     let frames_f = (span * fps).round() + 1.0;
-    limits.check_shape(
-        if frames_f < 1e15 {
-            frames_f as usize
-        } else {
-            usize::MAX
-        },
-        order.len(),
-    )?;
+    let frames_checked = if frames_f < 1e15 {
+        frames_f as usize
+    } else {
+        usize::MAX
+    };
+    limits.check_shape(frames_checked, order.len())?;
+    // Each frame evaluates the whole node tree, not only the joints: bounded the same way,
+    // so that a file of few joints and many other nodes cannot make the work unbounded.
+    limits.check_shape(frames_checked, count.max(order.len()))?;
     let frames = frames_f as usize;
     let n = order.len();
 
@@ -249,8 +250,19 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         if rotates[k] {
             channels.extend(ROTATIONS);
         }
+        // A joint's name, made unique (exporters repeat names; a take's points must not).
+        let base = match nodes[i].element.name.to_string() {
+            n if n.trim().is_empty() => format!("node{}", nodes[i].element.typed_id),
+            n => n,
+        };
+        let mut name = base.clone();
+        let mut suffix = 2;
+        while joints.iter().any(|j: &Joint| j.name == name) {
+            name = format!("{base}_{suffix}");
+            suffix += 1;
+        }
         joints.push(Joint {
-            name: nodes[i].element.name.to_string(),
+            name,
             parent: parents[k],
             offset: if k == 0 { [0.0; 3] } else { t0.into() },
             end_site: channels.is_empty(),
