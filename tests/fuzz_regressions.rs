@@ -16,6 +16,7 @@ fn run(target: &str, data: &[u8]) {
         "read_trc" => fuzzing::read(Format::Trc, data),
         "read_json" => fuzzing::read(Format::Json, data),
         "read_npy" => fuzzing::read(Format::Npy, data),
+        "read_fbx" => fuzzing::read(Format::Fbx, data),
         "decode_raw" => fuzzing::decode(CodecId::Raw, data),
         "decode_quant" => fuzzing::decode(CodecId::Quant, data),
         "decode_mdtt" => fuzzing::decode(CodecId::Mdtt, data),
@@ -43,7 +44,7 @@ fn every_fuzz_target_is_known_here() {
         run(&name, b"");
         n += 1;
     }
-    assert_eq!(n, 19);
+    assert_eq!(n, 20);
 }
 
 #[test]
