@@ -445,6 +445,14 @@ mod tests {
         assert_eq!(detect(b"PathFileType\t4").unwrap(), Format::Trc);
         assert_eq!(detect(b"\n {\"fps\":1}").unwrap(), Format::Json);
         assert_eq!(detect(b"\x93NUMPY\x01\x00").unwrap(), Format::Npy);
+        assert_eq!(
+            detect(b"Kaydara FBX Binary  \0\x1a\0\xe8\x1c\0\0").unwrap(),
+            Format::Fbx
+        );
+        assert_eq!(
+            detect(b"; FBX 7.4.0 project file\n; ----").unwrap(),
+            Format::Fbx
+        );
         let mut c3d = vec![0u8; 512];
         c3d[0] = 2;
         c3d[1] = 0x50;
