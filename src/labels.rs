@@ -149,10 +149,6 @@ impl Labels {
         self.check_count()
     }
 
-    pub fn remove(&mut self, key: &str) -> Option<Label> {
-        self.0.remove(key)
-    }
-
     /// `other`'s labels over these (its value wins for a key both have).
     pub fn merge(&mut self, other: &Labels) -> Result<(), String> {
         for (k, v) in &other.0 {

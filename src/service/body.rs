@@ -58,6 +58,17 @@ pub async fn ensure(store: &Store, mut take: Take) -> Result<Take> {
 /// A live stream's axes from the frames of its first chunk (`positions`, as sent): what
 /// readers of the live take turn and move it by until it finishes.
 pub fn opening(take: &Take, positions: Vec<f32>) -> Result<Axes> {
+    axes_of(take, positions, None, given_before(take), None)
+}
+
+/// The axes of `take` from frames of it (`positions`; `joints`, a skeleton take's).
+fn axes_of(
+    take: &Take,
+    positions: Vec<f32>,
+    joints: Option<&[crate::motion::skeleton::Joint]>,
+    given: Given,
+    prior: Option<&Prior>,
+) -> Result<Axes> {
     let m = Motion::new(
         take.fps,
         take.meta.unit.clone(),
@@ -66,7 +77,7 @@ pub fn opening(take: &Take, positions: Vec<f32>) -> Result<Axes> {
         None,
     )
     .map_err(|e| stored(take, e))?;
-    derive(&m, None, &take.roles, given_before(take), None).map_err(|e| stored(take, e))
+    derive(&m, joints, &take.roles, given, prior).map_err(|e| stored(take, e))
 }
 
 /// A finishing stream's axes from the whole take, from a sample of its committed chunks
@@ -197,16 +208,8 @@ async fn derive_stored(store: &Store, take: &Take, given: Given) -> Result<Axes>
         for (i, payload) in &payloads {
             positions.extend(reader.decode_chunk(*i, payload)?);
         }
-        let m = Motion::new(
-            take.fps,
-            take.meta.unit.clone(),
-            take.meta.point_names.clone(),
-            positions,
-            None,
-        )
-        .map_err(|e| stored(&take, e))?;
         let joints = rig.as_ref().map(|r| r.joints());
-        derive(&m, joints, &take.roles, given, prior.as_ref()).map_err(|e| stored(&take, e))
+        axes_of(&take, positions, joints, given, prior.as_ref())
     })
     .await?
 }

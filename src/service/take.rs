@@ -289,6 +289,8 @@ impl Take {
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return Err(corrupt(format!("fps is {}", self.fps)));
         }
+        // Labels come deserialised too (an imported manifest line): checked as given ones.
+        self.labels.check().map_err(corrupt)?;
         if self.meta.unit.metres_per_unit != self.metres_per_unit {
             return Err(corrupt(format!(
                 "meta says {} metres per unit, the row {}",

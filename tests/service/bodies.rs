@@ -84,18 +84,8 @@ async fn glb_stands_up_as_an_independent_reading_of_the_source() {
         let source = common::script(&python, "bvh-fk.py", [&path]);
         // The manifest's up turned to +Y: a rotation of whole axes.
         let turn: Matrix3<f64> = want.up.turn_to(Axis::Y).unwrap_or_else(Matrix3::identity);
-        let nodes: Vec<&str> = shown["nodes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|n| n.as_str().unwrap())
-            .collect();
-        let names: Vec<&str> = source["names"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|n| n.as_str().unwrap())
-            .collect();
+        let nodes = common::strings(&shown["nodes"]);
+        let names = common::strings(&source["names"]);
         let pairs: Vec<(usize, usize)> = names
             .iter()
             .enumerate()

@@ -453,6 +453,15 @@ pub fn script<S: AsRef<std::ffi::OsStr>>(
         .unwrap_or_else(|_| panic!("{name} said {text} {}", String::from_utf8_lossy(&o.stderr)))
 }
 
+/// A JSON array of strings (point or node names), as `&str`s.
+pub fn strings(v: &Value) -> Vec<&str> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect()
+}
+
 /// [`mocapstore`] on the blocking pool, for a test whose server runs on this runtime.
 pub async fn mocapstore_beside(args: Vec<String>) -> std::process::Output {
     tokio::task::spawn_blocking(move || {

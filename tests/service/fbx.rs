@@ -41,18 +41,8 @@ async fn a_mixamo_fbx_is_stored_as_its_author_saw_it() {
 
     let glb = root.join("gltf/mixamo_breathing_idle.glb");
     let theirs = common::script(&python, "gltf-eval.py", [&glb]);
-    let nodes: Vec<&str> = theirs["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|n| n.as_str().unwrap())
-        .collect();
-    let names: Vec<&str> = ours["points"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|n| n.as_str().unwrap())
-        .collect();
+    let nodes = common::strings(&theirs["nodes"]);
+    let names = common::strings(&ours["points"]);
     let at = |v: &Value| {
         [
             v[0].as_f64().unwrap(),
