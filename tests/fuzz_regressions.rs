@@ -17,6 +17,7 @@ fn run(target: &str, data: &[u8]) {
         "read_json" => fuzzing::read(Format::Json, data),
         "read_npy" => fuzzing::read(Format::Npy, data),
         "read_fbx" => fuzzing::read(Format::Fbx, data),
+        "read_gltf" => fuzzing::read(Format::Glb, data),
         "decode_raw" => fuzzing::decode(CodecId::Raw, data),
         "decode_quant" => fuzzing::decode(CodecId::Quant, data),
         "decode_mdtt" => fuzzing::decode(CodecId::Mdtt, data),
@@ -44,7 +45,7 @@ fn every_fuzz_target_is_known_here() {
         run(&name, b"");
         n += 1;
     }
-    assert_eq!(n, 20);
+    assert_eq!(n, 21);
 }
 
 #[test]

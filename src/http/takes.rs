@@ -56,6 +56,9 @@ pub struct IngestQuery {
     /// The take's up and forward axes (signed: `y`, `-z`), winning over anatomy.
     up: Option<String>,
     forward: Option<String>,
+    /// Which of the file's animations (FBX stacks, glTF animations) to store, by its place
+    /// (from 0) or name; none: every one, each a take of its own.
+    animation: Option<String>,
 }
 
 /// Format named by `Content-Type` (e.g. `application/x-bvh`, `text/x-trc`), used only when
@@ -115,6 +118,7 @@ pub const HEADER_FIELDS: &[(&str, FromHeader)] = &[
     ("analog-bound", |q, v| text(&mut q.analog_bound, v)),
     ("up", |q, v| text(&mut q.up, v)),
     ("forward", |q, v| text(&mut q.forward, v)),
+    ("animation", |q, v| text(&mut q.animation, v)),
 ];
 
 fn text(slot: &mut Option<String>, v: &str) -> Result<(), ApiError> {
@@ -206,7 +210,13 @@ impl IngestQuery {
                 "empty body: send the file as the request body",
             ));
         }
+        let animation = match self.animation.as_deref().map(str::trim) {
+            None => None,
+            Some("") => return Err(ApiError::bad_request("animation: empty")),
+            Some(a) => Some(a.parse::<formats::Pick>().unwrap_or_else(|e| match e {})),
+        };
         Ok(IngestRequest {
+            animation,
             axes,
             bytes: body,
             label: Label {

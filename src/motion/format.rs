@@ -21,14 +21,14 @@ pub enum Format {
     Trc,
     Json,
     Npy,
-    /// Autodesk FBX (binary or ASCII); read only, for now.
+    /// Autodesk FBX (binary or ASCII).
     Fbx,
     Csv,
     /// Bare little-endian f32, `frames × points × 3`; write only (it has no header).
     F32,
-    /// Binary glTF 2.0; write only.
+    /// Binary glTF 2.0.
     Glb,
-    /// glTF 2.0 as JSON, its buffer embedded; write only.
+    /// glTF 2.0 as JSON, its buffers embedded.
     Gltf,
 }
 
@@ -55,7 +55,7 @@ impl Format {
     }
 
     pub fn can_read(self) -> bool {
-        !matches!(self, Format::Csv | Format::F32 | Format::Glb | Format::Gltf)
+        !matches!(self, Format::Csv | Format::F32)
     }
 }
 

@@ -44,6 +44,8 @@ pub struct IngestRequest {
     pub analog_bounds: AnalogBounds,
     /// The take's up and forward axes as the user states them: they win over anatomy.
     pub axes: Given,
+    /// Which of the file's animations to store; none: every one, each a take of its own.
+    pub animation: Option<formats::Pick>,
 }
 
 /// How a take is to be coded: the codec asked for (or auto), its bound and latency, what a
@@ -78,10 +80,16 @@ pub struct IngestReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub analog: Option<super::take::AnalogMeta>,
     pub warnings: Vec<String>,
+    /// The file's other animations, each stored as a take of its own (FBX stacks, glTF
+    /// animations), when none was asked for.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub more: Vec<IngestReport>,
 }
 
-/// Ingest one take; `histories`, if given, is what choice has learnt from the takes before
-/// ([`super::history`]).
+/// Ingest one upload; `histories`, if given, is what choice has learnt from the takes
+/// before ([`history`]). A file of several animations (FBX stacks, glTF animations) is read
+/// whole first, every animation bounded together, then stored as one take each, named
+/// `name/animation` and labelled `animation`, unless the request picked one.
 pub async fn ingest(
     store: &Store,
     histories: Option<&Histories>,
@@ -93,13 +101,74 @@ pub async fn ingest(
         unit: req.unit,
         fps: req.fps,
         lenient: req.lenient,
+        animation: req.animation.clone(),
     };
     let hint = req.format_hint;
-    let loaded = blocking(move || match (formats::detect(&bytes), hint) {
-        (Err(_), Some(f)) => formats::read_as(f, &bytes, &options),
-        _ => formats::read(&bytes, &options),
-    })
+    let loads = blocking(
+        move || -> crate::motion::error::Result<Vec<formats::Loaded>> {
+            let read = |options: &ReadOptions| match (formats::detect(&bytes), hint) {
+                (Err(_), Some(f)) => formats::read_as(f, &bytes, options),
+                _ => formats::read(&bytes, options),
+            };
+            let first = read(&options)?;
+            let count = first.extras.animations.len();
+            let mut loads = vec![first];
+            if options.animation.is_none() {
+                let mut samples = loads[0].motion.positions().len() as u64 / 3;
+                for i in 1..count {
+                    let next = read(&ReadOptions {
+                        animation: Some(formats::Pick::Index(i)),
+                        ..options.clone()
+                    })?;
+                    samples += next.motion.positions().len() as u64 / 3;
+                    if samples > options.limits.max_samples {
+                        return Err(crate::motion::error::Error::Limit {
+                            what: "sample count of every animation (frames × points)",
+                            actual: samples,
+                            limit: options.limits.max_samples,
+                        });
+                    }
+                    loads.push(next);
+                }
+            }
+            Ok(loads)
+        },
+    )
     .await??;
+    let named = loads.len() > 1 || req.animation.is_some();
+    let mut reports = Vec::with_capacity(loads.len());
+    for mut loaded in loads {
+        let mut req = req.clone();
+        if named {
+            let animation = loaded
+                .extras
+                .animations
+                .get(loaded.extras.animation)
+                .cloned();
+            if let Some(a) = animation {
+                req.label.name = req.label.name.map(|n| format!("{n}/{a}"));
+                loaded
+                    .extras
+                    .labels
+                    .insert("animation", crate::labels::Label::Text(a))
+                    .map_err(Error::InvalidRequest)?;
+            }
+        }
+        reports.push(store_loaded(store, histories, &req, loaded).await?);
+    }
+    let mut reports = reports.into_iter();
+    let mut first = reports.next().expect("a file read gives one take at least");
+    first.more = reports.collect();
+    Ok(first)
+}
+
+/// Code and store one take as read.
+async fn store_loaded(
+    store: &Store,
+    histories: Option<&Histories>,
+    req: &IngestRequest,
+    loaded: formats::Loaded,
+) -> Result<IngestReport> {
     let motion = Arc::new(loaded.motion);
     let extras = loaded.extras;
     // The body before any coding: a contradiction in what was given is the caller's 400.
@@ -261,6 +330,7 @@ pub async fn ingest(
         decision,
         analog: analog.map(|a| a.meta),
         warnings,
+        more: Vec::new(),
     })
 }
 

@@ -486,3 +486,38 @@ pub fn mocapstore(args: &[&str]) -> (bool, String, String) {
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// Joint positions of a take's `/frames?unit=m` answer (`ours`, at `fps` from `t0` s)
+/// against scripts/gltf-eval.py's evaluation of a glTF (`theirs`) at each of its key times
+/// that falls on one of the take's frames, node matched by name: how many were compared,
+/// and the farthest apart (m).
+pub fn against_gltf_eval(ours: &Value, theirs: &Value, fps: f64, t0: f64) -> (usize, f64) {
+    let nodes = strings(&theirs["nodes"]);
+    let names = strings(&ours["points"]);
+    let at = |v: &Value| {
+        [
+            v[0].as_f64().unwrap(),
+            v[1].as_f64().unwrap(),
+            v[2].as_f64().unwrap(),
+        ]
+    };
+    let (mut compared, mut worst) = (0usize, 0.0f64);
+    for (k, time) in theirs["times"].as_array().unwrap().iter().enumerate() {
+        let f = (time.as_f64().unwrap() - t0) * fps;
+        if (f - f.round()).abs() > 1e-3 {
+            continue;
+        }
+        let f = f.round() as usize;
+        for (i, name) in names.iter().enumerate() {
+            let j = nodes
+                .iter()
+                .position(|n| n == name)
+                .unwrap_or_else(|| panic!("{name} is not a node of the glTF"));
+            let (a, b) = (at(&ours["frames"][f][i]), at(&theirs["positions"][k][j]));
+            let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+            worst = worst.max(d);
+            compared += 1;
+        }
+    }
+    (compared, worst)
+}

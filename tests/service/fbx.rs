@@ -6,7 +6,6 @@
 use crate::common;
 
 use mocapstore::corpus;
-use serde_json::Value;
 
 #[tokio::test(flavor = "multi_thread")]
 async fn a_mixamo_fbx_is_stored_as_its_author_saw_it() {
@@ -41,34 +40,8 @@ async fn a_mixamo_fbx_is_stored_as_its_author_saw_it() {
 
     let glb = root.join("gltf/mixamo_breathing_idle.glb");
     let theirs = common::script(&python, "gltf-eval.py", [&glb]);
-    let nodes = common::strings(&theirs["nodes"]);
-    let names = common::strings(&ours["points"]);
-    let at = |v: &Value| {
-        [
-            v[0].as_f64().unwrap(),
-            v[1].as_f64().unwrap(),
-            v[2].as_f64().unwrap(),
-        ]
-    };
-    let (mut compared, mut worst) = (0usize, 0.0f64);
-    for (k, time) in theirs["times"].as_array().unwrap().iter().enumerate() {
-        // The GLB keys at 24 fps; those that fall on one of the take's 60 fps frames.
-        let f = time.as_f64().unwrap() * 60.0;
-        if (f - f.round()).abs() > 1e-3 {
-            continue;
-        }
-        let f = f.round() as usize;
-        for (i, name) in names.iter().enumerate() {
-            let j = nodes
-                .iter()
-                .position(|n| n == name)
-                .unwrap_or_else(|| panic!("{name} is not a node of the GLB"));
-            let (a, b) = (at(&ours["frames"][f][i]), at(&theirs["positions"][k][j]));
-            let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
-            worst = worst.max(d);
-            compared += 1;
-        }
-    }
+    // The GLB keys at 24 fps; those that fall on one of the take's 60 fps frames.
+    let (compared, worst) = common::against_gltf_eval(&ours, &theirs, 60.0, 0.0);
     eprintln!("FBX vs the GLB's evaluation: {compared} joint positions, worst {worst:.6} m");
     assert!(compared > 3000, "{compared}");
     assert!(

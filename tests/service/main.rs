@@ -18,6 +18,7 @@ mod cli;
 mod cluster;
 mod export;
 mod fbx;
+mod gltf_in;
 mod hostile;
 mod http;
 mod library;

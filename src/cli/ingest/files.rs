@@ -16,7 +16,7 @@ use mocapstore::motion::formats;
 const SNIFF_BYTES: u64 = 64 << 10;
 
 /// Extensions only motion files have (`.json` may be labels or anything else).
-const MOTION_EXTENSIONS: &[&str] = &["bvh", "c3d", "trc", "npy", "fbx"];
+const MOTION_EXTENSIONS: &[&str] = &["bvh", "c3d", "trc", "npy", "fbx", "glb", "gltf"];
 
 /// The largest entry of a ZIP read: what a server takes as one upload by default
 /// ([`mocapstore::limits::Limits::upload_bytes`]). An entry that says it is larger, or

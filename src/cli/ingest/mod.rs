@@ -148,17 +148,32 @@ pub fn run(args: &IngestArgs) -> ExitCode {
         "{:<48} {:<8} {:>8} {:>9} {:>9}",
         "file", "codec", "frames", "ratio", "max mm"
     );
+    let row = |file: &str, v: &Value| {
+        println!(
+            "{:<48} {:<8} {:>8} {:>9.1} {:>9.3}",
+            file,
+            v["codec"].as_str().unwrap_or("?"),
+            v["frames"].as_u64().unwrap_or(0),
+            v["ratio"].as_f64().unwrap_or(0.0),
+            v["max_mm"].as_f64().unwrap_or(0.0)
+        )
+    };
+    // A file of several animations is a take for each: a row for each, named by its take.
+    let mut several = 0;
     for o in &outcomes {
         if let Ok(v) = &o.result {
-            println!(
-                "{:<48} {:<8} {:>8} {:>9.1} {:>9.3}",
-                o.file,
-                v["codec"].as_str().unwrap_or("?"),
-                v["frames"].as_u64().unwrap_or(0),
-                v["ratio"].as_f64().unwrap_or(0.0),
-                v["max_mm"].as_f64().unwrap_or(0.0)
-            );
+            row(&o.file, v);
+            for more in v["more"].as_array().into_iter().flatten() {
+                row(
+                    &format!("  + {}", more["name"].as_str().unwrap_or("?")),
+                    more,
+                );
+                several += 1;
+            }
         }
+    }
+    if several > 0 {
+        println!("{several} more takes from files of several animations (rows with +)");
     }
     println!(
         "{} stored, {} failed, {} skipped ({} beside takes with their names, {} other files \

@@ -10,24 +10,13 @@
 //! kinematics gives back the file's joint positions. Meshes, skins, materials and textures
 //! are not motion: they are not loaded, and the take says what was left out.
 
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::Matrix4;
 
-use super::{Extras, Format, Parsed, ReadLimits};
+use super::posed::{place, Place, Posed, Skeletal};
+use super::{Extras, Format, Parsed, Pick, ReadLimits};
 use crate::motion::body::{Axis, Prior};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
-use crate::motion::rotation::to_euler;
-use crate::motion::skeleton::{Animation, Channel, Joint};
-
-/// Euler order of every joint's rotation channels (Z, then X, then Y: BVH's usual one;
-/// any order gives the same rotations back).
-const ORDER: [usize; 3] = [2, 0, 1];
-const ROTATIONS: [Channel; 3] = [Channel::Zrotation, Channel::Xrotation, Channel::Yrotation];
-const POSITIONS: [Channel; 3] = [Channel::Xposition, Channel::Yposition, Channel::Zposition];
-
-/// A joint whose translation from its parent moves less than this (file units) over the
-/// take keeps it as a fixed offset; else it gets position channels.
-const FIXED: f64 = 1e-6;
 
 fn err(reason: impl Into<String>) -> Error {
     Error::parse(Format::Fbx, Location::Whole, reason)
@@ -45,15 +34,11 @@ fn allocator(bytes: usize) -> ufbx::AllocatorOpts {
 }
 
 /// A node's world transform: its position, and its rotation with any scale taken out.
-fn world(m: &ufbx::Matrix) -> (Vector3<f64>, UnitQuaternion<f64>) {
-    let r = Matrix3::new(
-        m.m00, m.m01, m.m02, m.m10, m.m11, m.m12, m.m20, m.m21, m.m22,
-    );
-    let rot = Rotation3::from_matrix_eps(&r, 1e-12, 64, Rotation3::identity());
-    (
-        Vector3::new(m.m03, m.m13, m.m23),
-        UnitQuaternion::from_rotation_matrix(&rot),
-    )
+fn world(m: &ufbx::Matrix) -> Place {
+    place(&Matrix4::new(
+        m.m00, m.m01, m.m02, m.m03, m.m10, m.m11, m.m12, m.m13, m.m20, m.m21, m.m22, m.m23, 0.0,
+        0.0, 0.0, 1.0,
+    ))
 }
 
 fn axis(a: ufbx::CoordinateAxis) -> Option<Axis> {
@@ -69,7 +54,7 @@ fn axis(a: ufbx::CoordinateAxis) -> Option<Axis> {
     })
 }
 
-pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
+pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) -> Result<Parsed> {
     let opts = ufbx::LoadOpts {
         temp_allocator: allocator(bytes.len()),
         result_allocator: allocator(bytes.len()),
@@ -168,21 +153,28 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
                 .and_then(|p| index_of.get(&index(p)).copied())
         })
         .collect();
-    let mut leaf = vec![true; order.len()];
-    for p in parents.iter().flatten() {
-        leaf[*p] = false;
-    }
 
-    // The animation: the first stack, sampled at the file's frame rate.
+    // The animation: the stack asked for (else the first), sampled at the file's rate.
     let stacks: &[ufbx::Ref<ufbx::AnimStack>] = &scene.anim_stacks;
-    let stack = stacks
-        .first()
-        .ok_or_else(|| err("the file holds no animation (no animation stack)"))?;
+    let animations: Vec<String> = stacks
+        .iter()
+        .enumerate()
+        .map(|(i, s)| match s.element.name.trim() {
+            "" => format!("stack {i}"),
+            n => n.to_string(),
+        })
+        .collect();
+    if stacks.is_empty() {
+        return Err(err("the file holds no animation (no animation stack)"));
+    }
+    let pick = Pick::place(animation, &animations)?;
+    let stack = &stacks[pick];
     if stacks.len() > 1 {
         warnings.push(format!(
-            "{} animation stacks; the first ({:?}) was read",
-            stacks.len(),
-            stack.element.name.to_string()
+            "animation stack {:?} of {} ({}); each is a take of its own",
+            animations[pick],
+            animations.len(),
+            animations.join(", ")
         ));
     }
     let fps = scene.settings.frames_per_second;
@@ -208,7 +200,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
     let n = order.len();
 
     // Each frame: every joint's world transform, as the file's author saw it.
-    let mut places: Vec<(Vector3<f64>, UnitQuaternion<f64>)> = Vec::with_capacity(frames * n);
+    let mut places: Vec<Place> = Vec::with_capacity(frames * n);
     for f in 0..frames {
         let t = stack.time_begin + f as f64 / fps;
         let eval = ufbx::EvaluateOpts {
@@ -223,91 +215,27 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         }
     }
 
-    // The skeleton: each joint's translation and rotation relative to its parent's.
-    let local = |f: usize, k: usize| -> (Vector3<f64>, UnitQuaternion<f64>) {
-        let (p, q) = places[f * n + k];
-        match parents[k] {
-            None => (p, q),
-            Some(pk) => {
-                let (pp, pq) = places[f * n + pk];
-                (pq.inverse() * (p - pp), pq.inverse() * q)
-            }
-        }
-    };
-    let mut joints = Vec::with_capacity(n);
-    let mut moves = vec![false; n];
-    let mut rotates = vec![false; n];
-    for (k, &i) in order.iter().enumerate() {
-        let (t0, _) = local(0, k);
-        moves[k] = k == 0 || (1..frames).any(|f| (local(f, k).0 - t0).amax() > FIXED);
-        let leaf = leaf[k];
-        let mut channels = Vec::new();
-        if moves[k] {
-            channels.extend(POSITIONS);
-        }
-        // A leaf's rotation turns nothing below it: it is an end site unless it moves.
-        rotates[k] = !leaf || k == 0;
-        if rotates[k] {
-            channels.extend(ROTATIONS);
-        }
-        // A joint's name, made unique (exporters repeat names; a take's points must not).
-        let base = match nodes[i].element.name.to_string() {
+    let names: Vec<String> = order
+        .iter()
+        .map(|&i| match nodes[i].element.name.to_string() {
             n if n.trim().is_empty() => format!("node{}", nodes[i].element.typed_id),
             n => n,
-        };
-        let mut name = base.clone();
-        let mut suffix = 2;
-        while joints.iter().any(|j: &Joint| j.name == name) {
-            name = format!("{base}_{suffix}");
-            suffix += 1;
-        }
-        joints.push(Joint {
-            name,
-            parent: parents[k],
-            offset: if k == 0 { [0.0; 3] } else { t0.into() },
-            end_site: channels.is_empty(),
-            channels,
-        });
+        })
+        .collect();
+    let Skeletal {
+        names,
+        positions,
+        skeleton,
+        warnings: scaled,
+    } = Posed {
+        names,
+        parents,
+        frames,
+        places,
     }
-    let mut values = Vec::new();
-    let mut last: Vec<Option<[f64; 3]>> = vec![None; n];
-    for f in 0..frames {
-        for (k, j) in joints.iter().enumerate() {
-            if j.channels.is_empty() {
-                continue;
-            }
-            let (t, q) = local(f, k);
-            if moves[k] {
-                values.extend_from_slice(&[t.x, t.y, t.z]);
-            }
-            if rotates[k] {
-                let e = to_euler(&q, ORDER, last[k]);
-                last[k] = Some(e);
-                values.extend_from_slice(&e);
-            }
-        }
-    }
-    let names: Vec<String> = joints.iter().map(|j| j.name.clone()).collect();
-    let skeleton = Animation::new(joints, values)?;
-    let fk = skeleton.forward_kinematics();
-    // What the skeleton gives back against the file's own world positions: apart only
-    // where the file scales a joint unevenly (a skeleton has no scale).
-    let mut worst = 0.0f64;
-    for (f, chunk) in fk.chunks_exact(n * 3).enumerate() {
-        for k in 0..n {
-            let p = places[f * n + k].0;
-            let d = Vector3::new(chunk[k * 3], chunk[k * 3 + 1], chunk[k * 3 + 2]) - p;
-            worst = worst.max(d.norm());
-        }
-    }
-    if worst > 1e-3 {
-        warnings.push(format!(
-            "the file scales joints unevenly: the skeleton's joints lie up to {worst:.4} file \
-             units from the file's (a skeleton has no scale)"
-        ));
-    }
+    .skeleton()?;
+    warnings.extend(scaled);
     let mut contradictions = Vec::new();
-    let positions: Vec<f32> = fk.into_iter().map(|v| v as f32).collect();
     let bad = positions.iter().filter(|v| !v.is_finite()).count();
     if bad > 0 {
         contradictions.push(format!("{bad} joint coordinates are not finite"));
@@ -339,6 +267,8 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         contradictions,
         extras: Extras {
             up,
+            animations,
+            animation: pick,
             ..Default::default()
         },
     })

@@ -18,6 +18,7 @@ pub mod fbx;
 pub mod gltf;
 pub mod json;
 pub mod npy;
+mod posed;
 pub mod rawf32;
 mod text;
 pub mod trc;
@@ -101,6 +102,53 @@ pub struct ReadOptions {
     /// warning, instead of refusing it. Off by default: an archive that silently keeps half
     /// a take is worse than one that says no.
     pub lenient: bool,
+    /// Which of a file's animations (FBX stacks, glTF animations) to read, counted from 0
+    /// in the file's order ([`Extras::animations`]); none: the first.
+    pub animation: Option<Pick>,
+}
+
+/// One of a file's animations, by its place in the file (from 0) or its name.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Pick {
+    Index(usize),
+    Name(String),
+}
+
+impl std::str::FromStr for Pick {
+    type Err = std::convert::Infallible;
+    /// A number is a place; anything else a name.
+    fn from_str(s: &str) -> std::result::Result<Pick, Self::Err> {
+        Ok(match s.trim().parse::<usize>() {
+            Ok(i) => Pick::Index(i),
+            Err(_) => Pick::Name(s.trim().to_string()),
+        })
+    }
+}
+
+impl Pick {
+    /// The place of the animation picked among a file's `names`; none picked: the first.
+    pub(crate) fn place(pick: Option<&Pick>, names: &[String]) -> Result<usize> {
+        let found = match pick {
+            None if names.is_empty() => None,
+            None => Some(0),
+            Some(Pick::Index(i)) => Some(*i).filter(|&i| i < names.len()),
+            Some(Pick::Name(n)) => names.iter().position(|a| a == n),
+        };
+        found.ok_or_else(|| {
+            let asked = match pick {
+                Some(Pick::Index(i)) => format!("animation {i}"),
+                Some(Pick::Name(n)) => format!("animation {n:?}"),
+                None => "an animation".into(),
+            };
+            match names.len() {
+                0 => Error::Invalid(format!("{asked} asked for; the file holds no animation")),
+                n => Error::Invalid(format!(
+                    "{asked} asked for; the file has {n}, from 0: {}",
+                    names.join(", ")
+                )),
+            }
+        })
+    }
 }
 
 /// A take as read from a file, with what the reader noticed but could work around.
@@ -130,6 +178,11 @@ pub struct Extras {
     /// The up axis the file states (an FBX's `GlobalSettings`), over its format's
     /// convention.
     pub up: Option<crate::motion::body::Prior>,
+    /// The names of every animation the file holds (FBX stacks, glTF animations), in its
+    /// order: each is a take of its own ([`ReadOptions::animation`] picks one).
+    pub animations: Vec<String>,
+    /// Which of them this take is (its place in `animations`).
+    pub animation: usize,
 }
 
 /// What a format reader returns before units are settled.
@@ -179,6 +232,9 @@ pub fn detect(bytes: &[u8]) -> Result<Format> {
     if bytes.starts_with(b"Kaydara FBX Binary") {
         return Ok(Format::Fbx);
     }
+    if bytes.starts_with(b"glTF") {
+        return Ok(Format::Glb);
+    }
     // C3D: byte 2 of the header is the key 0x50, byte 1 points at the parameter block.
     if bytes.len() >= 512 && bytes[1] == 0x50 && bytes[0] >= 2 {
         return Ok(Format::C3d);
@@ -196,11 +252,15 @@ pub fn detect(bytes: &[u8]) -> Result<Format> {
         return Ok(Format::Fbx);
     }
     if trimmed[0] == b'{' {
-        return Ok(Format::Json);
+        return Ok(if gltf::read::is_gltf_json(bytes) {
+            Format::Gltf
+        } else {
+            Format::Json
+        });
     }
     Err(Error::UnknownFormat(
         "not BVH (HIERARCHY), C3D (0x50 key), TRC (PathFileType), JSON ({), NPY (\\x93NUMPY) \
-         or FBX (Kaydara FBX Binary, ; FBX)"
+         FBX (Kaydara FBX Binary, ; FBX) or glTF (glTF, {\"asset\")"
             .into(),
     ))
 }
@@ -248,8 +308,9 @@ pub fn read_as(format: Format, bytes: &[u8], options: &ReadOptions) -> Result<Lo
         Format::Trc => trc::read(bytes, limits)?,
         Format::Json => json::read(bytes, limits)?,
         Format::Npy => npy::read(bytes, limits)?,
-        Format::Fbx => fbx::read(bytes, limits)?,
-        Format::Csv | Format::F32 | Format::Glb | Format::Gltf => {
+        Format::Fbx => fbx::read(bytes, limits, options.animation.as_ref())?,
+        Format::Glb | Format::Gltf => gltf::read::read(bytes, options)?,
+        Format::Csv | Format::F32 => {
             return Err(Error::Unsupported(format!(
                 "{format} is an output format only"
             )))

@@ -520,10 +520,15 @@ class Client(_Base):
         codec: str | None = None,
         point_names: Sequence[str] | None = None,
         labels: p.Labels | None = None,
+        animation: int | str | None = None,
     ) -> Take:
-        """Store a file (BVH, C3D, TRC, JSON, NPY, FBX; named after the file unless ``name`` is
-        given) or an array of positions ``(frames, points, 3)`` with its ``fps`` (NaN where
-        missing; with ``point_names`` it keeps them, else points are numbered). A slow
+        """Store a file (BVH, C3D, TRC, JSON, NPY, FBX, glTF/GLB; named after the file unless
+        ``name`` is given) or an array of positions ``(frames, points, 3)`` with its ``fps``
+        (NaN where missing; with ``point_names`` it keeps them, else points are numbered).
+        A file of several animations (FBX stacks, glTF animations) is a take for each, named
+        ``name/animation`` and labelled ``animation``; the first is returned (the others:
+        ``takes(name_prefix=name + "/")``), unless ``animation`` (its place from 0, or its name)
+        picks one. A slow
         upload is not retried: if it times out, look for the take before sending it again
         (it may have been stored)."""
         body, stem = self._ingest_body(source, fps, point_names)
@@ -538,6 +543,7 @@ class Client(_Base):
             keep=keep,
             codec=codec,
             labels=p.labels_json(labels),
+            animation=animation,
         )
         return self._run(p.ingest(body, query))
 
@@ -873,6 +879,7 @@ class AsyncClient(_Base):
         codec: str | None = None,
         point_names: Sequence[str] | None = None,
         labels: p.Labels | None = None,
+        animation: int | str | None = None,
     ) -> Take:
         """Store a file or an array of positions (see [`Client.ingest`])."""
         # Reading a file (or serialising an array) off the event loop.
@@ -888,6 +895,7 @@ class AsyncClient(_Base):
             keep=keep,
             codec=codec,
             labels=p.labels_json(labels),
+            animation=animation,
         )
         return await self._run(p.ingest(body, query))
 
