@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Evaluate a glTF the way a player does, with an independent reader (pygltflib): each
-node's translation, rotation and scale from the animation at every key of its first
-sampler input, composed down the node tree. Prints one JSON line:
+node's translation, rotation and scale from the animation at every key time of any of its
+samplers (a channel keyed at other times interpolated as the specification says), composed
+down the node tree. Prints one JSON line:
 
   {"nodes": [names], "frames": F, "times": [...], "positions": [[[x, y, z], ...], ...],
    "visible": [[bool, ...], ...], "extras": {...}}
@@ -41,6 +42,36 @@ def quat_matrix(q):
     ])
 
 
+def resample(keys, values, times, interpolation, rotation):
+    """A channel's values at `times` (held before its first key and after its last):
+    STEP holds, LINEAR lerps, or slerps a rotation the short way (glTF 2.0, Appendix C)."""
+    if interpolation == "CUBICSPLINE":
+        raise SystemExit("CUBICSPLINE samplers with different inputs are not evaluated")
+    out = np.empty((len(times), values.shape[1]))
+    for i, t in enumerate(times):
+        k = np.searchsorted(keys, t, side="right") - 1
+        if k < 0 or k >= len(keys) - 1:
+            out[i] = values[0 if k < 0 else len(keys) - 1]
+            continue
+        s = (t - keys[k]) / (keys[k + 1] - keys[k])
+        a, b = values[k], values[k + 1]
+        if interpolation == "STEP":
+            out[i] = a
+        elif rotation:
+            d = np.dot(a, b)
+            if d < 0:
+                b, d = -b, -d
+            if d > 0.9995:
+                q = a + (b - a) * s
+            else:
+                th = np.arccos(min(d, 1.0))
+                q = (np.sin((1 - s) * th) * a + np.sin(s * th) * b) / np.sin(th)
+            out[i] = q / np.linalg.norm(q)
+        else:
+            out[i] = a + (b - a) * s
+    return out
+
+
 def main():
     path = sys.argv[1]
     g = GLTF2().load(path)
@@ -48,7 +79,9 @@ def main():
     nodes = g.nodes
     n = len(nodes)
     anim = g.animations[0] if g.animations else None
-    times = accessor(g, blob, anim.samplers[0].input)[:, 0] if anim else np.zeros(1)
+    # Every key time of the animation: samplers may key different times (assimp's do).
+    times = (np.unique(np.concatenate([accessor(g, blob, smp.input)[:, 0] for smp in anim.samplers]))
+             if anim else np.zeros(1))
     frames = len(times)
     trs = []
     for node in nodes:
@@ -60,9 +93,10 @@ def main():
         for ch in anim.channels:
             sampler = anim.samplers[ch.sampler]
             keys = accessor(g, blob, sampler.input)[:, 0]
-            if len(keys) != frames or np.any(np.abs(keys - times) > 1e-6):
-                raise SystemExit("samplers with different inputs")
             out = accessor(g, blob, sampler.output)
+            if len(keys) != frames or np.any(np.abs(keys - times) > 1e-6):
+                out = resample(keys, out, times, sampler.interpolation or "LINEAR",
+                               ch.target.path == "rotation")
             k = {"translation": 0, "rotation": 1, "scale": 2}[ch.target.path]
             trs[ch.target.node][k] = out
     parent = [None] * n

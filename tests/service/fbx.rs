@@ -62,3 +62,178 @@ async fn a_mixamo_fbx_is_stored_as_its_author_saw_it() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// A BVH with its root's channels set to zero in every frame: what assimp's FBX writer
+/// keeps of it (it makes the BVH's root the FBX scene's root, which holds no animation).
+fn root_still(bvh: &str) -> String {
+    let root_channels: usize = bvh
+        .lines()
+        .find(|l| l.trim_start().starts_with("CHANNELS"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|n| n.parse().ok())
+        .unwrap();
+    let mut out = String::new();
+    let mut in_motion = false;
+    for line in bvh.lines() {
+        if in_motion && !line.trim().is_empty() {
+            let mut v: Vec<&str> = line.split_whitespace().collect();
+            v.iter_mut().take(root_channels).for_each(|x| *x = "0");
+            out.push_str(&v.join(" "));
+        } else {
+            out.push_str(line);
+        }
+        out.push('\n');
+        in_motion |= line.trim_start().starts_with("Frame Time");
+    }
+    out
+}
+
+/// Issue 49: FBX files made from corpus BVH by assimp (Debian's assimp-utils, 5.2), binary
+/// (`-ffbx`) and ASCII (`-ffbxa`), read as the BVH says and as assimp reads them back.
+///
+/// assimp's writer has two faults the comparison allows for, both its own: its binary
+/// files leave out the null records that end nested lists (read by their lengths, with a
+/// warning), and it writes the BVH's root as the FBX scene's root, whose motion FBX cannot
+/// hold (so the reference is the BVH with its root still) and one key per second (so FBX
+/// time k s is BVH frame k). Against the BVH: scripts/bvh-fk.py; against assimp's own
+/// reading: its GLB of the FBX (`assimp export x.fbx x.glb`), evaluated by pygltflib.
+#[tokio::test(flavor = "multi_thread")]
+async fn assimp_fbx_of_corpus_bvh_reads_as_the_bvh_and_as_assimp() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let Some(python) = common::python() else {
+        return;
+    };
+    if std::env::var("MOCAP_TEST_ASSIMP").is_err() {
+        return;
+    }
+    let assimp = |args: &[&std::ffi::OsStr]| {
+        let o = std::process::Command::new("assimp")
+            .args(args)
+            .output()
+            .expect("MOCAP_TEST_ASSIMP is set: assimp must be installed");
+        assert!(o.status.success(), "assimp {args:?}: {o:?}");
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let dir = std::env::temp_dir().join(format!("mocapstore-fbx-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A CMU take (120 fps), a Bandai one (30 fps), a Mixamo rig.
+    for source in [
+        "bvh/cmu/01_01.bvh",
+        "bvh/bandai/dataset-1_walk_active_001.bvh",
+        "bvh/misc/mixamo_rig.bvh",
+    ] {
+        let bvh_path = root.join(source);
+        if !bvh_path.exists() {
+            panic!("{source} is not in the corpus");
+        }
+        let text = std::fs::read_to_string(&bvh_path).unwrap();
+        let still = dir.join("still.bvh");
+        std::fs::write(&still, root_still(&text)).unwrap();
+        let reference = common::script(
+            &python,
+            "bvh-fk.py",
+            [still.as_os_str(), "--frames".as_ref(), "0:30".as_ref()],
+        );
+        let ref_names = common::strings(&reference["names"]);
+        for (kind, flag) in [("binary", "-ffbx"), ("ascii", "-ffbxa")] {
+            let fbx = dir.join(format!("take-{kind}.fbx"));
+            assimp(&[
+                "export".as_ref(),
+                bvh_path.as_os_str(),
+                fbx.as_os_str(),
+                flag.as_ref(),
+            ]);
+            let (status, report) = srv
+                .post(&format!("name={kind}"), std::fs::read(&fbx).unwrap())
+                .await;
+            assert_eq!(status, 201, "{source} {kind}: {report}");
+            let id = report["id"].as_str().unwrap();
+            let (_, take) = srv.get_json(&format!("/v1/takes/{id}")).await;
+            let fps = take["fps"].as_f64().unwrap();
+            let unit = take["metres_per_unit"].as_f64().unwrap();
+            let bound = take["max_mm"].as_f64().unwrap() * 1e-3 / unit;
+            let (status, ours) = srv.get_json(&format!("/v1/takes/{id}/frames")).await;
+            assert_eq!(status, 200, "{ours}");
+            let names = common::strings(&ours["points"]);
+            let frames = ours["frames"].as_array().unwrap();
+            // Against the BVH: FBX time k s, BVH frame k; End Sites by their parent.
+            let (mut compared, mut worst) = (0usize, 0.0f64);
+            for k in 0..reference["frames"].as_u64().unwrap() as usize {
+                let f = (k as f64 * fps).round() as usize;
+                if f >= frames.len() {
+                    break;
+                }
+                for (i, name) in names.iter().enumerate() {
+                    let theirs = match *name {
+                        "root" => ref_names[0].to_string(),
+                        n => n
+                            .strip_prefix("EndSite_")
+                            .map_or(n.to_string(), |p| format!("{p}_End")),
+                    };
+                    let Some(j) = ref_names.iter().position(|n| *n == theirs) else {
+                        panic!("{source} {kind}: {name} is not a joint of the BVH");
+                    };
+                    let a = &frames[f][i];
+                    let b = &reference["positions"][k][j];
+                    let d = (0..3)
+                        .map(|c| (a[c].as_f64().unwrap() - b[c].as_f64().unwrap()).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    worst = worst.max(d);
+                    compared += 1;
+                }
+            }
+            // Against assimp's own reading of the same FBX: its ASCII one (assimp cannot
+            // read its own binary files back: "block offset is out of range").
+            let (mut by_assimp, mut worst_assimp) = (0, 0.0);
+            if kind == "ascii" {
+                let glb = dir.join("assimp.glb");
+                assimp(&[
+                    "export".as_ref(),
+                    fbx.as_os_str(),
+                    glb.as_os_str(),
+                    "-fglb2".as_ref(),
+                ]);
+                let theirs = common::script(&python, "gltf-eval.py", [&glb]);
+                let mut renamed = ours.clone();
+                if renamed["points"][0] == "root" {
+                    renamed["points"][0] = "RootNode".into();
+                }
+                (by_assimp, worst_assimp) = common::against_gltf_eval(&renamed, &theirs, fps, 0.0);
+                assert!(by_assimp >= 3 * names.len(), "{source}: {by_assimp}");
+            }
+            eprintln!(
+                "{source} as {kind} FBX: {} joints, {} frames at {fps} fps, unit {unit} m, up \
+                 {}; vs BVH {compared} positions worst {:.4} mm; vs assimp {by_assimp} worst \
+                 {:.4} mm (bound {:.3} mm)",
+                take["points"],
+                take["frames"],
+                take["body"]["up"],
+                worst * unit * 1e3,
+                worst_assimp * unit * 1e3,
+                bound * unit * 1e3
+            );
+            assert!(compared >= 3 * names.len(), "{source} {kind}: {compared}");
+            assert!(
+                worst <= bound + 1e-6,
+                "{source} {kind}: {worst} over {bound}"
+            );
+            assert!(
+                worst_assimp <= bound + 1e-6,
+                "{source} {kind}: {worst_assimp} over {bound}"
+            );
+            if kind == "binary" {
+                assert!(
+                    report["warnings"].to_string().contains("null record"),
+                    "{report}"
+                );
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    srv.stop().await;
+    t.finish().await;
+}

@@ -10,6 +10,8 @@
 //! kinematics gives back the file's joint positions. Meshes, skins, materials and textures
 //! are not motion: they are not loaded, and the take says what was left out.
 
+mod records;
+
 use nalgebra::Matrix4;
 
 use super::posed::{place, Place, Posed, Skeletal};
@@ -41,6 +43,26 @@ fn world(m: &ufbx::Matrix) -> Place {
     ))
 }
 
+/// What ufbx says went wrong: its description, its detail, and where in the file's
+/// structure it was (the innermost of its frames), so that "Failed to load" says what.
+fn load_error(e: &ufbx::Error) -> String {
+    let mut said = e.description.to_string();
+    let info = e.info();
+    if !info.is_empty() {
+        said = format!("{said}: {info}");
+    }
+    let frames = (e.stack_size as usize).min(e.stack.len());
+    let context: Vec<String> = e.stack[..frames]
+        .iter()
+        .map(|f| f.description.to_string())
+        .filter(|d| !d.is_empty() && *d != said)
+        .collect();
+    if !context.is_empty() {
+        said = format!("{said} ({})", context.join(" < "));
+    }
+    said
+}
+
 fn axis(a: ufbx::CoordinateAxis) -> Option<Axis> {
     use ufbx::CoordinateAxis as C;
     Some(match a {
@@ -65,15 +87,17 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) 
         file_format: ufbx::FileFormat::Fbx,
         ..Default::default()
     };
-    let scene = ufbx::load_memory(bytes, opts).map_err(|e| {
-        let info = e.info();
-        err(if info.is_empty() {
-            e.description.to_string()
-        } else {
-            format!("{}: {info}", e.description)
-        })
-    })?;
     let mut warnings = Vec::new();
+    let mended = records::mend(bytes);
+    if mended.is_some() {
+        warnings.push(
+            "the file's nested record lists lack the null record that ends them (assimp \
+             5.2's FBX writer leaves them out); read by the records' lengths"
+                .into(),
+        );
+    }
+    let scene = ufbx::load_memory(mended.as_deref().unwrap_or(bytes), opts)
+        .map_err(|e| err(load_error(&e)))?;
 
     // The joints: the bones of the file's largest skeleton and the nodes between them (an
     // exporter may put a plain node among its bones, as assimp does with a BVH's root),
@@ -91,45 +115,57 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) 
             limit: limits.max_depth,
         });
     }
-    // Bones in each node's subtree, children counted before their parents.
+    // The joints: the bones the file's skins bind (a character's, end bones included),
+    // else every bone; headed by the lowest node above all of them. Skins decide where
+    // they exist because an exporter may leave the bones of one character as several
+    // trees under the scene's root (assimp writes a BVH's root there), and a scene of
+    // props may hold bones that no character uses.
+    let mut marked = vec![false; count + 1];
+    for skin in scene.skin_deformers.iter() {
+        for bone in skin.clusters.iter().filter_map(|c| c.bone_node.as_ref()) {
+            marked[index(bone)] = true;
+        }
+    }
+    if !marked.iter().any(|&m| m) {
+        nodes
+            .iter()
+            .for_each(|n| marked[index(n)] = n.bone.is_some());
+    }
+    // Marked nodes in each node's subtree, children counted before their parents.
     let mut deepest_first: Vec<usize> = (0..count).collect();
     deepest_first.sort_by_key(|&i| std::cmp::Reverse(nodes[i].node_depth));
     let mut below = vec![0usize; count + 1];
     for &i in &deepest_first {
-        below[i] += usize::from(nodes[i].bone.is_some());
+        below[i] += usize::from(marked[i]);
         if let Some(p) = nodes[i].parent.as_ref() {
             let (p, n) = (index(p), below[i]);
             below[p] += n;
         }
     }
-    let with_bones = |n: &ufbx::Node| below[index(n)] > 0;
-    let tops: Vec<usize> = scene
-        .root_node
-        .children
-        .iter()
-        .filter(|c| with_bones(c))
-        .map(|c| index(c))
-        .collect();
-    let mut head = *tops
-        .iter()
-        .max_by_key(|&&t| below[t])
-        .ok_or_else(|| err("the file holds no skeleton (no bone or limb nodes)"))?;
-    for &other in tops.iter().filter(|&&t| t != head) {
-        warnings.push(format!(
-            "the skeleton under {:?} left out: a take holds one skeleton, the largest ({:?})",
-            nodes[other].element.name.to_string(),
-            nodes[head].element.name.to_string()
-        ));
+    let root = index(&scene.root_node);
+    if below[root] == 0 {
+        return Err(err("the file holds no skeleton (no bone or limb nodes)"));
     }
-    // Down to the lowest node above every bone: a plain node above a single branch (an
+    // Down to the lowest node above every joint: a plain node above a single branch (an
     // armature, a scene's grouping) is not a joint.
-    while nodes[head].bone.is_none() {
-        let mut branches = nodes[head].children.iter().filter(|c| with_bones(c));
+    let mut head = root;
+    while !marked[head] {
+        let mut branches = nodes[head].children.iter().filter(|c| below[index(c)] > 0);
         match (branches.next(), branches.next()) {
             (Some(only), None) => head = index(only),
             _ => break,
         }
     }
+    if head == root {
+        warnings.push(
+            "the bones hang from the scene's root, not from one bone: a still root joint \
+             (root) heads them"
+                .into(),
+        );
+    }
+    // A child is a joint if joints lie below it, or it is a bone itself (an end bone no
+    // skin weights).
+    let with_bones = |n: &ufbx::Node| below[index(n)] > 0 || n.bone.is_some();
     let mut order = Vec::new();
     let mut stack = vec![head];
     while let Some(i) = stack.pop() {
@@ -218,6 +254,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) 
     let names: Vec<String> = order
         .iter()
         .map(|&i| match nodes[i].element.name.to_string() {
+            _ if i == root => "root".to_string(),
             n if n.trim().is_empty() => format!("node{}", nodes[i].element.typed_id),
             n => n,
         })
