@@ -35,7 +35,7 @@ export async function libraryPage(main, params) {
   });
 
   const drop = el('div', { class: 'drop', tabindex: '0', role: 'button', 'aria-label': 'Upload files' },
-    'Drop mocap files here (BVH, C3D, TRC, JSON, NPY, FBX) or ',
+    'Drop mocap files here (BVH, C3D, TRC, JSON, NPY, FBX, glTF/GLB) or ',
     el('label', { class: 'link' }, 'choose files', el('input', { type: 'file', multiple: '', hidden: '' })));
   const uploads = el('ul', { class: 'uploads' });
   const table = el('table', { class: 'takes' });
@@ -110,8 +110,11 @@ export async function libraryPage(main, params) {
       try {
         const r = await upload(file, q, (f) => { bar.value = f; });
         bar.value = 1;
-        status.replaceChildren(` stored as ${r.codec}, ratio ${fmt.num(r.ratio, 1)}, max ${fmt.num(r.max_mm, 3)} mm: `,
-          el('a', { href: `#/take/${encodeURIComponent(r.id)}` }, 'see what compression did'));
+        // A file of several animations is a take for each: the first, then `more`.
+        const links = [r, ...(r.more || [])].flatMap((t, i) => [i ? ', ' : '',
+          el('a', { href: `#/take/${encodeURIComponent(t.id)}` }, r.more ? t.name : 'see what compression did')]);
+        status.replaceChildren(` stored as ${r.codec}, ratio ${fmt.num(r.ratio, 1)}, max ${fmt.num(r.max_mm, 3)} mm`
+          + (r.more ? ` (${r.more.length + 1} animations, a take each)` : '') + ': ', ...links);
         status.className = 'ok';
       } catch (e) {
         status.textContent = ` refused: ${e.message}`;

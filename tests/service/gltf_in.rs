@@ -185,18 +185,28 @@ async fn each_animation_of_a_file_is_a_take_and_broken_gltf_is_refused() {
     outside["buffers"][0]["uri"] = "walk.bin".into();
     let mut cycle = doc.clone();
     cycle["nodes"][0]["children"] = serde_json::json!([0]);
+    // A chain of nodes deeper than any skeleton (the limit is 512), and a count no file
+    // holds.
+    let mut deep = doc.clone();
+    deep["nodes"] = (0..2000)
+        .map(|i| serde_json::json!({"name": format!("n{i}"), "children": if i < 1999 { vec![i + 1] } else { vec![] }}))
+        .collect();
+    let mut huge = doc.clone();
+    huge["accessors"][0]["count"] = u64::MAX.into();
     for (what, bad) in [
         ("cut", file[..file.len() / 2].to_vec()),
         ("past", serde_json::to_vec(&past).unwrap()),
         ("outside", serde_json::to_vec(&outside).unwrap()),
         ("cycle", serde_json::to_vec(&cycle).unwrap()),
+        ("deep", serde_json::to_vec(&deep).unwrap()),
+        ("huge", serde_json::to_vec(&huge).unwrap()),
         ("glb", b"glTF\x02\0\0\0\xff\xff\0\0".to_vec()),
     ] {
         let (status, err) = srv.post("name=bad", bad).await;
         assert!(status == 422 || status == 400, "{what}: {status} {err}");
         let said = err.to_string().to_lowercase();
         assert!(
-            said.contains("gltf") || said.contains("json"),
+            said.contains("gltf") || said.contains("json") || said.contains("depth"),
             "{what}: {err}"
         );
     }

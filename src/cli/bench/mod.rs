@@ -1,6 +1,7 @@
 //! `mocapstore bench`: compression ratio, errors and speed of codecs on real files.
 
 mod analog;
+mod euler;
 mod lossless;
 mod plot;
 
@@ -76,6 +77,11 @@ pub struct BenchArgs {
     /// files) and xz -9 of the analog block, on the C3D files, file by file.
     #[arg(long)]
     analog: bool,
+    /// Instead of sizes, how `rot` and `pga` give a BVH's Euler channels back at the first
+    /// max bound: jumps over 90° between frames against the source's, and the largest
+    /// channel difference, file by file.
+    #[arg(long)]
+    euler: bool,
 }
 
 /// One (file, codec, bound) measurement.
@@ -417,6 +423,10 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     }
     if args.analog {
         return analog::run(&files, &args.out);
+    }
+    if args.euler {
+        let bound = args.max_error.first().copied().unwrap_or(1.0);
+        return euler::run(&files, bound, &args.out);
     }
     let mut takes = Vec::new();
     for path in &files {
