@@ -66,6 +66,17 @@ impl ReadLimits {
         check("input size in bytes", n as u64, self.max_bytes)
     }
 
+    /// Work a reader does per frame over `per_frame` things (an FBX or glTF node tree
+    /// composed, its channels sampled), bounded like samples: a file of few joints and many
+    /// other nodes cannot make reading it unbounded.
+    pub fn check_work(&self, frames: usize, per_frame: usize) -> Result<()> {
+        check(
+            "evaluation work (frames × nodes or channels)",
+            (frames as u64).saturating_mul(per_frame as u64),
+            self.max_samples,
+        )
+    }
+
     pub fn check_shape(&self, frames: usize, points: usize) -> Result<()> {
         check("point count", points as u64, self.max_points)?;
         check("frame count", frames as u64, self.max_frames)?;

@@ -5,6 +5,8 @@
 //! where a file scales a joint unevenly (a skeleton has no scale) the take says how far
 //! apart they lie.
 
+use std::collections::{HashMap, HashSet};
+
 use nalgebra::{Matrix3, Matrix4, Rotation3, UnitQuaternion, Vector3};
 
 use crate::motion::error::Result;
@@ -57,19 +59,29 @@ pub(crate) struct Skeletal {
 }
 
 /// Name `i` made unique among `taken` and never empty (exporters repeat names and leave
-/// them out; a take's points may do neither).
-fn unique(base: &str, i: usize, taken: &std::collections::HashSet<String>) -> String {
+/// them out; a take's points may do neither); `next` holds each base's next suffix, so that
+/// a thousand joints of one name cost a thousand lookups, not half a million.
+fn unique(
+    base: &str,
+    i: usize,
+    taken: &HashSet<String>,
+    next: &mut HashMap<String, usize>,
+) -> String {
     let base = match base.trim() {
         "" => format!("node{i}"),
         _ => base.to_string(),
     };
-    let mut name = base.clone();
-    let mut suffix = 2;
-    while taken.contains(&name) {
-        name = format!("{base}_{suffix}");
-        suffix += 1;
+    if !taken.contains(&base) {
+        return base;
     }
-    name
+    let suffix = next.entry(base.clone()).or_insert(2);
+    loop {
+        let name = format!("{base}_{suffix}");
+        *suffix += 1;
+        if !taken.contains(&name) {
+            return name;
+        }
+    }
 }
 
 impl Posed {
@@ -96,7 +108,8 @@ impl Posed {
         let mut joints = Vec::with_capacity(n);
         let mut moves = vec![false; n];
         let mut rotates = vec![false; n];
-        let mut taken = std::collections::HashSet::new();
+        let mut taken = HashSet::new();
+        let mut next = HashMap::new();
         for k in 0..n {
             let (t0, _) = local(0, k);
             moves[k] = k == 0 || (1..frames).any(|f| (local(f, k).0 - t0).amax() > FIXED);
@@ -108,7 +121,7 @@ impl Posed {
             if rotates[k] {
                 channels.extend(ROTATIONS);
             }
-            let name = unique(&self.names[k], k, &taken);
+            let name = unique(&self.names[k], k, &taken, &mut next);
             taken.insert(name.clone());
             joints.push(Joint {
                 name,

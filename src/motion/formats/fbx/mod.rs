@@ -231,7 +231,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) 
     limits.check_shape(frames_checked, order.len())?;
     // Each frame evaluates the whole node tree, not only the joints: bounded the same way,
     // so that a file of few joints and many other nodes cannot make the work unbounded.
-    limits.check_shape(frames_checked, count.max(order.len()))?;
+    limits.check_work(frames_checked, count)?;
     let frames = frames_f as usize;
     let n = order.len();
 

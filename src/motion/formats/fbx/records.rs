@@ -16,21 +16,20 @@ const MAGIC: &[u8] = b"Kaydara FBX Binary  \0";
 /// The magic, two bytes (0x1A 0x00) and the version.
 const HEADER: usize = 27;
 
-/// One record: where its name and properties lie, and its children.
-struct Record {
-    /// Name length byte, name and property bytes, as in the file.
-    head: std::ops::Range<usize>,
-    props: u64,
-    children: Vec<Record>,
-    /// Its children's list ended with a null record.
-    closed: bool,
-}
-
+/// The records of a binary FBX, walked by their lengths.
 struct Walk<'a> {
     bytes: &'a [u8],
     wide: bool,
     /// Nested lists found without their null record.
     open: usize,
+}
+
+/// One record's header: where it ends, its property count and the end of its name and
+/// properties (where its children begin).
+struct Head {
+    end: usize,
+    props: u64,
+    body_end: usize,
 }
 
 impl Walk<'_> {
@@ -53,42 +52,83 @@ impl Walk<'_> {
         }
     }
 
-    /// The records from `at` to `end`: `(records, closed)`.
-    fn list(&mut self, mut at: usize, end: usize, depth: usize) -> Option<(Vec<Record>, bool)> {
-        if depth > MAX_DEPTH {
-            return None;
-        }
+    /// The record at `at` within a list ending at `end`, or `None` for the null record
+    /// there; `Err(())` where the file contradicts itself.
+    fn head(&self, at: usize, end: usize) -> Result<Option<Head>, ()> {
         let h = self.header_len();
-        let mut out = Vec::new();
-        while at < end {
-            let header = self.bytes.get(at..at + h)?;
-            if header.iter().all(|&b| b == 0) {
-                return Some((out, true));
-            }
-            let record_end = usize::try_from(self.word(at, 0)?).ok()?;
-            let props = self.word(at, 1)?;
-            let props_len = usize::try_from(self.word(at, 2)?).ok()?;
-            let name_len = usize::from(*self.bytes.get(at + h - 1)?);
-            let head = at + h - 1..(at + h).checked_add(name_len)?.checked_add(props_len)?;
-            if record_end > end || head.end > record_end || record_end <= at {
-                return None;
-            }
-            let (children, closed) = if head.end < record_end {
-                let (c, closed) = self.list(head.end, record_end, depth + 1)?;
-                self.open += usize::from(!closed);
-                (c, closed)
-            } else {
-                (Vec::new(), false)
-            };
-            out.push(Record {
-                head,
-                props,
-                children,
-                closed,
-            });
-            at = record_end;
+        let header = self.bytes.get(at..at + h).ok_or(())?;
+        if header.iter().all(|&b| b == 0) {
+            return Ok(None);
         }
-        Some((out, false))
+        let record_end = usize::try_from(self.word(at, 0).ok_or(())?).map_err(|_| ())?;
+        let props = self.word(at, 1).ok_or(())?;
+        let props_len = usize::try_from(self.word(at, 2).ok_or(())?).map_err(|_| ())?;
+        let name_len = usize::from(header[h - 1]);
+        let body_end = (at + h)
+            .checked_add(name_len)
+            .and_then(|e| e.checked_add(props_len))
+            .ok_or(())?;
+        if record_end > end || body_end > record_end || record_end <= at {
+            return Err(());
+        }
+        Ok(Some(Head {
+            end: record_end,
+            props,
+            body_end,
+        }))
+    }
+
+    /// Counts the lists from `at` to `end` (and below) that lack their null record; the
+    /// offset where this list stops (its null record, or `end`) and whether it is closed.
+    /// Holds nothing per record: a file of millions of records costs a walk, not a tree.
+    fn scan(&mut self, mut at: usize, end: usize, depth: usize) -> Result<(usize, bool), ()> {
+        if depth > MAX_DEPTH {
+            return Err(());
+        }
+        while at < end {
+            let Some(head) = self.head(at, end)? else {
+                return Ok((at, true));
+            };
+            if head.body_end < head.end {
+                let (_, closed) = self.scan(head.body_end, head.end, depth + 1)?;
+                self.open += usize::from(!closed);
+            }
+            at = head.end;
+        }
+        Ok((end, false))
+    }
+
+    /// Writes the records from `at` to `end` with every nested list closed; `scan` has
+    /// walked them, so every header reads.
+    fn copy(&self, mut at: usize, end: usize, out: &mut Vec<u8>) -> Result<(), ()> {
+        let h = self.header_len();
+        while at < end {
+            let Some(head) = self.head(at, end)? else {
+                return Ok(());
+            };
+            let start = out.len();
+            let props_len = head.body_end - (at + h) - usize::from(self.bytes[at + h - 1]);
+            for w in [0u64, head.props, props_len as u64] {
+                if self.wide {
+                    out.extend(w.to_le_bytes());
+                } else {
+                    out.extend((w as u32).to_le_bytes());
+                }
+            }
+            out.extend_from_slice(&self.bytes[at + h - 1..head.body_end]);
+            if head.body_end < head.end {
+                self.copy(head.body_end, head.end, out)?;
+                out.extend(std::iter::repeat_n(0u8, h));
+            }
+            let record_end = out.len() as u64;
+            if self.wide {
+                out[start..start + 8].copy_from_slice(&record_end.to_le_bytes());
+            } else {
+                out[start..start + 4].copy_from_slice(&(record_end as u32).to_le_bytes());
+            }
+            at = head.end;
+        }
+        Ok(())
     }
 }
 
@@ -105,58 +145,19 @@ pub(crate) fn mend(bytes: &[u8]) -> Option<Vec<u8>> {
         wide: version >= 7500,
         open: 0,
     };
-    let (top, closed) = walk.list(HEADER, bytes.len(), 0)?;
+    let (top_end, closed) = walk.scan(HEADER, bytes.len(), 0).ok()?;
     if walk.open == 0 || !closed {
         return None;
     }
     let h = walk.header_len();
-    // Where the top list's null record ends: the footer after it is kept as it is.
-    let mut top_end = HEADER;
-    for r in &top {
-        top_end = end_of(r, bytes, &walk);
-    }
+    // The footer after the top list's null record is kept as it is.
     let footer = bytes.get(top_end + h..)?;
     let mut out = Vec::with_capacity(bytes.len() + walk.open * h);
     out.extend_from_slice(&bytes[..HEADER]);
-    for r in &top {
-        write(r, bytes, walk.wide, &mut out);
-    }
+    walk.copy(HEADER, top_end, &mut out).ok()?;
     out.extend(std::iter::repeat_n(0u8, h));
     out.extend_from_slice(footer);
     Some(out)
-}
-
-/// Where record `r` ends in the original file.
-fn end_of(r: &Record, bytes: &[u8], walk: &Walk) -> usize {
-    let at = r.head.start + 1 - walk.header_len();
-    walk.word(at, 0).map_or(bytes.len(), |e| e as usize)
-}
-
-fn write(r: &Record, bytes: &[u8], wide: bool, out: &mut Vec<u8>) {
-    let start = out.len();
-    let h = if wide { 25 } else { 13 };
-    let props_len = r.head.len() - 1 - usize::from(bytes[r.head.start]);
-    let words = [0u64, r.props, props_len as u64];
-    for w in words {
-        if wide {
-            out.extend(w.to_le_bytes());
-        } else {
-            out.extend((w as u32).to_le_bytes());
-        }
-    }
-    out.extend_from_slice(&bytes[r.head.clone()]);
-    for c in &r.children {
-        write(c, bytes, wide, out);
-    }
-    if !r.children.is_empty() || r.closed {
-        out.extend(std::iter::repeat_n(0u8, h));
-    }
-    let end = out.len() as u64;
-    if wide {
-        out[start..start + 8].copy_from_slice(&end.to_le_bytes());
-    } else {
-        out[start..start + 4].copy_from_slice(&(end as u32).to_le_bytes());
-    }
 }
 
 #[cfg(test)]

@@ -18,6 +18,9 @@
 //! Every index and byte range the document states is checked against what the file holds
 //! before it is read; nothing is allocated from a count the file only claims.
 
+use std::collections::HashMap;
+use std::rc::Rc;
+
 use base64::Engine;
 use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3, Vector4};
 use serde::de::IgnoredAny;
@@ -268,13 +271,50 @@ fn buffers(doc: &Doc, bin: Option<&[u8]>) -> Result<Vec<Vec<u8>>> {
         .collect()
 }
 
-/// Reads accessors, every range checked against its view and buffer.
+/// Reads accessors, every range checked against its view and buffer, each once: channels
+/// that share one are given the same values, and all that is decoded is bounded together
+/// (a byte of a normalised accessor is 8 as a number), so that no file can make reading it
+/// hold more than its limits allow.
 struct Data<'a> {
     doc: &'a Doc,
     buffers: Vec<Vec<u8>>,
+    /// By accessor and row width (only one width reads an accessor).
+    decoded: HashMap<(usize, usize), Rc<Vec<f64>>>,
+    /// Numbers that may still be decoded.
+    budget: u64,
 }
 
 impl Data<'_> {
+    /// Accessor `i` as [`Data::rows`] reads it, decoded once; `times`: key times, which
+    /// the specification has be floats.
+    fn get(&mut self, i: usize, width: usize, what: &str, times: bool) -> Result<Rc<Vec<f64>>> {
+        if let Some(v) = self.decoded.get(&(i, width)) {
+            return Ok(v.clone());
+        }
+        let a = self
+            .doc
+            .accessors
+            .get(i)
+            .ok_or_else(|| err(format!("{what}: accessor {i} does not exist")))?;
+        if times && a.component_type != 5126 {
+            return Err(err(format!(
+                "{what}: key times (accessor {i}) are not floats"
+            )));
+        }
+        let numbers = a.count.saturating_mul(width as u64);
+        if numbers > self.budget {
+            return Err(Error::Limit {
+                what: "animation values decoded",
+                actual: numbers,
+                limit: self.budget,
+            });
+        }
+        self.budget -= numbers;
+        let v = Rc::new(self.rows(i, width, what)?);
+        self.decoded.insert((i, width), v.clone());
+        Ok(v)
+    }
+
     /// Accessor `i` as rows of `width` numbers (normalised integers as the specification
     /// maps them to [-1, 1] or [0, 1]).
     fn rows(&self, i: usize, width: usize, what: &str) -> Result<Vec<f64>> {
@@ -389,10 +429,10 @@ struct Track {
     node: usize,
     path: Path,
     interpolation: Interpolation,
-    times: Vec<f64>,
+    times: Rc<Vec<f64>>,
     /// `keys × width`, or `keys × 3 × width` (in-tangent, value, out-tangent) for
     /// CUBICSPLINE.
-    values: Vec<f64>,
+    values: Rc<Vec<f64>>,
 }
 
 impl Track {
@@ -586,9 +626,12 @@ pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
             "its buffers are compressed ({x}), which is not read"
         )));
     }
-    let data = Data {
+    let mut data = Data {
         buffers: buffers(&doc, bin)?,
         doc: &doc,
+        decoded: HashMap::new(),
+        // Key times and values for every sample a take may hold, four numbers each.
+        budget: limits.max_samples.saturating_mul(4),
     };
     let nodes = &doc.nodes;
     let count = nodes.len();
@@ -629,8 +672,8 @@ pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
             ))
         })?;
         let what = format!("channel {c}");
-        let times = data.rows(s.input, 1, &what)?;
-        let values = data.rows(s.output, path.width(), &what)?;
+        let times = data.get(s.input, 1, &what, true)?;
+        let values = data.get(s.output, path.width(), &what, false)?;
         let per_key = if s.interpolation == Interpolation::Cubicspline {
             3
         } else {
@@ -744,8 +787,7 @@ pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
                 .filter(|&c| joint(c)),
         );
     }
-    let index_of: std::collections::HashMap<usize, usize> =
-        chosen.iter().enumerate().map(|(k, &i)| (i, k)).collect();
+    let index_of: HashMap<usize, usize> = chosen.iter().enumerate().map(|(k, &i)| (i, k)).collect();
     let joint_parents: Vec<Option<usize>> = chosen
         .iter()
         .map(|&i| parents[i].and_then(|p| index_of.get(&p).copied()))
@@ -779,7 +821,7 @@ pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
     };
     limits.check_shape(frames_checked, chosen.len())?;
     // Every frame composes the whole tree and samples every channel: bounded the same way.
-    limits.check_shape(frames_checked, count.max(tracks.len()).max(chosen.len()))?;
+    limits.check_work(frames_checked, count.max(tracks.len()))?;
     let frames = frames_checked;
 
     // Each node's resting transform; animated parts replace their own.
@@ -1028,8 +1070,8 @@ mod tests {
             node: 0,
             path: Path::Translation,
             interpolation: Interpolation::Linear,
-            values: vec![0.0; times.len() * 3],
-            times,
+            values: Rc::new(vec![0.0; times.len() * 3]),
+            times: Rc::new(times),
         };
         let thirty: Vec<f64> = (1..40).map(|k| k as f64 * 0.033_333_3).collect();
         assert_eq!(keyframe_rate(&[track(thirty)]), Some(30.0));
