@@ -15,6 +15,7 @@
 //! - [`bvh_lossless`]: a skeleton's channel values exactly as printed. [`rot`]: its
 //!   rotations, error-bounded on the FK positions.
 //! - [`pga`]: principal geodesics of rotations with IK (Tournier et al. 2009).
+//! - [`branches`]: which equivalent Euler triple `rot` and `pga` give back (the source's).
 //! - [`spca`]: segments, torso normalisation, PCA and key-framed splines (Liu & McMillan
 //!   2006).
 //! - [`analog`]: analog channels (force plates, EMG) by linear prediction, lossless or
@@ -28,6 +29,7 @@
 
 pub mod analog;
 pub mod basis;
+pub mod branches;
 pub mod bvh_lossless;
 pub mod container;
 pub mod dct;

@@ -110,3 +110,58 @@ pub fn meets_bounds_and_shrinks(m: &Motion, codec: CodecId, bounds: [f64; 3]) {
     let (_, mean) = measured(m, &enc);
     assert!(mean <= 2.0, "{mean} > 2");
 }
+
+/// A dancer whose Euler triples are moved, joint by joint and 40 frames at a time, to
+/// equivalent ones (the other branch, whole turns), as exporters write them; coded by
+/// `codec` at 1 mm, every decoded triple must be the source's (within a few degrees) and
+/// the decoded channels must jump no more often than the source's.
+pub fn follows_the_sources_euler_branches(codec: CodecId) {
+    let mut m = crate::motion::synthetic::dancer(240, 60.0, 5);
+    let sk = m.skeleton.as_mut().unwrap();
+    let cc = sk.joints.iter().map(|j| j.channels.len()).sum::<usize>();
+    let turnings = super::branches::turnings(&Skeleton::new(sk.joints.clone()).unwrap());
+    assert!(turnings.len() > 3);
+    for (n, t) in turnings.iter().enumerate() {
+        for (f, row) in sk.values.chunks_exact_mut(cc).enumerate() {
+            if (f / 40 + n) % 2 == 0 {
+                let [a, b, c] = t.idx;
+                row[a] += 180.0 + 360.0 * (n % 3) as f64;
+                row[b] = 180.0 - row[b];
+                row[c] -= 180.0;
+            }
+        }
+    }
+    let sk = m.skeleton.clone().unwrap();
+    let enc = encoded(&m, codec, ErrorBound::max(1.0));
+    let shared = skeleton_shared(&m);
+    let source = Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
+    let decoded = Reader::new(enc.container.header.clone(), shared)
+        .and_then(|r| r.read_channels(0..m.frame_count(), cc, &source))
+        .unwrap()
+        .values;
+    let rot: Vec<usize> = turnings.iter().flat_map(|t| t.idx).collect();
+    let largest = decoded
+        .chunks_exact(cc)
+        .zip(sk.values.chunks_exact(cc))
+        .flat_map(|(d, s)| rot.iter().map(move |&c| (d[c] - s[c]).abs()))
+        .fold(0.0, f64::max);
+    assert!(
+        largest < 5.0,
+        "{codec}: a decoded angle {largest}° off the source's"
+    );
+    let jumps = |v: &[f64]| {
+        let rows: Vec<&[f64]> = v.chunks_exact(cc).collect();
+        rows.windows(2)
+            .map(|w| {
+                rot.iter()
+                    .filter(|&&c| (w[1][c] - w[0][c]).abs() > 90.0)
+                    .count()
+            })
+            .sum::<usize>()
+    };
+    let (s, d) = (jumps(&sk.values), jumps(&decoded));
+    assert!(
+        s > 0 && d <= s,
+        "{codec}: {d} jumps against the source's {s}"
+    );
+}

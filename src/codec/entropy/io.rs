@@ -19,6 +19,11 @@ pub trait Io {
     fn int(&mut self, m: &mut IntModel, v: i32) -> i32;
     fn raw(&mut self, v: u32, bits: u32) -> u32;
     fn encoding(&self) -> bool;
+    /// A trial run that codes nothing and only measures what decodes ([`Dry`]): coding
+    /// that cannot change a measured position may skip itself.
+    fn dry(&self) -> bool {
+        false
+    }
 }
 
 impl Io for Encoder {
@@ -69,6 +74,9 @@ impl Io for Dry {
         v
     }
     fn encoding(&self) -> bool {
+        true
+    }
+    fn dry(&self) -> bool {
         true
     }
 }

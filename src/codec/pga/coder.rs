@@ -8,6 +8,7 @@ use super::layout::Layout;
 use super::lifting::coarsest_stride;
 use super::params::Params;
 use super::scale::{alpha, Scale};
+use crate::codec::branches::{self, Turning};
 use crate::codec::entropy::io::Io;
 use crate::codec::error::Result;
 use crate::codec::skeleton::printed;
@@ -20,6 +21,8 @@ pub struct Coder {
     solve: Solve,
     /// The encoder's dead zone ([`Steps::dead_zone`]); 0 when decoding.
     dead_zone: f64,
+    /// The joints whose Euler branches a chunk of version 3 carries.
+    turnings: Vec<Turning>,
 }
 
 impl Coder {
@@ -30,6 +33,7 @@ impl Coder {
             iterations: usize::from(params.iterations),
         };
         Coder {
+            turnings: layout.turnings(),
             layout: layout.clone(),
             params,
             scale,
@@ -44,13 +48,14 @@ impl Coder {
     }
 
     /// One chunk of `frames` frames at step index `s` (when encoding; read when decoding)
-    /// through `io`: its decoded channel values, rounded as printed.
+    /// through `io`: its decoded channel values, rounded as printed. The encoder gives the
+    /// chunk's trajectories and its source channel values (for their Euler branches).
     pub fn code<I: Io>(
         &self,
         io: &mut I,
         s: u32,
         frames: usize,
-        given: Option<&Trajectories>,
+        given: Option<(&Trajectories, &[f64])>,
     ) -> Result<Vec<f64>> {
         let s = io.raw(s, 8);
         let steps = Steps {
@@ -66,11 +71,23 @@ impl Coder {
         };
         let stride = coarsest_stride(frames, 1 << self.params.stride_log2);
         let g = &self.params.model;
-        let t = chunk::code(io, frames, ends, g.dims(), stride, &steps, given)?;
-        let mut out = Vec::with_capacity(frames * self.layout.channels());
+        let t = chunk::code(
+            io,
+            frames,
+            ends,
+            g.dims(),
+            stride,
+            &steps,
+            given.map(|g| g.0),
+        )?;
+        let cc = self.layout.channels();
+        let mut out = Vec::with_capacity(frames * cc);
         frames::channels(&self.layout, g, &t, &self.solve, &mut out);
         for v in &mut out {
             *v = printed(*v);
+        }
+        if self.params.version >= 3 {
+            branches::code(io, &self.turnings, cc, given.map(|g| g.1), &mut out)?;
         }
         Ok(out)
     }

@@ -259,6 +259,7 @@ impl<'a> Take<'a> {
     /// The take coded with `model` and options `o`.
     fn code(&self, model: &Model, o: Options, target: Target) -> Result<CodecOutput> {
         let params = Params {
+            version: super::params::VERSION,
             iterations: o.iterations.min(MAX_ITERATIONS),
             stride_log2: o.stride_log2.min(MAX_STRIDE_LOG2),
             base: target.tightest(),
@@ -288,8 +289,10 @@ impl<'a> Take<'a> {
             let (f0, len) = (*f0, given.root_position.len());
             let original = &self.input.data[f0 * w..(f0 + len) * w];
             let valid = self.input.valid.map(|v| &v[f0 * w / 3..(f0 + len) * w / 3]);
+            let cc = self.layout.channels();
+            let source = &self.values[f0 * cc..(f0 + len) * cc];
             let meets = |s: u32| -> Result<bool> {
-                let decoded = coder.code(&mut Dry, s, len, Some(given))?;
+                let decoded = coder.code(&mut Dry, s, len, Some((given, source)))?;
                 let mut positions = vec![0f32; len * w];
                 self.rig.positions(&decoded, &mut positions);
                 let (max, mean) = max_mean(original, &positions, valid);
@@ -302,7 +305,7 @@ impl<'a> Take<'a> {
                 ),
             })?;
             let mut enc = Encoder::new();
-            coder.code(&mut enc, s, len, Some(given))?;
+            coder.code(&mut enc, s, len, Some((given, source)))?;
             chunks.push(ChunkOut {
                 frames: len,
                 bytes: enc.finish(),

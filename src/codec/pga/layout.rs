@@ -235,6 +235,16 @@ impl Layout {
     }
 
     /// The number of inner joints.
+    /// The joints whose Euler triples are decoded (the root's rotation and the inner
+    /// joints'), for their [`branches`](crate::codec::branches).
+    pub fn turnings(&self) -> Vec<crate::codec::branches::Turning> {
+        self.root_rotation
+            .iter()
+            .chain(&self.inner)
+            .map(|t| crate::codec::branches::Turning { idx: t.idx })
+            .collect()
+    }
+
     pub fn inner_count(&self) -> usize {
         self.inner.len()
     }

@@ -125,6 +125,11 @@ mod tests {
     use crate::motion::synthetic::dancer;
 
     #[test]
+    fn decoded_euler_triples_are_the_sources() {
+        crate::codec::testing::follows_the_sources_euler_branches(CodecId::Pga);
+    }
+
+    #[test]
     fn meets_max_and_mean_bounds_on_fk_positions_and_shrinks_as_they_loosen() {
         meets_bounds_and_shrinks(&dancer(600, 120.0, 7), CodecId::Pga, [0.5, 2.0, 10.0]);
     }

@@ -1,6 +1,7 @@
 //! A `pga` take's header parameters: how it was coded and the model it was coded with.
 //!
-//! Version 2 (1 had no model kind byte, [`Geodesics::parse_v1`]), little-endian: `version u8`, `iterations u8` (IK steps per frame, at most
+//! Version 2 and 3 (1 had no model kind byte, [`Geodesics::parse_v1`]; 3's chunks end with
+//! their Euler branch changes), little-endian: `version u8`, `iterations u8` (IK steps per frame, at most
 //! [`MAX_ITERATIONS`]; 0: poses from the coordinates alone, end points not coded),
 //! `stride u8` (log₂ of the lifting's coarsest stride, at most [`MAX_STRIDE_LOG2`]),
 //! `base f64` (the `α` of step index 224, take units), `rho f32`, `lambda f32`
@@ -15,10 +16,12 @@ use crate::codec::skeleton::Skeleton;
 use crate::codec::wire::{Reader, Writer};
 
 /// What the encoder writes. Version 2 added the model's kind byte (the canonical model);
-/// version 1 models are all fitted ([`Geodesics::parse_v1`]).
-pub const VERSION: u8 = 2;
+/// version 1 models are all fitted ([`Geodesics::parse_v1`]). Version 3 has the same
+/// header, and each chunk ends with its Euler branch changes
+/// ([`branches`](crate::codec::branches)).
+pub const VERSION: u8 = 3;
 /// The versions a decoder reads.
-pub const VERSIONS: [u8; 2] = [1, 2];
+pub const VERSIONS: [u8; 3] = [1, 2, 3];
 /// IK steps per decoded frame: what bounds a chunk's decoding time.
 pub const MAX_ITERATIONS: u8 = 8;
 /// The lifting's coarsest stride, 2⁸ frames at most.
@@ -26,6 +29,8 @@ pub const MAX_STRIDE_LOG2: u8 = 8;
 
 #[derive(Debug, Clone)]
 pub struct Params {
+    /// The version the take was written with ([`VERSIONS`]).
+    pub version: u8,
     pub iterations: u8,
     pub stride_log2: u8,
     pub base: f64,
@@ -41,7 +46,7 @@ pub struct Params {
 impl Params {
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut w = Writer::new();
-        w.bytes(&[VERSION, self.iterations, self.stride_log2])
+        w.bytes(&[self.version, self.iterations, self.stride_log2])
             .f64(self.base)
             .f32(self.rho as f32)
             .f32(self.lambda as f32)
@@ -105,6 +110,7 @@ impl Params {
             _ => Geodesics::parse(&model_bytes, inner, 3 * inner)?,
         };
         let params = Params {
+            version,
             iterations,
             stride_log2,
             base,

@@ -214,6 +214,13 @@ pub(super) fn aim(
     }
 }
 
+/// Children this near one line (the second singular value against the first) leave the
+/// turn about it to the noise of the decoded positions: a child a micrometre off the line
+/// (a position channel printing the offset with rounding) set a twisting root to any angle
+/// about the hips' line (Blender's rig in bvhtools_test3.bvh: 150° off the file's). The
+/// file's twist is kept instead.
+const COLLINEAR: f64 = 1e-3;
+
 /// The rotation `R` minimising `Σ |R·a − b|²` over the pairs; `None` when the `a` are all on
 /// one line (then the turn about that line is undetermined, and the caller keeps the
 /// file's rotation).
@@ -225,7 +232,7 @@ fn kabsch(pairs: &[(Vector3<f64>, Vector3<f64>)]) -> Option<UnitQuaternion<f64>>
     let svd = h.svd(true, true);
     let (u, v_t) = (svd.u?, svd.v_t?);
     let s = svd.singular_values;
-    if s[1] <= 1e-9 * s[0] {
+    if s[1] <= COLLINEAR * s[0] {
         // On one line (e.g. two hips either side of the pelvis): turn the longest onto its
         // target; the turn about the line stays the file's.
         let (a, b) = pairs

@@ -55,7 +55,7 @@ pub(super) fn code_chunk<I: Io>(
     for (p, (part, h)) in plan.parts.iter().zip(&mut hist).enumerate() {
         h.extrapolate = match plan.version {
             Version::V1 => true,
-            Version::V2 => {
+            Version::V2 | Version::V3 => {
                 let want = given.is_some_and(|g| {
                     extrapolates(part, &g.coeffs.rotations[p], g.values, cc, frames)
                 });

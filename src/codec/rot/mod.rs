@@ -15,13 +15,16 @@
 //! bound. Residuals go to the adaptive range coder with contexts from their running size.
 //!
 //! Decoded rotations come back as Euler angles in each joint's own channel order (continuous
-//! from frame to frame within a chunk), rounded to 10⁻⁶ — what the decoder gives is what a
-//! BVH file prints, so the bound verified on decoding holds on the served file.
+//! from frame to frame within a chunk, and from version 3 on the source's branch: the
+//! chunk's [`branches`](super::branches) say where it is not), rounded to 10⁻⁶ — what the
+//! decoder gives is what a BVH file prints, so the bound verified on decoding holds on the
+//! served file.
 
 use std::sync::Arc;
 
 use nalgebra::Vector3;
 
+use super::branches::{self, turnings, Turning};
 use super::entropy::io::{Dry, Io};
 use super::entropy::rangecoder::{Decoder, Encoder};
 use super::error::{malformed, Error, Result};
@@ -40,8 +43,8 @@ mod aim;
 mod delta;
 mod transform;
 
-/// What the encoder writes ([`Version::V2`]); the decoder reads every [`Version`].
-const VERSION: u8 = 2;
+/// What the encoder writes ([`Version::V3`]); the decoder reads every [`Version`].
+const VERSION: u8 = 3;
 pub(super) const SIZE_CONTEXTS: usize = 20;
 
 pub struct Rot;
@@ -120,11 +123,14 @@ pub(super) enum Version {
     /// decoded parent, [`aim`], so an error moves the joint's own children only); delta mode
     /// chooses each part's predictor.
     V2,
+    /// Version 2, and each chunk ends with its Euler branch changes
+    /// ([`branches`](super::branches)), so decoded triples are the source's.
+    V3,
 }
 
 impl Version {
     /// The versions a decoder reads.
-    pub const ALL: [u8; 2] = [1, 2];
+    pub const ALL: [u8; 3] = [1, 2, 3];
 }
 
 impl Version {
@@ -132,6 +138,7 @@ impl Version {
         match v {
             1 => Some(Version::V1),
             2 => Some(Version::V2),
+            3 => Some(Version::V3),
             _ => None,
         }
     }
@@ -154,7 +161,7 @@ fn distances(rig: &Skeleton, version: Version) -> Vec<f64> {
             dist[p] = dist[p].max((pos[d] - pos[p]).norm());
             a = match version {
                 Version::V1 => joints[p].parent,
-                Version::V2 => None,
+                Version::V2 | Version::V3 => None,
             };
         }
     }
@@ -233,6 +240,8 @@ struct Steps {
     /// Each joint's rotation step is `α` over this ([`distances`]).
     distance: Vec<f64>,
     base: f64,
+    /// The joints whose Euler branches a chunk of version 3 carries.
+    turnings: Vec<Turning>,
 }
 
 impl Steps {
@@ -241,6 +250,7 @@ impl Steps {
             version,
             distance: distances(rig, version),
             base,
+            turnings: turnings(rig),
         }
     }
 
@@ -276,10 +286,16 @@ fn code<I: Io>(
         0 => Mode::Delta,
         _ => Mode::Transform,
     };
+    let base = out.len();
     match mode {
-        Mode::Delta => delta::code_chunk(io, &plan, frames, given, out),
-        Mode::Transform => transform::code_chunk(io, &plan, frames, given, out),
+        Mode::Delta => delta::code_chunk(io, &plan, frames, given, out)?,
+        Mode::Transform => transform::code_chunk(io, &plan, frames, given, out)?,
     }
+    if steps.version == Version::V3 {
+        let source = given.map(|g| g.values);
+        branches::code(io, &steps.turnings, plan.channels, source, &mut out[base..])?;
+    }
+    Ok(())
 }
 
 /// How the encoder codes a chunk: the mode (written in the chunk) and whether rotations
@@ -313,7 +329,7 @@ impl<'a> Take<'a> {
     ) -> Take<'a> {
         let frames = skeleton.frame_count();
         let values = &skeleton.values[..];
-        let steps = Steps::new(rig, Version::V2, base);
+        let steps = Steps::new(rig, Version::V3, base);
         let layout = steps.plan(rig, 224);
         let cc = layout.channels;
         let chunks = (0..frames)
@@ -456,6 +472,11 @@ mod tests {
     use crate::motion::format::Format;
     use crate::motion::formats::{read_as, ReadOptions};
     use crate::motion::synthetic::dancer;
+
+    #[test]
+    fn decoded_euler_triples_are_the_sources() {
+        crate::codec::testing::follows_the_sources_euler_branches(CodecId::Rot);
+    }
 
     #[test]
     fn meets_max_and_mean_bounds_on_fk_positions_and_shrinks_as_they_loosen() {
