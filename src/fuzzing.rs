@@ -44,6 +44,7 @@ pub fn read(format: Format, data: &[u8]) {
                 let written = formats::c3d::write::write(&formats::c3d::write::Out {
                     motion: &l.motion,
                     analog: l.extras.analog.as_ref(),
+                    outputs: l.extras.outputs.as_ref(),
                     parameters: l.extras.parameters.as_ref(),
                     first_frame: l.extras.first_frame.unwrap_or(1),
                 });

@@ -200,6 +200,7 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
             .parameters
             .as_ref()
             .map(|_| format!("{stem}.parameters.zst"));
+        let outputs = t.outputs.as_ref().map(|_| format!("{stem}.outputs.mcso"));
         // The open file piece by piece, as it is decoded.
         let path = dir.join(&file);
         let mut out = std::fs::File::create(&path).map_err(|e| io(&path, e))?;
@@ -212,6 +213,9 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
         }
         if let (Some(rel), Some(p)) = (&parameters, t.parameters) {
             files.push((rel.clone(), p));
+        }
+        if let (Some(rel), Some(o)) = (&outputs, t.outputs) {
+            files.push((rel.clone(), o));
         }
         for (rel, bytes) in files {
             let p = dir.join(rel);
@@ -239,6 +243,7 @@ async fn export_all(args: &ExportArgs) -> Result<usize, String> {
             file,
             analog,
             parameters,
+            outputs,
         };
         lines += &serde_json::to_string(&line).map_err(|e| e.to_string())?;
         lines.push('\n');
@@ -302,6 +307,7 @@ async fn import_all(args: &ImportArgs) -> Result<(usize, usize), String> {
         let beside = archive::Beside {
             analog: line.analog.as_deref().map(read).transpose()?,
             parameters: line.parameters.as_deref().map(read).transpose()?,
+            outputs: line.outputs.as_deref().map(read).transpose()?,
         };
         match archive::import_take(&store, &line, bitstream, bases, skeleton, beside).await {
             Ok(Imported::Stored) => stored += 1,

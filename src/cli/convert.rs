@@ -142,9 +142,15 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
         // The trial frame of the first frame, at the output's rate (as the service writes).
         let first = loaded.extras.first_frame.unwrap_or(1);
         let first_frame = trial_frame_at(first, loaded.motion.fps, motion.fps);
+        let outputs = loaded
+            .extras
+            .outputs
+            .as_ref()
+            .map(|o| o.resampled(loaded.motion.fps, motion.fps));
         formats::c3d::write::write(&formats::c3d::write::Out {
             motion: &motion,
             analog: analog.as_ref(),
+            outputs: outputs.as_ref(),
             parameters: loaded.extras.parameters.as_ref(),
             first_frame,
         })

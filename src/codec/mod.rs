@@ -18,6 +18,7 @@
 //! - [`branches`]: which equivalent Euler triple `rot` and `pga` give back (the source's).
 //! - [`spca`]: segments, torso normalisation, PCA and key-framed splines (Liu & McMillan
 //!   2006).
+//! - [`outputs`]: a C3D's model outputs (angles, forces, moments, powers), exactly.
 //! - [`analog`]: analog channels (force plates, EMG) by linear prediction, lossless or
 //!   bounded per channel.
 //! - [`basis`]: shared bases — learned once per layout, content addressed, referenced.
@@ -41,6 +42,7 @@ pub mod linalg;
 pub mod lsdt;
 pub mod mdtt;
 pub mod measure;
+pub mod outputs;
 pub mod pga;
 pub mod pipeline;
 pub mod quant;

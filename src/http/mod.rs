@@ -199,6 +199,7 @@ fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
         .get("/v1/takes/{id}/frames", Take(Read), takes::frames)
         .get("/v1/takes/{id}/errors", Take(Read), takes::errors)
         .get("/v1/takes/{id}/analog", Take(Read), takes::analog)
+        .get("/v1/takes/{id}/outputs", Take(Read), takes::outputs)
         .get("/v1/takes/{id}/parameters", Take(Read), takes::parameters)
         .get("/v1/stats", Needs(Read), library::stats)
         .get("/v1/ranges", Needs(Read), takes::ranges)

@@ -708,7 +708,12 @@ pub async fn analog(
         &labels,
     )
     .await?;
-    let format = frames.format;
+    columns_response(a, frames.format)
+}
+
+/// Columns over a range (analog channels, model outputs) as `format`, with headers that
+/// say where they start, how many frames and columns and at what rate.
+fn columns_response(a: analog::AnalogAnswer, format: Format) -> Result<Response, ApiError> {
     let content_type = match format {
         Format::Json => "application/json",
         Format::Csv => "text/csv",
@@ -733,6 +738,58 @@ pub async fn analog(
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
     headers.insert(header::CONTENT_LENGTH, hv(body.len().to_string()));
     Ok((headers, held_body(body, a.reservation)).into_response())
+}
+
+#[derive(Deserialize)]
+pub struct OutputsQuery {
+    start: Option<usize>,
+    end: Option<usize>,
+    t0: Option<f64>,
+    t1: Option<f64>,
+    /// Output names, comma-separated; all when absent.
+    names: Option<String>,
+    format: Option<String>,
+}
+
+/// `GET /v1/takes/{id}/outputs`: model outputs (joint angles, forces, moments, powers)
+/// over a range, three columns each in the output's own unit.
+pub async fn outputs(
+    State(state): State<AppState>,
+    Extension(holder): Extension<Holder>,
+    Path(id): Path<String>,
+    query: Result<Query<OutputsQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query?;
+    if let Some(f) = q.format.as_deref() {
+        if !matches!(f, "json" | "csv" | "npy" | "f32") {
+            return Err(ApiError::bad_request(format!(
+                "model outputs are answered as json, csv, npy or f32, not {f:?}"
+            )));
+        }
+    }
+    let frames = frames_request(FramesQuery {
+        start: q.start,
+        end: q.end,
+        t0: q.t0,
+        t1: q.t1,
+        format: q.format.clone(),
+        ..FramesQuery::default()
+    })?;
+    let names: Vec<String> = q
+        .names
+        .map(|c| c.split(',').map(|l| l.trim().to_string()).collect())
+        .unwrap_or_default();
+    let a = crate::service::outputs::answer(
+        &state.store,
+        &state.answers,
+        holder,
+        &state.limits,
+        &id,
+        frames.range,
+        &names,
+    )
+    .await?;
+    columns_response(a, frames.format)
 }
 
 /// A body of `bytes` that keeps `reservation` (what it holds of the answer budget) until

@@ -11,6 +11,7 @@ pub mod formats;
 pub mod layout;
 pub mod metrics;
 pub mod model;
+pub mod outputs;
 pub mod rotation;
 pub mod skeleton;
 pub mod synthetic;

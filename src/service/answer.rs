@@ -525,7 +525,8 @@ async fn plan(
             let words = analog
                 .as_ref()
                 .map_or(0, |(d, k)| d.layout().channels.len() * k);
-            let points_out = shaper.width() / 3;
+            // The markers and the model outputs written back among them.
+            let points_out = shaper.width() / 3 + take.meta.outputs.len();
             let file = crate::motion::formats::c3d::write::data_len(frames_out, points_out, words)
                 + 256 * 512;
             if file > limits.answer_bytes {
@@ -1135,6 +1136,29 @@ impl Answer {
             }
         };
         let parameters = super::analog::parameters(&self.store, &self.id).await?;
+        let outputs = match super::outputs::of(&self.store, &self.id).await? {
+            Some(o) if o.frames() >= self.end => {
+                let o = o
+                    .rows(self.start, self.end)
+                    .resampled(self.prepared.fps, fps);
+                if o.frames() != frames {
+                    return Err(Error::Internal(format!(
+                        "take {}: {} frames of model outputs for {frames} frames",
+                        self.id,
+                        o.frames()
+                    )));
+                }
+                Some(o)
+            }
+            Some(o) => {
+                return Err(Error::Corrupt(format!(
+                    "take {}: {} frames of model outputs, fewer than its frames",
+                    self.id,
+                    o.frames()
+                )))
+            }
+            None => None,
+        };
         let id = self.id.clone();
         blocking(move || -> Result<Vec<u8>> {
             use crate::motion::formats::c3d::write;
@@ -1150,6 +1174,7 @@ impl Answer {
             write::write(&write::Out {
                 motion: &motion,
                 analog: analog.as_ref(),
+                outputs: outputs.as_ref(),
                 parameters: parameters.as_ref(),
                 first_frame: parts.first_frame,
             })

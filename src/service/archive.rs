@@ -102,7 +102,8 @@ async fn check_take(store: &Store, take: &Take) -> Result<Checked> {
     } else {
         super::fetch::stored_header(take)?
     };
-    let mut problems = check_record(take, &header, &index, live);
+    let (beside, mut problems) = beside_of(store, take).await?;
+    problems.extend(check_record(take, &header, &index, live, beside));
     let had_digest = take.meta.decoded_blake3.is_some();
     problems.extend(check_chunks(store, take, header, index.len()).await?);
     Ok(Checked {
@@ -112,9 +113,50 @@ async fn check_take(store: &Store, take: &Take) -> Result<Checked> {
     })
 }
 
+/// What a take keeps beside its points and counts in its sizes (`add_beside`): raw and
+/// stored bytes of its analog channels, parameters and model outputs; and what is wrong
+/// with them (model outputs that do not decode, or do not match the take's record).
+async fn beside_of(store: &Store, take: &Take) -> Result<((u64, u64), Vec<String>)> {
+    let (mut raw, mut stored) = (0u64, 0u64);
+    let mut problems = Vec::new();
+    if let Some(a) = store.analog(&take.id).await? {
+        raw += a.raw_bytes as u64;
+        stored += a.stored_bytes as u64;
+    }
+    if let Some(p) = store.parameters(&take.id).await? {
+        stored += p.payload.len() as u64;
+    }
+    match (store.outputs(&take.id).await?, take.meta.outputs.is_empty()) {
+        (None, true) => {}
+        (Some(bytes), false) => {
+            raw += (take.frames * take.meta.outputs.len() * 12) as u64;
+            stored += bytes.len() as u64;
+            let (frames, described) = (take.frames, take.meta.outputs.clone());
+            let decoded = blocking(move || {
+                crate::codec::outputs::decode(&bytes, &codec::DecodeLimits::default())
+            })
+            .await?;
+            match decoded {
+                Ok(o) if o.frames() == frames && o.outputs == described => {}
+                Ok(_) => problems.push("its model outputs do not match its record".into()),
+                Err(e) => problems.push(format!("its model outputs: {e}")),
+            }
+        }
+        (Some(_), true) => problems.push("model outputs its record does not list".into()),
+        (None, false) => problems.push("its record lists model outputs that are not stored".into()),
+    }
+    Ok(((raw, stored), problems))
+}
+
 /// What a take's record, header and chunk index must agree on, and its statistics with its
-/// bound and sizes.
-fn check_record(take: &Take, header: &Header, index: &[ChunkEntry], live: bool) -> Vec<String> {
+/// bound and sizes (`beside`: the raw and stored bytes kept beside the points).
+fn check_record(
+    take: &Take,
+    header: &Header,
+    index: &[ChunkEntry],
+    live: bool,
+    beside: (u64, u64),
+) -> Vec<String> {
     let mut problems = Vec::new();
     if index.len() != header.chunks.len() {
         problems.push(format!(
@@ -157,17 +199,18 @@ fn check_record(take: &Take, header: &Header, index: &[ChunkEntry], live: bool) 
             take.max_mm, take.mean_mm, take.bound
         ));
     }
-    if take.raw_bytes != (take.frames * take.points * 12) as u64 {
+    if take.raw_bytes != (take.frames * take.points * 12) as u64 + beside.0 {
         problems.push(format!(
-            "raw_bytes {} is not frames × points × 12",
-            take.raw_bytes
+            "raw_bytes {} is not frames × points × 12 and what is kept beside the points ({})",
+            take.raw_bytes, beside.0
         ));
     }
-    let stored =
-        (header.to_bytes().len() + index.iter().map(|e| e.len as usize).sum::<usize>()) as u64;
+    let stored = (header.to_bytes().len() + index.iter().map(|e| e.len as usize).sum::<usize>())
+        as u64
+        + beside.1;
     if !live && stored != take.stored_bytes {
         problems.push(format!(
-            "stored_bytes {} but the header and chunks take {stored}",
+            "stored_bytes {} but the header, chunks and what is beside them take {stored}",
             take.stored_bytes
         ));
     }
@@ -244,6 +287,8 @@ pub struct ExportedTake {
     pub analog: Option<Container>,
     /// The file's parameters as stored (a zstd C3D parameter section), if it had any.
     pub parameters: Option<Vec<u8>>,
+    /// Its model outputs as stored (`codec::outputs` bytes), if it had any.
+    pub outputs: Option<Vec<u8>>,
 }
 
 /// The open format a take's frames are written back to: its own where we write it, else the
@@ -327,6 +372,7 @@ pub async fn export_take(store: &Store, with: &ReadWith, take: Take) -> Result<E
         None => None,
     };
     let parameters = store.parameters(&take.id).await?;
+    let outputs = store.outputs(&take.id).await?;
     let file = answer::open(
         store,
         &with.caches,
@@ -351,6 +397,7 @@ pub async fn export_take(store: &Store, with: &ReadWith, take: Take) -> Result<E
         file,
         analog,
         parameters: parameters.map(|p| p.payload),
+        outputs,
     })
 }
 
@@ -372,6 +419,9 @@ pub struct ManifestLine {
     /// The file's parameters as stored (zstd of a C3D parameter section).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub parameters: Option<String>,
+    /// Its model outputs as stored (`codec::outputs`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outputs: Option<String>,
 }
 
 /// What an export keeps beside a take's point bitstream: its analog bitstream and its
@@ -380,6 +430,7 @@ pub struct ManifestLine {
 pub struct Beside {
     pub analog: Option<Vec<u8>>,
     pub parameters: Option<Vec<u8>>,
+    pub outputs: Option<Vec<u8>>,
 }
 
 /// What [`import_take`] did.
@@ -536,6 +587,31 @@ pub async fn import_take(
         }
         None => None,
     };
+    let outputs = match (beside.outputs, line.take.meta.outputs.is_empty()) {
+        (None, true) => None,
+        (Some(bytes), false) => {
+            let frames = line.take.frames;
+            let described = line.take.meta.outputs.clone();
+            let checked = bytes.clone();
+            blocking(move || {
+                let o = codec::outputs::decode(&checked, &codec::DecodeLimits::default())
+                    .map_err(|e| e.to_string())?;
+                if o.frames() != frames || o.outputs != described {
+                    return Err("does not match its manifest line".to_string());
+                }
+                Ok(())
+            })
+            .await?
+            .map_err(|e| invalid("model outputs", &e))?;
+            Some(bytes)
+        }
+        _ => {
+            return Err(invalid(
+                "model outputs",
+                &"the manifest line and the export disagree on whether there are any",
+            ))
+        }
+    };
     let chunks = super::take::chunk_rows(&container);
     let mut take = line.take.clone();
     take.header = container.header.to_bytes();
@@ -550,6 +626,7 @@ pub async fn import_take(
             errors: None,
             analog,
             parameters,
+            outputs,
             stream: None,
         })
         .await?;

@@ -179,13 +179,15 @@ async fn store_loaded(
         blocking(move || Body::of(&m, given, prior.as_ref())).await?
     }
     .map_err(|e| Error::InvalidRequest(e.to_string()))?;
-    let analog_only = motion.point_count() == 0 && extras.analog.is_some();
+    // A file of analog channels or model outputs alone is a take with no point chunks.
+    let analog_only =
+        motion.point_count() == 0 && (extras.analog.is_some() || extras.outputs.is_some());
     if motion.frame_count() == 0
         || !analog_only && (motion.point_count() == 0 || motion.gap_fraction() >= 1.0)
     {
         return Err(Error::Unsatisfiable(format!(
-            "the take has no point samples to store ({} points, {} frames) and no analog \
-             channels",
+            "the take has no point samples to store ({} points, {} frames), no analog \
+             channels and no model outputs",
             motion.point_count(),
             motion.frame_count()
         )));
@@ -232,6 +234,17 @@ async fn store_loaded(
         }
         None => None,
     };
+    // Model outputs, exactly, apart from the markers.
+    let outputs = match extras.outputs {
+        Some(o) => {
+            let fps = motion.fps;
+            let raw = o.values.len() as u64 * 4;
+            let described = o.outputs.clone();
+            let bytes = blocking(move || codec::outputs::encode(&o, fps)).await??;
+            Some((described, raw, bytes))
+        }
+        None => None,
+    };
     // Parameters C3D cannot hold again (an entry past an i16 offset, a name of 128 bytes)
     // are dropped with a warning rather than refuse the take.
     let mut warnings = loaded.warnings;
@@ -260,6 +273,7 @@ async fn store_loaded(
         analog: analog.as_ref().map(|a| a.meta.clone()),
         axes: Some(body.axes.clone()),
         roles_given: Default::default(),
+        outputs: outputs.as_ref().map(|o| o.0.clone()).unwrap_or_default(),
     };
     let format = loaded.format.name();
     // The file's labels, and over them the request's.
@@ -288,6 +302,9 @@ async fn store_loaded(
     if let Some(p) = &parameters {
         take.add_beside(0, p.payload.len() as u64);
     }
+    if let Some((_, raw, bytes)) = &outputs {
+        take.add_beside(*raw, bytes.len() as u64);
+    }
     let basis = enc.container.header.basis.as_ref().map(codec::basis::hex);
     // The rig the encoder built when the codec keeps channels; built here otherwise.
     let skeleton = match (&enc.rig, &m.skeleton) {
@@ -305,6 +322,7 @@ async fn store_loaded(
             errors: Some(enc.series.to_bytes()),
             analog: analog.as_ref().map(|a| analog::rows(&a.container, &a.meta)),
             parameters,
+            outputs: outputs.map(|o| o.2),
             stream: None,
         })
         .await?;

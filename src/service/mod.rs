@@ -35,6 +35,7 @@ pub mod history;
 pub mod ingest;
 pub mod jobs;
 pub mod library;
+pub mod outputs;
 pub mod prepared;
 pub mod ranges;
 pub mod shape;

@@ -421,6 +421,7 @@ mod tests {
                 errors: None,
                 analog: None,
                 parameters: None,
+                outputs: None,
                 stream: None,
             })
             .await

@@ -117,6 +117,11 @@ pub struct TakeMeta {
     /// read from the names or shape whenever the take is parsed.
     #[serde(default, skip_serializing_if = "RoleMap::is_empty")]
     pub roles_given: RoleMap,
+    /// The model outputs the file carried beside its markers (a C3D's joint angles,
+    /// forces, moments, powers): names, kinds, units; their values are read by name
+    /// (`/v1/takes/{id}/outputs`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outputs: Vec<crate::motion::outputs::Output>,
 }
 
 impl TakeMeta {
@@ -585,6 +590,7 @@ impl Take {
                     reason: "a lab C3D is Z-up by convention".into(),
                 }),
                 roles_given: RoleMap::new(),
+                outputs: Vec::new(),
             },
             created_at: 1,
             header: vec![1, 2, 3],

@@ -253,8 +253,27 @@ impl Store {
                 .execute(&mut *tx)
                 .await?;
             }
+            if let Some(o) = &s.outputs {
+                sqlx::query("INSERT INTO take_outputs (take_id, payload) VALUES ($1, $2)")
+                    .bind(&s.id)
+                    .bind(o)
+                    .execute(&mut *tx)
+                    .await?;
+            }
             tx.commit().await?;
             Ok(())
+        })
+    }
+
+    /// A take's model outputs (`codec::outputs` bytes); `None` if it has none.
+    pub async fn outputs(&self, id: &str) -> Result<Option<Vec<u8>>> {
+        dispatch!(self, pool => {
+            Ok(sqlx::query_scalar::<_, Vec<u8>>(
+                "SELECT payload FROM take_outputs WHERE take_id = $1",
+            )
+            .bind(id)
+            .fetch_optional(pool)
+            .await?)
         })
     }
 

@@ -147,6 +147,8 @@ pub struct NewTake {
     pub analog: Option<AnalogRows>,
     /// The uploaded file's parameters, if its format has any.
     pub parameters: Option<ParametersRow>,
+    /// Its model outputs (`codec::outputs` bytes), if the file had any.
+    pub outputs: Option<Vec<u8>>,
     /// For a live stream's take: the server that codes it, and its coder's state.
     pub stream: Option<super::NewStream>,
 }

@@ -48,6 +48,7 @@ async fn fill(srv: &common::Server) -> Vec<String> {
             formats::write(&gaps, Format::Npy).unwrap(),
             "fps=120&unit=mm&codec=raw",
         ),
+        ("c3d", c3d_with_outputs(), "max_error_mm=1"),
     ];
     for (name, body, q) in uploads {
         let (status, r) = srv
@@ -101,8 +102,41 @@ async fn fill(srv: &common::Server) -> Vec<String> {
     ids
 }
 
-/// Everything the store holds of a take: its row (as JSON) and chunk payloads.
-async fn stored(store: &Store, id: &str) -> (Value, Vec<u8>, Vec<Vec<u8>>) {
+/// A C3D of markers and two model outputs (an angle and a moment) between them.
+fn c3d_with_outputs() -> Vec<u8> {
+    use mocapstore::motion::formats::c3d::write::{write, Out};
+    use mocapstore::motion::outputs::{Kind, Output, Outputs};
+    let m = walker(120, 6, 100.0, 5, 0.0);
+    let output = |name: &str, kind, unit: &str, slot| Output {
+        name: name.into(),
+        kind,
+        unit: unit.into(),
+        slot,
+    };
+    let values = (0..120 * 6)
+        .map(|i| (i as f32 * 0.1).sin() * 30.0)
+        .collect();
+    let o = Outputs::new(
+        vec![
+            output("LHipAngles", Kind::Angle, "deg", 1),
+            output("LHipMoment", Kind::Moment, "Nmm", 3),
+        ],
+        values,
+    )
+    .unwrap();
+    write(&Out {
+        motion: &m,
+        analog: None,
+        outputs: Some(&o),
+        parameters: None,
+        first_frame: 1,
+    })
+    .unwrap()
+}
+
+/// Everything the store holds of a take: its row (as JSON), chunk payloads and model
+/// outputs.
+async fn stored(store: &Store, id: &str) -> (Value, Vec<u8>, Vec<Vec<u8>>, Option<Vec<u8>>) {
     let row = store.get(id).await.unwrap().unwrap();
     let header = row.header.clone();
     let chunks = store
@@ -116,7 +150,7 @@ async fn stored(store: &Store, id: &str) -> (Value, Vec<u8>, Vec<Vec<u8>>) {
     let mut v = serde_json::to_value(&take).unwrap();
     // The store's own bookkeeping, not the take.
     v.as_object_mut().unwrap().remove("created_at");
-    (v, header, chunks)
+    (v, header, chunks, store.outputs(id).await.unwrap())
 }
 
 fn url_of(t: &common::TestStore) -> String {
@@ -135,7 +169,7 @@ async fn verify_names_a_damaged_take_and_export_import_round_trips_byte_for_byte
     let (ok, out, err) = mocapstore(&["verify", "--database-url", &url]);
     assert!(ok, "{out}{err}");
     assert!(
-        out.contains("6 takes") && out.contains("0 problems"),
+        out.contains("7 takes") && out.contains("0 problems"),
         "{out}"
     );
 
@@ -144,14 +178,14 @@ async fn verify_names_a_damaged_take_and_export_import_round_trips_byte_for_byte
     let d = dir.display().to_string();
     let (ok, out, err) = mocapstore(&["export", &d, "--database-url", &url]);
     assert!(ok, "{out}{err}");
-    assert!(out.contains("exported 6 takes"), "{out}");
+    assert!(out.contains("exported 7 takes"), "{out}");
     let (ok, _, err) = mocapstore(&["export", &d, "--database-url", &url]);
     assert!(!ok && err.contains("holds an export already"), "{err}");
     check_files(&dir);
     for b in common::all().await {
         let (ok, out, err) = mocapstore(&["import", &d, "--database-url", &url_of(&b)]);
         assert!(ok, "{}: {out}{err}", b.name);
-        assert!(out.contains("imported 6 takes"), "{out}");
+        assert!(out.contains("imported 7 takes"), "{out}");
         for id in &ids {
             assert_eq!(
                 stored(&b.store, id).await,
@@ -161,7 +195,7 @@ async fn verify_names_a_damaged_take_and_export_import_round_trips_byte_for_byte
             );
         }
         let (ok, out, _) = mocapstore(&["import", &d, "--database-url", &url_of(&b)]);
-        assert!(ok && out.contains("6 were stored already"), "{out}");
+        assert!(ok && out.contains("7 were stored already"), "{out}");
         let (ok, out, err) = mocapstore(&["verify", "--database-url", &url_of(&b)]);
         assert!(ok, "{}: {out}{err}", b.name);
         b.finish().await;

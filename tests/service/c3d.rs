@@ -98,9 +98,14 @@ async fn c3d_files_come_back_whole() {
         let a = ours.extras.analog.as_ref().unwrap();
         assert_eq!(analog["raw_bytes"], a.raw_bytes() as u64, "{name}");
         let points_raw = ours.motion.frame_count() * ours.motion.point_count() * 12;
+        let outputs_raw = ours
+            .extras
+            .outputs
+            .as_ref()
+            .map_or(0, |o| o.values.len() * 4);
         assert_eq!(
             report["raw_bytes"],
-            (points_raw + a.raw_bytes()) as u64,
+            (points_raw + a.raw_bytes() + outputs_raw) as u64,
             "{name}"
         );
 
@@ -304,6 +309,172 @@ async fn analog_bounds_and_analog_only_files() {
             + total["analog"]["raw_bytes"].as_i64().unwrap(),
         total["raw_bytes"].as_i64().unwrap()
     );
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// Model outputs (issue 49): every corpus C3D whose POINT:ANGLES, FORCES, MOMENTS or POWERS
+/// list points keeps those apart from the markers — not among the take's points, listed with
+/// their kinds and units, read by name in their own units equal to py-c3d's reading
+/// (`scripts/c3d-outputs.py`) — and its C3D comes back with them where they were.
+#[tokio::test(flavor = "multi_thread")]
+async fn model_outputs_are_kept_apart_in_their_units() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let lenient = ReadOptions {
+        lenient: true,
+        ..ReadOptions::default()
+    };
+    let mut files: Vec<PathBuf> = std::fs::read_dir(root.join("c3d"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            p.extension().is_some_and(|e| e == "c3d")
+                && std::fs::read(p)
+                    .ok()
+                    .and_then(|b| formats::read(&b, &lenient).ok())
+                    .is_some_and(|l| l.extras.outputs.is_some())
+        })
+        .collect();
+    files.sort();
+    assert!(
+        files.len() >= 20,
+        "{} corpus files with model outputs",
+        files.len()
+    );
+    let python = common::python();
+    let (mut checked, mut against_py_c3d) = (0, 0);
+    for path in &files {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let bytes = std::fs::read(path).unwrap();
+        let ours = formats::read(&bytes, &lenient).unwrap();
+        let outputs = ours.extras.outputs.as_ref().unwrap();
+        // A quick codec: what is checked here is beside the points.
+        let (status, report) = srv.post("lenient=true&codec=quant", bytes.clone()).await;
+        assert_eq!(status, 201, "{name}: {report}");
+        let id = report["id"].as_str().unwrap().to_string();
+        let (_, _, body) = srv.get(&format!("/v1/takes/{id}")).await;
+        let take: Value = serde_json::from_slice(&body).unwrap();
+        let listed = take["meta"]["outputs"]
+            .as_array()
+            .expect("the take lists its outputs");
+        assert_eq!(listed.len(), outputs.outputs.len(), "{name}");
+        // (None at all when every point of the file is an output.)
+        let points: Vec<&str> = take["meta"]["point_names"]
+            .as_array()
+            .map(|a| a.iter().filter_map(Value::as_str).collect())
+            .unwrap_or_default();
+        for o in listed {
+            let n = o["name"].as_str().unwrap();
+            assert!(!points.contains(&n), "{name}: {n} among the markers");
+            assert!(o["unit"].as_str().is_some_and(|u| !u.is_empty()), "{o}");
+        }
+        // Every output over the whole take, in its unit.
+        let (status, _, body) = srv
+            .get(&format!("/v1/takes/{id}/outputs?format=json"))
+            .await;
+        assert_eq!(status, 200, "{name}: {}", String::from_utf8_lossy(&body));
+        let answer: Value = serde_json::from_slice(&body).unwrap();
+        let rows = answer["values"].as_array().unwrap();
+        assert_eq!(rows.len(), ours.motion.frame_count(), "{name}");
+        if let Some(python) = &python {
+            let v = common::script(python, "c3d-outputs.py", [path.as_os_str()]);
+            if let Some(theirs) = v["outputs"].as_object() {
+                assert_eq!(theirs.len(), outputs.outputs.len(), "{name}");
+                for (k, o) in outputs.outputs.iter().enumerate() {
+                    let want = &theirs[&o.name];
+                    assert_eq!(
+                        want["kind"],
+                        serde_json::to_value(o.kind).unwrap(),
+                        "{name}"
+                    );
+                    assert_eq!(want["unit"], o.unit.as_str(), "{name}");
+                    for (f, w) in want["values"].as_array().unwrap().iter().enumerate() {
+                        let row = rows[f].as_array().unwrap();
+                        for c in 0..3 {
+                            let got = row[k * 3 + c].as_f64();
+                            match w.as_array() {
+                                Some(w) => {
+                                    let w = w[c].as_f64().unwrap();
+                                    let got = got.unwrap_or(f64::NAN);
+                                    assert!(
+                                        (got - w).abs() <= 1e-6 * w.abs().max(1.0),
+                                        "{name} {} frame {f}: {got} against py-c3d's {w}",
+                                        o.name
+                                    );
+                                }
+                                None => assert!(got.is_none(), "{name} {} frame {f}", o.name),
+                            }
+                        }
+                    }
+                }
+                against_py_c3d += 1;
+            }
+        }
+        checked += 1;
+    }
+    // By name, a range, and what a name that is not one gets.
+    let path = root.join("c3d/btkdata__others__Analysis.c3d");
+    let bytes = std::fs::read(&path).unwrap();
+    let ours = formats::read(&bytes, &lenient).unwrap();
+    let (_, report) = srv.post("name=analysis", bytes.clone()).await;
+    let id = report["id"].as_str().unwrap().to_string();
+    let (status, _, body) = srv
+        .get(&format!(
+            "/v1/takes/{id}/outputs?format=csv&names=LHipAngles&start=5&end=9"
+        ))
+        .await;
+    let text = String::from_utf8(body).unwrap();
+    assert_eq!(status, 200, "{text}");
+    let lines: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+    assert!(
+        lines[0].contains("LHipAngles.x") && lines[0].contains("deg"),
+        "{text}"
+    );
+    assert_eq!(lines.len(), 5, "{text}");
+    let hip = ours.extras.outputs.as_ref().unwrap();
+    let want = hip.get(5, hip.find("LHipAngles").unwrap());
+    assert!(
+        lines[1].contains(&format!("{}", want[0])),
+        "{text} {want:?}"
+    );
+    let (status, _, body) = srv
+        .get(&format!("/v1/takes/{id}/outputs?names=LHipAngle"))
+        .await;
+    let err: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(status, 400, "{err}");
+    assert!(
+        err["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("LHipAngles"),
+        "{err}"
+    );
+    // The C3D back holds them where the upload had them, as py-c3d and ezc3d read it.
+    let (status, _, c3d) = srv.get(&format!("/v1/takes/{id}/frames?format=c3d")).await;
+    assert_eq!(status, 200);
+    let back = formats::read(&c3d, &ReadOptions::default()).unwrap();
+    assert_eq!(back.extras.outputs.as_ref().unwrap().outputs, hip.outputs);
+    if let Some(python) = &python {
+        let tol = report["max_mm"].as_f64().unwrap() * 1.0001 + 1e-3;
+        let v = compare(
+            python,
+            &path,
+            &c3d,
+            &["--point-tol".into(), tol.to_string()],
+        );
+        assert_eq!(v["ok"], true, "{v}");
+    }
+    eprintln!("{checked} C3D files with model outputs checked, {against_py_c3d} against py-c3d");
+    if python.is_some() {
+        assert!(
+            against_py_c3d >= 15,
+            "{against_py_c3d} files read by py-c3d"
+        );
+    }
     srv.stop().await;
     t.finish().await;
 }

@@ -70,6 +70,7 @@ fn take(id: &str, n: usize) -> NewTake {
         errors: None,
         analog: None,
         parameters: None,
+        outputs: None,
         stream: None,
     }
 }

@@ -182,6 +182,9 @@ pub struct Extras {
     /// `TRIAL:ACTUAL_START_FIELD`); `None` where the format has none (then 1).
     pub first_frame: Option<usize>,
     pub analog: Option<super::analog::Analog>,
+    /// Model outputs (a C3D's joint angles, forces, moments, powers), apart from the
+    /// markers.
+    pub outputs: Option<super::outputs::Outputs>,
     pub events: Vec<super::events::Event>,
     pub parameters: Option<c3d::params::Parameters>,
     /// What the file says the take is of (a JSON document's `labels`).

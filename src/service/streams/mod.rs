@@ -193,6 +193,7 @@ impl Streams {
             analog: None,
             axes: None,
             roles_given: Default::default(),
+            outputs: Vec::new(),
         };
         let mut take = Take::new(
             &plan.label,
@@ -221,6 +222,7 @@ impl Streams {
                 errors: None,
                 analog: None,
                 parameters: None,
+                outputs: None,
                 stream: Some(NewStream {
                     owner: self.owner_row(),
                     state: state.to_text()?,

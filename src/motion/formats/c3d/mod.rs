@@ -22,6 +22,7 @@ use crate::motion::analog::{self, Analog, Samples};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::events::Event;
 use crate::motion::model::Motion;
+use crate::motion::outputs::{Kind, Output, Outputs};
 use crate::motion::units::parse_unit;
 use params::Parameters;
 
@@ -288,7 +289,8 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         limits,
         &mut warnings,
     )?;
-    let motion = if points == 0 {
+    let (names, positions, outputs) = model_outputs(&params, names, positions, &mut warnings)?;
+    let motion = if names.is_empty() {
         Motion::without_points(rate, unsettled_unit(), frames)?
     } else {
         Motion::new(rate, unsettled_unit(), names, positions, None)?
@@ -305,11 +307,84 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<Parsed> {
         extras: Extras {
             first_frame: Some(first_frame),
             analog,
+            outputs,
             events,
             parameters: Some(params),
             ..Default::default()
         },
     })
+}
+
+/// The points that `POINT:ANGLES`, `FORCES`, `MOMENTS` and `POWERS` name, taken out of
+/// the markers as model outputs ([`Outputs`]) in their units; the markers and their
+/// positions that remain.
+fn model_outputs(
+    params: &Parameters,
+    names: Vec<String>,
+    positions: Vec<f32>,
+    warnings: &mut Vec<String>,
+) -> Result<(Vec<String>, Vec<f32>, Option<Outputs>)> {
+    let mut kinds: Vec<Option<Kind>> = vec![None; names.len()];
+    let mut counts = Vec::new();
+    for kind in Kind::ALL {
+        let listed = params.strings_continued("POINT", kind.list());
+        let mut n = 0;
+        for (slot, name) in names.iter().enumerate() {
+            if kinds[slot].is_none() && listed.iter().any(|l| l == name) {
+                kinds[slot] = Some(kind);
+                n += 1;
+            }
+        }
+        if n > 0 {
+            counts.push(format!("{n} {}", kind.list().to_lowercase()));
+        }
+    }
+    if counts.is_empty() {
+        return Ok((names, positions, None));
+    }
+    let unit = |kind: Kind| {
+        params
+            .strings("POINT", kind.unit_parameter())
+            .and_then(|v| v.into_iter().find(|u| !u.is_empty()))
+            .unwrap_or_else(|| kind.default_unit().to_string())
+    };
+    let points = names.len();
+    let outputs: Vec<Output> = kinds
+        .iter()
+        .enumerate()
+        .filter_map(|(slot, k)| {
+            k.map(|kind| Output {
+                name: names[slot].clone(),
+                kind,
+                unit: unit(kind),
+                slot,
+            })
+        })
+        .collect();
+    let frames = positions.len() / (points * 3).max(1);
+    let mut values = Vec::with_capacity(frames * outputs.len() * 3);
+    let mut kept = Vec::with_capacity(frames * (points - outputs.len()) * 3);
+    for row in positions.chunks_exact(points * 3) {
+        for (p, xyz) in row.chunks_exact(3).enumerate() {
+            match kinds[p] {
+                Some(_) => values.extend_from_slice(xyz),
+                None => kept.extend_from_slice(xyz),
+            }
+        }
+    }
+    let markers: Vec<String> = names
+        .into_iter()
+        .zip(&kinds)
+        .filter(|(_, k)| k.is_none())
+        .map(|(n, _)| n)
+        .collect();
+    warnings.push(format!(
+        "{} model outputs ({}) kept apart from the markers, in their own units",
+        outputs.len(),
+        counts.join(", ")
+    ));
+    let outputs = Outputs::new(outputs, values).map_err(|e| err(0, e.to_string()))?;
+    Ok((markers, kept, Some(outputs)))
 }
 
 /// What decides how many analog values a frame holds, beside the header.

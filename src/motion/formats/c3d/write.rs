@@ -17,6 +17,7 @@ use super::BLOCK;
 use crate::motion::analog::{Analog, Samples};
 use crate::motion::error::{Error, Result};
 use crate::motion::model::Motion;
+use crate::motion::outputs::{Kind, Outputs};
 
 /// What to write: the points (a take or a range of it), its analog channels over the
 /// same frames, the parameters it was uploaded with, and the number of its first frame
@@ -24,6 +25,9 @@ use crate::motion::model::Motion;
 pub struct Out<'a> {
     pub motion: &'a Motion,
     pub analog: Option<&'a Analog>,
+    /// Model outputs over the same frames, written back among the points where the file
+    /// had them.
+    pub outputs: Option<&'a Outputs>,
     pub parameters: Option<&'a Parameters>,
     pub first_frame: usize,
 }
@@ -108,8 +112,26 @@ fn point_unit(metres_per_unit: f64) -> (&'static str, f32) {
 pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
     let m = out.motion;
     let frames = m.frame_count();
-    let points = m.point_count();
     let invalid = |what: String| Error::Invalid(format!("C3D out: {what}"));
+    if let Some(o) = out.outputs.filter(|o| o.frames() != frames) {
+        return Err(invalid(format!(
+            "{} model output frames for {frames} point frames",
+            o.frames()
+        )));
+    }
+    // Every point slot written: the markers, and the model outputs where the file had them.
+    let order = out.outputs.map_or_else(
+        || (0..m.point_count()).map(Err).collect(),
+        |o| o.interleave(m.point_count()),
+    );
+    let points = order.len();
+    let point_names: Vec<String> = order
+        .iter()
+        .map(|s| match (s, out.outputs) {
+            (Ok(o), Some(outputs)) => outputs.outputs[*o].name.clone(),
+            (Err(k), _) | (Ok(k), None) => m.point_names[*k].clone(),
+        })
+        .collect();
     if points > 65_535 {
         return Err(invalid(format!("{points} points (at most 65535)")));
     }
@@ -156,9 +178,32 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
     );
     // The upload's labels stand where they still name the points written (blank and
     // repeated labels, and bytes that are not UTF-8, come back as they were).
-    if super::labels(&p, "POINT", points, "P") != m.point_names {
-        set_continued(&mut p, "POINT", "LABELS", string_lists(&m.point_names));
+    if super::labels(&p, "POINT", points, "P") != point_names {
+        set_continued(&mut p, "POINT", "LABELS", string_lists(&point_names));
         p.remove("POINT", "DESCRIPTIONS");
+    }
+    if let Some(o) = out.outputs {
+        // Each kind's list and unit name the outputs written (a list the upload kept
+        // stands when it still does).
+        for kind in Kind::ALL {
+            let of: Vec<&crate::motion::outputs::Output> =
+                o.outputs.iter().filter(|x| x.kind == kind).collect();
+            let Some(first) = of.first() else { continue };
+            let names: Vec<String> = of.iter().map(|x| x.name.clone()).collect();
+            let listed = p.strings_continued("POINT", kind.list());
+            if !names.iter().all(|n| listed.contains(n)) {
+                set_continued(&mut p, "POINT", kind.list(), string_lists(&names));
+            }
+            if p.get("POINT", kind.unit_parameter()).is_none() {
+                p.set(
+                    "POINT",
+                    Parameter {
+                        name: kind.unit_parameter().into(),
+                        ..strings(std::slice::from_ref(&first.unit))
+                    },
+                );
+            }
+        }
     }
     if last > 65_535 {
         let pair = |v: usize| Values::Int(vec![v as u16 as i16, (v >> 16) as u16 as i16]);
@@ -253,11 +298,18 @@ pub fn write(out: &Out<'_>) -> Result<Vec<u8>> {
     b[20..24].copy_from_slice(&rate.to_le_bytes());
     b.extend_from_slice(&section);
     for f in 0..frames {
-        for (pi, xyz) in m.frame(f).chunks_exact(3).enumerate() {
-            let _ = pi;
+        let row = m.frame(f);
+        for slot in &order {
+            // Markers in the point unit; outputs as the file had them, in their own.
+            let (xyz, factor) = match (slot, out.outputs) {
+                (Ok(o), Some(outputs)) => (outputs.get(f, *o), 1.0),
+                (Err(k), _) | (Ok(k), None) => {
+                    ([row[k * 3], row[k * 3 + 1], row[k * 3 + 2]], to_unit)
+                }
+            };
             if xyz[0].is_finite() {
                 for v in xyz {
-                    b.extend_from_slice(&(v * to_unit).to_le_bytes());
+                    b.extend_from_slice(&(v * factor).to_le_bytes());
                 }
                 b.extend_from_slice(&0f32.to_le_bytes());
             } else {
@@ -337,6 +389,7 @@ mod tests {
         let bytes = write(&Out {
             motion: &m,
             analog: Some(&a),
+            outputs: None,
             parameters: Some(&params),
             first_frame: 1,
         })
@@ -370,6 +423,7 @@ mod tests {
         let late = write(&Out {
             motion: &m,
             analog: Some(&a),
+            outputs: None,
             parameters: Some(&params),
             first_frame: 65_534,
         })
