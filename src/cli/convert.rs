@@ -93,6 +93,13 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
                 .into(),
         );
     }
+    if format == Format::Fbx {
+        // FBX states its axes: +Y up unless +Z is asked for.
+        if transform.up.is_some_and(|u| u != Axis::Y && u != Axis::Z) {
+            return Err("FBX is written +Y or +Z up: --up y or --up z".into());
+        }
+        transform.up = Some(transform.up.unwrap_or(Axis::Y));
+    }
     let gltf = matches!(format, Format::Glb | Format::Gltf);
     if gltf {
         if transform.metres_per_unit.is_some_and(|m| m != 1.0)
@@ -127,6 +134,16 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
             &name,
             format == Format::Glb,
             serde_json::json!({ "mocapstore": { "source": name } }),
+        ))
+    } else if format == Format::Fbx {
+        let name = args
+            .input
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().to_string());
+        Ok(formats::fbx::write::of_motion(
+            &motion,
+            &name,
+            transform.up.unwrap_or(Axis::Y),
         ))
     } else if format == Format::C3d {
         // Everything the input held: analog channels, events and parameters too (analog

@@ -163,6 +163,9 @@ struct Whole {
     fps: f64,
     /// For C3D: the take's analog channels, parameters and trial frames.
     c3d: Option<C3dParts>,
+    /// The metres a unit of the values is and the up axis they were turned to (FBX states
+    /// both in its settings).
+    space: (f64, Axis),
     _held: Option<Held>,
 }
 
@@ -175,9 +178,10 @@ struct C3dParts {
     metres_per_unit: f64,
 }
 
-/// What a glTF is written from, owned (it is written on the blocking pool).
+/// What a glTF or FBX is written from, owned (it is written on the blocking pool).
 struct GltfFile {
     format: Format,
+    space: (f64, Axis),
     joints: Option<Vec<crate::motion::skeleton::Joint>>,
     names: Vec<String>,
     values: Vec<f64>,
@@ -192,6 +196,7 @@ impl Whole {
     fn file(&mut self) -> GltfFile {
         GltfFile {
             format: self.format,
+            space: self.space,
             joints: self.joints.clone(),
             names: self.names.clone(),
             values: std::mem::take(&mut self.values),
@@ -223,10 +228,12 @@ impl GltfFile {
             fps: self.fps,
             extras: self.extras.clone(),
         };
-        if self.format == Format::Gltf {
-            gltf::gltf(&scene)
-        } else {
-            gltf::glb(&scene)
+        match self.format {
+            Format::Gltf => gltf::gltf(&scene),
+            Format::Fbx => {
+                crate::motion::formats::fbx::write::fbx(&scene, self.space.0, self.space.1)
+            }
+            _ => gltf::glb(&scene),
         }
     }
 }
@@ -261,6 +268,16 @@ pub fn transform_for(format: Format, mut transform: Options) -> Result<Options> 
             }
             transform.metres_per_unit = Some(1.0);
             transform.up = Some(Axis::Y);
+        }
+        Format::Fbx => {
+            // FBX states its axes: the body's up turned to +Y (Maya's, and what every
+            // importer expects) unless +Z is asked for; the take's unit unless one is.
+            if transform.up.is_some_and(|u| u != Axis::Y && u != Axis::Z) {
+                return Err(Error::InvalidRequest(
+                    "FBX is written +Y or +Z up: up=y or up=z".into(),
+                ));
+            }
+            transform.up = Some(transform.up.unwrap_or(Axis::Y));
         }
         Format::C3d
             if transform.root != crate::motion::transform::Root::Keep
@@ -564,11 +581,16 @@ async fn plan(
                 Some(c3d),
             )
         }
-        Format::Glb | Format::Gltf => {
+        Format::Glb | Format::Gltf | Format::Fbx => {
             if req.points.is_some() {
-                return Err(Error::InvalidRequest(
-                    "glTF output is the whole take: leave out points".into(),
-                ));
+                return Err(Error::InvalidRequest(format!(
+                    "{} output is the whole take: leave out points",
+                    if req.format == Format::Fbx {
+                        "FBX"
+                    } else {
+                        "glTF"
+                    }
+                )));
             }
             check_size(frames_out, prepared.point_names.len(), limits)?;
             let keeps =
@@ -582,21 +604,30 @@ async fn plan(
             let nodes = shaper
                 .joints()
                 .map_or(shaper.width() / 3, <[crate::motion::skeleton::Joint]>::len);
-            let file = crate::motion::formats::gltf::glb_len_bound(frames_out, nodes);
+            let file = if req.format == Format::Fbx {
+                crate::motion::formats::fbx::write::len_bound(frames_out, nodes)
+            } else {
+                crate::motion::formats::gltf::glb_len_bound(frames_out, nodes)
+            };
             let gathered = frames_out as u64 * shaper.width() as u64 * 8;
             // Building it holds the binary buffer and the file: a GLB is the buffer once
             // more; a glTF is its base64 (4/3 of it) inside the JSON text.
             let build = file.saturating_mul(if req.format == Format::Gltf { 4 } else { 2 });
             if build.saturating_add(gathered) > limits.answer_bytes {
                 return Err(Error::InvalidRequest(format!(
-                    "a glTF of {frames_out} frames of {nodes} nodes takes about {} bytes to \
+                    "a {} of {frames_out} frames of {nodes} nodes takes about {} bytes to \
                      build, over the limit of {} for one answer; ask for a shorter range or a \
                      lower fps",
+                    if req.format == Format::Fbx {
+                        "FBX"
+                    } else {
+                        "glTF"
+                    },
                     build + gathered,
                     limits.answer_bytes
                 )));
             }
-            Plan::whole(
+            let mut plan = Plan::whole(
                 &prepared,
                 req.format,
                 shaper,
@@ -604,7 +635,16 @@ async fn plan(
                 &span,
                 build + gathered,
                 None,
-            )
+            );
+            if let Writer::Whole(w) = &mut plan.writer {
+                w.space = (
+                    transform
+                        .metres_per_unit
+                        .unwrap_or(prepared.metres_per_unit),
+                    transform.up.unwrap_or(Axis::Y),
+                );
+            }
+            plan
         }
         format if transform.is_identity() => Plan::points(
             &prepared,
@@ -834,6 +874,7 @@ impl Plan {
             name: prepared.name.clone(),
             fps: shaper.fps(prepared),
             c3d,
+            space: (prepared.metres_per_unit, Axis::Y),
             _held: None,
         };
         Plan {

@@ -459,15 +459,10 @@ pub fn frame_writer(
                 "BVH is written from a skeleton's channels, not from points".into(),
             ))
         }
-        Format::C3d | Format::Glb | Format::Gltf => {
+        Format::C3d | Format::Glb | Format::Gltf | Format::Fbx => {
             return Err(Error::Unsupported(format!(
                 "{format} is written whole, not frame by frame"
             )))
-        }
-        Format::Fbx => {
-            return Err(Error::Unsupported(
-                "FBX is read, not written yet: ask for glb, bvh or c3d".into(),
-            ))
         }
     })
 }

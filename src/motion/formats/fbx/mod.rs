@@ -11,6 +11,7 @@
 //! are not motion: they are not loaded, and the take says what was left out.
 
 mod records;
+pub mod write;
 
 use nalgebra::Matrix4;
 
