@@ -140,11 +140,7 @@ fn convert(args: &ConvertArgs) -> Result<Vec<String>, String> {
             .input
             .file_stem()
             .map_or_else(String::new, |s| s.to_string_lossy().to_string());
-        Ok(formats::fbx::write::of_motion(
-            &motion,
-            &name,
-            transform.up.unwrap_or(Axis::Y),
-        ))
+        formats::fbx::write::of_motion(&motion, &name, transform.up.unwrap_or(Axis::Y))
     } else if format == Format::C3d {
         // Everything the input held: analog channels, events and parameters too (analog
         // keeps its rate: resampled, it must be a whole number of samples a frame).

@@ -209,7 +209,7 @@ impl Whole {
 }
 
 impl GltfFile {
-    fn write(self) -> Vec<u8> {
+    fn write(self) -> Result<Vec<u8>> {
         use crate::motion::formats::gltf::{self, Figure, Scene};
         let figure = match &self.joints {
             Some(joints) => Figure::Skeleton {
@@ -228,13 +228,14 @@ impl GltfFile {
             fps: self.fps,
             extras: self.extras.clone(),
         };
-        match self.format {
+        Ok(match self.format {
             Format::Gltf => gltf::gltf(&scene),
             Format::Fbx => {
-                crate::motion::formats::fbx::write::fbx(&scene, self.space.0, self.space.1)
+                return crate::motion::formats::fbx::write::fbx(&scene, self.space.0, self.space.1)
+                    .map_err(|e| Error::InvalidRequest(e.to_string()))
             }
             _ => gltf::glb(&scene),
-        }
+        })
     }
 }
 
@@ -982,7 +983,7 @@ impl Answer {
                     }
                     Writer::Whole(w) => {
                         let file = w.file();
-                        let bytes = blocking(move || file.write()).await?;
+                        let bytes = blocking(move || file.write()).await??;
                         // The file is held as the piece it is handed on in from now.
                         w._held = None;
                         self.pending = bytes;

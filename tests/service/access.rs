@@ -213,6 +213,8 @@ fn cases() -> Vec<Case> {
         c(Method::GET, "/v1/takes/{id}/errors", "read", true, 200),
         // The matrix's take is no C3D: no analog channels, no parameters (409).
         c(Method::GET, "/v1/takes/{id}/analog", "read", true, 409),
+        // Nor has it model outputs (409).
+        c(Method::GET, "/v1/takes/{id}/outputs", "read", true, 409),
         c(Method::GET, "/v1/takes/{id}/parameters", "read", true, 409),
         c(Method::GET, "/v1/stats", "read", false, 200),
         c(Method::GET, "/v1/export", "read", false, 200),
@@ -301,6 +303,9 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
         }
         ("GET", "/v1/takes/{id}/analog") => {
             (format!("/v1/takes/{}/analog", take().await), Body::None)
+        }
+        ("GET", "/v1/takes/{id}/outputs") => {
+            (format!("/v1/takes/{}/outputs", take().await), Body::None)
         }
         ("GET", "/v1/takes/{id}/parameters") => {
             (format!("/v1/takes/{}/parameters", take().await), Body::None)

@@ -234,7 +234,6 @@ impl Layout {
         &self.chain
     }
 
-    /// The number of inner joints.
     /// The joints whose Euler triples are decoded (the root's rotation and the inner
     /// joints'), for their [`branches`](crate::codec::branches).
     pub fn turnings(&self) -> Vec<crate::codec::branches::Turning> {
@@ -245,6 +244,7 @@ impl Layout {
             .collect()
     }
 
+    /// The number of inner joints.
     pub fn inner_count(&self) -> usize {
         self.inner.len()
     }

@@ -24,7 +24,8 @@ use nalgebra::UnitQuaternion;
 
 use super::super::gltf::{Figure, Scene};
 use crate::motion::body::Axis;
-use crate::motion::rotation::{euler_order, to_euler};
+use crate::motion::error::{Error, Result};
+use crate::motion::rotation::{euler_order, from_euler, to_euler};
 use crate::motion::skeleton::{translation, Joint};
 
 /// FBX's time unit: ticks a second.
@@ -378,8 +379,12 @@ impl Build {
 }
 
 /// Each joint's rotation a frame as FBX Euler angles (x, y, z degrees) in its
-/// `RotationOrder`: a joint of three rotation channels as its channels hold them, any
-/// other as its channels composed, in FBX's default order, continuous.
+/// `RotationOrder`, continuous: FBX curves are interpolated angle by angle, so a key that
+/// wraps (179° to −179°) or flips to the other triple would turn the joint the long way
+/// between frames (an importer that resamples, a player at another rate). A joint of three
+/// rotation channels keeps its channels' values wherever they are the triple nearest the
+/// frame before (and at the first frame), else the equivalent one that is; any other is its
+/// channels composed, in FBX's default order.
 fn joint_rotations(
     joint: &Joint,
     first: usize,
@@ -392,13 +397,28 @@ fn joint_rotations(
         let rot: Vec<usize> = (0..joint.channels.len())
             .filter(|&c| joint.channels[c].rotation_axis().is_some())
             .collect();
+        let mut prev: Option<[f64; 3]> = None;
         let out = (0..frames)
             .map(|f| {
+                // In channel order, as `to_euler` gives them.
                 let mut e = [0.0; 3];
                 for (k, &c) in rot.iter().enumerate() {
-                    e[order[k]] = own(f)[c];
+                    e[k] = own(f)[c];
                 }
-                e
+                if let Some(p) = prev {
+                    let near = to_euler(&from_euler(order, e), order, Some(p));
+                    let far =
+                        |x: &[f64; 3]| x.iter().zip(p).map(|(a, b)| (a - b).abs()).sum::<f64>();
+                    if far(&near) + 1e-6 < far(&e) {
+                        e = near;
+                    }
+                }
+                prev = Some(e);
+                let mut by_axis = [0.0; 3];
+                for k in 0..3 {
+                    by_axis[order[k]] = e[k];
+                }
+                by_axis
             })
             .collect();
         return (rotation_order(order), out);
@@ -427,8 +447,19 @@ fn joint_rotations(
 
 /// The binary FBX 7.4 of `scene`, whose values are in units of `metres_per_unit` metres
 /// with `up` up (+Y or +Z).
-pub fn fbx(scene: &Scene<'_>, metres_per_unit: f64, up: Axis) -> Vec<u8> {
+pub fn fbx(scene: &Scene<'_>, metres_per_unit: f64, up: Axis) -> Result<Vec<u8>> {
     let frames = scene.frames;
+    let nodes = match &scene.figure {
+        Figure::Skeleton { joints, .. } => joints.len(),
+        Figure::Markers { names, .. } => names.len(),
+    };
+    // FBX 7.4's records say where they end in 32 bits.
+    if len_bound(frames, nodes) > u64::from(u32::MAX) {
+        return Err(Error::Invalid(format!(
+            "FBX out: {frames} frames of {nodes} nodes pass FBX 7.4's 4 GiB; ask for a shorter \
+             range or a lower fps"
+        )));
+    }
     let fps = scene.fps;
     let times: Vec<i64> = (0..frames)
         .map(|f| (f as f64 * KTIME_PER_SECOND / fps).round() as i64)
@@ -560,7 +591,9 @@ pub fn fbx(scene: &Scene<'_>, metres_per_unit: f64, up: Axis) -> Vec<u8> {
             ),
         ]),
         node("FileId", vec![Prop::Raw(FILE_ID.to_vec())]),
-        node("CreationTime", vec![s("1970-01-01 00:00:00:000")]),
+        // The FBX SDK checks the file id against the creation time: this pair is the one
+        // Blender's writer uses.
+        node("CreationTime", vec![s("1970-01-01 10:00:00:000")]),
         node(
             "Creator",
             vec![s(concat!("mocapstore ", env!("CARGO_PKG_VERSION")))],
@@ -593,7 +626,7 @@ pub fn fbx(scene: &Scene<'_>, metres_per_unit: f64, up: Axis) -> Vec<u8> {
         node("Takes", Vec::new()).with(vec![node("Current", vec![s("Take 001")])]),
     ];
 
-    let mut out = Vec::new();
+    let mut out = Vec::with_capacity(len_bound(frames, b.counts[0]) as usize);
     out.extend_from_slice(b"Kaydara FBX Binary  \x00\x1a\x00");
     out.extend_from_slice(&VERSION.to_le_bytes());
     for n in &top {
@@ -612,12 +645,12 @@ pub fn fbx(scene: &Scene<'_>, metres_per_unit: f64, up: Axis) -> Vec<u8> {
     out.extend_from_slice(&VERSION.to_le_bytes());
     out.extend_from_slice(&[0; 120]);
     out.extend_from_slice(&FOOTER_MAGIC);
-    out
+    Ok(out)
 }
 
 /// A whole take as FBX, named `name`, whose values were turned to `up` (+Y or +Z), in its
 /// own unit.
-pub fn of_motion(m: &crate::motion::Motion, name: &str, up: Axis) -> Vec<u8> {
+pub fn of_motion(m: &crate::motion::Motion, name: &str, up: Axis) -> Result<Vec<u8>> {
     let positions: Vec<f64>;
     let figure = match &m.skeleton {
         Some(s) => Figure::Skeleton {
@@ -681,7 +714,7 @@ mod tests {
             fps: m.fps,
             extras: serde_json::Value::Null,
         };
-        let bytes = fbx(&scene, 0.01, Axis::Y);
+        let bytes = fbx(&scene, 0.01, Axis::Y).unwrap();
         let back = read_as(Format::Fbx, &bytes, &ReadOptions::default()).unwrap();
         assert_eq!(back.motion.frame_count(), m.frame_count());
         assert!(
@@ -708,6 +741,47 @@ mod tests {
             }
         }
         assert!(worst < 1e-3, "{worst}");
+    }
+
+    /// A channel that wraps (170°, 179°, −172° …) is written as the continuous curve (…,
+    /// 188°), the same rotation, so an importer interpolating between keys turns the short
+    /// way; a flipped triple likewise.
+    #[test]
+    fn curves_are_continuous_where_the_channels_wrap() {
+        use crate::motion::skeleton::Channel;
+        let joint = Joint {
+            name: "j".into(),
+            parent: None,
+            offset: [0.0; 3],
+            channels: vec![Channel::Zrotation, Channel::Xrotation, Channel::Yrotation],
+            end_site: false,
+        };
+        let values = [
+            170.0,
+            10.0,
+            5.0, //
+            179.0,
+            10.0,
+            5.0, //
+            -172.0,
+            10.0,
+            5.0, //
+            -172.0 + 180.0,
+            170.0,
+            5.0 + 180.0, // the same rotation's other triple
+        ];
+        let (order, e) = joint_rotations(&joint, 0, &values, 4);
+        assert_eq!(order, 3);
+        let z: Vec<f64> = e.iter().map(|v| v[2]).collect();
+        assert_eq!(&z[..2], &[170.0, 179.0]);
+        assert!(
+            (z[2] - 188.0).abs() < 1e-9 && (z[3] - 188.0).abs() < 1e-6,
+            "{z:?}"
+        );
+        assert!(
+            (e[3][0] - 10.0).abs() < 1e-6 && (e[3][1] - 5.0).abs() < 1e-6,
+            "{e:?}"
+        );
     }
 
     #[test]
