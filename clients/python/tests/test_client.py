@@ -302,17 +302,19 @@ def test_a_folder_is_ingested_with_its_refusals_reported(
     (tmp_path / "sub").mkdir()
     np.save(tmp_path / "sub" / "b.npy", walker(40))
     (tmp_path / "bad.trc").write_text("not a trc\n")
+    (tmp_path / "bad.glb").write_bytes(b"glTF\x02\x00\x00\x00")
     (tmp_path / "notes.txt").write_text("ignored")
     # A dataset's label file beside a take, and a hidden file: neither is a take.
     (tmp_path / "a.json").write_text('{"content": 7, "style": 0}')
     (tmp_path / ".b.npy").write_bytes(b"hidden")
     lib = library()
     out = client.ingest_folder(tmp_path, library=lib, fps=60, progress=False)
-    assert [o.path.name for o in out] == ["a.npy", "bad.trc", "b.npy"]
+    assert [o.path.name for o in out] == ["a.npy", "bad.glb", "bad.trc", "b.npy"]
     stored = {o.path.name: o.take for o in out if o.take is not None}
     assert stored["a.npy"].frames == 30 and stored["b.npy"].frames == 40
-    bad = next(o for o in out if o.path.name == "bad.trc")
-    assert isinstance(bad.error, mocapstore.Unreadable) and bad.take is None
+    for name in ("bad.trc", "bad.glb"):
+        bad = next(o for o in out if o.path.name == name)
+        assert isinstance(bad.error, mocapstore.Unreadable) and bad.take is None, bad
     assert sorted(t.name for t in client.takes(library=lib)) == ["a", "b"]
 
 

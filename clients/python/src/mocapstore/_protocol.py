@@ -416,7 +416,7 @@ def channels(id: str, query: Params) -> Op[Channels]:
 
 
 #: The files a folder's ingest picks up (a ``.json`` only when it holds a take).
-TAKE_SUFFIXES = (".bvh", ".c3d", ".trc", ".json", ".npy", ".fbx")
+TAKE_SUFFIXES = (".bvh", ".c3d", ".trc", ".json", ".npy", ".fbx", ".glb", ".gltf")
 
 
 def is_take_json(path: Path) -> bool:
