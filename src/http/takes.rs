@@ -679,25 +679,18 @@ pub async fn analog(
     query: Result<Query<AnalogQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
-    if let Some(f) = q.format.as_deref() {
-        if !matches!(f, "json" | "csv" | "npy" | "f32") {
-            return Err(ApiError::bad_request(format!(
-                "analog channels are answered as json, csv, npy or f32, not {f:?}"
-            )));
-        }
-    }
-    let frames = frames_request(FramesQuery {
-        start: q.start,
-        end: q.end,
-        t0: q.t0,
-        t1: q.t1,
-        format: q.format.clone(),
-        ..FramesQuery::default()
-    })?;
-    let labels: Vec<String> = q
-        .channels
-        .map(|c| c.split(',').map(|l| l.trim().to_string()).collect())
-        .unwrap_or_default();
+    let (frames, labels) = columns_request(
+        "analog channels",
+        FramesQuery {
+            start: q.start,
+            end: q.end,
+            t0: q.t0,
+            t1: q.t1,
+            format: q.format,
+            ..FramesQuery::default()
+        },
+        q.channels,
+    )?;
     let a = analog::answer(
         &state.store,
         &state.answers,
@@ -709,6 +702,27 @@ pub async fn analog(
     )
     .await?;
     columns_response(a, frames.format)
+}
+
+/// A request for columns over a range (`what`: analog channels, model outputs): its frames,
+/// a format columns are written in (json, csv, npy, f32), and the comma-separated names
+/// asked for (all when none).
+fn columns_request(
+    what: &str,
+    range: FramesQuery,
+    names: Option<String>,
+) -> Result<(RangeRequest, Vec<String>), ApiError> {
+    if let Some(f) = range.format.as_deref() {
+        if !matches!(f, "json" | "csv" | "npy" | "f32") {
+            return Err(ApiError::bad_request(format!(
+                "{what} are answered as json, csv, npy or f32, not {f:?}"
+            )));
+        }
+    }
+    let names = names
+        .map(|c| c.split(',').map(|l| l.trim().to_string()).collect())
+        .unwrap_or_default();
+    Ok((frames_request(range)?, names))
 }
 
 /// Columns over a range (analog channels, model outputs) as `format`, with headers that
@@ -760,25 +774,18 @@ pub async fn outputs(
     query: Result<Query<OutputsQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
-    if let Some(f) = q.format.as_deref() {
-        if !matches!(f, "json" | "csv" | "npy" | "f32") {
-            return Err(ApiError::bad_request(format!(
-                "model outputs are answered as json, csv, npy or f32, not {f:?}"
-            )));
-        }
-    }
-    let frames = frames_request(FramesQuery {
-        start: q.start,
-        end: q.end,
-        t0: q.t0,
-        t1: q.t1,
-        format: q.format.clone(),
-        ..FramesQuery::default()
-    })?;
-    let names: Vec<String> = q
-        .names
-        .map(|c| c.split(',').map(|l| l.trim().to_string()).collect())
-        .unwrap_or_default();
+    let (frames, names) = columns_request(
+        "model outputs",
+        FramesQuery {
+            start: q.start,
+            end: q.end,
+            t0: q.t0,
+            t1: q.t1,
+            format: q.format,
+            ..FramesQuery::default()
+        },
+        q.names,
+    )?;
     let a = crate::service::outputs::answer(
         &state.store,
         &state.answers,

@@ -651,28 +651,10 @@ pub fn fbx(scene: &Scene<'_>, metres_per_unit: f64, up: Axis) -> Result<Vec<u8>>
 /// A whole take as FBX, named `name`, whose values were turned to `up` (+Y or +Z), in its
 /// own unit.
 pub fn of_motion(m: &crate::motion::Motion, name: &str, up: Axis) -> Result<Vec<u8>> {
-    let positions: Vec<f64>;
-    let figure = match &m.skeleton {
-        Some(s) => Figure::Skeleton {
-            joints: &s.joints,
-            values: &s.values,
-        },
-        None => {
-            positions = m.positions().iter().map(|&v| f64::from(v)).collect();
-            Figure::Markers {
-                names: &m.point_names,
-                positions: &positions,
-            }
-        }
-    };
-    let scene = Scene {
-        name,
-        figure,
-        frames: m.frame_count(),
-        fps: m.fps,
-        extras: serde_json::Value::Null,
-    };
-    fbx(&scene, m.unit.metres_per_unit, up)
+    let unit = m.unit.metres_per_unit;
+    super::super::gltf::with_scene(m, name, serde_json::Value::Null, |scene| {
+        fbx(scene, unit, up)
+    })
 }
 
 /// Bytes of an FBX of `frames` frames of `nodes` models, at most: for sizes checked before

@@ -48,9 +48,14 @@ pub struct Scene<'a> {
     pub extras: Value,
 }
 
-/// A whole take as glTF (`binary`: GLB), named `name`; it must be in metres and +Y up
-/// already ([`crate::motion::transform::whole::apply`] with those).
-pub fn of_motion(m: &crate::motion::Motion, name: &str, binary: bool, extras: Value) -> Vec<u8> {
+/// The scene of a whole take `m`, named `name`, handed to `write` (the glTF and FBX writers
+/// take the same scene).
+pub fn with_scene<T>(
+    m: &crate::motion::Motion,
+    name: &str,
+    extras: Value,
+    write: impl FnOnce(&Scene<'_>) -> T,
+) -> T {
     let positions: Vec<f64>;
     let figure = match &m.skeleton {
         Some(s) => Figure::Skeleton {
@@ -65,18 +70,25 @@ pub fn of_motion(m: &crate::motion::Motion, name: &str, binary: bool, extras: Va
             }
         }
     };
-    let scene = Scene {
+    write(&Scene {
         name,
         figure,
         frames: m.frame_count(),
         fps: m.fps,
         extras,
-    };
-    if binary {
-        glb(&scene)
-    } else {
-        gltf(&scene)
-    }
+    })
+}
+
+/// A whole take as glTF (`binary`: GLB), named `name`; it must be in metres and +Y up
+/// already ([`crate::motion::transform::whole::apply`] with those).
+pub fn of_motion(m: &crate::motion::Motion, name: &str, binary: bool, extras: Value) -> Vec<u8> {
+    with_scene(m, name, extras, |scene| {
+        if binary {
+            glb(scene)
+        } else {
+            gltf(scene)
+        }
+    })
 }
 
 /// Bytes of a GLB of `scene`, in all: for sizes checked before anything is built.
