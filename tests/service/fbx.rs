@@ -263,7 +263,8 @@ fn as_json(m: &mocapstore::motion::Motion) -> serde_json::Value {
 /// 7.4 (`format=fbx`: +Y up, the take's unit) read back by our FBX reader (ufbx) and by
 /// assimp (its GLB of our FBX, evaluated by pygltflib), and both agree with the GLB of the
 /// same take (evaluated by pygltflib) joint for joint, frame for frame; the GLB with the
-/// take's own JSON frames. Every CMU and misc BVH of the corpus and every 12th Bandai one
+/// take's own JSON frames; assimp's reading also with the source BVH as an independent
+/// reader evaluates it (scripts/bvh-fk.py) within the take's bound. Every CMU and misc BVH of the corpus and every 12th Bandai one
 /// (all with `MOCAP_FULL_SWEEP=1`), and a marker take (TRC: null nodes, through assimp).
 #[tokio::test(flavor = "multi_thread")]
 async fn fbx_out_reads_back_in_ufbx_and_assimp_as_the_glb() {
@@ -294,6 +295,8 @@ async fn fbx_out_reads_back_in_ufbx_and_assimp_as_the_glb() {
         .collect();
     picked.push(root.join("trc/TRCSamples__Knee.trc"));
     let (mut rows, mut a_skeleton) = (Vec::new(), None);
+    // Takes compared with the source BVH's own FK, and the worst as a share of the bound.
+    let (mut against_source, mut worst_source) = (0usize, 0f64);
     for path in &picked {
         let name = path.file_name().unwrap().to_string_lossy().to_string();
         let (status, report) = srv
@@ -383,6 +386,35 @@ async fn fbx_out_reads_back_in_ufbx_and_assimp_as_the_glb() {
                 worst_assimp < 1e-4,
                 "{name}: assimp vs the take {worst_assimp} m"
             );
+            // And against the source itself, read by an independent BVH reader
+            // (scripts/bvh-fk.py, file units and axes): a +Y-up body's FBX is the file's
+            // axes and units, within the take's bound.
+            if path.extension().is_some_and(|e| e == "bvh") {
+                let (_, take) = srv.get_json(&format!("/v1/takes/{id}")).await;
+                if take["body"]["up"] == "y" {
+                    let fk = common::script(
+                        &python,
+                        "bvh-fk.py",
+                        [path.as_os_str(), "--frames".as_ref(), "0:60".as_ref()],
+                    );
+                    let source = serde_json::json!({
+                        "points": fk["names"],
+                        "frames": fk["positions"],
+                    });
+                    let (n, worst) = common::against_gltf_eval(&source, &by_assimp, fps, 0.0);
+                    let bound = take["max_mm"].as_f64().unwrap() * 1e-3 / unit;
+                    assert!(n >= points, "{name}: {n} against the source");
+                    assert!(
+                        worst <= bound * 1.0001 + 1e-6,
+                        "{name}: assimp's reading of our FBX is {worst} from the BVH's FK, over \
+                         the bound {bound} (file units)"
+                    );
+                    against_source += 1;
+                    if bound > 0.0 {
+                        worst_source = worst_source.max(worst / bound);
+                    }
+                }
+            }
         }
         rows.push(format!(
             "{name}: {points} points × {} frames at {fps} fps, codec {}; ufbx vs GLB {n_ufbx} \
@@ -399,6 +431,15 @@ async fn fbx_out_reads_back_in_ufbx_and_assimp_as_the_glb() {
         eprintln!("{r}");
     }
     assert!(rows.len() >= 10, "{} takes compared", rows.len());
+    eprintln!(
+        "{against_source} takes against the source BVH's FK: worst {worst_source:.3} of the bound"
+    );
+    if with_assimp {
+        assert!(
+            against_source >= 10,
+            "{against_source} takes against the source"
+        );
+    }
     // Another unit and up, as asked; an up FBX does not state is a 400; a library export.
     let id = a_skeleton.unwrap();
     let (status, _, fbx) = srv
