@@ -596,8 +596,12 @@ fn freeze_current_bitstreams() {
     ));
 
     // The codecs that keep a skeleton's channels, on a small BVH take whose Euler triples
-    // are not all on the canonical branch (what rot and pga version 3 carry per chunk).
-    let bvh = on_other_branches(mocapstore::motion::synthetic::dancer(150, 60.0, 11));
+    // are not all on the canonical branch (what rot and pga version 3 carry per chunk) and
+    // two of whose joints sit near gimbal lock (what version 4 twists; version 3's files
+    // were frozen from the plain dancer).
+    let bvh = on_other_branches(mocapstore::motion::synthetic::dancer_near_lock(
+        150, 60.0, 11,
+    ));
     let rig = Arc::new(codec::Skeleton::new(bvh.skeleton.clone().unwrap().joints).unwrap());
     std::fs::create_dir_all(dir().join("skeletons")).unwrap();
     std::fs::write(

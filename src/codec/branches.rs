@@ -27,6 +27,8 @@ use crate::motion::rotation::euler_order;
 pub struct Turning {
     /// Its channels' indices in a frame, in channel order.
     pub idx: [usize; 3],
+    /// Their axes (0 = x), in channel order.
+    pub order: [usize; 3],
 }
 
 /// Every joint of `rig` with three rotation channels about three axes, in rig order.
@@ -34,7 +36,7 @@ pub fn turnings(rig: &Skeleton) -> Vec<Turning> {
     let mut out = Vec::new();
     let mut first = 0;
     for joint in rig.joints() {
-        if euler_order(&joint.channels).is_some() {
+        if let Some(order) = euler_order(&joint.channels) {
             let mut idx = [0; 3];
             let rot = joint
                 .channels
@@ -45,7 +47,7 @@ pub fn turnings(rig: &Skeleton) -> Vec<Turning> {
             for (slot, i) in idx.iter_mut().zip(rot) {
                 *slot = i;
             }
-            out.push(Turning { idx });
+            out.push(Turning { idx, order });
         }
         first += joint.channels.len();
     }
@@ -268,7 +270,10 @@ mod tests {
 
     #[test]
     fn decoded_triples_come_back_nearest_the_sources_and_continuous_between_changes() {
-        let t = [Turning { idx: [3, 4, 5] }];
+        let t = [Turning {
+            idx: [3, 4, 5],
+            order: ORDER,
+        }];
         let (source, decoded) = frames();
         let far = |d: &[f64]| {
             d.chunks_exact(6)
@@ -297,7 +302,10 @@ mod tests {
 
     #[test]
     fn a_chunk_already_on_the_sources_branches_costs_one_bit() {
-        let t = [Turning { idx: [3, 4, 5] }];
+        let t = [Turning {
+            idx: [3, 4, 5],
+            order: ORDER,
+        }];
         let (_, decoded) = frames();
         let mut out = decoded.clone();
         let mut enc = Encoder::new();
@@ -310,7 +318,16 @@ mod tests {
 
     #[test]
     fn damaged_changes_are_refused_or_harmless() {
-        let t = [Turning { idx: [3, 4, 5] }, Turning { idx: [0, 1, 2] }];
+        let t = [
+            Turning {
+                idx: [3, 4, 5],
+                order: ORDER,
+            },
+            Turning {
+                idx: [0, 1, 2],
+                order: ORDER,
+            },
+        ];
         let (_, decoded) = frames();
         for seed in 0..200u32 {
             let bytes: Vec<u8> = (0..12)

@@ -59,6 +59,7 @@ pub mod spca;
 pub mod stream;
 #[cfg(test)]
 pub(crate) mod testing;
+pub mod twists;
 mod wire;
 
 use crate::motion::{Animation, Motion};

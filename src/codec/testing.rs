@@ -165,3 +165,41 @@ pub fn follows_the_sources_euler_branches(codec: CodecId) {
         "{codec}: {d} jumps against the source's {s}"
     );
 }
+
+/// A dancer with two joints held near gimbal lock ([`dancer_near_lock`]): coded by `codec`
+/// at 1 mm, their decoded triples stay near the file's ([`twists`](super::twists)); a
+/// rotation within the bound alone leaves them tens of degrees off (89° and 57° here,
+/// `rot` and `pga`).
+///
+/// [`dancer_near_lock`]: crate::motion::synthetic::dancer_near_lock
+pub fn keeps_the_sources_angles_near_gimbal_lock(codec: CodecId) {
+    let m = crate::motion::synthetic::dancer_near_lock(240, 60.0, 7);
+    let sk = m.skeleton.clone().unwrap();
+    let cc = sk.joints.iter().map(|j| j.channels.len()).sum::<usize>();
+    let turnings = super::branches::turnings(&Skeleton::new(sk.joints.clone()).unwrap());
+    let held: Vec<_> = turnings
+        .iter()
+        .filter(|t| sk.values.chunks_exact(cc).all(|r| r[t.idx[1]].abs() > 89.7))
+        .collect();
+    assert_eq!(held.len(), 2);
+    let enc = encoded(&m, codec, ErrorBound::max(1.0));
+    let shared = skeleton_shared(&m);
+    let source = Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
+    let decoded = Reader::new(enc.container.header.clone(), shared)
+        .and_then(|r| r.read_channels(0..m.frame_count(), cc, &source))
+        .unwrap()
+        .values;
+    let largest = decoded
+        .chunks_exact(cc)
+        .zip(sk.values.chunks_exact(cc))
+        .flat_map(|(d, s)| {
+            held.iter()
+                .flat_map(|t| t.idx)
+                .map(move |c| (d[c] - s[c]).abs())
+        })
+        .fold(0.0, f64::max);
+    assert!(
+        largest < 30.0,
+        "{codec}: a decoded angle near lock {largest}° off the source's"
+    );
+}

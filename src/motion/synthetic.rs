@@ -182,6 +182,45 @@ pub fn dancer(frames: usize, fps: f64, seed: u64) -> Motion {
     .motion
 }
 
+/// The [`dancer`] with two joints held near gimbal lock, LeftLeg at +90° and RightFoot
+/// at −90° on their middle (X) angle, 0.05° to 0.25° off, while their first and last angles
+/// swing; the positions are the new channels' FK. Where a rotation within any bound leaves
+/// Euler angles ill-conditioned (the codecs' twists, issue 49).
+pub fn dancer_near_lock(frames: usize, fps: f64, seed: u64) -> Motion {
+    let m = dancer(frames, fps, seed);
+    let mut sk = m.skeleton.clone().expect("a dancer has a skeleton");
+    // The values change: what the generated text printed no longer holds.
+    sk.printed = None;
+    let cc: usize = sk.joints.iter().map(|j| j.channels.len()).sum();
+    let first = |name: &str| {
+        let j = sk.joints.iter().position(|j| j.name == name).expect(name);
+        sk.joints[..j]
+            .iter()
+            .map(|j| j.channels.len())
+            .sum::<usize>()
+    };
+    // Both joints' channels are Zrotation Xrotation Yrotation.
+    let held = [first("LeftLeg"), first("RightFoot")];
+    for (f, row) in sk.values.chunks_exact_mut(cc).enumerate() {
+        let x = f as f64 / fps;
+        for (n, &c) in held.iter().enumerate() {
+            let sign = if n == 0 { 1.0 } else { -1.0 };
+            row[c] = 60.0 * (1.3 * x + n as f64).sin();
+            row[c + 1] = sign * (89.85 + 0.1 * (3.0 * x).sin());
+            row[c + 2] = -50.0 * (0.9 * x).cos();
+        }
+    }
+    let mut fk = super::skeleton::Fk::new(&sk.joints);
+    let mut frame = vec![0f64; sk.joints.len() * 3];
+    let mut positions = Vec::with_capacity(m.positions().len());
+    for row in sk.values.chunks_exact(cc) {
+        fk.frame(&sk.joints, row, &mut frame);
+        positions.extend(frame.iter().map(|&v| v as f32));
+    }
+    Motion::new(m.fps, m.unit, m.point_names.clone(), positions, Some(sk))
+        .expect("the dancer's own shape")
+}
+
 /// Two behaviours: a dancer's first second, played over and over for 800 frames, with
 /// its forearms and hands also swinging fast and wide from frame 400 on (positions only; the
 /// skeleton is dropped). PPCA segmentation cuts it near frame 400.

@@ -12,6 +12,7 @@ use crate::codec::branches::{self, Turning};
 use crate::codec::entropy::io::Io;
 use crate::codec::error::Result;
 use crate::codec::skeleton::printed;
+use crate::codec::twists;
 
 /// What codes and decodes chunks: the layout, the parameters, and what follows from them.
 pub struct Coder {
@@ -21,7 +22,7 @@ pub struct Coder {
     solve: Solve,
     /// The encoder's dead zone ([`Steps::dead_zone`]); 0 when decoding.
     dead_zone: f64,
-    /// The joints whose Euler branches a chunk of version 3 carries.
+    /// The joints whose Euler branches a chunk of version 3 on carries.
     turnings: Vec<Turning>,
 }
 
@@ -85,6 +86,9 @@ impl Coder {
         frames::channels(&self.layout, g, &t, &self.solve, &mut out);
         for v in &mut out {
             *v = printed(*v);
+        }
+        if self.params.version >= 4 {
+            twists::code_frames(io, &self.turnings, cc, given.map(|g| g.1), &mut out)?;
         }
         if self.params.version >= 3 {
             branches::code(io, &self.turnings, cc, given.map(|g| g.1), &mut out)?;

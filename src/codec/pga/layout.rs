@@ -240,7 +240,10 @@ impl Layout {
         self.root_rotation
             .iter()
             .chain(&self.inner)
-            .map(|t| crate::codec::branches::Turning { idx: t.idx })
+            .map(|t| crate::codec::branches::Turning {
+                idx: t.idx,
+                order: t.order,
+            })
             .collect()
     }
 

@@ -130,6 +130,11 @@ mod tests {
     }
 
     #[test]
+    fn decoded_euler_triples_near_gimbal_lock_are_the_sources() {
+        crate::codec::testing::keeps_the_sources_angles_near_gimbal_lock(CodecId::Pga);
+    }
+
+    #[test]
     fn meets_max_and_mean_bounds_on_fk_positions_and_shrinks_as_they_loosen() {
         meets_bounds_and_shrinks(&dancer(600, 120.0, 7), CodecId::Pga, [0.5, 2.0, 10.0]);
     }

@@ -11,6 +11,7 @@ use crate::codec::entropy::ints::IntModel;
 use crate::codec::entropy::io::{code_residual, Io};
 use crate::codec::entropy::rangecoder::Bit;
 use crate::codec::error::{malformed, Result};
+use crate::codec::twists::Twists;
 use crate::motion::rotation;
 
 /// What one part has decoded so far in the chunk.
@@ -55,7 +56,7 @@ pub(super) fn code_chunk<I: Io>(
     for (p, (part, h)) in plan.parts.iter().zip(&mut hist).enumerate() {
         h.extrapolate = match plan.version {
             Version::V1 => true,
-            Version::V2 | Version::V3 => {
+            Version::V2 | Version::V3 | Version::V4 => {
                 let want = given.is_some_and(|g| {
                     extrapolates(part, &g.coeffs.rotations[p], g.values, cc, frames)
                 });
@@ -63,6 +64,7 @@ pub(super) fn code_chunk<I: Io>(
             }
         };
     }
+    let mut twists = plan.twists.then(|| Twists::new(plan.parts.len()));
     let base = out.len();
     out.resize(base + frames * cc, 0.0);
     for f in 0..frames {
@@ -126,11 +128,21 @@ pub(super) fn code_chunk<I: Io>(
                     let e = rotation::to_euler(&q, order, h.euler);
                     h.euler = Some(e);
                     h.quats = [Some(q), h.quats[0]];
+                    // Twisted near lock before the children are aimed from it.
+                    let shown = match twists.as_mut() {
+                        Some(tw) => tw.code(io, p, order, e, row.map(|r| idx.map(|i| r[i])))?,
+                        None => e,
+                    };
                     if let Some((_, pose)) = aim.as_mut() {
-                        pose.decoded(joint, q);
+                        let shown_q = if shown == e {
+                            q
+                        } else {
+                            rotation::from_euler(order, shown)
+                        };
+                        pose.decoded(joint, shown_q);
                     }
                     for k in 0..3 {
-                        dest[idx[k]] = printed(e[k]);
+                        dest[idx[k]] = printed(shown[k]);
                     }
                 }
             }

@@ -16,7 +16,9 @@
 //!
 //! Decoded rotations come back as Euler angles in each joint's own channel order (continuous
 //! from frame to frame within a chunk, and from version 3 on the source's branch: the
-//! chunk's [`branches`](super::branches) say where it is not), rounded to 10⁻⁶ — what the
+//! chunk's [`branches`](super::branches) say where it is not; from version 4 also
+//! [`twists`](super::twists) near gimbal lock, applied before the joint's children are
+//! aimed from it), rounded to 10⁻⁶ — what the
 //! decoder gives is what a BVH file prints, so the bound verified on decoding holds on the
 //! served file.
 
@@ -43,8 +45,8 @@ mod aim;
 mod delta;
 mod transform;
 
-/// What the encoder writes ([`Version::V3`]); the decoder reads every [`Version`].
-const VERSION: u8 = 3;
+/// What the encoder writes ([`Version::V4`]); the decoder reads every [`Version`].
+const VERSION: u8 = 4;
 pub(super) const SIZE_CONTEXTS: usize = 20;
 
 pub struct Rot;
@@ -69,6 +71,9 @@ pub(super) struct Plan {
     pub(super) parts: Vec<Part>,
     pub(super) channels: usize,
     pub(super) version: Version,
+    /// Whether the chunk's joints are [`twisted`](super::twists) near lock (version 4,
+    /// chunk by chunk).
+    pub(super) twists: bool,
 }
 
 impl Plan {
@@ -109,6 +114,7 @@ impl Plan {
             parts,
             channels: rig.channel_count(),
             version,
+            twists: false,
         }
     }
 }
@@ -126,11 +132,14 @@ pub(super) enum Version {
     /// Version 2, and each chunk ends with its Euler branch changes
     /// ([`branches`](super::branches)), so decoded triples are the source's.
     V3,
+    /// Version 3, and each joint's Euler triples near gimbal lock are twisted to the
+    /// file's angles ([`twists`](super::twists)), coded where the joint is decoded.
+    V4,
 }
 
 impl Version {
     /// The versions a decoder reads.
-    pub const ALL: [u8; 3] = [1, 2, 3];
+    pub const ALL: [u8; 4] = [1, 2, 3, 4];
 }
 
 impl Version {
@@ -139,6 +148,7 @@ impl Version {
             1 => Some(Version::V1),
             2 => Some(Version::V2),
             3 => Some(Version::V3),
+            4 => Some(Version::V4),
             _ => None,
         }
     }
@@ -161,7 +171,7 @@ fn distances(rig: &Skeleton, version: Version) -> Vec<f64> {
             dist[p] = dist[p].max((pos[d] - pos[p]).norm());
             a = match version {
                 Version::V1 => joints[p].parent,
-                Version::V2 | Version::V3 => None,
+                Version::V2 | Version::V3 | Version::V4 => None,
             };
         }
     }
@@ -268,10 +278,11 @@ pub(super) struct Given<'a> {
     aim: Option<aim::Aim<'a>>,
 }
 
-/// One chunk, after its step index and mode (`k` and `mode` when encoding).
+/// One chunk, after its step index, mode and (version 4) whether it twists (`k` and
+/// `how` when encoding).
 #[allow(clippy::too_many_arguments)]
 fn code<I: Io>(
-    mode: Mode,
+    how: How,
     io: &mut I,
     rig: &Skeleton,
     steps: &Steps,
@@ -281,28 +292,33 @@ fn code<I: Io>(
     out: &mut Vec<f64>,
 ) -> Result<()> {
     let k = io.raw(k, 8);
-    let plan = steps.plan(rig, k);
-    let mode = match io.raw(mode as u32, 1) {
+    let mut plan = steps.plan(rig, k);
+    let mode = match io.raw(how.mode as u32, 1) {
         0 => Mode::Delta,
         _ => Mode::Transform,
     };
+    if steps.version == Version::V4 {
+        plan.twists = io.raw(u32::from(how.twists), 1) == 1;
+    }
     let base = out.len();
     match mode {
         Mode::Delta => delta::code_chunk(io, &plan, frames, given, out)?,
         Mode::Transform => transform::code_chunk(io, &plan, frames, given, out)?,
     }
-    if steps.version == Version::V3 {
+    if matches!(steps.version, Version::V3 | Version::V4) {
         let source = given.map(|g| g.values);
         branches::code(io, &steps.turnings, plan.channels, source, &mut out[base..])?;
     }
     Ok(())
 }
 
-/// How the encoder codes a chunk: the mode (written in the chunk) and whether rotations
-/// are aimed from the decoded parents (the encoder's choice; the decoder need not know).
+/// How the encoder codes a chunk: the mode and whether joints are twisted near lock
+/// (written in the chunk), and whether rotations are aimed from the decoded parents (the
+/// encoder's choice; the decoder need not know).
 #[derive(Debug, Clone, Copy)]
 struct How {
     mode: Mode,
+    twists: bool,
     aim: bool,
 }
 
@@ -329,7 +345,7 @@ impl<'a> Take<'a> {
     ) -> Take<'a> {
         let frames = skeleton.frame_count();
         let values = &skeleton.values[..];
-        let steps = Steps::new(rig, Version::V3, base);
+        let steps = Steps::new(rig, Version::V4, base);
         let layout = steps.plan(rig, 224);
         let cc = layout.channels;
         let chunks = (0..frames)
@@ -363,7 +379,7 @@ impl<'a> Take<'a> {
         });
         let mut out = Vec::with_capacity(values.len());
         code(
-            how.mode,
+            how,
             io,
             self.rig,
             &self.steps,
@@ -394,17 +410,20 @@ impl<'a> Take<'a> {
     /// The bitstream: every chunk in the mode that codes it smaller, each at the largest
     /// step that meets `target`. Chunks are aimed ([`aim`]) unless aiming cannot meet the
     /// bound (a rig whose position channels move children away from where their parent's
-    /// rotation puts them): then the file's rotations are coded as they are.
+    /// rotation puts them): then the file's rotations are coded as they are. Joints are
+    /// twisted near lock ([`twists`](super::twists)) unless that cannot meet the bound (a
+    /// twist moves a rotation a little, and its children with it).
     fn encode(&self, target: Target) -> Result<CodecOutput> {
         let mut chunks = Vec::with_capacity(self.chunks.len());
-        // The step search per mode and aiming: each chunk's starts where the last one's ended.
-        let mut steps = [[ChunkSteps::default(); 2]; 2];
+        // The step search per mode, aiming and twisting: each chunk's starts where the last
+        // one's ended.
+        let mut steps = [[[ChunkSteps::default(); 2]; 2]; 2];
         for i in 0..self.chunks.len() {
             let mut best = Smallest::new();
             for mode in [Mode::Delta, Mode::Transform] {
-                for aim in [true, false] {
-                    let how = How { mode, aim };
-                    let steps = &mut steps[mode as usize][usize::from(aim)];
+                for (aim, twists) in [(true, true), (true, false), (false, true), (false, false)] {
+                    let how = How { mode, twists, aim };
+                    let steps = &mut steps[mode as usize][usize::from(aim)][usize::from(twists)];
                     let Some(k) = steps.largest(|k| self.meets(how, i, k, target))? else {
                         continue;
                     };
@@ -448,8 +467,14 @@ impl ChannelDecoder for RotDecoder {
     fn channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
         let mut dec = Decoder::new(bytes);
         let mut values = Vec::new();
+        // What the chunk says it is, read from it.
+        let how = How {
+            mode: Mode::Delta,
+            twists: false,
+            aim: false,
+        };
         code(
-            Mode::Delta,
+            how,
             &mut dec,
             &self.rig,
             &self.steps,
@@ -476,6 +501,11 @@ mod tests {
     #[test]
     fn decoded_euler_triples_are_the_sources() {
         crate::codec::testing::follows_the_sources_euler_branches(CodecId::Rot);
+    }
+
+    #[test]
+    fn decoded_euler_triples_near_gimbal_lock_are_the_sources() {
+        crate::codec::testing::keeps_the_sources_angles_near_gimbal_lock(CodecId::Rot);
     }
 
     #[test]

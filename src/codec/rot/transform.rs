@@ -12,6 +12,7 @@ use crate::codec::dct;
 use crate::codec::entropy::ints::IntModel;
 use crate::codec::entropy::io::{code_residual, Io};
 use crate::codec::error::{malformed, Result};
+use crate::codec::twists::Twists;
 use crate::motion::rotation;
 
 /// Frequency bands with their own statistics: 0, 1, 2, 3–4, 5–8, 9–16, 17+.
@@ -129,6 +130,7 @@ pub(super) fn code_chunk<I: Io>(
             )
         })
     });
+    let mut twists = plan.twists.then(|| Twists::new(plan.parts.len()));
     let mut s = 0;
     for (p, part) in plan.parts.iter().enumerate() {
         let (n, step, kind) = match *part {
@@ -180,13 +182,26 @@ pub(super) fn code_chunk<I: Io>(
                 for t in 0..frames {
                     let v = Vector3::new(decoded[0][t], decoded[1][t], decoded[2][t]);
                     let q = rotation::exp(&v);
-                    if let Some((_, _, poses)) = aim.as_mut() {
-                        poses[t].decoded(joint, q);
-                    }
                     let e = rotation::to_euler(&q, order, near);
                     near = Some(e);
+                    // Twisted near lock before the children are aimed from it.
+                    let shown = match twists.as_mut() {
+                        Some(tw) => {
+                            let source = given.map(|g| idx.map(|i| g.values[t * cc + i]));
+                            tw.code(io, p, order, e, source)?
+                        }
+                        None => e,
+                    };
+                    if let Some((_, _, poses)) = aim.as_mut() {
+                        let shown_q = if shown == e {
+                            q
+                        } else {
+                            rotation::from_euler(order, shown)
+                        };
+                        poses[t].decoded(joint, shown_q);
+                    }
                     for k in 0..3 {
-                        out[base + t * cc + idx[k]] = printed(e[k]);
+                        out[base + t * cc + idx[k]] = printed(shown[k]);
                     }
                 }
             }
