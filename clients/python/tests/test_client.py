@@ -163,6 +163,38 @@ def test_a_skeleton_take_extracts_its_root(client: mocapstore.Client, corpus: Pa
     assert np.allclose(still.data[:, 0, [0, 2]], 0.0, atol=1e-4)
 
 
+def test_model_outputs_and_analog_come_as_columns_in_their_units(
+    client: mocapstore.Client, corpus: Path | None
+) -> None:
+    if corpus is None:
+        pytest.skip("no corpus")
+    take = client.ingest(corpus / "c3d" / "c3dio__sample_03__gait-pig.c3d", library=library())
+    listed = take.raw["meta"]["outputs"]
+    angles = [o["name"] for o in listed if o["kind"] == "angle"]
+    assert angles, listed
+    # Kept apart from the markers.
+    assert not set(angles) & set(take.point_names)
+    o = client.outputs(take.id, names=angles[:2], start=10, end=30)
+    assert o.labels == tuple(f"{n}.{a}" for n in angles[:2] for a in "xyz")
+    assert o.values.shape == (20, 6) and o.start == 10 and len(o) == 20
+    assert o.rate == pytest.approx(take.fps) and o.t0 == pytest.approx(10 / take.fps)
+    unit = {x["name"]: x["unit"] for x in listed}
+    assert o.units == tuple(unit[n] for n in angles[:2] for _ in "xyz")
+    # Angles, not millimetres read as metres: a joint angle of tens of degrees.
+    assert np.nanmax(np.abs(o.values)) > 1.0
+    whole = client.outputs(take.id)
+    assert len(whole) == take.frames and len(whole.labels) == 3 * len(listed)
+    first = f"{angles[0]}.x"
+    assert np.array_equal(o[first], whole[first][10:30], equal_nan=True)
+    with pytest.raises(mocapstore.BadRequest, match=angles[0]):
+        client.outputs(take.id, names=["NoSuchOutput"])
+    with pytest.raises(KeyError, match=first):
+        o["nope"]
+    a = client.analog(take.id, t0=0.0, t1=0.5)
+    assert a.rate > take.fps and len(a) == round(0.5 * a.rate)
+    assert a.values.shape == (len(a), len(a.labels)) and len(a.units) == len(a.labels)
+
+
 def test_takes_pages_see_every_take_once_while_takes_are_added(client: mocapstore.Client) -> None:
     lib = library()
     first = [client.ingest(walker(30), name=f"t{i}", library=lib, fps=60).id for i in range(5)]

@@ -24,7 +24,7 @@ from .errors import (
     Unreadable,
 )
 from .skeleton import Channels, Joint, Skeleton
-from .types import Frames, Take
+from .types import Columns, Frames, Take
 
 __all__ = [
     "API",
@@ -34,6 +34,7 @@ __all__ = [
     "Busy",
     "Channels",
     "Client",
+    "Columns",
     "Conflict",
     "ConnectionFailed",
     "Forbidden",

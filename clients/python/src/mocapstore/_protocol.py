@@ -22,7 +22,7 @@ from . import errors
 from ._version import API
 from .skeleton import Channels
 from .skeleton import parse as parse_bvh
-from .types import Frames, Take
+from .types import Columns, Frames, Take
 
 T = TypeVar("T")
 
@@ -405,6 +405,25 @@ def finish_stream(id: str) -> Op[Take]:
 
 
 # Skeletons ------------------------------------------------------------------------------
+
+
+def columns(id: str, what: str, query: Params) -> Op[Columns]:
+    """Columns over a range (``what``: ``analog`` or ``outputs``), from the JSON answer."""
+    r = yield Request("GET", f"/v1/takes/{id}/{what}", [*query, ("format", "json")])
+    raise_for(r)
+    doc = json.loads(r.content)
+    cols = doc["channels"]
+    values = np.array(
+        [[np.nan if v is None else v for v in row] for row in doc["values"]], dtype=np.float64
+    ).reshape(len(doc["values"]), len(cols))
+    return Columns(
+        values=values,
+        labels=tuple(c["label"] for c in cols),
+        units=tuple(c["unit"] for c in cols),
+        rate=float(doc["rate"]),
+        t0=float(doc["t0"]),
+        start=header_int(r.headers, "x-start-frame"),
+    )
 
 
 def channels(id: str, query: Params) -> Op[Channels]:

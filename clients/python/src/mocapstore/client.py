@@ -27,7 +27,7 @@ from . import _protocol as p
 from . import errors
 from ._version import __version__
 from .skeleton import Channels
-from .types import Frames, Take
+from .types import Columns, Frames, Take
 
 T = TypeVar("T")
 
@@ -631,6 +631,40 @@ class Client(_Base):
         q = self._range_query(start, end, t0, t1, fps, root, up, unit)
         return self._run(p.channels(id, q))
 
+    def analog(
+        self,
+        id: str,
+        *,
+        channels: Sequence[str] | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+    ) -> Columns:
+        """A C3D take's analog channels (``channels``: their labels; all by default) over
+        a range, at the analog rate and in their units (force plates in N and N·mm, EMG in
+        V; a 400 naming the take's channels for an unknown one)."""
+        q = [*p.params(channels=channels), *self._range_query(start, end, t0, t1, *[None] * 4)]
+        return self._run(p.columns(id, "analog", q))
+
+    def outputs(
+        self,
+        id: str,
+        *,
+        names: Sequence[str] | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+    ) -> Columns:
+        """A C3D take's model outputs (``names``: e.g. ``LHipAngles``; all by default;
+        ``take.raw["meta"]["outputs"]`` lists them): joint angles, forces, moments and
+        powers a modelling package (Vicon's Plug-in Gait) wrote among the file's points,
+        kept apart from the markers, three columns each in the output's own unit (a 400
+        naming the take's outputs for an unknown one)."""
+        q = [*p.params(names=names), *self._range_query(start, end, t0, t1, *[None] * 4)]
+        return self._run(p.columns(id, "outputs", q))
+
     def ingest_folder(
         self,
         path: str | os.PathLike[str],
@@ -1018,6 +1052,34 @@ class AsyncClient(_Base):
         """A skeleton take's channel values and skeleton (see [`Client.channels`])."""
         q = self._range_query(start, end, t0, t1, fps, root, up, unit)
         return await self._run(p.channels(id, q))
+
+    async def analog(
+        self,
+        id: str,
+        *,
+        channels: Sequence[str] | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+    ) -> Columns:
+        """A C3D take's analog channels over a range (see [`Client.analog`])."""
+        q = [*p.params(channels=channels), *self._range_query(start, end, t0, t1, *[None] * 4)]
+        return await self._run(p.columns(id, "analog", q))
+
+    async def outputs(
+        self,
+        id: str,
+        *,
+        names: Sequence[str] | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+    ) -> Columns:
+        """A C3D take's model outputs over a range (see [`Client.outputs`])."""
+        q = [*p.params(names=names), *self._range_query(start, end, t0, t1, *[None] * 4)]
+        return await self._run(p.columns(id, "outputs", q))
 
     async def ingest_folder(
         self,

@@ -169,3 +169,38 @@ class Frames:
                 "z": flat[:, 2],
             }
         )
+
+
+@dataclass(frozen=True)
+class Columns:
+    """Columns over a range of a take, each in its own unit: a C3D's analog channels
+    (``Client.analog``) or its model outputs (``Client.outputs``: joint angles, forces,
+    moments, powers, three columns ``name.x``, ``name.y``, ``name.z`` each).
+
+    ``values`` is ``(samples, columns)`` float64, NaN where a value is missing, sampled at
+    ``rate`` from ``t0`` seconds after the take's start; ``start`` is the take's frame the
+    range starts at. ``columns["LHipAngles.x"]`` is that column."""
+
+    values: npt.NDArray[np.float64]
+    labels: tuple[str, ...]
+    units: tuple[str, ...]
+    rate: float
+    t0: float
+    start: int
+
+    def __len__(self) -> int:
+        return int(self.values.shape[0])
+
+    def __getitem__(self, label: str) -> npt.NDArray[np.float64]:
+        try:
+            return self.values[:, self.labels.index(label)]
+        except ValueError:
+            raise KeyError(
+                f"no column {label!r}; the columns are {', '.join(self.labels)}"
+            ) from None
+
+    def unit(self, label: str) -> str:
+        """The unit of column ``label``."""
+        if label not in self.labels:
+            raise KeyError(f"no column {label!r}; the columns are {', '.join(self.labels)}")
+        return self.units[self.labels.index(label)]
