@@ -34,7 +34,7 @@ const BUSY_RETRIES: u32 = 30;
 
 #[derive(Args, Clone)]
 pub struct FilesArgs {
-    /// Export files for use in this format (glb, gltf, bvh, c3d, trc, csv, json, npy, f32)
+    /// Export files for use in this format (glb, gltf, fbx, bvh, c3d, trc, csv, json, npy, f32)
     /// from a running service, instead of the archive from the database.
     #[arg(long)]
     pub format: Option<String>,
