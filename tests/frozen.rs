@@ -429,7 +429,9 @@ fn stream_container(
     }
 }
 
-/// Write the bitstreams of today's encoders that are not frozen yet (never overwriting).
+/// What the skeletal files frozen now code (the index's description).
+const DANCER: &str = "a dancer BVH take with triples on other branches and two joints near lock";
+
 /// `m` with some joints' Euler triples moved to equivalent ones (the other branch, whole
 /// turns), as exporters write them: the same rotations, other channel values.
 fn on_other_branches(mut m: Motion) -> Motion {
@@ -460,6 +462,7 @@ fn on_other_branches(mut m: Motion) -> Motion {
     m
 }
 
+/// Write the bitstreams of today's encoders that are not frozen yet (never overwriting).
 #[test]
 #[ignore = "writes tests/frozen/; run with MOCAPSTORE_FREEZE=1 after a format change"]
 fn freeze_current_bitstreams() {
@@ -615,11 +618,7 @@ fn freeze_current_bitstreams() {
             .unwrap()
             .container;
         let name = format!("{codec}-v{}", c.header.params[0]);
-        skeletal.push((
-            name,
-            c,
-            format!("{codec} batch, {bound}, a dancer BVH take"),
-        ));
+        skeletal.push((name, c, format!("{codec} batch, {bound}, {DANCER}")));
     }
     // `pga`'s two decoder paths on their own: poses from coordinates alone, and IK.
     let ik = Options {
@@ -655,7 +654,7 @@ fn freeze_current_bitstreams() {
         skeletal.push((
             format!("pga-v{}-{name}", c.header.params[0]),
             c,
-            format!("pga batch {what}, {bound}, a dancer BVH take"),
+            format!("pga batch {what}, {bound}, {DANCER}"),
         ));
     }
 

@@ -16,7 +16,8 @@
 //! takes a twist only where the triple is more than [`FAR`] from the file's, the twist
 //! brings it nearer by more than [`SLACK`], and it leaves the rotation no farther from the file's rotation, keeps it while it stays
 //! within the slack, and trial encodes run the same code, so the bound is judged on what
-//! decodes. (Judged against `rot`'s aimed rotation instead, twists were seldom taken and
+//! decodes; a chunk that cannot meet the bound with twists is coded without (one raw bit
+//! per chunk). (Judged against `rot`'s aimed rotation instead, twists were seldom taken and
 //! the jumps stayed; coded after the chunk, they moved aimed children and cost `rot` 12 %.)
 //! Flips and whole turns are the [`branches`](super::branches)' job, after this.
 
@@ -65,7 +66,8 @@ pub fn sigma(order: [usize; 3], b: f64) -> f64 {
     } else {
         -1.0
     };
-    if b.to_radians().sin() >= 0.0 {
+    // sin b ≥ 0 for b in [0°, 180°) modulo 360° (IEEE basic operations, no library's sine).
+    if b.rem_euclid(360.0) < 180.0 {
         parity
     } else {
         -parity
@@ -81,9 +83,11 @@ pub fn twisted(e: [f64; 3], order: [usize; 3], t: i32) -> [f64; 3] {
     [e[0] + t, e[1], e[2] - sigma(order, e[1]) * t]
 }
 
-/// Whether `e`'s middle angle is near lock.
+/// Whether `e`'s middle angle is near lock: within [`LOCK`] of 90° modulo 180°. IEEE basic
+/// operations (correctly rounded on every machine), not a library's cosine: the decoder
+/// reads a symbol or not by this, and every machine must decide alike.
 fn near_lock(e: [f64; 3]) -> bool {
-    e[1].to_radians().cos().abs() < LOCK.to_radians().sin()
+    (e[1].rem_euclid(180.0) - 90.0).abs() < LOCK
 }
 
 /// An angle difference, wrapped into (−180°, 180°].

@@ -48,17 +48,20 @@ impl Coder {
         Coder { dead_zone, ..self }
     }
 
-    /// One chunk of `frames` frames at step index `s` (when encoding; read when decoding)
-    /// through `io`: its decoded channel values, rounded as printed. The encoder gives the
-    /// chunk's trajectories and its source channel values (for their Euler branches).
+    /// One chunk of `frames` frames at step index `s`, twisting near lock or not (version
+    /// 4; both when encoding, read when decoding) through `io`: its decoded channel values,
+    /// rounded as printed. The encoder gives the chunk's trajectories and its source channel
+    /// values (for their Euler branches and twists).
     pub fn code<I: Io>(
         &self,
         io: &mut I,
         s: u32,
+        twists: bool,
         frames: usize,
         given: Option<(&Trajectories, &[f64])>,
     ) -> Result<Vec<f64>> {
         let s = io.raw(s, 8);
+        let twists = self.params.version >= 4 && io.raw(u32::from(twists), 1) == 1;
         let steps = Steps {
             dead_zone: self.dead_zone,
             ..self
@@ -87,7 +90,7 @@ impl Coder {
         for v in &mut out {
             *v = printed(*v);
         }
-        if self.params.version >= 4 {
+        if twists {
             twists::code_frames(io, &self.turnings, cc, given.map(|g| g.1), &mut out)?;
         }
         if self.params.version >= 3 {

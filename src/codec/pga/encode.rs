@@ -274,7 +274,9 @@ impl<'a> Take<'a> {
         self.code_chunks(&coder, &model.given, target)
     }
 
-    /// Every chunk of `given` coded by `coder` at the largest step that meets `target`.
+    /// Every chunk of `given` coded by `coder` at the largest step that meets `target`,
+    /// twisting near lock ([`twists`](crate::codec::twists)) unless that cannot meet it (a
+    /// twist moves a rotation a little, and what hangs below it).
     fn code_chunks(
         &self,
         coder: &Coder,
@@ -284,28 +286,37 @@ impl<'a> Take<'a> {
         let k = coder.params.model.dims();
         let w = self.input.points * 3;
         let mut chunks = Vec::with_capacity(given.len());
-        let mut steps = ChunkSteps::default();
+        // The step search with twists and without: each chunk's starts where the last
+        // one's ended.
+        let mut steps = [ChunkSteps::default(); 2];
         for (i, (f0, given)) in given.iter().enumerate() {
             let (f0, len) = (*f0, given.root_position.len());
             let original = &self.input.data[f0 * w..(f0 + len) * w];
             let valid = self.input.valid.map(|v| &v[f0 * w / 3..(f0 + len) * w / 3]);
             let cc = self.layout.channels();
             let source = &self.values[f0 * cc..(f0 + len) * cc];
-            let meets = |s: u32| -> Result<bool> {
-                let decoded = coder.code(&mut Dry, s, len, Some((given, source)))?;
+            let meets = |twists: bool, s: u32| -> Result<bool> {
+                let decoded = coder.code(&mut Dry, s, twists, len, Some((given, source)))?;
                 let mut positions = vec![0f32; len * w];
                 self.rig.positions(&decoded, &mut positions);
                 let (max, mean) = max_mean(original, &positions, valid);
                 Ok(target.holds(max, mean))
             };
-            let s = steps.largest(meets)?.ok_or_else(|| Error::BoundMissed {
+            let mut found = None;
+            for twists in [true, false] {
+                if let Some(s) = steps[usize::from(twists)].largest(|s| meets(twists, s))? {
+                    found = Some((s, twists));
+                    break;
+                }
+            }
+            let (s, twists) = found.ok_or_else(|| Error::BoundMissed {
                 codec: "pga".into(),
                 detail: format!(
                     "chunk {i} misses the bound even at the finest step with {k} directions"
                 ),
             })?;
             let mut enc = Encoder::new();
-            coder.code(&mut enc, s, len, Some((given, source)))?;
+            coder.code(&mut enc, s, twists, len, Some((given, source)))?;
             chunks.push(ChunkOut {
                 frames: len,
                 bytes: enc.finish(),

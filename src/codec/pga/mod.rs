@@ -109,7 +109,7 @@ impl ChannelDecoder for PgaDecoder {
 
     fn channels(&self, bytes: &[u8], frames: usize) -> Result<Channels> {
         let mut dec = Decoder::new(bytes);
-        let values = self.coder.code(&mut dec, 0, frames, None)?;
+        let values = self.coder.code(&mut dec, 0, false, frames, None)?;
         read_whole(&dec, values, CodecId::Pga)
     }
 }

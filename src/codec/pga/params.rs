@@ -1,7 +1,7 @@
 //! A `pga` take's header parameters: how it was coded and the model it was coded with.
 //!
 //! Version 2, 3 and 4 (1 had no model kind byte, [`Geodesics::parse_v1`]; 3's chunks end
-//! with their Euler branch changes, 4's with twists near lock among them), little-endian: `version u8`, `iterations u8` (IK steps per frame, at most
+//! with their Euler branch changes, 4's also twist near gimbal lock), little-endian: `version u8`, `iterations u8` (IK steps per frame, at most
 //! [`MAX_ITERATIONS`]; 0: poses from the coordinates alone, end points not coded),
 //! `stride u8` (log₂ of the lifting's coarsest stride, at most [`MAX_STRIDE_LOG2`]),
 //! `base f64` (the `α` of step index 224, take units), `rho f32`, `lambda f32`
@@ -18,8 +18,8 @@ use crate::codec::wire::{Reader, Writer};
 /// What the encoder writes. Version 2 added the model's kind byte (the canonical model);
 /// version 1 models are all fitted ([`Geodesics::parse_v1`]). Version 3 has the same
 /// header, and each chunk ends with its Euler branch changes
-/// ([`branches`](crate::codec::branches)); version 4's branch changes carry twists near
-/// gimbal lock.
+/// ([`branches`](crate::codec::branches)); version 4's chunks say whether their decoded
+/// triples are [`twisted`](crate::codec::twists) near gimbal lock, before the branch changes.
 pub const VERSION: u8 = 4;
 /// The versions a decoder reads.
 pub const VERSIONS: [u8; 4] = [1, 2, 3, 4];
