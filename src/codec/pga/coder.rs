@@ -28,7 +28,11 @@ pub struct Coder {
 
 impl Coder {
     pub fn new(layout: &Layout, params: Params) -> Coder {
-        let scale = Scale::new(layout.chain(), &params.model);
+        let scale = Scale::new(
+            layout.chain(),
+            &params.model,
+            super::scale::lever_floor(params.version),
+        );
         let solve = Solve {
             lambda: scale.weights(params.lambda),
             iterations: usize::from(params.iterations),
