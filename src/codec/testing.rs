@@ -111,6 +111,16 @@ pub fn meets_bounds_and_shrinks(m: &Motion, codec: CodecId, bounds: [f64; 3]) {
     assert!(mean <= 2.0, "{mean} > 2");
 }
 
+/// Skeleton take `m` (`cc` channels) coded by `codec` at 1 mm: its decoded channel values.
+fn channels_at_1mm(m: &Motion, codec: CodecId, cc: usize) -> Vec<f64> {
+    let enc = encoded(m, codec, ErrorBound::max(1.0));
+    let source = Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
+    Reader::new(enc.container.header.clone(), skeleton_shared(m))
+        .and_then(|r| r.read_channels(0..m.frame_count(), cc, &source))
+        .unwrap()
+        .values
+}
+
 /// A dancer whose Euler triples are moved, joint by joint and 40 frames at a time, to
 /// equivalent ones (the other branch, whole turns), as exporters write them; coded by
 /// `codec` at 1 mm, every decoded triple must be the source's (within a few degrees) and
@@ -132,13 +142,7 @@ pub fn follows_the_sources_euler_branches(codec: CodecId) {
         }
     }
     let sk = m.skeleton.clone().unwrap();
-    let enc = encoded(&m, codec, ErrorBound::max(1.0));
-    let shared = skeleton_shared(&m);
-    let source = Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
-    let decoded = Reader::new(enc.container.header.clone(), shared)
-        .and_then(|r| r.read_channels(0..m.frame_count(), cc, &source))
-        .unwrap()
-        .values;
+    let decoded = channels_at_1mm(&m, codec, cc);
     let rot: Vec<usize> = turnings.iter().flat_map(|t| t.idx).collect();
     let largest = decoded
         .chunks_exact(cc)
@@ -182,13 +186,7 @@ pub fn keeps_the_sources_angles_near_gimbal_lock(codec: CodecId) {
         .filter(|t| sk.values.chunks_exact(cc).all(|r| r[t.idx[1]].abs() > 89.7))
         .collect();
     assert_eq!(held.len(), 2);
-    let enc = encoded(&m, codec, ErrorBound::max(1.0));
-    let shared = skeleton_shared(&m);
-    let source = Stored::new(0, enc.container.chunks.iter().map(Vec::as_slice));
-    let decoded = Reader::new(enc.container.header.clone(), shared)
-        .and_then(|r| r.read_channels(0..m.frame_count(), cc, &source))
-        .unwrap()
-        .values;
+    let decoded = channels_at_1mm(&m, codec, cc);
     let largest = decoded
         .chunks_exact(cc)
         .zip(sk.values.chunks_exact(cc))

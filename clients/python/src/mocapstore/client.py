@@ -194,6 +194,19 @@ class _Base:
         return p.params(start=start, end=end, t0=t0, t1=t1, fps=fps, root=root, up=up, unit=unit)
 
     @staticmethod
+    def _columns_query(
+        key: str,
+        names: Sequence[str] | None,
+        start: int | None,
+        end: int | None,
+        t0: float | None,
+        t1: float | None,
+    ) -> p.Params:
+        """The query of an analog or outputs read: the names asked for under ``key`` and
+        the range (columns are not resampled or transformed)."""
+        return [*p.params(**{key: names}), *p.params(start=start, end=end, t0=t0, t1=t1)]
+
+    @staticmethod
     def _ingest_body(
         source: str | os.PathLike[str] | npt.ArrayLike,
         fps: float | None,
@@ -644,7 +657,7 @@ class Client(_Base):
         """A C3D take's analog channels (``channels``: their labels; all by default) over
         a range, at the analog rate and in their units (force plates in N and N·mm, EMG in
         V; a 400 naming the take's channels for an unknown one)."""
-        q = [*p.params(channels=channels), *self._range_query(start, end, t0, t1, *[None] * 4)]
+        q = self._columns_query("channels", channels, start, end, t0, t1)
         return self._run(p.columns(id, "analog", q))
 
     def outputs(
@@ -662,7 +675,7 @@ class Client(_Base):
         powers a modelling package (Vicon's Plug-in Gait) wrote among the file's points,
         kept apart from the markers, three columns each in the output's own unit (a 400
         naming the take's outputs for an unknown one)."""
-        q = [*p.params(names=names), *self._range_query(start, end, t0, t1, *[None] * 4)]
+        q = self._columns_query("names", names, start, end, t0, t1)
         return self._run(p.columns(id, "outputs", q))
 
     def ingest_folder(
@@ -1064,7 +1077,7 @@ class AsyncClient(_Base):
         t1: float | None = None,
     ) -> Columns:
         """A C3D take's analog channels over a range (see [`Client.analog`])."""
-        q = [*p.params(channels=channels), *self._range_query(start, end, t0, t1, *[None] * 4)]
+        q = self._columns_query("channels", channels, start, end, t0, t1)
         return await self._run(p.columns(id, "analog", q))
 
     async def outputs(
@@ -1078,7 +1091,7 @@ class AsyncClient(_Base):
         t1: float | None = None,
     ) -> Columns:
         """A C3D take's model outputs over a range (see [`Client.outputs`])."""
-        q = [*p.params(names=names), *self._range_query(start, end, t0, t1, *[None] * 4)]
+        q = self._columns_query("names", names, start, end, t0, t1)
         return await self._run(p.columns(id, "outputs", q))
 
     async def ingest_folder(
