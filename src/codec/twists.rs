@@ -14,8 +14,9 @@
 //! frames near lock: one adaptive bit per such frame says whether the twist changes, and
 //! the new twist follows. Away from lock the twist is 0 and costs nothing. The encoder
 //! takes a twist only where the triple is more than [`FAR`] from the file's, the twist
-//! brings it nearer by more than [`SLACK`], and it leaves the rotation no farther from the file's rotation, keeps it while it stays
-//! within the slack, and trial encodes run the same code, so the bound is judged on what
+//! brings it nearer by more than [`SLACK`], and it leaves the rotation no farther from the
+//! file's rotation, and keeps it while it stays within the slack; where the file's own
+//! curve turns by nearly a jump it holds the triple to within [`TIGHT`] instead; and trial encodes run the same code, so the bound is judged on what
 //! decodes; a chunk that cannot meet the bound with twists is coded without (one raw bit
 //! per chunk). (Judged against `rot`'s aimed rotation instead, twists were seldom taken and
 //! the jumps stayed; coded after the chunk, they moved aimed children and cost `rot` 12 %.)
@@ -56,6 +57,18 @@ const OWN: f64 = 2.0;
 /// A twist in use must stay as near the file's as no twist, give or take this (degrees):
 /// rounding never forces a change.
 const GAIN: f64 = 1e-3;
+
+/// Where the file's first or last angle turns by more than this between two frames
+/// (degrees, either side of the frame), the file's curve nearly jumps (its jumps are over
+/// 90°): a decoded triple a few degrees off there can make a jump the file does not have,
+/// so such frames are held to [`TIGHT`] instead of [`FAR`] and [`SLACK`] (Bandai walkers
+/// turned 79–90° in a frame and decoded 91–95°).
+const TURN: f64 = 60.0;
+
+/// How near the file's a frame at a [`TURN`] is put (degrees, summed): a twist is taken
+/// when it brings the triple this much nearer, and one in use is kept only within this of
+/// the best.
+const TIGHT: f64 = 1.0;
 
 /// The sign σ with which the last angle joins the first near lock: with `Rb(b) e_c =
 /// ±e_a`, `Ra(a) Rb(b) Rc(c) = Ra(a + σc) Rb(b)`, σ = sign(sin b) times the order's parity
@@ -136,7 +149,7 @@ impl Twists {
         j: usize,
         order: [usize; 3],
         e: [f64; 3],
-        source: Option<[f64; 3]>,
+        source: Option<Source>,
     ) -> Result<[f64; 3]> {
         if !near_lock(e) {
             self.twist[j] = 0;
@@ -158,6 +171,62 @@ impl Twists {
     }
 }
 
+/// The file's channel values of a chunk (`frames × channels`) with the frame before it and
+/// the frame after it where the take has them: whether the file's curves turn at a chunk's
+/// first or last frame is judged across the chunk's edge.
+#[derive(Debug, Clone, Copy)]
+pub struct Around<'a> {
+    values: &'a [f64],
+    channels: usize,
+    /// The chunk's first frame in `values`.
+    first: usize,
+    frames: usize,
+}
+
+impl<'a> Around<'a> {
+    /// The chunk of `frames` frames from frame `f0` of the take's `values`.
+    pub fn new(values: &'a [f64], channels: usize, f0: usize, frames: usize) -> Around<'a> {
+        let total = values.len() / channels.max(1);
+        let start = f0.saturating_sub(1);
+        let end = (f0 + frames + 1).min(total);
+        Around {
+            values: &values[start * channels..end * channels],
+            channels,
+            first: f0 - start,
+            frames,
+        }
+    }
+
+    /// The chunk's own values.
+    pub fn chunk(&self) -> &'a [f64] {
+        &self.values[self.first * self.channels..(self.first + self.frames) * self.channels]
+    }
+
+    /// What frame `f` of the chunk is judged by, for the joint at channels `idx`.
+    pub fn source(&self, idx: [usize; 3], f: usize) -> Source {
+        let triple = |r: usize| idx.map(|i| self.values[r * self.channels + i]);
+        let r = self.first + f;
+        let s = triple(r);
+        let rows = self.values.len() / self.channels.max(1);
+        let turns = [r.checked_sub(1), Some(r + 1).filter(|&n| n < rows)]
+            .into_iter()
+            .flatten()
+            .any(|n| {
+                let o = triple(n);
+                [0, 2].iter().any(|&k| wrapped(o[k] - s[k]).abs() > TURN)
+            });
+        Source { s, turns }
+    }
+}
+
+/// What the encoder judges a frame's twist by: the file's triple, and whether the file's
+/// curves turn by more than [`TURN`] into or out of this frame.
+#[derive(Debug, Clone, Copy)]
+pub struct Source {
+    s: [f64; 3],
+    turns: bool,
+}
+
 /// A chunk's twists where nothing is aimed from the joints (`pga`): every frame of
 /// `decoded` (`frames × channels`, as printed), joint by joint, judged against `source`
 /// (the file's channel values) when encoding.
@@ -165,7 +234,7 @@ pub fn code_frames<I: Io>(
     io: &mut I,
     turnings: &[Turning],
     channels: usize,
-    source: Option<&[f64]>,
+    source: Option<Around>,
     decoded: &mut [f64],
 ) -> Result<()> {
     if channels == 0 {
@@ -175,7 +244,7 @@ pub fn code_frames<I: Io>(
     for (f, row) in decoded.chunks_exact_mut(channels).enumerate() {
         for (j, t) in turnings.iter().enumerate() {
             let e = t.idx.map(|i| row[i]);
-            let given = source.map(|s| t.idx.map(|i| s[f * channels + i]));
+            let given = source.map(|s| s.source(t.idx, f));
             let shown = tw.code(io, j, t.order, e, given)?;
             if shown != e {
                 for (k, i) in t.idx.iter().enumerate() {
@@ -187,8 +256,14 @@ pub fn code_frames<I: Io>(
     Ok(())
 }
 
-/// The encoder's twist for a frame near lock, `current` in use, `s` the file's triple.
-fn decide(current: i32, order: [usize; 3], e: [f64; 3], s: [f64; 3]) -> i32 {
+/// The encoder's twist for a frame near lock, `current` in use, judged by the file's.
+fn decide(current: i32, order: [usize; 3], e: [f64; 3], given: Source) -> i32 {
+    let s = given.s;
+    let (far, slack) = if given.turns {
+        (TIGHT, TIGHT)
+    } else {
+        (FAR, SLACK)
+    };
     if !s.iter().chain(&e).all(|v| v.is_finite()) {
         return 0;
     }
@@ -213,9 +288,9 @@ fn decide(current: i32, order: [usize; 3], e: [f64; 3], s: [f64; 3]) -> i32 {
         })
         .fold((0, plain), |b, c| if c.1 < b.1 { c } else { b });
     let now = dist(current);
-    if keeps(current) && now <= plain + GAIN && now <= near + SLACK {
+    if keeps(current) && now <= plain + GAIN && now <= near + slack {
         current
-    } else if best != 0 && plain > FAR && near + SLACK < plain && keeps(best) {
+    } else if best != 0 && plain > far && near + slack < plain && keeps(best) {
         best
     } else {
         0
@@ -275,7 +350,11 @@ mod tests {
             .iter()
             .zip(decoded)
             .map(|(s, e)| {
-                tw.code(io, 0, ORDER, *e, io.encoding().then_some(*s))
+                let given = Source {
+                    s: *s,
+                    turns: false,
+                };
+                tw.code(io, 0, ORDER, *e, io.encoding().then_some(given))
                     .unwrap()
             })
             .collect()
@@ -308,13 +387,55 @@ mod tests {
     }
 
     #[test]
+    fn where_the_files_curve_nearly_jumps_the_triple_is_held_tight() {
+        // Ten degrees off the file's (summed), the same rotation within 0.03°: left alone
+        // on a quiet curve, put on the file's where the curve turns by nearly a jump.
+        let s = [40.0, 89.7, -35.0];
+        let e = twisted(s, ORDER, 5);
+        assert!((off(e, s) - 10.0).abs() < 1e-9);
+        assert!(from_euler(ORDER, e).angle_to(&from_euler(ORDER, s)) < 0.03f64.to_radians());
+        for (turns, want) in [(false, e), (true, s)] {
+            let mut enc = Encoder::new();
+            let got = Twists::new(1)
+                .code(&mut enc, 0, ORDER, e, Some(Source { s, turns }))
+                .unwrap();
+            assert!(
+                off(got, want) < 1e-9,
+                "turns {turns}: {got:?}, not {want:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_files_turns_are_judged_across_a_chunks_edges() {
+        // One joint, first angle 0, 0, 80, 80, 80: the turn into frame 2 is seen from the
+        // chunk that starts there, and from the one that ends just before.
+        let values: Vec<f64> = [0.0, 0.0, 80.0, 80.0, 80.0]
+            .iter()
+            .flat_map(|a| [*a, 89.0, 0.0])
+            .collect();
+        let idx = [0, 1, 2];
+        let late = Around::new(&values, 3, 2, 3);
+        assert_eq!(late.chunk(), &values[6..]);
+        let turns: Vec<bool> = (0..3).map(|f| late.source(idx, f).turns).collect();
+        assert_eq!(turns, [true, false, false]);
+        let early = Around::new(&values, 3, 0, 2);
+        assert_eq!(early.chunk(), &values[..6]);
+        let turns: Vec<bool> = (0..2).map(|f| early.source(idx, f).turns).collect();
+        assert_eq!(turns, [false, true]);
+    }
+
+    #[test]
     fn away_from_lock_nothing_is_coded_or_moved() {
         let mut tw = Twists::new(2);
         let mut enc = Encoder::new();
         let empty = Encoder::new().finish();
         let e = [10.0, 40.0, -70.0];
         for _ in 0..50 {
-            let given = Some([80.0, 40.0, -140.0]);
+            let given = Some(Source {
+                s: [80.0, 40.0, -140.0],
+                turns: true,
+            });
             assert_eq!(tw.code(&mut enc, 1, ORDER, e, given).unwrap(), e);
         }
         assert_eq!(enc.finish(), empty);

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
-use mocapstore::codec::{self, CodecId, ErrorBound, Reader, Shared, Stored};
+use mocapstore::codec::{self, branches, CodecId, ErrorBound, Reader, Shared, Stored};
 use mocapstore::motion::formats::{self, Format};
 
 /// A jump between frames larger than this is a flip on a curve (degrees).
@@ -41,8 +41,43 @@ fn jumps(values: &[f64], channels: usize, rot: &[usize]) -> usize {
         .sum()
 }
 
+/// A decoded jump over [`JUMP`] where the source's is not: (frame, channel, the source's
+/// triple at the frame before and at the frame, the decoded triple at both).
+type Extra = (usize, usize, [[f64; 3]; 2], [[f64; 3]; 2]);
+
+/// Every [`Extra`] jump of `decoded` against `source` (`frames × channels` each), on the
+/// Euler triples of `turnings`.
+fn extra_jumps(
+    source: &[f64],
+    decoded: &[f64],
+    channels: usize,
+    turnings: &[branches::Turning],
+) -> Vec<Extra> {
+    let mut out = Vec::new();
+    let frames = source.len() / channels.max(1);
+    let triple = |v: &[f64], f: usize, t: &branches::Turning| t.idx.map(|i| v[f * channels + i]);
+    for f in 1..frames {
+        for t in turnings {
+            for c in t.idx {
+                let step = |v: &[f64]| (v[f * channels + c] - v[(f - 1) * channels + c]).abs();
+                if step(decoded) > JUMP && step(source) <= JUMP {
+                    out.push((
+                        f,
+                        c,
+                        [triple(source, f - 1, t), triple(source, f, t)],
+                        [triple(decoded, f - 1, t), triple(decoded, f, t)],
+                    ));
+                }
+            }
+        }
+    }
+    out
+}
+
 pub fn run(files: &[PathBuf], bound_mm: f64, out: &Path) -> ExitCode {
     let mut rows = Vec::new();
+    // Where a decoded curve jumps over 90° and the source's does not.
+    let mut extra = Vec::new();
     for path in files
         .iter()
         .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
@@ -75,6 +110,7 @@ pub fn run(files: &[PathBuf], bound_mm: f64, out: &Path) -> ExitCode {
                 continue;
             }
         };
+        let turnings = branches::turnings(&rig);
         for codec in CODECS {
             let enc = match codec::encode(&m, codec, ErrorBound::max(bound_mm), Default::default())
             {
@@ -99,6 +135,15 @@ pub fn run(files: &[PathBuf], bound_mm: f64, out: &Path) -> ExitCode {
                     return ExitCode::FAILURE;
                 }
             };
+            extra.extend(extra_jumps(&s.values, &decoded, channels.len(), &turnings).into_iter().map(
+                |(f, c, src, dec)| {
+                    format!(
+                        "- {} {codec} frame {f} channel {c}: the source {:.2?} → {:.2?}, decoded {:.2?} → {:.2?}",
+                        super::short_name(path),
+                        src[0], src[1], dec[0], dec[1]
+                    )
+                },
+            ));
             let (mut largest, mut flipped) = (0.0f64, 0);
             for (d, v) in decoded
                 .chunks_exact(channels.len())
@@ -149,6 +194,13 @@ pub fn run(files: &[PathBuf], bound_mm: f64, out: &Path) -> ExitCode {
         );
         println!("{codec}: {more} of {} files decode with more jumps over 90° than their source; largest channel difference {largest:.2}°", of.len());
     }
+    if !extra.is_empty() {
+        table += "\nJumps over 90° that the source does not make (first, middle, last angle):\n\n";
+        for e in &extra {
+            table += e;
+            table.push('\n');
+        }
+    }
     print!("{table}");
     if let Err(e) =
         std::fs::create_dir_all(out).and_then(|_| std::fs::write(out.join("euler.md"), &table))
@@ -168,5 +220,21 @@ mod tests {
         let v = [0.0, 10.0, 500.0, 170.0, 0.0, -170.0, 0.0, -160.0];
         assert_eq!(super::jumps(&v, 2, &[1]), 2);
         assert_eq!(super::jumps(&v, 2, &[]), 0);
+    }
+
+    /// A decoded jump is listed only where the source's step is not over 90° too.
+    #[test]
+    fn jumps_the_source_does_not_make_are_listed() {
+        use mocapstore::codec::branches::Turning;
+        let t = Turning {
+            idx: [0, 1, 2],
+            order: [2, 0, 1],
+        };
+        // Frame 1: both jump (source 100°); frame 2: only the decoded curve (89° → 91°).
+        let source = [0.0, 0.0, 0.0, 100.0, 0.0, 0.0, 11.0, 0.0, 0.0];
+        let decoded = [0.0, 0.0, 0.0, 100.0, 0.0, 0.0, 9.0, 0.0, 0.0];
+        let extra = super::extra_jumps(&source, &decoded, 3, &[t]);
+        assert_eq!(extra.len(), 1);
+        assert_eq!((extra[0].0, extra[0].1), (2, 0));
     }
 }

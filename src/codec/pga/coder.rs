@@ -12,7 +12,7 @@ use crate::codec::branches::{self, Turning};
 use crate::codec::entropy::io::Io;
 use crate::codec::error::Result;
 use crate::codec::skeleton::printed;
-use crate::codec::twists;
+use crate::codec::twists::{self, Around};
 
 /// What codes and decodes chunks: the layout, the parameters, and what follows from them.
 pub struct Coder {
@@ -62,7 +62,7 @@ impl Coder {
         s: u32,
         twists: bool,
         frames: usize,
-        given: Option<(&Trajectories, &[f64])>,
+        given: Option<(&Trajectories, Around)>,
     ) -> Result<Vec<f64>> {
         let s = io.raw(s, 8);
         let twists = self.params.version >= 4 && io.raw(u32::from(twists), 1) == 1;
@@ -98,7 +98,7 @@ impl Coder {
             twists::code_frames(io, &self.turnings, cc, given.map(|g| g.1), &mut out)?;
         }
         if self.params.version >= 3 {
-            branches::code(io, &self.turnings, cc, given.map(|g| g.1), &mut out)?;
+            branches::code(io, &self.turnings, cc, given.map(|g| g.1.chunk()), &mut out)?;
         }
         Ok(out)
     }

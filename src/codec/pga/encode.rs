@@ -19,6 +19,7 @@ use crate::codec::error::{Error, Result};
 use crate::codec::measure::max_mean;
 use crate::codec::rate::{narrow, ChunkSteps, Smallest};
 use crate::codec::skeleton::{printed, Skeleton};
+use crate::codec::twists::Around;
 use crate::codec::{default_chunk_frames, ChunkOut, CodecOutput, Input, Target};
 use crate::motion::Animation;
 
@@ -294,7 +295,7 @@ impl<'a> Take<'a> {
             let original = &self.input.data[f0 * w..(f0 + len) * w];
             let valid = self.input.valid.map(|v| &v[f0 * w / 3..(f0 + len) * w / 3]);
             let cc = self.layout.channels();
-            let source = &self.values[f0 * cc..(f0 + len) * cc];
+            let source = Around::new(self.values, cc, f0, len);
             let meets = |twists: bool, s: u32| -> Result<bool> {
                 let decoded = coder.code(&mut Dry, s, twists, len, Some((given, source)))?;
                 let mut positions = vec![0f32; len * w];

@@ -130,7 +130,9 @@ pub(super) fn code_chunk<I: Io>(
                     h.quats = [Some(q), h.quats[0]];
                     // Twisted near lock before the children are aimed from it.
                     let shown = match twists.as_mut() {
-                        Some(tw) => tw.code(io, p, order, e, row.map(|r| idx.map(|i| r[i])))?,
+                        Some(tw) => {
+                            tw.code(io, p, order, e, given.map(|g| g.around.source(idx, f)))?
+                        }
                         None => e,
                     };
                     if let Some((_, pose)) = aim.as_mut() {

@@ -35,6 +35,7 @@ use super::rate::{ChunkSteps, Smallest};
 use super::skeletal::{no_skeleton, read_whole, rig_of, ChannelDecoder, Posed};
 pub(super) use super::skeleton::printed;
 use super::skeleton::{Channels, Skeleton};
+use super::twists;
 use super::{
     default_chunk_frames, ChunkDecoder, ChunkOut, Codec, CodecId, CodecOutput, Input, Shared,
     Target,
@@ -274,6 +275,8 @@ impl Steps {
 /// what aiming needs (when the chunk is aimed).
 pub(super) struct Given<'a> {
     values: &'a [f64],
+    /// `values` with the frames either side (for the twists' judgement).
+    around: twists::Around<'a>,
     coeffs: &'a transform::Coeffs,
     aim: Option<aim::Aim<'a>>,
 }
@@ -387,6 +390,7 @@ impl<'a> Take<'a> {
             *n,
             Some(&Given {
                 values,
+                around: twists::Around::new(self.values, cc, *f0, *n),
                 coeffs,
                 aim,
             }),

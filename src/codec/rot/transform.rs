@@ -187,7 +187,7 @@ pub(super) fn code_chunk<I: Io>(
                     // Twisted near lock before the children are aimed from it.
                     let shown = match twists.as_mut() {
                         Some(tw) => {
-                            let source = given.map(|g| idx.map(|i| g.values[t * cc + i]));
+                            let source = given.map(|g| g.around.source(idx, t));
                             tw.code(io, p, order, e, source)?
                         }
                         None => e,
