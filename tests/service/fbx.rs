@@ -238,6 +238,171 @@ async fn assimp_fbx_of_corpus_bvh_reads_as_the_bvh_and_as_assimp() {
     t.finish().await;
 }
 
+/// `text` (an ASCII FBX) with a second animation stack, "Slow": a copy of the first one
+/// (its stack, layer, curve nodes and curves, at new ids, bound to the same nodes) with
+/// every key, and the stack's start and stop, at twice its time. What an FBX of several takes (MotionBuilder's, a Mixamo
+/// pack's) holds, made from assimp's file of one.
+fn with_slow_stack(text: &str) -> String {
+    let lines: Vec<&str> = text.lines().collect();
+    let start = lines
+        .iter()
+        .position(|l| l.starts_with("\tAnimationStack: "))
+        .expect("an animation stack");
+    let objects_end = start
+        + lines[start..]
+            .iter()
+            .position(|l| *l == "}")
+            .expect("the end of Objects");
+    // Every object from the stack on is animation (assimp writes them last).
+    let id_of = |l: &str| -> Option<u64> {
+        let rest = l.strip_prefix('\t')?;
+        let (kind, rest) = rest.split_once(": ")?;
+        if kind.contains(' ') || kind.contains('\t') {
+            return None;
+        }
+        rest.split_once(',')?.0.parse().ok()
+    };
+    let ids: std::collections::HashSet<u64> = lines[start..objects_end]
+        .iter()
+        .filter_map(|l| id_of(l))
+        .collect();
+    const SHIFT: u64 = 5_000_000;
+    let moved = |id: u64| if ids.contains(&id) { id + SHIFT } else { id };
+    let mut copy = Vec::new();
+    let mut times = false;
+    for l in &lines[start..objects_end] {
+        times &= !l.trim_start().starts_with('}');
+        if let Some(id) = id_of(l) {
+            copy.push(
+                l.replacen(&id.to_string(), &(id + SHIFT).to_string(), 1)
+                    .replace("AnimStack::Motion", "AnimStack::Slow"),
+            );
+        } else if l.contains("\"KTime\"") {
+            // The stack's start and stop: twice as late too.
+            let (head, t) = l.rsplit_once(", ").expect("a time");
+            copy.push(format!("{head}, {}", 2 * t.trim().parse::<i64>().unwrap()));
+        } else if times {
+            // The key times: "a: t,t,…" over as many lines as the writer wraps them.
+            let (head, keys) = match l.split_once("a: ") {
+                Some((indent, keys)) => (format!("{indent}a: "), keys),
+                None => (String::new(), *l),
+            };
+            let doubled: Vec<String> = keys
+                .split(',')
+                .map(|k| match k.trim() {
+                    "" => String::new(),
+                    k => (2 * k.parse::<i64>().unwrap()).to_string(),
+                })
+                .collect();
+            copy.push(format!("{head}{}", doubled.join(",")));
+        } else {
+            copy.push(l.to_string());
+        }
+        times |= l.trim_start().starts_with("KeyTime: ");
+    }
+    let mut out: Vec<String> = lines[..objects_end].iter().map(|l| l.to_string()).collect();
+    out.extend(copy);
+    let connections = objects_end
+        + lines[objects_end..]
+            .iter()
+            .position(|l| l.starts_with("Connections:"))
+            .expect("connections");
+    out.extend(
+        lines[objects_end..=connections]
+            .iter()
+            .map(|l| l.to_string()),
+    );
+    for l in &lines[connections + 1..] {
+        out.push(l.to_string());
+        let Some(rest) = l.trim_start().strip_prefix("C: ") else {
+            continue;
+        };
+        let parts: Vec<&str> = rest.split(", ").collect();
+        let (a, b): (u64, u64) = (parts[1].parse().unwrap(), parts[2].parse().unwrap());
+        if ids.contains(&a) {
+            let mut p = parts.clone();
+            let (a, b) = (moved(a).to_string(), moved(b).to_string());
+            p[1] = &a;
+            p[2] = &b;
+            out.push(format!("\tC: {}", p.join(", ")));
+        }
+    }
+    out.join("\n") + "\n"
+}
+
+/// An FBX of two animation stacks is two takes, named for their stacks and labelled with
+/// them, each read in full; one is picked by `animation=`. The file: assimp's ASCII FBX of
+/// a Bandai walk with a second stack at half speed ([`with_slow_stack`]), so frame `2k` of
+/// the slow take is frame `k` of the other.
+#[tokio::test(flavor = "multi_thread")]
+async fn each_animation_stack_of_an_fbx_is_a_take() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    if std::env::var("MOCAP_TEST_ASSIMP").is_err() {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("mocapstore-fbx-stacks-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let fbx = dir.join("walk.fbx");
+    let o = std::process::Command::new("assimp")
+        .arg("export")
+        .arg(root.join("bvh/bandai/dataset-1_walk_active_001.bvh"))
+        .arg(&fbx)
+        .arg("-ffbxa")
+        .output()
+        .expect("MOCAP_TEST_ASSIMP is set: assimp must be installed");
+    assert!(o.status.success(), "{o:?}");
+    let file = with_slow_stack(&std::fs::read_to_string(&fbx).unwrap()).into_bytes();
+    let _ = std::fs::remove_dir_all(&dir);
+
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let (status, report) = srv.post("name=walk&codec=raw", file.clone()).await;
+    assert_eq!(status, 201, "{report}");
+    assert_eq!(report["name"], "walk/Motion", "{report}");
+    let more = report["more"].as_array().expect("the second stack");
+    assert_eq!(more.len(), 1, "{report}");
+    assert_eq!(more[0]["name"], "walk/Slow", "{report}");
+    let mut read = Vec::new();
+    for r in [&report, &more[0]] {
+        let id = r["id"].as_str().unwrap();
+        let (_, take) = srv.get_json(&format!("/v1/takes/{id}")).await;
+        assert_eq!(
+            take["labels"]["animation"],
+            r["name"].as_str().unwrap()[5..]
+        );
+        let (status, frames) = srv.get_json(&format!("/v1/takes/{id}/frames")).await;
+        assert_eq!(status, 200, "{frames}");
+        read.push((take, frames));
+    }
+    let (fast, slow) = (&read[0], &read[1]);
+    let n = fast.0["frames"].as_u64().unwrap() as usize;
+    assert!(n > 10, "{}", fast.0);
+    assert_eq!(slow.0["frames"].as_u64().unwrap() as usize, 2 * n - 1);
+    assert_eq!(slow.0["fps"], fast.0["fps"]);
+    let worst = (0..n)
+        .flat_map(|k| {
+            let (a, b) = (&fast.1["frames"][k], &slow.1["frames"][2 * k]);
+            let points = a.as_array().unwrap().len();
+            (0..points * 3).map(move |i| {
+                (a[i / 3][i % 3].as_f64().unwrap() - b[i / 3][i % 3].as_f64().unwrap()).abs()
+            })
+        })
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-3,
+        "the slow stack's frame 2k is the other's k: {worst}"
+    );
+
+    let (status, one) = srv.post("name=only&animation=Slow&codec=raw", file).await;
+    assert_eq!(status, 201, "{one}");
+    assert_eq!(one["name"], "only/Slow");
+    assert!(one.get("more").is_none(), "{one}");
+    srv.stop().await;
+    t.finish().await;
+}
+
 /// The metres a unit of take `id` is.
 async fn take_unit(srv: &common::Server, id: &str) -> f64 {
     let (_, take) = srv.get_json(&format!("/v1/takes/{id}")).await;
