@@ -211,9 +211,13 @@ async fn export_files(
                 blake3,
                 frames,
                 fps,
+                metres_per_unit,
+                points,
             } => {
                 (e.bytes, e.blake3) = (Some(bytes), Some(blake3));
                 (e.frames, e.fps) = (frames.unwrap_or(e.frames), fps.unwrap_or(e.fps));
+                e.metres_per_unit = metres_per_unit.unwrap_or(e.metres_per_unit);
+                e.points = export::points_written(std::mem::take(&mut e.points), points);
                 writeln!(journal, "{}", json(&*e)).map_err(|err| io(&dir.join(JOURNAL), err))?;
                 written += 1;
             }
@@ -383,6 +387,9 @@ enum Fetched {
         blake3: String,
         frames: Option<usize>,
         fps: Option<f64>,
+        metres_per_unit: Option<f64>,
+        /// Points per frame (`None` for a file of joints, BVH).
+        points: Option<usize>,
     },
     /// The take cannot be written in this format (the service said why).
     Skipped(String),
@@ -439,6 +446,8 @@ async fn fetch(
     };
     let frames = header("x-frames").and_then(|v| v.parse().ok());
     let fps = header("x-fps").and_then(|v| v.parse().ok());
+    let metres_per_unit = header("x-metres-per-unit").and_then(|v| v.parse().ok());
+    let points = header("x-points").and_then(|v| v.parse().ok());
     let io = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(|e| io(parent, e))?;
@@ -467,5 +476,7 @@ async fn fetch(
         blake3: hasher.finalize().to_hex().to_string(),
         frames,
         fps,
+        metres_per_unit,
+        points,
     })
 }

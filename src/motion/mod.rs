@@ -12,6 +12,7 @@ pub mod layout;
 pub mod metrics;
 pub mod model;
 pub mod outputs;
+pub mod rate;
 pub mod rotation;
 pub mod skeleton;
 pub mod synthetic;

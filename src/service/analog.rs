@@ -355,7 +355,7 @@ pub async fn answer(
         start_frame: start,
         frames: end - start,
         rate: take.fps * per_frame as f64,
-        t0: start as f64 / take.fps,
+        t0: start as f64 / crate::motion::rate::nominal(take.fps),
         columns,
         values,
         reservation,

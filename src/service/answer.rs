@@ -453,7 +453,18 @@ async fn plan(
     req: &RangeRequest,
 ) -> Result<Planned> {
     let req = req.clone();
-    let (prepared, (start, end)) = prepare(store, caches, id, req.range).await?;
+    let (prepared, (start, asked_end)) = prepare(store, caches, id, req.range).await?;
+    let transform = transform_for(req.format, req.transform)?;
+    // Resampled, the range's last output frames may lie past its last source frame: they
+    // are interpolated from the frames after it (C3D keeps its range: its analog and
+    // outputs go frame for frame with the points).
+    let (end, frames_out) = super::shape::span(
+        &prepared,
+        &transform,
+        req.format != Format::C3d,
+        (start, asked_end),
+        req.range.seconds_from(start, asked_end, prepared.fps),
+    );
     let header = prepared.reader.header();
     let chunks = prepared.reader.chunks_for(start..end)?;
     let metas = &header.chunks[chunks.clone()];
@@ -470,14 +481,12 @@ async fn plan(
     let max_payload = metas.iter().map(|c| u64::from(c.len)).max().unwrap_or(0);
     let all_payloads: u64 = metas.iter().map(|c| u64::from(c.len)).sum();
     let frames = end - start;
-    let transform = transform_for(req.format, req.transform)?;
-    let frames_out = super::shape::frames_out(&prepared, &transform, frames);
     // Resampling up makes a block of output frames from a block of decoded ones.
     let grow = |n: u64| (n as f64 * frames_out as f64 / frames.max(1) as f64).ceil() as u64 + 2;
     let span = Span {
         id,
         start,
-        end,
+        end: asked_end,
         frames: frames_out,
         chunk_frames,
         part_frames,
@@ -501,7 +510,8 @@ async fn plan(
             let rig = channels_rig(store, &prepared).await?;
             let shaper = (!transform.is_identity())
                 .then(|| Shaper::channels(&prepared, rig.joints(), &transform, frames))
-                .transpose()?;
+                .transpose()?
+                .map(|s| s.limited(frames_out));
             Plan::channels(
                 &rig,
                 &prepared,
@@ -526,7 +536,7 @@ async fn plan(
                     "take {id} is being streamed; C3D is written once it is finished"
                 )));
             }
-            let shaper = Shaper::points(&prepared, &transform, frames, None)?;
+            let shaper = Shaper::points(&prepared, &transform, frames, None)?.limited(frames_out);
             let decoder = super::analog::decoder(store, id).await?;
             let analog = match decoder {
                 None => None,
@@ -598,9 +608,9 @@ async fn plan(
                 codec::codec(prepared.reader.header().codec).is_ok_and(|c| c.codes_channels());
             let shaper = if keeps {
                 let rig = channels_rig(store, &prepared).await?;
-                Shaper::channels(&prepared, rig.joints(), &transform, frames)?
+                Shaper::channels(&prepared, rig.joints(), &transform, frames)?.limited(frames_out)
             } else {
-                Shaper::points(&prepared, &transform, frames, None)?
+                Shaper::points(&prepared, &transform, frames, None)?.limited(frames_out)
             };
             let nodes = shaper
                 .joints()
@@ -661,7 +671,8 @@ async fn plan(
                 .as_deref()
                 .map(|n| point_indices(&prepared, n))
                 .transpose()?;
-            let shaper = Shaper::points(&prepared, &transform, frames, selected)?;
+            let shaper =
+                Shaper::points(&prepared, &transform, frames, selected)?.limited(frames_out);
             let names = shaper.point_names(&prepared);
             let span = Span {
                 chunk_frames: grow(chunk_frames),

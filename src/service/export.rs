@@ -47,11 +47,28 @@ use crate::motion::formats::Format;
 use crate::motion::transform::Options;
 use crate::store::{SortKey, Store};
 
+/// The names of the points a written file holds, in order: the take's `points`, then those
+/// the transforms add after them (`root=extract`'s path and heading) up to the answer's
+/// `count`; none when the file holds joints, not points (BVH: `count` is `None`).
+pub fn points_written(mut points: Vec<String>, count: Option<usize>) -> Vec<String> {
+    let Some(count) = count else {
+        return Vec::new();
+    };
+    let extra = [
+        crate::motion::transform::ROOT_MOTION,
+        crate::motion::transform::ROOT_MOTION_FORWARD,
+    ];
+    let added = count.saturating_sub(points.len()).min(extra.len());
+    points.truncate(count);
+    points.extend(extra[..added].iter().map(|n| n.to_string()));
+    points
+}
+
 /// The manifest's file name, in the ZIP and in an export folder.
 pub const MANIFEST: &str = "manifest.csv";
 
 /// The manifest's columns, in order.
-pub const COLUMNS: [&str; 17] = [
+pub const COLUMNS: [&str; 19] = [
     "file",
     "id",
     "name",
@@ -61,6 +78,8 @@ pub const COLUMNS: [&str; 17] = [
     "frames",
     "fps",
     "source_fps",
+    "metres_per_unit",
+    "points",
     "codec",
     "max_bound_mm",
     "mean_bound_mm",
@@ -108,6 +127,13 @@ pub struct Entry {
     pub frames: usize,
     pub fps: f64,
     pub source_fps: f64,
+    /// The file's unit (the take's, or `unit=`'s), and the names of its points in order
+    /// (none for BVH, which names its joints itself): what reading an `.npy` or `.json`
+    /// back needs without the server.
+    #[serde(default)]
+    pub metres_per_unit: f64,
+    #[serde(default)]
+    pub points: Vec<String>,
     pub codec: String,
     pub max_bound_mm: f64,
     pub mean_bound_mm: Option<f64>,
@@ -135,6 +161,9 @@ impl Entry {
             frames: take.frames,
             fps: take.fps,
             source_fps: take.fps,
+            metres_per_unit: take.metres_per_unit,
+            // Counted in the manifest's reservation now; the written file's once written.
+            points: take.meta.point_names.clone(),
             codec: take.codec.to_string(),
             max_bound_mm: take.bound.max_mm(),
             mean_bound_mm: take.bound.mean_mm(),
@@ -166,6 +195,8 @@ impl Entry {
             frames: 0,
             fps: 0.0,
             source_fps: 0.0,
+            metres_per_unit: 0.0,
+            points: Vec::new(),
             codec: String::new(),
             max_bound_mm: 0.0,
             mean_bound_mm: None,
@@ -197,6 +228,12 @@ impl Entry {
             self.frames.to_string(),
             self.fps.to_string(),
             self.source_fps.to_string(),
+            self.metres_per_unit.to_string(),
+            csv_text(&if self.points.is_empty() {
+                String::new()
+            } else {
+                serde_json::to_string(&self.points).unwrap_or_default()
+            }),
             csv_text(&self.codec),
             self.max_bound_mm.to_string(),
             opt(self.mean_bound_mm.map(|m| m.to_string())),
@@ -648,6 +685,8 @@ impl Export {
         let e = &mut self.entries[self.at];
         e.frames = a.frames_out;
         e.fps = a.fps;
+        e.metres_per_unit = a.metres_per_unit;
+        e.points = points_written(std::mem::take(&mut e.points), a.points);
         let options = file_options(e.created_at, a.len_bound);
         let name = e.file.clone();
         self.answer = Some(a);
@@ -701,6 +740,21 @@ fn file_options(created_ms: i64, len_bound: u64) -> SimpleFileOptions {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_files_points_are_the_takes_and_what_the_transforms_add() {
+        let take = || vec!["a".to_string(), "b".to_string()];
+        assert_eq!(points_written(take(), Some(2)), ["a", "b"]);
+        assert_eq!(
+            points_written(take(), Some(4)),
+            ["a", "b", "root_motion", "root_motion_forward"]
+        );
+        assert_eq!(points_written(take(), Some(3)), ["a", "b", "root_motion"]);
+        assert!(
+            points_written(take(), None).is_empty(),
+            "BVH names its joints"
+        );
+    }
 
     #[test]
     fn names_are_safe_and_unique_ignoring_case() {

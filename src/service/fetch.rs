@@ -5,6 +5,7 @@ use super::take::Take;
 use super::{blocking, Error, Result};
 use crate::codec::container::ChunkMeta;
 use crate::codec::{self, basis::hex, DecodeLimits, Header, Reader, Shared, Stored};
+use crate::motion::rate;
 use crate::store::{ChunkEntry, Store, TakeRow};
 
 /// A range as the user states it: frame indices (end exclusive) or seconds.
@@ -24,21 +25,14 @@ pub enum TimeRange {
 
 impl TimeRange {
     /// Frame indices `start..end` within a take of `frames` frames at `fps`. Seconds select
-    /// every frame whose time `f / fps` lies in `[t0, t1)`.
+    /// every frame whose time `f / rate` lies in `[t0, t1)`, `rate` the rate `fps` was
+    /// written for ([`rate::nominal`]: a BVH's `Frame Time: 0.0333333` is 30 fps, so a
+    /// second holds 30 frames, not 31). Errors speak in the units the range was given in.
     pub fn resolve(self, frames: usize, fps: f64) -> Result<(usize, usize)> {
         let (start, end) = match self {
             TimeRange::All => (0, frames),
             TimeRange::Frames { start, end } => (start, end.unwrap_or(frames)),
-            TimeRange::Seconds { t0, t1 } => {
-                let t1 = t1.unwrap_or(frames as f64 / fps);
-                if !(t0.is_finite() && t1.is_finite() && t0 >= 0.0) {
-                    return Err(Error::InvalidRequest(format!(
-                        "times must be finite and ≥ 0, got {t0}..{t1}"
-                    )));
-                }
-                let at = |t: f64| (t * fps - 1e-6).ceil().max(0.0) as usize;
-                (at(t0), at(t1))
-            }
+            TimeRange::Seconds { t0, t1 } => return seconds(t0, t1, frames, fps),
         };
         if start >= end {
             return Err(Error::InvalidRequest(format!("empty range {start}..{end}")));
@@ -50,6 +44,49 @@ impl TimeRange {
         }
         Ok((start, end))
     }
+}
+
+impl TimeRange {
+    /// The seconds from frame `start` (of a take at `fps`) to the range's end: to `t1` when
+    /// the range was given in seconds, else to frame `end`. The frames of a resampled
+    /// answer are those before it.
+    pub fn seconds_from(self, start: usize, end: usize, fps: f64) -> f64 {
+        let rate = rate::nominal(fps);
+        match self {
+            TimeRange::Seconds { t1: Some(t1), .. } => t1 - start as f64 / rate,
+            _ => (end - start) as f64 / rate,
+        }
+    }
+}
+
+/// [`TimeRange::resolve`] of `t0..t1` seconds.
+fn seconds(t0: f64, t1: Option<f64>, frames: usize, fps: f64) -> Result<(usize, usize)> {
+    let rate = rate::nominal(fps);
+    let length = frames as f64 / rate;
+    let t1 = t1.unwrap_or(length);
+    if !(t0.is_finite() && t1.is_finite() && t0 >= 0.0) {
+        return Err(Error::InvalidRequest(format!(
+            "times must be finite and ≥ 0, got t0={t0} t1={t1}"
+        )));
+    }
+    let (start, end) = (
+        rate::first_frame_from(t0, fps),
+        rate::first_frame_from(t1, fps),
+    );
+    let lasts = || format!("the take lasts {length:.6} s ({frames} frames at {rate} fps)");
+    if end > frames as f64 {
+        return Err(Error::OutOfRange(format!(
+            "t1={t1} s is past the take's end: {}",
+            lasts()
+        )));
+    }
+    if start >= end {
+        return Err(Error::InvalidRequest(format!(
+            "t0={t0} s to t1={t1} s holds no frame: {}",
+            lasts()
+        )));
+    }
+    Ok((start as usize, end as usize))
 }
 
 /// The take stored under `id`, parsed.
@@ -201,5 +238,13 @@ mod tests {
             Err(Error::OutOfRange(_))
         ));
         assert!(secs(f64::NAN, Some(1.0)).resolve(10, 1.0).is_err());
+        // A BVH's printed 30 fps: a second is 30 frames; past the end is said in seconds.
+        let bvh = 1.0 / 0.0333333;
+        assert_eq!(secs(0.0, Some(1.0)).resolve(100, bvh).unwrap(), (0, 30));
+        assert_eq!(secs(3.0, None).resolve(100, bvh).unwrap(), (90, 100));
+        let Err(Error::OutOfRange(e)) = secs(0.0, Some(4.0)).resolve(100, bvh) else {
+            panic!("4 s of a 3.33 s take");
+        };
+        assert!(e.contains("t1=4 s") && e.contains("3.333333 s"), "{e}");
     }
 }

@@ -111,7 +111,7 @@ pub async fn answer(
         start_frame: start,
         frames: end - start,
         rate: take.fps,
-        t0: start as f64 / take.fps,
+        t0: start as f64 / crate::motion::rate::nominal(take.fps),
         columns,
         values,
         reservation,

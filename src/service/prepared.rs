@@ -123,18 +123,36 @@ impl Prepared {
         })
     }
 
-    /// The indices of the named points, or a 400 naming the first that is not in the take.
+    /// The indices of the named points, or a 400 naming the first that is not in the take
+    /// and the take's points (the first [`LISTED`] of them), so the caller can fix the name.
     pub fn point_indices(&self, names: &[String]) -> super::Result<Vec<usize>> {
         names
             .iter()
             .map(|w| {
                 self.point_names.iter().position(|n| n == w).ok_or_else(|| {
-                    super::Error::InvalidRequest(format!("no point named {w:?} in this take"))
+                    let shown: Vec<&str> = self
+                        .point_names
+                        .iter()
+                        .take(LISTED)
+                        .map(String::as_str)
+                        .collect();
+                    let more = match self.point_names.len().saturating_sub(LISTED) {
+                        0 => String::new(),
+                        n => format!(" and {n} more (GET /v1/takes/ID lists them all)"),
+                    };
+                    super::Error::InvalidRequest(format!(
+                        "no point named {w:?} in this take; its {} points are {}{more}",
+                        self.point_names.len(),
+                        shown.join(", ")
+                    ))
                 })
             })
             .collect()
     }
 }
+
+/// How many of a take's point names an error lists.
+const LISTED: usize = 20;
 
 /// Entries by id, and ids in insertion order (for eviction).
 type Entries = (HashMap<String, Arc<Prepared>>, VecDeque<String>);

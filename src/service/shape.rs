@@ -46,11 +46,31 @@ pub fn check(options: &Options) -> Result<()> {
     options.check().map_err(Error::InvalidRequest)
 }
 
-/// Frames an answer of `frames` source frames has after `options`.
-pub fn frames_out(prepared: &Prepared, options: &Options, frames: usize) -> usize {
+/// The source frames an answer of range `start..end` decodes (from `start`) and the frames
+/// it has after `options`. Resampled, its frames are those whose time lies in the range,
+/// `seconds` long from frame `start` (`t0 ≤ t < t1`: a second of a 24 fps take at 30 fps
+/// is 30 frames); those past the range's last source frame are interpolated from the
+/// frames after it, which are decoded too where the take has them and `extend` allows.
+pub fn span(
+    prepared: &Prepared,
+    options: &Options,
+    extend: bool,
+    (start, end): (usize, usize),
+    seconds: f64,
+) -> (usize, usize) {
     match options.fps {
-        Some(fps) if fps != prepared.fps => output_frames(frames, prepared.fps, fps),
-        _ => frames,
+        Some(fps) if fps != prepared.fps => {
+            let t = seconds * fps;
+            let within = (t - 1e-9 * t.max(1.0)).ceil().max(1.0) as usize;
+            let decoded = if extend {
+                (end + 2).min(prepared.frames.max(end))
+            } else {
+                end
+            };
+            let can = output_frames(decoded - start, prepared.fps, fps);
+            (decoded, within.min(can))
+        }
+        _ => (end, end - start),
     }
 }
 
@@ -67,6 +87,24 @@ fn resampler<I: crate::motion::transform::resample::Interpolant>(
 }
 
 impl Shaper {
+    /// This shaper making at most `frames` output frames (the range's, of more source
+    /// frames decoded: [`span`]).
+    pub fn limited(mut self, frames: usize) -> Shaper {
+        match &mut self {
+            Shaper::Points { resampler, .. } => {
+                if let Some(r) = resampler {
+                    r.limit(frames);
+                }
+            }
+            Shaper::Channels { resampler, .. } => {
+                if let Some(r) = resampler {
+                    r.limit(frames);
+                }
+            }
+        }
+        self
+    }
+
     /// The shaper of positions of `frames` source frames, keeping the points `selected`
     /// (all when `None`; with `root=extract`, `root_motion` is kept as well).
     pub fn points(

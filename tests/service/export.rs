@@ -165,6 +165,13 @@ async fn library_export_streams_the_corpus_bvh_as_one_zip() {
         assert_eq!(row["blake3"], blake3_hex(bytes), "{name}");
         assert_eq!(row["fps"], "30");
         assert_eq!(row["library"], "corpus");
+        // The file's unit; its points are named in the file itself (glTF nodes), so the
+        // manifest names none (an NPY's are named: the Python client's test).
+        assert!(
+            row["metres_per_unit"].parse::<f64>().unwrap() > 0.0,
+            "{row:?}"
+        );
+        assert_eq!(row["points"], "", "{row:?}");
         assert!(row["max_error_mm"].parse::<f64>().unwrap() <= 1.0 + 1e-9);
     }
     // The one read path: a file in the ZIP is the range answer, byte for byte.

@@ -92,6 +92,12 @@ impl<I: Interpolant> Resampler<I> {
         }
     }
 
+    /// At most `frames` output frames: the source frames pushed run past the range whose
+    /// frames are asked for, only to interpolate its last ones.
+    pub fn limit(&mut self, frames: usize) {
+        self.output_frames = self.output_frames.min(frames);
+    }
+
     /// Output frames in all.
     pub fn output_frames(&self) -> usize {
         self.output_frames
