@@ -5,8 +5,12 @@ server's code, and a clear refusal of a server of another API."""
 from __future__ import annotations
 
 import asyncio
+import csv
 import http.server
+import io
 import json
+import math
+import socket
 import tempfile
 import threading
 import uuid
@@ -21,6 +25,7 @@ import pytest
 
 import mocapstore
 from mocapstore import _protocol
+from mocapstore.data import nominal_rate
 
 NAMES = ["head", "lhand", "rhand", "lfoot", "rfoot"]
 
@@ -452,3 +457,102 @@ def test_joint_names_with_spaces(client: mocapstore.Client) -> None:
     assert ch.skeleton.names == ("Hips", "Left Leg", "Left Leg_End")
     assert ch.joint("Left Leg").tolist() == [[3.0, 4.0, 5.0]] * 3
     assert client.frames(take.id).point_names == ch.skeleton.names
+
+
+def test_errors_say_what_to_do(client: mocapstore.Client) -> None:
+    t = client.ingest(walker(120), library=library(), fps=60, point_names=NAMES, name="walk one")
+    with pytest.raises(ValueError, match=r"has no scheme: write it as http://localhost:8080"):
+        mocapstore.Client("localhost:8080")
+    # A take's name where its id goes.
+    with pytest.raises(mocapstore.NotFound, match=r"names are not ids.*name_prefix='walk one'"):
+        client.take("walk one")
+    with pytest.raises(mocapstore.NotFound) as e:
+        client.take("0192f0c1-7d2e-7a1b-9c3d-1e2f3a4b5c6d")  # an id, just not one stored
+    assert "name_prefix" not in str(e.value)
+    # A point the take lacks: its points are listed.
+    with pytest.raises(mocapstore.BadRequest, match=r"its 5 points are head, lhand, rhand"):
+        client.frames(t.id, points=["Hips"])
+    # A range given in seconds is refused in seconds.
+    with pytest.raises(mocapstore.OutOfRange, match=r"t1=5 s is past .* lasts 2\.000000 s"):
+        client.frames(t.id, t0=0, t1=5)
+    # Nothing listens: said at once, with what to do.
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with (
+        mocapstore.Client(f"http://127.0.0.1:{port}") as down,
+        pytest.raises(mocapstore.ConnectionFailed, match=r"Is the server running.*MOCAP_SERVER"),
+    ):
+        down.take(t.id)
+
+
+def test_a_401_names_the_token() -> None:
+    def answer(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(
+            401,
+            headers={"x-mocapstore-api": "1"},
+            json={"error": {"code": "unauthorized", "message": "a bearer token is needed"}},
+        )
+
+    c = mocapstore.Client("http://mock")
+    c._http = httpx.Client(base_url="http://mock", transport=httpx.MockTransport(answer))
+    with pytest.raises(mocapstore.Unauthorized, match="bearer token is needed; pass token="):
+        list(c.takes())
+    with pytest.raises(mocapstore.Unauthorized, match="MOCAP_TOKEN"):
+        c.take("x")
+
+
+def test_a_second_at_30_fps_is_30_frames_for_every_corpus_take(
+    client: mocapstore.Client, corpus: Path | None
+) -> None:
+    """``t0 <= t < t1`` whatever rate the file states: BVH's ``Frame Time: 0.0333333``
+    (30.00003 fps) gave 31 frames before."""
+    if corpus is None:
+        pytest.skip("no corpus")
+    lib = library()
+    files = sorted(corpus.glob("bvh/**/*.bvh")) + sorted(corpus.glob("c3d/**/*.c3d"))
+    assert len(files) > 200
+    checked = short = 0
+    for f in files:
+        try:
+            t = client.ingest(f, library=lib, codec="quant")
+        except mocapstore.MocapstoreError:
+            continue  # the corpus holds files the server refuses on purpose
+        if t.frames / t.fps < 1.0 - 1e-6 or t.points == 0:
+            short += 1
+            continue
+        got = client.frames(t.id, t0=0, t1=1, fps=30)
+        assert got.data.shape[0] == 30, f"{f.name}: {t.fps} fps gave {got.data.shape[0]}"
+        own = client.frames(t.id, t0=0, t1=1)
+        want = math.ceil(nominal_rate(t.fps) - 1e-9)
+        assert own.data.shape[0] == want, f"{f.name}: {t.fps} fps"
+        checked += 1
+    assert checked > 200, (checked, short)
+
+
+def test_an_exported_file_reads_back_by_its_manifest_alone(
+    client: mocapstore.Client, server: str, tmp_path: Path
+) -> None:
+    lib = library()
+    take = client.ingest(walker(120), name="m", library=lib, fps=60, point_names=NAMES)
+    # root=extract follows the pelvis: this figure has none, so its feet stand in for it.
+    r = httpx.patch(
+        f"{server}/v1/takes/{take.id}", json={"body": {"roles": {"pelvis": ["lfoot", "rfoot"]}}}
+    )
+    assert r.status_code == 200, r.text
+    for root, names in [(None, NAMES), ("extract", [*NAMES, "root_motion"])]:
+        z = client.export_library(
+            tmp_path / "lib.zip", library=lib, format="npy", fps=30, unit="m", root=root
+        )
+        with zipfile.ZipFile(z) as archive:
+            rows = list(csv.DictReader(io.StringIO(archive.read("manifest.csv").decode())))
+            (row,) = rows
+            assert row["skipped"] == "", row
+            a = np.load(io.BytesIO(archive.read(row["file"])))
+        points = json.loads(row["points"])
+        # What reading the file needs, and nothing from the server: its shape, unit, rate.
+        assert points[: len(names)] == names, points
+        assert a.shape == (int(row["frames"]), len(points), 3)
+        assert float(row["metres_per_unit"]) == 1.0 and float(row["fps"]) == 30
+        want = client.frames(take.id, fps=30, unit="m", root=root)
+        assert np.array_equal(a, want.data, equal_nan=True)

@@ -15,7 +15,7 @@ import numpy.typing as npt
 import pytest
 
 import mocapstore
-from mocapstore.data import Windows
+from mocapstore.data import ROLES, Windows, collate
 
 from .test_client import NAMES, walker
 
@@ -37,7 +37,7 @@ def test_windows_count_shape_and_content(server: str, lib: str) -> None:
     w = Windows(server, library=lib, seconds=0.5, fps=30, points=["rhand", "head"])
     # 15 frames at 30 fps span 29 source frames at 60; one every 30: 5 + 3 + 1.
     assert len(w) == 9 and w.frames == 15
-    a = w[5]
+    a = w.array(5)
     assert a.shape == (15, 2, 3) and a.dtype == np.float32
     win = w.windows[5]
     with mocapstore.Client(server) as c:
@@ -45,20 +45,20 @@ def test_windows_count_shape_and_content(server: str, lib: str) -> None:
     assert a.tobytes() == f.data[:15].tobytes()
     # The left hand's gap (frames 20..35 of each take) is NaN in the windows over it.
     full = Windows(server, library=lib, seconds=0.5, fps=60)
-    assert np.isnan(full[0][20:35, 1]).all() and not np.isnan(full[0][:20]).any()
+    assert np.isnan(full.array(0)[20:35, 1]).all() and not np.isnan(full.array(0)[:20]).any()
     with pytest.raises(IndexError):
         w[9]
     # The last window of a take ends at its last frame.
     last = w.windows[4]
-    assert last.end == 149 and w[4].shape == (15, 2, 3)
+    assert last.end == 149 and w.array(4).shape == (15, 2, 3)
 
 
 def test_every_window_once_in_order_or_shuffled(server: str, lib: str, tmp_path: Path) -> None:
     w = Windows(server, library=lib, seconds=0.25, fps=60, cache_dir=tmp_path)
-    ordered = [a.tobytes() for a in w]
+    ordered = [it["motion"].tobytes() for it in w]
     assert len(ordered) == len(w) > 0
     assert w.order(shuffle=True, seed=3) == w.order(shuffle=True, seed=3)
-    shuffled = [a.tobytes() for a in w.iter(shuffle=True, seed=3)]
+    shuffled = [it["motion"].tobytes() for it in w.iter(shuffle=True, seed=3)]
     assert sorted(shuffled) == sorted(ordered)
     # A second Windows reads the same windows from the disk cache.
     again = Windows(server, library=lib, seconds=0.25, fps=60, cache_dir=tmp_path)
@@ -71,14 +71,16 @@ def test_every_window_once_in_order_or_shuffled(server: str, lib: str, tmp_path:
         return original(indices)
 
     again._fetch = counted  # type: ignore[method-assign]
-    assert [again[i].tobytes() for i in range(len(again))] == ordered
+    assert [again[i]["motion"].tobytes() for i in range(len(again))] == ordered
     assert calls == 0
     assert w.batch([0, 2]).shape == (2, w.frames, len(NAMES), 3)
 
 
 def test_windows_come_many_to_a_request(server: str, lib: str, tmp_path: Path) -> None:
     w = Windows(server, library=lib, seconds=0.25, fps=60, batch_size=4, concurrency=2)
-    one = [Windows(server, library=lib, seconds=0.25, fps=60)[i].tobytes() for i in range(len(w))]
+    plain = Windows(server, library=lib, seconds=0.25, fps=60)
+    one = [plain.array(i).tobytes() for i in range(len(w))]
+    as_items = [np.nan_to_num(plain.array(i)).tobytes() for i in range(len(w))]
     asked: list[int] = []
     original = w._fetch
 
@@ -88,7 +90,9 @@ def test_windows_come_many_to_a_request(server: str, lib: str, tmp_path: Path) -
 
     w._fetch = counted  # type: ignore[method-assign]
     order = w.order(shuffle=True, seed=5)
-    assert [a.tobytes() for a in w.iter(shuffle=True, seed=5)] == [one[i] for i in order]
+    assert [it["motion"].tobytes() for it in w.iter(shuffle=True, seed=5)] == [
+        as_items[i] for i in order
+    ]
     assert sum(asked) == len(w) and max(asked) == 4 and len(asked) == -(-len(w) // 4)
     # Read again: from memory, no request.
     asked.clear()
@@ -111,7 +115,7 @@ def test_windows_come_many_to_a_request(server: str, lib: str, tmp_path: Path) -
 
 def _read(args: tuple[Windows, list[int]]) -> list[tuple[int, bytes]]:
     w, idx = args
-    return [(i, w[i].tobytes()) for i in idx]
+    return [(i, w.array(i).tobytes()) for i in idx]
 
 
 def test_two_worker_processes_read_every_window_once(server: str, lib: str) -> None:
@@ -122,7 +126,7 @@ def test_two_worker_processes_read_every_window_once(server: str, lib: str) -> N
     with multiprocessing.get_context("fork").Pool(2) as pool:
         got = [x for part in pool.map(_read, halves) for x in part]
     assert sorted(i for i, _ in got) == list(range(len(w)))
-    assert all(b == w[i].tobytes() for i, b in got)
+    assert all(b == w.array(i).tobytes() for i, b in got)
 
 
 def test_the_bench_runs(server: str, lib: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -154,14 +158,15 @@ def test_the_torch_dataset_pickles_without_a_connection(
 
     w = Windows(server, library=lib, seconds=0.25, fps=60)
     ds = WindowDataset(w)
-    kind, a = ds[3]
-    assert kind == "tensor" and a.tobytes() == w[3].tobytes() and len(ds) == len(w)
+    kind, a = ds[3]["motion"]
+    assert kind == "tensor" and a.tobytes() == w[3]["motion"].tobytes() and len(ds) == len(w)
+    assert ds[3]["mask"][0] == "tensor" and ds[3]["take"] == w.windows[3].take
     copy = pickle.loads(pickle.dumps(ds))
     assert copy.windows._client is None and len(copy.windows._memory) == 0
-    assert copy[3][1].tobytes() == a.tobytes()
+    assert copy[3]["motion"][1].tobytes() == a.tobytes()
     # What a DataLoader calls for a batch, when the dataset has it: one request.
     got = ds.__getitems__([3, 0, 3])
-    assert [t[1].tobytes() for t in got] == [w[i].tobytes() for i in (3, 0, 3)]
+    assert [t["motion"][1].tobytes() for t in got] == [w[i]["motion"].tobytes() for i in (3, 0, 3)]
     # As a DataLoader with 2 workers runs it: the dataset pickled to two forked processes,
     # each reading its batches of an epoch's shuffled order: every window once.
     order = w.order(shuffle=True, seed=2)
@@ -170,5 +175,108 @@ def test_the_torch_dataset_pickles_without_a_connection(
         got_batches = pool.map(_read_batch, [(ds, b) for b in batches])
     seen = [i for b in batches for i in b]
     assert sorted(seen) == list(range(len(w)))
-    flat = [t[1].tobytes() for b in got_batches for t in b]
-    assert flat == [w[i].tobytes() for i in seen]
+    flat = [t["motion"][1].tobytes() for b in got_batches for t in b]
+    assert flat == [w[i]["motion"].tobytes() for i in seen]
+
+
+def test_items_say_where_they_come_from(server: str) -> None:
+    lib = f"py-items-{uuid.uuid4().hex[:8]}"
+    with mocapstore.Client(server) as c:
+        t = c.ingest(
+            walker(150, gaps=True),
+            library=lib,
+            fps=60,
+            point_names=NAMES,
+            labels={"content": "walk", "n": 3},
+        )
+        # A Client is as good as its URL (and token).
+        w = Windows(c, library=lib, seconds=0.5, fps=30, stride=0.25)
+    it = w[1]  # frames 15..45 of 60 fps: over the left hand's gap (20..35)
+    assert set(it) == {"motion", "mask", "take", "name", "start", "fps", "labels", "points"}
+    assert it["take"] == t.id and it["name"] == t.name and it["fps"] == 30
+    assert it["start"] == pytest.approx(0.25) and it["labels"] == {"content": "walk", "n": 3}
+    assert it["points"] == tuple(NAMES)
+    raw = w.array(1)
+    assert (it["mask"] == ~np.isnan(raw).any(axis=2)).all() and not it["mask"].all()
+    assert not np.isnan(it["motion"]).any() and (it["motion"][~it["mask"]] == 0).all()
+    with pytest.raises(TypeError, match=r"a server URL or a mocapstore\.Client"):
+        Windows(42, library=lib)  # type: ignore[arg-type]
+
+
+def test_no_silent_empties(server: str, lib: str, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no take matches library='nope'"):
+        Windows(server, library="nope")
+    with pytest.raises(ValueError, match=r"none 5\.0 s long"):
+        Windows(server, library=lib, seconds=5.0)
+    # A take without the points asked for is an error naming it, or left out and counted.
+    other = f"{lib}-mixed"
+    with mocapstore.Client(server) as c:
+        c.ingest(walker(150), library=other, fps=60, point_names=NAMES, name="full")
+        c.ingest(walker(150)[:, :3], library=other, fps=60, point_names=NAMES[:3], name="part")
+        with pytest.raises(FileNotFoundError, match="no such folder"):
+            c.ingest_folder(tmp_path / "no-such-dir")
+        with pytest.raises(FileNotFoundError, match="holds no take file"):
+            c.ingest_folder(tmp_path)
+    with pytest.raises(ValueError, match=r"1 of 2 takes lack.*part lacks rfoot.*skip"):
+        Windows(server, library=other, points=["head", "rfoot"])
+    w = Windows(server, library=other, points=["head", "rfoot"], on_missing="skip")
+    assert w.skipped == [("part", ("rfoot",))] and {x.name for x in w.windows} == {"full"}
+    # Padded together, the two rigs' windows stack, the padding masked.
+    both = Windows(server, library=other, seconds=0.5, fps=30)
+    items = [both[i] for i in range(len(both))]
+    batch = collate(items)
+    assert batch["motion"].shape == (len(items), 15, 5, 3)
+    narrow = [k for k, it in enumerate(items) if it["motion"].shape[1] == 3]
+    assert narrow and not batch["mask"][narrow][:, :, 3:].any()
+    assert batch["mask"][narrow][:, :, :3].all()
+
+
+def test_splits_by_take_and_filters(server: str) -> None:
+    lib = f"py-split-{uuid.uuid4().hex[:8]}"
+    with mocapstore.Client(server) as c:
+        for k in range(30):
+            c.ingest(
+                walker(40),
+                library=lib,
+                fps=60,
+                point_names=NAMES,
+                name=f"t{k}",
+                labels={"content": "walk" if k % 3 else "run"},
+            )
+    takes = {}
+    for split in ("train", "val", "test"):
+        w = Windows(server, library=lib, seconds=0.5, fps=30, split=split, seed=7)
+        takes[split] = {x.take for x in w.windows}
+        again = Windows(server, library=lib, seconds=0.5, fps=30, split=split, seed=7)
+        assert {x.take for x in again.windows} == takes[split]
+    assert not (takes["train"] & takes["val"]) and not (takes["train"] & takes["test"])
+    assert len(takes["train"] | takes["val"] | takes["test"]) == 30
+    assert len(takes["train"]) > len(takes["val"])
+    runs = Windows(server, library=lib, seconds=0.5, fps=30, labels={"content": "run"})
+    assert len({x.take for x in runs.windows}) == 10
+    few = Windows(server, library=lib, seconds=0.5, fps=30, where=lambda t: t.name < "t2")
+    assert {x.name for x in few.windows} == {"t0", "t1"} | {f"t1{k}" for k in range(10)}
+
+
+def test_windows_by_roles_put_every_rig_on_one_layout(server: str, corpus: Path | None) -> None:
+    if corpus is None:
+        pytest.skip("no corpus")
+    lib = f"py-roles-{uuid.uuid4().hex[:8]}"
+    with mocapstore.Client(server) as c:
+        cmu = c.ingest(corpus / "bvh" / "cmu" / "01_01.bvh", library=lib, codec="quant")
+        bandai = c.ingest(
+            corpus / "bvh" / "bandai" / "dataset-1_walk_active_001.bvh", library=lib, codec="quant"
+        )
+    assert cmu.points != bandai.points
+    w = Windows(server, library=lib, seconds=1.0, fps=30, roles=True, unit="m")
+    items = {w.windows[i].take: w[i] for i in range(len(w))}
+    assert set(items) == {cmu.id, bandai.id}
+    for it in items.values():
+        assert it["points"] == ROLES and it["motion"].shape == (30, len(ROLES), 3)
+        # Every limb of these skeletons is placed; the head is above the ankles.
+        assert it["mask"].all(), it["name"]
+        up = 1  # both are +Y up BVH
+        head, ankle = ROLES.index("head"), ROLES.index("left_ankle")
+        assert (it["motion"][:, head, up] > it["motion"][:, ankle, up] + 0.8).all()
+    batch = collate(list(items.values()))
+    assert batch["motion"].shape == (2, 30, len(ROLES), 3) and batch["mask"].all()

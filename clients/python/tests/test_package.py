@@ -36,7 +36,7 @@ def test_the_wheel_holds_the_package_its_types_and_only_its_dependencies(
     meta = zipfile.ZipFile(wheel).read(meta_name).decode()
     requires = re.findall(r"^Requires-Dist: (.+)$", meta, re.M)
     runtime = sorted(r.split(">")[0].split("=")[0] for r in requires if "extra ==" not in r)
-    assert runtime == ["httpx", "numpy"]
+    assert runtime == ["httpx", "numpy", "tqdm"]
     extras = re.findall(r"^Provides-Extra: (.+)$", meta, re.M)
     assert sorted(extras) == ["pandas", "torch"]
     assert f"Version: {_version.__version__}" in meta

@@ -125,6 +125,8 @@ def test_a_stream_through_refusals_and_lost_answers_keeps_every_frame_once(
 def test_an_append_that_would_leave_a_gap_is_refused(server: str) -> None:
     with mocapstore.Client(server) as c:
         s = c.stream(30, 2, name="gap")
+        # The take's record from the moment it opens: its id is the stream's.
+        assert s.take.id == s.id and s.take.name == "gap"
         s.append(motion(10, 2))
         s.info["frames_received"] = 15  # as if the client had lost count
         with pytest.raises(mocapstore.Conflict, match="send from frame 10"):
@@ -139,11 +141,18 @@ def test_an_append_that_would_leave_a_gap_is_refused(server: str) -> None:
 def test_the_async_client_streams_and_reads_channels(server: str, corpus: Path | None) -> None:
     async def run() -> None:
         async with mocapstore.AsyncClient(server) as c:
-            async with await c.stream(30, 2, name="async") as s:
+            async with c.stream(30, 2, name="async") as s:
+                # The record is there from the start, the take live.
+                assert s.take.id == s.id and s.take.name == "async"
                 await s.append(motion(10, 2))
                 await s.append(motion(10, 2)[5:])
                 await s.flush()
-            assert s.take is not None and s.take.frames == 15
+            assert s.take.frames == 15
+            # Awaited, the stream is the caller's to finish.
+            s2 = await c.stream(30, 2, name="awaited")
+            assert s2.take.id == s2.id
+            await s2.append(motion(4, 2))
+            assert (await s2.finish()).frames == 4
             if corpus is not None:
                 t = await c.ingest(corpus / "bvh" / "cmu" / "131_02.bvh", codec="bvh-lossless")
                 ch = await c.channels(t.id, end=5)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 from collections.abc import Generator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -138,6 +139,35 @@ def raise_for(r: Response) -> Response:
         wait = retry_after(r.headers)
         raise errors.Busy(message, status=r.status, code=code, retry_after=wait)
     raise errors.from_status(r.status, code, message)
+
+
+_TAKE_PATH = re.compile(r"^/v1/takes/([^/]+)")
+_ID = re.compile(r"^[0-9a-fA-F]{8}-[0-9a-fA-F]{4}-[0-9a-fA-F]{4}-[0-9a-fA-F]{4}-[0-9a-fA-F]{12}$")
+
+
+def hinted(req: Request, r: Response) -> Response:
+    """An error answer with what to do added to its message, where the client knows more
+    than the server: a 401 names where the token comes from; a 404 of a take asked for by
+    something that is not an id (a name) says how to find it by name."""
+    hint = ""
+    if r.status == 401:
+        hint = "pass token= to the client, or set MOCAP_TOKEN"
+    elif r.status == 404:
+        m = _TAKE_PATH.match(req.path)
+        if m and not _ID.match(m.group(1)):
+            name = m.group(1)
+            hint = (
+                f"{name!r} is not a take id (ids look like 0192f0c1-7d2e-7a1b-9c3d-1e2f3a4b5c6d); "
+                f"names are not ids: find it with takes(name_prefix={name!r})"
+            )
+    if not hint:
+        return r
+    try:
+        body = json.loads(r.content)
+        body["error"]["message"] = f"{body['error']['message']}; {hint}"
+    except (ValueError, KeyError, TypeError):
+        body = {"error": {"code": "", "message": hint}}
+    return Response(r.status, r.headers, json.dumps(body).encode())
 
 
 def retry_after(headers: Mapping[str, str], default: float = 1.0) -> float:
@@ -368,11 +398,12 @@ def download(path: str, query: Params, to: Path) -> Op[Path]:
 # Live streams ---------------------------------------------------------------------------
 
 
-def open_stream(body: dict[str, Any]) -> Op[dict[str, Any]]:
-    """Open a live take; its state (``id``, ``frames_received``, …)."""
+def open_stream(body: dict[str, Any]) -> Op[tuple[dict[str, Any], Take]]:
+    """Open a live take; its state (``id``, ``frames_received``, …) and its record."""
     r = yield Request("POST", "/v1/streams", [], json=body, safe=False)
     v: dict[str, Any] = json_of(r)
-    return v
+    t: Take = yield from take(v["id"])
+    return v, t
 
 
 def f32_frames(array: npt.ArrayLike, points: int) -> tuple[bytes, int]:
@@ -530,10 +561,13 @@ def folder_labels(
 
 def take_files(root: Path) -> list[Path]:
     """The take files under ``root`` (or ``root`` itself), sorted; hidden files, and JSON
-    that holds no take, left out."""
+    that holds no take, left out. A ``root`` that is not there, or holds no take file, is an
+    error, not an empty list: a mistyped path must not pass for an empty dataset."""
     if root.is_file():
         return [root]
-    return sorted(
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such folder or file")
+    found = sorted(
         p
         for p in root.rglob("*")
         if p.is_file()
@@ -541,3 +575,8 @@ def take_files(root: Path) -> list[Path]:
         and not any(part.startswith(".") for part in p.relative_to(root).parts)
         and (p.suffix.lower() != ".json" or is_take_json(p))
     )
+    if not found:
+        raise FileNotFoundError(
+            f"{root}: holds no take file ({', '.join(TAKE_SUFFIXES)}, hidden files passed over)"
+        )
+    return found

@@ -14,7 +14,7 @@ import asyncio
 import importlib
 import os
 import time
-from collections.abc import AsyncIterator, Iterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Coroutine, Generator, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -84,13 +84,9 @@ class _NoBar:
 
 
 def _progress(total: int, show: bool) -> _Bar:
-    """A tqdm bar if tqdm is installed and one is wanted."""
+    """A tqdm bar (a dependency; imported by name, as it ships no type hints), if wanted."""
     if show:
-        try:
-            tqdm = importlib.import_module("tqdm").tqdm
-        except ImportError:
-            return _NoBar()
-        bar: _Bar = tqdm(total=total, unit="take")
+        bar: _Bar = importlib.import_module("tqdm").tqdm(total=total, unit="take")
         return bar
     return _NoBar()
 
@@ -100,7 +96,14 @@ class _Base:
 
     def __init__(self, url: str | None, token: str | None, retries: int) -> None:
         self.url = (url or os.environ.get("MOCAP_SERVER") or DEFAULT_URL).rstrip("/")
+        if not self.url.startswith(("http://", "https://")):
+            said = "url=" if url else "MOCAP_SERVER="
+            raise ValueError(
+                f"{said}{self.url!r} has no scheme: write it as http://{self.url} (or https://)"
+            )
         token = token if token is not None else os.environ.get("MOCAP_TOKEN")
+        #: The token requests carry (``token=`` or ``MOCAP_TOKEN``), if any.
+        self.token = token
         self._headers = {"user-agent": f"mocapstore-python/{__version__}"}
         if token:
             self._headers["authorization"] = f"Bearer {token.strip()}"
@@ -109,12 +112,29 @@ class _Base:
         # Point names per take (they never change): a range's names without a second call.
         self._takes: dict[str, Take] = {}
 
-    def _checked(self, r: p.Response) -> p.Response:
+    def _checked(self, req: p.Request, r: p.Response) -> p.Response:
         named = "x-mocapstore-api" in r.headers
         if not self._api_checked and (named or r.status < 400):
             p.check_api(r.headers)
             self._api_checked = True
-        return r
+        return p.hinted(req, r)
+
+    def _unreachable(self, e: httpx.TransportError, attempt: int) -> errors.ConnectionFailed:
+        """The error of a server that could not be reached, saying what to do."""
+        if isinstance(e, httpx.ConnectError) and not self._api_checked:
+            return errors.ConnectionFailed(
+                f"{self.url}: {e}. Is the server running? Start one with `mocapstore serve`, "
+                "or set MOCAP_SERVER (or url=) to where it runs"
+            )
+        tried = f" (tried {attempt + 1} times)" if attempt else ""
+        return errors.ConnectionFailed(f"{self.url}: {e}{tried}")
+
+    def _retry(self, req: p.Request, e: httpx.TransportError, attempt: int) -> bool:
+        """Whether a request that failed to get an answer is sent again. A server never
+        reached is not waited for: refused at the first call, it is not running (or not
+        there); one that answered before may be restarting."""
+        never_reached = isinstance(e, httpx.ConnectError) and not self._api_checked
+        return req.safe and attempt < self._retries and not never_reached
 
     @staticmethod
     def _retried_delete(req: p.Request, attempt: int, r: p.Response) -> p.Response:
@@ -268,14 +288,18 @@ def _stream_body(
 class Stream:
     """A live take being recorded ([`Client.stream`]). Each append is numbered with the
     frame it starts at, so a retry (after a 503, or a connection broken before the answer
-    came) neither loses nor repeats a frame. Finished when the ``with`` block ends."""
+    came) neither loses nor repeats a frame. Finished when the ``with`` block ends.
 
-    def __init__(self, client: Client, info: dict[str, Any]) -> None:
+    ``take`` is the take's record from the moment the stream opens (``take.id`` is the id
+    to read it by, live or finished); ``finish`` replaces it with the finished take's."""
+
+    def __init__(self, client: Client, info: dict[str, Any], take: Take) -> None:
         self._client = client
         self.info = info
         self.id: str = info["id"]
         self.points: int = int(info["points"])
-        self.take: Take | None = None
+        self.take: Take = take
+        self._finished = False
         # An append failed (its frames may be stored or not): resynchronise before the next.
         self._unsure = False
 
@@ -307,9 +331,10 @@ class Stream:
         self.info = self._client._run(p.append(self.id, b"", self.frames_received, True, None))
 
     def finish(self) -> Take:
-        """Close the stream; the stored take."""
-        if self.take is None:
+        """Close the stream; the stored take (also ``take`` from now on)."""
+        if not self._finished:
             self.take = self._client._run(p.finish_stream(self.id))
+            self._finished = True
         return self.take
 
     def __enter__(self) -> Stream:
@@ -320,14 +345,15 @@ class Stream:
 
 
 class AsyncStream:
-    """[`Stream`] for [`AsyncClient`]."""
+    """[`Stream`] for [`AsyncClient`]: ``async with client.stream(...) as s``."""
 
-    def __init__(self, client: AsyncClient, info: dict[str, Any]) -> None:
+    def __init__(self, client: AsyncClient, info: dict[str, Any], take: Take) -> None:
         self._client = client
         self.info = info
         self.id: str = info["id"]
         self.points: int = int(info["points"])
-        self.take: Take | None = None
+        self.take: Take = take
+        self._finished = False
         # An append failed (its frames may be stored or not): resynchronise before the next.
         self._unsure = False
 
@@ -359,9 +385,10 @@ class AsyncStream:
         )
 
     async def finish(self) -> Take:
-        """Close the stream; the stored take."""
-        if self.take is None:
+        """Close the stream; the stored take (also ``take`` from now on)."""
+        if not self._finished:
             self.take = await self._client._run(p.finish_stream(self.id))
+            self._finished = True
         return self.take
 
     async def __aenter__(self) -> AsyncStream:
@@ -369,6 +396,26 @@ class AsyncStream:
 
     async def __aexit__(self, *exc: object) -> None:
         await self.finish()
+
+
+class _OpeningStream:
+    """What [`AsyncClient.stream`] returns: a stream being opened, to ``await`` (the
+    stream) or to use as ``async with`` (the stream, finished when the block ends)."""
+
+    def __init__(self, opening: Coroutine[Any, Any, AsyncStream]) -> None:
+        self._opening = opening
+        self._stream: AsyncStream | None = None
+
+    def __await__(self) -> Generator[Any, None, AsyncStream]:
+        return self._opening.__await__()
+
+    async def __aenter__(self) -> AsyncStream:
+        self._stream = await self._opening
+        return self._stream
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self._stream is not None:
+            await self._stream.finish()
 
 
 class Client(_Base):
@@ -416,12 +463,12 @@ class Client(_Base):
             try:
                 r = self._exchange(req)
             except httpx.TransportError as e:
-                if req.safe and attempt < self._retries:
+                if self._retry(req, e, attempt):
                     time.sleep(BACKOFF_S * 2**attempt)
                     attempt += 1
                     continue
-                raise errors.ConnectionFailed(f"{self.url}: {e}") from e
-            self._checked(r)
+                raise self._unreachable(e, attempt) from e
+            r = self._checked(req, r)
             if r.status in (429, 503) and attempt < self._retries:
                 time.sleep(p.retry_after(r.headers))
                 attempt += 1
@@ -688,11 +735,12 @@ class Client(_Base):
         sidecar_labels: bool = True,
         **fields: Any,
     ) -> list[Ingested]:
-        """Store every take file under ``path`` (.bvh .c3d .trc .npy, and .json holding a take;
-        label files and hidden files are passed over), ``concurrency``
+        """Store every take file under ``path`` (.bvh .c3d .trc .npy .fbx .glb .gltf, and
+        .json holding a take; label files and hidden files are passed over), ``concurrency``
         at a time, each named after its file, with ``fields`` as [`Client.ingest`] takes
-        them; a progress bar when ``tqdm`` is installed. A file the server refuses is
-        reported in its result, not raised.
+        them; a progress bar (``tqdm``). A file the server refuses is reported in its
+        result, not raised; a ``path`` that is not there or holds no take file raises
+        ``FileNotFoundError``.
 
         Each take is labelled as ``mocapstore ingest`` labels it: by its name read with
         ``labels_from_name`` (``"{dataset}_{content}_{style}_{n}"``), then the label file
@@ -749,7 +797,7 @@ class Client(_Base):
             chunk_seconds,
             labels,
         )
-        return Stream(self, self._run(p.open_stream(body)))
+        return Stream(self, *self._run(p.open_stream(body)))
 
     def export_library(
         self,
@@ -812,12 +860,12 @@ class AsyncClient(_Base):
             try:
                 r = await self._exchange(req)
             except httpx.TransportError as e:
-                if req.safe and attempt < self._retries:
+                if self._retry(req, e, attempt):
                     await asyncio.sleep(BACKOFF_S * 2**attempt)
                     attempt += 1
                     continue
-                raise errors.ConnectionFailed(f"{self.url}: {e}") from e
-            self._checked(r)
+                raise self._unreachable(e, attempt) from e
+            r = self._checked(req, r)
             if r.status in (429, 503) and attempt < self._retries:
                 await asyncio.sleep(p.retry_after(r.headers))
                 attempt += 1
@@ -1018,7 +1066,7 @@ class AsyncClient(_Base):
         """Several ranges in one request (see [`Client.ranges`])."""
         return await self._run(self._ranges_op(parts, points, fps, root, up, unit))
 
-    async def stream(
+    def stream(
         self,
         fps: float,
         points: int | Sequence[str],
@@ -1032,8 +1080,9 @@ class AsyncClient(_Base):
         codec: str | None = None,
         chunk_seconds: float | None = None,
         labels: p.Labels | None = None,
-    ) -> AsyncStream:
-        """Open a live take (see [`Client.stream`])."""
+    ) -> _OpeningStream:
+        """Open a live take (see [`Client.stream`]): ``async with client.stream(...) as s``,
+        or ``s = await client.stream(...)`` and ``await s.finish()``."""
         body = _stream_body(
             fps,
             points,
@@ -1047,7 +1096,11 @@ class AsyncClient(_Base):
             chunk_seconds,
             labels,
         )
-        return AsyncStream(self, await self._run(p.open_stream(body)))
+
+        async def opening() -> AsyncStream:
+            return AsyncStream(self, *await self._run(p.open_stream(body)))
+
+        return _OpeningStream(opening())
 
     async def channels(
         self,

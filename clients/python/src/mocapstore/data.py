@@ -1,7 +1,9 @@
 """A library as training data: fixed-length windows of every take at one rate
 ([`Windows`]), indexable and shuffleable, fetched by range (the server decodes only the
 chunks a window lies in) on kept-alive connections, several at once, through a bounded
-cache in memory and optionally on disk.
+cache in memory and optionally on disk. Each window is an item that says where it comes
+from (``{"motion", "mask", "take", "name", "start", "fps", "labels", "points"}``);
+[`collate`] stacks items of different rigs.
 
 A [`Windows`] holds the server's address, not a connection: each process (a DataLoader
 worker after ``fork``) opens its own client at its first fetch, so none is shared.
@@ -14,11 +16,11 @@ import math
 import os
 import threading
 from collections import OrderedDict, deque
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -28,6 +30,75 @@ from .client import Client
 from .types import Frames, Take
 
 F32Array = npt.NDArray[np.float32]
+
+#: A window as a dataset item: ``motion`` ``(frames, points, 3)`` float32 with 0 where a
+#: sample is missing, ``mask`` ``(frames, points)`` bool (True where present), ``take``
+#: (its id), ``name``, ``start`` (seconds from the take's start), ``fps``, ``labels`` and
+#: ``points`` (the names, or roles, of the points in order).
+Item = dict[str, Any]
+
+#: Every body role the server places, in its order: what ``roles=True`` windows hold.
+ROLES: tuple[str, ...] = (
+    "pelvis",
+    "spine",
+    "neck",
+    "head",
+    *(
+        f"{side}_{part}"
+        for part in ("clavicle", "shoulder", "elbow", "wrist", "hip", "knee", "ankle", "toe")
+        for side in ("left", "right")
+    ),
+)
+
+#: The fractions of takes in each split, in order.
+SPLITS: dict[str, float] = {"train": 0.8, "val": 0.1, "test": 0.1}
+
+
+def nominal_rate(fps: float) -> float:
+    """The rate a take's frame times are reckoned at, as the server reckons them: the
+    nearest whole rate within 1e-4 (a frame time printed with rounding: BVH's 0.0333333 s
+    is 30 fps), else ``fps``."""
+    whole = round(fps)
+    return float(whole) if whole >= 1 and abs(fps - whole) <= 1e-4 * fps else fps
+
+
+def split_of(take_id: str, seed: int, splits: Mapping[str, float] | None = None) -> str:
+    """The split a take belongs to: fixed by its id and ``seed`` alone, so a take stays in
+    its split as takes are added or removed, and no take is in two."""
+    shares = dict(splits or SPLITS)
+    total = sum(shares.values())
+    if total <= 0 or any(v < 0 for v in shares.values()):
+        raise ValueError(f"split fractions must be ≥ 0 and not all 0, got {shares}")
+    h = hashlib.sha256(f"{seed}:{take_id}".encode()).digest()
+    u = int.from_bytes(h[:8], "big") / 2**64 * total
+    for name, share in shares.items():
+        if u < share:
+            return name
+        u -= share
+    return next(reversed(shares))
+
+
+def collate(items: Sequence[Item]) -> Item:
+    """Items stacked into one batch: ``motion`` ``(batch, frames, points, 3)`` and ``mask``
+    ``(batch, frames, points)``, padded (0, mask False) to the most points among them when
+    their rigs differ; ``points`` the names of each item (a list of tuples); the other fields
+    as lists. Windows of ``roles=True`` share one layout and need no padding."""
+    if not items:
+        raise ValueError("collate of no items")
+    frames = {it["motion"].shape[0] for it in items}
+    if len(frames) != 1:
+        raise ValueError(f"items of different lengths {sorted(frames)} cannot be stacked")
+    width = max(it["motion"].shape[1] for it in items)
+    motion = np.zeros((len(items), frames.pop(), width, 3), dtype=np.float32)
+    mask = np.zeros(motion.shape[:3], dtype=bool)
+    for k, it in enumerate(items):
+        n = it["motion"].shape[1]
+        motion[k, :, :n] = it["motion"]
+        mask[k, :, :n] = it["mask"]
+    out: Item = {"motion": motion, "mask": mask}
+    for key in ("take", "name", "start", "fps", "labels", "points"):
+        out[key] = [it[key] for it in items]
+    return out
 
 
 def grid_step(source: float, to: float) -> float:
@@ -53,12 +124,24 @@ class Window:
 
 class Windows:
     """Every ``seconds``-long window of a selection's takes, ``stride`` seconds apart
-    (default: ``seconds``, no overlap), resampled to ``fps``; each is ``(frames, points,
-    3)`` float32 with ``frames = round(seconds * fps)``, NaN where missing. ``points``
-    selects and orders points by name (every take must have them); ``unit``, ``up`` and
-    ``root`` are the server's transforms. Takes shorter than a window give none. Without
-    ``points``, windows have each take's own points: stack them (``batch``, a DataLoader's
-    collate) only over takes of one marker set or skeleton.
+    (default: ``seconds``, no overlap), resampled to ``fps``; ``frames = round(seconds *
+    fps)`` frames each. ``w[i]`` is an [`Item`]; ``array(i)``, ``many`` and ``batch`` give
+    the bare ``(frames, points, 3)`` float32 arrays, NaN where missing.
+
+    ``server``: a URL (default ``MOCAP_SERVER``) or a [`Client`], whose URL and token are
+    used. The selection: ``library``, ``tag`` and ``labels`` (``{"content": "walk"}``) on
+    the server, ``where`` (a test of each [`Take`], for any field it lists: ``lambda t:
+    t.fps >= 100``) and ``split`` (``"train"``, ``"val"`` or ``"test"``: each take's split
+    is fixed by its id and ``seed``, ``splits`` the fractions, [`SPLITS`] by default).
+    A selection with no window is an error that says why.
+
+    ``points`` selects and orders points by name; a take without them is an error naming
+    it, unless ``on_missing="skip"`` (then ``skipped`` lists each take left out and what it
+    lacks). ``roles=True`` gives every take the same layout, one point per body role
+    ([`ROLES`]: the centroid of the points the server places in it, missing where none),
+    so windows of different rigs stack. Without either, windows have each take's own
+    points ([`collate`] pads them). ``unit``, ``up`` and ``root`` are the server's
+    transforms.
 
     Windows are fetched at most ``batch_size`` to a request (``GET /v1/ranges``, one request
     for windows of many takes; a batch smaller than ``concurrency * batch_size`` is split
@@ -70,15 +153,22 @@ class Windows:
 
     def __init__(
         self,
-        url: str | None = None,
+        server: str | Client | None = None,
         token: str | None = None,
         *,
         library: str | None = None,
         tag: str | None = None,
+        labels: Mapping[str, str | int | float] | None = None,
+        where: Callable[[Take], bool] | None = None,
+        split: str | None = None,
+        splits: Mapping[str, float] | None = None,
+        seed: int = 0,
         seconds: float = 1.0,
         fps: float = 30.0,
         stride: float | None = None,
         points: Sequence[str] | None = None,
+        roles: bool = False,
+        on_missing: Literal["raise", "skip"] = "raise",
         unit: str | None = None,
         up: str | None = None,
         root: str | None = None,
@@ -90,11 +180,28 @@ class Windows:
     ) -> None:
         if seconds <= 0 or fps <= 0 or (stride is not None and stride <= 0):
             raise ValueError("seconds, fps and stride must be positive")
+        if on_missing not in ("raise", "skip"):
+            raise ValueError(f"on_missing is 'raise' or 'skip', not {on_missing!r}")
+        if points is not None and roles:
+            raise ValueError("points= and roles=True choose the points two ways: pick one")
+        shares = dict(splits or SPLITS)
+        if split is not None and split not in shares:
+            raise ValueError(f"split {split!r} is none of {', '.join(shares)}")
+        url: str | None
+        if isinstance(server, Client):
+            url, token = server.url, server.token if token is None else token
+        elif server is None or isinstance(server, str):
+            url = server
+        else:
+            raise TypeError(
+                f"Windows takes a server URL or a mocapstore.Client, not {type(server).__name__}"
+            )
         self.url, self.token = url, token
         self.seconds, self.fps = seconds, fps
         self.stride = stride if stride is not None else seconds
         self.frames = max(1, round(seconds * fps))
         self.points = _protocol.names(points)
+        self.roles = roles
         self.unit, self.up, self.root = unit, up, root
         self.cache_bytes, self.disk_bytes = cache_bytes, disk_bytes
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
@@ -107,27 +214,83 @@ class Windows:
         self._disk_written = 0
         self._lock = threading.Lock()
         self._client_lock = threading.Lock()
+        #: Takes left out by ``on_missing="skip"``: (name, the points it lacks).
+        self.skipped: list[tuple[str, tuple[str, ...]]] = []
         with Client(url, token) as c:
-            self.windows = self._index(c.takes(library=library, tag=tag))
+            listed = list(c.takes(library=library, tag=tag, labels=labels))
+        chosen = [
+            t
+            for t in listed
+            if (where is None or where(t))
+            and (split is None or split_of(t.id, seed, shares) == split)
+        ]
+        self.windows = self._index(chosen, on_missing)
+        if not self.windows:
+            raise ValueError(self._why_empty(listed, chosen, library, tag, labels, split))
         self._key = hashlib.sha256(
-            repr((self.fps, self.frames, self.points, unit, up, root)).encode()
+            repr((self.fps, self.frames, self.points, roles, unit, up, root)).encode()
         ).hexdigest()[:16]
 
-    def _index(self, takes: Iterator[Take]) -> list[Window]:
+    def _why_empty(
+        self,
+        listed: list[Take],
+        chosen: list[Take],
+        library: str | None,
+        tag: str | None,
+        labels: Mapping[str, Any] | None,
+        split: str | None,
+    ) -> str:
+        """Why a selection gave no window, in the caller's terms."""
+        asked = ", ".join(
+            f"{k}={v!r}"
+            for k, v in (("library", library), ("tag", tag), ("labels", labels))
+            if v is not None
+        )
+        if not listed:
+            return f"no window: no take matches {asked or 'the server (it holds none)'}"
+        if not chosen:
+            return (
+                f"no window: {len(listed)} takes match {asked or 'the server'}, "
+                f"none passes where= and split={split!r}"
+            )
+        if self.skipped and len(self.skipped) == len(chosen):
+            return f"no window: every one of the {len(chosen)} takes lacks points of {self.points}"
+        longest = max(t.frames / nominal_rate(t.fps) for t in chosen)
+        return (
+            f"no window: {len(chosen)} takes, none {self.seconds} s long "
+            f"(the longest lasts {longest:.3f} s)"
+        )
+
+    def _index(self, takes: list[Take], on_missing: str) -> list[Window]:
         out: list[Window] = []
         # The listed records name each take's points: no window asks for them again.
         self._records: dict[str, Take] = {}
+        self._layouts: dict[str, list[list[int]]] = {}
+        lacking: list[tuple[str, tuple[str, ...]]] = []
         for t in takes:
             self._records[t.id] = t
-            if self.points is not None and not set(self.points) <= set(t.point_names):
-                continue
+            if self.points is not None:
+                missing = tuple(n for n in self.points if n not in t.point_names)
+                if missing:
+                    lacking.append((t.name, missing))
+                    continue
+            if self.roles:
+                self._layouts[t.id] = _role_layout(t)
             # Source frames a window spans: the fewest whose answer at ``fps`` has
             # ``frames`` frames (the server's grid, snapped as it snaps), and the step
             # between windows.
             span = math.ceil((self.frames - 1) * grid_step(t.fps, self.fps) - 1e-9) + 1
-            step = max(1, round(self.stride * t.fps))
+            step = max(1, round(self.stride * nominal_rate(t.fps)))
             for start in range(0, t.frames - span + 1, step):
                 out.append(Window(t.id, t.name, start, start + span))
+        if lacking and on_missing == "raise":
+            shown = "; ".join(f"{n} lacks {', '.join(m)}" for n, m in lacking[:5])
+            more = f" (and {len(lacking) - 5} more)" if len(lacking) > 5 else ""
+            raise ValueError(
+                f"{len(lacking)} of {len(takes)} takes lack points of {list(self.points or ())}: "
+                f"{shown}{more}; pass on_missing='skip' to leave them out"
+            )
+        self.skipped = lacking
         return out
 
     def __len__(self) -> int:
@@ -188,12 +351,38 @@ class Windows:
                 raise RuntimeError(
                     f"window {i} of {w.name} gave {len(f)} frames, not {self.frames}"
                 )
-            out.append(np.array(f.data[: self.frames]))
+            a = f.data[: self.frames]
+            out.append(_by_roles(a, self._layouts[w.take]) if self.roles else np.array(a))
         return out
 
-    def __getitem__(self, i: int) -> F32Array:
-        """Window ``i``: ``(frames, points, 3)`` float32 (a writable array of its own)."""
+    def array(self, i: int) -> F32Array:
+        """Window ``i`` as a bare ``(frames, points, 3)`` float32 array, NaN where missing
+        (a writable array of its own)."""
         return self._get([i])[0]
+
+    def item(self, i: int, motion: F32Array) -> Item:
+        """Window ``i``'s [`Item`], its ``motion`` from the array ``motion``."""
+        w = self.windows[i % len(self)]
+        t = self._records[w.take]
+        present = ~np.isnan(motion).any(axis=2)
+        return {
+            "motion": np.nan_to_num(motion, nan=0.0),
+            "mask": present,
+            "take": w.take,
+            "name": w.name,
+            "start": w.start / nominal_rate(t.fps),
+            "fps": self.fps,
+            "labels": dict(t.labels),
+            "points": ROLES if self.roles else self.points or t.point_names,
+        }
+
+    def __getitem__(self, i: int) -> Item:
+        """Window ``i`` as an [`Item`]."""
+        return self.item(i, self.array(i))
+
+    def items(self, indices: Sequence[int]) -> list[Item]:
+        """Windows ``indices`` as [`Item`]s, fetched as [`many`] fetches them."""
+        return [self.item(i, a) for i, a in zip(indices, self.many(indices), strict=True)]
 
     def _get(self, indices: Sequence[int]) -> list[F32Array]:
         """Windows ``indices`` from the memory cache, the disk cache, or in one request for
@@ -295,13 +484,18 @@ class Windows:
             np.random.default_rng(seed).shuffle(idx)
         return idx
 
-    def __iter__(self) -> Iterator[F32Array]:
+    def __iter__(self) -> Iterator[Item]:
         return self.iter()
 
-    def iter(self, shuffle: bool = False, seed: int | None = None) -> Iterator[F32Array]:
-        """Every window once, fetched ``batch_size`` to a request, at most ``concurrency +
-        1`` requests ahead of the reader."""
+    def iter(self, shuffle: bool = False, seed: int | None = None) -> Iterator[Item]:
+        """Every window once as an [`Item`], fetched ``batch_size`` to a request, at most
+        ``concurrency + 1`` requests ahead of the reader."""
         order = self.order(shuffle, seed)
+        return (self.item(i, a) for i, a in zip(order, self._arrays(order), strict=True))
+
+    def _arrays(self, order: list[int]) -> Iterator[F32Array]:
+        """Windows ``order`` as arrays, ``batch_size`` to a request, at most ``concurrency +
+        1`` requests ahead of the reader."""
         groups = [order[i : i + self.batch_size] for i in range(0, len(order), self.batch_size)]
         with ThreadPoolExecutor(self.concurrency) as pool:
             pending: deque[Future[list[F32Array]]] = deque()
@@ -322,4 +516,30 @@ class Windows:
         w = self.windows[i]
         take = self._records[w.take]
         names = _protocol.frame_names(take, self.points, self.root)
-        return Frames(self[i], names, self.fps, take.fps, w.start, 0.0).to_pandas()
+        if self.roles:
+            names = ROLES
+        return Frames(self.array(i), names, self.fps, take.fps, w.start, 0.0).to_pandas()
+
+
+def _role_layout(t: Take) -> list[list[int]]:
+    """For each of [`ROLES`], the indices of take ``t``'s points the server places in it
+    (its record's ``body.roles``), empty where none."""
+    body = t.raw.get("body") or {}
+    placed: Mapping[str, Sequence[str]] = body.get("roles") or {}
+    index = {n: k for k, n in enumerate(t.point_names)}
+    return [[index[n] for n in placed.get(r, ()) if n in index] for r in ROLES]
+
+
+def _by_roles(a: F32Array, layout: list[list[int]]) -> F32Array:
+    """``a`` ``(frames, points, 3)`` as one point per role: the centroid of the role's
+    points (of those present in a frame), NaN where it has none."""
+    out = np.full((a.shape[0], len(layout), 3), np.nan, dtype=np.float32)
+    for r, idx in enumerate(layout):
+        if idx:
+            part = a[:, idx]
+            present = np.logical_not(np.isnan(part).any(axis=2))
+            total = np.where(present[..., None], part, 0.0).sum(axis=1)
+            count = present.sum(axis=1)
+            ok = count > 0
+            out[ok, r] = total[ok] / count[ok, None]
+    return out
