@@ -280,3 +280,73 @@ def test_windows_by_roles_put_every_rig_on_one_layout(server: str, corpus: Path 
         assert (it["motion"][:, head, up] > it["motion"][:, ankle, up] + 0.8).all()
     batch = collate(list(items.values()))
     assert batch["motion"].shape == (2, 30, len(ROLES), 3) and batch["mask"].all()
+
+
+def _forward(skeleton: Any, rot_names: Sequence[str], quats: npt.NDArray[Any], values: Any) -> Any:
+    """Joint positions ``(frames, joints, 3)`` by forward kinematics from local rotations
+    (quaternions) and the offsets and position channels of ``skeleton``: a check of the
+    rotations that shares nothing with the server."""
+    from mocapstore.skeleton import quaternion_matrices
+
+    frames = quats.shape[0]
+    index = {n: k for k, n in enumerate(rot_names)}
+    world = np.zeros((frames, len(skeleton.joints), 3, 3))
+    pos = np.zeros((frames, len(skeleton.joints), 3))
+    at = 0
+    for j, joint in enumerate(skeleton.joints):
+        local = (
+            quaternion_matrices(quats[:, index[joint.name]])
+            if joint.name in index
+            else np.broadcast_to(np.eye(3), (frames, 3, 3))
+        )
+        offset = np.broadcast_to(np.array(joint.offset, dtype=np.float64), (frames, 3)).copy()
+        for k, c in enumerate(joint.channels):
+            if c.lower().endswith("position"):
+                offset[:, "XYZ".index(c[0].upper())] += values[:, at + k]
+        at += len(joint.channels)
+        if joint.parent < 0:
+            world[:, j], pos[:, j] = local, offset
+        else:
+            p = joint.parent
+            world[:, j] = world[:, p] @ local
+            pos[:, j] = pos[:, p] + np.einsum("fij,fj->fi", world[:, p], offset)
+    return pos
+
+
+def test_rotations_of_skeleton_windows_give_back_their_positions(
+    server: str, corpus: Path | None
+) -> None:
+    if corpus is None:
+        pytest.skip("no corpus")
+    lib = f"py-rot-{uuid.uuid4().hex[:8]}"
+    with mocapstore.Client(server) as c:
+        t = c.ingest(corpus / "bvh" / "cmu" / "131_02.bvh", library=lib, codec="bvh-lossless")
+        c.ingest(walker(150), library=lib, fps=60, point_names=NAMES, name="markers")
+        with pytest.raises(ValueError, match=r"markers lacks a skeleton \(for rotation=\)"):
+            Windows(c, library=lib, rotation="quat")
+        w = Windows(c, library=lib, seconds=0.5, fps=30, rotation="quat", on_missing="skip")
+        assert [n for n, _ in w.skipped] == ["markers"]
+        it = w[2]
+        win = w.windows[2]
+        ch = c.channels(t.id, start=win.start, end=win.end, fps=30)
+    q = it["rotation"].astype(np.float64)
+    assert q.shape == (15, len(it["joints"]), 4)
+    assert np.allclose(np.linalg.norm(q, axis=2), 1, atol=1e-6) and (q[..., 0] >= 0).all()
+    # Forward kinematics from these rotations puts every joint where the server does.
+    fk = _forward(ch.skeleton, it["joints"], q, ch.values[:15])
+    names = list(it["points"])
+    order = [names.index(j.name) for j in ch.skeleton.joints]
+    positions = it["motion"][:, order].astype(np.float64)
+    worst = np.abs(fk - positions).max()
+    assert worst < 1e-4 * np.abs(positions).max() + 1e-3, worst
+    # 6D is the quaternion's matrix's first two columns; Euler the file's channel values.
+    from mocapstore.skeleton import quaternion_matrices, rotations
+
+    names6, six = rotations(ch, "6d")
+    m = quaternion_matrices(q)
+    assert names6 == tuple(it["joints"])
+    assert np.allclose(six[:15], np.concatenate([m[..., 0], m[..., 1]], axis=-1), atol=1e-5)
+    _, euler = rotations(ch, "euler")
+    assert euler.shape[2] == 3 and np.allclose(
+        euler[:15, 0], ch.joint(ch.skeleton.names[0])[:15, 3:]
+    )

@@ -27,6 +27,7 @@ import numpy.typing as npt
 
 from . import _protocol
 from .client import Client
+from .skeleton import ROTATIONS, rotations
 from .types import Frames, Take
 
 F32Array = npt.NDArray[np.float32]
@@ -98,6 +99,14 @@ def collate(items: Sequence[Item]) -> Item:
     out: Item = {"motion": motion, "mask": mask}
     for key in ("take", "name", "start", "fps", "labels", "points"):
         out[key] = [it[key] for it in items]
+    if all("rotation" in it for it in items):
+        joints = max(it["rotation"].shape[1] for it in items)
+        k = items[0]["rotation"].shape[2]
+        rot = np.zeros((len(items), motion.shape[1], joints, k), dtype=np.float32)
+        for i, it in enumerate(items):
+            rot[i, :, : it["rotation"].shape[1]] = it["rotation"]
+        out["rotation"] = rot
+        out["joints"] = [it["joints"] for it in items]
     return out
 
 
@@ -135,8 +144,12 @@ class Windows:
     is fixed by its id and ``seed``, ``splits`` the fractions, [`SPLITS`] by default).
     A selection with no window is an error that says why.
 
-    ``points`` selects and orders points by name; a take without them is an error naming
-    it, unless ``on_missing="skip"`` (then ``skipped`` lists each take left out and what it
+    ``rotation="quat"|"6d"|"euler"`` adds each skeleton take's joint rotations to its
+    items (``rotation`` ``(frames, joints, 4|6|3)``, ``joints`` their names; read from the
+    take's channels over the same range, rate and transforms, one request per window; see
+    [`mocapstore.skeleton.rotations`]); a take without a skeleton is then missing what is
+    asked. ``points`` selects and orders points by name; a take without them is an error
+    naming it, unless ``on_missing="skip"`` (then ``skipped`` lists each take left out and what it
     lacks). ``roles=True`` gives every take the same layout, one point per body role
     ([`ROLES`]: the centroid of the points the server places in it, missing where none),
     so windows of different rigs stack. Without either, windows have each take's own
@@ -168,6 +181,7 @@ class Windows:
         stride: float | None = None,
         points: Sequence[str] | None = None,
         roles: bool = False,
+        rotation: Literal["quat", "6d", "euler"] | None = None,
         on_missing: Literal["raise", "skip"] = "raise",
         unit: str | None = None,
         up: str | None = None,
@@ -184,6 +198,8 @@ class Windows:
             raise ValueError(f"on_missing is 'raise' or 'skip', not {on_missing!r}")
         if points is not None and roles:
             raise ValueError("points= and roles=True choose the points two ways: pick one")
+        if rotation is not None and rotation not in ROTATIONS:
+            raise ValueError(f"rotation is one of {', '.join(ROTATIONS)}, not {rotation!r}")
         shares = dict(splits or SPLITS)
         if split is not None and split not in shares:
             raise ValueError(f"split {split!r} is none of {', '.join(shares)}")
@@ -202,6 +218,7 @@ class Windows:
         self.frames = max(1, round(seconds * fps))
         self.points = _protocol.names(points)
         self.roles = roles
+        self.rotation = rotation
         self.unit, self.up, self.root = unit, up, root
         self.cache_bytes, self.disk_bytes = cache_bytes, disk_bytes
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
@@ -254,12 +271,21 @@ class Windows:
                 f"none passes where= and split={split!r}"
             )
         if self.skipped and len(self.skipped) == len(chosen):
-            return f"no window: every one of the {len(chosen)} takes lacks points of {self.points}"
+            return f"no window: every one of the {len(chosen)} takes lacks {self._asked()}"
         longest = max(t.frames / nominal_rate(t.fps) for t in chosen)
         return (
             f"no window: {len(chosen)} takes, none {self.seconds} s long "
             f"(the longest lasts {longest:.3f} s)"
         )
+
+    def _asked(self) -> str:
+        """What every take must have, in the caller's terms."""
+        wants = []
+        if self.points is not None:
+            wants.append(f"points of {list(self.points)}")
+        if self.rotation is not None:
+            wants.append("a skeleton (for rotation=)")
+        return " and ".join(wants)
 
     def _index(self, takes: list[Take], on_missing: str) -> list[Window]:
         out: list[Window] = []
@@ -269,11 +295,12 @@ class Windows:
         lacking: list[tuple[str, tuple[str, ...]]] = []
         for t in takes:
             self._records[t.id] = t
-            if self.points is not None:
-                missing = tuple(n for n in self.points if n not in t.point_names)
-                if missing:
-                    lacking.append((t.name, missing))
-                    continue
+            missing = tuple(n for n in self.points or () if n not in t.point_names)
+            if self.rotation is not None and t.skeleton is None:
+                missing += ("a skeleton (for rotation=)",)
+            if missing:
+                lacking.append((t.name, missing))
+                continue
             if self.roles:
                 self._layouts[t.id] = _role_layout(t)
             # Source frames a window spans: the fewest whose answer at ``fps`` has
@@ -287,7 +314,7 @@ class Windows:
             shown = "; ".join(f"{n} lacks {', '.join(m)}" for n, m in lacking[:5])
             more = f" (and {len(lacking) - 5} more)" if len(lacking) > 5 else ""
             raise ValueError(
-                f"{len(lacking)} of {len(takes)} takes lack points of {list(self.points or ())}: "
+                f"{len(lacking)} of {len(takes)} takes lack {self._asked()}: "
                 f"{shown}{more}; pass on_missing='skip' to leave them out"
             )
         self.skipped = lacking
@@ -365,7 +392,7 @@ class Windows:
         w = self.windows[i % len(self)]
         t = self._records[w.take]
         present = ~np.isnan(motion).any(axis=2)
-        return {
+        item: Item = {
             "motion": np.nan_to_num(motion, nan=0.0),
             "mask": present,
             "take": w.take,
@@ -375,6 +402,26 @@ class Windows:
             "labels": dict(t.labels),
             "points": ROLES if self.roles else self.points or t.point_names,
         }
+        if self.rotation is not None:
+            item["joints"], item["rotation"] = self._rotations(w)
+        return item
+
+    def _rotations(self, w: Window) -> tuple[tuple[str, ...], F32Array]:
+        """Window ``w``'s joint rotations ``(frames, joints, k)`` from the take's channels
+        over the same range, rate and transforms (one request per window)."""
+        ch = self.client().channels(
+            w.take,
+            start=w.start,
+            end=w.end,
+            fps=self.fps,
+            unit=self.unit,
+            up=self.up,
+            root=self.root,
+        )
+        names, rot = rotations(ch, self.rotation or "quat")
+        if len(rot) < self.frames:
+            raise RuntimeError(f"{w.name}: {len(rot)} frames of channels, not {self.frames}")
+        return names, rot[: self.frames].astype(np.float32)
 
     def __getitem__(self, i: int) -> Item:
         """Window ``i`` as an [`Item`]."""

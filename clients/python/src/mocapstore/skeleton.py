@@ -162,3 +162,85 @@ def parse(text: bytes, start: int = 0) -> Channels:
         start=start,
         bvh=text,
     )
+
+
+#: What [`rotations`] gives per joint: a unit quaternion (w, x, y, z), the first two
+#: columns of the rotation matrix (Zhou et al. 2019, continuous for learning), or the
+#: file's Euler angles in degrees in its channel order.
+ROTATIONS = {"quat": 4, "6d": 6, "euler": 3}
+
+
+def _axis_quaternions(axis: str, degrees: F64Array) -> F64Array:
+    """``(n, 4)`` quaternions (w, x, y, z) of turns by ``degrees`` about ``axis``."""
+    half = np.radians(degrees) / 2
+    q = np.zeros((len(degrees), 4))
+    q[:, 0] = np.cos(half)
+    q[:, "XYZ".index(axis) + 1] = np.sin(half)
+    return q
+
+
+def _multiply(a: F64Array, b: F64Array) -> F64Array:
+    """The Hamilton products ``a ⊗ b`` of ``(n, 4)`` quaternions (w, x, y, z)."""
+    aw, ax, ay, az = a.T
+    bw, bx, by, bz = b.T
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=1,
+    )
+
+
+def quaternion_matrices(q: F64Array) -> F64Array:
+    """``(..., 3, 3)`` rotation matrices of unit quaternions ``(..., 4)`` (w, x, y, z)."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def rotations(ch: Channels, kind: str = "quat") -> tuple[tuple[str, ...], F64Array]:
+    """The local rotation of every joint with rotation channels, ``(frames, joints, k)``
+    (``k`` from [`ROTATIONS`]), and those joints' names. A joint's rotation is its channels'
+    turns composed in file order (BVH's ``Zrotation Xrotation Yrotation`` is ``Rz·Rx·Ry``),
+    as the server's forward kinematics composes them. Quaternions are signed so that
+    ``w ≥ 0``."""
+    if kind not in ROTATIONS:
+        raise ValueError(f"rotation is one of {', '.join(ROTATIONS)}, not {kind!r}")
+    names: list[str] = []
+    out: list[F64Array] = []
+    at = 0
+    frames = len(ch)
+    for j in ch.skeleton.joints:
+        cols = [
+            (at + k, c[0].upper())
+            for k, c in enumerate(j.channels)
+            if c.lower().endswith("rotation")
+        ]
+        at += len(j.channels)
+        if not cols:
+            continue
+        names.append(j.name)
+        if kind == "euler":
+            out.append(ch.values[:, [c for c, _ in cols]])
+            continue
+        q = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1))
+        for c, axis in cols:
+            q = _multiply(q, _axis_quaternions(axis, ch.values[:, c]))
+        q *= np.where(q[:, :1] < 0, -1.0, 1.0)
+        if kind == "quat":
+            out.append(q)
+        else:
+            m = quaternion_matrices(q)
+            out.append(np.concatenate([m[:, :, 0], m[:, :, 1]], axis=1))
+    width = ROTATIONS[kind]
+    stacked = np.stack(out, axis=1) if out else np.zeros((frames, 0, width))
+    return tuple(names), stacked
