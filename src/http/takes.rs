@@ -435,9 +435,9 @@ fn answer_headers(a: &Answer) -> HeaderMap {
     headers.insert("x-start-frame", hv(a.start.to_string()));
     headers.insert("x-fps", hv(a.fps.to_string()));
     headers.insert("x-source-fps", hv(a.source_fps.to_string()));
+    headers.insert("x-metres-per-unit", hv(a.metres_per_unit.to_string()));
     if let Some(points) = a.points {
         headers.insert("x-points", hv(points.to_string()));
-        headers.insert("x-metres-per-unit", hv(a.metres_per_unit.to_string()));
     }
     if let Some(n) = a.length {
         headers.insert(header::CONTENT_LENGTH, hv(n.to_string()));

@@ -23,13 +23,26 @@ pub fn nominal(fps: f64) -> f64 {
 }
 
 /// The first frame at `fps` whose time `f / nominal(fps)` is at or after `t` seconds, as a
-/// float (the caller checks it against the take's frames before using it as an index). A
-/// frame time within 1e-9 of a frame of `t` counts as at it: `t` itself is usually printed
-/// from a frame time with rounding.
+/// float (the caller checks it against the take's frames before using it as an index).
+/// A time reckoned at either rate lands on the same frame: `t` within the two rates'
+/// difference of frame `f`'s time (and 1e-9) counts as at it, so frame 100's time at a
+/// printed 59.9988 fps is frame 100, not 101.
 pub fn first_frame_from(t: f64, fps: f64) -> f64 {
-    let f = t * nominal(fps);
-    (f - 1e-9 * f.abs().max(1.0)).ceil().max(0.0)
+    (t * nominal(fps) - slack(t, fps)).ceil().max(0.0)
 }
+
+/// How far (in frames at the nominal rate) a time `t` reckoned at the printed rate `fps`
+/// can lie from the same frame reckoned at the nominal one, with room for rounding; never
+/// more than [`MAX_SLACK`] of a frame, so a time between frames stays between them. (Far
+/// enough into a take the two reckonings part by more: 8,000 frames in at a printed
+/// 59.9988 fps, 160,000 at BVH's 30.00003.)
+pub fn slack(t: f64, fps: f64) -> f64 {
+    let f = (t * nominal(fps)).abs();
+    (1.5 * (fps / nominal(fps) - 1.0).abs() * f + 1e-9 * f.max(1.0)).min(MAX_SLACK)
+}
+
+/// The most of a frame [`slack`] allows.
+pub const MAX_SLACK: f64 = 0.25;
 
 #[cfg(test)]
 mod tests {
@@ -76,8 +89,13 @@ mod tests {
             a in 0u32..100_000,
             len in 1u32..100_000,
             between in prop::bool::ANY,
+            at_printed in prop::bool::ANY,
         ) {
-            let rate = nominal(fps);
+            // Times reckoned at the nominal rate, or at the printed one (as a take's
+            // record, its headers and its CSV columns give them).
+            // At the printed rate only where the two reckonings lie within the slack.
+            let drift = (fps / nominal(fps) - 1.0).abs() * f64::from(a + len);
+            let rate = if at_printed && 1.5 * drift < MAX_SLACK { fps } else { nominal(fps) };
             let shift = if between { 0.37 } else { 0.0 };
             let t0 = (f64::from(a) + shift) / rate;
             let t1 = (f64::from(a + len) + shift) / rate;
@@ -98,5 +116,9 @@ mod tests {
         assert_eq!(first_frame_from(10.0, 1.0 / 0.0083333), 1200.0);
         // NTSC stays NTSC: one second of 29.97 fps holds frames 0..=29.
         assert_eq!(first_frame_from(1.0, 30000.0 / 1001.0), 30.0);
+        // Frame 100's time at a printed 59.9988 fps (0.016667 s) is frame 100.
+        let fps = 1.0 / 0.016667;
+        assert_eq!(first_frame_from(100.0 / fps, fps), 100.0);
+        assert_eq!(first_frame_from(5_000.0 / fps, fps), 5_000.0);
     }
 }

@@ -78,8 +78,6 @@ pub const COLUMNS: [&str; 19] = [
     "frames",
     "fps",
     "source_fps",
-    "metres_per_unit",
-    "points",
     "codec",
     "max_bound_mm",
     "mean_bound_mm",
@@ -88,6 +86,9 @@ pub const COLUMNS: [&str; 19] = [
     "bytes",
     "blake3",
     "skipped",
+    // After the columns of earlier versions, so that readers by position keep working.
+    "metres_per_unit",
+    "points",
 ];
 
 /// What the ZIP writer holds beside the answer it writes: the deflate state (zlib's window,
@@ -228,12 +229,6 @@ impl Entry {
             self.frames.to_string(),
             self.fps.to_string(),
             self.source_fps.to_string(),
-            self.metres_per_unit.to_string(),
-            csv_text(&if self.points.is_empty() {
-                String::new()
-            } else {
-                serde_json::to_string(&self.points).unwrap_or_default()
-            }),
             csv_text(&self.codec),
             self.max_bound_mm.to_string(),
             opt(self.mean_bound_mm.map(|m| m.to_string())),
@@ -242,6 +237,13 @@ impl Entry {
             opt(self.bytes.map(|b| b.to_string())),
             opt(self.blake3.clone()),
             csv_text(&opt(self.skipped.clone())),
+            self.metres_per_unit.to_string(),
+            // A take with no file names no points.
+            csv_text(&if self.points.is_empty() || self.skipped.is_some() {
+                String::new()
+            } else {
+                serde_json::to_string(&self.points).unwrap_or_default()
+            }),
         ];
         // Text is encoded above; numbers and hex hashes need no quotes.
         let mut line = fields.join(",");

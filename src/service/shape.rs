@@ -5,6 +5,7 @@
 
 use super::prepared::Prepared;
 use super::{Error, Result};
+use crate::motion::rate;
 use crate::motion::skeleton::Joint;
 use crate::motion::transform::channels::Channels;
 use crate::motion::transform::pose::{PointPose, SkeletonPose};
@@ -60,13 +61,21 @@ pub fn span(
 ) -> (usize, usize) {
     match options.fps {
         Some(fps) if fps != prepared.fps => {
+            let plain = output_frames(end - start, prepared.fps, fps);
+            if !extend {
+                return (end, plain);
+            }
+            // Output frames before the range's end (its time reckoned at either rate).
             let t = seconds * fps;
-            let within = (t - 1e-9 * t.max(1.0)).ceil().max(1.0) as usize;
-            let decoded = if extend {
-                (end + 2).min(prepared.frames.max(end))
-            } else {
-                end
-            };
+            let slack = rate::slack(seconds, prepared.fps) * fps / rate::nominal(prepared.fps);
+            let within = (t - slack).ceil().max(1.0) as usize;
+            if within <= plain {
+                return (end, within);
+            }
+            // The last ones lie past the range's last source frame: decode the frames
+            // after it that interpolating them needs (the cubic's two), where the take has
+            // them.
+            let decoded = (end + 2).min(prepared.frames.max(end));
             let can = output_frames(decoded - start, prepared.fps, fps);
             (decoded, within.min(can))
         }

@@ -199,6 +199,12 @@ def test_items_say_where_they_come_from(server: str) -> None:
     raw = w.array(1)
     assert (it["mask"] == ~np.isnan(raw).any(axis=2)).all() and not it["mask"].all()
     assert not np.isnan(it["motion"]).any() and (it["motion"][~it["mask"]] == 0).all()
+    # The old name of the first argument still works.
+    assert len(Windows(url=server, library=lib, seconds=0.5, fps=30)) == len(
+        Windows(server, library=lib, seconds=0.5, fps=30)
+    )
+    with pytest.raises(ValueError, match="root='extract' adds the root's path"):
+        Windows(server, library=lib, roles=True, root="extract")
     with pytest.raises(TypeError, match=r"a server URL or a mocapstore\.Client"):
         Windows(42, library=lib)  # type: ignore[arg-type]
 
@@ -252,6 +258,8 @@ def test_splits_by_take_and_filters(server: str) -> None:
     assert not (takes["train"] & takes["val"]) and not (takes["train"] & takes["test"])
     assert len(takes["train"] | takes["val"] | takes["test"]) == 30
     assert len(takes["train"]) > len(takes["val"])
+    other = Windows(server, library=lib, seconds=0.5, fps=30, split="train", seed=8)
+    assert {x.take for x in other.windows} != takes["train"], "the seed chooses the split"
     runs = Windows(server, library=lib, seconds=0.5, fps=30, labels={"content": "run"})
     assert len({x.take for x in runs.windows}) == 10
     few = Windows(server, library=lib, seconds=0.5, fps=30, where=lambda t: t.name < "t2")

@@ -151,7 +151,7 @@ def hinted(req: Request, r: Response) -> Response:
     something that is not an id (a name) says how to find it by name."""
     hint = ""
     if r.status == 401:
-        hint = "pass token= to the client, or set MOCAP_TOKEN"
+        hint = "the token comes from token= or MOCAP_TOKEN: check that it is set and valid"
     elif r.status == 404:
         m = _TAKE_PATH.match(req.path)
         if m and not _ID.match(m.group(1)):
@@ -166,7 +166,8 @@ def hinted(req: Request, r: Response) -> Response:
         body = json.loads(r.content)
         body["error"]["message"] = f"{body['error']['message']}; {hint}"
     except (ValueError, KeyError, TypeError):
-        body = {"error": {"code": "", "message": hint}}
+        said = r.content[:500].decode("utf-8", "replace") or f"HTTP {r.status}"
+        body = {"error": {"code": "", "message": f"{said}; {hint}"}}
     return Response(r.status, r.headers, json.dumps(body).encode())
 
 

@@ -109,10 +109,14 @@ class _Base:
             self._headers["authorization"] = f"Bearer {token.strip()}"
         self._retries = retries
         self._api_checked = False
+        #: Whether this client, or the code that made it, has had an answer from the
+        #: server: until then a refused connection means no server, and is not retried.
+        self.reached = False
         # Point names per take (they never change): a range's names without a second call.
         self._takes: dict[str, Take] = {}
 
     def _checked(self, req: p.Request, r: p.Response) -> p.Response:
+        self.reached = True
         named = "x-mocapstore-api" in r.headers
         if not self._api_checked and (named or r.status < 400):
             p.check_api(r.headers)
@@ -121,7 +125,7 @@ class _Base:
 
     def _unreachable(self, e: httpx.TransportError, attempt: int) -> errors.ConnectionFailed:
         """The error of a server that could not be reached, saying what to do."""
-        if isinstance(e, httpx.ConnectError) and not self._api_checked:
+        if isinstance(e, httpx.ConnectError) and not self.reached:
             return errors.ConnectionFailed(
                 f"{self.url}: {e}. Is the server running? Start one with `mocapstore serve`, "
                 "or set MOCAP_SERVER (or url=) to where it runs"
@@ -133,7 +137,7 @@ class _Base:
         """Whether a request that failed to get an answer is sent again. A server never
         reached is not waited for: refused at the first call, it is not running (or not
         there); one that answered before may be restarting."""
-        never_reached = isinstance(e, httpx.ConnectError) and not self._api_checked
+        never_reached = isinstance(e, httpx.ConnectError) and not self.reached
         return req.safe and attempt < self._retries and not never_reached
 
     @staticmethod

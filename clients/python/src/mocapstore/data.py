@@ -169,6 +169,7 @@ class Windows:
         server: str | Client | None = None,
         token: str | None = None,
         *,
+        url: str | None = None,
         library: str | None = None,
         tag: str | None = None,
         labels: Mapping[str, str | int | float] | None = None,
@@ -198,12 +199,20 @@ class Windows:
             raise ValueError(f"on_missing is 'raise' or 'skip', not {on_missing!r}")
         if points is not None and roles:
             raise ValueError("points= and roles=True choose the points two ways: pick one")
+        if roles and root == "extract":
+            raise ValueError(
+                "roles=True gives body roles only, and root='extract' adds the root's path as "
+                "a point: use root='in-place' with roles, or points= with root='extract'"
+            )
+        if url is not None:
+            if server is not None:
+                raise ValueError("give the server once: server= (or url=, its old name)")
+            server = url
         if rotation is not None and rotation not in ROTATIONS:
             raise ValueError(f"rotation is one of {', '.join(ROTATIONS)}, not {rotation!r}")
         shares = dict(splits or SPLITS)
         if split is not None and split not in shares:
             raise ValueError(f"split {split!r} is none of {', '.join(shares)}")
-        url: str | None
         if isinstance(server, Client):
             url, token = server.url, server.token if token is None else token
         elif server is None or isinstance(server, str):
@@ -235,12 +244,15 @@ class Windows:
         self.skipped: list[tuple[str, tuple[str, ...]]] = []
         with Client(url, token) as c:
             listed = list(c.takes(library=library, tag=tag, labels=labels))
-        chosen = [
-            t
-            for t in listed
-            if (where is None or where(t))
-            and (split is None or split_of(t.id, seed, shares) == split)
-        ]
+            chosen = [
+                t
+                for t in listed
+                if (where is None or where(t))
+                and (split is None or split_of(t.id, seed, shares) == split)
+            ]
+            if roles:
+                # A take stored before bodies were derived gets its body at its first read.
+                chosen = [t if t.raw.get("body") else c.take(t.id) for t in chosen]
         self.windows = self._index(chosen, on_missing)
         if not self.windows:
             raise ValueError(self._why_empty(listed, chosen, library, tag, labels, split))
@@ -285,6 +297,8 @@ class Windows:
             wants.append(f"points of {list(self.points)}")
         if self.rotation is not None:
             wants.append("a skeleton (for rotation=)")
+        if self.roles:
+            wants.append("body roles (for roles=True)")
         return " and ".join(wants)
 
     def _index(self, takes: list[Take], on_missing: str) -> list[Window]:
@@ -298,11 +312,13 @@ class Windows:
             missing = tuple(n for n in self.points or () if n not in t.point_names)
             if self.rotation is not None and t.skeleton is None:
                 missing += ("a skeleton (for rotation=)",)
+            if self.roles:
+                self._layouts[t.id] = _role_layout(t)
+                if not any(self._layouts[t.id]):
+                    missing += ("body roles (its body.unplaced lists every one)",)
             if missing:
                 lacking.append((t.name, missing))
                 continue
-            if self.roles:
-                self._layouts[t.id] = _role_layout(t)
             # Source frames a window spans: the fewest whose answer at ``fps`` has
             # ``frames`` frames (the server's grid, snapped as it snaps), and the step
             # between windows.
@@ -341,6 +357,9 @@ class Windows:
         with self._client_lock:
             if self._client is None or self._pid != os.getpid():
                 self._client = Client(self.url, self.token)
+                # The server answered when the windows were listed: a worker's first
+                # request refused (a restart) is retried, not taken for no server at all.
+                self._client.reached = True
                 self._pid = os.getpid()
             return self._client
 
@@ -400,7 +419,7 @@ class Windows:
             "start": w.start / nominal_rate(t.fps),
             "fps": self.fps,
             "labels": dict(t.labels),
-            "points": ROLES if self.roles else self.points or t.point_names,
+            "points": ROLES if self.roles else _protocol.frame_names(t, self.points, self.root),
         }
         if self.rotation is not None:
             item["joints"], item["rotation"] = self._rotations(w)

@@ -113,9 +113,16 @@ class Frames:
         return tuple(self.data.shape)
 
     @property
+    def rate(self) -> float:
+        """The rate times are reckoned at, as the server reckons them: ``fps``, or the whole
+        rate a printed one was written for (a BVH's 0.0333333 s frames are 30 fps)."""
+        whole = round(self.fps)
+        return float(whole) if whole >= 1 and abs(self.fps - whole) <= 1e-4 * self.fps else self.fps
+
+    @property
     def times(self) -> npt.NDArray[np.float64]:
-        """Seconds of each frame from the range's start."""
-        return np.arange(len(self), dtype=np.float64) / self.fps
+        """Seconds of each frame from the range's start (at [`rate`])."""
+        return np.arange(len(self), dtype=np.float64) / self.rate
 
     def point(self, name: str) -> F32Array:
         """The ``(frames, 3)`` track of the point ``name``."""
@@ -148,8 +155,16 @@ class Frames:
 
     def between(self, t0: float, t1: float) -> Frames:
         """The frames at ``t0 <= t < t1`` seconds from the range's start."""
-        first = max(0, int(np.ceil(t0 * self.fps - 1e-9)))
-        end = max(first, int(np.ceil(t1 * self.fps - 1e-9)))
+        drift = abs(self.fps / self.rate - 1)
+
+        def at(t: float) -> int:
+            # As the server counts: a time reckoned at either rate is at the same frame
+            # (within a quarter frame).
+            f = t * self.rate
+            return int(np.ceil(f - min(1.5 * drift * abs(f) + 1e-9 * max(1.0, abs(f)), 0.25)))
+
+        first = max(0, at(t0))
+        end = max(first, at(t1))
         return self[first:end]
 
     def to_pandas(self) -> Any:
