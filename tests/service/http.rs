@@ -157,15 +157,16 @@ async fn ingest_fetch_and_errors_on_every_backend() {
             part == full[100 * w * 4..340 * w * 4],
             "a range equals the same frames of the whole"
         );
-        // Seconds select frames whose time f / fps lies in [t0, t1): at 120.00048 fps (this
-        // take's), frame 120 is at 0.999996 s, so 1 s starts at frame 121.
+        // Seconds select frames whose time lies in [t0, t1) at the rate the file's was
+        // written for: this take's printed 120.00048 fps is 120, so 1 s starts at frame 120
+        // (at the printed rate frame 120 would be 0.999996 s, and a second 121 frames).
         let (status, h, secs) = srv
             .get(&format!("/v1/takes/{id}/frames?t0=1&t1=2&format=f32"))
             .await;
         assert_eq!(status, 200);
         let first: usize = h["x-start-frame"].to_str().unwrap().parse().unwrap();
         let n: usize = h["x-frames"].to_str().unwrap().parse().unwrap();
-        assert_eq!((first, n), (121, 120));
+        assert_eq!((first, n), (120, 120));
         assert!(secs == full[first * w * 4..(first + n) * w * 4]);
         let (status, _, body) = srv
             .get(&format!(
