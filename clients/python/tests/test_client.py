@@ -25,7 +25,7 @@ import pytest
 
 import mocapstore
 from mocapstore import _protocol
-from mocapstore.data import nominal_rate
+from mocapstore.types import nominal_rate
 
 NAMES = ["head", "lhand", "rhand", "lfoot", "rfoot"]
 

@@ -28,7 +28,7 @@ import numpy.typing as npt
 from . import _protocol
 from .client import Client
 from .skeleton import ROTATIONS, rotations
-from .types import Frames, Take
+from .types import Frames, Take, nominal_rate
 
 F32Array = npt.NDArray[np.float32]
 
@@ -53,14 +53,6 @@ ROLES: tuple[str, ...] = (
 
 #: The fractions of takes in each split, in order.
 SPLITS: dict[str, float] = {"train": 0.8, "val": 0.1, "test": 0.1}
-
-
-def nominal_rate(fps: float) -> float:
-    """The rate a take's frame times are reckoned at, as the server reckons them: the
-    nearest whole rate within 1e-4 (a frame time printed with rounding: BVH's 0.0333333 s
-    is 30 fps), else ``fps``."""
-    whole = round(fps)
-    return float(whole) if whole >= 1 and abs(fps - whole) <= 1e-4 * fps else fps
 
 
 def split_of(take_id: str, seed: int, splits: Mapping[str, float] | None = None) -> str:

@@ -13,6 +13,14 @@ import numpy.typing as npt
 F32Array = npt.NDArray[np.float32]
 
 
+def nominal_rate(fps: float) -> float:
+    """The rate a take's frame times are reckoned at, as the server reckons them: the
+    nearest whole rate within 1e-4 (a frame time printed with rounding: BVH's 0.0333333 s
+    is 30 fps), else ``fps``."""
+    whole = round(fps)
+    return float(whole) if whole >= 1 and abs(fps - whole) <= 1e-4 * fps else fps
+
+
 @dataclass(frozen=True)
 class Take:
     """A stored take: what it is, how it was coded, what that cost and what error it
@@ -116,8 +124,7 @@ class Frames:
     def rate(self) -> float:
         """The rate times are reckoned at, as the server reckons them: ``fps``, or the whole
         rate a printed one was written for (a BVH's 0.0333333 s frames are 30 fps)."""
-        whole = round(self.fps)
-        return float(whole) if whole >= 1 and abs(self.fps - whole) <= 1e-4 * self.fps else self.fps
+        return nominal_rate(self.fps)
 
     @property
     def times(self) -> npt.NDArray[np.float64]:
