@@ -120,6 +120,22 @@ pub const MAX_AUDIT_PAGE: usize = 1_000;
 /// selection reads the library by.
 pub const MAX_TAKES_PAGE: usize = 500;
 
+/// Takes one `POST /v1/motion-stats` may name by id (`ids`): the takes of a training split.
+pub const MAX_STATS_IDS: usize = 20_000;
+
+/// Point layouts (a set of point names in one unit) one motion-statistics answer may hold:
+/// what it holds grows with each. A selection of more is refused with what to do (narrow
+/// it, select `points`, or ask `by=roles`).
+pub const MAX_STATS_GROUPS: usize = 64;
+
+/// Takes a motion-statistics answer lists as skipped, each with its reason (it counts the
+/// rest).
+pub const MAX_STATS_SKIPPED: usize = 100;
+
+/// Bytes of per-take motion statistics a server keeps ([`crate::service::motion_stats`]):
+/// about 150 bytes a point, so 32 MiB keeps a few thousand takes of a full marker set.
+pub const MOTION_STATS_CACHE_BYTES: usize = 32 << 20;
+
 /// Jobs one listing answers at most.
 pub const MAX_JOBS_LISTED: usize = 1_000;
 

@@ -1,5 +1,6 @@
 //! `GET /v1/takes` (listing), `PATCH /v1/takes/{id}`, `GET /v1/stats`,
-//! `GET /v1/export` (a library as one ZIP).
+//! `GET /v1/export` (a library as one ZIP), `GET`/`POST /v1/motion-stats` (normalisation
+//! statistics of a selection's motion).
 
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
@@ -22,6 +23,7 @@ use crate::service::body;
 use crate::service::budget::Holder;
 use crate::service::export::{self, ExportRequest};
 use crate::service::library::{self, Page, Stats, TakeQuery};
+use crate::service::motion_stats::{self, By, MotionStats, Selection, StatsRequest};
 use crate::store::SortKey;
 
 /// A listing's order and page; its filter is the same query string read as a [`TakeQuery`].
@@ -151,6 +153,152 @@ pub async fn export(
     headers.insert(header::CONTENT_DISPOSITION, attachment(&file));
     headers.insert("x-takes", HeaderValue::from(e.takes));
     Ok((headers, streamed(e).await?).into_response())
+}
+
+/// `GET /v1/motion-stats`: the selection as a listing's filters (and `label.<key>=`),
+/// the points and transforms as a range request's.
+#[derive(Deserialize)]
+pub struct MotionStatsQuery {
+    library: Option<String>,
+    tag: Option<String>,
+    name_prefix: Option<String>,
+    codec: Option<CodecId>,
+    layout: Option<String>,
+    /// Point names, comma-separated.
+    points: Option<String>,
+    by: Option<String>,
+    fps: Option<f64>,
+    root: Option<String>,
+    up: Option<String>,
+    unit: Option<String>,
+}
+
+/// `POST /v1/motion-stats`: the same as JSON, with the takes named by id (a training
+/// split) instead of filters if wished, and labels as an object.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionStatsBody {
+    ids: Option<Vec<String>>,
+    library: Option<String>,
+    tag: Option<String>,
+    name_prefix: Option<String>,
+    codec: Option<CodecId>,
+    layout: Option<String>,
+    /// `{"content": "walk"}`: each a condition, as `label.<key>=` in a query string.
+    labels: Option<serde_json::Map<String, serde_json::Value>>,
+    points: Option<Vec<String>>,
+    by: Option<String>,
+    fps: Option<f64>,
+    root: Option<String>,
+    up: Option<String>,
+    unit: Option<String>,
+}
+
+pub async fn motion_stats(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
+    query: Result<Query<MotionStatsQuery>, QueryRejection>,
+    pairs: Result<Query<Pairs>, QueryRejection>,
+) -> Result<Json<MotionStats>, ApiError> {
+    let (Query(q), Query(pairs)) = (query?, pairs?);
+    let takes = TakeQuery {
+        library: q.library,
+        tag: q.tag,
+        name_prefix: q.name_prefix,
+        codec: q.codec,
+        layout: q.layout,
+        ..TakeQuery::default()
+    }
+    .with_labels(pairs.iter().map(|(k, v)| (k.as_str(), v.as_str())));
+    let request = StatsRequest {
+        selection: Selection::Query(Box::new(takes)),
+        grant: caller.grant.clone(),
+        points: q.points.map(|p| p.split(',').map(str::to_string).collect()),
+        by: by_of(q.by.as_deref())?,
+        transform: transform_of(q.fps, q.root.as_deref(), q.up.as_deref(), q.unit.as_deref())?,
+    };
+    stats_answer(&state, holder, request).await
+}
+
+pub async fn motion_stats_of(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Extension(holder): Extension<Holder>,
+    body: Result<Json<MotionStatsBody>, JsonRejection>,
+) -> Result<Json<MotionStats>, ApiError> {
+    let Json(b) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let mut labels = Vec::new();
+    for (k, v) in b.labels.unwrap_or_default() {
+        let text = match v {
+            serde_json::Value::String(s) => s,
+            serde_json::Value::Number(n) => n.to_string(),
+            other => {
+                return Err(ApiError::bad_request(format!(
+                    "label {k:?}: a label is text or a number, not {other}"
+                )))
+            }
+        };
+        labels.push((format!("label.{k}"), text));
+    }
+    let filtered = b.library.is_some()
+        || b.tag.is_some()
+        || b.name_prefix.is_some()
+        || b.codec.is_some()
+        || b.layout.is_some()
+        || !labels.is_empty();
+    if b.ids.is_some() && filtered {
+        return Err(ApiError::bad_request(
+            "give ids or filters (library, tag, labels, name_prefix, codec, layout), not both",
+        ));
+    }
+    let query = TakeQuery {
+        library: b.library,
+        tag: b.tag,
+        name_prefix: b.name_prefix,
+        codec: b.codec,
+        layout: b.layout,
+        ..TakeQuery::default()
+    }
+    .with_labels(labels.iter().map(|(k, v)| (k.as_str(), v.as_str())));
+    let selection = match b.ids {
+        Some(ids) => Selection::Ids(ids),
+        None => Selection::Query(Box::new(query)),
+    };
+    let request = StatsRequest {
+        selection,
+        grant: caller.grant.clone(),
+        points: b.points,
+        by: by_of(b.by.as_deref())?,
+        transform: transform_of(b.fps, b.root.as_deref(), b.up.as_deref(), b.unit.as_deref())?,
+    };
+    stats_answer(&state, holder, request).await
+}
+
+fn by_of(by: Option<&str>) -> Result<By, ApiError> {
+    by.map(str::parse)
+        .transpose()
+        .map_err(ApiError::bad_request)
+        .map(Option::unwrap_or_default)
+}
+
+async fn stats_answer(
+    state: &AppState,
+    holder: Holder,
+    request: StatsRequest,
+) -> Result<Json<MotionStats>, ApiError> {
+    Ok(Json(
+        motion_stats::compute(
+            &state.store,
+            &state.caches,
+            &state.moments,
+            &state.answers,
+            holder,
+            &state.limits,
+            request,
+        )
+        .await?,
+    ))
 }
 
 /// `Content-Disposition` of a download named `file` (letters of any script, digits, `._-`):

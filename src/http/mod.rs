@@ -116,6 +116,8 @@ pub struct AppState {
     pub answers: Arc<Budget>,
     pub metrics: Arc<Metrics>,
     pub caches: Arc<ReadCaches>,
+    /// Per-take motion statistics, kept for `/v1/motion-stats`.
+    pub moments: Arc<crate::service::motion_stats::MomentsCache>,
     pub jobs: Arc<Jobs>,
     pub streams: Arc<Streams>,
     /// Sends a live stream's requests on to the server that codes it.
@@ -204,6 +206,12 @@ fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
         .get("/v1/stats", Needs(Read), library::stats)
         .get("/v1/ranges", Needs(Read), takes::ranges)
         .get("/v1/export", Needs(Read), library::export)
+        .get("/v1/motion-stats", Needs(Read), library::motion_stats)
+        .post(
+            "/v1/motion-stats",
+            Needs(Read),
+            library::motion_stats_of.layer(json.clone()),
+        )
         .get("/v1/bases", Needs(Read), bases::list)
         .post("/v1/bases", Needs(Admin), bases::train.layer(json.clone()))
         .get("/v1/bases/{id}", Needs(Read), bases::get)
@@ -402,6 +410,7 @@ impl Application {
             answers: Arc::new(Budget::new(limits.answer_bytes, limits.answer_share_bytes)),
             metrics: Arc::new(Metrics::default()),
             caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
+            moments: Default::default(),
             jobs: Arc::new(Jobs::new(store.clone(), config.job_lease, &node.id)),
             streams: Arc::new(Streams::new(limits, config.stream_lease, node.clone())),
             forwarder: Arc::new(forward::Forwarder::new(&node.id)),

@@ -11,6 +11,7 @@ pub mod formats;
 pub mod layout;
 pub mod metrics;
 pub mod model;
+pub mod moments;
 pub mod outputs;
 pub mod rate;
 pub mod rotation;

@@ -967,6 +967,36 @@ impl Answer {
         self.end - self.start
     }
 
+    /// The next decoded and shaped frames of a positions answer (frames × points × 3, NaN
+    /// where missing), not written: what reads the values themselves ([`super::motion_stats`])
+    /// take instead of [`Answer::next`]. `None` once every frame is given. Counted in the
+    /// answer's reservation while the returned [`Held`] lives.
+    pub async fn next_positions(&mut self) -> Result<Option<(Vec<f32>, Held)>> {
+        if !matches!(self.writer, Writer::Points { .. }) {
+            return Err(Error::Internal(format!(
+                "{} answers are written, not read as positions",
+                self.format.name()
+            )));
+        }
+        loop {
+            if let Some(block) = self.block.take() {
+                self.frames_left = self
+                    .frames_left
+                    .saturating_sub(block.frames - block.written);
+                let Decoded::Positions(mut v) = block.data else {
+                    unreachable!("a points answer decodes positions")
+                };
+                let width = self.points.unwrap_or(0) * 3;
+                v.drain(..block.written * width);
+                return Ok(Some((v, block._held)));
+            }
+            if self.next_chunk >= self.last_chunk {
+                return Ok(None);
+            }
+            self.decode_next().await?;
+        }
+    }
+
     /// The next piece of output; `None` once the answer is whole.
     pub async fn next(&mut self) -> Result<Option<Bytes>> {
         loop {

@@ -38,14 +38,14 @@ use super::access::Grant;
 use super::answer::{self, RangeRequest, PIECES_IN_FLIGHT, PIECE_BYTES};
 use super::budget::{Budget, Held, Holder, Reservation};
 use super::fetch::TimeRange;
-use super::library::TakeQuery;
+use super::library::{Pages, TakeQuery};
 use super::prepared::ReadCaches;
 use super::take::Take;
 use super::{blocking, Error, Result};
-use crate::limits::{Limits, MAX_TAKES_PAGE};
+use crate::limits::Limits;
 use crate::motion::formats::Format;
 use crate::motion::transform::Options;
-use crate::store::{SortKey, Store};
+use crate::store::Store;
 
 /// The names of the points a written file holds, in order: the take's `points`, then those
 /// the transforms add after them (`root=extract`'s path and heading) up to the answer's
@@ -391,7 +391,7 @@ const METHOD: CompressionMethod = CompressionMethod::Deflated;
 /// Whether a take's answer failed for a reason of its own (it is skipped, and the manifest
 /// says why: the format cannot hold it, it is damaged, it was deleted meanwhile), or for
 /// one that stops the export (the database, the server).
-fn skips(e: &Error) -> bool {
+pub(super) fn skips(e: &Error) -> bool {
     match e {
         Error::Store(crate::store::Error::Corrupt(_)) => true,
         Error::Store(_) | Error::Internal(_) | Error::Busy(_) | Error::Moved(_) => false,
@@ -493,18 +493,9 @@ pub async fn open(
     // A page of takes at a time, each kept as its entry only.
     let mut entries = Vec::new();
     let mut names = Names::default();
-    let mut cursor = None;
-    loop {
-        let page = store
-            .list(
-                &filter,
-                SortKey::Created,
-                false,
-                MAX_TAKES_PAGE,
-                cursor.as_ref(),
-            )
-            .await?;
-        for row in page.items {
+    let mut pages = Pages::new(store, filter);
+    while let Some(rows) = pages.next().await? {
+        for row in rows {
             let file = names.file(&row.library, &row.name, req.format.name());
             let (id, name, library, tags) = (
                 row.id.clone(),
@@ -521,10 +512,6 @@ pub async fn open(
                     ..Entry::unread(file, id, name, library, tags, created_at)
                 },
             });
-        }
-        match page.next {
-            Some(c) => cursor = Some(c),
-            None => break,
         }
     }
     drop(names);

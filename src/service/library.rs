@@ -37,6 +37,46 @@ pub struct TakeQuery {
     pub created_before: Option<i64>,
 }
 
+/// The takes a filter matches, oldest first, a page of rows at a time ([`MAX_TAKES_PAGE`]):
+/// how a whole selection is read (an export, motion statistics) without holding it whole.
+pub struct Pages<'a> {
+    store: &'a Store,
+    filter: Filter,
+    cursor: Option<Cursor>,
+    done: bool,
+}
+
+impl<'a> Pages<'a> {
+    pub fn new(store: &'a Store, filter: Filter) -> Pages<'a> {
+        Pages {
+            store,
+            filter,
+            cursor: None,
+            done: false,
+        }
+    }
+
+    /// The next page's rows; `None` after the last.
+    pub async fn next(&mut self) -> Result<Option<Vec<TakeRow>>> {
+        if self.done {
+            return Ok(None);
+        }
+        let page = self
+            .store
+            .list(
+                &self.filter,
+                SortKey::Created,
+                false,
+                MAX_TAKES_PAGE,
+                self.cursor.as_ref(),
+            )
+            .await?;
+        self.cursor = page.next;
+        self.done = self.cursor.is_none();
+        Ok(Some(page.items))
+    }
+}
+
 impl TakeQuery {
     /// This query with the `label.<key>=<value>` pairs of `pairs` (a query string's, in
     /// order; others ignored).

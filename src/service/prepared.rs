@@ -16,6 +16,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
+use super::kept::Kept;
 use super::take::Take;
 use crate::codec::container::Header;
 use crate::codec::{CodecId, Reader, Shared};
@@ -247,64 +248,32 @@ impl ReadCaches {
 
 /// Decoded chunks by (take, its coding's [`Stamp`], chunk index), bounded in bytes, oldest evicted first.
 pub struct ChunkCache {
-    budget: usize,
-    inner: Mutex<ChunkEntries>,
+    kept: Kept<ChunkKey, Arc<Vec<f32>>>,
 }
 
 /// A decoded chunk's key: the take, the coding it was decoded from, the chunk.
 type ChunkKey = (String, Stamp, usize);
 
-#[derive(Default)]
-struct ChunkEntries {
-    map: HashMap<ChunkKey, Arc<Vec<f32>>>,
-    order: VecDeque<ChunkKey>,
-    bytes: usize,
-}
-
 impl ChunkCache {
     pub fn new(budget_bytes: usize) -> Self {
         ChunkCache {
-            budget: budget_bytes,
-            inner: Mutex::new(ChunkEntries::default()),
+            kept: Kept::new(budget_bytes),
         }
     }
 
     /// Chunk `index` of the take `p` reads, as decoded from its coding now.
     pub fn get(&self, p: &Prepared, index: usize) -> Option<Arc<Vec<f32>>> {
-        let key = (p.id.clone(), p.stamp.coding(), index);
-        self.inner
-            .lock()
-            .expect("cache lock")
-            .map
-            .get(&key)
-            .cloned()
+        self.kept.get(&(p.id.clone(), p.stamp.coding(), index))
     }
 
     pub fn insert(&self, p: &Prepared, index: usize, frames: Arc<Vec<f32>>) {
         let size = frames.len() * 4;
-        if size > self.budget {
-            return;
-        }
-        let mut g = self.inner.lock().expect("cache lock");
-        let key: ChunkKey = (p.id.clone(), p.stamp.coding(), index);
-        if let Some(old) = g.map.insert(key.clone(), frames) {
-            g.bytes -= old.len() * 4;
-        } else {
-            g.order.push_back(key);
-        }
-        g.bytes += size;
-        while g.bytes > self.budget {
-            let Some(old) = g.order.pop_front() else {
-                break;
-            };
-            if let Some(v) = g.map.remove(&old) {
-                g.bytes -= v.len() * 4;
-            }
-        }
+        self.kept
+            .insert((p.id.clone(), p.stamp.coding(), index), frames, size);
     }
 
     pub fn bytes(&self) -> usize {
-        self.inner.lock().expect("cache lock").bytes
+        self.kept.bytes()
     }
 }
 

@@ -218,6 +218,10 @@ fn cases() -> Vec<Case> {
         c(Method::GET, "/v1/takes/{id}/parameters", "read", true, 409),
         c(Method::GET, "/v1/stats", "read", false, 200),
         c(Method::GET, "/v1/export", "read", false, 200),
+        c(Method::GET, "/v1/motion-stats", "read", false, 200),
+        // Statistics of a take of the lab named by id: to another library's token it is not
+        // there.
+        c(Method::POST, "/v1/motion-stats", "read", true, 200),
         // A batch naming a take of the lab: to another library's token it is not there.
         c(Method::GET, "/v1/ranges", "read", true, 200),
         c(Method::GET, "/v1/bases", "read", false, 200),
@@ -260,11 +264,10 @@ fn expected(case: &Case, who: Who) -> u16 {
     if who == Who::WrongLibrary && case.in_lab {
         // A take of another library answers as one that does not exist; naming another
         // library for a new one is refused.
-        return if case.route.contains("{id}") || case.route == "/v1/ranges" {
-            404
-        } else {
-            403
-        };
+        let names_a_take = case.route.contains("{id}")
+            || case.route == "/v1/ranges"
+            || (case.method == Method::POST && case.route == "/v1/motion-stats");
+        return if names_a_take { 404 } else { 403 };
     }
     case.ok
 }
@@ -298,6 +301,10 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
                 Body::None,
             )
         }
+        ("POST", "/v1/motion-stats") => (
+            "/v1/motion-stats".into(),
+            Body::Json(json!({"ids": [take().await]})),
+        ),
         ("GET", "/v1/takes/{id}/errors") => {
             (format!("/v1/takes/{}/errors", take().await), Body::None)
         }

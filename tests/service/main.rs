@@ -23,6 +23,7 @@ mod hostile;
 mod http;
 mod library;
 mod limits;
+mod motion_stats;
 mod openapi;
 mod python;
 mod ranges;

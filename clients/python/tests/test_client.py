@@ -261,6 +261,9 @@ def test_the_async_client_does_the_same(server: str) -> None:
             assert [t.id async for t in c.takes(library=lib)] == [take.id]
             assert (await c.update(take.id, library=lib + "-b")).library == lib + "-b"
             assert (await c.stats(library=lib + "-b"))["total"]["takes"] == 1
+            s = await c.motion_stats(ids=[take.id], points=["head"])
+            assert s.takes == 1 and s.groups[0].points == ("head",) and s.frames == 60
+            assert (await c.motion_stats(library=lib + "-b")).groups[0].points == tuple(NAMES)
             await c.delete(take.id)
             with pytest.raises(mocapstore.NotFound):
                 await c.take(take.id)

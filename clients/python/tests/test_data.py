@@ -358,3 +358,55 @@ def test_rotations_of_skeleton_windows_give_back_their_positions(
     assert euler.shape[2] == 3 and np.allclose(
         euler[:15, 0], ch.joint(ch.skeleton.names[0])[:15, 3:]
     )
+
+
+def test_statistics_are_those_of_every_frame_of_the_windows_takes(server: str) -> None:
+    lib = f"py-stats-{uuid.uuid4().hex[:8]}"
+    with mocapstore.Client(server) as c:
+        for k in range(12):
+            c.ingest(
+                walker(60 + 7 * k, gaps=k % 2 == 0),
+                library=lib,
+                fps=60,
+                point_names=NAMES,
+                name=f"t{k}",
+            )
+        w = Windows(server, library=lib, seconds=0.5, fps=30, split="train", seed=3, unit="m")
+        stats = w.statistics()
+        assert stats is w.statistics(), "asked once per window set"
+        train = list(dict.fromkeys(x.take for x in w.windows))
+        assert stats.takes == len(train) < 12 and stats.skipped_count == 0
+        # Every frame of the train takes as the server answers them at 30 fps in metres,
+        # reckoned here with numpy: the same numbers.
+        takes = [c.frames(t, fps=30, unit="m").data.astype(np.float64) for t in train]
+        allf = np.concatenate(takes)
+        vel = np.concatenate([np.diff(a, axis=0) * 30 for a in takes])
+        g = stats.group(NAMES)
+        assert g.frames == len(allf) and g.takes == len(train)
+        np.testing.assert_array_equal(g.present, (~np.isnan(allf).any(axis=2)).sum(axis=0))
+        np.testing.assert_allclose(g.mean, np.nanmean(allf, axis=0), rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(g.std, np.nanstd(allf, axis=0), rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(g.velocity_mean, np.nanmean(vel, axis=0), rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(g.velocity_std, np.nanstd(vel, axis=0), rtol=1e-6, atol=1e-9)
+        # The whole library is another set of takes: other numbers.
+        everything = c.motion_stats(library=lib, fps=30, unit="m")
+        assert everything.takes == 12 and everything.frames > stats.frames
+        # An item normalised by its layout's group: finite, 0 where missing.
+        item = w[0]
+        z = stats.normalise(item)
+        assert z.shape == item["motion"].shape and np.isfinite(z).all()
+        assert (z[~item["mask"]] == 0).all()
+        np.testing.assert_allclose(
+            g.denormalise(g.normalise(item["motion"])), item["motion"], atol=1e-4
+        )
+        # By roles: one layout, the roles' order.
+        roles = Windows(server, library=lib, seconds=0.5, fps=30, roles=True, unit="m")
+        by_roles = roles.statistics()
+        assert by_roles.by == "roles" and len(by_roles.groups) == 1
+        assert by_roles.groups[0].points == ROLES
+        assert by_roles.groups[0].present[ROLES.index("head")] > 0
+        assert stats.raw["read"] >= 0
+        with pytest.raises(ValueError, match="not both"):
+            c.motion_stats(ids=train, library=lib)
+        with pytest.raises(mocapstore.BadRequest, match="roles"):
+            c.motion_stats(library=lib, by="roles", root="extract")

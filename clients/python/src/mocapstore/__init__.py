@@ -24,7 +24,7 @@ from .errors import (
     Unreadable,
 )
 from .skeleton import Channels, Joint, Skeleton
-from .types import Columns, Frames, Take
+from .types import Columns, Frames, MotionStats, StatsGroup, Take
 
 __all__ = [
     "API",
@@ -43,10 +43,12 @@ __all__ = [
     "Ingested",
     "Joint",
     "MocapstoreError",
+    "MotionStats",
     "NotFound",
     "OutOfRange",
     "ServerError",
     "Skeleton",
+    "StatsGroup",
     "Stream",
     "Take",
     "Unauthorized",

@@ -23,7 +23,7 @@ from . import errors
 from ._version import API
 from .skeleton import Channels
 from .skeleton import parse as parse_bvh
-from .types import Columns, Frames, Take
+from .types import Columns, Frames, MotionStats, Take
 
 T = TypeVar("T")
 
@@ -244,6 +244,15 @@ def stats(filters: Params) -> Op[dict[str, Any]]:
     r = yield Request("GET", "/v1/stats", filters)
     v: dict[str, Any] = json_of(r)
     return v
+
+
+def motion_stats(query: Params, body: dict[str, Any] | None) -> Op[MotionStats]:
+    """The statistics of a selection: by its filters (GET), or of takes named by id (POST)."""
+    if body is None:
+        r = yield Request("GET", "/v1/motion-stats", query)
+    else:
+        r = yield Request("POST", "/v1/motion-stats", [], json=body)
+    return MotionStats.from_json(json_of(r))
 
 
 def npy_bytes(array: npt.ArrayLike) -> bytes:

@@ -27,7 +27,7 @@ from . import _protocol as p
 from . import errors
 from ._version import __version__
 from .skeleton import Channels
-from .types import Columns, Frames, Take
+from .types import Columns, Frames, MotionStats, Take
 
 T = TypeVar("T")
 
@@ -253,6 +253,26 @@ class _Base:
     @staticmethod
     def _filters(**fields: Any) -> p.Params:
         return p.params(**fields)
+
+    @staticmethod
+    def _motion_stats_op(
+        ids: Sequence[str] | None,
+        filters: dict[str, Any],
+        labels: p.Labels | None,
+        points: Sequence[str] | None,
+        options: dict[str, Any],
+    ) -> p.Op[MotionStats]:
+        names = p.names(points)
+        if ids is not None:
+            if any(v is not None for v in filters.values()) or labels:
+                raise ValueError("give ids= or filters (library, tag, labels, ...), not both")
+            body: dict[str, Any] = {"ids": list(ids)}
+            body.update({k: v for k, v in options.items() if v is not None})
+            if names is not None:
+                body["points"] = list(names)
+            return p.motion_stats([], body)
+        query = p.params(**filters, **options, points=names) + p.label_filters(labels)
+        return p.motion_stats(query, None)
 
 
 def _stream_body(
@@ -568,6 +588,35 @@ class Client(_Base):
         """Totals over the library, by codec and by library."""
         filters = self._filters(library=library, tag=tag, codec=codec)
         return self._run(p.stats(filters + p.label_filters(labels)))
+
+    def motion_stats(
+        self,
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        name_prefix: str | None = None,
+        codec: str | None = None,
+        layout: str | None = None,
+        labels: p.Labels | None = None,
+        ids: Sequence[str] | None = None,
+        points: Sequence[str] | None = None,
+        by: str = "points",
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> MotionStats:
+        """Normalisation statistics of a selection's motion, computed by the server in one
+        pass over the frames its range answers give with the same ``fps``, ``root``, ``up``
+        and ``unit`` (and kept, so asking again reads only takes added or changed): per
+        layout, each point's mean and standard deviation of positions and of velocities.
+        The takes by filters, or by ``ids`` (a training split); ``points`` the same points
+        of every take; ``by="roles"`` the body's 20 roles, as ``Windows(roles=True)``."""
+        filters = dict(
+            library=library, tag=tag, name_prefix=name_prefix, codec=codec, layout=layout
+        )
+        options = dict(by=by, fps=fps, root=root, up=up, unit=unit)
+        return self._run(self._motion_stats_op(ids, filters, labels, points, options))
 
     def ingest(
         self,
@@ -962,6 +1011,35 @@ class AsyncClient(_Base):
         """Totals over the library, by codec and by library."""
         filters = self._filters(library=library, tag=tag, codec=codec)
         return await self._run(p.stats(filters + p.label_filters(labels)))
+
+    async def motion_stats(
+        self,
+        *,
+        library: str | None = None,
+        tag: str | None = None,
+        name_prefix: str | None = None,
+        codec: str | None = None,
+        layout: str | None = None,
+        labels: p.Labels | None = None,
+        ids: Sequence[str] | None = None,
+        points: Sequence[str] | None = None,
+        by: str = "points",
+        fps: float | None = None,
+        root: str | None = None,
+        up: str | None = None,
+        unit: str | None = None,
+    ) -> MotionStats:
+        """Normalisation statistics of a selection's motion, computed by the server in one
+        pass over the frames its range answers give with the same ``fps``, ``root``, ``up``
+        and ``unit`` (and kept, so asking again reads only takes added or changed): per
+        layout, each point's mean and standard deviation of positions and of velocities.
+        The takes by filters, or by ``ids`` (a training split); ``points`` the same points
+        of every take; ``by="roles"`` the body's 20 roles, as ``Windows(roles=True)``."""
+        filters = dict(
+            library=library, tag=tag, name_prefix=name_prefix, codec=codec, layout=layout
+        )
+        options = dict(by=by, fps=fps, root=root, up=up, unit=unit)
+        return await self._run(self._motion_stats_op(ids, filters, labels, points, options))
 
     async def ingest(
         self,

@@ -28,7 +28,7 @@ import numpy.typing as npt
 from . import _protocol
 from .client import Client
 from .skeleton import ROTATIONS, rotations
-from .types import Frames, Take, nominal_rate
+from .types import Frames, MotionStats, Take, nominal_rate
 
 F32Array = npt.NDArray[np.float32]
 
@@ -227,6 +227,7 @@ class Windows:
         self.batch_size = max(1, batch_size)
         self._client: Client | None = None
         self._pid = 0
+        self._stats: MotionStats | None = None
         self._memory: OrderedDict[int, F32Array] = OrderedDict()
         self._held = 0
         self._disk_written = 0
@@ -327,6 +328,25 @@ class Windows:
             )
         self.skipped = lacking
         return out
+
+    def statistics(self) -> MotionStats:
+        """Normalisation statistics of these windows' takes (those with a window; every
+        frame of each, at the windows' ``fps``, ``unit``, ``up`` and ``root``, of the
+        ``points`` or ``roles`` the items hold), computed by the server in one pass and kept
+        there: one group per layout. ``stats.normalise(item)`` normalises an item by its
+        layout's group. For a split, pass the train split's to every split."""
+        if self._stats is None:
+            ids = list(dict.fromkeys(w.take for w in self.windows))
+            self._stats = self.client().motion_stats(
+                ids=ids,
+                points=self.points,
+                by="roles" if self.roles else "points",
+                fps=self.fps,
+                root=self.root,
+                up=self.up,
+                unit=self.unit,
+            )
+        return self._stats
 
     def __len__(self) -> int:
         return len(self.windows)

@@ -1,9 +1,11 @@
-"""What the server's answers are, as Python values: a stored take's record ([`Take`]) and a
-range of its frames as a numpy array with its names and clock ([`Frames`])."""
+"""What the server's answers are, as Python values: a stored take's record ([`Take`]), a
+range of its frames as a numpy array with its names and clock ([`Frames`]), and the
+normalisation statistics of a selection's motion ([`MotionStats`])."""
 
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, overload
 
@@ -226,3 +228,99 @@ class Columns:
         if label not in self.labels:
             raise KeyError(f"no column {label!r}; the columns are {', '.join(self.labels)}")
         return self.units[self.labels.index(label)]
+
+
+@dataclass(frozen=True)
+class StatsGroup:
+    """The statistics of the takes of one layout (point names in order, in one unit):
+    per point ``(points, 3)`` arrays of the positions' mean and standard deviation
+    (population) and of their velocities' (units per second), ``present`` the frames each
+    point is present in."""
+
+    points: tuple[str, ...]
+    metres_per_unit: float
+    takes: int
+    frames: int
+    present: npt.NDArray[np.int64]
+    mean: npt.NDArray[np.float64]
+    std: npt.NDArray[np.float64]
+    velocity_mean: npt.NDArray[np.float64]
+    velocity_std: npt.NDArray[np.float64]
+
+    @classmethod
+    def from_json(cls, v: dict[str, Any]) -> StatsGroup:
+        def per_point(key: str) -> npt.NDArray[np.float64]:
+            return np.asarray(v[key], dtype=np.float64).reshape(-1, 3)
+
+        return cls(
+            points=tuple(v["points"]),
+            metres_per_unit=float(v["metres_per_unit"]),
+            takes=int(v["takes"]),
+            frames=int(v["frames"]),
+            present=np.asarray(v["present"], dtype=np.int64),
+            mean=per_point("mean"),
+            std=per_point("std"),
+            velocity_mean=per_point("velocity_mean"),
+            velocity_std=per_point("velocity_std"),
+        )
+
+    def normalise(self, motion: npt.ArrayLike, eps: float = 1e-6) -> F32Array:
+        """``motion`` ``(..., points, 3)`` of this layout, less the mean, over the standard
+        deviation (at least ``eps``, so a point that never moves stays finite)."""
+        a = np.asarray(motion, dtype=np.float32)
+        return ((a - self.mean) / np.maximum(self.std, eps)).astype(np.float32)
+
+    def denormalise(self, motion: npt.ArrayLike, eps: float = 1e-6) -> F32Array:
+        """The inverse of [`normalise`]."""
+        a = np.asarray(motion, dtype=np.float32)
+        return (a * np.maximum(self.std, eps) + self.mean).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class MotionStats:
+    """Normalisation statistics of a selection's motion (``GET /v1/motion-stats``), one
+    [`StatsGroup`] per layout, most frames first; ``skipped`` the takes not counted in,
+    each ``(id, name, reason)``; ``read`` how many takes the server read for this answer
+    (it keeps the rest)."""
+
+    by: str
+    takes: int
+    frames: int
+    groups: tuple[StatsGroup, ...]
+    skipped: tuple[tuple[str, str, str], ...]
+    skipped_count: int
+    read: int
+    raw: dict[str, Any] = field(repr=False, compare=False)
+
+    @classmethod
+    def from_json(cls, v: dict[str, Any]) -> MotionStats:
+        return cls(
+            by=v["by"],
+            takes=int(v["takes"]),
+            frames=int(v["frames"]),
+            groups=tuple(StatsGroup.from_json(g) for g in v["groups"]),
+            skipped=tuple((s["id"], s["name"], s["reason"]) for s in v["skipped"]),
+            skipped_count=int(v["skipped_count"]),
+            read=int(v["read"]),
+            raw=v,
+        )
+
+    def group(self, points: Sequence[str]) -> StatsGroup:
+        """The group of exactly these points, in this order (a take's ``point_names``, or an
+        item's ``points``)."""
+        want = tuple(points)
+        for g in self.groups:
+            if g.points == want:
+                return g
+        sizes = [len(g.points) for g in self.groups]
+        raise KeyError(
+            f"no group of these {len(want)} points ({', '.join(want[:3])}, ...); the groups "
+            f"have {sizes} points"
+        )
+
+    def normalise(self, item: Mapping[str, Any], eps: float = 1e-6) -> F32Array:
+        """A dataset item's ``motion`` normalised by its layout's group (found by the item's
+        ``points``), 0 where its ``mask`` says a sample is missing."""
+        out = self.group(item["points"]).normalise(item["motion"], eps)
+        out[~np.asarray(item["mask"], dtype=bool)] = 0.0
+        return out
