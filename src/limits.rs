@@ -128,6 +128,10 @@ pub const MAX_STATS_IDS: usize = 20_000;
 /// it, select `points`, or ask `by=roles`).
 pub const MAX_STATS_GROUPS: usize = 64;
 
+/// Points in all the layouts of one motion-statistics answer: what it holds and writes
+/// (about 450 bytes a point) grows with them.
+pub const MAX_STATS_POINTS: usize = 20_000;
+
 /// Takes a motion-statistics answer lists as skipped, each with its reason (it counts the
 /// rest).
 pub const MAX_STATS_SKIPPED: usize = 100;

@@ -217,7 +217,10 @@ async fn export_files(
                 (e.bytes, e.blake3) = (Some(bytes), Some(blake3));
                 (e.frames, e.fps) = (frames.unwrap_or(e.frames), fps.unwrap_or(e.fps));
                 e.metres_per_unit = metres_per_unit.unwrap_or(e.metres_per_unit);
-                e.points = export::points_written(std::mem::take(&mut e.points), points);
+                e.points = mocapstore::service::answer::points_written(
+                    std::mem::take(&mut e.points),
+                    points,
+                );
                 writeln!(journal, "{}", json(&*e)).map_err(|err| io(&dir.join(JOURNAL), err))?;
                 written += 1;
             }

@@ -171,6 +171,9 @@ pub struct MotionStatsQuery {
     root: Option<String>,
     up: Option<String>,
     unit: Option<String>,
+    /// Not a field of the query: refused with where it goes, rather than ignored (which
+    /// would answer for every take the token reaches).
+    ids: Option<String>,
 }
 
 /// `POST /v1/motion-stats`: the same as JSON, with the takes named by id (a training
@@ -202,6 +205,11 @@ pub async fn motion_stats(
     pairs: Result<Query<Pairs>, QueryRejection>,
 ) -> Result<Json<MotionStats>, ApiError> {
     let (Query(q), Query(pairs)) = (query?, pairs?);
+    if q.ids.is_some() {
+        return Err(ApiError::bad_request(
+            "takes by id come in the body of POST /v1/motion-stats ({\"ids\": [...]})",
+        ));
+    }
     let takes = TakeQuery {
         library: q.library,
         tag: q.tag,

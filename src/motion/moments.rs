@@ -123,9 +123,10 @@ impl PointMoments {
     }
 
     /// The moments of the frames pushed here and those of `other` (the same points): a
-    /// velocity is never taken across the two.
+    /// velocity is never taken across the two (a push after a merge starts afresh).
     pub fn merge(&mut self, other: &PointMoments) {
         debug_assert_eq!(self.points, other.points);
+        self.last = None;
         for (a, b) in self.position.iter_mut().zip(&other.position) {
             a.merge(b);
         }

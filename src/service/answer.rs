@@ -58,6 +58,28 @@ const TAIL_BYTES: usize = 64;
 /// Ranges of at most this many chunks are decoded through the server's chunk cache.
 pub const CACHED_CHUNKS: usize = 8;
 
+/// The names of the points a written file holds, in order: the take's `points`, then those
+/// the transforms add after them (`root=extract`'s path and heading) up to the answer's
+/// `count`; none when the file holds joints, not points (BVH: `count` is `None`).
+pub fn points_written(mut points: Vec<String>, count: Option<usize>) -> Vec<String> {
+    let Some(count) = count else {
+        return Vec::new();
+    };
+    let extra = [
+        crate::motion::transform::ROOT_MOTION,
+        crate::motion::transform::ROOT_MOTION_FORWARD,
+    ];
+    let added = count.saturating_sub(points.len()).min(extra.len());
+    points.truncate(count);
+    points.extend(extra[..added].iter().map(|n| n.to_string()));
+    points
+}
+
+/// How long a reader of many takes (a library export, motion statistics) waits for room in
+/// the answer budget before its next take: other answers end within seconds, and an export
+/// half sent cannot answer 503 any more.
+pub const BUDGET_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
+
 /// An answer written piece by piece ([`Answer`], a library export's ZIP): what the HTTP
 /// layer streams, the first piece before the status.
 pub trait Pieces: Send + 'static {
@@ -965,6 +987,20 @@ impl Answer {
     /// Frames in the answer.
     pub fn frames(&self) -> usize {
         self.end - self.start
+    }
+
+    /// The coding this answer reads (and the body's revision its transforms read): what
+    /// anything computed from it is kept by.
+    pub fn stamp(&self) -> super::prepared::Stamp {
+        self.prepared.stamp
+    }
+
+    /// Read as one of many takes read whole (an export, motion statistics): the chunks it
+    /// decodes are not kept in the server's cache, so that a pass over a library does not
+    /// evict what range requests keep hot. Chunks cached already are still read from it.
+    pub fn bulk(mut self) -> Answer {
+        self.cache = false;
+        self
     }
 
     /// The next decoded and shaped frames of a positions answer (frames × points × 3, NaN

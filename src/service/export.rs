@@ -27,7 +27,6 @@
 use std::collections::HashSet;
 use std::io::Write;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
 use bytes::Bytes;
 use serde::{Deserialize, Serialize};
@@ -35,7 +34,9 @@ use zip::write::{SimpleFileOptions, StreamWriter};
 use zip::{CompressionMethod, ZipWriter};
 
 use super::access::Grant;
-use super::answer::{self, RangeRequest, PIECES_IN_FLIGHT, PIECE_BYTES};
+use super::answer::{
+    self, points_written, RangeRequest, BUDGET_WAIT, PIECES_IN_FLIGHT, PIECE_BYTES,
+};
 use super::budget::{Budget, Held, Holder, Reservation};
 use super::fetch::TimeRange;
 use super::library::{Pages, TakeQuery};
@@ -46,23 +47,6 @@ use crate::limits::Limits;
 use crate::motion::formats::Format;
 use crate::motion::transform::Options;
 use crate::store::Store;
-
-/// The names of the points a written file holds, in order: the take's `points`, then those
-/// the transforms add after them (`root=extract`'s path and heading) up to the answer's
-/// `count`; none when the file holds joints, not points (BVH: `count` is `None`).
-pub fn points_written(mut points: Vec<String>, count: Option<usize>) -> Vec<String> {
-    let Some(count) = count else {
-        return Vec::new();
-    };
-    let extra = [
-        crate::motion::transform::ROOT_MOTION,
-        crate::motion::transform::ROOT_MOTION_FORWARD,
-    ];
-    let added = count.saturating_sub(points.len()).min(extra.len());
-    points.truncate(count);
-    points.extend(extra[..added].iter().map(|n| n.to_string()));
-    points
-}
 
 /// The manifest's file name, in the ZIP and in an export folder.
 pub const MANIFEST: &str = "manifest.csv";
@@ -97,10 +81,6 @@ pub const ZIP_BYTES: u64 = (1 << 20) + PIECES_IN_FLIGHT * 2 * (PIECE_BYTES as u6
 
 /// Output is handed on once this much is written (an entry's end hands on what is left).
 const OUT_PIECE: usize = 64 << 10;
-
-/// How long an export waits for room in the answer budget before its next take: other
-/// answers end within seconds, and an export half sent cannot answer 503 any more.
-pub const BUDGET_WAIT: Duration = Duration::from_secs(30);
 
 /// A library export, parsed: which takes, which format, which transforms.
 #[derive(Debug, Clone)]
@@ -388,17 +368,6 @@ fn reason(e: &Error) -> String {
 /// to 49 %: rest poses, repeated times and gaps repeat), at about 30 MB/s of one core.
 const METHOD: CompressionMethod = CompressionMethod::Deflated;
 
-/// Whether a take's answer failed for a reason of its own (it is skipped, and the manifest
-/// says why: the format cannot hold it, it is damaged, it was deleted meanwhile), or for
-/// one that stops the export (the database, the server).
-pub(super) fn skips(e: &Error) -> bool {
-    match e {
-        Error::Store(crate::store::Error::Corrupt(_)) => true,
-        Error::Store(_) | Error::Internal(_) | Error::Busy(_) | Error::Moved(_) => false,
-        _ => true,
-    }
-}
-
 /// What the ZIP is written into: bytes handed on as they come.
 #[derive(Clone, Default)]
 struct Sink(Arc<Mutex<Vec<u8>>>);
@@ -655,15 +624,19 @@ impl Export {
         )
         .await;
         let first = match opened {
-            Ok(mut a) => match a.next().await {
-                Ok(first) => Ok((a, first)),
-                Err(e) => Err(e),
-            },
+            Ok(a) => {
+                // A take of many, read whole: past the chunk cache.
+                let mut a = a.bulk();
+                match a.next().await {
+                    Ok(first) => Ok((a, first)),
+                    Err(e) => Err(e),
+                }
+            }
             Err(e) => Err(e),
         };
         let (a, first) = match first {
             Ok(got) => got,
-            Err(e) if skips(&e) => {
+            Err(e) if e.is_the_takes_own() => {
                 tracing::warn!(take = %id, error = %e, "a library export skips a take");
                 self.entries[self.at].skipped = Some(reason(&e));
                 self.at += 1;

@@ -1,7 +1,8 @@
-//! A map bounded in bytes, the entry kept longest dropped first: what the server's caches
-//! of decoded chunks ([`super::prepared::ChunkCache`]) and of per-take motion statistics
-//! ([`super::motion_stats::MomentsCache`]) hold. Each entry's key names everything its
-//! value was computed from, so an entry is never stale: one no longer asked for ages out.
+//! A map bounded in bytes, the entry used least recently dropped first: what the server's
+//! caches of decoded chunks ([`super::prepared::ChunkCache`]) and of per-take motion
+//! statistics ([`super::motion_stats::MomentsCache`]) hold. Each entry's key names what its
+//! value was computed from (a take's coding stamp among it), so a take changed since is
+//! looked up under another key, and what is no longer asked for ages out.
 
 use std::collections::{HashMap, VecDeque};
 use std::hash::Hash;
@@ -13,10 +14,36 @@ pub struct Kept<K, V> {
 }
 
 struct Entries<K, V> {
-    /// Each value with the bytes it counts for.
-    map: HashMap<K, (V, usize)>,
-    order: VecDeque<K>,
+    map: HashMap<K, Entry<V>>,
+    /// Keys in the order they were last used, each with the use it records; a key used
+    /// again is pushed again, and its older places are skipped (and now and then dropped).
+    order: VecDeque<(K, u64)>,
     bytes: usize,
+    uses: u64,
+}
+
+struct Entry<V> {
+    value: V,
+    /// The bytes it counts for, and its last use.
+    bytes: usize,
+    used: u64,
+}
+
+impl<K: Eq + Hash + Clone, V: Clone> Entries<K, V> {
+    fn touch(&mut self, key: &K) -> Option<V> {
+        self.uses += 1;
+        let used = self.uses;
+        let e = self.map.get_mut(key)?;
+        e.used = used;
+        let value = e.value.clone();
+        self.order.push_back((key.clone(), used));
+        if self.order.len() > 2 * self.map.len() + 64 {
+            let map = &self.map;
+            self.order
+                .retain(|(k, u)| map.get(k).is_some_and(|e| e.used == *u));
+        }
+        Some(value)
+    }
 }
 
 impl<K: Eq + Hash + Clone, V: Clone> Kept<K, V> {
@@ -28,33 +55,38 @@ impl<K: Eq + Hash + Clone, V: Clone> Kept<K, V> {
                 map: HashMap::new(),
                 order: VecDeque::new(),
                 bytes: 0,
+                uses: 0,
             }),
         }
     }
 
+    /// The value kept under `key` (now its most recent use).
     pub fn get(&self, key: &K) -> Option<V> {
-        let g = self.inner.lock().expect("cache lock");
-        g.map.get(key).map(|(v, _)| v.clone())
+        self.inner.lock().expect("cache lock").touch(key)
     }
 
     /// Keep `value` under `key`, counted as `bytes` (a value over the whole budget is not
-    /// kept); a key kept already gets the new value and keeps its place.
+    /// kept), dropping the least recently used entries past the budget.
     pub fn insert(&self, key: K, value: V, bytes: usize) {
         if bytes > self.budget {
             return;
         }
         let mut g = self.inner.lock().expect("cache lock");
-        match g.map.insert(key.clone(), (value, bytes)) {
-            Some((_, old)) => g.bytes -= old,
-            None => g.order.push_back(key),
+        g.uses += 1;
+        let used = g.uses;
+        if let Some(old) = g.map.insert(key.clone(), Entry { value, bytes, used }) {
+            g.bytes -= old.bytes;
         }
+        g.order.push_back((key, used));
         g.bytes += bytes;
         while g.bytes > self.budget {
-            let Some(old) = g.order.pop_front() else {
+            let Some((old, at)) = g.order.pop_front() else {
                 break;
             };
-            if let Some((_, size)) = g.map.remove(&old) {
-                g.bytes -= size;
+            if g.map.get(&old).is_some_and(|e| e.used == at) {
+                if let Some(e) = g.map.remove(&old) {
+                    g.bytes -= e.bytes;
+                }
             }
         }
     }
@@ -79,19 +111,30 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_oldest_go_first_and_the_bytes_stay_within_the_budget() {
+    fn the_least_recently_used_go_first_and_the_bytes_stay_within_the_budget() {
         let k: Kept<u32, u32> = Kept::new(100);
         k.insert(1, 10, 40);
         k.insert(2, 20, 40);
-        k.insert(1, 11, 30); // replaced in place: still the oldest
+        k.insert(1, 11, 30); // replaced: now the most recent
         assert_eq!((k.bytes(), k.get(&1)), (70, Some(11)));
-        k.insert(3, 30, 40); // 110 > 100: key 1 goes
+        k.insert(3, 30, 40); // 110 > 100: key 2, used least recently, goes
         assert_eq!(
-            (k.get(&1), k.get(&2), k.get(&3)),
-            (None, Some(20), Some(30))
+            (k.get(&2), k.get(&1), k.get(&3)),
+            (None, Some(11), Some(30))
         );
-        assert_eq!((k.bytes(), k.len()), (80, 2));
-        k.insert(4, 40, 101); // over the whole budget: not kept, nothing evicted
-        assert_eq!((k.get(&4), k.len()), (None, 2));
+        assert_eq!((k.bytes(), k.len()), (70, 2));
+        k.get(&1); // 3 is now the least recently used
+        k.insert(4, 40, 40);
+        assert_eq!(
+            (k.get(&3), k.get(&1), k.get(&4)),
+            (None, Some(11), Some(40))
+        );
+        k.insert(5, 50, 101); // over the whole budget: not kept, nothing dropped
+        assert_eq!((k.get(&5), k.len()), (None, 2));
+        // Many uses of one key keep the order's length bounded.
+        for _ in 0..1000 {
+            k.get(&1);
+        }
+        assert!(k.inner.lock().unwrap().order.len() <= 2 * 2 + 64 + 1);
     }
 }

@@ -94,6 +94,20 @@ pub enum Error {
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+impl Error {
+    /// Whether a take's answer failed for a reason of the take's own (the format cannot
+    /// hold it, it is damaged, it was deleted meanwhile, it lacks what was asked): a reader
+    /// of many takes (an export, motion statistics) skips it and says why. The others (the
+    /// database, the server, a full budget) stop it.
+    pub fn is_the_takes_own(&self) -> bool {
+        match self {
+            Error::Store(crate::store::Error::Corrupt(_)) => true,
+            Error::Store(_) | Error::Internal(_) | Error::Busy(_) | Error::Moved(_) => false,
+            _ => true,
+        }
+    }
+}
+
 /// Run CPU-heavy work on the blocking pool, never on the async executor.
 pub(crate) async fn blocking<T: Send + 'static>(
     f: impl FnOnce() -> T + Send + 'static,

@@ -7,33 +7,38 @@
 //! # One pass, cached, the same on every server
 //! Each take is read once, front to back, into its moments ([`PointMoments`]); a selection's
 //! statistics are its takes' moments merged in the order they were stored (exactly:
-//! [`crate::motion::moments`]). A take's moments are cached by the take, the
-//! [`Stamp`] of its coding and body (a take re-encoded, replaced or given a corrected body,
-//! through any server, is read again; a deleted one is no longer listed) and what was
-//! asked, so asking again, or for a library that grew by a take, reads only what is new.
-//! What is computed depends on the stored take alone, so every server sharing a database
-//! answers the same numbers, cached or not.
+//! [`crate::motion::moments`]). A take's moments (or why it was skipped) are kept by the
+//! take, the [`Stamp`] of the coding and body its answer read (a take re-encoded, replaced
+//! or given a corrected body, through any server, is read again; a deleted one is no longer
+//! listed) and what was asked, so asking again, or for a library that grew by a take, reads
+//! only what is new, as long as the selection's moments fit what a server keeps
+//! ([`MOTION_STATS_CACHE_BYTES`], the least recently used dropped first). What is computed
+//! depends on the stored take alone, so every server sharing a database answers the same
+//! numbers, kept or not. A take still being streamed is left out (skipped, with why): its
+//! frames and its body change until it finishes.
 //!
 //! # Groups
 //! Takes of different point sets cannot share statistics: each layout (its point names in
 //! order, in one unit) is a group of its own. `points=` selects the same points of every
 //! take (one group, if the unit is asked too); `by=roles` gives every take the body's roles
 //! ([`Role::all`]: the centroid of the points the body places in each, missing where none),
-//! the layout `roles=True` windows have.
+//! the layout `roles=True` windows have. A role's centroid moves when one of its points
+//! drops out or comes back, and its velocity with it, as the windows' do.
 //!
 //! # What it holds
 //! One take's answer at a time (reserved from the answer budget as a range request of the
-//! whole take would be, waiting for room as an export does), one take's moments and the
-//! groups' (at most [`MAX_STATS_GROUPS`]); takes are listed a page at a time.
+//! whole take would be, waiting for room as an export does; its chunks are not kept in the
+//! decoded-chunk cache), one take's moments and the groups' (at most [`MAX_STATS_GROUPS`]
+//! layouts of [`MAX_STATS_POINTS`] points in all, about 150 bytes a point, and the answer
+//! about 300 bytes a point); takes are listed a page at a time.
 
 use std::sync::Arc;
 
 use serde::Serialize;
 
 use super::access::{check_take, Grant};
-use super::answer::{self, RangeRequest};
+use super::answer::{self, points_written, RangeRequest, BUDGET_WAIT};
 use super::budget::{Budget, Holder};
-use super::export::{points_written, skips, BUDGET_WAIT};
 use super::fetch::TimeRange;
 use super::kept::Kept;
 use super::library::{Pages, TakeQuery};
@@ -41,7 +46,8 @@ use super::prepared::{ReadCaches, Stamp};
 use super::take::Take;
 use super::{Error, Result};
 use crate::limits::{
-    Limits, MAX_STATS_GROUPS, MAX_STATS_IDS, MAX_STATS_SKIPPED, MOTION_STATS_CACHE_BYTES,
+    Limits, MAX_STATS_GROUPS, MAX_STATS_IDS, MAX_STATS_POINTS, MAX_STATS_SKIPPED,
+    MOTION_STATS_CACHE_BYTES,
 };
 use crate::motion::body::Role;
 use crate::motion::formats::Format;
@@ -149,10 +155,27 @@ impl TakeMoments {
     }
 }
 
-/// Per-take moments by (take, its [`Stamp`], what was asked), bounded in bytes
-/// ([`MOTION_STATS_CACHE_BYTES`]), the oldest evicted first.
+/// What reading a take as asked gave: its moments, or why it is not counted in.
+#[derive(Debug)]
+enum Outcome {
+    Counted(TakeMoments),
+    Skipped(String),
+}
+
+impl Outcome {
+    fn bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + match self {
+                Outcome::Counted(m) => m.bytes(),
+                Outcome::Skipped(why) => why.len(),
+            }
+    }
+}
+
+/// What reading each take gave, by (take, the [`Stamp`] of what was read, what was asked),
+/// bounded in bytes ([`MOTION_STATS_CACHE_BYTES`]), the least recently used dropped first.
 pub struct MomentsCache {
-    kept: Kept<MomentKey, Arc<TakeMoments>>,
+    kept: Kept<MomentKey, Arc<Outcome>>,
 }
 
 type MomentKey = (String, Stamp, String);
@@ -166,16 +189,16 @@ impl Default for MomentsCache {
 }
 
 impl MomentsCache {
-    fn get(&self, key: &MomentKey) -> Option<Arc<TakeMoments>> {
+    fn get(&self, key: &MomentKey) -> Option<Arc<Outcome>> {
         self.kept.get(key)
     }
 
-    fn insert(&self, key: MomentKey, m: Arc<TakeMoments>) {
-        let size = m.bytes() + key.0.len() + key.2.len();
-        self.kept.insert(key, m, size);
+    fn insert(&self, key: MomentKey, outcome: Arc<Outcome>) {
+        let size = outcome.bytes() + 2 * (key.0.len() + key.2.len() + 64);
+        self.kept.insert(key, outcome, size);
     }
 
-    /// Takes whose moments are kept.
+    /// Takes whose outcome is kept.
     pub fn len(&self) -> usize {
         self.kept.len()
     }
@@ -209,6 +232,9 @@ fn check(req: &StatsRequest) -> Result<Options> {
     if let Some(points) = &req.points {
         if points.is_empty() {
             return bad("points names no point: leave it out for every point");
+        }
+        if points.iter().any(|p| p.is_empty()) {
+            return bad("points has an empty name: give names separated by commas");
         }
         let mut seen = std::collections::HashSet::new();
         if let Some(twice) = points.iter().find(|p| !seen.insert(p.as_str())) {
@@ -267,7 +293,7 @@ pub async fn compute(
                     let (id, name) = (row.id.clone(), row.name.clone());
                     match super::fetch::parse(store, row).await {
                         Ok(take) => run.count(&take).await?,
-                        Err(e) if skips(&e) => run.skip(id, name, &e),
+                        Err(e) if e.is_the_takes_own() => run.skip(id, name, &e),
                         Err(e) => return Err(e),
                     }
                 }
@@ -276,10 +302,15 @@ pub async fn compute(
         Selection::Ids(ids) => {
             let mut seen = std::collections::HashSet::new();
             for id in ids.iter().filter(|id| seen.insert(id.as_str())) {
-                // A take the caller's token cannot see is not found, as by its own route.
+                // A take the caller's token cannot see is not found, as by its own route;
+                // one that cannot be read is skipped, as in a selection.
                 check_take(store, &req.grant, id).await?;
-                let take = super::fetch::take(store, id).await?;
-                run.count(&take).await?;
+                match super::fetch::take(store, id).await {
+                    Ok(take) => run.count(&take).await?,
+                    Err(e @ Error::NotFound(_)) => return Err(e),
+                    Err(e) if e.is_the_takes_own() => run.skip(id.clone(), String::new(), &e),
+                    Err(e) => return Err(e),
+                }
             }
         }
     }
@@ -305,18 +336,46 @@ struct Run<'a> {
 }
 
 impl Run<'_> {
-    /// Count `take` in (its moments as kept, or read now), or skip it if it cannot be read
-    /// as asked; an error of the server or the database stops the request.
+    /// Count `take` in (what reading it gave, as kept, or read now), or skip it if it cannot
+    /// be read as asked; an error of the server or the database stops the request.
     async fn count(&mut self, take: &Take) -> Result<()> {
-        let m = match self.moments(take).await {
-            Ok(m) => m,
-            Err(e) if skips(&e) => {
-                self.skip(take.id.clone(), take.name.clone(), &e);
+        if take.is_live() {
+            let why = "it is being streamed: its statistics count once it finishes";
+            self.skipped(take.id.clone(), take.name.clone(), why.into());
+            return Ok(());
+        }
+        let key = (take.id.clone(), Stamp::of(take), self.asked.clone());
+        let outcome = match self.kept.get(&key) {
+            Some(o) => o,
+            None => {
+                let (stamp, outcome) = match self.read(take).await {
+                    Ok((stamp, m)) => (stamp, Outcome::Counted(m)),
+                    Err(e) if e.is_the_takes_own() => {
+                        (Stamp::of(take), Outcome::Skipped(e.to_string()))
+                    }
+                    Err(e) => return Err(e),
+                };
+                let outcome = Arc::new(outcome);
+                self.read += 1;
+                // Kept by what was read: a take changed since it was listed is read again
+                // by the next request that lists it as it is now.
+                self.kept.insert((key.0, stamp, key.2), outcome.clone());
+                outcome
+            }
+        };
+        let m = match &*outcome {
+            Outcome::Counted(m) => m,
+            Outcome::Skipped(why) => {
+                self.skipped(take.id.clone(), take.name.clone(), why.clone());
                 return Ok(());
             }
-            Err(e) => return Err(e),
         };
         if m.moments.frames == 0 {
+            self.skipped(
+                take.id.clone(),
+                take.name.clone(),
+                "it has no frames".into(),
+            );
             return Ok(());
         }
         let into = self
@@ -329,40 +388,42 @@ impl Run<'_> {
                 g.moments.merge(&m.moments);
                 g.takes += 1;
             }
-            None if self.groups.len() >= MAX_STATS_GROUPS => {
-                return Err(Error::InvalidRequest(format!(
-                    "the selection holds more than {MAX_STATS_GROUPS} point layouts (point \
-                     names and unit); narrow it, name the same points= of each take with \
-                     unit=, or ask by=roles"
-                )))
+            None => {
+                let points: usize = self.groups.iter().map(|g| g.points.len()).sum();
+                if self.groups.len() >= MAX_STATS_GROUPS
+                    || points + m.points.len() > MAX_STATS_POINTS
+                {
+                    return Err(Error::InvalidRequest(format!(
+                        "the selection holds more than {MAX_STATS_GROUPS} point layouts (point \
+                         names and unit) or {MAX_STATS_POINTS} points in all; narrow it, name \
+                         the same points= of each take with unit=, or ask by=roles"
+                    )));
+                }
+                self.groups.push(Gathering {
+                    points: m.points.clone(),
+                    metres_per_unit: m.metres_per_unit,
+                    takes: 1,
+                    moments: m.moments.clone(),
+                });
             }
-            None => self.groups.push(Gathering {
-                points: m.points.clone(),
-                metres_per_unit: m.metres_per_unit,
-                takes: 1,
-                moments: m.moments.clone(),
-            }),
         }
         Ok(())
     }
 
     fn skip(&mut self, id: String, name: String, e: &Error) {
+        self.skipped(id, name, e.to_string());
+    }
+
+    fn skipped(&mut self, id: String, name: String, reason: String) {
         self.skipped_count += 1;
         if self.skipped.len() < MAX_STATS_SKIPPED {
-            self.skipped.push(Skipped {
-                id,
-                name,
-                reason: e.to_string(),
-            });
+            self.skipped.push(Skipped { id, name, reason });
         }
     }
 
-    /// The moments of `take` as asked: kept, or read through its range answer.
-    async fn moments(&mut self, take: &Take) -> Result<Arc<TakeMoments>> {
-        let key = (take.id.clone(), Stamp::of(take), self.asked.clone());
-        if let Some(m) = self.kept.get(&key) {
-            return Ok(m);
-        }
+    /// The moments of `take` as asked, read through its range answer, and the stamp of
+    /// what the answer read.
+    async fn read(&mut self, take: &Take) -> Result<(Stamp, TakeMoments)> {
         let request = RangeRequest {
             range: TimeRange::All,
             points: self.req.points.clone(),
@@ -370,7 +431,7 @@ impl Run<'_> {
             transform: self.transform,
         };
         let (budget, holder) = (self.budget.clone(), self.holder.clone());
-        let mut a = answer::open_waiting(
+        let a = answer::open_waiting(
             self.store,
             self.caches,
             || budget.reservation(holder.clone()),
@@ -380,6 +441,8 @@ impl Run<'_> {
             BUDGET_WAIT,
         )
         .await?;
+        // One of many takes read whole: past the chunk cache.
+        let mut a = a.bulk();
         let named = self
             .req
             .points
@@ -411,16 +474,12 @@ impl Run<'_> {
                 None => moments.push(&positions),
             }
         }
-        self.read += 1;
-        let m = Arc::new(TakeMoments {
+        let m = TakeMoments {
             points,
             metres_per_unit: a.metres_per_unit,
             moments: moments.finished(),
-        });
-        // A live take's coding grows with each commit: its stamp changes, and what is kept
-        // of it now is never read again (it ages out).
-        self.kept.insert(key, m.clone());
-        Ok(m)
+        };
+        Ok((a.stamp(), m))
     }
 
     fn finish(mut self) -> MotionStats {

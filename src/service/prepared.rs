@@ -246,7 +246,8 @@ impl ReadCaches {
     }
 }
 
-/// Decoded chunks by (take, its coding's [`Stamp`], chunk index), bounded in bytes, oldest evicted first.
+/// Decoded chunks by (take, its coding's [`Stamp`], chunk index), bounded in bytes, the least
+/// recently used dropped first.
 pub struct ChunkCache {
     kept: Kept<ChunkKey, Arc<Vec<f32>>>,
 }

@@ -296,6 +296,56 @@ async fn motion_stats_of_named_takes_points_and_libraries() {
         why.contains("M5") && why.contains("M3"),
         "the reason lists the take's points: {why}"
     );
+    // What each take gave is kept, a skip too: asked again, nothing is read.
+    let (_, again) = srv
+        .get_json("/v1/motion-stats?library=lab&points=M5,M0")
+        .await;
+    assert_eq!(
+        (again["read"].as_u64(), again["skipped_count"].as_u64()),
+        (Some(0), Some(1))
+    );
+
+    // A take still being streamed is left out, and says why; once finished, it counts.
+    let (status, _, live) = srv
+        .post_json(
+            "/v1/streams",
+            &json!({"name": "live", "library": "lab", "fps": 60.0, "points": 6, "unit": "mm"}),
+        )
+        .await;
+    assert_eq!(status, 201, "{live}");
+    let live = live["id"].as_str().unwrap().to_string();
+    let frames: Vec<u8> = walker(60, 6, 60.0, 4, 0.0)
+        .positions()
+        .iter()
+        .flat_map(|x| x.to_le_bytes())
+        .collect();
+    let r = srv
+        .client
+        .post(format!("{}/v1/streams/{live}/frames?flush=true", srv.base))
+        .header("content-type", "application/octet-stream")
+        .body(frames)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let (_, streaming) = srv.get_json("/v1/motion-stats?library=lab").await;
+    assert_eq!(streaming["takes"], 3, "{streaming}");
+    let skipped = &streaming["skipped"][0];
+    assert_eq!(skipped["id"], live.as_str());
+    assert!(
+        skipped["reason"].as_str().unwrap().contains("streamed"),
+        "{skipped}"
+    );
+    let (status, _, _) = srv
+        .post_json(&format!("/v1/streams/{live}/finish"), &json!({}))
+        .await;
+    assert_eq!(status, 200);
+    let (_, finished) = srv.get_json("/v1/motion-stats?library=lab").await;
+    assert_eq!(
+        (finished["takes"].as_u64(), finished["read"].as_u64()),
+        (Some(4), Some(1))
+    );
+    assert_eq!(srv.delete(&format!("/v1/takes/{live}")).await, 204);
 
     // Refused, with why.
     for (query, says) in [
@@ -304,6 +354,8 @@ async fn motion_stats_of_named_takes_points_and_libraries() {
         ("by=joints", "points or roles"),
         ("fps=0", "fps"),
         ("points=M0,M0", "named twice"),
+        ("points=M0,,M1", "empty name"),
+        ("ids=a,b", "POST"),
     ] {
         let (status, v) = srv.get_json(&format!("/v1/motion-stats?{query}")).await;
         assert_eq!(status, 400, "{query}: {v}");

@@ -405,8 +405,34 @@ def test_statistics_are_those_of_every_frame_of_the_windows_takes(server: str) -
         assert by_roles.by == "roles" and len(by_roles.groups) == 1
         assert by_roles.groups[0].points == ROLES
         assert by_roles.groups[0].present[ROLES.index("head")] > 0
-        assert stats.raw["read"] >= 0
+        assert (stats.fps, stats.root, stats.up) == (30, "keep", None)
+        # A layout stored in two units, asked without unit=: which group is ambiguous.
+        mixed = f"py-stats-units-{uuid.uuid4().hex[:8]}"
+        c.ingest(walker(60), library=mixed, fps=60, point_names=NAMES, unit="mm")
+        c.ingest(walker(60) / 1000, library=mixed, fps=60, point_names=NAMES, unit="m")
+        two = c.motion_stats(library=mixed)
+        assert len(two.groups) == 2
+        with pytest.raises(KeyError, match="unit="):
+            two.group(NAMES)
+        assert len(c.motion_stats(library=mixed, unit="m").groups) == 1
         with pytest.raises(ValueError, match="not both"):
             c.motion_stats(ids=train, library=lib)
         with pytest.raises(mocapstore.BadRequest, match="roles"):
             c.motion_stats(library=lib, by="roles", root="extract")
+
+
+def test_statistics_of_windows_with_the_root_extracted(server: str, corpus: Path | None) -> None:
+    if corpus is None:
+        pytest.skip("no corpus")
+    lib = f"py-stats-root-{uuid.uuid4().hex[:8]}"
+    with mocapstore.Client(server) as c:
+        take = c.ingest(corpus / "bvh" / "cmu" / "01_01.bvh", library=lib, codec="quant")
+    w = Windows(server, library=lib, seconds=1.0, fps=30, unit="m", root="extract")
+    item = w[0]
+    # The items name every point the answer holds: the path and the heading after the take's.
+    assert len(item["points"]) == item["motion"].shape[1] == take.points + 2
+    assert item["points"][-2:] == ("root_motion", "root_motion_forward")
+    stats = w.statistics()
+    assert stats.groups[0].points == item["points"]
+    z = stats.normalise(item)
+    assert np.isfinite(z).all() and abs(float(z.mean())) < 5

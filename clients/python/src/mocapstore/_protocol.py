@@ -295,6 +295,15 @@ def frame_names(t: Take, points: Sequence[str] | None, root: str | None) -> tupl
     return names
 
 
+def with_heading(names: tuple[str, ...], width: int) -> tuple[str, ...]:
+    """``names`` (of [`frame_names`]) of an answer of ``width`` points: with the extracted
+    root's heading, ``root_motion_forward``, when the answer holds it (the body told which
+    way it faces: the heading comes as a point ahead of the path)."""
+    if len(names) + 1 == width and names[-1:] == ("root_motion",):
+        return (*names, "root_motion_forward")
+    return names
+
+
 def header_int(h: Mapping[str, str], name: str) -> int:
     return int(h[name])
 
@@ -319,9 +328,7 @@ def f32_answer(h: Mapping[str, str], body: bytes | memoryview, names: tuple[str,
         raise errors.MocapstoreError(
             f"the answer holds {data.size} values, not {n} frames x {p} points x 3"
         )
-    if len(names) + 1 == p and names[-1:] == ("root_motion",):
-        # The body tells which way it faces: the heading comes as a point ahead of the path.
-        names = (*names, "root_motion_forward")
+    names = with_heading(names, p)
     if len(names) != p:
         raise errors.MocapstoreError(f"the answer has {p} points, the take names {len(names)}")
     return Frames(

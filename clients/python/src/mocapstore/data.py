@@ -15,6 +15,7 @@ import hashlib
 import math
 import os
 import threading
+import warnings
 from collections import OrderedDict, deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -50,6 +51,9 @@ ROLES: tuple[str, ...] = (
         for side in ("left", "right")
     ),
 )
+
+#: Takes one statistics request may name by id (the server's limit).
+MAX_STATS_IDS = 20_000
 
 #: The fractions of takes in each split, in order.
 SPLITS: dict[str, float] = {"train": 0.8, "val": 0.1, "test": 0.1}
@@ -337,7 +341,13 @@ class Windows:
         layout's group. For a split, pass the train split's to every split."""
         if self._stats is None:
             ids = list(dict.fromkeys(w.take for w in self.windows))
-            self._stats = self.client().motion_stats(
+            if len(ids) > MAX_STATS_IDS:
+                raise ValueError(
+                    f"statistics of {len(ids)} takes by id: the server takes at most "
+                    f"{MAX_STATS_IDS}; ask client.motion_stats(library=..., ...) for the "
+                    "whole selection instead"
+                )
+            stats = self.client().motion_stats(
                 ids=ids,
                 points=self.points,
                 by="roles" if self.roles else "points",
@@ -346,6 +356,14 @@ class Windows:
                 up=self.up,
                 unit=self.unit,
             )
+            if stats.skipped_count:
+                why = "; ".join(f"{name}: {reason}" for _, name, reason in stats.skipped[:3])
+                warnings.warn(
+                    f"the server left {stats.skipped_count} of the windows' takes out of the "
+                    f"statistics ({why})",
+                    stacklevel=2,
+                )
+            self._stats = stats
         return self._stats
 
     def __len__(self) -> int:
@@ -431,7 +449,11 @@ class Windows:
             "start": w.start / nominal_rate(t.fps),
             "fps": self.fps,
             "labels": dict(t.labels),
-            "points": ROLES if self.roles else _protocol.frame_names(t, self.points, self.root),
+            "points": ROLES
+            if self.roles
+            else _protocol.with_heading(
+                _protocol.frame_names(t, self.points, self.root), motion.shape[1]
+            ),
         }
         if self.rotation is not None:
             item["joints"], item["rotation"] = self._rotations(w)
@@ -593,10 +615,13 @@ class Windows:
         ``z``); needs the ``pandas`` extra."""
         w = self.windows[i]
         take = self._records[w.take]
-        names = _protocol.frame_names(take, self.points, self.root)
+        a = self.array(i)
+        names = _protocol.with_heading(
+            _protocol.frame_names(take, self.points, self.root), a.shape[1]
+        )
         if self.roles:
             names = ROLES
-        return Frames(self.array(i), names, self.fps, take.fps, w.start, 0.0).to_pandas()
+        return Frames(a, names, self.fps, take.fps, w.start, 0.0).to_pandas()
 
 
 def _role_layout(t: Take) -> list[list[int]]:

@@ -230,7 +230,7 @@ class Columns:
         return self.units[self.labels.index(label)]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class StatsGroup:
     """The statistics of the takes of one layout (point names in order, in one unit):
     per point ``(points, 3)`` arrays of the positions' mean and standard deviation
@@ -264,19 +264,26 @@ class StatsGroup:
             velocity_std=per_point("velocity_std"),
         )
 
-    def normalise(self, motion: npt.ArrayLike, eps: float = 1e-6) -> F32Array:
-        """``motion`` ``(..., points, 3)`` of this layout, less the mean, over the standard
-        deviation (at least ``eps``, so a point that never moves stays finite)."""
-        a = np.asarray(motion, dtype=np.float32)
-        return ((a - self.mean) / np.maximum(self.std, eps)).astype(np.float32)
+    def scale(self, eps: float = 1e-8) -> npt.NDArray[np.float64]:
+        """The standard deviations [`normalise`] divides by: 1 where a coordinate does not
+        vary (below ``eps`` in the group's unit, or a point present in fewer than two
+        frames), as scikit-learn's scalers do, so that it is not blown up."""
+        flat = (self.std < eps) | (self.present[:, None] < 2)
+        return np.where(flat, 1.0, self.std)
 
-    def denormalise(self, motion: npt.ArrayLike, eps: float = 1e-6) -> F32Array:
+    def normalise(self, motion: npt.ArrayLike, eps: float = 1e-8) -> F32Array:
+        """``motion`` ``(..., points, 3)`` of this layout, less the mean, over the standard
+        deviation ([`scale`])."""
+        a = np.asarray(motion, dtype=np.float32)
+        return ((a - self.mean) / self.scale(eps)).astype(np.float32)
+
+    def denormalise(self, motion: npt.ArrayLike, eps: float = 1e-8) -> F32Array:
         """The inverse of [`normalise`]."""
         a = np.asarray(motion, dtype=np.float32)
-        return (a * np.maximum(self.std, eps) + self.mean).astype(np.float32)
+        return (a * self.scale(eps) + self.mean).astype(np.float32)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class MotionStats:
     """Normalisation statistics of a selection's motion (``GET /v1/motion-stats``), one
     [`StatsGroup`] per layout, most frames first; ``skipped`` the takes not counted in,
@@ -286,6 +293,10 @@ class MotionStats:
     by: str
     takes: int
     frames: int
+    #: The rate, root and up axis asked for (``None``: each take's own).
+    fps: float | None
+    root: str
+    up: str | None
     groups: tuple[StatsGroup, ...]
     skipped: tuple[tuple[str, str, str], ...]
     skipped_count: int
@@ -298,6 +309,9 @@ class MotionStats:
             by=v["by"],
             takes=int(v["takes"]),
             frames=int(v["frames"]),
+            fps=v["fps"],
+            root=v["root"],
+            up=v["up"],
             groups=tuple(StatsGroup.from_json(g) for g in v["groups"]),
             skipped=tuple((s["id"], s["name"], s["reason"]) for s in v["skipped"]),
             skipped_count=int(v["skipped_count"]),
@@ -309,9 +323,15 @@ class MotionStats:
         """The group of exactly these points, in this order (a take's ``point_names``, or an
         item's ``points``)."""
         want = tuple(points)
-        for g in self.groups:
-            if g.points == want:
-                return g
+        found = [g for g in self.groups if g.points == want]
+        if len(found) > 1:
+            units = ", ".join(f"{g.metres_per_unit} m" for g in found)
+            raise KeyError(
+                f"these points come in {len(found)} units ({units}): ask the statistics "
+                "(and the windows) with unit= to have one"
+            )
+        if found:
+            return found[0]
         sizes = [len(g.points) for g in self.groups]
         raise KeyError(
             f"no group of these {len(want)} points ({', '.join(want[:3])}, ...); the groups "
