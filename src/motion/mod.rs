@@ -6,6 +6,7 @@ pub mod body;
 pub mod decimal;
 pub mod error;
 pub mod events;
+pub mod features;
 pub mod format;
 pub mod formats;
 pub mod layout;

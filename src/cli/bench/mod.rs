@@ -4,6 +4,7 @@ mod analog;
 mod euler;
 mod lossless;
 mod plot;
+mod search;
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -77,6 +78,11 @@ pub struct BenchArgs {
     /// files) and xz -9 of the analog block, on the C3D files, file by file.
     #[arg(long)]
     analog: bool,
+    /// Instead of codecs, how well motion features find motion by motion: precision@5 of
+    /// the content label of takes named `<dataset>_<content>_<style>_<n>` (Bandai Namco's),
+    /// whole takes and 1 s windows as queries, beside a mean-pose baseline.
+    #[arg(long)]
+    search: bool,
     /// Instead of sizes, how `rot` and `pga` give a BVH's Euler channels back at the first
     /// max bound: jumps over 90° between frames against the source's, and the largest
     /// channel difference, file by file.
@@ -423,6 +429,9 @@ pub fn run(args: &BenchArgs) -> ExitCode {
     }
     if args.analog {
         return analog::run(&files, &args.out);
+    }
+    if args.search {
+        return search::run(&files);
     }
     if args.euler {
         let bound = args.max_error.first().copied().unwrap_or(1.0);
