@@ -15,6 +15,7 @@ pub mod model;
 pub mod moments;
 pub mod outputs;
 pub mod rate;
+pub mod retrieval;
 pub mod rotation;
 pub mod skeleton;
 pub mod synthetic;
