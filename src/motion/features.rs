@@ -92,13 +92,6 @@ pub struct Features {
     pub leg_m: Option<f64>,
 }
 
-fn index(role: Role) -> usize {
-    Role::all()
-        .iter()
-        .position(|r| *r == role)
-        .expect("a role of Role::all")
-}
-
 type V3 = [f64; 3];
 
 fn at(frame: &[f32], role: usize) -> Option<V3> {
@@ -129,8 +122,8 @@ fn heading(frame: &[f32]) -> Option<f64> {
     let mut right = [0.0, 0.0];
     let mut any = false;
     for part in [Part::Hip, Part::Shoulder] {
-        let l = at(frame, index(Role::left(part)));
-        let r = at(frame, index(Role::right(part)));
+        let l = at(frame, Role::left(part).index());
+        let r = at(frame, Role::right(part).index());
         if let (Some(l), Some(r)) = (l, r) {
             right[0] += r[0] - l[0];
             right[1] += r[2] - l[2];
@@ -160,8 +153,8 @@ fn to_body(v: V3, heading: f64) -> V3 {
 pub fn features(roles: &[f32]) -> Features {
     let width = Role::all().len() * 3;
     let frames: Vec<&[f32]> = roles.chunks_exact(width).collect();
-    let pelvis = index(Role::Pelvis);
-    let keys: Vec<usize> = KEY_ROLES.iter().map(|r| index(*r)).collect();
+    let pelvis = Role::Pelvis.index();
+    let keys: Vec<usize> = KEY_ROLES.iter().map(|r| r.index()).collect();
     let placed: Vec<Role> = KEY_ROLES
         .iter()
         .zip(&keys)
@@ -175,9 +168,9 @@ pub fn features(roles: &[f32]) -> Features {
             [super::body::Side::Left, super::body::Side::Right]
                 .into_iter()
                 .filter_map(|s| {
-                    let h = at(f, index(Role::Limb(s, Part::Hip)))?;
-                    let k = at(f, index(Role::Limb(s, Part::Knee)))?;
-                    let a = at(f, index(Role::Limb(s, Part::Ankle)))?;
+                    let h = at(f, Role::Limb(s, Part::Hip).index())?;
+                    let k = at(f, Role::Limb(s, Part::Knee).index())?;
+                    let a = at(f, Role::Limb(s, Part::Ankle).index())?;
                     Some(norm(sub(h, k)) + norm(sub(k, a)))
                 })
                 .collect::<Vec<_>>()
@@ -189,7 +182,7 @@ pub fn features(roles: &[f32]) -> Features {
         median(
             frames
                 .iter()
-                .filter_map(|f| Some(at(f, index(Role::Head))?[1] - at(f, pelvis)?[1]))
+                .filter_map(|f| Some(at(f, Role::Head.index())?[1] - at(f, pelvis)?[1]))
                 .collect(),
         )
         .map_or(1.0, |h| (h.abs() * 1.4).max(0.1))
@@ -199,7 +192,7 @@ pub fn features(roles: &[f32]) -> Features {
         .flat_map(|f| {
             let mut lows = Vec::new();
             for r in [Role::left(Part::Ankle), Role::right(Part::Ankle)] {
-                if let Some(p) = at(f, index(r)) {
+                if let Some(p) = at(f, r.index()) {
                     lows.push(p[1]);
                 }
             }

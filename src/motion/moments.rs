@@ -151,41 +151,6 @@ impl PointMoments {
     }
 }
 
-/// One point per group of `groups` (indices into a frame's `points` points): the centroid
-/// of the group's points present in each frame, NaN where none is or the group is empty.
-/// What a take's body roles make of its points.
-pub fn centroids(positions: &[f32], points: usize, groups: &[Vec<usize>]) -> Vec<f32> {
-    let width = points * 3;
-    if width == 0 {
-        return Vec::new();
-    }
-    let frames = positions.len() / width;
-    let mut out = vec![f32::NAN; frames * groups.len() * 3];
-    for (f, frame) in positions.chunks_exact(width).enumerate() {
-        for (g, idx) in groups.iter().enumerate() {
-            let mut sum = [0f64; 3];
-            let mut n = 0usize;
-            for &p in idx {
-                let v = &frame[p * 3..p * 3 + 3];
-                if v.iter().any(|x| x.is_nan()) {
-                    continue;
-                }
-                for k in 0..3 {
-                    sum[k] += f64::from(v[k]);
-                }
-                n += 1;
-            }
-            if n > 0 {
-                let o = (f * groups.len() + g) * 3;
-                for k in 0..3 {
-                    out[o + k] = (sum[k] / n as f64) as f32;
-                }
-            }
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -259,21 +224,5 @@ mod tests {
         assert_eq!(x.velocity[0].n, 2);
         assert!((x.velocity[0].mean - 1.0).abs() < 1e-12);
         assert_eq!(x.frames, 4);
-    }
-
-    #[test]
-    fn centroids_average_what_is_present() {
-        // Two frames of three points; groups {0, 1}, {2}, {}.
-        let n = f32::NAN;
-        let pos = [
-            0.0, 0.0, 0.0, 2.0, 2.0, 2.0, 5.0, 5.0, 5.0, //
-            n, n, n, 4.0, 4.0, 4.0, n, n, n,
-        ];
-        let c = centroids(&pos, 3, &[vec![0, 1], vec![2], vec![]]);
-        assert_eq!(&c[0..3], &[1.0, 1.0, 1.0]);
-        assert_eq!(&c[3..6], &[5.0, 5.0, 5.0]);
-        assert!(c[6..9].iter().all(|v| v.is_nan()));
-        assert_eq!(&c[9..12], &[4.0, 4.0, 4.0]);
-        assert!(c[12..18].iter().all(|v| v.is_nan()));
     }
 }

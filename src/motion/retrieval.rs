@@ -11,9 +11,8 @@
 
 use std::collections::BTreeMap;
 
-use super::body::{Axis, Body, Given, Prior, Role};
+use super::body::{centroids, Axis, Body, Given, Prior};
 use super::features::{self, Window, DIMS, RATE};
-use super::moments::centroids;
 use super::transform::{whole, Options};
 use super::Motion;
 
@@ -48,10 +47,7 @@ pub fn labelled(m: &Motion, prior: Option<&Prior>, label: String) -> super::Resu
         },
     )?;
     let names = &shaped.point_names;
-    let groups: Vec<Vec<usize>> = Role::all()
-        .into_iter()
-        .map(|r| body.roles.points(r, names))
-        .collect();
+    let groups = body.roles.placed_in(names);
     let roles = centroids(shaped.positions(), names.len(), &groups);
     let windows = features::features(&roles).windows;
     let width = groups.len() * 3;

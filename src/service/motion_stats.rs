@@ -49,9 +49,10 @@ use crate::limits::{
     Limits, MAX_STATS_GROUPS, MAX_STATS_IDS, MAX_STATS_POINTS, MAX_STATS_SKIPPED,
     MOTION_STATS_CACHE_BYTES,
 };
+use crate::motion::body::centroids;
 use crate::motion::body::Role;
 use crate::motion::formats::Format;
-use crate::motion::moments::{centroids, PointMoments};
+use crate::motion::moments::PointMoments;
 use crate::motion::transform::{Options, Root};
 use crate::store::Store;
 
@@ -453,10 +454,7 @@ impl Run<'_> {
         let (points, roles) = match self.req.by {
             By::Points => (names, None),
             By::Roles => {
-                let roles: Vec<Vec<usize>> = Role::all()
-                    .into_iter()
-                    .map(|r| take.roles.points(r, &names))
-                    .collect();
+                let roles = take.roles.placed_in(&names);
                 if roles.iter().all(Vec::is_empty) {
                     return Err(Error::Unsatisfiable(format!(
                         "take {} places no body role (its body.unplaced lists every one)",

@@ -120,6 +120,15 @@ impl Roles {
         })
     }
 
+    /// For each role of [`Role::all`], the points among `names` that play it (indices),
+    /// empty where none does: what [`centroids`] takes.
+    pub fn placed_in(&self, names: &[String]) -> Vec<Vec<usize>> {
+        Role::all()
+            .into_iter()
+            .map(|r| self.points(r, names))
+            .collect()
+    }
+
     /// The limb roles ([`Role::limbs`]) not placed.
     pub fn missing_limbs(&self) -> Vec<Role> {
         Role::limbs()
@@ -745,6 +754,41 @@ fn band(mut v: Vec<f64>) -> f64 {
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
+}
+
+/// One point per group of `groups` (indices into a frame's `points` points): the centroid
+/// of the group's points present in each frame, NaN where none is or the group is empty.
+/// What a take's body roles make of its points ([`Roles::placed_in`]): one point per role.
+pub fn centroids(positions: &[f32], points: usize, groups: &[Vec<usize>]) -> Vec<f32> {
+    let width = points * 3;
+    if width == 0 {
+        return Vec::new();
+    }
+    let frames = positions.len() / width;
+    let mut out = vec![f32::NAN; frames * groups.len() * 3];
+    for (f, frame) in positions.chunks_exact(width).enumerate() {
+        for (g, idx) in groups.iter().enumerate() {
+            let mut sum = [0f64; 3];
+            let mut n = 0usize;
+            for &p in idx {
+                let v = &frame[p * 3..p * 3 + 3];
+                if v.iter().any(|x| x.is_nan()) {
+                    continue;
+                }
+                for k in 0..3 {
+                    sum[k] += f64::from(v[k]);
+                }
+                n += 1;
+            }
+            if n > 0 {
+                let o = (f * groups.len() + g) * 3;
+                for k in 0..3 {
+                    out[o + k] = (sum[k] / n as f64) as f32;
+                }
+            }
+        }
+    }
+    out
 }
 
 #[cfg(test)]

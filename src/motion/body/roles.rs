@@ -91,6 +91,20 @@ impl Role {
         v
     }
 
+    /// This role's place in [`Role::all`], without building it (read per frame).
+    pub fn index(self) -> usize {
+        match self {
+            Role::Pelvis => 0,
+            Role::Spine => 1,
+            Role::Neck => 2,
+            Role::Head => 3,
+            Role::Limb(s, p) => {
+                let part = Part::ALL.iter().position(|x| *x == p).unwrap_or(0);
+                4 + part * 2 + usize::from(s == Side::Right)
+            }
+        }
+    }
+
     /// The roles that make a body's limbs: shoulder, elbow, wrist, hip, knee, ankle and toe
     /// on both sides (clavicles are often not captured and are not counted).
     pub fn limbs() -> Vec<Role> {
@@ -167,8 +181,9 @@ mod tests {
         let all = Role::all();
         assert_eq!(all.len(), 20);
         assert_eq!(Role::limbs().len(), 14);
-        for r in &all {
+        for (i, r) in all.iter().enumerate() {
             assert_eq!(r.name().parse::<Role>().unwrap(), *r);
+            assert_eq!(r.index(), i, "{r}");
         }
         assert_eq!(Role::left(Part::Knee).name(), "left_knee");
         assert!("knee".parse::<Role>().is_err());

@@ -301,3 +301,19 @@ fn markers_at_the_origin_are_missing() {
         a.reason
     );
 }
+
+#[test]
+fn centroids_average_what_is_present() {
+    // Two frames of three points; groups {0, 1}, {2}, {}.
+    let n = f32::NAN;
+    let pos = [
+        0.0, 0.0, 0.0, 2.0, 2.0, 2.0, 5.0, 5.0, 5.0, //
+        n, n, n, 4.0, 4.0, 4.0, n, n, n,
+    ];
+    let c = centroids(&pos, 3, &[vec![0, 1], vec![2], vec![]]);
+    assert_eq!(&c[0..3], &[1.0, 1.0, 1.0]);
+    assert_eq!(&c[3..6], &[5.0, 5.0, 5.0]);
+    assert!(c[6..9].iter().all(|v| v.is_nan()));
+    assert_eq!(&c[9..12], &[4.0, 4.0, 4.0]);
+    assert!(c[12..18].iter().all(|v| v.is_nan()));
+}
