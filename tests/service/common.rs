@@ -382,6 +382,20 @@ pub async fn gauge(srv: &Server, name: &str) -> u64 {
     metrics(srv).await[name]
 }
 
+/// Wait until no answer holds or reserves bytes: a client can have read an answer's last byte
+/// a moment before the server drops the stream that held it, so a test that reads the
+/// gauges right after a body would race the server's release.
+pub async fn answers_released(srv: &Server) {
+    for _ in 0..600 {
+        let m = metrics(srv).await;
+        if m["mocapstore_answer_bytes_held"] == 0 && m["mocapstore_answer_bytes_reserved"] == 0 {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("answers still hold bytes 30 s after their bodies were read");
+}
+
 /// Poll `f` until it holds, at most `tries` times 50 ms apart.
 pub async fn eventually<F: std::future::Future<Output = bool>>(
     tries: usize,
