@@ -140,6 +140,15 @@ pub const MAX_STATS_SKIPPED: usize = 100;
 /// about 150 bytes a point, so 32 MiB keeps a few thousand takes of a full marker set.
 pub const MOTION_STATS_CACHE_BYTES: usize = 32 << 20;
 
+/// Bytes of takes' motion features a server keeps decoded for search
+/// ([`crate::service::motion_index`]): about 700 bytes a second of motion, so 128 MiB
+/// holds 50 hours.
+pub const MOTION_INDEX_CACHE_BYTES: usize = 128 << 20;
+
+/// Results one search answers at most (`k`), and from one take (`per_take`).
+pub const MAX_SEARCH_K: usize = 100;
+pub const MAX_SEARCH_PER_TAKE: usize = 10;
+
 /// Jobs one listing answers at most.
 pub const MAX_JOBS_LISTED: usize = 1_000;
 

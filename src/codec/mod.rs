@@ -18,6 +18,7 @@
 //! - [`branches`]: which equivalent Euler triple `rot` and `pga` give back (the source's).
 //! - [`spca`]: segments, torso normalisation, PCA and key-framed splines (Liu & McMillan
 //!   2006).
+//! - [`features`]: a take's motion features (one descriptor per window) as stored.
 //! - [`outputs`]: a C3D's model outputs (angles, forces, moments, powers), exactly.
 //! - [`analog`]: analog channels (force plates, EMG) by linear prediction, lossless or
 //!   bounded per channel.
@@ -36,6 +37,7 @@ pub mod container;
 pub mod dct;
 pub mod entropy;
 pub mod error;
+pub mod features;
 pub mod gaps;
 pub mod id;
 pub mod linalg;

@@ -12,6 +12,7 @@ mod library;
 mod metrics;
 pub mod proxy;
 mod routes;
+mod search;
 pub mod serve;
 mod skeletons;
 mod streams;
@@ -44,6 +45,7 @@ use crate::service::access::{AuditLog, Authenticator, Scope};
 use crate::service::budget::Budget;
 use crate::service::history::Histories;
 use crate::service::jobs::Jobs;
+use crate::service::motion_index::MotionIndex;
 use crate::service::prepared::ReadCaches;
 use crate::service::streams::Streams;
 use crate::service::Node;
@@ -87,6 +89,10 @@ pub const METRICS_CONNECTIONS: u64 = 16;
 /// times this), finishes idle streams and closes the takes of streams whose server died.
 pub const MAINTENANCE_PERIOD: Duration = Duration::from_secs(10);
 
+/// How often a server looks for takes whose motion features are missing or stale, and
+/// starts the index job if none runs.
+pub const INDEX_PERIOD: Duration = Duration::from_secs(5);
+
 impl Default for Config {
     fn default() -> Self {
         Config {
@@ -118,6 +124,8 @@ pub struct AppState {
     pub caches: Arc<ReadCaches>,
     /// Per-take motion statistics, kept for `/v1/motion-stats`.
     pub moments: Arc<crate::service::motion_stats::MomentsCache>,
+    /// Takes' motion features: taken at ingest and by the index job, kept for search.
+    pub index: Arc<MotionIndex>,
     pub jobs: Arc<Jobs>,
     pub streams: Arc<Streams>,
     /// Sends a live stream's requests on to the server that codes it.
@@ -189,7 +197,11 @@ fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
         .get("/", Public, ui::index)
         .get("/ui/{*path}", Public, ui::file)
         .get("/metrics", Needs(Admin), metrics::render)
-        .post("/v1/takes", Needs(Write), takes::create.layer(upload))
+        .post(
+            "/v1/takes",
+            Needs(Write),
+            takes::create.layer(upload.clone()),
+        )
         .get("/v1/takes", Needs(Read), library::list)
         .get("/v1/takes/{id}", Take(Read), takes::get)
         .delete("/v1/takes/{id}", Take(Admin), takes::delete)
@@ -203,6 +215,7 @@ fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
         .get("/v1/takes/{id}/analog", Take(Read), takes::analog)
         .get("/v1/takes/{id}/outputs", Take(Read), takes::outputs)
         .get("/v1/takes/{id}/parameters", Take(Read), takes::parameters)
+        .get("/v1/takes/{id}/similar", Take(Read), search::similar)
         .get("/v1/stats", Needs(Read), library::stats)
         .get("/v1/ranges", Needs(Read), takes::ranges)
         .get("/v1/export", Needs(Read), library::export)
@@ -211,6 +224,11 @@ fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
             "/v1/motion-stats",
             Needs(Read),
             library::motion_stats_of.layer(json.clone()),
+        )
+        .post(
+            "/v1/search",
+            Needs(Read),
+            search::search.layer(upload.clone()),
         )
         .get("/v1/bases", Needs(Read), bases::list)
         .post("/v1/bases", Needs(Admin), bases::train.layer(json.clone()))
@@ -403,13 +421,21 @@ impl Application {
             .local_addr()
             .map_err(|e| format!("{}: {e}", config.listen))?;
         let node = Node::new(advertised(&config, bound)?);
+        let answers = Arc::new(Budget::new(limits.answer_bytes, limits.answer_share_bytes));
+        let caches = Arc::new(ReadCaches::new(config.decoded_cache_mib << 20));
         let state = AppState {
             store: store.clone(),
             limits,
             bodies: Arc::new(Budget::new(limits.inflight_bytes, limits.body_share_bytes)),
-            answers: Arc::new(Budget::new(limits.answer_bytes, limits.answer_share_bytes)),
+            index: Arc::new(MotionIndex::new(
+                store.clone(),
+                caches.clone(),
+                answers.clone(),
+                limits,
+            )),
+            answers,
             metrics: Arc::new(Metrics::default()),
-            caches: Arc::new(ReadCaches::new(config.decoded_cache_mib << 20)),
+            caches,
             moments: Default::default(),
             jobs: Arc::new(Jobs::new(store.clone(), config.job_lease, &node.id)),
             streams: Arc::new(Streams::new(limits, config.stream_lease, node.clone())),
@@ -514,16 +540,28 @@ impl Application {
             let every = (state.jobs.lease() / 3).max(Duration::from_millis(200));
             let mut tick = tokio::time::interval(every);
             let mut pruned: Option<std::time::Instant> = None;
+            let mut indexed: Option<std::time::Instant> = None;
             loop {
                 tick.tick().await;
                 loop {
-                    match crate::service::training::take_over(&state.store, &state.jobs).await {
+                    match crate::service::background::take_over(&state.index, &state.jobs).await {
                         Ok(true) => continue,
                         Ok(false) => break,
                         Err(e) => {
                             tracing::warn!(error = %e, "looking for jobs to take over failed");
                             break;
                         }
+                    }
+                }
+                // Takes whose motion features are missing or stale (stored before features
+                // were, re-encoded, finished streaming, given another body): the index job
+                // takes them, on one server at a time.
+                if indexed.is_none_or(|t| t.elapsed() >= INDEX_PERIOD) {
+                    indexed = Some(std::time::Instant::now());
+                    let started =
+                        crate::service::motion_index::start_if_stale(&state.index, &state.jobs);
+                    if let Err(e) = started.await {
+                        tracing::warn!(error = %e, "starting the motion index job failed");
                     }
                 }
                 if pruned.is_none_or(|t| t.elapsed() >= Duration::from_secs(3600)) {

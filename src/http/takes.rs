@@ -63,7 +63,7 @@ pub struct IngestQuery {
 
 /// Format named by `Content-Type` (e.g. `application/x-bvh`, `text/x-trc`), used only when
 /// the content itself does not say.
-fn content_type_format(headers: &HeaderMap) -> Option<Format> {
+pub(super) fn content_type_format(headers: &HeaderMap) -> Option<Format> {
     let ct = headers
         .get(header::CONTENT_TYPE)?
         .to_str()
@@ -288,7 +288,13 @@ pub async fn create(
     let mut req = ingest_request(q, &headers, body?, &state.limits)?;
     req.label.library = caller.grant.library_for_new(&req.label.library)?;
     let uploaded = req.bytes.len();
-    let report = ingest::ingest(&state.store, state.histories.as_deref(), req).await?;
+    let report = ingest::ingest(
+        &state.store,
+        state.histories.as_deref(),
+        Some(&state.index),
+        req,
+    )
+    .await?;
     state
         .metrics
         .ingested(report.frames, uploaded, report.stored_bytes);

@@ -315,6 +315,44 @@ pub fn energy(d: &[f32; DIMS]) -> f64 {
     (speeds + root).sqrt() + 0.05
 }
 
+/// A take's features with what they were taken from: its frames at [`RATE`], one point per
+/// role each ([`Role::all`]), and whether its pelvis is placed.
+#[derive(Debug, Clone)]
+pub struct Taken {
+    pub features: Features,
+    pub roles: Vec<f32>,
+    pub frames: usize,
+    pub pelvis: bool,
+}
+
+/// The features of `m` read as the server reads a stored take's (its body from anatomy,
+/// else the format's `prior`; 30 fps, metres, +Y up; one point per role): an uploaded
+/// clip's, or a file's for the retrieval measure.
+pub fn of_motion(m: &super::Motion, prior: Option<&super::body::Prior>) -> super::Result<Taken> {
+    use super::body::{centroids, Axis, Body, Given};
+    use super::transform::{whole, Options};
+    let body = Body::of(m, Given::default(), prior)?;
+    let shaped = whole::apply(
+        m,
+        &body,
+        &Options {
+            fps: Some(RATE),
+            up: Some(Axis::Y),
+            metres_per_unit: Some(1.0),
+            ..Options::default()
+        },
+    )?;
+    let names = &shaped.point_names;
+    let groups = body.roles.placed_in(names);
+    let roles = centroids(shaped.positions(), names.len(), &groups);
+    Ok(Taken {
+        features: features(&roles),
+        frames: roles.len() / (Role::all().len() * 3),
+        pelvis: !groups[Role::Pelvis.index()].is_empty(),
+        roles,
+    })
+}
+
 /// The squared Euclidean distance between two descriptors.
 pub fn distance(a: &[f32; DIMS], b: &[f32; DIMS]) -> f32 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()

@@ -17,6 +17,7 @@ pub mod outputs;
 pub mod rate;
 pub mod retrieval;
 pub mod rotation;
+pub mod similar;
 pub mod skeleton;
 pub mod synthetic;
 pub mod transform;

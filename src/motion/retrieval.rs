@@ -11,9 +11,9 @@
 
 use std::collections::BTreeMap;
 
-use super::body::{centroids, Axis, Body, Given, Prior};
-use super::features::{self, Window, DIMS, RATE};
-use super::transform::{whole, Options};
+use super::body::{Prior, Role};
+use super::features::{self, Window, DIMS};
+use super::similar::{self, Shared};
 use super::Motion;
 
 /// A labelled take as the measure sees it.
@@ -35,23 +35,10 @@ pub fn content_label(stem: &str) -> Option<String> {
 
 /// `m` (with the format's `prior` on up) as the measure sees it, labelled `label`.
 pub fn labelled(m: &Motion, prior: Option<&Prior>, label: String) -> super::Result<Labelled> {
-    let body = Body::of(m, Given::default(), prior)?;
-    let shaped = whole::apply(
-        m,
-        &body,
-        &Options {
-            fps: Some(RATE),
-            up: Some(Axis::Y),
-            metres_per_unit: Some(1.0),
-            ..Options::default()
-        },
-    )?;
-    let names = &shaped.point_names;
-    let groups = body.roles.placed_in(names);
-    let roles = centroids(shaped.positions(), names.len(), &groups);
-    let windows = features::features(&roles).windows;
-    let width = groups.len() * 3;
-    let frames: Vec<&[f32]> = roles.chunks_exact(width).collect();
+    let taken = features::of_motion(m, prior)?;
+    let width = Role::all().len() * 3;
+    let frames: Vec<&[f32]> = taken.roles.chunks_exact(width).collect();
+    let windows = taken.features.windows;
     let window_poses = windows
         .iter()
         .map(|w| mean_pose(&frames[w.start..(w.start + features::WINDOW).min(frames.len())]))
@@ -91,32 +78,21 @@ fn pose_distance(a: &[f64], b: &[f64]) -> f64 {
         .sqrt()
 }
 
-fn dist(a: &[f32; DIMS], b: &[f32; DIMS]) -> f64 {
-    f64::from(features::distance(a, b)).sqrt()
-}
-
 /// How far window `w` lies from take `t`: its nearest window's distance.
 fn nearest(w: &[f32; DIMS], t: &Labelled) -> f64 {
-    t.windows
-        .iter()
-        .map(|x| dist(w, &x.descriptor))
-        .fold(f64::INFINITY, f64::min)
+    take_distance_of(std::slice::from_ref(w), t)
 }
 
-/// The distance between two takes: each one's windows' mean distance to the other's
-/// nearest, both ways, each window weighted by how much it moves ([`features::energy`]:
-/// the still windows most takes begin and end with tell little).
+fn take_distance_of(query: &[[f32; DIMS]], t: &Labelled) -> f64 {
+    let windows: Vec<[f32; DIMS]> = t.windows.iter().map(|w| w.descriptor).collect();
+    similar::best_run(query, &windows, &Shared::all()).map_or(f64::INFINITY, |r| r.score)
+}
+
+/// The distance between two takes: the search's score of `b`'s best run for the whole of
+/// `a` as the query ([`similar::best_run`]).
 pub fn take_distance(a: &Labelled, b: &Labelled) -> f64 {
-    let one = |x: &Labelled, y: &Labelled| {
-        let (mut sum, mut weight) = (0.0, 0.0);
-        for w in &x.windows {
-            let e = features::energy(&w.descriptor);
-            sum += e * nearest(&w.descriptor, y);
-            weight += e;
-        }
-        sum / weight.max(1e-9)
-    };
-    (one(a, b) + one(b, a)) / 2.0
+    let query: Vec<[f32; DIMS]> = a.windows.iter().map(|w| w.descriptor).collect();
+    take_distance_of(&query, b)
 }
 
 /// The baseline's distance: between the takes' mean poses.

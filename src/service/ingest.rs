@@ -9,6 +9,7 @@ use serde::Serialize;
 use super::analog::{self, AnalogBounds};
 use super::choose::{self, CodecRequest, Decision, Keep, Tried};
 use super::history::{self, Histories};
+use super::motion_index::MotionIndex;
 use super::skeletons;
 use super::take::{Label, Take, TakeMeta};
 use super::{blocking, Error, Result};
@@ -89,10 +90,14 @@ pub struct IngestReport {
 /// Ingest one upload; `histories`, if given, is what choice has learnt from the takes
 /// before ([`history`]). A file of several animations (FBX stacks, glTF animations) is read
 /// whole first, every animation bounded together, then stored as one take each, named
-/// `name/animation` and labelled `animation`, unless the request picked one.
+/// `name/animation` and labelled `animation`, unless the request picked one. With `index`,
+/// each stored take's motion features are taken before the answer, so that it is found by
+/// search at once (a take whose features fail for the server's reasons is stored all the
+/// same, and the index job takes them).
 pub async fn ingest(
     store: &Store,
     histories: Option<&Histories>,
+    index: Option<&MotionIndex>,
     req: IngestRequest,
 ) -> Result<IngestReport> {
     let bytes = req.bytes.clone();
@@ -154,7 +159,13 @@ pub async fn ingest(
                     .map_err(Error::InvalidRequest)?;
             }
         }
-        reports.push(store_loaded(store, histories, &req, loaded).await?);
+        let report = store_loaded(store, histories, &req, loaded).await?;
+        if let Some(index) = index {
+            if let Err(e) = index.index(&report.id).await {
+                tracing::warn!(take = %report.id, error = %e, "taking motion features failed; the index job will");
+            }
+        }
+        reports.push(report);
     }
     let mut reports = reports.into_iter();
     let mut first = reports.next().expect("a file read gives one take at least");

@@ -259,9 +259,9 @@ impl Jobs {
         progress
     }
 
-    /// Take over one job whose server died (its lease ran out), if there is one: its stored
-    /// request, and the handle to run it with.
-    pub async fn take_over(self: &Arc<Self>) -> Result<Option<(String, Progress)>> {
+    /// Take over one job whose server died (its lease ran out), if there is one: its kind,
+    /// its stored request, and the handle to run it with.
+    pub async fn take_over(self: &Arc<Self>) -> Result<Option<(String, String, Progress)>> {
         let Some(row) = self
             .store
             .take_over_job(&self.server, now_ms(), self.lease_until())
@@ -275,7 +275,11 @@ impl Jobs {
             attempt = row.attempts,
             "taking over a job whose server stopped renewing it; running it again"
         );
-        Ok(Some((row.request.clone(), self.runner(&row.id))))
+        Ok(Some((
+            row.kind.clone(),
+            row.request.clone(),
+            self.runner(&row.id),
+        )))
     }
 
     /// Forget jobs finished more than [`KEEP_FINISHED`] ago.

@@ -25,6 +25,8 @@ pub struct TakeQuery {
     pub name_prefix: Option<String>,
     pub layout: Option<String>,
     pub codec: Option<CodecId>,
+    /// Takes of this stored skeleton (its id, `/v1/skeletons`).
+    pub skeleton: Option<String>,
     pub fps: Option<f64>,
     pub points: Option<u64>,
     pub min_duration_s: Option<f64>,
@@ -146,6 +148,7 @@ impl TakeQuery {
             points: count(self.points),
             layout: self.layout.clone(),
             codec: self.codec.map(|c| c.to_string()),
+            skeleton: self.skeleton.clone(),
             min_duration_s: self.min_duration_s,
             max_duration_s: self.max_duration_s,
             min_frames: count(self.min_frames),

@@ -44,6 +44,16 @@ impl Stamp {
         }
     }
 
+    /// The stamp as the take's row holds it.
+    pub fn row(self) -> StampRow {
+        StampRow {
+            codec: self.codec.to_string(),
+            stored_bytes: self.stored_bytes as i64,
+            frames: self.frames as i64,
+            body_rev: self.body_rev as i64,
+        }
+    }
+
     /// The stamp of the coding alone: a body corrected changes what transforms read, not
     /// the chunks decoded.
     fn coding(self) -> Stamp {

@@ -326,12 +326,9 @@ pub async fn start_training(store: &Store, jobs: &Arc<Jobs>, req: TrainRequest) 
     Ok(job)
 }
 
-/// Take over a training job whose server died, if there is one, and run it again here.
-pub async fn take_over(store: &Store, jobs: &Arc<Jobs>) -> Result<bool> {
-    let Some((request, progress)) = jobs.take_over().await? else {
-        return Ok(false);
-    };
-    let selected = match serde_json::from_str::<TrainRequest>(&request) {
+/// Run again a training job taken over from a server that died (its stored `request`).
+pub async fn resume(store: &Store, request: &str, progress: Progress) {
+    let selected = match serde_json::from_str::<TrainRequest>(request) {
         Ok(req) => select(store, &req).await,
         Err(e) => Err(Error::Corrupt(format!("job {}: request: {e}", progress.id))),
     };
@@ -344,7 +341,6 @@ pub async fn take_over(store: &Store, jobs: &Arc<Jobs>) -> Result<bool> {
         // The takes it selected may have gone meanwhile.
         Err(e) => progress.fail(e.to_string()).await,
     }
-    Ok(true)
 }
 
 /// Train `sel` in the background, reporting through `progress`.

@@ -786,6 +786,8 @@ macro_rules! bind_all {
 
 mod bases;
 pub use bases::{BasisRow, Deletion};
+mod features;
+pub use features::{Candidate, FeatureRow};
 mod jobs;
 mod skeletons;
 mod streams;

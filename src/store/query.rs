@@ -17,6 +17,8 @@ pub struct Filter {
     pub points: Option<i64>,
     pub layout: Option<String>,
     pub codec: Option<String>,
+    /// Takes of this stored skeleton (its id).
+    pub skeleton: Option<String>,
     pub min_duration_s: Option<f64>,
     pub max_duration_s: Option<f64>,
     pub min_frames: Option<i64>,
@@ -162,6 +164,9 @@ pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
     }
     if let Some(v) = &f.codec {
         s.push("codec = ?", Value::Text(v.clone()));
+    }
+    if let Some(v) = &f.skeleton {
+        s.push("skeleton_id = ?", Value::Text(v.clone()));
     }
     for (v, clause) in [
         (f.min_duration_s, "duration_s >= ?"),

@@ -15,7 +15,7 @@ pub struct ChunkRow {
 }
 
 /// A take's codec, stored bytes and frames as stored ([`super::Store::coding_stamp`]).
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Hash)]
 pub struct StampRow {
     pub codec: String,
     pub stored_bytes: i64,

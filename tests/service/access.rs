@@ -216,6 +216,9 @@ fn cases() -> Vec<Case> {
         // Nor has it model outputs (409).
         c(Method::GET, "/v1/takes/{id}/outputs", "read", true, 409),
         c(Method::GET, "/v1/takes/{id}/parameters", "read", true, 409),
+        // Motion like a take of the lab's: to another library's token it is not there.
+        c(Method::GET, "/v1/takes/{id}/similar", "read", true, 200),
+        c(Method::POST, "/v1/search", "read", true, 200),
         c(Method::GET, "/v1/stats", "read", false, 200),
         c(Method::GET, "/v1/export", "read", false, 200),
         c(Method::GET, "/v1/motion-stats", "read", false, 200),
@@ -266,7 +269,8 @@ fn expected(case: &Case, who: Who) -> u16 {
         // library for a new one is refused.
         let names_a_take = case.route.contains("{id}")
             || case.route == "/v1/ranges"
-            || (case.method == Method::POST && case.route == "/v1/motion-stats");
+            || (case.method == Method::POST && case.route == "/v1/motion-stats")
+            || (case.method == Method::POST && case.route == "/v1/search");
         return if names_a_take { 404 } else { 403 };
     }
     case.ok
@@ -275,6 +279,20 @@ fn expected(case: &Case, who: Who) -> u16 {
 /// The concrete request of a case, with fresh objects where a call uses one up.
 async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (String, Body) {
     let take = || async { new_take(srv, admin, n).await };
+    // A take with a body (roles), which search compares by.
+    let dancer = || async {
+        let body = mocapstore::motion::synthetic::dancer_bvh(60, 30.0, n, 4).into_bytes();
+        let (status, v) = call(
+            srv,
+            Some(admin),
+            Method::POST,
+            "/v1/takes?library=lab&codec=quant",
+            Body::Bytes(body),
+        )
+        .await;
+        assert_eq!(status, 201, "{v}");
+        v["id"].as_str().unwrap().to_string()
+    };
     let stream = || async { new_stream(srv, admin).await };
     match (case.method.as_str(), case.route) {
         ("POST", "/v1/takes") => (
@@ -301,6 +319,14 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
                 Body::None,
             )
         }
+        ("GET", "/v1/takes/{id}/similar") => (
+            format!("/v1/takes/{}/similar?k=3", dancer().await),
+            Body::None,
+        ),
+        ("POST", "/v1/search") => (
+            format!("/v1/search?take={}&t0=0&t1=1", dancer().await),
+            Body::None,
+        ),
         ("POST", "/v1/motion-stats") => (
             "/v1/motion-stats".into(),
             Body::Json(json!({"ids": [take().await]})),

@@ -28,6 +28,7 @@ mod openapi;
 mod python;
 mod ranges;
 mod robustness;
+mod search;
 mod skeletons;
 mod store;
 mod streams;

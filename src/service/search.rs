@@ -1,0 +1,346 @@
+//! Finding motion by motion (`POST /v1/search`, `GET /v1/takes/{id}/similar`): the takes
+//! whose motion is most like a query's, each with the range of it that is.
+//!
+//! A query is a range of a stored take or an uploaded clip, read as its windows'
+//! descriptors ([`crate::motion::features`]; a stored take's from the motion index, a
+//! clip's taken as a stored take's are). Every take the caller's token reaches that matches
+//! the filters is scored by its best run of as many windows ([`crate::motion::similar`]),
+//! on the body roles both place; the `k` best are answered, at most `per_take` from one
+//! take (runs that do not overlap), never the query's own range. Exact: every window of
+//! every take is compared, which an archive of 300,000 frames answers in a few
+//! milliseconds on one core (`mocapstore bench search`).
+//!
+//! What was searched is said: takes and windows compared, and the takes left out because
+//! their features are not taken yet (the index job is at them), they are being streamed,
+//! or their contents gave none. A token limited to libraries searches only their takes:
+//! the others are never listed, counted or scored.
+
+use std::sync::Arc;
+
+use serde::Serialize;
+
+use super::access::{check_take, Grant};
+use super::library::TakeQuery;
+use super::motion_index::MotionIndex;
+use super::take::Take;
+use super::{Error, Result};
+use crate::codec::features::{self as stored, Stored};
+use crate::limits::{MAX_SEARCH_K, MAX_SEARCH_PER_TAKE};
+use crate::motion::body::Role;
+use crate::motion::features::RATE;
+use crate::motion::formats::{self, Format, ReadOptions};
+use crate::motion::similar::{self, Descriptor, Shared};
+
+/// What is searched for.
+#[derive(Debug, Clone)]
+pub enum Query {
+    /// A range of a stored take (`t0 ≤ t < t1` in seconds; `None`: its start, its end).
+    Take {
+        id: String,
+        t0: Option<f64>,
+        t1: Option<f64>,
+    },
+    /// An uploaded clip (any format ingest reads), or a range of it.
+    Clip {
+        bytes: bytes::Bytes,
+        format: Option<Format>,
+        options: ReadOptions,
+        t0: Option<f64>,
+        t1: Option<f64>,
+    },
+}
+
+/// A search, parsed.
+#[derive(Debug, Clone)]
+pub struct SearchRequest {
+    pub query: Query,
+    /// Results answered, at most [`MAX_SEARCH_K`].
+    pub k: usize,
+    /// Results from one take, at most [`MAX_SEARCH_PER_TAKE`].
+    pub per_take: usize,
+    /// Which takes are searched (library, tags, labels, fps, duration, skeleton …).
+    pub takes: TakeQuery,
+    pub grant: Grant,
+}
+
+/// The query as it was compared.
+#[derive(Debug, Clone, Serialize)]
+pub struct QueryInfo {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub take: Option<String>,
+    /// The seconds its windows span.
+    pub t0: f64,
+    pub t1: f64,
+    pub windows: usize,
+    /// The body roles its windows hold, and those it lacks (not compared with any take).
+    pub roles: Vec<String>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub missing_roles: Vec<String>,
+}
+
+/// One range found.
+#[derive(Debug, Clone, Serialize)]
+pub struct Found {
+    pub take: String,
+    pub name: String,
+    pub library: String,
+    /// Seconds of the take: the range `t0 ≤ t < t1` that is most like the query.
+    pub t0: f64,
+    pub t1: f64,
+    /// Lower is nearer; 0 is the same motion.
+    pub score: f64,
+    /// Roles the query holds that this take does not place: compared without them.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub missing_roles: Vec<String>,
+}
+
+/// What was searched.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Searched {
+    /// Takes compared, and their windows.
+    pub takes: usize,
+    pub windows: usize,
+    /// Takes left out: features not taken yet (the index job takes them), being streamed,
+    /// or none their contents could give.
+    pub unindexed: usize,
+    pub live: usize,
+    pub without_features: usize,
+}
+
+/// A search's answer.
+#[derive(Debug, Clone, Serialize)]
+pub struct SearchAnswer {
+    pub query: QueryInfo,
+    pub results: Vec<Found>,
+    pub searched: Searched,
+}
+
+fn role_names(roles: &[Role]) -> Vec<String> {
+    roles.iter().map(|r| r.name()).collect()
+}
+
+/// The windows of `f` within `[t0, t1)` seconds: those wholly inside, or, when the range
+/// is shorter than a window, the one whose middle is nearest the range's. `None` when the
+/// range lies outside the take.
+fn windows_within(f: &Stored, t0: Option<f64>, t1: Option<f64>) -> Result<(usize, usize)> {
+    let duration = Stored::seconds(f.frames as usize);
+    let (t0, t1) = (
+        t0.unwrap_or(0.0),
+        t1.unwrap_or(duration.max(t0.unwrap_or(0.0))),
+    );
+    if t0 >= duration || f.windows.is_empty() {
+        return Err(Error::OutOfRange(format!(
+            "the query's range starts at t0 = {t0} s, at or past its take's end at \
+             {duration:.3} s"
+        )));
+    }
+    if !(t0.is_finite() && t1.is_finite() && t0 >= 0.0 && t0 < t1) {
+        return Err(Error::InvalidRequest(format!(
+            "the query's range is t0 = {t0} s to t1 = {t1} s: give 0 ≤ t0 < t1"
+        )));
+    }
+    let (a, b) = (t0 * RATE - 0.5, t1 * RATE + 0.5);
+    let inside: Vec<usize> = (0..f.windows.len())
+        .filter(|&i| {
+            let (s, e) = f.span(i);
+            s as f64 >= a && e as f64 <= b
+        })
+        .collect();
+    if let (Some(&first), Some(&last)) = (inside.first(), inside.last()) {
+        return Ok((first, last + 1 - first));
+    }
+    let middle = (t0 + t1.min(duration)) / 2.0 * RATE;
+    let nearest = (0..f.windows.len())
+        .min_by(|&x, &y| {
+            let m = |i: usize| {
+                let (s, e) = f.span(i);
+                ((s + e) as f64 / 2.0 - middle).abs()
+            };
+            m(x).total_cmp(&m(y))
+        })
+        .expect("a window");
+    Ok((nearest, 1))
+}
+
+/// The query's windows, and where they come from.
+struct Asked {
+    windows: Vec<Descriptor>,
+    placed: Vec<Role>,
+    pelvis: bool,
+    /// The stored take and the run of its windows it is, to leave out of the results.
+    own: Option<(String, usize, usize)>,
+    info: QueryInfo,
+}
+
+async fn asked(index: &MotionIndex, req: &SearchRequest) -> Result<Asked> {
+    let (features, take, t0, t1) = match &req.query {
+        Query::Take { id, t0, t1 } => {
+            check_take(index.store(), &req.grant, id).await?;
+            let take: Take = super::fetch::take(index.store(), id).await?;
+            if take.is_live() {
+                return Err(Error::Unsatisfiable(format!(
+                    "take {} is being streamed: search with it once it finishes",
+                    take.name
+                )));
+            }
+            let f = match index.of_take(&take).await? {
+                Ok(f) => f,
+                Err(why) => {
+                    return Err(Error::Unsatisfiable(format!(
+                        "take {} has no motion features: {why}",
+                        take.name
+                    )))
+                }
+            };
+            (f, Some(take.id), *t0, *t1)
+        }
+        Query::Clip {
+            bytes,
+            format,
+            options,
+            t0,
+            t1,
+        } => {
+            let (bytes, format, options) = (bytes.clone(), *format, options.clone());
+            let f = super::blocking(move || -> Result<Stored> {
+                let loaded = match (formats::detect(&bytes), format) {
+                    (Err(_), Some(f)) => formats::read_as(f, &bytes, &options),
+                    _ => formats::read(&bytes, &options),
+                }?;
+                let taken = crate::motion::features::of_motion(&loaded.motion, loaded.up.as_ref())?;
+                if !taken.pelvis {
+                    return Err(Error::Unsatisfiable(
+                        "the clip places no pelvis (no body role it could be compared by): \
+                         name its points as a body's"
+                            .into(),
+                    ));
+                }
+                // As a stored take's would be: the same codes.
+                let bytes = stored::encode(&taken.features, taken.pelvis, taken.frames)?;
+                Ok(stored::decode(&bytes, u64::MAX)?)
+            })
+            .await??;
+            (Arc::new(f), None, *t0, *t1)
+        }
+    };
+    let (first, count) = windows_within(&features, t0, t1)?;
+    let span = |i: usize| features.span(i);
+    let info = QueryInfo {
+        take: take.clone(),
+        t0: Stored::seconds(span(first).0),
+        t1: Stored::seconds(span(first + count - 1).1),
+        windows: count,
+        roles: role_names(&features.placed),
+        missing_roles: role_names(
+            &crate::motion::features::KEY_ROLES
+                .iter()
+                .filter(|r| !features.placed.contains(r))
+                .copied()
+                .collect::<Vec<_>>(),
+        ),
+    };
+    Ok(Asked {
+        windows: features.windows[first..first + count].to_vec(),
+        placed: features.placed.clone(),
+        pelvis: features.pelvis,
+        own: take.map(|t| (t, first, count)),
+        info,
+    })
+}
+
+/// Answer `req` from the takes' features `index` holds.
+pub async fn search(index: &MotionIndex, req: SearchRequest) -> Result<SearchAnswer> {
+    if req.k == 0 || req.k > MAX_SEARCH_K {
+        return Err(Error::InvalidRequest(format!(
+            "k is the results answered: 1 to {MAX_SEARCH_K}, not {}",
+            req.k
+        )));
+    }
+    if req.per_take == 0 || req.per_take > MAX_SEARCH_PER_TAKE {
+        return Err(Error::InvalidRequest(format!(
+            "per_take is the results from one take: 1 to {MAX_SEARCH_PER_TAKE}, not {}",
+            req.per_take
+        )));
+    }
+    req.takes.check()?;
+    let asked = asked(index, &req).await?;
+    let candidates = index
+        .store()
+        .candidates(&req.takes.filter(&req.grant))
+        .await?;
+    let mut searched = Searched::default();
+    let listed: Vec<_> = candidates
+        .iter()
+        .filter(|c| {
+            if c.live {
+                searched.live += 1;
+            }
+            !c.live
+        })
+        .collect();
+    let features = index.features(&listed).await?;
+    let mut compared: Vec<(usize, String, Arc<Stored>)> = Vec::with_capacity(listed.len());
+    for (i, f) in features.into_iter().enumerate() {
+        match f {
+            None => searched.unindexed += 1,
+            Some(Err(_)) => searched.without_features += 1,
+            Some(Ok(f)) => {
+                searched.takes += 1;
+                searched.windows += f.windows.len();
+                compared.push((i, listed[i].id.clone(), f));
+            }
+        }
+    }
+    let (k, per_take) = (req.k, req.per_take);
+    let Asked {
+        windows,
+        placed,
+        pelvis,
+        own,
+        info,
+    } = asked;
+    let query_roles = placed.clone();
+    let ranked = super::blocking(move || {
+        let mut found: Vec<(usize, similar::Run, Arc<Stored>)> = Vec::new();
+        for (i, id, f) in compared {
+            let shared = Shared::of((&placed, pelvis), (&f.placed, f.pelvis));
+            let runs = similar::best_runs(&windows, &f.windows, &shared, per_take + 1);
+            let mine = own.as_ref().filter(|o| o.0 == id);
+            let kept = runs.into_iter().filter(|r| match mine {
+                Some((_, first, count)) => r.apart(*first, *count),
+                None => true,
+            });
+            found.extend(kept.take(per_take).map(|r| (i, r, f.clone())));
+        }
+        found.sort_by(|a, b| a.1.score.total_cmp(&b.1.score));
+        found.truncate(k);
+        found
+    });
+    let ranked = ranked.await?;
+    let results = ranked
+        .into_iter()
+        .map(|(i, r, f)| {
+            let c = listed[i];
+            Found {
+                take: c.id.clone(),
+                name: c.name.clone(),
+                library: c.library.clone(),
+                t0: Stored::seconds(f.span(r.first).0),
+                t1: Stored::seconds(f.span(r.first + r.count - 1).1),
+                score: r.score,
+                missing_roles: role_names(
+                    &query_roles
+                        .iter()
+                        .filter(|r| !f.placed.contains(r))
+                        .copied()
+                        .collect::<Vec<_>>(),
+                ),
+            }
+        })
+        .collect();
+    Ok(SearchAnswer {
+        query: info,
+        results,
+        searched,
+    })
+}
