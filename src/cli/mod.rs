@@ -13,6 +13,7 @@ mod fetch;
 mod ingest;
 mod inspect;
 mod loadtest;
+mod search;
 mod streamtest;
 mod token;
 mod train_bases;
@@ -42,6 +43,9 @@ enum Command {
     Ingest(ingest::IngestArgs),
     /// Write any range of a stored take to a file (BVH for takes that keep their animation).
     Fetch(fetch::FetchArgs),
+    /// Find stored motion like a range of a stored take or of a clip file (a running
+    /// service's `POST /v1/search`).
+    Search(search::SearchArgs),
     /// Live-stream ingest over HTTP: frames/s sustained, capture-to-fetchable delay.
     Streamtest(streamtest::StreamArgs),
     /// Train a shared basis on a running service's takes (library, tag, layout or ids).
@@ -331,6 +335,7 @@ pub fn main() -> ExitCode {
         Command::Bench(args) => bench::run(&args),
         Command::Ingest(args) => ingest::run(&args),
         Command::Fetch(args) => fetch::run(&args),
+        Command::Search(args) => search::run(&args),
         Command::Loadtest(args) => loadtest::run(&args),
         Command::TrainBases(args) => train_bases::run(&args),
         Command::Streamtest(args) => streamtest::run(&args),

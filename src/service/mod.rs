@@ -10,7 +10,10 @@
 //! - [`export`]: a library as files of one format, streamed as one ZIP with a manifest.
 //! - [`bases`]: shared bases as stored objects — loading, the newest per layout, deleting.
 //! - [`training`]: training shared bases from a selection of takes, as a background job.
-//! - [`jobs`]: background jobs and their progress.
+//! - [`jobs`]: background jobs and their progress; [`background`]: a job taken over from a
+//!   server that died, run again by its kind's module.
+//! - [`motion_index`]: every take's motion features, taken through the read path, stored,
+//!   kept current (the index job) and kept decoded; [`search`]: finding motion by motion.
 //! - [`choose`]: which codecs compete for a take, and the decision record.
 //! - [`history`]: what choice learns from a library's takes: candidates not worth encoding.
 //! - [`ingest`]: parse, encode with every candidate, keep the smallest, store.

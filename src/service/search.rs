@@ -29,6 +29,7 @@ use crate::limits::{MAX_SEARCH_K, MAX_SEARCH_PER_TAKE};
 use crate::motion::body::Role;
 use crate::motion::features::RATE;
 use crate::motion::formats::{self, Format, ReadOptions};
+use crate::motion::rate;
 use crate::motion::similar::{self, Descriptor, Shared};
 
 /// What is searched for.
@@ -87,6 +88,10 @@ pub struct Found {
     /// Seconds of the take: the range `t0 ≤ t < t1` that is most like the query.
     pub t0: f64,
     pub t1: f64,
+    /// The same range in the take's own frames, `start ≤ f < end` (what `/v1/ranges` and
+    /// `start`/`end` of a range request take).
+    pub start: usize,
+    pub end: usize,
     /// Lower is nearer; 0 is the same motion.
     pub score: f64,
     /// Roles the query holds that this take does not place: compared without them.
@@ -321,12 +326,21 @@ pub async fn search(index: &MotionIndex, req: SearchRequest) -> Result<SearchAns
         .into_iter()
         .map(|(i, r, f)| {
             let c = listed[i];
+            let (t0, t1) = (
+                Stored::seconds(f.span(r.first).0),
+                Stored::seconds(f.span(r.first + r.count - 1).1),
+            );
+            let frames = usize::try_from(c.stamp.frames).unwrap_or(0);
+            let frame = |t: f64| (rate::first_frame_from(t, c.fps).max(0.0) as usize).min(frames);
+            let start = frame(t0).min(frames.saturating_sub(1));
             Found {
                 take: c.id.clone(),
                 name: c.name.clone(),
                 library: c.library.clone(),
-                t0: Stored::seconds(f.span(r.first).0),
-                t1: Stored::seconds(f.span(r.first + r.count - 1).1),
+                t0,
+                t1,
+                start,
+                end: frame(t1).max(start + 1).min(frames.max(1)),
                 score: r.score,
                 missing_roles: role_names(
                     &query_roles

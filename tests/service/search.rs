@@ -111,6 +111,11 @@ async fn a_range_finds_its_copy_where_it_was_cut_and_its_action_next() {
             (Some(1.0), Some(3.0))
         );
         assert!(first["score"].as_f64().unwrap() < 1e-6, "{first}");
+        // The same range in the take's own frames (30 fps, printed 0.0333333).
+        assert_eq!(
+            (first["start"].as_u64(), first["end"].as_u64()),
+            (Some(30), Some(90))
+        );
         // Then walks: the other two of the three.
         let found = names(&a);
         assert_eq!(found.len(), 5);

@@ -561,3 +561,45 @@ def test_an_exported_file_reads_back_by_its_manifest_alone(
         assert float(row["metres_per_unit"]) == 1.0 and float(row["fps"]) == 30
         want = client.frames(take.id, fps=30, unit="m", root=root)
         assert np.array_equal(a, want.data, equal_nan=True)
+
+
+def test_search_finds_motion_and_its_ranges_read_in_one_request(
+    client: mocapstore.Client, corpus: Path | None, server: str
+) -> None:
+    if corpus is None:
+        pytest.skip("no corpus")
+    lib = library()
+    bandai = corpus / "bvh" / "bandai"
+    names = ["walk_normal", "walk_happy", "bow_normal", "bow_happy", "dash_normal"]
+    takes = {
+        n: client.ingest(bandai / f"dataset-1_{n}_001.bvh", library=lib, codec="quant")
+        for n in names
+    }
+    query = takes["walk_normal"]
+    found = client.search(query, t0=1.0, t1=3.0, k=3, library=lib)
+    assert found.query["take"] == query.id and found.searched["takes"] == 5
+    # Another stretch of the same walk may come first; the nearest other take is a walk.
+    others = [m for m in found if m.take != query.id]
+    assert len(found) == 3 and others[0].name == "dataset-1_walk_happy_001", found
+    assert [m.score for m in found] == sorted(m.score for m in found)
+    assert all(m.take != query.id or m.t1 <= 1.0 or m.t0 >= 3.0 for m in found)
+    # Every range found in one request, each the frames of its seconds.
+    frames = client.ranges(found.parts())
+    for m, f in zip(found, frames, strict=True):
+        assert f.start == m.start and len(f) == m.end - m.start
+        assert f.start / f.source_fps == pytest.approx(m.t0, abs=1 / f.source_fps)
+    assert [len(f) for f in client.ranges(list(found))] == [len(f) for f in frames]
+    # A clip file finds its stored take first, at the range asked.
+    clip = client.search(bandai / "dataset-1_bow_happy_001.bvh", t0=1.0, t1=3.0, k=1, library=lib)
+    assert clip[0].take == takes["bow_happy"].id and (clip[0].t0, clip[0].t1) == (1.0, 3.0)
+    with pytest.raises(FileNotFoundError):
+        client.search(Path("/no/such/clip.bvh"))
+    with pytest.raises(mocapstore.NotFound):
+        client.search("no-such-take")
+
+    async def run() -> None:
+        async with mocapstore.AsyncClient(server) as c:
+            again = await c.search(query.id, t0=1.0, t1=3.0, k=3, library=lib)
+            assert again.parts() == found.parts()
+
+    asyncio.run(run())

@@ -5,6 +5,7 @@ mod euler;
 mod lossless;
 mod plot;
 mod search;
+mod search_speed;
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -83,6 +84,14 @@ pub struct BenchArgs {
     /// whole takes and 1 s windows as queries, beside a mean-pose baseline.
     #[arg(long)]
     search: bool,
+    /// With --search: also what search costs through the store, on an archive of the files
+    /// ingested again under other names until it holds this many frames (e.g. 300000):
+    /// latency p50/p99, the features' share of the database, ingest slowdown.
+    #[arg(long, requires = "search")]
+    search_frames: Option<u64>,
+    /// With --search-frames: searches timed.
+    #[arg(long, default_value_t = 400)]
+    search_queries: usize,
     /// Instead of sizes, how `rot` and `pga` give a BVH's Euler channels back at the first
     /// max bound: jumps over 90° between frames against the source's, and the largest
     /// channel difference, file by file.
@@ -431,7 +440,24 @@ pub fn run(args: &BenchArgs) -> ExitCode {
         return analog::run(&files, &args.out);
     }
     if args.search {
-        return search::run(&files);
+        let measured = search::run(&files);
+        let Some(frames) = args.search_frames else {
+            return measured;
+        };
+        let runtime = match tokio::runtime::Runtime::new() {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("mocapstore bench --search: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        return match runtime.block_on(search_speed::run(&files, frames, args.search_queries)) {
+            Ok(()) => measured,
+            Err(e) => {
+                eprintln!("mocapstore bench --search-frames: {e}");
+                ExitCode::FAILURE
+            }
+        };
     }
     if args.euler {
         let bound = args.max_error.first().copied().unwrap_or(1.0);

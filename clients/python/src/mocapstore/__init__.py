@@ -24,7 +24,7 @@ from .errors import (
     Unreadable,
 )
 from .skeleton import Channels, Joint, Skeleton
-from .types import Columns, Frames, MotionStats, StatsGroup, Take
+from .types import Columns, Frames, Match, MotionStats, SearchResults, StatsGroup, Take
 
 __all__ = [
     "API",
@@ -42,10 +42,12 @@ __all__ = [
     "IncompatibleServer",
     "Ingested",
     "Joint",
+    "Match",
     "MocapstoreError",
     "MotionStats",
     "NotFound",
     "OutOfRange",
+    "SearchResults",
     "ServerError",
     "Skeleton",
     "StatsGroup",

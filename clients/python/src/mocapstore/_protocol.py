@@ -23,7 +23,7 @@ from . import errors
 from ._version import API
 from .skeleton import Channels
 from .skeleton import parse as parse_bvh
-from .types import Columns, Frames, MotionStats, Take
+from .types import Columns, Frames, MotionStats, SearchResults, Take
 
 T = TypeVar("T")
 
@@ -253,6 +253,16 @@ def motion_stats(query: Params, body: dict[str, Any] | None) -> Op[MotionStats]:
     else:
         r = yield Request("POST", "/v1/motion-stats", [], json=body)
     return MotionStats.from_json(json_of(r))
+
+
+def search(path: str, query: Params, clip: bytes | None) -> Op[SearchResults]:
+    """Motion like a query's: a stored take's range (``path`` its ``similar`` route) or a
+    clip's (``POST /v1/search`` with the file as the body)."""
+    if clip is None:
+        r = yield Request("GET", path, query)
+    else:
+        r = yield Request("POST", "/v1/search", query, content=clip)
+    return SearchResults.from_json(json_of(r))
 
 
 def npy_bytes(array: npt.ArrayLike) -> bytes:

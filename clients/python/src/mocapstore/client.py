@@ -27,7 +27,7 @@ from . import _protocol as p
 from . import errors
 from ._version import __version__
 from .skeleton import Channels
-from .types import Columns, Frames, MotionStats, Take
+from .types import Columns, Frames, Match, MotionStats, SearchResults, Take
 
 T = TypeVar("T")
 
@@ -185,7 +185,7 @@ class _Base:
 
     def _ranges_op(
         self,
-        parts: Sequence[tuple[str | Take, int, int]],
+        parts: Sequence[tuple[str | Take, int, int] | Match],
         points: Sequence[str] | None,
         fps: float | None,
         root: str | None,
@@ -194,7 +194,8 @@ class _Base:
     ) -> p.Op[list[Frames]]:
         points = p.names(points)
         takes: list[tuple[Take, int, int]] = []
-        for take, start, end in parts:
+        for part in parts:
+            take, start, end = part.part() if isinstance(part, Match) else part
             t = take if isinstance(take, Take) else (yield from self._take_op(take))
             takes.append((t, int(start), int(end)))
         query = p.params(points=points, fps=fps, root=root, up=up, unit=unit)
@@ -203,6 +204,31 @@ class _Base:
             got = yield from p.ranges(group, query, points, root)
             out.extend(got)
         return out
+
+    @staticmethod
+    def _search_op(
+        like: str | Take | os.PathLike[str] | bytes,
+        t0: float | None,
+        t1: float | None,
+        k: int,
+        per_take: int,
+        filters: dict[str, Any],
+        labels: p.Labels | None,
+    ) -> p.Op[SearchResults]:
+        query = [
+            *p.params(t0=t0, t1=t1, k=k, per_take=per_take, **filters),
+            *p.label_filters(labels),
+        ]
+        if isinstance(like, Take):
+            like = like.id
+        if isinstance(like, bytes):
+            return p.search("/v1/search", query, like)
+        if isinstance(like, str) and not os.path.exists(like):
+            return p.search(f"/v1/takes/{like}/similar", query, None)
+        path = Path(like)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such clip to search with")
+        return p.search("/v1/search", query, path.read_bytes())
 
     @staticmethod
     def _range_query(
@@ -618,6 +644,40 @@ class Client(_Base):
         options = dict(by=by, fps=fps, root=root, up=up, unit=unit)
         return self._run(self._motion_stats_op(ids, filters, labels, points, options))
 
+    def search(
+        self,
+        like: str | Take | os.PathLike[str] | bytes,
+        *,
+        t0: float | None = None,
+        t1: float | None = None,
+        k: int = 10,
+        per_take: int = 1,
+        library: str | None = None,
+        tag: str | None = None,
+        name_prefix: str | None = None,
+        labels: p.Labels | None = None,
+        skeleton: str | None = None,
+        fps: float | None = None,
+        min_duration_s: float | None = None,
+        max_duration_s: float | None = None,
+    ) -> SearchResults:
+        """The ranges of stored takes whose motion is most like ``like``'s: a stored take
+        (its id or record; ``t0``/``t1`` seconds of it, all of it by default), a clip file
+        (any format ingest reads) or a clip's bytes. The ``k`` best, at most ``per_take``
+        from one take (ranges that do not overlap), never the query's own range, among the
+        takes the token reaches that match the filters. ``results.parts()`` are the ranges
+        as [`ranges`] reads them in one request."""
+        filters = dict(
+            library=library,
+            tag=tag,
+            name_prefix=name_prefix,
+            skeleton=skeleton,
+            fps=fps,
+            min_duration_s=min_duration_s,
+            max_duration_s=max_duration_s,
+        )
+        return self._run(self._search_op(like, t0, t1, k, per_take, filters, labels))
+
     def ingest(
         self,
         source: str | os.PathLike[str] | npt.ArrayLike,
@@ -685,7 +745,7 @@ class Client(_Base):
 
     def ranges(
         self,
-        parts: Sequence[tuple[str | Take, int, int]],
+        parts: Sequence[tuple[str | Take, int, int] | Match],
         *,
         points: Sequence[str] | None = None,
         fps: float | None = None,
@@ -694,7 +754,8 @@ class Client(_Base):
         unit: str | None = None,
     ) -> list[Frames]:
         """Several ranges, ``(take, start, end)`` in the takes' own frames (end excluded;
-        the take by id, or its record from ``takes()``, which saves a lookup), of one take
+        the take by id, or its record from ``takes()``, which saves a lookup; or a [`Match`]
+        a search found), of one take
         or many, each as [`frames`] gives it, in one request per ``MAX_RANGES`` parts (fewer
         when their ids would pass ``MAX_RANGES_CHARS`` of URL): what reading a shuffled batch
         of windows costs once instead of once per window."""
@@ -1041,6 +1102,40 @@ class AsyncClient(_Base):
         options = dict(by=by, fps=fps, root=root, up=up, unit=unit)
         return await self._run(self._motion_stats_op(ids, filters, labels, points, options))
 
+    async def search(
+        self,
+        like: str | Take | os.PathLike[str] | bytes,
+        *,
+        t0: float | None = None,
+        t1: float | None = None,
+        k: int = 10,
+        per_take: int = 1,
+        library: str | None = None,
+        tag: str | None = None,
+        name_prefix: str | None = None,
+        labels: p.Labels | None = None,
+        skeleton: str | None = None,
+        fps: float | None = None,
+        min_duration_s: float | None = None,
+        max_duration_s: float | None = None,
+    ) -> SearchResults:
+        """The ranges of stored takes whose motion is most like ``like``'s: a stored take
+        (its id or record; ``t0``/``t1`` seconds of it, all of it by default), a clip file
+        (any format ingest reads) or a clip's bytes. The ``k`` best, at most ``per_take``
+        from one take (ranges that do not overlap), never the query's own range, among the
+        takes the token reaches that match the filters. ``results.parts()`` are the ranges
+        as [`ranges`] reads them in one request."""
+        filters = dict(
+            library=library,
+            tag=tag,
+            name_prefix=name_prefix,
+            skeleton=skeleton,
+            fps=fps,
+            min_duration_s=min_duration_s,
+            max_duration_s=max_duration_s,
+        )
+        return await self._run(self._search_op(like, t0, t1, k, per_take, filters, labels))
+
     async def ingest(
         self,
         source: str | os.PathLike[str] | npt.ArrayLike,
@@ -1137,7 +1232,7 @@ class AsyncClient(_Base):
 
     async def ranges(
         self,
-        parts: Sequence[tuple[str | Take, int, int]],
+        parts: Sequence[tuple[str | Take, int, int] | Match],
         *,
         points: Sequence[str] | None = None,
         fps: float | None = None,

@@ -344,3 +344,74 @@ class MotionStats:
         out = self.group(item["points"]).normalise(item["motion"], eps)
         out[~np.asarray(item["mask"], dtype=bool)] = 0.0
         return out
+
+
+@dataclass(frozen=True)
+class Match:
+    """One range found by a search: ``take`` (its id), its ``name`` and ``library``, the
+    range in seconds (``t0 <= t < t1``) and in the take's own frames (``start:end``), and
+    its ``score`` (lower is nearer; 0 is the same motion). ``missing_roles``: the query's
+    body roles this take does not place (compared without them)."""
+
+    take: str
+    name: str
+    library: str
+    t0: float
+    t1: float
+    start: int
+    end: int
+    score: float
+    missing_roles: tuple[str, ...] = ()
+
+    @classmethod
+    def from_json(cls, v: dict[str, Any]) -> Match:
+        return cls(
+            take=v["take"],
+            name=v["name"],
+            library=v["library"],
+            t0=float(v["t0"]),
+            t1=float(v["t1"]),
+            start=int(v["start"]),
+            end=int(v["end"]),
+            score=float(v["score"]),
+            missing_roles=tuple(v.get("missing_roles", ())),
+        )
+
+    def part(self) -> tuple[str, int, int]:
+        """``(take, start, end)``: this range as [`Client.ranges`] reads it."""
+        return (self.take, self.start, self.end)
+
+
+@dataclass(frozen=True, eq=False)
+class SearchResults(Sequence[Match]):
+    """What a search found, best first (a sequence of [`Match`]); ``query`` the query as
+    compared (``t0``, ``t1``, ``windows``, ``roles``), ``searched`` what was searched
+    (``takes``, ``windows``, and the takes left out: ``unindexed``, ``live``,
+    ``without_features``). ``client.ranges(results.parts())`` reads every range found in
+    one request."""
+
+    matches: tuple[Match, ...]
+    query: dict[str, Any]
+    searched: dict[str, Any]
+
+    @classmethod
+    def from_json(cls, v: dict[str, Any]) -> SearchResults:
+        return cls(
+            matches=tuple(Match.from_json(m) for m in v["results"]),
+            query=dict(v["query"]),
+            searched=dict(v["searched"]),
+        )
+
+    @overload
+    def __getitem__(self, i: int) -> Match: ...
+    @overload
+    def __getitem__(self, i: slice) -> Sequence[Match]: ...
+    def __getitem__(self, i: int | slice) -> Match | Sequence[Match]:
+        return self.matches[i]
+
+    def __len__(self) -> int:
+        return len(self.matches)
+
+    def parts(self) -> list[tuple[str, int, int]]:
+        """Every range found as ``(take, start, end)``, for [`Client.ranges`]."""
+        return [m.part() for m in self.matches]
