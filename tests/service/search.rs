@@ -197,6 +197,19 @@ async fn a_range_finds_its_copy_where_it_was_cut_and_its_action_next() {
         let stored: Value = r.json().await.unwrap();
         assert_eq!(stored["query"]["windows"], clip["query"]["windows"]);
 
+        // The CLI: the same first range, as a table; a clip that is not there, by name.
+        let (ok, out, err) = common::mocapstore(&[
+            "search", "--server", &one.base, "--take", query, "--t0", "1", "--t1", "3", "-k", "2",
+        ]);
+        assert!(ok, "{err}");
+        let row = out.lines().nth(2).unwrap_or_default();
+        assert!(
+            row.contains(copy.as_str()) && row.contains("1.00") && row.contains("3.00"),
+            "{out}"
+        );
+        let (ok, _, err) = common::mocapstore(&["search", "--server", &one.base, "/no/such.bvh"]);
+        assert!(!ok && err.contains("/no/such.bvh"), "{err}");
+
         // What cannot be asked.
         for (path, want) in [
             (format!("/v1/takes/{query}/similar?k=0"), 400),
