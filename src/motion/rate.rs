@@ -93,10 +93,14 @@ mod tests {
         ) {
             // Times reckoned at the nominal rate, or at the printed one (as a take's
             // record, its headers and its CSV columns give them).
-            // At the printed rate only where the two reckonings lie within the slack.
+            // At the printed rate only where the two reckonings lie within the slack, and,
+            // for a time between frames, where the slack cannot reach back to the frame
+            // before it (the time lands `shift - drift` after it; the slack is 1.5 drift):
+            // past that, which frame a time reckoned at the printed rate means is not told.
             let drift = (fps / nominal(fps) - 1.0).abs() * f64::from(a + len);
-            let rate = if at_printed && 1.5 * drift < MAX_SLACK { fps } else { nominal(fps) };
             let shift = if between { 0.37 } else { 0.0 };
+            let told = 1.5 * drift < MAX_SLACK && (!between || 2.5 * drift < shift);
+            let rate = if at_printed && told { fps } else { nominal(fps) };
             let t0 = (f64::from(a) + shift) / rate;
             let t1 = (f64::from(a + len) + shift) / rate;
             let (f0, f1) = (first_frame_from(t0, fps), first_frame_from(t1, fps));
