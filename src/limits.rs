@@ -148,6 +148,9 @@ pub const MOTION_INDEX_CACHE_BYTES: usize = 128 << 20;
 /// Results one search answers at most (`k`), and from one take (`per_take`).
 pub const MAX_SEARCH_K: usize = 100;
 pub const MAX_SEARCH_PER_TAKE: usize = 10;
+/// The longest query a search compares, in seconds (its windows against every take's):
+/// a longer range is refused, naming t0/t1.
+pub const MAX_SEARCH_QUERY_S: f64 = 120.0;
 
 /// Jobs one listing answers at most.
 pub const MAX_JOBS_LISTED: usize = 1_000;

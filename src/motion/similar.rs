@@ -155,31 +155,20 @@ pub fn runs(query: &[Descriptor], take: &[Descriptor], shared: &Shared) -> Vec<R
     let eq = energies(query);
     let ec = energies(take);
     let eq_sum: f64 = eq.iter().sum();
-    // d[i * n + j]: query window i to take window j.
-    let mut d = vec![0f64; m * n];
-    for (i, q) in query.iter().enumerate() {
-        for (j, c) in take.iter().enumerate() {
-            d[i * n + j] = f64::from(shared.distance(q, c));
-        }
-    }
     let run = m.min(n);
     let starts = n - run + 1;
-    // Each take window's nearest query window: the same at every start.
-    let col_min: Vec<f64> = (0..n)
-        .map(|j| (0..m).map(|i| d[i * n + j]).fold(f64::INFINITY, f64::min))
-        .collect();
-    let mut weighted = vec![0f64; n + 1];
-    let mut weight = vec![0f64; n + 1];
-    for j in 0..n {
-        weighted[j + 1] = weighted[j] + ec[j] * col_min[j];
-        weight[j + 1] = weight[j] + ec[j];
-    }
-    // Each query window's nearest take window within the run at each start: a sliding
-    // minimum per query window.
+    // One query window's distances at a time (memory in the take's windows alone): each
+    // take window's nearest query window (the same at every start), and each query
+    // window's nearest take window within the run at each start, a sliding minimum.
+    let mut col_min = vec![f64::INFINITY; n];
     let mut toward = vec![0f64; starts];
+    let mut row = vec![0f64; n];
     let mut deque: VecDeque<usize> = VecDeque::with_capacity(run);
-    for i in 0..m {
-        let row = &d[i * n..(i + 1) * n];
+    for (i, q) in query.iter().enumerate() {
+        for (j, c) in take.iter().enumerate() {
+            row[j] = f64::from(shared.distance(q, c));
+            col_min[j] = col_min[j].min(row[j]);
+        }
         deque.clear();
         for j in 0..n {
             while deque.back().is_some_and(|&b| row[b] >= row[j]) {
@@ -194,6 +183,12 @@ pub fn runs(query: &[Descriptor], take: &[Descriptor], shared: &Shared) -> Vec<R
                 toward[start] += eq[i] * row[deque[0]];
             }
         }
+    }
+    let mut weighted = vec![0f64; n + 1];
+    let mut weight = vec![0f64; n + 1];
+    for j in 0..n {
+        weighted[j + 1] = weighted[j] + ec[j] * col_min[j];
+        weight[j + 1] = weight[j] + ec[j];
     }
     (0..starts)
         .map(|s| {

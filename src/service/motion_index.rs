@@ -148,11 +148,23 @@ impl MotionIndex {
             )));
         }
         let pelvis = !groups[Role::Pelvis.index()].is_empty();
+        // One point per role per frame at 30 fps: bounded as a take's frames are.
+        let at_rate = (take.frames as f64 * RATE / take.fps.max(1e-9)).ceil() as u64;
+        if at_rate > self.limits.frames {
+            return Err(Error::Unsatisfiable(format!(
+                "take {} would be {at_rate} frames at 30 fps, over the {} a take may have: it \
+                 has no motion features",
+                take.name, self.limits.frames
+            )));
+        }
         let mut roles = Vec::new();
         while let Some((positions, _held)) = a.next_positions().await? {
             roles.extend(centroids(&positions, names.len(), &groups));
         }
-        let stamp = a.stamp().row();
+        // Stored under the stamp of the take the roles were read from: if the answer read
+        // a newer coding or body, the conditional write refuses them and the job takes the
+        // take again.
+        let stamp = super::prepared::Stamp::of(take).row();
         let frames = roles.len() / (Role::all().len() * 3);
         let payload = super::blocking(move || {
             let f = features::features(&roles);
@@ -189,7 +201,12 @@ impl MotionIndex {
                 match self.index(&id).await {
                     Ok(true) => done += 1,
                     Ok(false) | Err(Error::NotFound(_)) => {}
-                    Err(e) => return Err(e),
+                    // The database away: stop, for the next job.
+                    Err(Error::Store(e)) if e.is_unavailable() => return Err(Error::Store(e)),
+                    // One take's trouble (busy, a worker fault) does not hold back the rest.
+                    Err(e) => {
+                        tracing::warn!(take = %id, error = %e, "taking motion features failed")
+                    }
                 }
                 if let Some(p) = progress {
                     p.report(0.0, format!("{done} takes indexed"));

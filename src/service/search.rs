@@ -25,7 +25,7 @@ use super::motion_index::MotionIndex;
 use super::take::Take;
 use super::{Error, Result};
 use crate::codec::features::{self as stored, Stored};
-use crate::limits::{MAX_SEARCH_K, MAX_SEARCH_PER_TAKE};
+use crate::limits::{MAX_SEARCH_K, MAX_SEARCH_PER_TAKE, MAX_SEARCH_QUERY_S};
 use crate::motion::body::Role;
 use crate::motion::features::RATE;
 use crate::motion::formats::{self, Format, ReadOptions};
@@ -212,6 +212,19 @@ async fn asked(index: &MotionIndex, req: &SearchRequest) -> Result<Asked> {
                     (Err(_), Some(f)) => formats::read_as(f, &bytes, &options),
                     _ => formats::read(&bytes, &options),
                 }?;
+                // What reading it at 30 fps would make, before it is made.
+                let m = &loaded.motion;
+                let at_rate =
+                    (m.frame_count().saturating_sub(1) as f64 * RATE / m.fps).ceil() + 1.0;
+                let samples = at_rate * m.point_count().max(1) as f64;
+                if samples > options.limits.max_samples as f64 {
+                    return Err(Error::InvalidRequest(format!(
+                        "the clip at 30 fps would be {at_rate:.0} frames of {} points, over the \
+                         {} samples a take may have: send a shorter clip",
+                        m.point_count(),
+                        options.limits.max_samples
+                    )));
+                }
                 let taken = crate::motion::features::of_motion(&loaded.motion, loaded.up.as_ref())?;
                 if !taken.pelvis {
                     return Err(Error::Unsatisfiable(
@@ -228,7 +241,22 @@ async fn asked(index: &MotionIndex, req: &SearchRequest) -> Result<Asked> {
             (Arc::new(f), None, *t0, *t1)
         }
     };
+    if !features.pelvis {
+        return Err(Error::Unsatisfiable(
+            "the query places no pelvis: no body role it could be compared by (name its \
+             points' roles with PATCH)"
+                .into(),
+        ));
+    }
     let (first, count) = windows_within(&features, t0, t1)?;
+    let (s, e) = (features.span(first).0, features.span(first + count - 1).1);
+    if Stored::seconds(e - s) > MAX_SEARCH_QUERY_S + 1.0 {
+        return Err(Error::InvalidRequest(format!(
+            "the query spans {:.1} s; a search compares at most {MAX_SEARCH_QUERY_S} s: give \
+             t0 and t1",
+            Stored::seconds(e - s)
+        )));
+    }
     let span = |i: usize| features.span(i);
     let info = QueryInfo {
         take: take.clone(),
