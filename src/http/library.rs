@@ -62,7 +62,7 @@ pub async fn list(
 }
 
 /// A query string's pairs in order: where `label.<key>=<value>` conditions are read from.
-type Pairs = Vec<(String, String)>;
+pub(super) type Pairs = Vec<(String, String)>;
 
 #[derive(Deserialize)]
 pub struct StatsQuery {

@@ -12,6 +12,7 @@ use axum::{Extension, Json};
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::library::Pairs;
 use super::AppState;
 use crate::motion::formats::{self, ReadOptions};
 use crate::motion::units::parse_unit;
@@ -33,8 +34,6 @@ pub struct SearchQuery {
     /// An uploaded clip's unit, when its file does not say.
     unit: Option<String>,
 }
-
-type Pairs = Vec<(String, String)>;
 
 fn request(
     caller: &Caller,
