@@ -2,6 +2,10 @@
 // clock, overlaid in one view or side by side; the URL keeps the takes, the view, the
 // playhead, speed and loop, so it can be shared. Takes of the same points are also compared
 // frame by frame: the largest and mean distance of each to the first, in mm.
+//
+// `starts=` (seconds, one per take) plays each take from its own time and `span=` ends the
+// clock after that many seconds: how a search's results play beside their query, which may
+// be another range of the same take.
 
 import { json } from './api.js';
 import { el, fmt } from './dom.js';
@@ -14,15 +18,25 @@ import { Transport } from './transport.js';
 const MAX_TAKES = COLOURS.length;
 
 export async function comparePage(main, params) {
-  const ids = [...new Set((params.get('ids') ?? '').split(',').filter(Boolean))].slice(0, MAX_TAKES);
+  const { ids, starts } = entries(params);
+  const span = Number(params.get('span')) > 0 ? Number(params.get('span')) : null;
   const mode = params.get('mode') === 'side' ? 'side' : 'overlay';
-  const takes = await Promise.all(ids.map((id) => json(`/v1/takes/${encodeURIComponent(id)}`)));
+  const records = new Map(await Promise.all([...new Set(ids)].map(async (id) => [id, await json(`/v1/takes/${encodeURIComponent(id)}`)])));
+  const takes = ids.map((id) => records.get(id));
   const shapes = await Promise.all(takes.map(shapeOf));
   let transport = null;
   const url = (changes = {}, q = transport ? transport.query() : params) => {
     const next = { ids: ids.join(','), mode, ...changes };
     const all = new URLSearchParams(q);
     for (const [k, v] of Object.entries(next)) all.set(k, v);
+    // Takes added or removed leave the starts and span of a search's pairing behind.
+    if ('ids' in changes) {
+      all.delete('starts');
+      all.delete('span');
+    } else if (starts.some((s) => s > 0)) {
+      all.set('starts', starts.join(','));
+      if (span) all.set('span', String(span));
+    }
     return `#/compare?${all}`;
   };
 
@@ -42,14 +56,15 @@ export async function comparePage(main, params) {
     el('thead', {}, el('tr', {}, ...['', 'take', 'codec', 'bound mm', 'max / mean error mm', 'ratio', 'now', ''].map((h) => el('th', { scope: 'col' }, h)))),
     el('tbody', {}, ...takes.map((t, i) => el('tr', {},
       el('td', {}, el('span', { class: 'swatch', style: { background: COLOURS[i] }, 'aria-label': `colour ${i + 1}` })),
-      el('td', {}, el('a', { href: `#/take/${encodeURIComponent(t.id)}` }, t.name || t.id), ' ', el('small', { class: 'muted' }, t.library || '')),
+      el('td', {}, el('a', { href: `#/take/${encodeURIComponent(t.id)}` }, t.name || t.id), ' ', el('small', { class: 'muted' }, t.library || ''),
+        starts[i] > 0 ? el('small', { class: 'muted' }, ` from ${fmt.num(starts[i], 2)} s`) : null),
       el('td', {}, t.codec),
       el('td', { class: 'n' }, String(t.max_bound_mm)),
       el('td', { class: 'n' }, `${fmt.num(t.max_mm, 3)} / ${fmt.num(t.mean_mm, 3)}`),
       el('td', { class: 'n' }, fmt.num(t.ratio, 1)),
       el('td', { class: 'n now' }, '—'),
       el('td', {}, el('button', { 'aria-label': `remove ${t.name || t.id}`, onclick: () => {
-        location.hash = url({ ids: ids.filter((x) => x !== t.id).join(',') });
+        location.hash = url({ ids: ids.filter((_, j) => j !== i).join(',') });
       } }, '✕')),
     ))));
 
@@ -65,10 +80,10 @@ export async function comparePage(main, params) {
   const framed = players.map(() => false);
 
   async function show(t) {
-    const f = sources.map((s) => s.frameAt(t));
+    const f = sources.map((s, i) => s.frameAt(starts[i] + t));
     const xyz = await Promise.all(f.map((g, i) => sources[i].at(g)));
     // A later seek may have moved the playhead while these frames were fetched.
-    if (sources.some((s, i) => s.frameAt(transport.t) !== f[i])) return;
+    if (sources.some((s, i) => s.frameAt(starts[i] + transport.t) !== f[i])) return;
     // Each view's camera is pointed once any of its points is present (a capture may start
     // with none).
     players.forEach((p, k) => {
@@ -90,7 +105,7 @@ export async function comparePage(main, params) {
   }
 
   transport = new Transport({
-    last: Math.max(...takes.map((t) => Math.max(0, t.frames - 1) / t.fps)),
+    last: span ?? Math.max(...takes.map((t, i) => Math.max(0, t.frames - 1) / t.fps - starts[i])),
     rate: Math.max(...takes.map((t) => t.fps)),
     params,
     onSeek: show,
@@ -111,6 +126,26 @@ export async function comparePage(main, params) {
     abort.abort();
     players.forEach((p) => p.dispose());
   };
+}
+
+/**
+ * The takes the URL names, each with the second it plays from: a take may come twice when
+ * its starts differ (a range found beside its query), never twice at one start.
+ */
+function entries(params) {
+  const ids = (params.get('ids') ?? '').split(',');
+  const given = (params.get('starts') ?? '').split(',').map(Number);
+  const seen = new Set();
+  const out = { ids: [], starts: [] };
+  ids.forEach((id, i) => {
+    const start = Number.isFinite(given[i]) && given[i] > 0 ? given[i] : 0;
+    const key = `${id}@${start}`;
+    if (!id || seen.has(key) || out.ids.length >= MAX_TAKES) return;
+    seen.add(key);
+    out.ids.push(id);
+    out.starts.push(start);
+  });
+  return out;
 }
 
 /** A chooser of a take to add: takes of the first take's layout first. */

@@ -7,6 +7,7 @@ import { el, fmt, svg } from './dom.js';
 import { showError } from './app.js';
 import { shapeOf, TakeFrames } from './frames.js';
 import { Player, GltfFigure } from './player.js';
+import { similarPanel } from './similar.js';
 import { Transport } from './transport.js';
 
 export async function takePage(main, id, params) {
@@ -84,6 +85,8 @@ export async function takePage(main, id, params) {
     transport.loopBar,
     el('p', { class: 'muted' }, transport.help.textContent, ' ', compare),
   );
+  // The loop range when the loop is on, else the whole take (the panel caps its length).
+  main.append(similarPanel(take, () => (transport.loop.checked ? transport.range() : [0, transport.last + 1 / fps])));
 
   // --- numbers, decision, downloads
   const facts = [

@@ -46,6 +46,7 @@ static ASSETS: &[Asset] = &[
     asset!("transport.js", JS),
     asset!("live.js", JS),
     asset!("compare.js", JS),
+    asset!("similar.js", JS),
     asset!("vendor/three/three.module.js", JS),
     asset!("vendor/three/three.core.js", JS),
     asset!("vendor/three/OrbitControls.js", JS),

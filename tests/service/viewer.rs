@@ -1213,3 +1213,149 @@ async fn takes_stand_up_in_the_viewer() {
     srv.stop().await;
     t.finish().await;
 }
+
+/// Issue 51: on a take page, the loop range is searched with "Find similar"; the ranges
+/// found are listed with their scores, nearest first (a copy of the take, at the very range,
+/// scores 0), and "play beside" plays the first one side by side with the query, each from
+/// its own start, in step.
+#[tokio::test]
+async fn the_take_page_finds_similar_motion_and_plays_it_beside() {
+    let Some(browser) = Browser::with_corpus().await else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let walk = "bvh/bandai/dataset-1_walk_normal_001.bvh";
+    let query = stored(&srv, "name=walk&library=a&max_error_mm=1", walk).await;
+    let copy = stored(&srv, "name=copy&library=b&max_error_mm=1", walk).await;
+    for (name, rel) in [
+        ("other-walk", "bvh/bandai/dataset-1_walk_happy_001.bvh"),
+        ("bow", "bvh/bandai/dataset-1_bow_normal_001.bvh"),
+        ("bye", "bvh/bandai/dataset-1_bye_normal_001.bvh"),
+    ] {
+        stored(&srv, &format!("name={name}&library=b&max_error_mm=1"), rel).await;
+    }
+    let (q, c) = (query["id"].as_str().unwrap(), copy["id"].as_str().unwrap());
+
+    // Seconds 1 to 3 of the walk, chosen as the loop range, searched.
+    browser
+        .visit(
+            &format!("{}/#/take/{q}?t=1&loop=1&from=1&to=3", srv.base),
+            "the take page",
+            "return document.querySelector('canvas.view')?.dataset.frame && document.querySelector('button.find-similar');",
+        )
+        .await;
+    browser.click("button.find-similar").await;
+    let rows = browser
+        .until(
+            "the results",
+            "const rows = [...document.querySelectorAll('table.similar tbody tr')];
+             return rows.length && rows.map(r => [...r.querySelectorAll('td')].map(d => d.textContent));",
+        )
+        .await;
+    let rows = rows.as_array().unwrap();
+    // The query's own range never comes back (its take does, at a range apart from it);
+    // every take is found, nearest first.
+    assert_eq!(rows.len(), 5, "{rows:?}");
+    let cell = |r: usize, c: usize| rows[r][c].as_str().unwrap().to_string();
+    assert_eq!(cell(0, 1), "copy", "{rows:?}");
+    assert_eq!(cell(0, 3), "1.00–3.00", "{rows:?}");
+    let scores: Vec<f64> = (0..rows.len())
+        .map(|r| cell(r, 5).parse().unwrap())
+        .collect();
+    assert_eq!(scores[0], 0.0, "{rows:?}");
+    assert!(scores.windows(2).all(|w| w[0] <= w[1]), "{scores:?}");
+    assert_eq!(cell(1, 1), "walk", "{rows:?}");
+    let own: Vec<f64> = cell(1, 3).split('–').map(|x| x.parse().unwrap()).collect();
+    assert!(
+        own[0] >= 3.0 || own[1] <= 1.0,
+        "apart from the query: {rows:?}"
+    );
+    assert_eq!(cell(2, 1), "other-walk", "the other walk next: {rows:?}");
+    let status = browser
+        .js(
+            "return document.querySelector('.similar-status').textContent;",
+            json!([]),
+        )
+        .await;
+    assert!(
+        status.as_str().unwrap().contains("among 5 takes"),
+        "{status}"
+    );
+    browser
+        .js(
+            "document.querySelector('.similar-panel').scrollIntoView(); return true;",
+            json!([]),
+        )
+        .await;
+    browser.screenshot("similar-results").await;
+    assert_eq!(unnamed_controls(&browser).await, json!([]));
+
+    // The copy's range beside the query's: both from second 1 (frame 30 at 30 fps).
+    browser.click("table.similar a.play-beside").await;
+    let frames = browser
+        .until(
+            "the pair side by side",
+            "const c = document.querySelectorAll('canvas.view');
+             return location.hash.startsWith('#/compare') && c.length === 2 && c[0].dataset.frames;",
+        )
+        .await;
+    assert_eq!(frames, "30,30", "each from its own start");
+    let hash = browser.js("return location.hash;", json!([])).await;
+    let hash = hash.as_str().unwrap();
+    assert!(
+        hash.contains(&format!("ids={q}%2C{c}")) && hash.contains("mode=side"),
+        "{hash}"
+    );
+    assert!(drawn(&browser, 0).await > 100 && drawn(&browser, 1).await > 100);
+    // Playing moves both on; the loop keeps them within the query's two seconds.
+    browser.click("button.play").await;
+    let moved = browser
+        .until(
+            "both playing",
+            "const f = document.querySelector('canvas.view').dataset.frames.split(',').map(Number); return f[0] > 40 && f;",
+        )
+        .await;
+    assert_eq!(moved[0], moved[1], "in step: {moved}");
+    assert!(moved[0].as_i64().unwrap() <= 90, "{moved}");
+    browser.click("button.play").await;
+    browser.screenshot("similar-beside").await;
+
+    // The query's own take, at another range, plays from that range's start beside it.
+    browser.goto(&format!("{}/", srv.base)).await;
+    browser
+        .visit(
+            &format!("{}/#/take/{q}?t=1&loop=1&from=1&to=3", srv.base),
+            "the take page again",
+            "return document.querySelector('canvas.view')?.dataset.frame && document.querySelector('button.find-similar');",
+        )
+        .await;
+    browser.click("button.find-similar").await;
+    let second = browser
+        .until(
+            "the results again",
+            "const a = document.querySelectorAll('table.similar a.play-beside')[1]; return a && a.getAttribute('href');",
+        )
+        .await;
+    let second = second.as_str().unwrap().to_string();
+    let start: f64 = second
+        .split("starts=")
+        .nth(1)
+        .and_then(|s| s.split('&').next())
+        .map(|s| s.replace("%2C", ","))
+        .and_then(|s| s.split(',').nth(1).and_then(|x| x.parse().ok()))
+        .unwrap_or_else(|| panic!("{second}"));
+    browser.goto(&format!("{}/{second}", srv.base)).await;
+    let frames = browser
+        .until(
+            "the other walk beside",
+            "const c = document.querySelectorAll('canvas.view'); return c.length === 2 && c[0].dataset.frames;",
+        )
+        .await;
+    let want = format!("30,{}", (start * 30.0 + 1e-6).floor() as i64);
+    assert_eq!(frames, want.as_str(), "{second}");
+    assert!(browser.console_errors().await.is_empty());
+    browser.quit().await;
+    srv.stop().await;
+    t.finish().await;
+}
