@@ -18,7 +18,7 @@ use crate::motion::formats::{self, ReadOptions};
 use crate::motion::units::parse_unit;
 use crate::service::access::Caller;
 use crate::service::library::TakeQuery;
-use crate::service::search::{self, Query as Asked, SearchAnswer, SearchRequest};
+use crate::service::search::{self, Index, Query as Asked, SearchAnswer, SearchRequest};
 
 /// Results answered when `k` is not given.
 const DEFAULT_K: usize = 10;
@@ -33,6 +33,8 @@ pub struct SearchQuery {
     per_take: Option<usize>,
     /// An uploaded clip's unit, when its file does not say.
     unit: Option<String>,
+    /// `auto` (the default), `exact` or `approximate`.
+    index: Option<String>,
 }
 
 fn request(
@@ -41,14 +43,20 @@ fn request(
     takes: TakeQuery,
     pairs: &Pairs,
     query: Asked,
-) -> SearchRequest {
-    SearchRequest {
+) -> Result<SearchRequest, ApiError> {
+    Ok(SearchRequest {
         query,
         k: q.k.unwrap_or(DEFAULT_K),
         per_take: q.per_take.unwrap_or(1),
         takes: takes.with_labels(pairs.iter().map(|(k, v)| (k.as_str(), v.as_str()))),
         grant: caller.grant.clone(),
-    }
+        index: q
+            .index
+            .as_deref()
+            .map(Index::parse)
+            .transpose()?
+            .unwrap_or_default(),
+    })
 }
 
 pub async fn search(
@@ -97,7 +105,7 @@ pub async fn search(
             t1: q.t1,
         },
     };
-    let req = request(&caller, q, takes, &pairs, asked);
+    let req = request(&caller, q, takes, &pairs, asked)?;
     Ok(Json(search::search(&state.index, req).await?))
 }
 
@@ -120,6 +128,6 @@ pub async fn similar(
         t0: q.t0,
         t1: q.t1,
     };
-    let req = request(&caller, q, takes, &pairs, asked);
+    let req = request(&caller, q, takes, &pairs, asked)?;
     Ok(Json(search::search(&state.index, req).await?))
 }

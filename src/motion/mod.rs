@@ -13,6 +13,7 @@ pub mod layout;
 pub mod metrics;
 pub mod model;
 pub mod moments;
+pub mod nearest;
 pub mod outputs;
 pub mod rate;
 pub mod retrieval;

@@ -124,21 +124,26 @@ pub fn best_run(query: &[Descriptor], take: &[Descriptor], shared: &Shared) -> O
         .min_by(|a, b| a.score.total_cmp(&b.score))
 }
 
-/// The best runs of `take` for `query` that do not overlap, best first, at most `most`.
+/// The best runs of `take` for `query` that do not overlap each other nor the run
+/// `apart_from` (first window, count: the query's own, when `take` is its take), best
+/// first, at most `most`. The forbidden run is left out before picking, so a run that
+/// overlaps it never keeps out one that does not.
 pub fn best_runs(
     query: &[Descriptor],
     take: &[Descriptor],
     shared: &Shared,
     most: usize,
+    apart_from: Option<(usize, usize)>,
 ) -> Vec<Run> {
     let mut all = runs(query, take, shared);
-    all.sort_by(|a, b| a.score.total_cmp(&b.score));
+    all.sort_by(|a, b| a.score.total_cmp(&b.score).then(a.first.cmp(&b.first)));
     let mut out: Vec<Run> = Vec::new();
     for r in all {
         if out.len() >= most {
             break;
         }
-        if out.iter().all(|o| r.apart(o.first, o.count)) {
+        let allowed = apart_from.is_none_or(|(first, count)| r.apart(first, count));
+        if allowed && out.iter().all(|o| r.apart(o.first, o.count)) {
             out.push(r);
         }
     }
@@ -259,12 +264,17 @@ mod tests {
         assert_eq!((short.first, short.count), (0, 6));
         assert!(best_run(&[], &take, &Shared::all()).is_none());
         // Runs that do not overlap, best first.
-        let two = best_runs(&query, &take, &Shared::all(), 2);
+        let two = best_runs(&query, &take, &Shared::all(), 2, None);
         assert_eq!(two.len(), 2);
         assert_eq!(two[0].first, 17);
         assert!(two[1].first + 6 < 17 || two[1].first > 23);
         assert!(two[1].apart(17, 6) && !two[0].apart(17, 6));
         assert!(two[1].score > two[0].score);
+        // The query's own run left out before picking: as many runs, all apart from it.
+        let own = best_runs(&query, &take, &Shared::all(), 2, Some((17, 6)));
+        assert_eq!(own.len(), 2, "{own:?}");
+        assert!(own.iter().all(|r| r.apart(17, 6)), "{own:?}");
+        assert!(own[0].apart(own[1].first, own[1].count));
     }
 
     #[test]

@@ -161,7 +161,7 @@ pub async fn ingest(
         }
         let report = store_loaded(store, histories, &req, loaded).await?;
         if let Some(index) = index {
-            if let Err(e) = index.index(&report.id).await {
+            if let Err(e) = index.index_now(&report.id).await {
                 tracing::warn!(take = %report.id, error = %e, "taking motion features failed; the index job will");
             }
         }

@@ -26,6 +26,7 @@
 pub mod access;
 pub mod analog;
 pub mod answer;
+pub mod approximate;
 pub mod archive;
 pub mod background;
 pub mod bases;

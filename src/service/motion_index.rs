@@ -33,7 +33,7 @@ use super::kept::Kept;
 use super::prepared::ReadCaches;
 use super::take::Take;
 use super::{Error, Result};
-use crate::codec::features::{self as stored, Stored};
+use crate::codec::features as stored;
 use crate::limits::{Limits, MOTION_INDEX_CACHE_BYTES};
 use crate::motion::body::{centroids, Axis, Role};
 use crate::motion::features::{self, HOP, RATE};
@@ -58,7 +58,7 @@ pub fn reading() -> Options {
 }
 
 /// A take's features as a search reads them: its windows, or why it has none.
-pub type Indexed = std::result::Result<Arc<Stored>, String>;
+pub use super::approximate::Indexed;
 
 /// The features of the database's takes, as this server takes, reads and keeps them.
 pub struct MotionIndex {
@@ -68,6 +68,8 @@ pub struct MotionIndex {
     budget: Arc<Budget>,
     limits: Limits,
     kept: Kept<(String, StampRow), Indexed>,
+    /// The graph approximate search asks ([`super::approximate`]).
+    approximate: super::approximate::Slot,
 }
 
 impl MotionIndex {
@@ -78,7 +80,57 @@ impl MotionIndex {
             budget,
             limits,
             kept: Kept::new(MOTION_INDEX_CACHE_BYTES),
+            approximate: Default::default(),
         }
+    }
+
+    /// The graph of approximate search as this server holds it.
+    pub fn approximate(&self) -> &super::approximate::Slot {
+        &self.approximate
+    }
+
+    /// Start building the graph of approximate search in the background, from the
+    /// features stored now, unless a build is under way; whether one was started.
+    pub fn start_graph(self: &Arc<Self>) -> bool {
+        if !self.approximate.begin() {
+            return false;
+        }
+        let index = self.clone();
+        tokio::spawn(async move {
+            let built = match index.graph_of_stored().await {
+                Ok(a) => {
+                    tracing::info!(
+                        takes = a.graph.takes(),
+                        windows = a.graph.windows(),
+                        bytes = a.graph.bytes(),
+                        "approximate search index built"
+                    );
+                    Some(a)
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "approximate search index not built");
+                    None
+                }
+            };
+            index.approximate.finish(built);
+        });
+        true
+    }
+
+    /// The graph of every take's current features, in the order the takes were stored.
+    async fn graph_of_stored(&self) -> Result<super::approximate::Approximate> {
+        let all = self
+            .store
+            .candidates(&crate::store::Filter::default())
+            .await?;
+        let listed: Vec<&Candidate> = all.iter().filter(|c| !c.live && c.current).collect();
+        let features = self.features(&listed).await?;
+        let takes: Vec<_> = listed
+            .iter()
+            .zip(features)
+            .filter_map(|(c, f)| Some((super::approximate::key(c), f?)))
+            .collect();
+        super::blocking(move || super::approximate::build(takes)).await
     }
 
     pub fn store(&self) -> &Store {
@@ -95,11 +147,22 @@ impl MotionIndex {
     /// (its features are taken once it finishes) or changed while they were taken (the
     /// job takes it again).
     pub async fn index(&self, id: &str) -> Result<bool> {
+        self.index_waiting(id, BUDGET_WAIT).await
+    }
+
+    /// [`Self::index`] without waiting for room in the answers' budget: an ingest's, which
+    /// must not hold its client while other answers fill the budget (a busy budget is an
+    /// error, and the index job takes the take).
+    pub async fn index_now(&self, id: &str) -> Result<bool> {
+        self.index_waiting(id, std::time::Duration::ZERO).await
+    }
+
+    async fn index_waiting(&self, id: &str, wait: std::time::Duration) -> Result<bool> {
         let take = super::fetch::take(&self.store, id).await?;
         if take.is_live() {
             return Ok(false);
         }
-        let row = match self.take(&take).await {
+        let row = match self.take(&take, wait).await {
             Ok(row) => row,
             Err(e) if e.is_the_takes_own() => FeatureRow {
                 stamp: StampRow {
@@ -118,7 +181,7 @@ impl MotionIndex {
 
     /// The features of `take`, read through its range answer, with the stamp of what the
     /// answer read.
-    async fn take(&self, take: &Take) -> Result<FeatureRow> {
+    async fn take(&self, take: &Take, wait: std::time::Duration) -> Result<FeatureRow> {
         let request = RangeRequest {
             range: TimeRange::All,
             points: None,
@@ -134,7 +197,7 @@ impl MotionIndex {
             &self.limits,
             &take.id,
             request,
-            BUDGET_WAIT,
+            wait,
         )
         .await?;
         let mut a = a.bulk();
@@ -182,18 +245,15 @@ impl MotionIndex {
     /// to `progress`; the number taken.
     pub async fn index_stale(&self, progress: Option<&Progress>) -> Result<usize> {
         let mut done = 0usize;
-        let mut tried = std::collections::HashSet::new();
+        // A cursor, not a set of takes tried: a take that stays stale after it was taken
+        // (it changes under the job) waits for the next job without hiding the rest.
+        let mut after: Option<String> = None;
         loop {
-            let ids = self.store.stale_features(BATCH).await?;
-            // A take that stays stale after it was taken (it changes under the job) waits
-            // for the next job.
-            let fresh: Vec<String> = ids
-                .into_iter()
-                .filter(|id| tried.insert(id.clone()))
-                .collect();
-            if fresh.is_empty() {
+            let fresh = self.store.stale_features(after.as_deref(), BATCH).await?;
+            let Some(last) = fresh.last() else {
                 return Ok(done);
-            }
+            };
+            after = Some(last.clone());
             for id in fresh {
                 if progress.is_some_and(Progress::is_lost) {
                     return Ok(done);
@@ -258,7 +318,7 @@ impl MotionIndex {
         let mut out: Vec<Option<Indexed>> = vec![None; candidates.len()];
         let mut missing = Vec::new();
         for (i, c) in candidates.iter().enumerate() {
-            if c.features.as_ref() != Some(&c.stamp) {
+            if !c.current {
                 continue;
             }
             match self.kept.get(&(c.id.clone(), c.stamp.clone())) {
@@ -305,7 +365,7 @@ fn decoded(row: FeatureRow, max_windows: u64) -> Indexed {
 /// Start the index job on this server if some take's features are missing or stale and no
 /// server runs it already; true if one was started here.
 pub async fn start_if_stale(index: &Arc<MotionIndex>, jobs: &Arc<Jobs>) -> Result<bool> {
-    if index.store.stale_features(1).await?.is_empty() {
+    if index.store.stale_features(None, 1).await?.is_empty() {
         return Ok(false);
     }
     let (_, runner) = jobs

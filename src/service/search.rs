@@ -6,18 +6,25 @@
 //! clip's taken as a stored take's are). Every take the caller's token reaches that matches
 //! the filters is scored by its best run of as many windows ([`crate::motion::similar`]),
 //! on the body roles both place; the `k` best are answered, at most `per_take` from one
-//! take (runs that do not overlap), never the query's own range. Exact: every window of
-//! every take is compared, which an archive of 300,000 frames answers in a few
-//! milliseconds on one core (`mocapstore bench search`).
+//! take (runs that do not overlap), never the query's own range.
+//!
+//! Exact search compares every window of every take (an archive of 300,000 frames in about
+//! 35 ms on 2 cores, `mocapstore bench --search`). Past [`APPROXIMATE_FROM_WINDOWS`] (or
+//! asked with `index=approximate`), a graph of every full-body take's windows proposes the
+//! takes worth scoring ([`super::approximate`]), and only those, with the takes the graph
+//! does not hold, are scored, exactly as exact search scores them.
 //!
 //! What was searched is said: takes and windows compared, and the takes left out because
 //! their features are not taken yet (the index job is at them), they are being streamed,
 //! or their contents gave none. A token limited to libraries searches only their takes:
 //! the others are never listed, counted or scored.
 
+use std::collections::HashMap;
 use std::sync::Arc;
 
 use serde::Serialize;
+
+use super::approximate::{self, Approximate};
 
 use super::access::{check_take, Grant};
 use super::library::TakeQuery;
@@ -25,10 +32,13 @@ use super::motion_index::MotionIndex;
 use super::take::Take;
 use super::{Error, Result};
 use crate::codec::features::{self as stored, Stored};
-use crate::limits::{MAX_SEARCH_K, MAX_SEARCH_PER_TAKE, MAX_SEARCH_QUERY_S};
+use crate::limits::{
+    APPROXIMATE_FROM_WINDOWS, MAX_SEARCH_K, MAX_SEARCH_PER_TAKE, MAX_SEARCH_QUERY_S,
+};
 use crate::motion::body::Role;
 use crate::motion::features::RATE;
 use crate::motion::formats::{self, Format, ReadOptions};
+use crate::motion::nearest::Depth;
 use crate::motion::rate;
 use crate::motion::similar::{self, Descriptor, Shared};
 
@@ -51,6 +61,35 @@ pub enum Query {
     },
 }
 
+/// Which index answers: `auto` goes approximate past [`APPROXIMATE_FROM_WINDOWS`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Index {
+    #[default]
+    Auto,
+    Exact,
+    Approximate,
+}
+
+impl Index {
+    pub fn parse(s: &str) -> Result<Index> {
+        match s {
+            "auto" => Ok(Index::Auto),
+            "exact" => Ok(Index::Exact),
+            "approximate" => Ok(Index::Approximate),
+            _ => Err(Error::InvalidRequest(format!(
+                "index is auto, exact or approximate, not {s:?}"
+            ))),
+        }
+    }
+}
+
+/// Takes the graph proposes for scoring: at least `wanted` (it looks deeper until it has
+/// them, or every take it may), at most `most`, so that the `k` best are among them.
+fn proposals(k: usize, per_take: usize) -> (usize, usize) {
+    let results = k * per_take;
+    ((2 * results).max(20), (10 * results).max(100))
+}
+
 /// A search, parsed.
 #[derive(Debug, Clone)]
 pub struct SearchRequest {
@@ -62,6 +101,7 @@ pub struct SearchRequest {
     /// Which takes are searched (library, tags, labels, fps, duration, skeleton …).
     pub takes: TakeQuery,
     pub grant: Grant,
+    pub index: Index,
 }
 
 /// The query as it was compared.
@@ -100,7 +140,7 @@ pub struct Found {
 }
 
 /// What was searched.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Serialize)]
 pub struct Searched {
     /// Takes compared, and their windows.
     pub takes: usize,
@@ -110,6 +150,11 @@ pub struct Searched {
     pub unindexed: usize,
     pub live: usize,
     pub without_features: usize,
+    /// `exact` (every take scored) or `approximate` (the takes the graph proposed, and
+    /// those it does not hold).
+    pub index: &'static str,
+    /// Takes scored.
+    pub scored: usize,
 }
 
 /// A search's answer.
@@ -118,6 +163,110 @@ pub struct SearchAnswer {
     pub query: QueryInfo,
     pub results: Vec<Found>,
     pub searched: Searched,
+}
+
+/// The graph to propose takes with, or `None` for exact search: `auto` wants it once
+/// the listed takes hold [`APPROXIMATE_FROM_WINDOWS`] windows, `approximate` always. A
+/// graph wanted and not built yet starts building: meanwhile `auto` is exact and
+/// `approximate` is refused as busy.
+fn graph_for(
+    index: &Arc<MotionIndex>,
+    asked: Index,
+    listed: &[&crate::store::Candidate],
+) -> Result<Option<Arc<Approximate>>> {
+    let wanted = match asked {
+        Index::Exact => false,
+        Index::Approximate => true,
+        Index::Auto => {
+            listed
+                .iter()
+                .map(|c| approximate::windows_of(c))
+                .sum::<usize>()
+                >= APPROXIMATE_FROM_WINDOWS
+        }
+    };
+    if !wanted {
+        return Ok(None);
+    }
+    let current = index.approximate().current();
+    if current.is_none() {
+        index.start_graph();
+        if asked == Index::Approximate {
+            return Err(Error::Busy(
+                "the approximate index is being built: ask again shortly, or with \
+                 index=exact"
+                    .into(),
+            ));
+        }
+    }
+    Ok(current)
+}
+
+/// The listed takes to score approximately: those the graph proposes for `query` among
+/// the listed ones it holds, and every listed one it does not (stored or changed since it
+/// was built, or of fewer roles), each with whether it is counted in `searched` already.
+/// Starts a new graph when the one held is behind the database.
+async fn propose(
+    index: &Arc<MotionIndex>,
+    a: &Arc<Approximate>,
+    listed: &[&crate::store::Candidate],
+    (query, wanted, most): (&[Descriptor], usize, usize),
+    searched: &mut Searched,
+) -> Result<Vec<(usize, bool)>> {
+    let mut allowed = vec![false; a.graph.takes()];
+    let mut listed_at: HashMap<usize, usize> = HashMap::new();
+    let mut picked = Vec::new();
+    let mut unknown = 0usize;
+    for (i, c) in listed.iter().enumerate() {
+        if !c.current {
+            searched.unindexed += 1;
+            continue;
+        }
+        let key = approximate::key(c);
+        if let Some(slot) = a.graph.slot(&key) {
+            allowed[slot] = true;
+            listed_at.insert(slot, i);
+            searched.takes += 1;
+            searched.windows += a.windows[slot];
+        } else if a.without.contains(&key) {
+            searched.without_features += 1;
+        } else {
+            if !a.exact.contains(&key) {
+                unknown += approximate::windows_of(c);
+            }
+            picked.push((i, false));
+        }
+    }
+    if a.stale(unknown) {
+        index.start_graph();
+    }
+    let (graph, query) = (a.clone(), query.to_vec());
+    let wanted = wanted.min(listed_at.len());
+    let found = super::blocking(move || {
+        let allowed = |slot: usize| allowed[slot];
+        graph
+            .graph
+            .nearest_takes(&query, &allowed, Depth::default(), wanted, most)
+    })
+    .await?;
+    // Fewer than wanted after looking through the whole graph (clusters it could not walk
+    // between): the rest of the takes it may see are scored too.
+    let proposed: std::collections::HashSet<usize> = found.iter().map(|f| f.0).collect();
+    if proposed.len() < wanted {
+        let mut rest: Vec<(usize, usize)> = listed_at
+            .iter()
+            .filter(|(slot, _)| !proposed.contains(slot))
+            .map(|(&slot, &i)| (slot, i))
+            .collect();
+        rest.sort_unstable();
+        picked.extend(rest.into_iter().map(|(_, i)| (i, true)));
+    }
+    picked.extend(
+        found
+            .iter()
+            .filter_map(|(slot, _)| listed_at.get(slot).map(|&i| (i, true))),
+    );
+    Ok(picked)
 }
 
 fn role_names(roles: &[Role]) -> Vec<String> {
@@ -133,16 +282,22 @@ fn windows_within(f: &Stored, t0: Option<f64>, t1: Option<f64>) -> Result<(usize
         t0.unwrap_or(0.0),
         t1.unwrap_or(duration.max(t0.unwrap_or(0.0))),
     );
+    let bad = || {
+        Error::InvalidRequest(format!(
+            "the query's range is t0 = {t0} s to t1 = {t1} s: give 0 ≤ t0 < t1"
+        ))
+    };
+    if !(t0.is_finite() && t1.is_finite() && t0 >= 0.0) {
+        return Err(bad());
+    }
     if t0 >= duration || f.windows.is_empty() {
         return Err(Error::OutOfRange(format!(
             "the query's range starts at t0 = {t0} s, at or past its take's end at \
              {duration:.3} s"
         )));
     }
-    if !(t0.is_finite() && t1.is_finite() && t0 >= 0.0 && t0 < t1) {
-        return Err(Error::InvalidRequest(format!(
-            "the query's range is t0 = {t0} s to t1 = {t1} s: give 0 ≤ t0 < t1"
-        )));
+    if t0 >= t1 {
+        return Err(bad());
     }
     let (a, b) = (t0 * RATE - 0.5, t1 * RATE + 0.5);
     let inside: Vec<usize> = (0..f.windows.len())
@@ -154,8 +309,22 @@ fn windows_within(f: &Stored, t0: Option<f64>, t1: Option<f64>) -> Result<(usize
     if let (Some(&first), Some(&last)) = (inside.first(), inside.last()) {
         return Ok((first, last + 1 - first));
     }
+    // No window lies wholly inside: the nearest of those that overlap the range (a range
+    // in a take's last frames, which no window ends in), else the nearest of all.
     let middle = (t0 + t1.min(duration)) / 2.0 * RATE;
-    let nearest = (0..f.windows.len())
+    let overlapping: Vec<usize> = (0..f.windows.len())
+        .filter(|&i| {
+            let (s, e) = f.span(i);
+            (s as f64) < t1 * RATE && e as f64 > t0 * RATE
+        })
+        .collect();
+    let pool: Vec<usize> = if overlapping.is_empty() {
+        (0..f.windows.len()).collect()
+    } else {
+        overlapping
+    };
+    let nearest = pool
+        .into_iter()
         .min_by(|&x, &y| {
             let m = |i: usize| {
                 let (s, e) = f.span(i);
@@ -282,7 +451,7 @@ async fn asked(index: &MotionIndex, req: &SearchRequest) -> Result<Asked> {
 }
 
 /// Answer `req` from the takes' features `index` holds.
-pub async fn search(index: &MotionIndex, req: SearchRequest) -> Result<SearchAnswer> {
+pub async fn search(index: &Arc<MotionIndex>, req: SearchRequest) -> Result<SearchAnswer> {
     if req.k == 0 || req.k > MAX_SEARCH_K {
         return Err(Error::InvalidRequest(format!(
             "k is the results answered: 1 to {MAX_SEARCH_K}, not {}",
@@ -301,7 +470,15 @@ pub async fn search(index: &MotionIndex, req: SearchRequest) -> Result<SearchAns
         .store()
         .candidates(&req.takes.filter(&req.grant))
         .await?;
-    let mut searched = Searched::default();
+    let mut searched = Searched {
+        takes: 0,
+        windows: 0,
+        unindexed: 0,
+        live: 0,
+        without_features: 0,
+        index: "exact",
+        scored: 0,
+    };
     let listed: Vec<_> = candidates
         .iter()
         .filter(|c| {
@@ -311,19 +488,34 @@ pub async fn search(index: &MotionIndex, req: SearchRequest) -> Result<SearchAns
             !c.live
         })
         .collect();
-    let features = index.features(&listed).await?;
-    let mut compared: Vec<(usize, String, Arc<Stored>)> = Vec::with_capacity(listed.len());
-    for (i, f) in features.into_iter().enumerate() {
+    let graph = graph_for(index, req.index, &listed)?;
+    // The takes to score, and whether each is counted as searched yet.
+    let picked: Vec<(usize, bool)> = match &graph {
+        None => (0..listed.len()).map(|i| (i, false)).collect(),
+        Some(a) => {
+            searched.index = "approximate";
+            let (wanted, most) = proposals(req.k, req.per_take);
+            let asking = (&asked.windows[..], wanted, most);
+            propose(index, a, &listed, asking, &mut searched).await?
+        }
+    };
+    let chosen: Vec<_> = picked.iter().map(|&(i, _)| listed[i]).collect();
+    let features = index.features(&chosen).await?;
+    let mut compared: Vec<(usize, String, Arc<Stored>)> = Vec::with_capacity(chosen.len());
+    for (&(i, counted), f) in picked.iter().zip(features) {
         match f {
             None => searched.unindexed += 1,
             Some(Err(_)) => searched.without_features += 1,
             Some(Ok(f)) => {
-                searched.takes += 1;
-                searched.windows += f.windows.len();
+                if !counted {
+                    searched.takes += 1;
+                    searched.windows += f.windows.len();
+                }
                 compared.push((i, listed[i].id.clone(), f));
             }
         }
     }
+    searched.scored = compared.len();
     let (k, per_take) = (req.k, req.per_take);
     let Asked {
         windows,
@@ -334,25 +526,27 @@ pub async fn search(index: &MotionIndex, req: SearchRequest) -> Result<SearchAns
     } = asked;
     let query_roles = placed.clone();
     let ranked = super::blocking(move || {
-        let mut found: Vec<(usize, similar::Run, Arc<Stored>)> = Vec::new();
+        let mut found: Vec<(usize, similar::Run, Arc<Stored>, String)> = Vec::new();
         for (i, id, f) in compared {
             let shared = Shared::of((&placed, pelvis), (&f.placed, f.pelvis));
-            let runs = similar::best_runs(&windows, &f.windows, &shared, per_take + 1);
-            let mine = own.as_ref().filter(|o| o.0 == id);
-            let kept = runs.into_iter().filter(|r| match mine {
-                Some((_, first, count)) => r.apart(*first, *count),
-                None => true,
-            });
-            found.extend(kept.take(per_take).map(|r| (i, r, f.clone())));
+            let mine = own.as_ref().filter(|o| o.0 == id).map(|o| (o.1, o.2));
+            let kept = similar::best_runs(&windows, &f.windows, &shared, per_take, mine);
+            found.extend(kept.into_iter().map(|r| (i, r, f.clone(), id.clone())));
         }
-        found.sort_by(|a, b| a.1.score.total_cmp(&b.1.score));
+        // Ties (copies of one take score alike) in an order of their own, not the order
+        // the takes were scored in, so exact and approximate search answer alike.
+        found.sort_by(|a, b| {
+            (a.1.score.total_cmp(&b.1.score))
+                .then_with(|| a.3.cmp(&b.3))
+                .then(a.1.first.cmp(&b.1.first))
+        });
         found.truncate(k);
         found
     });
     let ranked = ranked.await?;
     let results = ranked
         .into_iter()
-        .map(|(i, r, f)| {
+        .map(|(i, r, f, _)| {
             let c = listed[i];
             let (t0, t1) = (
                 Stored::seconds(f.span(r.first).0),

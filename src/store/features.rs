@@ -16,8 +16,9 @@ pub struct FeatureRow {
     pub failed: Option<String>,
 }
 
-/// A take a search may compare: what an answer names, its stamp now, and its features'
-/// stamp (`None`: none stored).
+/// A take a search may compare: what an answer names, its stamp now, and whether its
+/// stored features are current (taken from the coding and body it has now: the rule
+/// [`STAMP_MATCHES`] states, here and for [`Store::stale_features`] alike).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Candidate {
     pub id: String,
@@ -26,9 +27,10 @@ pub struct Candidate {
     pub fps: f64,
     pub live: bool,
     pub stamp: StampRow,
-    pub features: Option<StampRow>,
+    pub current: bool,
 }
 
+/// Whether a take's features row `f` was taken from the coding and body take `t` has now.
 const STAMP_MATCHES: &str = "f.codec = t.codec AND f.stored_bytes = t.stored_bytes \
     AND f.frames = t.frames AND f.body_rev = t.body_rev";
 
@@ -90,8 +92,8 @@ impl Store {
         let w = query::where_clause(filter, None);
         let sql = format!(
             "SELECT t.id, t.name, t.library, t.fps, t.live_until, t.codec, t.stored_bytes, \
-             t.frames, t.body_rev, f.codec AS f_codec, f.stored_bytes AS f_stored_bytes, \
-             f.frames AS f_frames, f.body_rev AS f_body_rev \
+             t.frames, t.body_rev, \
+             CASE WHEN f.take_id IS NOT NULL AND ({STAMP_MATCHES}) THEN 1 ELSE 0 END AS current \
              FROM (SELECT id, name, library, fps, live_until, codec, stored_bytes, frames, \
              body_rev, created_at FROM takes {}) t \
              LEFT JOIN take_features f ON f.take_id = t.id ORDER BY t.created_at, t.id",
@@ -108,7 +110,7 @@ impl Store {
                         fps: r.try_get("fps")?,
                         live: r.try_get::<Option<i64>, _>("live_until")?.is_some(),
                         stamp: stamp(r, "")?.unwrap_or_default(),
-                        features: stamp(r, "f_")?,
+                        current: r.try_get::<i32, _>("current")? == 1,
                     })
                 })
                 .collect()
@@ -145,15 +147,18 @@ impl Store {
     }
 
     /// Up to `limit` finished takes whose features are missing or were taken from another
-    /// coding or body than they have now, oldest first.
-    pub async fn stale_features(&self, limit: usize) -> Result<Vec<String>> {
+    /// coding or body than they have now, in the order of their ids, after `after` (a
+    /// cursor: the last id of the page before), so that takes that stay stale do not hide
+    /// the ones after them.
+    pub async fn stale_features(&self, after: Option<&str>, limit: usize) -> Result<Vec<String>> {
         let sql = format!(
             "SELECT t.id FROM takes t LEFT JOIN take_features f ON f.take_id = t.id \
              WHERE t.live_until IS NULL AND (f.take_id IS NULL OR NOT ({STAMP_MATCHES})) \
-             ORDER BY t.created_at, t.id LIMIT {limit}"
+             AND t.id > $1 ORDER BY t.id LIMIT {limit}"
         );
+        let after = after.unwrap_or("").to_string();
         dispatch!(self, pool => {
-            Ok(sqlx::query_scalar::<_, String>(&sql).fetch_all(pool).await?)
+            Ok(sqlx::query_scalar::<_, String>(&sql).bind(after).fetch_all(pool).await?)
         })
     }
 

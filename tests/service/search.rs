@@ -217,6 +217,8 @@ async fn a_range_finds_its_copy_where_it_was_cut_and_its_action_next() {
             (format!("/v1/takes/{query}/similar?per_take=0"), 400),
             (format!("/v1/takes/{query}/similar?t0=3&t1=2"), 400),
             (format!("/v1/takes/{query}/similar?t0=999"), 416),
+            (format!("/v1/takes/{query}/similar?t0=inf"), 400),
+            (format!("/v1/takes/{query}/similar?t0=1&t1=NaN"), 400),
             ("/v1/takes/no-such-take/similar".to_string(), 404),
         ] {
             let (status, v) = one.get_json(&path).await;
@@ -248,6 +250,116 @@ async fn a_range_finds_its_copy_where_it_was_cut_and_its_action_next() {
         one.stop().await;
         t.finish().await;
     }
+}
+
+/// Approximate search (`index=approximate`): the first asks start the graph's build and are
+/// refused as busy until it is in; then the graph proposes and the proposed takes are scored
+/// exactly, so on a small archive the answer is exact search's, score for score. A token of
+/// one library is never answered another's take (a copy of the query in it, nearer than any);
+/// a take stored after the graph was built is found all the same (scored beside the graph's
+/// proposals), and once deleted never again. A bad `index=` is a 400.
+#[tokio::test(flavor = "multi_thread")]
+async fn approximate_search_answers_what_exact_search_does() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let reader = common::token(&t.store, "reader", "read", Some(&["lab"])).await;
+    let writer = common::token(&t.store, "writer", "admin", None).await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let file = |name: &str| std::fs::read(root.join(format!("bvh/bandai/{name}.bvh"))).unwrap();
+    let put = |name: &'static str, library: &'static str| {
+        let (srv, writer, body) = (&srv, writer.clone(), file(name));
+        async move {
+            let r = srv
+                .client
+                .post(format!(
+                    "{}/v1/takes?name={name}&library={library}&codec=quant",
+                    srv.base
+                ))
+                .bearer_auth(&writer)
+                .body(body)
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(r.status(), 201);
+            r.json::<Value>().await.unwrap()["id"]
+                .as_str()
+                .unwrap()
+                .to_string()
+        }
+    };
+    let query = put(FILES[0], "lab").await;
+    for name in &FILES[1..] {
+        put(name, "lab").await;
+    }
+    put(FILES[0], "secret").await;
+    let ask = |path: String| {
+        let (srv, reader) = (&srv, reader.clone());
+        async move {
+            let r = srv
+                .client
+                .get(format!("{}{path}", srv.base))
+                .bearer_auth(&reader)
+                .send()
+                .await
+                .unwrap();
+            (r.status().as_u16(), r.json::<Value>().await.unwrap())
+        }
+    };
+    let similar = format!("/v1/takes/{query}/similar?k=10&t0=1&t1=3");
+    let (status, bad) = ask(format!("{similar}&index=nearest")).await;
+    assert_eq!(status, 400, "{bad}");
+    let approximate = || {
+        let ask = &ask;
+        let similar = similar.clone();
+        async move {
+            for _ in 0..600 {
+                let (status, v) = ask(format!("{similar}&index=approximate")).await;
+                if status == 200 {
+                    return v;
+                }
+                assert_eq!(status, 503, "{v}");
+                tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+            }
+            panic!("the graph was never built");
+        }
+    };
+    let a = approximate().await;
+    let (status, exact) = ask(format!("{similar}&index=exact")).await;
+    assert_eq!(status, 200);
+    assert_eq!(a["searched"]["index"], "approximate", "{a}");
+    assert_eq!(exact["searched"]["index"], "exact");
+    assert_eq!(exact["searched"]["scored"], 9);
+    assert_eq!(a["searched"]["takes"], 9, "{a}");
+    assert_eq!(a["results"], exact["results"], "{a}\n{exact}");
+    assert!(a["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|r| r["library"] == "lab"));
+    // Small archives are exact by default.
+    let (_, auto) = ask(similar.clone()).await;
+    assert_eq!(auto["searched"]["index"], "exact");
+
+    // A copy stored after the graph was built: found first, as exact search finds it.
+    let late = put(FILES[0], "lab").await;
+    let (_, after) = ask(format!("{similar}&index=approximate")).await;
+    assert_eq!(after["results"][0]["take"], late.as_str(), "{after}");
+    assert_eq!(after["results"][0]["score"], 0.0, "{after}");
+    assert_eq!(after["searched"]["takes"], 10, "{after}");
+    let r = srv
+        .client
+        .delete(format!("{}/v1/takes/{late}", srv.base))
+        .bearer_auth(&writer)
+        .send()
+        .await
+        .unwrap();
+    assert!(r.status().is_success(), "{}", r.status());
+    let (_, gone) = ask(format!("{similar}&index=approximate")).await;
+    assert_eq!(gone["results"], exact["results"], "{gone}");
+    srv.stop().await;
+    t.finish().await;
 }
 
 /// A token of library "lab" only: its results and counts are the same whatever other

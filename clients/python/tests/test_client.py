@@ -589,6 +589,11 @@ def test_search_finds_motion_and_its_ranges_read_in_one_request(
         assert f.start == m.start and len(f) == m.end - m.start
         assert f.start / f.source_fps == pytest.approx(m.t0, abs=1 / f.source_fps)
     assert [len(f) for f in client.ranges(list(found))] == [len(f) for f in frames]
+    # The approximate index (built on the first ask, retried while it is) answers the same.
+    approximate = client.search(query, t0=1.0, t1=3.0, k=3, library=lib, index="approximate")
+    assert approximate.searched["index"] == "approximate"
+    assert approximate.parts() == found.parts()
+    assert found.searched["index"] == "exact"
     # A clip file finds its stored take first, at the range asked.
     clip = client.search(bandai / "dataset-1_bow_happy_001.bvh", t0=1.0, t1=3.0, k=1, library=lib)
     assert clip[0].take == takes["bow_happy"].id and (clip[0].t0, clip[0].t1) == (1.0, 3.0)

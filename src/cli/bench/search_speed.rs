@@ -3,7 +3,10 @@
 //! the defaults, timed; further copies under other names with `codec=quant`, for speed:
 //! their features are the same), until the archive holds the frames asked. Then:
 //! - search latency (`GET /v1/takes/{id}/similar`, 2 s ranges and whole takes of random
-//!   takes, one at a time): p50, p99;
+//!   takes, one at a time): p50, p99, exact (`index=exact`) and approximate
+//!   (`index=approximate`, the graph built first and timed);
+//! - the approximate search's recall: the share of exact search's k results (take and
+//!   range) it answers too, and the takes it scored;
 //! - the features' bytes as a share of the database file;
 //! - ingest slowdown: the time taking the first copy's features (again, through a motion
 //!   index of its own) against its ingest's time without them.
@@ -122,16 +125,43 @@ pub async fn run(files: &[PathBuf], min_frames: u64, queries: usize) -> Result<(
     let (feature_bytes, indexed) = store.features_bytes().await.map_err(|e| e.to_string())?;
 
     let mut rng = mocapstore::rng::Rng::new(7);
-    let mut latencies = Vec::with_capacity(queries);
+    let mut exact_ms = Vec::with_capacity(queries);
+    let mut approximate_ms = Vec::with_capacity(queries);
+    let (mut found, mut missed, mut scored) = (0usize, 0usize, 0usize);
     let mut windows_searched = 0u64;
+    let search = |url: String| {
+        let client = client.clone();
+        async move {
+            let started = Instant::now();
+            let r = client.get(url).send().await.map_err(|e| e.to_string())?;
+            let status = r.status();
+            let v: serde_json::Value = r.json().await.map_err(|e| e.to_string())?;
+            Ok::<_, String>((status, v, started.elapsed().as_secs_f64() * 1e3))
+        }
+    };
     // One search first: the server reads every take's features into memory once.
-    let warm = Instant::now();
-    let _ = client
-        .get(format!("{base}/v1/takes/{}/similar?k=10", ids[0].0))
-        .send()
-        .await
-        .map_err(|e| e.to_string())?;
-    let first_search_ms = warm.elapsed().as_secs_f64() * 1e3;
+    let (_, _, first_search_ms) = search(format!(
+        "{base}/v1/takes/{}/similar?k=10&index=exact",
+        ids[0].0
+    ))
+    .await?;
+    // The graph: the first approximate search starts its build and is refused until it is in.
+    let built = Instant::now();
+    loop {
+        let (status, v, _) = search(format!(
+            "{base}/v1/takes/{}/similar?k=10&index=approximate",
+            ids[0].0
+        ))
+        .await?;
+        if status.is_success() {
+            break;
+        }
+        if status != reqwest::StatusCode::SERVICE_UNAVAILABLE {
+            return Err(format!("approximate search: {status}: {v}"));
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    let build_s = built.elapsed().as_secs_f64();
     for q in 0..queries {
         let (id, seconds) = &ids[rng.below(ids.len())];
         let range = if q % 2 == 0 && *seconds > 2.5 {
@@ -140,39 +170,74 @@ pub async fn run(files: &[PathBuf], min_frames: u64, queries: usize) -> Result<(
         } else {
             String::new()
         };
-        let started = Instant::now();
-        let r = client
-            .get(format!("{base}/v1/takes/{id}/similar?k=10{range}"))
-            .send()
-            .await
-            .map_err(|e| e.to_string())?;
-        let status = r.status();
-        let v: serde_json::Value = r.json().await.map_err(|e| e.to_string())?;
-        latencies.push(started.elapsed().as_secs_f64() * 1e3);
-        if !status.is_success() {
-            return Err(format!("search of take {id}: {status}: {v}"));
+        let mut answers = Vec::new();
+        for (index, times) in [
+            ("exact", &mut exact_ms),
+            ("approximate", &mut approximate_ms),
+        ] {
+            let (status, v, ms) = search(format!(
+                "{base}/v1/takes/{id}/similar?k=10&index={index}{range}"
+            ))
+            .await?;
+            if !status.is_success() {
+                return Err(format!("search of take {id} ({index}): {status}: {v}"));
+            }
+            times.push(ms);
+            answers.push(v);
         }
-        windows_searched = v["searched"]["windows"].as_u64().unwrap_or(0);
+        let results = |v: &serde_json::Value| -> Vec<(String, String)> {
+            v["results"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .map(|r| (r["take"].to_string(), r["t0"].to_string()))
+                .collect()
+        };
+        let (exact, approximate) = (results(&answers[0]), results(&answers[1]));
+        found += exact.iter().filter(|r| approximate.contains(r)).count();
+        missed += exact.iter().filter(|r| !approximate.contains(r)).count();
+        scored += answers[1]["searched"]["scored"].as_u64().unwrap_or(0) as usize;
+        windows_searched = answers[0]["searched"]["windows"].as_u64().unwrap_or(0);
     }
     let _ = stop.send(());
     let _ = server.await;
     store.close().await;
     let db_bytes = bytes_of(&dir);
     let _ = std::fs::remove_dir_all(&dir);
-    latencies.sort_by(f64::total_cmp);
+    exact_ms.sort_by(f64::total_cmp);
+    approximate_ms.sort_by(f64::total_cmp);
     println!();
     println!(
         "Search through the store: {} takes ({copy} copies of {} files), {frames} frames, \
          {windows_searched} windows; {queries} searches (2 s ranges and whole takes of random \
-         takes, k = 10, one at a time, over HTTP)",
+         takes, k = 10, one at a time, over HTTP), each exact and approximate",
         ids.len(),
         bodies.len()
     );
     println!();
     println!("| | value |");
     println!("|---|---:|");
-    println!("| search p50 | {:.1} ms |", percentile(&latencies, 0.5));
-    println!("| search p99 | {:.1} ms |", percentile(&latencies, 0.99));
+    println!(
+        "| search p50, exact / approximate | {:.1} / {:.1} ms |",
+        percentile(&exact_ms, 0.5),
+        percentile(&approximate_ms, 0.5)
+    );
+    println!(
+        "| search p99, exact / approximate | {:.1} / {:.1} ms |",
+        percentile(&exact_ms, 0.99),
+        percentile(&approximate_ms, 0.99)
+    );
+    println!(
+        "| approximate recall@10 (exact's results it answers too) | {:.3} ({found} of {}) |",
+        found as f64 / (found + missed).max(1) as f64,
+        found + missed
+    );
+    println!(
+        "| takes scored, approximate (exact: all {}) | {:.0} a search |",
+        ids.len(),
+        scored as f64 / queries.max(1) as f64
+    );
+    println!("| graph built (first approximate search to its answer) | {build_s:.1} s |");
     println!("| first search (reads every take's features) | {first_search_ms:.0} ms |");
     println!(
         "| features stored | {} takes, {:.2} MB ({:.1} bytes a frame) |",

@@ -18,7 +18,7 @@ from collections.abc import AsyncIterator, Coroutine, Generator, Iterator, Mappi
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any, Literal, Protocol, TypeVar
 
 import httpx
 import numpy.typing as npt
@@ -660,13 +660,17 @@ class Client(_Base):
         fps: float | None = None,
         min_duration_s: float | None = None,
         max_duration_s: float | None = None,
+        index: Literal["auto", "exact", "approximate"] | None = None,
     ) -> SearchResults:
         """The ranges of stored takes whose motion is most like ``like``'s: a stored take
         (its id or record; ``t0``/``t1`` seconds of it, all of it by default), a clip file
         (any format ingest reads) or a clip's bytes. The ``k`` best, at most ``per_take``
         from one take (ranges that do not overlap), never the query's own range, among the
         takes the token reaches that match the filters. ``results.parts()`` are the ranges
-        as [`ranges`] reads them in one request."""
+        as [`ranges`] reads them in one request. ``index="exact"`` scores every take,
+        ``"approximate"`` the takes a graph of the archive's windows proposes (the server
+        answers 503, retried, while it first builds it); by default the server goes
+        approximate past 40,000 windows (``results.searched["index"]`` says which)."""
         filters = dict(
             library=library,
             tag=tag,
@@ -675,6 +679,7 @@ class Client(_Base):
             fps=fps,
             min_duration_s=min_duration_s,
             max_duration_s=max_duration_s,
+            index=index,
         )
         return self._run(self._search_op(like, t0, t1, k, per_take, filters, labels))
 
@@ -1118,13 +1123,17 @@ class AsyncClient(_Base):
         fps: float | None = None,
         min_duration_s: float | None = None,
         max_duration_s: float | None = None,
+        index: Literal["auto", "exact", "approximate"] | None = None,
     ) -> SearchResults:
         """The ranges of stored takes whose motion is most like ``like``'s: a stored take
         (its id or record; ``t0``/``t1`` seconds of it, all of it by default), a clip file
         (any format ingest reads) or a clip's bytes. The ``k`` best, at most ``per_take``
         from one take (ranges that do not overlap), never the query's own range, among the
         takes the token reaches that match the filters. ``results.parts()`` are the ranges
-        as [`ranges`] reads them in one request."""
+        as [`ranges`] reads them in one request. ``index="exact"`` scores every take,
+        ``"approximate"`` the takes a graph of the archive's windows proposes (the server
+        answers 503, retried, while it first builds it); by default the server goes
+        approximate past 40,000 windows (``results.searched["index"]`` says which)."""
         filters = dict(
             library=library,
             tag=tag,
@@ -1133,6 +1142,7 @@ class AsyncClient(_Base):
             fps=fps,
             min_duration_s=min_duration_s,
             max_duration_s=max_duration_s,
+            index=index,
         )
         return await self._run(self._search_op(like, t0, t1, k, per_take, filters, labels))
 

@@ -387,8 +387,8 @@ class SearchResults(Sequence[Match]):
     """What a search found, best first (a sequence of [`Match`]); ``query`` the query as
     compared (``t0``, ``t1``, ``windows``, ``roles``), ``searched`` what was searched
     (``takes``, ``windows``, and the takes left out: ``unindexed``, ``live``,
-    ``without_features``). ``client.ranges(results.parts())`` reads every range found in
-    one request."""
+    ``without_features``; ``index``, exact or approximate, and the takes ``scored``).
+    ``client.ranges(results.parts())`` reads every range found in one request."""
 
     matches: tuple[Match, ...]
     query: dict[str, Any]
