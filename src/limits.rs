@@ -155,14 +155,23 @@ pub const MAX_SEARCH_QUERY_S: f64 = 120.0;
 /// Windows from which search goes approximate by itself (`index=auto`): past them, the
 /// takes a search may see are proposed by the graph of every full-body take's windows
 /// ([`crate::motion::nearest`]) and only those are scored. Below, exact search answers
-/// within about 50 ms (p50 35 ms at 19,490 windows on 2 cores).
+/// well within 50 ms (p50 18.7 ms at 19,490 windows on 2 cores; 96 ms at 93,552).
 pub const APPROXIMATE_FROM_WINDOWS: usize = 40_000;
-/// Windows the graph holds at most (about 2 KB each: 2 GB at this cap, 140 hours of
-/// motion); the takes past it, in the order they were stored, are scored exactly.
-pub const APPROXIMATE_MAX_WINDOWS: usize = 1_000_000;
+/// Windows the graph holds at most (about 2 KB each: 1 GB at this cap, 70 hours of
+/// motion; twice that while a new graph is built beside the one searched); the takes past
+/// it, in the order they were stored, are not read for it and are scored exactly.
+pub const APPROXIMATE_MAX_WINDOWS: usize = 500_000;
 /// The graph is built again, in the background, once takes it does not hold (stored or
 /// changed since) have this share of its windows: they are scored exactly meanwhile.
 pub const APPROXIMATE_REBUILD_SHARE: f64 = 0.1;
+/// … and once it is this old (seconds) when a search uses it, so that the windows of takes
+/// deleted or changed since (walked past, never answered) do not pile up.
+pub const APPROXIMATE_REBUILD_AFTER_S: u64 = 3_600;
+/// A build that failed is not tried again for this long (seconds).
+pub const APPROXIMATE_RETRY_AFTER_S: u64 = 60;
+/// Deepest a search looks in the graph: its beam at most (the crate walks on while a
+/// filter leaves its beam unfilled); past it, the takes not proposed are scored exactly.
+pub const APPROXIMATE_MAX_BEAM: usize = 4_096;
 
 /// Jobs one listing answers at most.
 pub const MAX_JOBS_LISTED: usize = 1_000;

@@ -29,19 +29,18 @@ export async function comparePage(main, params) {
     const next = { ids: ids.join(','), mode, ...changes };
     const all = new URLSearchParams(q);
     for (const [k, v] of Object.entries(next)) all.set(k, v);
-    // Takes added or removed leave the starts and span of a search's pairing behind.
-    if ('ids' in changes) {
-      all.delete('starts');
-      all.delete('span');
-    } else if (starts.some((s) => s > 0)) {
-      all.set('starts', starts.join(','));
-      if (span) all.set('span', String(span));
+    // Each take keeps its start (a take added starts at 0, `changes.starts`), and the
+    // clock its span.
+    if (!('starts' in changes)) {
+      if (starts.some((s) => s > 0)) all.set('starts', starts.join(','));
+      else all.delete('starts');
     }
+    if (span) all.set('span', String(span));
     return `#/compare?${all}`;
   };
 
   main.append(el('h1', {}, 'Compare'));
-  main.append(await picker(takes, (id) => { location.hash = url({ ids: [...ids, id].join(',') }); }));
+  main.append(await picker(takes, (id) => { location.hash = url({ ids: [...ids, id].join(','), starts: [...starts, 0].join(',') }); }));
   if (takes.length === 0) {
     main.append(el('p', { class: 'muted' }, 'Choose takes to compare: the same take stored at two bounds, or any takes.'));
     return () => {};
@@ -64,7 +63,7 @@ export async function comparePage(main, params) {
       el('td', { class: 'n' }, fmt.num(t.ratio, 1)),
       el('td', { class: 'n now' }, '—'),
       el('td', {}, el('button', { 'aria-label': `remove ${t.name || t.id}`, onclick: () => {
-        location.hash = url({ ids: ids.filter((_, j) => j !== i).join(',') });
+        location.hash = url({ ids: ids.filter((_, j) => j !== i).join(','), starts: starts.filter((_, j) => j !== i).join(',') });
       } }, '✕')),
     ))));
 

@@ -32,7 +32,7 @@ export function similarPanel(take, range) {
     try {
       const q = new URLSearchParams({ t0: t0.toFixed(4), t1: t1.toFixed(4), k: k.value, per_take: perTake.checked ? '3' : '1' });
       const answer = await json(`/v1/takes/${encodeURIComponent(take.id)}/similar?${q}`);
-      show(answer, t0, t1);
+      show(answer);
     } catch (e) {
       status.textContent = '';
       results.replaceChildren();
@@ -42,7 +42,7 @@ export function similarPanel(take, range) {
     }
   });
 
-  function show(answer, t0, t1) {
+  function show(answer) {
     const s = answer.searched;
     const left = s.unindexed + s.live + s.without_features;
     const missing = answer.query.missing_roles?.length ? `; the query places no ${answer.query.missing_roles.join(', ')}` : '';
@@ -52,8 +52,9 @@ export function similarPanel(take, range) {
       results.replaceChildren(el('p', { class: 'muted' }, 'Nothing found among the takes this token can see.'));
       return;
     }
-    // Both play from their own start for as long as the query lasts.
-    const span = Math.max(t1 - t0, 1 / take.fps);
+    // Both play from their own start for as long as the query the server compared (its
+    // windows: a second at least) lasts.
+    const span = Math.max(answer.query.t1 - answer.query.t0, 1 / take.fps);
     const beside = (r) => {
       const q = new URLSearchParams({
         ids: `${take.id},${r.take}`,

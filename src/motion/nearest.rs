@@ -39,6 +39,9 @@ pub struct Depth {
     pub per_window: usize,
     /// The search's beam in the lowest layer (≥ `per_window`).
     pub ef: usize,
+    /// The widest beam a search may deepen to: each window's search costs about as many
+    /// distances as its beam, and with a filter the crate walks on until the beam is full.
+    pub max_ef: usize,
 }
 
 impl Default for Depth {
@@ -47,6 +50,7 @@ impl Default for Depth {
             query_windows: 16,
             per_window: 48,
             ef: 96,
+            max_ef: 4_096,
         }
     }
 }
@@ -116,9 +120,10 @@ impl<K: Clone + Eq + std::hash::Hash> Graph<K> {
 
     /// The takes (their slots) with a window nearest `query`'s, nearest first, at most
     /// `most`, among those `allowed` accepts (the graph's walk passes through others but
-    /// never answers them). Looks deeper (four times the neighbours a window, until it has
-    /// asked for every point) while it has found fewer than `wanted` takes: a query whose
-    /// nearest windows all lie in a few takes still gets as many takes as it asks for.
+    /// never answers them). Looks deeper (four times the neighbours a window, while the
+    /// beam stays within `depth.max_ef` and short of every point) while it has found fewer
+    /// than `wanted` takes: a query whose nearest windows all lie in a few takes gets more
+    /// takes. It may still find fewer: the caller decides what to score then.
     pub fn nearest_takes(
         &self,
         query: &[Descriptor],
@@ -130,7 +135,8 @@ impl<K: Clone + Eq + std::hash::Hash> Graph<K> {
         let mut depth = depth;
         loop {
             let found = self.nearest_at(query, allowed, depth);
-            if found.len() >= wanted || depth.per_window >= self.windows() {
+            let deepest = depth.per_window >= self.windows() || depth.ef * 4 > depth.max_ef;
+            if found.len() >= wanted || deepest {
                 let mut out: Vec<(usize, f32)> = found.into_iter().collect();
                 out.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
                 out.truncate(most);
@@ -242,6 +248,7 @@ mod tests {
             query_windows: 4,
             per_window: 5,
             ef: 8,
+            max_ef: 8,
         };
         assert_eq!(
             a.nearest_takes(&q, &|_| true, depth, 10, 10),

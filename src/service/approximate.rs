@@ -14,7 +14,13 @@
 //! what the graph proposes, so a search misses nothing new; once such takes hold
 //! [`APPROXIMATE_REBUILD_SHARE`] of the graph's windows, the graph is built again, and
 //! searched as it was until the new one is ready. A deleted take is never listed, so never
-//! allowed: its windows stay in the graph, passed through, never answered.
+//! allowed: its windows stay in the graph, passed through, never answered, until the graph
+//! is built again, as it also is once it is [`APPROXIMATE_REBUILD_AFTER_S`] old.
+//!
+//! # What it costs
+//! About 2 KB a window, twice while a new graph is built beside the one searched; at most
+//! [`APPROXIMATE_MAX_WINDOWS`] (the takes past it are not read for it, and are scored
+//! exactly). A build that fails is not tried again for [`APPROXIMATE_RETRY_AFTER_S`].
 //!
 //! # On several servers
 //! Each server builds its own graph from the database; the same takes make the same graph
@@ -24,10 +30,14 @@
 
 use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, RwLock};
+use std::sync::{Arc, Mutex, RwLock};
+use std::time::{Duration, Instant};
 
 use crate::codec::features::Stored;
-use crate::limits::{APPROXIMATE_MAX_WINDOWS, APPROXIMATE_REBUILD_SHARE};
+use crate::limits::{
+    APPROXIMATE_MAX_WINDOWS, APPROXIMATE_REBUILD_AFTER_S, APPROXIMATE_REBUILD_SHARE,
+    APPROXIMATE_RETRY_AFTER_S,
+};
 use crate::motion::features::{HOP, KEY_ROLES, RATE};
 use crate::motion::nearest::Graph;
 use crate::motion::similar::Descriptor;
@@ -59,13 +69,15 @@ pub struct Approximate {
     pub exact: HashSet<Key>,
     /// Takes whose contents give no features.
     pub without: HashSet<Key>,
+    built: Instant,
 }
 
 impl Approximate {
     /// Whether the graph is behind the database enough to be built again: takes it does
-    /// not know (estimated windows) against its own.
+    /// not know (estimated windows) against its own, or its age.
     pub fn stale(&self, unknown_windows: usize) -> bool {
         unknown_windows as f64 > APPROXIMATE_REBUILD_SHARE * self.graph.windows().max(1) as f64
+            || self.built.elapsed() > Duration::from_secs(APPROXIMATE_REBUILD_AFTER_S)
     }
 }
 
@@ -74,6 +86,8 @@ impl Approximate {
 pub struct Slot {
     current: RwLock<Option<Arc<Approximate>>>,
     building: AtomicBool,
+    /// When the last build failed: none is tried again for a while.
+    failed: Mutex<Option<Instant>>,
 }
 
 impl Slot {
@@ -81,15 +95,31 @@ impl Slot {
         self.current.read().map(|g| g.clone()).unwrap_or(None)
     }
 
-    /// Claim the build: false if one is under way.
+    /// Claim the build: false if one is under way, or one failed lately.
     pub fn begin(&self) -> bool {
-        !self.building.swap(true, Ordering::AcqRel)
+        let lately = self
+            .failed
+            .lock()
+            .ok()
+            .and_then(|f| *f)
+            .is_some_and(|at| at.elapsed() < Duration::from_secs(APPROXIMATE_RETRY_AFTER_S));
+        !lately && !self.building.swap(true, Ordering::AcqRel)
     }
 
-    /// End the build claimed, with its graph if it was built (the one held is kept if not).
+    /// End the build claimed, with its graph if it was built (the one held is kept if not,
+    /// and no build is tried again for [`APPROXIMATE_RETRY_AFTER_S`]).
     pub fn finish(&self, built: Option<Approximate>) {
-        if let (Some(a), Ok(mut g)) = (built, self.current.write()) {
-            *g = Some(Arc::new(a));
+        match built {
+            Some(a) => {
+                if let Ok(mut g) = self.current.write() {
+                    *g = Some(Arc::new(a));
+                }
+            }
+            None => {
+                if let Ok(mut f) = self.failed.lock() {
+                    *f = Some(Instant::now());
+                }
+            }
         }
         self.building.store(false, Ordering::Release);
     }
@@ -128,5 +158,6 @@ pub fn build(takes: Vec<(Key, Indexed)>) -> Approximate {
         windows: graphed.iter().map(|(_, f)| f.windows.len()).collect(),
         exact,
         without,
+        built: Instant::now(),
     }
 }

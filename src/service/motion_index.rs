@@ -123,7 +123,17 @@ impl MotionIndex {
             .store
             .candidates(&crate::store::Filter::default())
             .await?;
-        let listed: Vec<&Candidate> = all.iter().filter(|c| !c.live && c.current).collect();
+        // The takes the graph can hold, in the order they were stored: those past its cap
+        // are not read (searches score them exactly).
+        let mut windows = 0usize;
+        let listed: Vec<&Candidate> = all
+            .iter()
+            .filter(|c| !c.live && c.current)
+            .take_while(|c| {
+                windows += super::approximate::windows_of(c);
+                windows <= crate::limits::APPROXIMATE_MAX_WINDOWS
+            })
+            .collect();
         let features = self.features(&listed).await?;
         let takes: Vec<_> = listed
             .iter()
