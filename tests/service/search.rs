@@ -341,6 +341,50 @@ async fn approximate_search_answers_what_exact_search_does() {
     // Small archives are exact by default.
     let (_, auto) = ask(similar.clone()).await;
     assert_eq!(auto["searched"]["index"], "exact");
+    // A clip of fewer roles (the walk's pelvis, head and ankles alone, as TRC markers) is
+    // compared on the roles it shares with each take: always exactly.
+    let (_, record) = ask(format!("/v1/takes/{query}")).await;
+    let roles = &record["body"]["roles"];
+    let points: Vec<&str> = ["pelvis", "head", "left_ankle", "right_ankle"]
+        .iter()
+        .filter_map(|r| roles[*r][0].as_str())
+        .collect();
+    assert_eq!(points.len(), 4, "{roles}");
+    let r = srv
+        .client
+        .get(format!(
+            "{}/v1/takes/{query}/frames?format=trc&points={}",
+            srv.base,
+            points.join(",")
+        ))
+        .bearer_auth(&reader)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let trc = r.bytes().await.unwrap();
+    let r = srv
+        .client
+        .post(format!(
+            "{}/v1/search?index=approximate&t0=1&t1=3&k=3",
+            srv.base
+        ))
+        .bearer_auth(&reader)
+        .body(trc)
+        .send()
+        .await
+        .unwrap();
+    let status = r.status();
+    let partial: Value = r.json().await.unwrap();
+    assert_eq!(status, 200, "{partial}");
+    assert_eq!(partial["searched"]["index"], "exact", "{partial}");
+    assert!(
+        !partial["query"]["missing_roles"]
+            .as_array()
+            .unwrap()
+            .is_empty(),
+        "{partial}"
+    );
 
     // A copy stored after the graph was built: found first, as exact search finds it.
     let late = put(FILES[0], "lab").await;
