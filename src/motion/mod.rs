@@ -17,6 +17,7 @@ pub mod nearest;
 pub mod outputs;
 pub mod rate;
 pub mod retrieval;
+pub mod rigs;
 pub mod rotation;
 pub mod similar;
 pub mod skeleton;
