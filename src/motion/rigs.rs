@@ -310,20 +310,7 @@ pub fn named(name: &str) -> Option<Rig> {
 mod tests {
     use super::*;
     use crate::motion::body::{Part, Role, Roles, Side};
-
-    /// World rest places of `joints` (zero channels).
-    fn places(joints: &[Joint]) -> Vec<[f64; 3]> {
-        let mut out: Vec<[f64; 3]> = Vec::with_capacity(joints.len());
-        for j in joints {
-            let base = j.parent.map_or([0.0; 3], |p| out[p]);
-            out.push([
-                base[0] + j.offset[0],
-                base[1] + j.offset[1],
-                base[2] + j.offset[2],
-            ]);
-        }
-        out
-    }
+    use crate::motion::skeleton::rest_places;
 
     #[test]
     fn every_rig_has_its_roles_by_name_and_stands_in_a_t_pose() {
@@ -338,7 +325,7 @@ mod tests {
                     role.name()
                 );
             }
-            let at = places(&rig.joints);
+            let at = rest_places(&rig.joints);
             let y = |role: Role| at[roles.points(role, &names)[0]][1];
             let x = |role: Role| at[roles.points(role, &names)[0]][0];
             assert!(y(Role::Head) > y(Role::Pelvis), "{}", rig.name);

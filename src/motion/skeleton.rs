@@ -76,6 +76,21 @@ pub struct Joint {
     pub end_site: bool,
 }
 
+/// Where each joint stands in the rest pose (offsets summed down the hierarchy, no
+/// channels), in file units; joints parents first.
+pub fn rest_places(joints: &[Joint]) -> Vec<[f64; 3]> {
+    let mut pos: Vec<[f64; 3]> = Vec::with_capacity(joints.len());
+    for j in joints {
+        let base = j.parent.map(|p| pos[p]).unwrap_or([0.0; 3]);
+        pos.push([
+            base[0] + j.offset[0],
+            base[1] + j.offset[1],
+            base[2] + j.offset[2],
+        ]);
+    }
+    pos
+}
+
 /// A hierarchy plus its per-frame channel values.
 ///
 /// Joints are stored parents-first (the order of the BVH file), so FK is one forward pass.
@@ -206,15 +221,7 @@ impl Animation {
     /// Height of the rest pose (offsets only, no channels) along the axis with the
     /// largest extent among Y (BVH's usual up axis) and Z; used to guess the unit.
     pub fn rest_height(&self) -> f64 {
-        let mut pos: Vec<[f64; 3]> = Vec::with_capacity(self.joints.len());
-        for j in &self.joints {
-            let base = j.parent.map(|p| pos[p]).unwrap_or([0.0; 3]);
-            pos.push([
-                base[0] + j.offset[0],
-                base[1] + j.offset[1],
-                base[2] + j.offset[2],
-            ]);
-        }
+        let pos = rest_places(&self.joints);
         let extent = |axis: usize| {
             let (lo, hi) = pos.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
                 (lo.min(p[axis]), hi.max(p[axis]))

@@ -252,6 +252,45 @@ async fn a_range_finds_its_copy_where_it_was_cut_and_its_action_next() {
     }
 }
 
+/// Store Bandai take `name` (quant, for speed) in `library` with `token`; its id.
+async fn put_bandai(
+    srv: &common::Server,
+    token: &str,
+    root: &std::path::Path,
+    name: &str,
+    library: &str,
+) -> String {
+    let body = std::fs::read(root.join(format!("bvh/bandai/{name}.bvh"))).unwrap();
+    let r = srv
+        .client
+        .post(format!(
+            "{}/v1/takes?name={name}&library={library}&codec=quant",
+            srv.base
+        ))
+        .bearer_auth(token)
+        .body(body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string()
+}
+
+/// `GET path` with `token`: the status and the JSON answer.
+async fn get_as(srv: &common::Server, token: &str, path: &str) -> (u16, Value) {
+    let r = srv
+        .client
+        .get(format!("{}{path}", srv.base))
+        .bearer_auth(token)
+        .send()
+        .await
+        .unwrap();
+    (r.status().as_u16(), r.json::<Value>().await.unwrap())
+}
+
 /// Approximate search (`index=approximate`): the first asks start the graph's build and are
 /// refused as busy until it is in; then the graph proposes and the proposed takes are scored
 /// exactly, so on a small archive the answer is exact search's, score for score. A token of
@@ -267,27 +306,9 @@ async fn approximate_search_answers_what_exact_search_does() {
     let reader = common::token(&t.store, "reader", "read", Some(&["lab"])).await;
     let writer = common::token(&t.store, "writer", "admin", None).await;
     let srv = common::start(t.store.clone(), 64 << 20).await;
-    let file = |name: &str| std::fs::read(root.join(format!("bvh/bandai/{name}.bvh"))).unwrap();
     let put = |name: &'static str, library: &'static str| {
-        let (srv, writer, body) = (&srv, writer.clone(), file(name));
-        async move {
-            let r = srv
-                .client
-                .post(format!(
-                    "{}/v1/takes?name={name}&library={library}&codec=quant",
-                    srv.base
-                ))
-                .bearer_auth(&writer)
-                .body(body)
-                .send()
-                .await
-                .unwrap();
-            assert_eq!(r.status(), 201);
-            r.json::<Value>().await.unwrap()["id"]
-                .as_str()
-                .unwrap()
-                .to_string()
-        }
+        let (srv, writer, root) = (&srv, writer.clone(), root.clone());
+        async move { put_bandai(srv, &writer, &root, name, library).await }
     };
     let query = put(FILES[0], "lab").await;
     for name in &FILES[1..] {
@@ -296,16 +317,7 @@ async fn approximate_search_answers_what_exact_search_does() {
     put(FILES[0], "secret").await;
     let ask = |path: String| {
         let (srv, reader) = (&srv, reader.clone());
-        async move {
-            let r = srv
-                .client
-                .get(format!("{}{path}", srv.base))
-                .bearer_auth(&reader)
-                .send()
-                .await
-                .unwrap();
-            (r.status().as_u16(), r.json::<Value>().await.unwrap())
-        }
+        async move { get_as(srv, &reader, &path).await }
     };
     let similar = format!("/v1/takes/{query}/similar?k=10&t0=1&t1=3");
     let (status, bad) = ask(format!("{similar}&index=nearest")).await;
@@ -420,25 +432,8 @@ async fn a_library_token_searches_its_libraries_alone() {
     let srv = common::start(t.store.clone(), 64 << 20).await;
     let file = |name: &str| std::fs::read(root.join(format!("bvh/bandai/{name}.bvh"))).unwrap();
     let put = |name: &'static str, library: &'static str| {
-        let (srv, writer, body) = (&srv, writer.clone(), file(name));
-        async move {
-            let r = srv
-                .client
-                .post(format!(
-                    "{}/v1/takes?name={name}&library={library}&codec=quant",
-                    srv.base
-                ))
-                .bearer_auth(&writer)
-                .body(body)
-                .send()
-                .await
-                .unwrap();
-            assert_eq!(r.status(), 201);
-            r.json::<Value>().await.unwrap()["id"]
-                .as_str()
-                .unwrap()
-                .to_string()
-        }
+        let (srv, writer, root) = (&srv, writer.clone(), root.clone());
+        async move { put_bandai(srv, &writer, &root, name, library).await }
     };
     let query = put(FILES[0], "lab").await;
     for name in &FILES[1..5] {
@@ -446,16 +441,7 @@ async fn a_library_token_searches_its_libraries_alone() {
     }
     let ask = |path: String| {
         let (srv, reader) = (&srv, reader.clone());
-        async move {
-            let r = srv
-                .client
-                .get(format!("{}{path}", srv.base))
-                .bearer_auth(&reader)
-                .send()
-                .await
-                .unwrap();
-            (r.status().as_u16(), r.json::<Value>().await.unwrap())
-        }
+        async move { get_as(srv, &reader, &path).await }
     };
     let similar = format!("/v1/takes/{query}/similar?k=10");
     let (status, before) = ask(similar.clone()).await;

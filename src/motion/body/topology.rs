@@ -27,11 +27,10 @@ pub fn roles(joints: &[Joint]) -> Vec<(Role, Vec<usize>)> {
             size[p] += size[i];
         }
     }
-    let mut rest = vec![Vector3::zeros(); n];
-    for (i, j) in joints.iter().enumerate() {
-        let base = j.parent.map_or_else(Vector3::zeros, |p| rest[p]);
-        rest[i] = base + Vector3::from(j.offset);
-    }
+    let rest: Vec<Vector3<f64>> = crate::motion::skeleton::rest_places(joints)
+        .into_iter()
+        .map(Vector3::from)
+        .collect();
     let branches = |i: usize| -> Vec<usize> {
         children[i]
             .iter()
