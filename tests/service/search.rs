@@ -7,7 +7,7 @@
 
 use crate::common;
 
-use serde_json::Value;
+use serde_json::{json, Value};
 
 use mocapstore::corpus;
 use mocapstore::store::Store;
@@ -162,6 +162,35 @@ async fn a_range_finds_its_copy_where_it_was_cut_and_its_action_next() {
             .await;
         assert_eq!(none["results"].as_array().unwrap().len(), 0, "{none}");
         assert_eq!(none["searched"]["takes"], 0);
+        // The listing's other filters select what is searched: the query's skeleton takes
+        // the takes whose records name it (Bandai's files come on more than one), its rate
+        // and its length every take; another skeleton, a longer minimum, none.
+        let (_, record) = one.get_json(&format!("/v1/takes/{query}")).await;
+        let skeleton = record["skeleton"].as_str().unwrap().to_string();
+        let mut same = 0;
+        for id in ids.values().chain([&copy]) {
+            let (_, r) = one.get_json(&format!("/v1/takes/{id}")).await;
+            same += usize::from(r["skeleton"] == skeleton.as_str());
+        }
+        assert!(same >= 2, "the query and its copy");
+        let all = a["searched"]["takes"].clone();
+        for (filter, takes) in [
+            (format!("skeleton={skeleton}"), json!(same)),
+            ("skeleton=no-such-skeleton".to_string(), json!(0)),
+            ("fps=30".to_string(), all.clone()),
+            (
+                "min_duration_s=0.1&max_duration_s=3600".to_string(),
+                all.clone(),
+            ),
+            ("min_duration_s=3600".to_string(), json!(0)),
+            ("tag=none-has-it".to_string(), json!(0)),
+        ] {
+            let (status, v) = one
+                .get_json(&format!("/v1/takes/{query}/similar?t0=1&t1=3&{filter}"))
+                .await;
+            assert_eq!(status, 200, "{filter}: {v}");
+            assert_eq!(v["searched"]["takes"], takes, "{filter}: {v}");
+        }
 
         // An uploaded clip: a range of a file finds its stored take at that range.
         let r = one
