@@ -16,6 +16,7 @@ pub mod moments;
 pub mod nearest;
 pub mod outputs;
 pub mod rate;
+pub mod retarget;
 pub mod retrieval;
 pub mod rigs;
 pub mod rotation;

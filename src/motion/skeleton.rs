@@ -91,6 +91,21 @@ pub fn rest_places(joints: &[Joint]) -> Vec<[f64; 3]> {
     pos
 }
 
+/// The channel values of the pose a hierarchy's offsets describe: rotations zero, and
+/// position channels at their offset's component (they replace it: zero would put every
+/// such joint on its parent). What a rig stands in when nothing moves it.
+pub fn rest_values(joints: &[Joint]) -> Vec<f64> {
+    joints
+        .iter()
+        .flat_map(|j| {
+            j.channels.iter().map(|c| match c.axis() {
+                (axis, false) => j.offset[axis],
+                (_, true) => 0.0,
+            })
+        })
+        .collect()
+}
+
 /// A hierarchy plus its per-frame channel values.
 ///
 /// Joints are stored parents-first (the order of the BVH file), so FK is one forward pass.
@@ -276,19 +291,19 @@ impl Fk {
         }
     }
 
+    /// Each joint's rotation in the world after the last [`Fk::frame`]: what its offset and
+    /// children's offsets are turned by (an end site has its parent's).
+    pub fn rotations(&self) -> &[Matrix3<f64>] {
+        &self.rotations
+    }
+
     /// Positions of one frame (`vals`, its channel values) into `out` (`joints × 3`).
     pub fn frame(&mut self, joints: &[Joint], vals: &[f64], out: &mut [f64]) {
         local_translations(joints, vals, &mut self.translations);
         let mut k = 0;
         for (i, j) in joints.iter().enumerate() {
-            let mut local = Matrix3::identity();
-            for &c in &j.channels {
-                let (axis, rot) = c.axis();
-                if rot {
-                    local *= axis_rotation(axis, vals[k].to_radians());
-                }
-                k += 1;
-            }
+            let local = local_rotation(j, &vals[k..k + j.channels.len()]);
+            k += j.channels.len();
             let t = Vector3::from(self.translations[i]);
             let (pos, rot) = match j.parent {
                 Some(p) => {
@@ -304,8 +319,19 @@ impl Fk {
     }
 }
 
-/// Right-handed rotation about one coordinate axis, applied as in BVH: the channels of a
-/// joint compose left to right, `R = R_c0 · R_c1 · R_c2`.
+/// A joint's rotation relative to its parent for its channel values `vals`: its rotation
+/// channels composed left to right, `R = R_c0 · R_c1 · R_c2`, as BVH applies them.
+pub fn local_rotation(joint: &Joint, vals: &[f64]) -> Matrix3<f64> {
+    let mut local = Matrix3::identity();
+    for (&c, &v) in joint.channels.iter().zip(vals) {
+        if let Some(axis) = c.rotation_axis() {
+            local *= axis_rotation(axis, v.to_radians());
+        }
+    }
+    local
+}
+
+/// Right-handed rotation about one coordinate axis.
 fn axis_rotation(axis: usize, a: f64) -> Matrix3<f64> {
     let (s, c) = a.sin_cos();
     match axis {

@@ -1,0 +1,248 @@
+//! Retargeting on the real corpus: takes of CMU, Bandai Namco and Mixamo put on each
+//! other's skeletons and on the standard rigs, every mapped bone measured against the
+//! source's own forward kinematics (its file read by the format reader, not by anything
+//! retargeting computed).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use mocapstore::corpus::{self, Entry};
+use mocapstore::motion::body::{Body, Given, Roles};
+use mocapstore::motion::formats::{self, Loaded, ReadOptions};
+use mocapstore::motion::retarget::{Figure, Retarget};
+use mocapstore::motion::rigs;
+use mocapstore::motion::skeleton::{rest_values, Animation, Joint};
+use mocapstore::motion::transform::Axis;
+use nalgebra::Vector3;
+
+fn corpus() -> Option<(PathBuf, Vec<Entry>)> {
+    corpus::for_tests()
+}
+
+fn read(root: &Path, path: &str) -> Loaded {
+    let bytes = std::fs::read(root.join(path)).unwrap_or_else(|e| panic!("{path}: {e}"));
+    formats::read(&bytes, &ReadOptions::default()).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+/// A corpus take as retargeting sees it.
+struct Take {
+    path: String,
+    rig: &'static str,
+    joints: Vec<Joint>,
+    values: Vec<f64>,
+    roles: Roles,
+    up: Axis,
+    floor: f64,
+    metres_per_unit: f64,
+}
+
+impl Take {
+    fn load(root: &Path, path: &str, rig: &'static str) -> Take {
+        let l = read(root, path);
+        let body = Body::of(&l.motion, Given::default(), l.up.as_ref()).unwrap();
+        let s = l.motion.skeleton.clone().expect("a skeleton take");
+        let mpu = l.motion.unit.metres_per_unit;
+        Take {
+            path: path.to_string(),
+            rig,
+            joints: s.joints,
+            values: s.values,
+            roles: body.roles,
+            up: body.axes.up.unwrap_or_else(|| panic!("{path}: no up")),
+            floor: body.axes.floor_m.unwrap_or(0.0) / mpu,
+            metres_per_unit: mpu,
+        }
+    }
+
+    fn figure(&self) -> Figure<'_> {
+        Figure {
+            joints: &self.joints,
+            rest: rest_values(&self.joints),
+            roles: &self.roles,
+            up: self.up,
+            floor: self.floor,
+            metres_per_unit: self.metres_per_unit,
+        }
+    }
+}
+
+/// A skeleton to put takes on.
+struct Target {
+    name: String,
+    joints: Vec<Joint>,
+    roles: Roles,
+    up: Axis,
+    metres_per_unit: f64,
+}
+
+impl Target {
+    fn figure(&self) -> Figure<'_> {
+        Figure {
+            joints: &self.joints,
+            rest: rest_values(&self.joints),
+            roles: &self.roles,
+            up: self.up,
+            floor: 0.0,
+            metres_per_unit: self.metres_per_unit,
+        }
+    }
+}
+
+fn positions(joints: &[Joint], values: Vec<f64>) -> Vec<Vector3<f64>> {
+    Animation::new(joints.to_vec(), values)
+        .unwrap()
+        .forward_kinematics()
+        .chunks_exact(3)
+        .map(|p| Vector3::new(p[0], p[1], p[2]))
+        .collect()
+}
+
+/// Frames looked at per take: evenly spread over it.
+const FRAMES: usize = 240;
+
+/// The angle (degrees) of every mapped bone of the sampled frames between the target's
+/// and the source's (turned to the target's world); the rig-shape bones apart.
+fn angles(take: &Take, target: &Target) -> (Vec<f64>, Vec<f64>) {
+    let mut r = Retarget::new(&take.figure(), &target.figure())
+        .unwrap_or_else(|e| panic!("{} on {}: {e}", take.path, target.name));
+    let cc = r.channels_in();
+    let frames = take.values.len() / cc;
+    let step = (frames / FRAMES).max(1);
+    let picked: Vec<f64> = (0..frames)
+        .step_by(step)
+        .flat_map(|f| take.values[f * cc..(f + 1) * cc].to_vec())
+        .collect();
+    let n = picked.len() / cc;
+    let mut written = Vec::new();
+    for f in picked.chunks_exact(cc) {
+        r.frame(f, &mut written);
+    }
+    let sp = positions(&take.joints, picked);
+    let tp = positions(r.joints(), written);
+    let (ns, nt) = (take.joints.len(), r.joints().len());
+    let m = r.mapping();
+    let (mut moving, mut shape) = (Vec::new(), Vec::new());
+    for f in 0..n {
+        for b in m.bones(r.joints()) {
+            let (pa, pc) = (&m.pairs[b.from], &m.pairs[b.to]);
+            let t = tp[f * nt + pc.target] - tp[f * nt + pa.target];
+            let s = m.turn() * (sp[f * ns + pc.source] - sp[f * ns + pa.source]);
+            if t.norm() > 1e-9 && s.norm() > 1e-9 {
+                let a = t.angle(&s).to_degrees();
+                if b.shape {
+                    shape.push(a);
+                } else {
+                    moving.push(a);
+                }
+            }
+        }
+    }
+    (moving, shape)
+}
+
+/// Angles of the bones that move, and of the rig-shape ones.
+type Angles = (Vec<f64>, Vec<f64>);
+
+fn percentile(v: &mut [f64], p: usize) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[(v.len() * p / 100).min(v.len() - 1)]
+}
+
+/// Twenty corpus takes (4 CMU, 10 Bandai Namco, Mixamo's BVH rig and 5 Mixamo glTF
+/// animations) on the skeletons of each other rig and on the standard ones: every mapped
+/// bone's angle to the source's, median ≤ 5° and 95th percentile ≤ 15° for every pair.
+#[test]
+fn every_mapped_bone_points_where_the_sources_does_between_corpus_rigs() {
+    let Some((root, entries)) = corpus() else {
+        return;
+    };
+    let mut bandai: Vec<&str> = entries
+        .iter()
+        .map(|e| e.path.as_str())
+        .filter(|p| p.starts_with("bvh/bandai/"))
+        .collect();
+    bandai.sort_unstable();
+    // Ten of its 174, spread over the actions (the names sort by action).
+    let step = bandai.len() / 10;
+    let mut takes: Vec<Take> = ["01_01", "01_03", "131_01", "131_02"]
+        .iter()
+        .map(|n| Take::load(&root, &format!("bvh/cmu/{n}.bvh"), "cmu"))
+        .collect();
+    takes.extend(
+        bandai
+            .iter()
+            .step_by(step)
+            .take(10)
+            .map(|p| Take::load(&root, p, "bandai")),
+    );
+    takes.push(Take::load(&root, "bvh/misc/mixamo_rig.bvh", "mixamo-bvh"));
+    for g in [
+        "walking",
+        "dancing",
+        "flair",
+        "dynamic_pose",
+        "breathing_idle",
+    ] {
+        takes.push(Take::load(
+            &root,
+            &format!("gltf/mixamo_{g}.glb"),
+            "mixamo-gltf",
+        ));
+    }
+    assert_eq!(takes.len(), 20);
+    // Each corpus rig's skeleton (its first take's) and the standard rigs.
+    let mut targets: Vec<Target> = Vec::new();
+    for rig in ["cmu", "bandai", "mixamo-bvh", "mixamo-gltf"] {
+        let t = takes.iter().find(|t| t.rig == rig).unwrap();
+        targets.push(Target {
+            name: rig.to_string(),
+            joints: t.joints.clone(),
+            roles: t.roles.clone(),
+            up: t.up,
+            metres_per_unit: t.metres_per_unit,
+        });
+    }
+    for rig in rigs::all() {
+        targets.push(Target {
+            name: rig.name.to_string(),
+            roles: Roles::of_skeleton(&rig.joints),
+            joints: rig.joints,
+            up: Axis::Y,
+            metres_per_unit: 1.0,
+        });
+    }
+    let mut table: BTreeMap<(&str, String), Angles> = BTreeMap::new();
+    for take in &takes {
+        for target in &targets {
+            if target.name == take.rig {
+                continue;
+            }
+            let (m, s) = angles(take, target);
+            let row = table.entry((take.rig, target.name.clone())).or_default();
+            row.0.extend(m);
+            row.1.extend(s);
+        }
+    }
+    eprintln!(
+        "{:<12} {:<12} {:>8} {:>7} {:>7} {:>7} | rig-shape bones: {:>6} {:>7}",
+        "source", "target", "bones", "median", "p95", "max", "median", "p95"
+    );
+    let mut failed = Vec::new();
+    for ((from, to), (mut m, mut s)) in table {
+        let (med, p95) = (percentile(&mut m, 50), percentile(&mut m, 95));
+        let max = m.last().copied().unwrap_or(f64::NAN);
+        eprintln!(
+            "{from:<12} {to:<12} {:>8} {med:>7.2} {p95:>7.2} {max:>7.2} | {:>22.2} {:>7.2}",
+            m.len(),
+            percentile(&mut s, 50),
+            percentile(&mut s, 95)
+        );
+        if !(med <= 5.0 && p95 <= 15.0) {
+            failed.push(format!("{from} → {to}: median {med:.2}°, 95th {p95:.2}°"));
+        }
+    }
+    assert!(failed.is_empty(), "{failed:#?}");
+}
