@@ -31,6 +31,7 @@ use crate::service::choose::{CodecRequest, Keep};
 use crate::service::fetch::{self, TimeRange};
 use crate::service::ingest::{self, IngestRequest};
 use crate::service::ranges::{self, Part, Ranges, RangesRequest};
+use crate::service::retarget::{self, Onto};
 use crate::service::take::Label;
 
 #[derive(Debug, Default, PartialEq, Deserialize)]
@@ -347,6 +348,9 @@ pub struct FramesQuery {
     up: Option<String>,
     /// mm, cm, m, in, …
     unit: Option<String>,
+    /// The skeleton to put the take on: a standard rig's name, a stored skeleton's id or
+    /// `take:ID`.
+    skeleton: Option<String>,
 }
 
 /// A range request's query as the range, output format, points and transforms it asks for.
@@ -380,7 +384,16 @@ pub fn frames_request(q: FramesQuery) -> Result<RangeRequest, ApiError> {
         format,
         points,
         transform,
+        onto: None,
     })
+}
+
+/// `skeleton=`, parsed.
+pub fn onto_of(skeleton: Option<&str>) -> Result<Option<Onto>, ApiError> {
+    skeleton
+        .map(str::parse)
+        .transpose()
+        .map_err(ApiError::bad_request)
 }
 
 /// The transforms a query asks for (`fps`, `root`, `up`, `unit`), parsed.
@@ -409,11 +422,16 @@ pub fn transform_of(
 pub async fn frames(
     State(state): State<AppState>,
     Extension(holder): Extension<Holder>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
     query: Result<Query<FramesQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let Query(q) = query?;
-    let request = frames_request(q)?;
+    let Query(mut q) = query?;
+    let onto = onto_of(q.skeleton.take().as_deref())?;
+    let mut request = frames_request(q)?;
+    if let Some(onto) = onto {
+        request.onto = Some(retarget::target(&state.store, &caller.grant, &onto).await?);
+    }
     let a = answer::open(
         &state.store,
         &state.caches,

@@ -244,8 +244,9 @@ fn mirrored(rows: &[Row]) -> Vec<(String, Option<String>, [f64; 3], bool)> {
     out
 }
 
-/// Joints from rows of rest places, parents first (a parent's row comes before its
-/// children's in every table here).
+/// Joints from rows of rest places (a parent's row comes before its children's in every
+/// table here), in the order a BVH file lists them: each joint's subtree whole before its
+/// next sibling, as a file's channel values run (tables list the two sides in turn).
 fn joints(rows: Vec<(String, Option<String>, [f64; 3], bool)>) -> Vec<Joint> {
     let mut out: Vec<Joint> = Vec::with_capacity(rows.len());
     let mut places: Vec<[f64; 3]> = Vec::with_capacity(rows.len());
@@ -277,7 +278,35 @@ fn joints(rows: Vec<(String, Option<String>, [f64; 3], bool)>) -> Vec<Joint> {
         });
         places.push(at);
     }
-    out
+    depth_first(out)
+}
+
+/// `joints` (parents first) reordered depth first, siblings in their order, parents renumbered.
+fn depth_first(joints: Vec<Joint>) -> Vec<Joint> {
+    let mut order = Vec::with_capacity(joints.len());
+    let mut stack: Vec<usize> = (0..joints.len())
+        .filter(|&i| joints[i].parent.is_none())
+        .rev()
+        .collect();
+    while let Some(i) = stack.pop() {
+        order.push(i);
+        stack.extend(
+            (0..joints.len())
+                .filter(|&c| joints[c].parent == Some(i))
+                .rev(),
+        );
+    }
+    let mut at = vec![0; joints.len()];
+    for (new, &old) in order.iter().enumerate() {
+        at[old] = new;
+    }
+    order
+        .iter()
+        .map(|&old| Joint {
+            parent: joints[old].parent.map(|p| at[p]),
+            ..joints[old].clone()
+        })
+        .collect()
 }
 
 /// Every standard rig, by name.
@@ -347,5 +376,22 @@ mod tests {
             assert!((1.3..1.8).contains(&height), "{}: {height}", rig.name);
         }
         assert!(named("mixamo").is_some() && named("nope").is_none());
+        // Depth first, as a BVH file's values run: each joint follows its parent or a
+        // subtree that ends with a sibling of it (its parent's earlier child's last joint).
+        for rig in all() {
+            let mut open: Vec<usize> = Vec::new();
+            for (i, j) in rig.joints.iter().enumerate() {
+                while open.last().is_some_and(|&o| Some(o) != j.parent) {
+                    open.pop();
+                }
+                assert!(
+                    j.parent.is_none() || open.last() == j.parent.as_ref(),
+                    "{}: {} out of depth-first order",
+                    rig.name,
+                    j.name
+                );
+                open.push(i);
+            }
+        }
     }
 }

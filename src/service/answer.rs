@@ -108,6 +108,8 @@ pub struct RangeRequest {
     pub format: Format,
     /// Frame rate, root motion, up axis and unit of the answer ([`super::shape`]).
     pub transform: Options,
+    /// The skeleton the take's motion is put on (`skeleton=`); `None` keeps its own.
+    pub onto: Option<Arc<super::retarget::Target>>,
 }
 
 /// One answer, open: what it holds (for the response's headers) and its pieces, taken with
@@ -477,6 +479,18 @@ async fn plan(
     let req = req.clone();
     let (prepared, (start, asked_end)) = prepare(store, caches, id, req.range).await?;
     let transform = transform_for(req.format, req.transform)?;
+    let onto = req.onto.as_deref();
+    if onto.is_some()
+        && !matches!(
+            req.format,
+            Format::Bvh | Format::Glb | Format::Gltf | Format::Fbx
+        )
+    {
+        return Err(Error::InvalidRequest(format!(
+            "skeleton= puts the take on a skeleton, which {} does not hold: ask for              format=bvh, glb, gltf or fbx",
+            req.format
+        )));
+    }
     // Resampled, the range's last output frames may lie past its last source frame: they
     // are interpolated from the frames after it (C3D keeps its range: its analog and
     // outputs go frame for frame with the points).
@@ -530,8 +544,8 @@ async fn plan(
             // As many samples as the skeleton's joints and End Sites would be as points.
             check_size(frames_out, prepared.point_names.len(), limits)?;
             let rig = channels_rig(store, &prepared).await?;
-            let shaper = (!transform.is_identity())
-                .then(|| Shaper::channels(&prepared, rig.joints(), &transform, frames))
+            let shaper = (!transform.is_identity() || onto.is_some())
+                .then(|| Shaper::channels(&prepared, rig.joints(), &transform, frames, onto))
                 .transpose()?
                 .map(|s| s.limited(frames_out));
             Plan::channels(
@@ -628,9 +642,10 @@ async fn plan(
             check_size(frames_out, prepared.point_names.len(), limits)?;
             let keeps =
                 codec::codec(prepared.reader.header().codec).is_ok_and(|c| c.codes_channels());
-            let shaper = if keeps {
+            let shaper = if keeps || onto.is_some() {
                 let rig = channels_rig(store, &prepared).await?;
-                Shaper::channels(&prepared, rig.joints(), &transform, frames)?.limited(frames_out)
+                Shaper::channels(&prepared, rig.joints(), &transform, frames, onto)?
+                    .limited(frames_out)
             } else {
                 Shaper::points(&prepared, &transform, frames, None)?.limited(frames_out)
             };
@@ -673,7 +688,7 @@ async fn plan(
                 w.space = (
                     transform
                         .metres_per_unit
-                        .unwrap_or(prepared.metres_per_unit),
+                        .unwrap_or(onto.map_or(prepared.metres_per_unit, |t| t.metres_per_unit)),
                     transform.up.unwrap_or(Axis::Y),
                 );
             }
@@ -747,7 +762,7 @@ async fn plan(
     let fps = transform.fps.unwrap_or(prepared.fps);
     let metres_per_unit = transform
         .metres_per_unit
-        .unwrap_or(prepared.metres_per_unit);
+        .unwrap_or(onto.map_or(prepared.metres_per_unit, |t| t.metres_per_unit));
     Ok(Planned {
         prepared,
         start,
@@ -1129,7 +1144,7 @@ impl Answer {
         };
         let channels = match (&self.writer, &self.shaper) {
             (Writer::Channels { channels, .. }, _) => *channels,
-            (_, Some(Shaper::Channels { pose, .. })) => pose.channels_in(),
+            (_, Some(s @ Shaper::Channels { .. })) => s.channels_in(),
             _ => 0,
         };
         let frames = part.len();

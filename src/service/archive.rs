@@ -385,6 +385,7 @@ pub async fn export_take(store: &Store, with: &ReadWith, take: Take) -> Result<E
             points: None,
             format,
             transform: Options::default(),
+            onto: None,
         },
     )
     .await?;

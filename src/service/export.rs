@@ -610,6 +610,7 @@ impl Export {
             points: None,
             format: self.format,
             transform: self.transform,
+            onto: None,
         };
         let budget = self.budget.clone();
         let parent = &self.reservation;

@@ -46,6 +46,7 @@ pub mod motion_stats;
 pub mod outputs;
 pub mod prepared;
 pub mod ranges;
+pub mod retarget;
 pub mod search;
 pub mod shape;
 pub mod skeletons;

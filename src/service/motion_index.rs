@@ -197,6 +197,7 @@ impl MotionIndex {
             points: None,
             format: Format::F32,
             transform: reading(),
+            onto: None,
         };
         let budget = self.budget.clone();
         let holder = Holder::Token("(motion index)".into());

@@ -430,6 +430,7 @@ impl Run<'_> {
             points: self.req.points.clone(),
             format: Format::F32,
             transform: self.transform,
+            onto: None,
         };
         let (budget, holder) = (self.budget.clone(), self.holder.clone());
         let a = answer::open_waiting(

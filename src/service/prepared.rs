@@ -104,6 +104,8 @@ pub struct Prepared {
     pub bound: crate::codec::ErrorBound,
     /// What transforms need of the take's body: up, the pelvis, the floor.
     pub stance: crate::motion::transform::Stance,
+    /// The take's body (its roles: what retargeting maps); `None` until derived.
+    pub body: Option<crate::motion::body::Body>,
 }
 
 impl Prepared {
@@ -131,6 +133,7 @@ impl Prepared {
                 ),
                 None => crate::motion::transform::Stance::default(),
             },
+            body: take.body(),
         })
     }
 
@@ -356,6 +359,7 @@ mod tests {
             name: id.into(),
             bound: ErrorBound::max(1.0),
             stance: Default::default(),
+            body: None,
         })
     }
 

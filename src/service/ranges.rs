@@ -138,6 +138,7 @@ fn part_request(batch: &RangesRequest, part: &Part, transform: Options) -> Range
         points: batch.points.clone(),
         format: batch.format,
         transform,
+        onto: None,
     }
 }
 

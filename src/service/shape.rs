@@ -4,8 +4,10 @@
 //! and decides which transform a take can take.
 
 use super::prepared::Prepared;
+use super::retarget::Target;
 use super::{Error, Result};
 use crate::motion::rate;
+use crate::motion::retarget::Retarget;
 use crate::motion::skeleton::Joint;
 use crate::motion::transform::channels::Channels;
 use crate::motion::transform::pose::{PointPose, SkeletonPose};
@@ -24,10 +26,12 @@ pub enum Shaper {
         /// Indices into the transformed frame's points.
         selected: Vec<usize>,
     },
-    /// A skeleton's channel values.
+    /// A skeleton's channel values: resampled, put on another skeleton (`skeleton=`),
+    /// then posed.
     Channels {
         fps: Option<f64>,
         resampler: Option<Resampler<Channels>>,
+        retarget: Option<Box<Retarget>>,
         pose: Box<SkeletonPose>,
     },
 }
@@ -156,20 +160,32 @@ impl Shaper {
         }
     }
 
-    /// The shaper of a skeleton's channels (`joints`) of `frames` source frames.
+    /// The shaper of a skeleton's channels (`joints`) of `frames` source frames, put on
+    /// `onto` when asked.
     pub fn channels(
         prepared: &Prepared,
         joints: &[Joint],
         options: &Options,
         frames: usize,
+        onto: Option<&Target>,
     ) -> Result<Shaper> {
         check(options)?;
-        let pose = SkeletonPose::new(options, joints, &prepared.stance, prepared.metres_per_unit)
-            .map_err(refused)?;
+        let (retarget, pose) = match onto {
+            None => (
+                None,
+                SkeletonPose::new(options, joints, &prepared.stance, prepared.metres_per_unit),
+            ),
+            Some(target) => {
+                let (r, stance) = super::retarget::retargeter(prepared, joints, target)?;
+                let pose = SkeletonPose::new(options, r.joints(), &stance, target.metres_per_unit);
+                (Some(Box::new(r)), pose)
+            }
+        };
         Ok(Shaper::Channels {
             fps: options.fps,
             resampler: resampler(Channels::new(joints), prepared, options, frames),
-            pose: Box::new(pose),
+            retarget,
+            pose: Box::new(pose.map_err(refused)?),
         })
     }
 
@@ -187,6 +203,17 @@ impl Shaper {
         match self {
             Shaper::Channels { pose, .. } => Some(pose.joints()),
             Shaper::Points { .. } => None,
+        }
+    }
+
+    /// Channels a source frame has (a skeleton's shaper).
+    pub fn channels_in(&self) -> usize {
+        match self {
+            Shaper::Channels {
+                retarget: Some(r), ..
+            } => r.channels_in(),
+            Shaper::Channels { pose, .. } => pose.channels_in(),
+            Shaper::Points { .. } => 0,
         }
     }
 
@@ -238,7 +265,10 @@ impl Shaper {
     /// are ready.
     pub fn channel_values(&mut self, decoded: &[f64]) -> Vec<f64> {
         let Shaper::Channels {
-            resampler, pose, ..
+            resampler,
+            retarget,
+            pose,
+            ..
         } = self
         else {
             unreachable!("a channels block is shaped by a channels shaper")
@@ -253,10 +283,25 @@ impl Shaper {
             }
             None => decoded,
         };
-        let w = pose.channels_in().max(1);
-        let mut out = Vec::with_capacity(frames.len() / w * pose.channels_out());
-        for f in frames.chunks_exact(w) {
-            pose.frame(f, &mut out);
+        let mut out = Vec::new();
+        match retarget {
+            None => {
+                let w = pose.channels_in().max(1);
+                out.reserve(frames.len() / w * pose.channels_out());
+                for f in frames.chunks_exact(w) {
+                    pose.frame(f, &mut out);
+                }
+            }
+            Some(r) => {
+                let w = r.channels_in().max(1);
+                out.reserve(frames.len() / w * pose.channels_out());
+                let mut on = Vec::with_capacity(r.channels_out());
+                for f in frames.chunks_exact(w) {
+                    on.clear();
+                    r.frame(f, &mut on);
+                    pose.frame(&on, &mut out);
+                }
+            }
         }
         out
     }

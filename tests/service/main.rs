@@ -27,6 +27,7 @@ mod motion_stats;
 mod openapi;
 mod python;
 mod ranges;
+mod retarget;
 mod robustness;
 mod search;
 mod skeletons;

@@ -1,0 +1,250 @@
+//! `skeleton=`: the skeleton an answer puts a take's motion on. A standard rig shipped with
+//! the service ([`crate::motion::rigs`]), a stored skeleton, or the skeleton of another
+//! take, resolved once per request into a [`Target`]; the math is
+//! [`crate::motion::retarget`].
+
+use std::str::FromStr;
+use std::sync::Arc;
+
+use super::access::{check_take, Grant};
+use super::prepared::Prepared;
+use super::{Error, Result};
+use crate::motion::body::{Axes, Body, Roles};
+use crate::motion::retarget::{Figure, Retarget};
+use crate::motion::rigs;
+use crate::motion::skeleton::{rest_places, rest_values, Joint};
+use crate::motion::transform::{Axis, Stance};
+use crate::store::Store;
+
+/// What `skeleton=` names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Onto {
+    /// A standard rig, by name (`mixamo`, `smpl`).
+    Rig(&'static str),
+    /// A stored skeleton, by id (`GET /v1/skeletons`).
+    Skeleton(String),
+    /// The skeleton of a stored take (`take:ID`), with that take's roles and axes.
+    Take(String),
+}
+
+impl FromStr for Onto {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Onto, String> {
+        let s = s.trim();
+        if let Some(id) = s.strip_prefix("take:") {
+            if id.is_empty() {
+                return Err("skeleton=take: needs a take id after the colon".into());
+            }
+            return Ok(Onto::Take(id.to_string()));
+        }
+        if let Some(rig) = rigs::all()
+            .into_iter()
+            .find(|r| r.name.eq_ignore_ascii_case(s))
+        {
+            return Ok(Onto::Rig(rig.name));
+        }
+        if !s.is_empty() && s.len() <= 128 && s.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return Ok(Onto::Skeleton(s.to_ascii_lowercase()));
+        }
+        let names: Vec<&str> = rigs::all().iter().map(|r| r.name).collect();
+        Err(format!(
+            "skeleton={s:?} is not a standard rig ({}), a stored skeleton's id (GET \
+             /v1/skeletons) or take:ID",
+            names.join(", ")
+        ))
+    }
+}
+
+/// A skeleton to put takes on, with what retargeting needs of it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Target {
+    /// What the request named (`mixamo`, a skeleton id, `take:ID`).
+    pub name: String,
+    pub joints: Vec<Joint>,
+    pub roles: Roles,
+    /// Its world's up: the take's body's, +Y for a standard rig, and for a stored skeleton
+    /// the axis its rest pose stands along (BVH's +Y when its rest is no standing body).
+    pub up: Axis,
+    pub metres_per_unit: f64,
+}
+
+impl Target {
+    /// The figure retargeting maps onto (standing on its origin's level).
+    pub fn figure(&self) -> Figure<'_> {
+        Figure {
+            joints: &self.joints,
+            rest: rest_values(&self.joints),
+            roles: &self.roles,
+            up: self.up,
+            floor: 0.0,
+            metres_per_unit: self.metres_per_unit,
+        }
+    }
+}
+
+/// The target `onto` names, as `grant` may see it (another take's or a stored skeleton
+/// outside its libraries is not found).
+pub async fn target(store: &Store, grant: &Grant, onto: &Onto) -> Result<Arc<Target>> {
+    Ok(Arc::new(match onto {
+        Onto::Rig(name) => {
+            let rig = rigs::named(name).ok_or_else(|| Error::NotFound(format!("rig {name}")))?;
+            Target {
+                name: rig.name.to_string(),
+                roles: Roles::of_skeleton(&rig.joints),
+                joints: rig.joints,
+                up: Axis::Y,
+                metres_per_unit: 1.0,
+            }
+        }
+        Onto::Skeleton(id) => {
+            let (row, rig) = super::skeletons::get(store, id, grant).await?;
+            let joints = rig.joints().to_vec();
+            Target {
+                name: row.id,
+                roles: super::skeletons::roles(&rig),
+                up: standing_up(&joints, &super::skeletons::roles(&rig)),
+                metres_per_unit: unit_of(&joints),
+                joints,
+            }
+        }
+        Onto::Take(id) => {
+            check_take(store, grant, id).await?;
+            let take = super::fetch::take(store, id).await?;
+            let skeleton = take.skeleton.clone().ok_or_else(|| {
+                Error::Unsatisfiable(format!(
+                    "take {id} is point data: it has no skeleton to put motion on"
+                ))
+            })?;
+            let body = take.body().ok_or_else(|| {
+                Error::Unsatisfiable(format!(
+                    "take {id}'s body is not derived yet; retry shortly"
+                ))
+            })?;
+            let up = body.axes.up.ok_or_else(|| {
+                Error::Unsatisfiable(format!(
+                    "take {id}'s body does not tell its up axis: give it by PATCH \
+                     /v1/takes/{id} {{\"body\": {{\"up\": \"y\"}}}}"
+                ))
+            })?;
+            let rig = super::skeletons::load(store, &skeleton).await?;
+            Target {
+                name: format!("take:{id}"),
+                joints: rig.joints().to_vec(),
+                roles: body.roles,
+                up,
+                metres_per_unit: take.metres_per_unit,
+            }
+        }
+    }))
+}
+
+/// A stored skeleton's unit (it keeps none; its takes do), from its rest pose's height as
+/// a take's is inferred; metres when that tells nothing.
+fn unit_of(joints: &[Joint]) -> f64 {
+    let height = crate::motion::skeleton::Animation {
+        joints: joints.to_vec(),
+        values: Vec::new(),
+        printed: None,
+    }
+    .rest_height();
+    crate::motion::units::Unit::infer_from_height(height).map_or(1.0, |u| u.metres_per_unit)
+}
+
+/// The axis a skeleton's rest pose stands along (pelvis below head within 30° of it), or
+/// BVH's +Y when the rest is no standing body (Bandai's rest lays every bone along x).
+fn standing_up(joints: &[Joint], roles: &Roles) -> Axis {
+    use crate::motion::body::Role;
+    let names: Vec<String> = joints.iter().map(|j| j.name.clone()).collect();
+    let at = rest_places(joints);
+    let one = |r: Role| roles.points(r, &names).first().map(|&i| at[i]);
+    let (Some(p), Some(h)) = (one(Role::Pelvis), one(Role::Head).or(one(Role::Neck))) else {
+        return Axis::Y;
+    };
+    let v = nalgebra::Vector3::new(h[0] - p[0], h[1] - p[1], h[2] - p[2]);
+    match Axis::nearest(&v) {
+        Some(a) if v.norm() > 0.0 && a.vector().dot(&v) / v.norm() > 30f64.to_radians().cos() => a,
+        _ => Axis::Y,
+    }
+}
+
+/// The retargeter of a take's skeleton (`joints`, its stored body's roles and axes) onto
+/// `target`, and the stance of the frames it writes (the target's pelvis, up and sides;
+/// the take's forward turned to the target's world), for the transforms after it.
+pub fn retargeter(
+    prepared: &Prepared,
+    joints: &[Joint],
+    target: &Target,
+) -> Result<(Retarget, Stance)> {
+    let body = prepared.body.as_ref().ok_or_else(|| {
+        Error::Unsatisfiable(format!(
+            "take {}'s body is not derived yet; retry shortly",
+            prepared.id
+        ))
+    })?;
+    let up = prepared
+        .stance
+        .up_for("skeleton=")
+        .map_err(|e| Error::Unsatisfiable(e.to_string()))?;
+    let source = Figure {
+        joints,
+        rest: rest_values(joints),
+        roles: &body.roles,
+        up,
+        floor: prepared.stance.floor,
+        metres_per_unit: prepared.metres_per_unit,
+    };
+    let r = Retarget::new(&source, &target.figure()).map_err(|e| match e {
+        crate::motion::Error::Unsupported(m) => Error::Unsatisfiable(m),
+        other => Error::Unsatisfiable(other.to_string()),
+    })?;
+    let forward = prepared
+        .stance
+        .forward
+        .and_then(|f| Axis::nearest(&(r.mapping().turn() * f.vector())));
+    let names: Vec<String> = target.joints.iter().map(|j| j.name.clone()).collect();
+    let written = Body {
+        axes: Axes {
+            up: Some(target.up),
+            forward,
+            floor_m: Some(0.0),
+            up_from: None,
+            forward_from: None,
+            reason: String::new(),
+        },
+        roles: target.roles.clone(),
+    };
+    let stance = Stance::of(&written, &names, target.metres_per_unit);
+    Ok((r, stance))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_parse() {
+        assert_eq!("mixamo".parse::<Onto>().unwrap(), Onto::Rig("mixamo"));
+        assert_eq!("SMPL".parse::<Onto>().unwrap(), Onto::Rig("smpl"));
+        assert_eq!(
+            "take:0192f0c1-aa".parse::<Onto>().unwrap(),
+            Onto::Take("0192f0c1-aa".into())
+        );
+        assert_eq!(
+            "ABCDEF0123".parse::<Onto>().unwrap(),
+            Onto::Skeleton("abcdef0123".into())
+        );
+        let e = "unreal".parse::<Onto>().unwrap_err();
+        assert!(e.contains("mixamo, smpl") && e.contains("take:ID"), "{e}");
+        assert!("take:".parse::<Onto>().is_err());
+    }
+
+    #[test]
+    fn a_standard_rig_stands_along_y() {
+        for rig in rigs::all() {
+            assert_eq!(
+                standing_up(&rig.joints, &Roles::of_skeleton(&rig.joints)),
+                Axis::Y
+            );
+        }
+    }
+}

@@ -1,0 +1,150 @@
+//! Issue 52: `skeleton=` puts a take on another skeleton. The source's bones are read from
+//! its own file and the answer's from the BVH the service wrote, both by the independent
+//! `scripts/bvh-fk.py`, never by the service's own forward kinematics.
+
+use crate::common;
+
+use mocapstore::corpus;
+use nalgebra::Vector3;
+use serde_json::Value;
+
+fn point(v: &Value) -> Vector3<f64> {
+    Vector3::new(
+        v[0].as_f64().unwrap(),
+        v[1].as_f64().unwrap(),
+        v[2].as_f64().unwrap(),
+    )
+}
+
+/// Bones (parent, child) named alike in CMU's files and on Mixamo's rig (there under
+/// `mixamorig:`).
+const BONES: &[(&str, &str)] = &[
+    ("LeftArm", "LeftForeArm"),
+    ("LeftForeArm", "LeftHand"),
+    ("RightArm", "RightForeArm"),
+    ("LeftUpLeg", "LeftLeg"),
+    ("LeftLeg", "LeftFoot"),
+    ("RightLeg", "RightFoot"),
+    ("RightFoot", "RightToeBase"),
+    ("Neck", "Head"),
+];
+
+/// A CMU walk as BVH on Mixamo's rig: its bones point where the source file's do in every
+/// frame, its feet stay under its head, it keeps the take's frames and rate, and it is in
+/// metres (the rig's unit). Asked of another take's skeleton (`take:ID`), a Bandai one, it
+/// answers on Bandai's joints. What cannot be answered says why.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_cmu_walk_on_mixamos_rig_moves_its_bones_as_the_source_does() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let Some(python) = common::python() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let path = root.join("bvh/cmu/01_01.bvh");
+    // Kept exactly, so that what is measured is the retargeting alone.
+    let (status, report) = srv
+        .post(
+            "name=walk&codec=bvh-lossless",
+            std::fs::read(&path).unwrap(),
+        )
+        .await;
+    assert_eq!(status, 201, "{report}");
+    let id = report["id"].as_str().unwrap().to_string();
+    let (status, headers, bvh) = srv
+        .get(&format!("/v1/takes/{id}/frames?format=bvh&skeleton=mixamo"))
+        .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&bvh));
+    assert_eq!(headers["x-metres-per-unit"], "1");
+    let dir = std::env::temp_dir().join(format!("mocapstore-retarget-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("on-mixamo.bvh");
+    std::fs::write(&file, &bvh).unwrap();
+    let source = common::script(&python, "bvh-fk.py", [&path]);
+    let out = common::script(&python, "bvh-fk.py", [&file]);
+    let (sn, on) = (
+        common::strings(&source["names"]),
+        common::strings(&out["names"]),
+    );
+    assert!(on.contains(&"mixamorig:Hips") && !on.contains(&"LowerBack"));
+    let (sp, op) = (
+        source["positions"].as_array().unwrap(),
+        out["positions"].as_array().unwrap(),
+    );
+    assert_eq!(sp.len(), op.len(), "frames");
+    assert_eq!(source["frame_time"], out["frame_time"]);
+    let at = |names: &[&str], n: &str| {
+        names
+            .iter()
+            .position(|m| *m == n)
+            .unwrap_or_else(|| panic!("no joint {n}"))
+    };
+    let mut worst = 0.0f64;
+    for (f, (a, b)) in sp.iter().zip(op).enumerate() {
+        for (sa, sb) in BONES {
+            let s = point(&a[at(&sn, sb)]) - point(&a[at(&sn, sa)]);
+            let o = point(&b[at(&on, &format!("mixamorig:{sb}"))])
+                - point(&b[at(&on, &format!("mixamorig:{sa}"))]);
+            // CMU 01_01 is Y-up like the rig: no turn between their worlds.
+            let angle = s.angle(&o).to_degrees();
+            worst = worst.max(angle);
+            assert!(angle < 1.0, "frame {f} {sa}→{sb}: {angle:.2}°");
+        }
+        let head = point(&b[at(&on, "mixamorig:Head")]);
+        for foot in ["mixamorig:LeftFoot", "mixamorig:RightFoot"] {
+            let foot = point(&b[at(&on, foot)]);
+            assert!(head.y - foot.y > 1.0, "frame {f}: head {head}, foot {foot}");
+        }
+    }
+    eprintln!(
+        "CMU 01_01 on mixamo: worst bone {worst:.3}° over {} frames",
+        sp.len()
+    );
+
+    // Another take's skeleton: a Bandai walk's.
+    let bandai = root.join("bvh/bandai/dataset-1_walk_normal_001.bvh");
+    let (status, report) = srv
+        .post("name=bandai", std::fs::read(&bandai).unwrap())
+        .await;
+    assert_eq!(status, 201, "{report}");
+    let other = report["id"].as_str().unwrap().to_string();
+    let (status, _, on_bandai) = srv
+        .get(&format!(
+            "/v1/takes/{id}/frames?format=bvh&skeleton=take:{other}&t0=0&t1=1"
+        ))
+        .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&on_bandai));
+    let text = String::from_utf8_lossy(&on_bandai);
+    assert!(text.contains("ROOT joint_Root") && text.contains("UpperArm_L"));
+    // And as glTF and FBX.
+    for format in ["glb", "fbx"] {
+        let (status, _, body) = srv
+            .get(&format!(
+                "/v1/takes/{id}/frames?format={format}&skeleton=smpl&t0=0&t1=1"
+            ))
+            .await;
+        assert_eq!(status, 200, "{format}: {}", String::from_utf8_lossy(&body));
+        assert!(body.windows(10).any(|w| w == b"left_elbow"), "{format}");
+    }
+
+    // Refusals.
+    for (query, status, says) in [
+        ("format=bvh&skeleton=unreal", 400, "not a standard rig"),
+        (
+            "format=json&skeleton=mixamo",
+            400,
+            "format=bvh, glb, gltf or fbx",
+        ),
+        ("format=bvh&skeleton=take:nope", 404, "nope"),
+        ("format=bvh&skeleton=abcdef", 404, "skeleton abcdef"),
+    ] {
+        let (s, _, body) = srv.get(&format!("/v1/takes/{id}/frames?{query}")).await;
+        let text = String::from_utf8_lossy(&body);
+        assert_eq!(s, status, "{query}: {text}");
+        assert!(text.contains(says), "{query}: {text}");
+    }
+    srv.stop().await;
+    t.finish().await;
+}
