@@ -351,6 +351,8 @@ pub struct FramesQuery {
     /// The skeleton to put the take on: a standard rig's name, a stored skeleton's id or
     /// `take:ID`.
     skeleton: Option<String>,
+    /// free or lock (with `skeleton`).
+    feet: Option<String>,
 }
 
 /// A range request's query as the range, output format, points and transforms it asks for.
@@ -385,6 +387,13 @@ pub fn frames_request(q: FramesQuery) -> Result<RangeRequest, ApiError> {
         points,
         transform,
         onto: None,
+        feet: q
+            .feet
+            .as_deref()
+            .map(str::parse)
+            .transpose()
+            .map_err(ApiError::bad_request)?
+            .unwrap_or_default(),
     })
 }
 
@@ -430,6 +439,7 @@ pub async fn frames(
     let onto = onto_of(q.skeleton.take().as_deref())?;
     let mut request = frames_request(q)?;
     if let Some(onto) = onto {
+        retarget::check_format(request.format)?;
         request.onto = Some(retarget::target(&state.store, &caller.grant, &onto).await?);
     }
     let a = answer::open(

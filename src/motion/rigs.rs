@@ -8,8 +8,10 @@
 //! - **Mixamo**: the HumanIK body of Mixamo's characters (`mixamorig:` names), in the
 //!   T-pose its characters are bound in; places from the Y Bot's rest pose, to about a
 //!   centimetre. Fingers are not listed yet.
-//! - **SMPL**: the 24 joints of SMPL's kinematic tree, in its order and with its parents,
-//!   at the mean shape's rest (T-pose), rounded to the millimetre.
+//! - **SMPL**: the 24 joints of SMPL's kinematic tree with its names and parents, at the
+//!   mean shape's rest (T-pose), rounded to the millimetre. Listed depth first, as every
+//!   rig here (a BVH file's values run so): SMPL's own joint numbers are the table's order
+//!   below, not the skeleton's.
 //!
 //! Each is checked by its own names: the body conventions ([`super::body`]) place every
 //! role on it, and its rest pose stands up with the arms level.

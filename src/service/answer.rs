@@ -110,6 +110,8 @@ pub struct RangeRequest {
     pub transform: Options,
     /// The skeleton the take's motion is put on (`skeleton=`); `None` keeps its own.
     pub onto: Option<Arc<super::retarget::Target>>,
+    /// What is done to its feet there (`feet=`).
+    pub feet: super::retarget::Feet,
 }
 
 /// One answer, open: what it holds (for the response's headers) and its pieces, taken with
@@ -480,16 +482,12 @@ async fn plan(
     let (prepared, (start, asked_end)) = prepare(store, caches, id, req.range).await?;
     let transform = transform_for(req.format, req.transform)?;
     let onto = req.onto.as_deref();
-    if onto.is_some()
-        && !matches!(
-            req.format,
-            Format::Bvh | Format::Glb | Format::Gltf | Format::Fbx
-        )
-    {
-        return Err(Error::InvalidRequest(format!(
-            "skeleton= puts the take on a skeleton, which {} does not hold: ask for              format=bvh, glb, gltf or fbx",
-            req.format
-        )));
+    if onto.is_some() {
+        super::retarget::check_format(req.format)?;
+    } else if req.feet != super::retarget::Feet::Free {
+        return Err(Error::InvalidRequest(
+            "feet=lock holds the feet of a take put on another skeleton: give skeleton= too".into(),
+        ));
     }
     // Resampled, the range's last output frames may lie past its last source frame: they
     // are interpolated from the frames after it (C3D keeps its range: its analog and
@@ -501,6 +499,8 @@ async fn plan(
         (start, asked_end),
         req.range.seconds_from(start, asked_end, prepared.fps),
     );
+    // Points a skeleton answer writes: the take's joints, or the target's.
+    let joints_out = onto.map_or(prepared.point_names.len(), |t| t.joints.len());
     let header = prepared.reader.header();
     let chunks = prepared.reader.chunks_for(start..end)?;
     let metas = &header.chunks[chunks.clone()];
@@ -542,10 +542,12 @@ async fn plan(
                 ));
             }
             // As many samples as the skeleton's joints and End Sites would be as points.
-            check_size(frames_out, prepared.point_names.len(), limits)?;
+            check_size(frames_out, joints_out, limits)?;
             let rig = channels_rig(store, &prepared).await?;
             let shaper = (!transform.is_identity() || onto.is_some())
-                .then(|| Shaper::channels(&prepared, rig.joints(), &transform, frames, onto))
+                .then(|| {
+                    Shaper::channels(&prepared, rig.joints(), &transform, frames, onto, req.feet)
+                })
                 .transpose()?
                 .map(|s| s.limited(frames_out));
             Plan::channels(
@@ -565,7 +567,7 @@ async fn plan(
                         .into(),
                 ));
             }
-            check_size(frames_out, prepared.point_names.len(), limits)?;
+            check_size(frames_out, joints_out, limits)?;
             let take = super::fetch::take(store, id).await?;
             if take.is_live() {
                 return Err(Error::Unsatisfiable(format!(
@@ -639,12 +641,12 @@ async fn plan(
                     }
                 )));
             }
-            check_size(frames_out, prepared.point_names.len(), limits)?;
+            check_size(frames_out, joints_out, limits)?;
             let keeps =
                 codec::codec(prepared.reader.header().codec).is_ok_and(|c| c.codes_channels());
             let shaper = if keeps || onto.is_some() {
                 let rig = channels_rig(store, &prepared).await?;
-                Shaper::channels(&prepared, rig.joints(), &transform, frames, onto)?
+                Shaper::channels(&prepared, rig.joints(), &transform, frames, onto, req.feet)?
                     .limited(frames_out)
             } else {
                 Shaper::points(&prepared, &transform, frames, None)?.limited(frames_out)
@@ -1196,9 +1198,12 @@ impl Answer {
             }
             None => {
                 let (payload, payload_held) = self.payload(i).await?;
+                // A frame's channels decoded, or shaped onto another skeleton's (more when
+                // it has more).
+                let width = channels.max(self.shaper.as_ref().map_or(0, Shaper::width));
                 let working = self
                     .reservation
-                    .hold(r.len() as u64 * (channels as u64 * CHANNEL_BYTES) + full as u64);
+                    .hold(r.len() as u64 * (width as u64 * CHANNEL_BYTES) + full as u64);
                 let p = self.prepared.clone();
                 let mut shaper = self.shaper.take();
                 let (decoded, shaper) = blocking(move || {

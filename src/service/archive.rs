@@ -386,6 +386,7 @@ pub async fn export_take(store: &Store, with: &ReadWith, take: Take) -> Result<E
             format,
             transform: Options::default(),
             onto: None,
+            feet: Default::default(),
         },
     )
     .await?;

@@ -611,6 +611,7 @@ impl Export {
             format: self.format,
             transform: self.transform,
             onto: None,
+            feet: Default::default(),
         };
         let budget = self.budget.clone();
         let parent = &self.reservation;

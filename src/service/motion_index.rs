@@ -198,6 +198,7 @@ impl MotionIndex {
             format: Format::F32,
             transform: reading(),
             onto: None,
+            feet: Default::default(),
         };
         let budget = self.budget.clone();
         let holder = Holder::Token("(motion index)".into());

@@ -431,6 +431,7 @@ impl Run<'_> {
             format: Format::F32,
             transform: self.transform,
             onto: None,
+            feet: Default::default(),
         };
         let (budget, holder) = (self.budget.clone(), self.holder.clone());
         let a = answer::open_waiting(

@@ -139,6 +139,7 @@ fn part_request(batch: &RangesRequest, part: &Part, transform: Options) -> Range
         format: batch.format,
         transform,
         onto: None,
+        feet: Default::default(),
     }
 }
 

@@ -55,6 +55,44 @@ impl FromStr for Onto {
     }
 }
 
+/// Whether `format` holds a skeleton a take can be put on: `skeleton=` with any other is a
+/// 400, told before the skeleton is looked for.
+pub fn check_format(format: crate::motion::format::Format) -> Result<()> {
+    use crate::motion::format::Format;
+    if matches!(
+        format,
+        Format::Bvh | Format::Glb | Format::Gltf | Format::Fbx
+    ) {
+        return Ok(());
+    }
+    Err(Error::InvalidRequest(format!(
+        "skeleton= puts the take on a skeleton, which {format} does not hold: ask for \
+         format=bvh, glb, gltf or fbx"
+    )))
+}
+
+/// What `feet=` asks of a retargeted take's feet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Feet {
+    /// As the angles place them.
+    #[default]
+    Free,
+    /// Held still while the source's feet stand on the floor
+    /// ([`crate::motion::retarget::feet`]).
+    Lock,
+}
+
+impl FromStr for Feet {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Feet, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "free" => Ok(Feet::Free),
+            "lock" => Ok(Feet::Lock),
+            other => Err(format!("feet is free or lock, not {other:?}")),
+        }
+    }
+}
+
 /// A skeleton to put takes on, with what retargeting needs of it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Target {
@@ -167,13 +205,15 @@ fn standing_up(joints: &[Joint], roles: &Roles) -> Axis {
     }
 }
 
-/// The retargeter of a take's skeleton (`joints`, its stored body's roles and axes) onto
-/// `target`, and the stance of the frames it writes (the target's pelvis, up and sides;
+/// The retargeter of a take's skeleton (`joints`, its stored body's roles and axes, its
+/// frames at `fps`) onto `target`, its feet as `feet` asks, and the stance of the frames it writes (the target's pelvis, up and sides;
 /// the take's forward turned to the target's world), for the transforms after it.
 pub fn retargeter(
     prepared: &Prepared,
     joints: &[Joint],
     target: &Target,
+    feet: Feet,
+    fps: f64,
 ) -> Result<(Retarget, Stance)> {
     let body = prepared.body.as_ref().ok_or_else(|| {
         Error::Unsatisfiable(format!(
@@ -193,10 +233,14 @@ pub fn retargeter(
         floor: prepared.stance.floor,
         metres_per_unit: prepared.metres_per_unit,
     };
-    let r = Retarget::new(&source, &target.figure()).map_err(|e| match e {
+    let mut r = Retarget::new(&source, &target.figure()).map_err(|e| match e {
         crate::motion::Error::Unsupported(m) => Error::Unsatisfiable(m),
+        crate::motion::Error::Contradiction(m) => Error::Corrupt(m),
         other => Error::Unsatisfiable(other.to_string()),
     })?;
+    if feet == Feet::Lock {
+        r.lock_feet(fps);
+    }
     let forward = prepared
         .stance
         .forward

@@ -4,7 +4,7 @@
 //! and decides which transform a take can take.
 
 use super::prepared::Prepared;
-use super::retarget::Target;
+use super::retarget::{Feet, Target};
 use super::{Error, Result};
 use crate::motion::rate;
 use crate::motion::retarget::Retarget;
@@ -161,13 +161,14 @@ impl Shaper {
     }
 
     /// The shaper of a skeleton's channels (`joints`) of `frames` source frames, put on
-    /// `onto` when asked.
+    /// `onto` when asked (its feet as `feet` asks).
     pub fn channels(
         prepared: &Prepared,
         joints: &[Joint],
         options: &Options,
         frames: usize,
         onto: Option<&Target>,
+        feet: Feet,
     ) -> Result<Shaper> {
         check(options)?;
         let (retarget, pose) = match onto {
@@ -176,7 +177,8 @@ impl Shaper {
                 SkeletonPose::new(options, joints, &prepared.stance, prepared.metres_per_unit),
             ),
             Some(target) => {
-                let (r, stance) = super::retarget::retargeter(prepared, joints, target)?;
+                let fps = options.fps.unwrap_or(prepared.fps);
+                let (r, stance) = super::retarget::retargeter(prepared, joints, target, feet, fps)?;
                 let pose = SkeletonPose::new(options, r.joints(), &stance, target.metres_per_unit);
                 (Some(Box::new(r)), pose)
             }

@@ -129,6 +129,15 @@ async fn a_cmu_walk_on_mixamos_rig_moves_its_bones_as_the_source_does() {
         assert!(body.windows(10).any(|w| w == b"left_elbow"), "{format}");
     }
 
+    // Feet held: the same frames, the feet where the contacts left them.
+    let (status, _, locked) = srv
+        .get(&format!(
+            "/v1/takes/{id}/frames?format=bvh&skeleton=mixamo&feet=lock&t0=0&t1=2"
+        ))
+        .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&locked));
+    assert!(String::from_utf8_lossy(&locked).contains("Frames: 240"));
+
     // Refusals.
     for (query, status, says) in [
         ("format=bvh&skeleton=unreal", 400, "not a standard rig"),
@@ -138,12 +147,88 @@ async fn a_cmu_walk_on_mixamos_rig_moves_its_bones_as_the_source_does() {
             "format=bvh, glb, gltf or fbx",
         ),
         ("format=bvh&skeleton=take:nope", 404, "nope"),
+        // The format is told before the skeleton is looked for.
+        (
+            "format=json&skeleton=take:nope",
+            400,
+            "format=bvh, glb, gltf or fbx",
+        ),
+        ("format=bvh&feet=lock", 400, "give skeleton="),
+        ("format=bvh&skeleton=smpl&feet=glue", 400, "free or lock"),
         ("format=bvh&skeleton=abcdef", 404, "skeleton abcdef"),
     ] {
         let (s, _, body) = srv.get(&format!("/v1/takes/{id}/frames?{query}")).await;
         let text = String::from_utf8_lossy(&body);
         assert_eq!(s, status, "{query}: {text}");
         assert!(text.contains(says), "{query}: {text}");
+    }
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// A token of one library cannot put a take on another library's take or on a skeleton
+/// only that library's takes have: both are not found, as if they did not exist.
+#[tokio::test(flavor = "multi_thread")]
+async fn another_librarys_skeleton_is_not_found() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let reader = common::token(&t.store, "reader", "read", Some(&["lab"])).await;
+    let admin = common::token(&t.store, "admin", "admin", None).await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let put = |path: &'static str, library: &'static str| {
+        let (srv, admin, root) = (&srv, admin.clone(), root.clone());
+        async move {
+            let r = srv
+                .client
+                .post(format!("{}/v1/takes?library={library}", srv.base))
+                .bearer_auth(&admin)
+                .body(std::fs::read(root.join(path)).unwrap())
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(r.status(), 201);
+            r.json::<Value>().await.unwrap()
+        }
+    };
+    let walk = put("bvh/cmu/01_01.bvh", "lab").await["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let hidden = put("bvh/bandai/dataset-1_walk_normal_001.bvh", "secret").await;
+    let hidden_id = hidden["id"].as_str().unwrap().to_string();
+    let ask = |token: &str, query: &str| {
+        let url = format!(
+            "{}/v1/takes/{walk}/frames?format=bvh&t0=0&t1=1&{query}",
+            srv.base
+        );
+        let (client, token) = (srv.client.clone(), token.to_string());
+        async move {
+            let r = client.get(url).bearer_auth(token).send().await.unwrap();
+            (r.status().as_u16(), r.text().await.unwrap())
+        }
+    };
+    let record: Value = srv
+        .client
+        .get(format!("{}/v1/takes/{hidden_id}", srv.base))
+        .bearer_auth(&admin)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let skeleton = record["skeleton"].as_str().unwrap().to_string();
+    for query in [
+        format!("skeleton=take:{hidden_id}"),
+        format!("skeleton={skeleton}"),
+    ] {
+        let (status, text) = ask(&reader, &query).await;
+        assert_eq!(status, 404, "{query}: {text}");
+        let (status, text) = ask(&admin, &query).await;
+        assert_eq!(status, 200, "{query}: {text}");
+        assert!(text.contains("UpperArm_L"), "{query}");
     }
     srv.stop().await;
     t.finish().await;

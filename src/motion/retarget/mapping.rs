@@ -130,8 +130,8 @@ impl Mapping {
             _ => {
                 return Err(Error::Unsupported(
                     "retargeting moves the target's pelvis along the source's, and one of \
-                     the two skeletons has no joint known to be its pelvis (name it by \
-                     PATCH /v1/takes/{id} {\"body\": {\"roles\": {\"pelvis\": [\"…\"]}}})"
+                     the two skeletons has no joint known to be its pelvis (a take's is named \
+                     by PATCH /v1/takes/ID {\"body\": {\"roles\": {\"pelvis\": [\"…\"]}}})"
                         .into(),
                 ))
             }

@@ -8,12 +8,16 @@
 //! target's pelvis runs the source's path scaled by their legs, its height kept above the
 //! floor. Pure: channel values in, channel values out.
 
+pub mod feet;
 pub mod mapping;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 pub use mapping::{Bone, Figure, Mapping, Pair};
 
+use feet::{Contact, Feet};
+
+use crate::motion::body::{Part, Role};
 use crate::motion::rotation::{euler_order, from_euler, to_euler};
 use crate::motion::skeleton::{local_rotation, translation, Fk, Joint};
 use crate::motion::Error;
@@ -101,7 +105,13 @@ pub struct Retarget {
     /// The source's up coordinate and floor, and how a source unit becomes a target one
     /// along the pelvis's path (units and the legs' scale).
     source_up: usize,
+    source_up_sign: f64,
     source_floor: f64,
+    source_metres_per_unit: f64,
+    /// The target's up axis: index and sign.
+    target_up: (usize, f64),
+    /// `feet=lock`'s legs, when asked ([`Retarget::lock_feet`]).
+    feet: Option<Feet>,
     path_scale: f64,
     /// Each target joint's last written angles (continuity across ±180°).
     last: Vec<Option<[f64; 3]>>,
@@ -150,7 +160,11 @@ impl Retarget {
             rest_translation,
             root_position,
             source_up: source.up.index(),
+            source_up_sign: source.up.sign(),
             source_floor: source.floor,
+            source_metres_per_unit: source.metres_per_unit,
+            target_up: (target.up.index(), target.up.sign()),
+            feet: None,
             path_scale: source.metres_per_unit * mapping.scale / target.metres_per_unit,
             mapping,
             last: vec![None; n],
@@ -221,29 +235,12 @@ impl Retarget {
                 });
             let local = match driven {
                 None => self.rest_local[i],
-                Some(world) => {
-                    let local = parent_world.transpose() * world;
-                    let q = UnitQuaternion::from_rotation_matrix(
-                        &Rotation3::from_matrix_unchecked(local),
-                    );
-                    let e = to_euler(&q, slots.order, self.last[i]);
-                    self.last[i] = Some(e);
-                    for &(k, a) in &slots.rotations {
-                        vals[slots.start + k] = e[a];
-                    }
-                    if slots.full {
-                        local
-                    } else {
-                        // What the channels it has can hold: its children make up the rest.
-                        let mut kept = [0.0; 3];
-                        for &(_, a) in &slots.rotations {
-                            kept[a] = e[a];
-                        }
-                        from_euler(slots.order, kept)
-                            .to_rotation_matrix()
-                            .into_inner()
-                    }
-                }
+                Some(world) => write(
+                    slots,
+                    &mut self.last[i],
+                    parent_world.transpose() * world,
+                    vals,
+                ),
             };
             self.world[i] = parent_world * local;
             self.places[i] = parent_place + parent_world * self.rest_translation[i];
@@ -255,13 +252,126 @@ impl Retarget {
             self.placed[ps * 3 + 1],
             self.placed[ps * 3 + 2],
         );
-        v[self.source_up] -= self.source_floor;
+        // The floor is a height along up: its coordinate is signed as up is.
+        v[self.source_up] -= self.source_floor * self.source_up_sign;
         let want = g * (v * self.path_scale);
         let shift = want - self.places[pt];
         for (a, &c) in self.root_position.iter().enumerate() {
             vals[self.slots[0].start + c] += shift[a];
         }
+        if let Some(feet) = &mut self.feet {
+            for p in &mut self.places {
+                *p += shift;
+            }
+            let target = &self.target;
+            let (lowered, turned) = feet.frame(&self.placed, &mut self.places, &self.world, &|j| {
+                target[j].parent
+            });
+            for (a, &c) in self.root_position.iter().enumerate() {
+                vals[self.slots[0].start + c] += lowered[a];
+            }
+            for t in turned {
+                self.world[t.joint] = t.world;
+                let parent = target[t.joint]
+                    .parent
+                    .map_or_else(Matrix3::identity, |p| self.world[p]);
+                write(
+                    &self.slots[t.joint],
+                    &mut self.last[t.joint],
+                    parent.transpose() * t.world,
+                    vals,
+                );
+            }
+        }
     }
+
+    /// Hold the target's feet still while the source's stand on the floor (`feet=lock`,
+    /// [`feet`]), the source running at `fps`. Legs whose hip, knee and ankle are not a chain
+    /// of joints with three rotation channels each are left as they are.
+    pub fn lock_feet(&mut self, fps: f64) {
+        let m = &self.mapping;
+        let role = |r: Role, source: bool| {
+            m.pairs
+                .iter()
+                .find(|p| p.role == r)
+                .map(|p| if source { p.source } else { p.target })
+        };
+        let target = &self.target;
+        let slots = &self.slots;
+        let chained = |r: Role| {
+            let j = role(r, false)?;
+            let Role::Limb(side, part) = r else {
+                return Some(j);
+            };
+            let ok = slots[j].full
+                && match part {
+                    Part::Knee => target[j].parent == role(Role::Limb(side, Part::Hip), false),
+                    Part::Ankle => target[j].parent == role(Role::Limb(side, Part::Knee), false),
+                    _ => true,
+                };
+            ok.then_some(j)
+        };
+        let (up, sign) = (self.source_up, self.source_up_sign);
+        let (floor, mpu) = (self.source_floor, self.source_metres_per_unit);
+        let bone = |r: Role| role(r, false).map_or(0.0, |j| Vector3::from(target[j].offset).norm());
+        let legs: Vec<f64> = crate::motion::body::Side::BOTH
+            .into_iter()
+            .map(|s| bone(Role::Limb(s, Part::Knee)) + bone(Role::Limb(s, Part::Ankle)))
+            .filter(|l| *l > 0.0)
+            .collect();
+        let legs_length = legs.iter().sum::<f64>() / legs.len().max(1) as f64;
+        self.feet = Some(Feet::new(
+            &chained,
+            &|r| role(r, true),
+            &|points| Contact::new(points, (up, sign), floor, mpu, fps),
+            self.target_up,
+            legs_length,
+            fps,
+        ));
+    }
+}
+
+/// Joint `slots`' channels written (into the frame's `vals`) for the rotation `local`
+/// relative to its parent, continuous with `last`; the rotation they hold (a joint with
+/// fewer than three rotation channels holds what they can, and its children make up the
+/// rest).
+fn write(
+    slots: &Slots,
+    last: &mut Option<[f64; 3]>,
+    local: Matrix3<f64>,
+    vals: &mut [f64],
+) -> Matrix3<f64> {
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(local));
+    let e = if slots.full {
+        to_euler(&q, slots.order, *last)
+    } else {
+        // The channels it has hold only part of the turn: the other of the two Euler
+        // solutions would write another rotation, so the first is kept, each angle only
+        // turned by whole turns toward the last frame's.
+        let mut e = to_euler(&q, slots.order, None);
+        if let Some(l) = last {
+            for (v, l) in e.iter_mut().zip(l.iter()) {
+                *v += 360.0 * ((*l - *v) / 360.0).round();
+            }
+        }
+        e
+    };
+    if e.iter().all(|v| v.is_finite()) {
+        *last = Some(e);
+    }
+    for &(k, a) in &slots.rotations {
+        vals[slots.start + k] = e[a];
+    }
+    if slots.full {
+        return local;
+    }
+    let mut kept = [0.0; 3];
+    for &(_, a) in &slots.rotations {
+        kept[a] = e[a];
+    }
+    from_euler(slots.order, kept)
+        .to_rotation_matrix()
+        .into_inner()
 }
 
 #[cfg(test)]

@@ -255,3 +255,76 @@ fn rest_places_lowest(joints: &[Joint]) -> f64 {
         .map(|p| p[1])
         .fold(f64::MAX, f64::min)
 }
+
+/// A rig turned Z-up (its offsets, path and every joint's frame turned: the same motion in
+/// another world) put on the rig as it stands, Y-up, gives back the motion itself: every
+/// joint's rotation relative to its parent, twist about its bone included (which aiming
+/// bones alone would not settle), and every joint's place.
+#[test]
+fn a_rig_in_another_world_comes_back_whole() {
+    use crate::motion::rotation::{euler_order, from_euler, to_euler};
+    let rig = rigs::named("mixamo").unwrap().joints;
+    let roles = Roles::of_skeleton(&rig);
+    let turn = Axis::Y.turn_to(Axis::Z).unwrap();
+    let mut zup = rig.clone();
+    for j in &mut zup {
+        j.offset = (turn * Vector3::from(j.offset)).into();
+    }
+    let src = poses(&rig, 12, 50.0, 11);
+    let cc = src.len() / 12;
+    let order = euler_order(&rig[1].channels).unwrap();
+    let q_turn =
+        nalgebra::UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(turn));
+    // The root's place turned and every joint's rotation conjugated by the turn (its
+    // offsets are turned, so its frame is too).
+    let turned: Vec<f64> = src
+        .chunks_exact(cc)
+        .flat_map(|f| {
+            let mut f = f.to_vec();
+            let p = turn * Vector3::new(f[0], f[1], f[2]);
+            f[..3].copy_from_slice(p.as_slice());
+            let mut start = 0;
+            for j in &rig {
+                let at = start + j.channels.len() - 3;
+                if !j.end_site {
+                    let q = q_turn
+                        * from_euler(order, [f[at], f[at + 1], f[at + 2]])
+                        * q_turn.inverse();
+                    f[at..at + 3].copy_from_slice(&to_euler(&q, order, None));
+                }
+                start += j.channels.len();
+            }
+            f
+        })
+        .collect();
+    let source = Figure {
+        up: Axis::Z,
+        ..figure(&zup, &roles)
+    };
+    let mut r = Retarget::new(&source, &figure(&rig, &roles)).unwrap();
+    let mut out = Vec::new();
+    for f in turned.chunks_exact(cc) {
+        r.frame(f, &mut out);
+    }
+    for (f, (a, b)) in src.chunks_exact(cc).zip(out.chunks_exact(cc)).enumerate() {
+        let mut start = 0;
+        for joint in &rig {
+            let n = joint.channels.len();
+            let (la, lb) = (
+                crate::motion::skeleton::local_rotation(joint, &a[start..start + n]),
+                crate::motion::skeleton::local_rotation(joint, &b[start..start + n]),
+            );
+            assert!(
+                (la - lb).norm() < 1e-9,
+                "frame {f} {}: rotations {:e} apart",
+                joint.name,
+                (la - lb).norm()
+            );
+            start += n;
+        }
+    }
+    let (a, b) = (positions(&rig, src), positions(&rig, out));
+    for (x, y) in a.iter().zip(&b) {
+        assert!((x - y).norm() < 1e-9, "{x} vs {y}");
+    }
+}
