@@ -56,6 +56,13 @@ pub struct FilesArgs {
     /// Unit of positions (mm, cm, m, in, …).
     #[arg(long)]
     unit: Option<String>,
+    /// Put every take on this skeleton (bvh, glb, gltf, fbx): a standard rig (mixamo,
+    /// smpl), a stored skeleton's id or take:ID.
+    #[arg(long)]
+    skeleton: Option<String>,
+    /// With --skeleton: lock holds each foot still while the source's stands.
+    #[arg(long)]
+    feet: Option<String>,
     /// Files fetched at once.
     #[arg(long, default_value_t = 2)]
     concurrency: usize,
@@ -72,6 +79,10 @@ struct Options {
     root: Option<String>,
     up: Option<String>,
     unit: Option<String>,
+    #[serde(default)]
+    skeleton: Option<String>,
+    #[serde(default)]
+    feet: Option<String>,
 }
 
 pub fn run(dir: &Path, library: Option<&str>, tag: Option<&str>, args: &FilesArgs) -> ExitCode {
@@ -129,6 +140,10 @@ async fn export_files(
         },
     };
     mocapstore::service::answer::transform_for(format, transform).map_err(|e| e.to_string())?;
+    if args.skeleton.is_some() {
+        mocapstore::service::retarget::check_format(format)
+            .map_err(|e| format!("--skeleton: {e}"))?;
+    }
     let options = Options {
         format: format.name().to_string(),
         library: library.map(str::to_string),
@@ -137,6 +152,8 @@ async fn export_files(
         root: args.root.clone(),
         up: args.up.clone(),
         unit: args.unit.clone(),
+        skeleton: args.skeleton.clone(),
+        feet: args.feet.clone(),
     };
     let io = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
@@ -166,7 +183,13 @@ async fn export_files(
             .expect("valid template"),
     );
     let mut query: Vec<(&str, String)> = vec![("format", options.format.clone())];
-    for (k, v) in [("root", &args.root), ("up", &args.up), ("unit", &args.unit)] {
+    for (k, v) in [
+        ("root", &args.root),
+        ("up", &args.up),
+        ("unit", &args.unit),
+        ("skeleton", &args.skeleton),
+        ("feet", &args.feet),
+    ] {
         if let Some(v) = v {
             query.push((k, v.clone()));
         }

@@ -12,7 +12,7 @@ use serde::Deserialize;
 use axum::http::{header, HeaderMap, HeaderValue};
 
 use super::error::ApiError;
-use super::takes::{format_of, streamed, transform_of};
+use super::takes::{feet_of, format_of, onto_of, streamed, transform_of};
 use super::views::{ListingView, TakeView};
 use super::AppState;
 use crate::codec::CodecId;
@@ -102,6 +102,8 @@ pub struct ExportQuery {
     root: Option<String>,
     up: Option<String>,
     unit: Option<String>,
+    skeleton: Option<String>,
+    feet: Option<String>,
 }
 
 /// `GET /v1/export`: every take of a selection in one format, as a ZIP streamed as it is
@@ -135,6 +137,8 @@ pub async fn export(
         grant: caller.grant.clone(),
         format,
         transform,
+        onto: onto_of(q.skeleton.as_deref())?,
+        feet: feet_of(q.feet.as_deref())?,
     };
     let e = export::open(
         &state.store,

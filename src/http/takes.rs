@@ -387,14 +387,17 @@ pub fn frames_request(q: FramesQuery) -> Result<RangeRequest, ApiError> {
         points,
         transform,
         onto: None,
-        feet: q
-            .feet
-            .as_deref()
-            .map(str::parse)
-            .transpose()
-            .map_err(ApiError::bad_request)?
-            .unwrap_or_default(),
+        feet: feet_of(q.feet.as_deref())?,
     })
+}
+
+/// `feet=`, parsed (free when absent).
+pub fn feet_of(feet: Option<&str>) -> Result<retarget::Feet, ApiError> {
+    Ok(feet
+        .map(str::parse)
+        .transpose()
+        .map_err(ApiError::bad_request)?
+        .unwrap_or_default())
 }
 
 /// `skeleton=`, parsed.

@@ -90,6 +90,9 @@ pub struct ExportRequest {
     pub grant: Grant,
     pub format: Format,
     pub transform: Options,
+    /// The skeleton every take is put on (`skeleton=`), and what is done to its feet.
+    pub onto: Option<super::retarget::Onto>,
+    pub feet: super::retarget::Feet,
 }
 
 /// One take's line in the manifest: the take, where its file is, and what was written.
@@ -431,6 +434,8 @@ pub struct Export {
     limits: Limits,
     format: Format,
     transform: Options,
+    onto: Option<Arc<super::retarget::Target>>,
+    feet: super::retarget::Feet,
     entries: Vec<Entry>,
     /// The entry being written (its answer open), or the next to open.
     at: usize,
@@ -458,6 +463,19 @@ pub async fn open(
     // The same for every take: refused once, not skipped take by take.
     let transform = answer::transform_for(req.format, req.transform)?;
     req.takes.check()?;
+    let onto = match &req.onto {
+        Some(onto) => {
+            super::retarget::check_format(req.format)?;
+            Some(super::retarget::target(store, &req.grant, onto).await?)
+        }
+        None if req.feet != super::retarget::Feet::Free => {
+            return Err(Error::InvalidRequest(
+                "feet=lock holds the feet of takes put on another skeleton: give skeleton= too"
+                    .into(),
+            ))
+        }
+        None => None,
+    };
     let filter = req.takes.filter(&req.grant);
     // A page of takes at a time, each kept as its entry only.
     let mut entries = Vec::new();
@@ -504,6 +522,8 @@ pub async fn open(
         limits: *limits,
         format: req.format,
         transform,
+        onto,
+        feet: req.feet,
         _entries_held: reservation.hold(manifest / 2),
         entries,
         at: 0,
@@ -610,8 +630,8 @@ impl Export {
             points: None,
             format: self.format,
             transform: self.transform,
-            onto: None,
-            feet: Default::default(),
+            onto: self.onto.clone(),
+            feet: self.feet,
         };
         let budget = self.budget.clone();
         let parent = &self.reservation;

@@ -249,6 +249,30 @@ def test_export_writes_what_the_server_answers(
     assert names == [f"{lib}/e.c3d", "manifest.csv"]
 
 
+def test_a_library_comes_out_on_one_rig(
+    client: mocapstore.Client, server: str, corpus: Path | None, tmp_path: Path
+) -> None:
+    if corpus is None:
+        pytest.skip("no corpus")
+    lib = library()
+    cmu = client.ingest(corpus / "bvh" / "cmu" / "01_01.bvh", library=lib)
+    client.ingest(corpus / "bvh" / "bandai" / "dataset-1_walk_normal_001.bvh", library=lib)
+    one = client.export(cmu.id, tmp_path / "walk.bvh", t1=1.0, skeleton="mixamo", feet="lock")
+    want = httpx.get(
+        f"{server}/v1/takes/{cmu.id}/frames?format=bvh&t1=1.0&skeleton=mixamo&feet=lock"
+    ).content
+    assert one.read_bytes() == want and b"ROOT mixamorig:Hips" in want
+    z = zipfile.ZipFile(
+        client.export_library(tmp_path / "lib.zip", library=lib, format="bvh", skeleton="smpl")
+    )
+    files = [n for n in z.namelist() if n.endswith(".bvh")]
+    assert len(files) == 2
+    for n in files:
+        assert z.read(n).startswith(b"HIERARCHY\nROOT pelvis"), n
+    with pytest.raises(mocapstore.BadRequest):
+        client.export(cmu.id, tmp_path / "walk.json", skeleton="mixamo")
+
+
 def test_the_async_client_does_the_same(server: str) -> None:
     async def run() -> None:
         async with mocapstore.AsyncClient(server) as c:

@@ -780,13 +780,22 @@ class Client(_Base):
         root: str | None = None,
         up: str | None = None,
         unit: str | None = None,
+        skeleton: str | None = None,
+        feet: str | None = None,
     ) -> Path:
         """A take (or a range of it) written to ``path`` in any format the server writes
         (``glb``, ``gltf``, ``bvh``, ``c3d``, ``trc``, ``csv``, ``json``, ``npy``, ``f32``;
-        by default the file's extension), streamed to disk as it is decoded."""
+        by default the file's extension), streamed to disk as it is decoded. ``skeleton``
+        puts the take on another skeleton (``bvh``, ``glb``, ``gltf``, ``fbx``): a standard
+        rig (``"mixamo"``, ``"smpl"``), a stored skeleton's id or ``"take:ID"``; with
+        ``feet="lock"`` its feet are held still while the source's stand."""
         to = Path(path)
         query = [
-            *p.params(format=format or to.suffix.lstrip(".").lower() or None),
+            *p.params(
+                format=format or to.suffix.lstrip(".").lower() or None,
+                skeleton=skeleton,
+                feet=feet,
+            ),
             *self._range_query(start, end, t0, t1, fps, root, up, unit),
         ]
         return self._run(p.download(f"/v1/takes/{id}/frames", query, to))
@@ -930,11 +939,22 @@ class Client(_Base):
         up: str | None = None,
         unit: str | None = None,
         labels: p.Labels | None = None,
+        skeleton: str | None = None,
+        feet: str | None = None,
     ) -> Path:
         """Every take of a selection in one format, as the server's ZIP (a file per take and
-        ``manifest.csv``), streamed to ``path``."""
+        ``manifest.csv``), streamed to ``path``; with ``skeleton`` (and ``feet``) every take
+        on one skeleton, as [`Client.export`] puts one."""
         query = p.params(
-            library=library, tag=tag, format=format, fps=fps, root=root, up=up, unit=unit
+            library=library,
+            tag=tag,
+            format=format,
+            fps=fps,
+            root=root,
+            up=up,
+            unit=unit,
+            skeleton=skeleton,
+            feet=feet,
         ) + p.label_filters(labels)
         return self._run(p.download("/v1/export", query, Path(path)))
 
@@ -1195,11 +1215,17 @@ class AsyncClient(_Base):
         root: str | None = None,
         up: str | None = None,
         unit: str | None = None,
+        skeleton: str | None = None,
+        feet: str | None = None,
     ) -> Path:
         """A take (or a range of it) written to ``path`` (see [`Client.export`])."""
         to = Path(path)
         query = [
-            *p.params(format=format or to.suffix.lstrip(".").lower() or None),
+            *p.params(
+                format=format or to.suffix.lstrip(".").lower() or None,
+                skeleton=skeleton,
+                feet=feet,
+            ),
             *self._range_query(start, end, t0, t1, fps, root, up, unit),
         ]
         return await self._run(p.download(f"/v1/takes/{id}/frames", query, to))
@@ -1216,10 +1242,20 @@ class AsyncClient(_Base):
         up: str | None = None,
         unit: str | None = None,
         labels: p.Labels | None = None,
+        skeleton: str | None = None,
+        feet: str | None = None,
     ) -> Path:
         """Every take of a selection as the server's ZIP (see [`Client.export_library`])."""
         query = p.params(
-            library=library, tag=tag, format=format, fps=fps, root=root, up=up, unit=unit
+            library=library,
+            tag=tag,
+            format=format,
+            fps=fps,
+            root=root,
+            up=up,
+            unit=unit,
+            skeleton=skeleton,
+            feet=feet,
         ) + p.label_filters(labels)
         return await self._run(p.download("/v1/export", query, Path(path)))
 
