@@ -238,6 +238,7 @@ fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
         .get("/v1/jobs/{id}", Needs(Read), bases::job)
         .get("/v1/skeletons", Needs(Read), skeletons::list)
         .get("/v1/skeletons/{id}", Needs(Read), skeletons::get)
+        .get("/v1/skeletons/{id}/map", Needs(Read), skeletons::map)
         .delete("/v1/skeletons/{id}", Needs(Admin), skeletons::delete)
         .post(
             "/v1/streams",

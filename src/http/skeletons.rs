@@ -1,4 +1,5 @@
-//! `/v1/skeletons`: the stored joint hierarchies takes reference (list, show, delete).
+//! `/v1/skeletons`: the stored joint hierarchies takes reference (list, show, delete), and
+//! how one maps onto another skeleton (`/map`).
 
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
@@ -11,7 +12,7 @@ use super::error::ApiError;
 use super::views::SkeletonView;
 use super::AppState;
 use crate::service::access::Caller;
-use crate::service::skeletons;
+use crate::service::{retarget, skeletons};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -38,6 +39,26 @@ pub async fn get(
     let (row, rig) = skeletons::get(&state.store, &id, &caller.grant).await?;
     let roles = skeletons::roles(&rig);
     Ok(Json(SkeletonView::of(&row, Some((rig.joints(), roles)))).into_response())
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapQuery {
+    to: Option<String>,
+}
+
+/// `GET /v1/skeletons/{id}/map?to=…`: how the skeleton's takes are put on `to`.
+pub async fn map(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path(id): Path<String>,
+    query: Result<Query<MapQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query?;
+    let onto = super::takes::onto_of(q.to.as_deref())?.ok_or_else(|| {
+        ApiError::bad_request("give to= (a standard rig, a skeleton id or take:ID)")
+    })?;
+    Ok(Json(retarget::map(&state.store, &caller.grant, &id, &onto).await?).into_response())
 }
 
 /// 204, 404, or 409 while takes still reference the skeleton.

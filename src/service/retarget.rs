@@ -188,6 +188,95 @@ fn unit_of(joints: &[Joint]) -> f64 {
     crate::motion::units::Unit::infer_from_height(height).map_or(1.0, |u| u.metres_per_unit)
 }
 
+/// How a stored skeleton maps onto a target, as `GET /v1/skeletons/{id}/map` shows it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct MapView {
+    /// The stored skeleton and what the target was named.
+    pub from: String,
+    pub to: String,
+    /// Target metres per source metre: the path's scale (the legs' ratio).
+    pub scale: f64,
+    /// Each target joint that follows a source joint, target parents first.
+    pub joints: Vec<JointMap>,
+    /// Target joints that follow none and keep their rest rotation.
+    pub unmapped: Vec<String>,
+    /// Source joints no target joint follows (their turn reaches the target only through
+    /// the next mapped joint's aim).
+    pub unused: Vec<String>,
+    /// Roles the target has and the source does not.
+    pub missing_roles: Vec<String>,
+    /// Target bones whose direction is the target's own shape (from a trunk joint out to a
+    /// side): turned with the trunk, not aimed along the source's.
+    pub shape_bones: Vec<ShapeBone>,
+}
+
+/// One target joint and the source joint it follows.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct JointMap {
+    pub joint: String,
+    pub follows: String,
+    pub role: String,
+    /// How far the two rest poses' bones lie apart at this joint (the rest correction's
+    /// angle), degrees: 40 at the shoulder between a T-pose and an A-pose.
+    pub correction_degrees: f64,
+}
+
+/// A rig-shape bone of the target.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ShapeBone {
+    pub from: String,
+    pub to: String,
+}
+
+/// How stored skeleton `id` maps onto `onto`, as `grant` may see both.
+pub async fn map(store: &Store, grant: &Grant, id: &str, onto: &Onto) -> Result<MapView> {
+    let (row, rig) = super::skeletons::get(store, id, grant).await?;
+    let target = target(store, grant, onto).await?;
+    let joints = rig.joints().to_vec();
+    let roles = super::skeletons::roles(&rig);
+    let source = Figure {
+        joints: &joints,
+        rest: rest_values(&joints),
+        roles: &roles,
+        up: standing_up(&joints, &roles),
+        floor: 0.0,
+        metres_per_unit: unit_of(&joints),
+    };
+    let m =
+        crate::motion::retarget::Mapping::new(&source, &target.figure()).map_err(|e| match e {
+            crate::motion::Error::Contradiction(m) => Error::Corrupt(m),
+            other => Error::Unsatisfiable(other.to_string()),
+        })?;
+    let (s, t) = (&joints, &target.joints);
+    Ok(MapView {
+        from: row.id,
+        to: target.name.clone(),
+        scale: m.scale,
+        joints: m
+            .pairs
+            .iter()
+            .map(|p| JointMap {
+                joint: t[p.target].name.clone(),
+                follows: s[p.source].name.clone(),
+                role: p.role.name(),
+                correction_degrees: p.correction_degrees(),
+            })
+            .collect(),
+        unmapped: m.unmapped.iter().map(|&i| t[i].name.clone()).collect(),
+        unused: m.unused.iter().map(|&i| s[i].name.clone()).collect(),
+        missing_roles: m.missing.iter().map(|r| r.name()).collect(),
+        shape_bones: m
+            .bones(t)
+            .into_iter()
+            .filter(|b| b.shape)
+            .map(|b| ShapeBone {
+                from: t[m.pairs[b.from].target].name.clone(),
+                to: t[m.pairs[b.to].target].name.clone(),
+            })
+            .collect(),
+    })
+}
+
 /// The axis a skeleton's rest pose stands along (pelvis below head within 30° of it), or
 /// BVH's +Y when the rest is no standing body (Bandai's rest lays every bone along x).
 fn standing_up(joints: &[Joint], roles: &Roles) -> Axis {

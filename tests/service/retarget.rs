@@ -138,6 +138,59 @@ async fn a_cmu_walk_on_mixamos_rig_moves_its_bones_as_the_source_does() {
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&locked));
     assert!(String::from_utf8_lossy(&locked).contains("Frames: 240"));
 
+    // The map the answers used, from the take's stored skeleton.
+    let (_, _, record) = srv.get(&format!("/v1/takes/{id}")).await;
+    let record: Value = serde_json::from_slice(&record).unwrap();
+    let skeleton = record["skeleton"].as_str().unwrap();
+    let (status, map) = srv
+        .get_json(&format!("/v1/skeletons/{skeleton}/map?to=mixamo"))
+        .await;
+    assert_eq!(status, 200, "{map}");
+    assert_eq!(map["to"], "mixamo");
+    let follows = |joint: &str| {
+        map["joints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|j| j["joint"] == joint)
+            .map(|j| {
+                (
+                    j["follows"].as_str().unwrap().to_string(),
+                    j["role"].clone(),
+                )
+            })
+    };
+    assert_eq!(
+        follows("mixamorig:LeftArm"),
+        Some(("LeftArm".into(), "left_shoulder".into()))
+    );
+    assert_eq!(
+        follows("mixamorig:Spine2").map(|f| f.0),
+        Some("Spine1".to_string()),
+        "the chains' ends paired"
+    );
+    let unused = common::strings(&map["unused"]);
+    assert!(
+        unused.contains(&"LHipJoint") && unused.contains(&"Neck1"),
+        "{unused:?}"
+    );
+    assert!(common::strings(&map["missing_roles"]).is_empty());
+    assert!(map["shape_bones"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|b| b["from"] == "mixamorig:Hips" && b["to"] == "mixamorig:LeftUpLeg"));
+    let scale = map["scale"].as_f64().unwrap();
+    assert!((0.8..1.3).contains(&scale), "{scale}");
+    for (query, status) in [("", 400), ("?to=nope", 400), ("?to=take:nope", 404)] {
+        let (s, body) = srv
+            .get_json(&format!("/v1/skeletons/{skeleton}/map{query}"))
+            .await;
+        assert_eq!(s, status, "{query}: {body}");
+    }
+    let (s, body) = srv.get_json("/v1/skeletons/abcdef/map?to=smpl").await;
+    assert_eq!(s, 404, "{body}");
+
     // Refusals.
     for (query, status, says) in [
         ("format=bvh&skeleton=unreal", 400, "not a standard rig"),
