@@ -696,6 +696,48 @@ async fn plan(
             }
             plan
         }
+        format if onto.is_some() => {
+            // Positions of the target's joints: channels decoded, shaped onto it, placed.
+            let rig = channels_rig(store, &prepared).await?;
+            let shaper =
+                Shaper::channels(&prepared, rig.joints(), &transform, frames, onto, req.feet)?
+                    .limited(frames_out);
+            let names: Vec<String> = shaper
+                .joints()
+                .map(|j| j.iter().map(|j| j.name.clone()).collect())
+                .unwrap_or_default();
+            let selected = req
+                .points
+                .as_deref()
+                .map(|want| super::retarget::joint_indices(&names, want))
+                .transpose()?;
+            let kept: Vec<String> = selected.as_ref().map_or_else(
+                || names.clone(),
+                |ix| ix.iter().map(|&i| names[i].clone()).collect(),
+            );
+            let span = Span {
+                chunk_frames: grow(chunk_frames),
+                part_frames: grow(part_frames),
+                ..span
+            };
+            // In the target's unit unless another is asked for.
+            let shaped = Options {
+                metres_per_unit: transform
+                    .metres_per_unit
+                    .or(onto.map(|t| t.metres_per_unit)),
+                ..transform
+            };
+            let mut plan =
+                Plan::points(&prepared, format, Some(&kept), limits, &span, Some(&shaped))?;
+            if let Writer::Points { selected, .. } = &mut plan.writer {
+                *selected = None;
+            }
+            plan.decode_bytes = chunk_frames
+                * (rig.channel_count() as u64 * CHANNEL_BYTES
+                    + prepared.point_names.len() as u64 * 12);
+            plan.shaper = Some(shaper.as_positions(selected));
+            plan
+        }
         format if transform.is_identity() => Plan::points(
             &prepared,
             format,
@@ -1140,6 +1182,8 @@ impl Answer {
         let full = r.len() * header.points as usize * 3 * 4;
         // Positions (of the selected points, or all when shaped), or channels (how many).
         let selected = match (&self.writer, &self.shaper) {
+            // Channels decoded, shaped onto another skeleton and placed.
+            (Writer::Points { .. }, Some(Shaper::Channels { .. })) => None,
             (Writer::Points { selected, .. }, _) => Some(selected.clone()),
             (Writer::Whole(_), Some(Shaper::Points { .. })) => Some(None),
             _ => None,
@@ -1227,6 +1271,20 @@ impl Answer {
                     Some(s) => decoded.values.len() / s.width().max(1),
                     None => frames,
                 };
+                let mut shaper = shaper;
+                if let Some((positions, frames)) =
+                    shaper.as_mut().and_then(|s| s.placed(&decoded.values))
+                {
+                    self.shaper = shaper;
+                    let held = self.reservation.hold(positions.capacity() as u64 * 4);
+                    self.block = (frames > 0).then_some(Block {
+                        frames,
+                        written: 0,
+                        data: Decoded::Positions(positions),
+                        _held: held,
+                    });
+                    return Ok(());
+                }
                 self.shaper = shaper;
                 let bytes = decoded.values.capacity() * 8
                     + decoded

@@ -55,20 +55,44 @@ impl FromStr for Onto {
     }
 }
 
-/// Whether `format` holds a skeleton a take can be put on: `skeleton=` with any other is a
-/// 400, told before the skeleton is looked for.
+/// Whether a take put on another skeleton can be written as `format`: a skeleton format
+/// (BVH, glTF, FBX) holds the target's joints and channels, a position format (JSON, CSV,
+/// TRC, NPY, f32) its joints' places; C3D keeps the lab's markers and is a 400, told
+/// before the skeleton is looked for.
 pub fn check_format(format: crate::motion::format::Format) -> Result<()> {
     use crate::motion::format::Format;
-    if matches!(
-        format,
-        Format::Bvh | Format::Glb | Format::Gltf | Format::Fbx
-    ) {
+    if format != Format::C3d {
         return Ok(());
     }
-    Err(Error::InvalidRequest(format!(
-        "skeleton= puts the take on a skeleton, which {format} does not hold: ask for \
-         format=bvh, glb, gltf or fbx"
-    )))
+    Err(Error::InvalidRequest(
+        "skeleton= puts the take on another skeleton, and C3D keeps the lab's markers: ask \
+         for bvh, glb, gltf or fbx (the skeleton), or json, csv, trc, npy or f32 (its \
+         joints' places)"
+            .into(),
+    ))
+}
+
+/// The indices of joints `want` among `names` (a target's): a 400 naming the first that
+/// is not one of them, or that is named twice.
+pub fn joint_indices(names: &[String], want: &[String]) -> Result<Vec<usize>> {
+    let mut seen = std::collections::HashSet::new();
+    want.iter()
+        .map(|w| {
+            if !seen.insert(w.as_str()) {
+                return Err(Error::InvalidRequest(format!(
+                    "point {w:?} is named more than once in points"
+                )));
+            }
+            names.iter().position(|n| n == w).ok_or_else(|| {
+                let shown: Vec<&str> = names.iter().take(20).map(String::as_str).collect();
+                Error::InvalidRequest(format!(
+                    "no joint named {w:?} in the target skeleton; its {} joints include {}",
+                    names.len(),
+                    shown.join(", ")
+                ))
+            })
+        })
+        .collect()
 }
 
 /// What `feet=` asks of a retargeted take's feet.

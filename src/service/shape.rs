@@ -33,7 +33,18 @@ pub enum Shaper {
         resampler: Option<Resampler<Channels>>,
         retarget: Option<Box<Retarget>>,
         pose: Box<SkeletonPose>,
+        /// For a position format: the shaped skeleton's joints placed by forward
+        /// kinematics, the asked-for ones kept ([`Shaper::as_positions`]).
+        placed: Option<Box<Placed>>,
     },
+}
+
+/// A shaped skeleton's frames as positions of its joints.
+pub struct Placed {
+    joints: Vec<Joint>,
+    fk: crate::motion::skeleton::Fk,
+    /// Indices of the joints written, in order.
+    selected: Vec<usize>,
 }
 
 /// A transform the take's body cannot make (409, naming what to give), a stored body that
@@ -188,7 +199,45 @@ impl Shaper {
             resampler: resampler(Channels::new(joints), prepared, options, frames),
             retarget,
             pose: Box::new(pose.map_err(refused)?),
+            placed: None,
         })
+    }
+
+    /// This skeleton shaper writing positions of its joints (`selected` by index among
+    /// [`Shaper::joints`], all when `None`) instead of channel values: a position format of
+    /// a take put on another skeleton.
+    pub fn as_positions(mut self, selected: Option<Vec<usize>>) -> Shaper {
+        if let Shaper::Channels { pose, placed, .. } = &mut self {
+            let joints = pose.joints().to_vec();
+            *placed = Some(Box::new(Placed {
+                selected: selected.unwrap_or_else(|| (0..joints.len()).collect()),
+                fk: crate::motion::skeleton::Fk::new(&joints),
+                joints,
+            }));
+        }
+        self
+    }
+
+    /// Shaped channel values (whole frames) as the positions [`Shaper::as_positions`]
+    /// asked for, and how many frames; `None` for a shaper that writes channels.
+    pub fn placed(&mut self, values: &[f64]) -> Option<(Vec<f32>, usize)> {
+        let Shaper::Channels {
+            placed: Some(p), ..
+        } = self
+        else {
+            return None;
+        };
+        let cc: usize = p.joints.iter().map(|j| j.channels.len()).sum();
+        let frames = values.len() / cc.max(1);
+        let mut at = vec![0.0; p.joints.len() * 3];
+        let mut out = Vec::with_capacity(frames * p.selected.len() * 3);
+        for f in values.chunks_exact(cc.max(1)) {
+            p.fk.frame(&p.joints, f, &mut at);
+            for &j in &p.selected {
+                out.extend(at[j * 3..j * 3 + 3].iter().map(|&v| v as f32));
+            }
+        }
+        Some((out, frames))
     }
 
     /// The rate of shaped frames.

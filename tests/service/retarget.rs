@@ -103,6 +103,30 @@ async fn a_cmu_walk_on_mixamos_rig_moves_its_bones_as_the_source_does() {
         sp.len()
     );
 
+    // As positions of the rig's joints: the places the BVH answer's joints have.
+    let (status, headers, json) = srv
+        .get(&format!(
+            "/v1/takes/{id}/frames?format=json&skeleton=mixamo&t0=0&t1=1\
+             &points=mixamorig:Head,mixamorig:LeftFoot"
+        ))
+        .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&json));
+    assert_eq!(headers["x-metres-per-unit"], "1");
+    let v: Value = serde_json::from_slice(&json).unwrap();
+    assert_eq!(
+        v["points"],
+        serde_json::json!(["mixamorig:Head", "mixamorig:LeftFoot"])
+    );
+    let frames = v["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 120);
+    for (f, frame) in frames.iter().enumerate() {
+        for (k, name) in ["mixamorig:Head", "mixamorig:LeftFoot"].iter().enumerate() {
+            let want = point(&op[f][at(&on, name)]);
+            let d = (point(&frame[k]) - want).norm();
+            assert!(d < 1e-5, "frame {f} {name}: {d} m from the BVH answer's");
+        }
+    }
+
     // Another take's skeleton: a Bandai walk's.
     let bandai = root.join("bvh/bandai/dataset-1_walk_normal_001.bvh");
     let (status, report) = srv
@@ -195,16 +219,21 @@ async fn a_cmu_walk_on_mixamos_rig_moves_its_bones_as_the_source_does() {
     for (query, status, says) in [
         ("format=bvh&skeleton=unreal", 400, "not a standard rig"),
         (
-            "format=json&skeleton=mixamo",
+            "format=c3d&skeleton=mixamo",
             400,
-            "format=bvh, glb, gltf or fbx",
+            "C3D keeps the lab's markers",
+        ),
+        (
+            "format=json&skeleton=mixamo&points=Head",
+            400,
+            "in the target skeleton; its 25 joints include mixamorig:Hips",
         ),
         ("format=bvh&skeleton=take:nope", 404, "nope"),
         // The format is told before the skeleton is looked for.
         (
-            "format=json&skeleton=take:nope",
+            "format=c3d&skeleton=take:nope",
             400,
-            "format=bvh, glb, gltf or fbx",
+            "C3D keeps the lab's markers",
         ),
         ("format=bvh&feet=lock", 400, "give skeleton="),
         ("format=bvh&skeleton=smpl&feet=glue", 400, "free or lock"),
