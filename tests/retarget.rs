@@ -361,7 +361,7 @@ fn sliding(take: &Take, target: &Target, lock: bool) -> Vec<f64> {
     let tp = positions(r.joints(), written);
     let (ns, nt) = (take.joints.len(), r.joints().len());
     let m = r.mapping();
-    let role = |ro: Role| m.pairs.iter().find(|p| p.role == ro);
+    let role = |ro: Role| m.pairs.iter().find(|p| p.role == Some(ro));
     let up = target.up.index();
     let mut out = Vec::new();
     for side in Side::BOTH {
@@ -471,4 +471,55 @@ fn locked_feet_do_not_slide_on_walks_and_runs() {
         }
     }
     assert!(failed.is_empty(), "{failed:#?}");
+}
+
+/// Fingers, which no role names, follow by name when both rigs have them: a Mixamo glTF
+/// animation on Mixamo's BVH rig pairs every finger joint of both hands (the rig's 55
+/// joints), each finger bone then pointing where the source's does. CMU's hands
+/// (LeftFingerBase, LFingers, LThumb) share no name with Mixamo's fingers: none pairs, and
+/// Mixamo's fingers keep their rest.
+#[test]
+fn fingers_follow_by_name() {
+    let Some((root, _)) = corpus() else {
+        return;
+    };
+    let glb = Take::load(&root, "gltf/mixamo_dancing.glb", "mixamo-gltf");
+    let bvh = Take::load(&root, "bvh/misc/mixamo_rig.bvh", "mixamo-bvh");
+    let target = Target {
+        name: "mixamo-bvh".into(),
+        joints: bvh.joints.clone(),
+        roles: bvh.roles.clone(),
+        up: bvh.up,
+        metres_per_unit: bvh.metres_per_unit,
+    };
+    let r = Retarget::new(&glb.figure(), &target.figure()).unwrap();
+    let named: Vec<&str> = r
+        .mapping()
+        .pairs
+        .iter()
+        .filter(|p| p.role.is_none())
+        .map(|p| target.joints[p.target].name.as_str())
+        .collect();
+    let fingers = target
+        .joints
+        .iter()
+        .filter(|j| !j.end_site && j.name.contains("Hand") && j.name.contains(char::is_numeric))
+        .count();
+    assert!(fingers >= 24, "{fingers} finger joints in the rig");
+    assert_eq!(named.len(), fingers, "{named:?}");
+    let (moving, _) = angles(&glb, &target);
+    let mut moving = moving;
+    let worst = percentile(&mut moving, 100);
+    assert!(worst < 0.1, "a bone {worst:.3}° off");
+
+    let cmu = Take::load(&root, "bvh/cmu/01_01.bvh", "cmu");
+    let r = Retarget::new(&cmu.figure(), &target.figure()).unwrap();
+    let named: Vec<&str> = r
+        .mapping()
+        .pairs
+        .iter()
+        .filter(|p| p.role.is_none())
+        .map(|p| target.joints[p.target].name.as_str())
+        .collect();
+    assert!(named.is_empty(), "{named:?}");
 }

@@ -16,7 +16,8 @@ use crate::motion::skeleton::{rest_places, rest_values, Joint};
 use crate::motion::transform::{Axis, Stance};
 use crate::store::Store;
 
-/// What `skeleton=` names.
+/// What `skeleton=` names. (`openapi.yaml`'s pattern for `skeleton=` and `to=` lists the
+/// standard rigs' names: a rig added to [`rigs::all`] is added there.)
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Onto {
     /// A standard rig, by name (`mixamo`, `smpl`).
@@ -239,7 +240,8 @@ pub struct MapView {
 pub struct JointMap {
     pub joint: String,
     pub follows: String,
-    pub role: String,
+    /// The role both play; `null` for joints paired by name (fingers, twist joints).
+    pub role: Option<String>,
     /// How far the two rest poses' bones lie apart at this joint (the rest correction's
     /// angle), degrees: 40 at the shoulder between a T-pose and an A-pose.
     pub correction_degrees: f64,
@@ -282,7 +284,7 @@ pub async fn map(store: &Store, grant: &Grant, id: &str, onto: &Onto) -> Result<
             .map(|p| JointMap {
                 joint: t[p.target].name.clone(),
                 follows: s[p.source].name.clone(),
-                role: p.role.name(),
+                role: p.role.map(|r| r.name()),
                 correction_degrees: p.correction_degrees(),
             })
             .collect(),

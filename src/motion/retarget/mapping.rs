@@ -47,7 +47,9 @@ pub struct Figure<'a> {
 /// One target joint driven by a source joint.
 #[derive(Debug, Clone)]
 pub struct Pair {
-    pub role: Role,
+    /// The role both joints play; `None` for joints paired by name below a paired one
+    /// (fingers, twist joints: [`by_name`]).
+    pub role: Option<Role>,
     pub target: usize,
     pub source: usize,
     /// `A` in the body frame: how far the source's rest bones lie from the target's.
@@ -112,7 +114,8 @@ impl Mapping {
     pub fn new(source: &Figure, target: &Figure) -> Result<Mapping, Error> {
         let s_roles = role_joints(source);
         let t_roles = role_joints(target);
-        let mut pairs_by_target: Vec<Option<(Role, usize)>> = vec![None; target.joints.len()];
+        let mut pairs_by_target: Vec<Option<(Option<Role>, usize)>> =
+            vec![None; target.joints.len()];
         let mut missing = Vec::new();
         for role in Role::all() {
             let (Some(t), Some(s)) = (t_roles.get(role), s_roles.get(role)) else {
@@ -122,9 +125,10 @@ impl Mapping {
                 continue;
             };
             for (ti, si) in chain_pairs(t, s) {
-                pairs_by_target[ti] = Some((role, si));
+                pairs_by_target[ti] = Some((Some(role), si));
             }
         }
+        by_name(source.joints, target.joints, &mut pairs_by_target);
         let pelvis = match (s_roles.one(Role::Pelvis), t_roles.one(Role::Pelvis)) {
             (Some(s), Some(t)) => (s, t),
             _ => {
@@ -160,7 +164,7 @@ impl Mapping {
             // The bones: to each mapped target joint whose nearest mapped ancestor is this
             // one, and to the source joint it follows, where that lies below this one's.
             let mut bones: Vec<(Vector3<f64>, Vector3<f64>)> = Vec::new();
-            let mut kinds: Vec<Role> = Vec::new();
+            let mut kinds: Vec<Option<Role>> = Vec::new();
             let mut aims: Vec<Option<Aim>> = Vec::new();
             for (ci, pair) in pairs_by_target.iter().enumerate() {
                 let Some((child_role, sc)) = *pair else {
@@ -202,7 +206,7 @@ impl Mapping {
                 (1, _) => aims[0],
                 (_, Some(_)) => kinds
                     .iter()
-                    .position(|r| matches!(r, Role::Spine | Role::Neck | Role::Head))
+                    .position(|r| matches!(r, Some(Role::Spine | Role::Neck | Role::Head)))
                     .and_then(|i| aims[i]),
                 _ => None,
             };
@@ -279,7 +283,8 @@ impl Mapping {
                 Some(Bone {
                     from,
                     to: c,
-                    shape: self.pairs[from].trunk && matches!(self.pairs[c].role, Role::Limb(..)),
+                    shape: self.pairs[from].trunk
+                        && matches!(self.pairs[c].role, Some(Role::Limb(..))),
                 })
             })
             .collect()
@@ -352,6 +357,36 @@ fn chain_pairs(t: &[usize], s: &[usize]) -> Vec<(usize, usize)> {
     out
 }
 
+/// Pair, by name, target joints no role pairs with source joints no role pairs: a joint
+/// that is not an end site, named alike once namespaces, case and separators are set
+/// aside (`mixamorig:LeftHandIndex1` and `LeftHandIndex1`), below the source joint its own
+/// nearest paired ancestor follows. Fingers and twist joints, which no role names, follow
+/// so when both rigs have them; parents first, so a finger's chain pairs joint by joint.
+fn by_name(source: &[Joint], target: &[Joint], pairs: &mut [Option<(Option<Role>, usize)>]) {
+    use crate::motion::body::names::normalise;
+    let mut used: Vec<bool> = vec![false; source.len()];
+    for (_, s) in pairs.iter().flatten() {
+        used[*s] = true;
+    }
+    let names: Vec<String> = source.iter().map(|j| normalise(&j.name)).collect();
+    for ti in 0..target.len() {
+        if pairs[ti].is_some() || target[ti].end_site || target[ti].channels.is_empty() {
+            continue;
+        }
+        let Some(anchor) = mapped_ancestor(target, pairs, ti).and_then(|a| pairs[a]) else {
+            continue;
+        };
+        let want = normalise(&target[ti].name);
+        let found = (0..source.len()).find(|&si| {
+            !used[si] && !source[si].end_site && names[si] == want && descends(source, si, anchor.1)
+        });
+        if let Some(si) = found {
+            used[si] = true;
+            pairs[ti] = Some((None, si));
+        }
+    }
+}
+
 /// The nearest proper ancestor of `i` that follows a source joint.
 fn mapped_ancestor<T>(joints: &[Joint], mapped: &[Option<T>], i: usize) -> Option<usize> {
     let mut at = joints[i].parent;
@@ -401,11 +436,14 @@ pub(super) fn least_turn(a: &Vector3<f64>, b: &Vector3<f64>) -> Rotation3<f64> {
 /// one as near as it can. The rigs' shapes differ most in how far below the pelvis the hips
 /// lie and how high the clavicles start; the trunk's direction is what the motion shows.
 /// `None` when the bones are not of that kind.
-fn trunk_fit(bones: &[(Vector3<f64>, Vector3<f64>)], kinds: &[Role]) -> Option<Rotation3<f64>> {
-    let find = |f: &dyn Fn(&Role) -> bool| kinds.iter().position(f).map(|i| bones[i]);
-    let trunk = find(&|r| matches!(r, Role::Spine | Role::Neck | Role::Head))?;
-    let left = find(&|r| matches!(r, Role::Limb(Side::Left, _)))?;
-    let right = find(&|r| matches!(r, Role::Limb(Side::Right, _)))?;
+fn trunk_fit(
+    bones: &[(Vector3<f64>, Vector3<f64>)],
+    kinds: &[Option<Role>],
+) -> Option<Rotation3<f64>> {
+    let find = |f: &dyn Fn(&Option<Role>) -> bool| kinds.iter().position(f).map(|i| bones[i]);
+    let trunk = find(&|r| matches!(r, Some(Role::Spine | Role::Neck | Role::Head)))?;
+    let left = find(&|r| matches!(r, Some(Role::Limb(Side::Left, _))))?;
+    let right = find(&|r| matches!(r, Some(Role::Limb(Side::Right, _))))?;
     let frame = |up: Vector3<f64>, across: Vector3<f64>| -> Option<Matrix3<f64>> {
         let a = across - up * up.dot(&across);
         (a.norm() > 1e-6).then(|| {

@@ -293,7 +293,7 @@ impl Retarget {
         let role = |r: Role, source: bool| {
             m.pairs
                 .iter()
-                .find(|p| p.role == r)
+                .find(|p| p.role == Some(r))
                 .map(|p| if source { p.source } else { p.target })
         };
         let target = &self.target;

@@ -188,7 +188,7 @@ fn a_t_pose_on_an_a_pose_rig_stands_in_a_t() {
             .mapping()
             .pairs
             .iter()
-            .find(|p| p.role == Role::Limb(Side::Left, Part::Shoulder))
+            .find(|p| p.role == Some(Role::Limb(Side::Left, Part::Shoulder)))
             .unwrap();
         assert!((shoulder.correction_degrees() - 40.0).abs() < 0.5);
         let mut out = Vec::new();
