@@ -236,6 +236,7 @@ fn cases() -> Vec<Case> {
         c(Method::GET, "/v1/skeletons", "read", false, 200),
         c(Method::GET, "/v1/skeletons/{id}", "read", false, 404),
         c(Method::DELETE, "/v1/skeletons/{id}", "admin", false, 404),
+        c(Method::GET, "/v1/skeletons/{id}/map", "read", false, 404),
         c(Method::POST, "/v1/streams", "write", true, 201),
         c(Method::GET, "/v1/streams/{id}", "read", true, 200),
         c(Method::GET, "/v1/streams/{id}/events", "read", true, 200),
@@ -350,6 +351,7 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
         ("GET" | "DELETE", "/v1/bases/{id}") => ("/v1/bases/none".into(), Body::None),
         ("GET", "/v1/jobs/{id}") => ("/v1/jobs/none".into(), Body::None),
         ("GET" | "DELETE", "/v1/skeletons/{id}") => ("/v1/skeletons/none".into(), Body::None),
+        ("GET", "/v1/skeletons/{id}/map") => ("/v1/skeletons/none/map?to=smpl".into(), Body::None),
         ("POST", "/v1/streams") => (
             "/v1/streams".into(),
             Body::Json(json!({"fps": 60.0, "points": 4, "library": "lab"})),

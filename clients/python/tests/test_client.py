@@ -269,8 +269,11 @@ def test_a_library_comes_out_on_one_rig(
     assert len(files) == 2
     for n in files:
         assert z.read(n).startswith(b"HIERARCHY\nROOT pelvis"), n
+    # Its joints' places in a position format; C3D keeps the lab's markers.
+    places = client.export(cmu.id, tmp_path / "walk.npy", t1=1.0, skeleton="smpl")
+    assert places.read_bytes()[:6] == b"\x93NUMPY"
     with pytest.raises(mocapstore.BadRequest):
-        client.export(cmu.id, tmp_path / "walk.json", skeleton="mixamo")
+        client.export(cmu.id, tmp_path / "walk.c3d", skeleton="mixamo")
 
 
 def test_the_async_client_does_the_same(server: str) -> None:
