@@ -13,6 +13,13 @@
 //! UTF-8 bytes, parent index u32 (`u32::MAX` for the root), flags u8 (bit 0: End Site),
 //! offset 3 × f64, channel count u8, one byte per channel (0–2: X/Y/Z position, 3–5: X/Y/Z
 //! rotation). All little-endian. The id is the BLAKE3 hash of these bytes (hex).
+//!
+//! Version 2 (a rig uploaded on its own, `POST /v1/skeletons`) follows the joints with
+//! what a take's skeleton does not need: flags u8 (bit 0: a rest pose, bit 1: a
+//! character), then the rest pose's channel values (one f64 per channel, in file order:
+//! the bind pose of a glTF character, whose joints rest turned) and the BLAKE3 hash of the
+//! character file (32 bytes) whose mesh the rig skins. A rig with neither is written as
+//! version 1, so a take's skeleton keeps the id it always had.
 
 use super::basis::hex;
 use super::error::{malformed, Error, Result};
@@ -22,6 +29,10 @@ use crate::motion::skeleton::{Animation, Channel, Fk, Joint};
 
 const MAGIC: &[u8; 4] = b"MCSK";
 const VERSION: u16 = 1;
+/// The version of a rig with a rest pose or a character.
+const VERSION_UPLOADED: u16 = 2;
+const HAS_REST: u8 = 1;
+const HAS_CHARACTER: u8 = 2;
 const CHANNELS: [Channel; 6] = [
     Channel::Xposition,
     Channel::Yposition,
@@ -36,6 +47,10 @@ const CHANNELS: [Channel; 6] = [
 pub struct Skeleton {
     joints: Vec<Joint>,
     channels: usize,
+    /// Channel values of the rest pose, when it is not the offsets' (rotations zero).
+    rest: Option<Vec<f64>>,
+    /// BLAKE3 of the character file whose mesh the rig skins.
+    character: Option<[u8; 32]>,
     bytes: Vec<u8>,
     hash: [u8; 32],
 }
@@ -44,14 +59,38 @@ impl Skeleton {
     /// The rig of these joints, checked as a skeleton is (parents first, one root, no
     /// channels on End Sites).
     pub fn new(joints: Vec<Joint>) -> Result<Skeleton> {
+        Skeleton::with_rest(joints, None, None)
+    }
+
+    /// A rig standing in `rest` (channel values, one per channel; finite) and skinning the
+    /// character file of hash `character`: an uploaded rig (version 2).
+    pub fn with_rest(
+        joints: Vec<Joint>,
+        rest: Option<Vec<f64>>,
+        character: Option<[u8; 32]>,
+    ) -> Result<Skeleton> {
         let joints = Animation::new(joints, Vec::new())
             .map_err(|e| Error::Invalid(format!("skeleton: {e}")))?
             .joints;
         if joints.is_empty() {
             return Err(Error::Invalid("a skeleton without joints".into()));
         }
+        let channels: usize = joints.iter().map(|j| j.channels.len()).sum();
+        if let Some(r) = &rest {
+            if r.len() != channels {
+                return Err(Error::Invalid(format!(
+                    "a rest pose of {} values for {channels} channels",
+                    r.len()
+                )));
+            }
+            if r.iter().any(|v| !v.is_finite()) {
+                return Err(Error::Invalid("a rest pose value is not finite".into()));
+            }
+        }
+        let uploaded = rest.is_some() || character.is_some();
+        let version = if uploaded { VERSION_UPLOADED } else { VERSION };
         let mut w = Writer::new();
-        w.bytes(MAGIC).bytes(&VERSION.to_le_bytes());
+        w.bytes(MAGIC).bytes(&version.to_le_bytes());
         w.u32(joints.len() as u32);
         for j in &joints {
             let name = j.name.as_bytes();
@@ -69,12 +108,28 @@ impl Skeleton {
                 w.bytes(&[code as u8]);
             }
         }
+        if uploaded {
+            let flags = if rest.is_some() { HAS_REST } else { 0 }
+                | if character.is_some() {
+                    HAS_CHARACTER
+                } else {
+                    0
+                };
+            w.bytes(&[flags]);
+            for v in rest.iter().flatten() {
+                w.f64(*v);
+            }
+            if let Some(h) = &character {
+                w.bytes(h);
+            }
+        }
         let bytes = w.0;
         let hash = *blake3::hash(&bytes).as_bytes();
-        let channels = joints.iter().map(|j| j.channels.len()).sum();
         Ok(Skeleton {
             joints,
             channels,
+            rest,
+            character,
             bytes,
             hash,
         })
@@ -83,7 +138,13 @@ impl Skeleton {
     /// Parse stored bytes; at most `max_joints` joints are allocated.
     pub fn parse(bytes: &[u8], max_joints: u64) -> Result<Skeleton> {
         let mut r = Reader::named(bytes, "skeleton");
-        r.opening(MAGIC, VERSION, "skeleton")?;
+        if r.take(4)? != MAGIC {
+            return Err(malformed("not a mocapstore skeleton (bad magic)"));
+        }
+        let version = r.u16()?;
+        if version != VERSION && version != VERSION_UPLOADED {
+            return Err(Error::Unsupported(format!("skeleton version {version}")));
+        }
         let n = r.u32()?;
         if u64::from(n) > max_joints {
             return Err(Error::Limit {
@@ -130,8 +191,27 @@ impl Skeleton {
                 end_site,
             });
         }
+        let (mut rest, mut character) = (None, None);
+        if version == VERSION_UPLOADED {
+            let flags = r.u8()?;
+            if flags & !(HAS_REST | HAS_CHARACTER) != 0 {
+                return Err(malformed(format!("skeleton flags {flags:#x}")));
+            }
+            if flags & HAS_REST != 0 {
+                let n: usize = joints.iter().map(|j| j.channels.len()).sum();
+                let mut v = Vec::with_capacity(n.min(bytes.len() / 8));
+                for _ in 0..n {
+                    v.push(r.f64()?);
+                }
+                rest = Some(v);
+            }
+            if flags & HAS_CHARACTER != 0 {
+                character = Some(r.take(32)?.try_into().expect("32 bytes"));
+            }
+        }
         r.finish()?;
-        let rig = Skeleton::new(joints).map_err(|e| malformed(e.to_string()))?;
+        let rig =
+            Skeleton::with_rest(joints, rest, character).map_err(|e| malformed(e.to_string()))?;
         if rig.bytes != bytes {
             return Err(malformed("skeleton bytes are not in canonical form"));
         }
@@ -140,6 +220,19 @@ impl Skeleton {
 
     pub fn joints(&self) -> &[Joint] {
         &self.joints
+    }
+
+    /// Channel values of the pose the rig stands in when nothing moves it: an uploaded
+    /// rig's bind pose, else its offsets' ([`crate::motion::skeleton::rest_values`]).
+    pub fn rest(&self) -> Vec<f64> {
+        self.rest
+            .clone()
+            .unwrap_or_else(|| crate::motion::skeleton::rest_values(&self.joints))
+    }
+
+    /// The hash (hex) of the character file whose mesh this rig skins, if it came with one.
+    pub fn character(&self) -> Option<String> {
+        self.character.as_ref().map(hex)
     }
 
     /// Channel values per frame.
@@ -228,6 +321,33 @@ mod tests {
             if let Ok(other) = Skeleton::parse(&b, 100) {
                 assert_ne!(other.hash(), r.hash());
             }
+        }
+    }
+
+    /// An uploaded rig keeps its rest pose and character through its bytes; the same
+    /// joints with neither are the version-1 rig a take stores, id unchanged.
+    #[test]
+    fn an_uploaded_rig_keeps_its_rest_and_character() {
+        let plain = rig();
+        let joints = plain.joints().to_vec();
+        let rest: Vec<f64> = (0..plain.channel_count()).map(|i| i as f64 * 0.5).collect();
+        let up = Skeleton::with_rest(joints.clone(), Some(rest.clone()), Some([7; 32])).unwrap();
+        assert_eq!(u16::from_le_bytes([up.bytes()[4], up.bytes()[5]]), 2);
+        let again = Skeleton::parse(up.bytes(), 100).unwrap();
+        assert_eq!(again.rest(), rest);
+        assert_eq!(again.character(), Some(hex(&[7; 32])));
+        assert_ne!(up.id(), plain.id());
+        assert_eq!(
+            Skeleton::with_rest(joints.clone(), None, None)
+                .unwrap()
+                .id(),
+            plain.id()
+        );
+        assert_eq!(plain.rest(), crate::motion::skeleton::rest_values(&joints));
+        assert!(Skeleton::with_rest(joints.clone(), Some(vec![0.0]), None).is_err());
+        assert!(Skeleton::with_rest(joints, Some(vec![f64::NAN; rest.len()]), None).is_err());
+        for cut in 0..up.bytes().len() {
+            assert!(Skeleton::parse(&up.bytes()[..cut], 100).is_err());
         }
     }
 }

@@ -19,12 +19,13 @@
 //! |---|---|
 //! | `GET /healthz`, `GET /readyz`, `GET /` and `GET /ui/…` (the viewer's files) | none |
 //! | every other `GET` | read |
-//! | `POST /v1/takes`, `PATCH /v1/takes/{id}`, `POST /v1/streams…` | write |
+//! | `POST /v1/takes`, `PATCH /v1/takes/{id}`, `POST /v1/streams…`, `POST /v1/skeletons` | write |
 //! | `DELETE /v1/takes/{id}`, `POST`/`DELETE /v1/bases…`, `DELETE /v1/skeletons/{id}`, `/v1/tokens…`, `GET /v1/audit`, `GET /metrics` | admin |
 //!
 //! A read or write token limited to libraries sees and changes only takes in them, and
-//! only the skeletons, bases, jobs and statistics of its libraries; a take of another
-//! library answers 404, as one that does not exist. An admin token is over every library.
+//! only the skeletons, bases, jobs and statistics of its libraries (and every uploaded rig,
+//! which holds no library's motion); a take of another library answers 404, as one that
+//! does not exist. An admin token is over every library.
 //! `/metrics` (archive-wide totals) is also served without a token on a separate address
 //! when the operator asks for one (`serve --metrics-listen`), for a scraper on an internal
 //! network.

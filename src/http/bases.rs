@@ -1,6 +1,6 @@
 //! `/v1/bases` (shared bases: train, list, show, delete) and `/v1/jobs/{id}`.
 
-use axum::extract::rejection::{JsonRejection, QueryRejection};
+use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -8,6 +8,7 @@ use axum::{Extension, Json};
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::object::Object;
 use super::views::BasisView;
 use super::AppState;
 use crate::codec::BasisKind;
@@ -21,9 +22,9 @@ use crate::service::Error;
 /// `POST /v1/bases`: 202 with the training job (and its address in `Location`).
 pub async fn train(
     State(state): State<AppState>,
-    body: Result<Json<TrainRequest>, JsonRejection>,
+    body: Object<TrainRequest>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let Json(req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let Object(req) = body;
     let job = training::start_training(&state.store, &state.jobs, req).await?;
     let location = format!("/v1/jobs/{}", job.id);
     Ok((

@@ -2,7 +2,7 @@
 //! `GET /v1/export` (a library as one ZIP), `GET`/`POST /v1/motion-stats` (normalisation
 //! statistics of a selection's motion).
 
-use axum::extract::rejection::{JsonRejection, QueryRejection};
+use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
@@ -12,6 +12,7 @@ use serde::Deserialize;
 use axum::http::{header, HeaderMap, HeaderValue};
 
 use super::error::ApiError;
+use super::object::Object;
 use super::takes::{feet_of, format_of, onto_of, streamed, transform_of};
 use super::views::{ListingView, TakeView};
 use super::AppState;
@@ -237,9 +238,9 @@ pub async fn motion_stats_of(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Extension(holder): Extension<Holder>,
-    body: Result<Json<MotionStatsBody>, JsonRejection>,
+    body: Object<MotionStatsBody>,
 ) -> Result<Json<MotionStats>, ApiError> {
-    let Json(b) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let Object(b) = body;
     let mut labels = Vec::new();
     for (k, v) in b.labels.unwrap_or_default() {
         let text = match v {
@@ -381,9 +382,9 @@ pub async fn patch(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
-    body: Result<Json<Patch>, JsonRejection>,
+    body: Object<Patch>,
 ) -> Result<Response, ApiError> {
-    let Json(p) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let Object(p) = body;
     if let Some(to) = &p.library {
         caller.grant.library(to)?;
     }

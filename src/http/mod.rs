@@ -10,6 +10,7 @@ mod error;
 pub mod forward;
 mod library;
 mod metrics;
+mod object;
 pub mod proxy;
 mod routes;
 mod search;
@@ -237,6 +238,11 @@ fn declare(bodies: &Arc<Budget>, limits: &Limits) -> Routes {
         .get("/v1/jobs", Needs(Read), bases::jobs)
         .get("/v1/jobs/{id}", Needs(Read), bases::job)
         .get("/v1/skeletons", Needs(Read), skeletons::list)
+        .post(
+            "/v1/skeletons",
+            Needs(Write),
+            skeletons::upload.layer(upload.clone()),
+        )
         .get("/v1/skeletons/{id}", Needs(Read), skeletons::get)
         .get("/v1/skeletons/{id}/map", Needs(Read), skeletons::map)
         .delete("/v1/skeletons/{id}", Needs(Admin), skeletons::delete)

@@ -5,7 +5,7 @@ use std::convert::Infallible;
 use std::sync::Arc;
 
 use axum::body::Bytes;
-use axum::extract::rejection::{JsonRejection, QueryRejection};
+use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, Method, StatusCode, Uri};
 use axum::response::sse::{Event, KeepAlive, Sse};
@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::broadcast::error::RecvError;
 
 use super::error::ApiError;
+use super::object::Object;
 use super::views::TakeView;
 use super::AppState;
 use crate::service::access::Caller;
@@ -75,9 +76,9 @@ pub async fn open(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Extension(holder): Extension<Holder>,
-    body: Result<Json<OpenRequest>, JsonRejection>,
+    body: Object<OpenRequest>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let Json(mut req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let Object(mut req) = body;
     req.library = caller.grant.library_for_new(&req.library)?;
     let info = state.streams.open(&state.store, req, &holder).await?;
     let location = format!("/v1/streams/{}", info.id);

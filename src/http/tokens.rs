@@ -1,6 +1,6 @@
 //! `/v1/tokens` and `/v1/audit`: API tokens (admin) and the audit log (admin).
 
-use axum::extract::rejection::{JsonRejection, QueryRejection};
+use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -8,6 +8,7 @@ use axum::Json;
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::object::Object;
 use super::views::{AuditView, NewTokenView, TokenView};
 use super::AppState;
 use crate::limits::MAX_AUDIT_PAGE;
@@ -15,9 +16,9 @@ use crate::service::access::{self, NewToken, TokenRequest};
 
 pub async fn create(
     State(state): State<AppState>,
-    body: Result<Json<TokenRequest>, JsonRejection>,
+    body: Object<TokenRequest>,
 ) -> Result<Response, ApiError> {
-    let Json(req) = body.map_err(|r| ApiError::bad_request(r.body_text()))?;
+    let Object(req) = body;
     let token: NewToken = access::create_token(&state.store, req).await?;
     state.auth.forget();
     let location = format!("/v1/tokens/{}", token.info.id);

@@ -164,6 +164,17 @@ pub struct SkeletonView<'a> {
     /// Which joints play which role, with the hierarchy.
     #[serde(skip_serializing_if = "Option::is_none")]
     roles: Option<crate::motion::body::Roles>,
+    /// The format of the file an uploaded rig came from; absent for a take's skeleton.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    uploaded_as: Option<&'a str>,
+    /// An uploaded rig's rest pose (channel values in hierarchy order: a character's bind
+    /// pose), with the hierarchy.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rest: Option<&'a [f64]>,
+    /// Whether the rig skins a character: a glb or gltf answer on it is the character
+    /// playing the take.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    character: Option<bool>,
 }
 
 impl<'a> SkeletonView<'a> {
@@ -181,6 +192,24 @@ impl<'a> SkeletonView<'a> {
             used_by: r.used_by,
             hierarchy,
             roles,
+            uploaded_as: r.uploaded_as.as_deref(),
+            rest: None,
+            character: None,
+        }
+    }
+
+    /// An uploaded rig with its hierarchy, roles, rest pose and whether it skins a
+    /// character.
+    pub fn uploaded(
+        r: &'a SkeletonRow,
+        hierarchy: (&'a [Joint], crate::motion::body::Roles),
+        rest: &'a [f64],
+        character: bool,
+    ) -> Self {
+        SkeletonView {
+            rest: Some(rest),
+            character: Some(character),
+            ..SkeletonView::of(r, Some(hierarchy))
         }
     }
 }

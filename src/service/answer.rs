@@ -192,6 +192,8 @@ struct Whole {
     /// The metres a unit of the values is and the up axis they were turned to (FBX states
     /// both in its settings).
     space: (f64, Axis),
+    /// The character file the target skeleton skins: a glTF answer is it playing the take.
+    character: Option<Arc<Vec<u8>>>,
     _held: Option<Held>,
 }
 
@@ -208,6 +210,7 @@ struct C3dParts {
 struct GltfFile {
     format: Format,
     space: (f64, Axis),
+    character: Option<Arc<Vec<u8>>>,
     joints: Option<Vec<crate::motion::skeleton::Joint>>,
     names: Vec<String>,
     values: Vec<f64>,
@@ -223,6 +226,7 @@ impl Whole {
         GltfFile {
             format: self.format,
             space: self.space,
+            character: self.character.clone(),
             joints: self.joints.clone(),
             names: self.names.clone(),
             values: std::mem::take(&mut self.values),
@@ -236,7 +240,22 @@ impl Whole {
 
 impl GltfFile {
     fn write(self) -> Result<Vec<u8>> {
-        use crate::motion::formats::gltf::{self, Figure, Scene};
+        use crate::motion::formats::gltf::{self, character, Figure, Scene};
+        if let (Some(file), Some(joints), Format::Glb | Format::Gltf) =
+            (&self.character, &self.joints, self.format)
+        {
+            let motion = character::Motion {
+                name: &self.name,
+                joints,
+                values: &self.values,
+                frames: self.frames,
+                fps: self.fps,
+                extras: self.extras.clone(),
+            };
+            let limits = crate::motion::formats::ReadLimits::default();
+            return character::animate(file, &limits, &motion, self.format == Format::Glb)
+                .map_err(|e| Error::Corrupt(format!("the stored character file: {e}")));
+        }
         let figure = match &self.joints {
             Some(joints) => Figure::Skeleton {
                 joints,
@@ -654,15 +673,28 @@ async fn plan(
             let nodes = shaper
                 .joints()
                 .map_or(shaper.width() / 3, <[crate::motion::skeleton::Joint]>::len);
-            let file = if req.format == Format::Fbx {
-                crate::motion::formats::fbx::write::len_bound(frames_out, nodes)
-            } else {
-                crate::motion::formats::gltf::glb_len_bound(frames_out, nodes)
+            // The character file the target skins comes along in a glTF.
+            let character = onto
+                .and_then(|t| t.character.clone())
+                .filter(|_| req.format != Format::Fbx);
+            let file = match &character {
+                _ if req.format == Format::Fbx => {
+                    crate::motion::formats::fbx::write::len_bound(frames_out, nodes)
+                }
+                Some(c) => {
+                    crate::motion::formats::gltf::character::len_bound(c.len(), frames_out, nodes)
+                }
+                None => crate::motion::formats::gltf::glb_len_bound(frames_out, nodes),
             };
             let gathered = frames_out as u64 * shaper.width() as u64 * 8;
             // Building it holds the binary buffer and the file: a GLB is the buffer once
             // more; a glTF is its base64 (4/3 of it) inside the JSON text.
-            let build = file.saturating_mul(if req.format == Format::Gltf { 4 } else { 2 });
+            // A character's file is copied in as well (its buffer, beside the one kept, and
+            // its document), and the answer is the whole file again.
+            let build = file.saturating_mul(match (req.format, &character) {
+                (Format::Gltf, _) | (_, Some(_)) => 4,
+                _ => 2,
+            });
             if build.saturating_add(gathered) > limits.answer_bytes {
                 return Err(Error::InvalidRequest(format!(
                     "a {} of {frames_out} frames of {nodes} nodes takes about {} bytes to \
@@ -693,6 +725,7 @@ async fn plan(
                         .unwrap_or(onto.map_or(prepared.metres_per_unit, |t| t.metres_per_unit)),
                     transform.up.unwrap_or(Axis::Y),
                 );
+                w.character = character;
             }
             plan
         }
@@ -950,7 +983,9 @@ impl Plan {
         c3d: Option<C3dParts>,
     ) -> Plan {
         let header = prepared.reader.header();
-        let in_width = prepared.point_names.len() as u64 * 12;
+        // A chunk's positions, or its channels shaped onto a target (which may have more).
+        let in_width =
+            (prepared.point_names.len() as u64 * 12).max(shaper.width() as u64 * CHANNEL_BYTES);
         let whole = Whole {
             format,
             joints: shaper.joints().map(<[_]>::to_vec),
@@ -968,6 +1003,7 @@ impl Plan {
             fps: shaper.fps(prepared),
             c3d,
             space: (prepared.metres_per_unit, Axis::Y),
+            character: None,
             _held: None,
         };
         Plan {

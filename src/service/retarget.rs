@@ -129,6 +129,12 @@ pub struct Target {
     /// the axis its rest pose stands along (BVH's +Y when its rest is no standing body).
     pub up: Axis,
     pub metres_per_unit: f64,
+    /// Channel values of its rest pose: an uploaded character's bind pose, else its
+    /// offsets' (rotations zero).
+    pub rest: Vec<f64>,
+    /// The character file an uploaded skeleton skins: a GLB or glTF answer is that file
+    /// playing the take ([`crate::motion::formats::gltf::character`]).
+    pub character: Option<Arc<Vec<u8>>>,
 }
 
 impl Target {
@@ -136,7 +142,7 @@ impl Target {
     pub fn figure(&self) -> Figure<'_> {
         Figure {
             joints: &self.joints,
-            rest: rest_values(&self.joints),
+            rest: self.rest.clone(),
             roles: &self.roles,
             up: self.up,
             floor: 0.0,
@@ -154,20 +160,30 @@ pub async fn target(store: &Store, grant: &Grant, onto: &Onto) -> Result<Arc<Tar
             Target {
                 name: rig.name.to_string(),
                 roles: Roles::of_skeleton(&rig.joints),
+                rest: rest_values(&rig.joints),
                 joints: rig.joints,
                 up: Axis::Y,
                 metres_per_unit: 1.0,
+                character: None,
             }
         }
         Onto::Skeleton(id) => {
             let (row, rig) = super::skeletons::get(store, id, grant).await?;
             let joints = rig.joints().to_vec();
+            let rest = rig.rest();
+            let roles = super::skeletons::roles(&rig);
+            let character = match rig.character() {
+                Some(_) => Some(super::skeletons::character(store, &row.id).await?),
+                None => None,
+            };
             Target {
                 name: row.id,
-                roles: super::skeletons::roles(&rig),
-                up: standing_up(&joints, &super::skeletons::roles(&rig)),
-                metres_per_unit: unit_of(&joints),
+                up: standing_up(&joints, &rest, &roles),
+                metres_per_unit: unit_of(&joints, &rest),
+                roles,
                 joints,
+                rest,
+                character,
             }
         }
         Onto::Take(id) => {
@@ -196,6 +212,8 @@ pub async fn target(store: &Store, grant: &Grant, onto: &Onto) -> Result<Arc<Tar
                 roles: body.roles,
                 up,
                 metres_per_unit: take.metres_per_unit,
+                rest: rig.rest(),
+                character: None,
             }
         }
     }))
@@ -203,14 +221,35 @@ pub async fn target(store: &Store, grant: &Grant, onto: &Onto) -> Result<Arc<Tar
 
 /// A stored skeleton's unit (it keeps none; its takes do), from its rest pose's height as
 /// a take's is inferred; metres when that tells nothing.
-fn unit_of(joints: &[Joint]) -> f64 {
-    let height = crate::motion::skeleton::Animation {
+fn unit_of(joints: &[Joint], rest: &[f64]) -> f64 {
+    let at = rest_at(joints, rest);
+    // As a take's rest height: Y or Z (a T-pose is as wide as it is tall, so X never).
+    let height = (1..3)
+        .map(|c| {
+            let (lo, hi) = at
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    (lo.min(p[c]), hi.max(p[c]))
+                });
+            hi - lo
+        })
+        .fold(0.0, f64::max);
+    crate::motion::units::Unit::infer_from_height(height).map_or(1.0, |u| u.metres_per_unit)
+}
+
+/// Where a skeleton's joints stand in its rest pose (`rest`: its channel values), file
+/// units.
+fn rest_at(joints: &[Joint], rest: &[f64]) -> Vec<[f64; 3]> {
+    let fk = crate::motion::skeleton::Animation {
         joints: joints.to_vec(),
-        values: Vec::new(),
+        values: rest.to_vec(),
         printed: None,
     }
-    .rest_height();
-    crate::motion::units::Unit::infer_from_height(height).map_or(1.0, |u| u.metres_per_unit)
+    .forward_kinematics();
+    if fk.len() != joints.len() * 3 {
+        return rest_places(joints);
+    }
+    fk.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect()
 }
 
 /// How a stored skeleton maps onto a target, as `GET /v1/skeletons/{id}/map` shows it.
@@ -260,13 +299,14 @@ pub async fn map(store: &Store, grant: &Grant, id: &str, onto: &Onto) -> Result<
     let target = target(store, grant, onto).await?;
     let joints = rig.joints().to_vec();
     let roles = super::skeletons::roles(&rig);
+    let rest = rig.rest();
     let source = Figure {
         joints: &joints,
-        rest: rest_values(&joints),
+        up: standing_up(&joints, &rest, &roles),
+        metres_per_unit: unit_of(&joints, &rest),
+        rest,
         roles: &roles,
-        up: standing_up(&joints, &roles),
         floor: 0.0,
-        metres_per_unit: unit_of(&joints),
     };
     let m =
         crate::motion::retarget::Mapping::new(&source, &target.figure()).map_err(|e| match e {
@@ -305,10 +345,10 @@ pub async fn map(store: &Store, grant: &Grant, id: &str, onto: &Onto) -> Result<
 
 /// The axis a skeleton's rest pose stands along (pelvis below head within 30° of it), or
 /// BVH's +Y when the rest is no standing body (Bandai's rest lays every bone along x).
-fn standing_up(joints: &[Joint], roles: &Roles) -> Axis {
+fn standing_up(joints: &[Joint], rest: &[f64], roles: &Roles) -> Axis {
     use crate::motion::body::Role;
     let names: Vec<String> = joints.iter().map(|j| j.name.clone()).collect();
-    let at = rest_places(joints);
+    let at = rest_at(joints, rest);
     let one = |r: Role| roles.points(r, &names).first().map(|&i| at[i]);
     let (Some(p), Some(h)) = (one(Role::Pelvis), one(Role::Head).or(one(Role::Neck))) else {
         return Axis::Y;
@@ -401,7 +441,11 @@ mod tests {
     fn a_standard_rig_stands_along_y() {
         for rig in rigs::all() {
             assert_eq!(
-                standing_up(&rig.joints, &Roles::of_skeleton(&rig.joints)),
+                standing_up(
+                    &rig.joints,
+                    &rest_values(&rig.joints),
+                    &Roles::of_skeleton(&rig.joints)
+                ),
                 Axis::Y
             );
         }

@@ -69,11 +69,84 @@ pub fn row_of(rig: &Skeleton, layout: &str, now_ms: i64) -> SkeletonRow {
         payload: rig.bytes().to_vec(),
         created_at: now_ms,
         used_by: 0,
+        uploaded_as: None,
     }
 }
 
+/// The layout an uploaded skeleton is listed under (it has no takes, so no take layout).
+pub const UPLOADED_LAYOUT: &str = "uploaded";
+
+/// A rig uploaded on its own, stored.
+#[derive(Debug)]
+pub struct Uploaded {
+    pub row: SkeletonRow,
+    pub rig: Arc<Skeleton>,
+    /// False when the same rig (and character) was stored already.
+    pub created: bool,
+    pub warnings: Vec<String>,
+}
+
+/// Store the rig of a character or rig file (`POST /v1/skeletons`): a glTF character with
+/// its bind pose and the file itself (for answers that play a take on its mesh), an FBX
+/// character's bones at their bind pose, or a BVH hierarchy. Content addressed: the same
+/// upload twice is the same skeleton.
+pub async fn upload(
+    store: &Store,
+    bytes: bytes::Bytes,
+    format: Option<crate::motion::format::Format>,
+    limits: crate::motion::formats::ReadLimits,
+) -> Result<Uploaded> {
+    let (rig, file, warnings) = blocking(move || -> Result<_> {
+        let file = crate::motion::formats::rig::read(&bytes, format, &limits)?;
+        let character = file.character.then(|| *blake3::hash(&bytes).as_bytes());
+        let rig = Skeleton::with_rest(file.joints, file.rest, character)
+            .map_err(|e| Error::InvalidRequest(format!("skeleton: {e}")))?;
+        Ok((
+            rig,
+            file.character.then_some(bytes),
+            (file.format, file.warnings),
+        ))
+    })
+    .await??;
+    let (format, warnings) = warnings;
+    let mut row = row_of(&rig, UPLOADED_LAYOUT, super::now_ms());
+    row.uploaded_as = Some(format.name().to_string());
+    let created = store.insert_skeleton(&row, file.as_deref()).await?;
+    let (row, rig) = get(store, &rig.id(), &Grant::everything()).await?;
+    Ok(Uploaded {
+        row,
+        rig,
+        created,
+        warnings,
+    })
+}
+
+/// The character file uploaded skeleton `id` skins, kept parsed-free and shared: a few are
+/// held (a library export writes every take onto the same one).
+pub async fn character(store: &Store, id: &str) -> Result<Arc<Vec<u8>>> {
+    static FILES: OnceLock<Mutex<HashMap<String, Arc<Vec<u8>>>>> = OnceLock::new();
+    const HELD: usize = 4;
+    let files = FILES.get_or_init(|| Mutex::new(HashMap::new()));
+    if let Some(f) = files.lock().ok().and_then(|c| c.get(id).cloned()) {
+        return Ok(f);
+    }
+    let file = Arc::new(store.skeleton_character(id).await?.ok_or_else(|| {
+        Error::Corrupt(format!(
+            "skeleton {id} names a character file that is not stored"
+        ))
+    })?);
+    if let Ok(mut c) = files.lock() {
+        if c.len() >= HELD {
+            c.clear();
+        }
+        c.insert(id.to_string(), file.clone());
+    }
+    Ok(file)
+}
+
 /// Stored skeletons, newest first, optionally of one layout (payloads not read). A grant
-/// limited to libraries sees those of its libraries' takes, each counted by those takes.
+/// limited to libraries sees those of its libraries' takes, each counted by those takes,
+/// and the uploaded ones (rigs to put takes on, holding no library's motion).
 pub async fn list(store: &Store, layout: Option<&str>, grant: &Grant) -> Result<Vec<SkeletonRow>> {
     let rows = store.skeletons(layout).await?;
     let Some(within) = grant.within() else {
@@ -83,7 +156,11 @@ pub async fn list(store: &Store, layout: Option<&str>, grant: &Grant) -> Result<
     Ok(rows
         .into_iter()
         .filter_map(|mut r| {
-            r.used_by = *uses.get(&r.id)?;
+            r.used_by = match uses.get(&r.id) {
+                Some(&n) => n,
+                None if r.uploaded_as.is_some() => 0,
+                None => return None,
+            };
             Some(r)
         })
         .collect())
@@ -116,7 +193,11 @@ pub async fn get(store: &Store, id: &str, grant: &Grant) -> Result<(SkeletonRow,
     let mut row = store.skeleton(id).await?.ok_or_else(missing)?;
     if let Some(within) = grant.within() {
         let uses = store.skeleton_use_within(&within).await?;
-        row.used_by = *uses.get(id).ok_or_else(missing)?;
+        row.used_by = match uses.get(id) {
+            Some(&n) => n,
+            None if row.uploaded_as.is_some() => 0,
+            None => return Err(missing()),
+        };
     }
     let rig = load(store, id).await?;
     Ok((row, rig))

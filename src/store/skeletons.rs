@@ -21,9 +21,12 @@ pub struct SkeletonRow {
     pub created_at: i64,
     /// How many takes reference it.
     pub used_by: i64,
+    /// The format of the file it was uploaded from (`POST /v1/skeletons`); `None` for a
+    /// take's skeleton, stored with the take.
+    pub uploaded_as: Option<String>,
 }
 
-const COLUMNS: &str = "id, layout, joints, created_at, \
+const COLUMNS: &str = "id, layout, joints, created_at, uploaded_as, \
     (SELECT COUNT(*) FROM takes s WHERE s.skeleton_id = skeletons.id) AS used_by";
 
 pub(super) const INSERT: &str = "INSERT INTO skeletons (id, layout, joints, payload, created_at) \
@@ -35,6 +38,7 @@ where
     for<'a> String: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> i64: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
     for<'a> Vec<u8>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
+    for<'a> Option<String>: sqlx::Decode<'a, R::Database> + sqlx::Type<R::Database>,
 {
     Ok(SkeletonRow {
         id: r.try_get("id")?,
@@ -47,6 +51,7 @@ where
         },
         created_at: r.try_get("created_at")?,
         used_by: r.try_get("used_by")?,
+        uploaded_as: r.try_get("uploaded_as")?,
     })
 }
 
@@ -61,6 +66,43 @@ impl Store {
                 .await?
                 .map(|r| skeleton_from_row(&r, true))
                 .transpose()
+        })
+    }
+
+    /// Store an uploaded skeleton (`row.uploaded_as` set) and the character file it skins,
+    /// unless one of its id is stored already: whether it was new.
+    pub async fn insert_skeleton(
+        &self,
+        row: &SkeletonRow,
+        character: Option<&[u8]>,
+    ) -> Result<bool> {
+        const SQL: &str = "INSERT INTO skeletons \
+            (id, layout, joints, payload, created_at, uploaded_as, character_file) \
+            VALUES ($1, $2, $3, $4, $5, $6, $7) ON CONFLICT (id) DO NOTHING";
+        dispatch!(self, pool => {
+            let done = sqlx::query(SQL)
+                .bind(&row.id)
+                .bind(&row.layout)
+                .bind(row.joints)
+                .bind(&row.payload)
+                .bind(row.created_at)
+                .bind(&row.uploaded_as)
+                .bind(character)
+                .execute(pool)
+                .await?;
+            Ok(done.rows_affected() == 1)
+        })
+    }
+
+    /// The character file an uploaded skeleton skins, if it has one.
+    pub async fn skeleton_character(&self, id: &str) -> Result<Option<Vec<u8>>> {
+        const SQL: &str = "SELECT character_file FROM skeletons WHERE id = $1";
+        dispatch!(self, pool => {
+            Ok(sqlx::query_scalar::<_, Option<Vec<u8>>>(SQL)
+                .bind(id)
+                .fetch_optional(pool)
+                .await?
+                .flatten())
         })
     }
 

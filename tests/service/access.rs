@@ -234,6 +234,8 @@ fn cases() -> Vec<Case> {
         c(Method::GET, "/v1/jobs", "read", false, 200),
         c(Method::GET, "/v1/jobs/{id}", "read", false, 404),
         c(Method::GET, "/v1/skeletons", "read", false, 200),
+        // An empty body: the scope is checked before it is read.
+        c(Method::POST, "/v1/skeletons", "write", false, 400),
         c(Method::GET, "/v1/skeletons/{id}", "read", false, 404),
         c(Method::DELETE, "/v1/skeletons/{id}", "admin", false, 404),
         c(Method::GET, "/v1/skeletons/{id}/map", "read", false, 404),
@@ -350,6 +352,7 @@ async fn request(srv: &common::Server, admin: &str, case: &Case, n: u64) -> (Str
         ),
         ("GET" | "DELETE", "/v1/bases/{id}") => ("/v1/bases/none".into(), Body::None),
         ("GET", "/v1/jobs/{id}") => ("/v1/jobs/none".into(), Body::None),
+        ("POST", "/v1/skeletons") => ("/v1/skeletons".into(), Body::None),
         ("GET" | "DELETE", "/v1/skeletons/{id}") => ("/v1/skeletons/none".into(), Body::None),
         ("GET", "/v1/skeletons/{id}/map") => ("/v1/skeletons/none/map?to=smpl".into(), Body::None),
         ("POST", "/v1/streams") => (

@@ -539,3 +539,26 @@ pub fn against_gltf_eval(ours: &Value, theirs: &Value, fps: f64, t0: f64) -> (us
     }
     (compared, worst)
 }
+
+/// The Khronos validator's report of a file: (errors, the first messages).
+pub fn validate(modules: &std::path::Path, file: &std::path::Path) -> Value {
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/gltf/validate.mjs");
+    let o = std::process::Command::new("node")
+        .arg(script)
+        .arg(file)
+        .env("GLTF_NODE_MODULES", modules)
+        .output()
+        .unwrap();
+    serde_json::from_slice(o.stdout.trim_ascii()).unwrap_or_else(|_| {
+        panic!(
+            "validate.mjs said {} {}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        )
+    })
+}
+
+/// The Node modules of the independent glTF tools, when the tests are given them.
+pub fn node_modules() -> Option<std::path::PathBuf> {
+    std::env::var_os("MOCAP_TEST_NODE_MODULES").map(std::path::PathBuf::from)
+}

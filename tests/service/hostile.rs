@@ -1067,3 +1067,56 @@ with open(path, 'rb') as h:
             for _, pts, _ in r.read_frames()]
 print(json.dumps(mask))
 "#;
+
+/// Found by schemathesis: serde reads a struct from a JSON array of its fields, so `[]`
+/// was an empty PATCH (200) and `["t", "read"]` a token. Every JSON body is an object, or
+/// a 400 saying so; nothing changes.
+#[tokio::test]
+async fn a_json_body_that_is_no_object_is_a_400() {
+    let t = common::sqlite().await;
+    let admin = common::token(&t.store, "admin", "admin", None).await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let id = ingest(
+        &srv,
+        &admin,
+        "name=kept",
+        mocapstore::motion::synthetic::chain_bvh(5).into_bytes(),
+    )
+    .await;
+    for (method, path, body) in [
+        (reqwest::Method::PATCH, format!("/v1/takes/{id}"), json!([])),
+        (
+            reqwest::Method::POST,
+            "/v1/tokens".into(),
+            json!(["t", "read"]),
+        ),
+        (
+            reqwest::Method::POST,
+            "/v1/streams".into(),
+            json!([60.0, 4]),
+        ),
+        (reqwest::Method::POST, "/v1/bases".into(), json!("cmu")),
+        (reqwest::Method::POST, "/v1/motion-stats".into(), json!(7)),
+    ] {
+        let (status, v) = call(&srv, &admin, method, &path, Some(body)).await;
+        assert_eq!(status, 400, "{path}: {v}");
+        assert!(
+            v["error"]["message"]
+                .as_str()
+                .unwrap()
+                .contains("JSON object"),
+            "{path}: {v}"
+        );
+    }
+    let (_, take) = call(
+        &srv,
+        &admin,
+        reqwest::Method::GET,
+        &format!("/v1/takes/{id}"),
+        None,
+    )
+    .await;
+    assert_eq!(take["name"], "kept");
+    srv.stop().await;
+    t.finish().await;
+}

@@ -312,6 +312,205 @@ async fn another_librarys_skeleton_is_not_found() {
         assert_eq!(status, 200, "{query}: {text}");
         assert!(text.contains("UpperArm_L"), "{query}");
     }
+    // An uploaded rig holds no library's motion: every reader may put takes on it.
+    let ybot = std::fs::read(root.join("gltf/mixamo_ybot_character.glb")).unwrap();
+    let (status, rig) = upload_rig(&srv, ybot.clone(), Some(&reader)).await;
+    assert_eq!(status, 403, "a read token uploads nothing: {rig}");
+    let (status, rig) = upload_rig(&srv, ybot, Some(&admin)).await;
+    assert_eq!(status, 201, "{rig}");
+    let id = rig["id"].as_str().unwrap();
+    let r = srv
+        .client
+        .get(format!("{}/v1/skeletons/{id}", srv.base))
+        .bearer_auth(&reader)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let (status, text) = ask(&reader, &format!("skeleton={id}")).await;
+    assert_eq!(status, 200, "{text}");
+    assert!(text.contains("mixamorig:LeftForeArm"));
+    srv.stop().await;
+    t.finish().await;
+}
+
+/// POST a rig file to `/v1/skeletons` (as `token`, if any): the status and the answer.
+async fn upload_rig(srv: &common::Server, body: Vec<u8>, token: Option<&str>) -> (u16, Value) {
+    let mut r = srv
+        .client
+        .post(format!("{}/v1/skeletons", srv.base))
+        .body(body);
+    if let Some(t) = token {
+        r = r.bearer_auth(t);
+    }
+    let r = r.send().await.unwrap();
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap_or(Value::Null))
+}
+
+/// The Mixamo Y Bot uploaded as a skeleton stands in its bind pose, and a CMU walk asked
+/// of it as GLB is the Y Bot's own file playing the walk: its mesh and skin, its node
+/// tree (the Armature that turns Blender's Z-up and scales centimetres), its joints
+/// moving. Evaluated by pygltflib (scripts/gltf-eval.py), the character's bones point as
+/// the source file's do (scripts/bvh-fk.py) in every frame and its head stays above its
+/// feet; the Khronos validator finds no error in it. An FBX character's bones at their bind
+/// pose are a rig too; a file that is no rig is a 400 saying why.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_character_uploaded_plays_a_take_on_its_own_mesh() {
+    let Some((root, _)) = corpus::for_tests() else {
+        return;
+    };
+    let Some(python) = common::python() else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let ybot = std::fs::read(root.join("gltf/mixamo_ybot_character.glb")).unwrap();
+    let (status, rig) = upload_rig(&srv, ybot.clone(), None).await;
+    assert_eq!(status, 201, "{rig}");
+    assert_eq!(rig["uploaded_as"], "glb");
+    assert_eq!(rig["character"], true);
+    assert_eq!(rig["joints"], 67);
+    assert_eq!(rig["hierarchy"][0]["name"], "mixamorig:Hips");
+    assert!(!rig["roles"].is_null(), "{rig}");
+    let skeleton = rig["id"].as_str().unwrap().to_string();
+    // The same file again is the same rig.
+    let (status, again) = upload_rig(&srv, ybot, None).await;
+    assert_eq!((status, &again["id"]), (200, &rig["id"]));
+
+    let path = root.join("bvh/cmu/01_01.bvh");
+    let (status, report) = srv
+        .post(
+            "name=walk&codec=bvh-lossless",
+            std::fs::read(&path).unwrap(),
+        )
+        .await;
+    assert_eq!(status, 201, "{report}");
+    let id = report["id"].as_str().unwrap().to_string();
+    let (status, _, glb) = srv
+        .get(&format!(
+            "/v1/takes/{id}/frames?format=glb&skeleton={skeleton}&t0=0&t1=2"
+        ))
+        .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&glb));
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let doc: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    assert_eq!(doc["meshes"].as_array().unwrap().len(), 2);
+    assert_eq!(doc["skins"].as_array().unwrap().len(), 1);
+    let dir = std::env::temp_dir().join(format!("mocapstore-character-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("walk-on-ybot.glb");
+    std::fs::write(&file, &glb).unwrap();
+    if let Some(m) = common::node_modules() {
+        let v = common::validate(&m, &file);
+        assert_eq!(v["errors"], 0, "{v}");
+    }
+    let source = common::script(&python, "bvh-fk.py", [&path]);
+    let shown = common::script(&python, "gltf-eval.py", [&file]);
+    let (sn, on) = (
+        common::strings(&source["names"]),
+        common::strings(&shown["nodes"]),
+    );
+    let (sp, op) = (
+        source["positions"].as_array().unwrap(),
+        shown["positions"].as_array().unwrap(),
+    );
+    assert_eq!(op.len(), 240, "the frames of 0 s to 2 s at 120 fps");
+    let at = |names: &[&str], n: &str| {
+        names
+            .iter()
+            .position(|m| *m == n)
+            .unwrap_or_else(|| panic!("no joint {n}"))
+    };
+    let mut angles = Vec::new();
+    for (f, (a, b)) in sp.iter().zip(op).enumerate() {
+        for (sa, sb) in BONES {
+            let s = point(&a[at(&sn, sb)]) - point(&a[at(&sn, sa)]);
+            let o = point(&b[at(&on, &format!("mixamorig:{sb}"))])
+                - point(&b[at(&on, &format!("mixamorig:{sa}"))]);
+            let angle = s.angle(&o).to_degrees();
+            assert!(angle < 1.0, "frame {f} {sa}→{sb}: {angle:.2}°");
+            angles.push(angle);
+        }
+        let head = point(&b[at(&on, "mixamorig:Head")]);
+        for foot in ["mixamorig:LeftFoot", "mixamorig:RightFoot"] {
+            let foot = point(&b[at(&on, foot)]);
+            assert!(head.y - foot.y > 0.8, "frame {f}: head {head}, foot {foot}");
+        }
+    }
+    angles.sort_by(f64::total_cmp);
+    eprintln!(
+        "CMU 01_01 on the Y Bot (GLB, pygltflib): bone angle median {:.4}°, max {:.4}°",
+        angles[angles.len() / 2],
+        angles[angles.len() - 1]
+    );
+    // The Y Bot's skeleton in other formats: its joints, no mesh.
+    let (status, _, bvh) = srv
+        .get(&format!(
+            "/v1/takes/{id}/frames?format=bvh&skeleton={skeleton}&t0=0&t1=1"
+        ))
+        .await;
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&bvh).contains("ROOT mixamorig:Hips"));
+
+    // An FBX character: its skinned bones at their bind pose.
+    let fbx = std::fs::read(root.join("fbx/mixamo_breathing_idle.fbx")).unwrap();
+    let (status, rig) = upload_rig(&srv, fbx, None).await;
+    assert_eq!(status, 201, "{rig}");
+    assert_eq!(
+        (&rig["uploaded_as"], &rig["character"]),
+        (&"fbx".into(), &false.into())
+    );
+    let fbx_rig = rig["id"].as_str().unwrap();
+    let (status, _, bvh) = srv
+        .get(&format!(
+            "/v1/takes/{id}/frames?format=bvh&skeleton={fbx_rig}&t0=0&t1=1"
+        ))
+        .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&bvh));
+    let on_fbx = dir.join("walk-on-fbx.bvh");
+    std::fs::write(&on_fbx, &bvh).unwrap();
+    let out = common::script(&python, "bvh-fk.py", [&on_fbx]);
+    let on = common::strings(&out["names"]);
+    let op = out["positions"].as_array().unwrap();
+    // The bones whose joints bvh-fk.py names in both (it does not name End Sites).
+    let bones: Vec<_> = BONES
+        .iter()
+        .filter(|(a, b)| {
+            [a, b]
+                .iter()
+                .all(|n| on.contains(&format!("mixamorig:{n}").as_str()))
+        })
+        .collect();
+    assert!(bones.len() >= 6, "{on:?}");
+    for (f, (a, b)) in sp.iter().zip(op).enumerate() {
+        for (sa, sb) in &bones {
+            let s = point(&a[at(&sn, sb)]) - point(&a[at(&sn, sa)]);
+            let o = point(&b[at(&on, &format!("mixamorig:{sb}"))])
+                - point(&b[at(&on, &format!("mixamorig:{sa}"))]);
+            let angle = s.angle(&o).to_degrees();
+            assert!(angle < 1.0, "FBX rig frame {f} {sa}→{sb}: {angle:.2}°");
+        }
+    }
+
+    // What is no rig says why.
+    let c3d = std::fs::read(root.join("c3d/btkdata__PiG__PiG_Calibration3_FF.c3d")).ok();
+    let skinless = br#"{"asset": {"version": "2.0"}, "nodes": [{"name": "a"}]}"#.to_vec();
+    for (body, says) in [
+        (skinless, "no skin"),
+        (b"not a file".to_vec(), "not BVH"),
+        (Vec::new(), "empty"),
+    ]
+    .into_iter()
+    .chain(c3d.map(|b| (b, "a rig comes from")))
+    {
+        let (status, e) = upload_rig(&srv, body, None).await;
+        // 400 for what is no rig file; 422 for a file of a rig format that does not read
+        // as one (as a take that does not parse).
+        assert!([400, 422].contains(&status), "{status} {e}");
+        assert!(e["error"].to_string().contains(says), "{says}: {e}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
     srv.stop().await;
     t.finish().await;
 }

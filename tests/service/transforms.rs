@@ -311,32 +311,9 @@ async fn up_and_down_again_through_the_service() {
     t.finish().await;
 }
 
-/// The Khronos validator's report of a file: (errors, the first messages).
-fn validate(modules: &Path, file: &Path) -> Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/gltf/validate.mjs");
-    let o = std::process::Command::new("node")
-        .arg(script)
-        .arg(file)
-        .env("GLTF_NODE_MODULES", modules)
-        .output()
-        .unwrap();
-    serde_json::from_slice(o.stdout.trim_ascii()).unwrap_or_else(|_| {
-        panic!(
-            "validate.mjs said {} {}",
-            String::from_utf8_lossy(&o.stdout),
-            String::from_utf8_lossy(&o.stderr)
-        )
-    })
-}
-
 /// pygltflib's evaluation of a file (scripts/gltf-eval.py).
 fn evaluate(python: &Path, file: &Path) -> Value {
     common::script(python, "gltf-eval.py", [file])
-}
-
-/// The Node modules of the independent glTF tools, when the tests are given them.
-fn node_modules() -> Option<PathBuf> {
-    std::env::var_os("MOCAP_TEST_NODE_MODULES").map(PathBuf::from)
 }
 
 /// Corpus BVH files, one in `every` (all with `MOCAP_FULL_SWEEP=1`).
@@ -366,7 +343,7 @@ async fn gltf_reads_back_in_independent_readers() {
         return;
     };
     let python = common::python();
-    let modules = node_modules();
+    let modules = common::node_modules();
     let t = common::sqlite().await;
     let srv = common::start(t.store.clone(), 64 << 20).await;
     let mut files = sampled_bvh(&root, 12);
@@ -388,7 +365,7 @@ async fn gltf_reads_back_in_independent_readers() {
         let file = dir.join(format!("{name}.glb"));
         std::fs::write(&file, &glb).unwrap();
         if let Some(m) = &modules {
-            let v = validate(m, &file);
+            let v = common::validate(m, &file);
             assert_eq!(v["errors"], 0, "{name}: {v}");
         }
         if let Some(python) = &python {
@@ -449,7 +426,7 @@ async fn gltf_reads_back_in_independent_readers() {
     if let Some(m) = &modules {
         let file = dir.join("t2.gltf");
         std::fs::write(&file, &gltf).unwrap();
-        let v = validate(m, &file);
+        let v = common::validate(m, &file);
         assert_eq!(v["errors"], 0, "{v}");
     }
     let _ = std::fs::remove_dir_all(&dir);
@@ -560,8 +537,8 @@ fn convert_takes_the_same_transforms() {
             assert!(hips[2].as_f64().unwrap().abs() < 1e-6, "{hips:?}");
         }
     }
-    if let Some(m) = node_modules() {
-        assert_eq!(validate(&m, &glb)["errors"], 0);
+    if let Some(m) = common::node_modules() {
+        assert_eq!(common::validate(&m, &glb)["errors"], 0);
     }
     let gait = root.join("c3d/btkdata__others__Gait.c3d");
     let source =

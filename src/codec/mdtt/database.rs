@@ -385,9 +385,16 @@ fn clips_of(takes: &[Input<'_>]) -> Result<(Clips, usize)> {
     let mut covs = Vec::new();
     for t in takes {
         let clip = clip_len(t.fps).min(t.frames);
+        if clip == 0 {
+            // A take without frames has no clip to learn from.
+            continue;
+        }
         let l = ((ratio(clip, t.fps) * w as f64 * 0.5).round() as usize).clamp(1, clip);
         let a = Analysis::new(t, clip, l);
         covs.extend(a.coefs.iter().map(|x| x * x.transpose()));
+    }
+    if covs.is_empty() {
+        return Err(Error::Invalid("no frames in the takes to train on".into()));
     }
     let energy: Vec<f64> = covs.iter().map(|c| c.trace()).collect();
     let total: DMatrix<f64> = covs.iter().fold(DMatrix::zeros(w, w), |a, c| a + c);

@@ -346,6 +346,11 @@ pub fn encode_with(
     target: Target,
 ) -> Result<CodecOutput> {
     check_points(input.points)?;
+    if input.frames == 0 {
+        return Err(Error::Invalid(
+            "mdtt codes clips of frames: the take has none".into(),
+        ));
+    }
     let w = input.width();
     let k = k.clamp(1, w);
     let clip = clip_len(input.fps).min(input.frames);

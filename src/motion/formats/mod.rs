@@ -20,6 +20,7 @@ pub mod json;
 pub mod npy;
 mod posed;
 pub mod rawf32;
+pub mod rig;
 mod text;
 pub mod trc;
 pub mod writer;

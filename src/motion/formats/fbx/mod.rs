@@ -20,6 +20,7 @@ use super::{Extras, Format, Parsed, Pick, ReadLimits};
 use crate::motion::body::{Axis, Prior};
 use crate::motion::error::{Error, Location, Result};
 use crate::motion::model::Motion;
+use crate::motion::skeleton::Animation;
 
 fn err(reason: impl Into<String>) -> Error {
     Error::parse(Format::Fbx, Location::Whole, reason)
@@ -77,7 +78,8 @@ fn axis(a: ufbx::CoordinateAxis) -> Option<Axis> {
     })
 }
 
-pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) -> Result<Parsed> {
+/// The scene of an FBX file, with what was mended on the way.
+fn load(bytes: &[u8], limits: &ReadLimits) -> Result<(ufbx::SceneRoot, Vec<String>)> {
     let opts = ufbx::LoadOpts {
         temp_allocator: allocator(bytes.len()),
         result_allocator: allocator(bytes.len()),
@@ -99,7 +101,18 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) 
     }
     let scene = ufbx::load_memory(mended.as_deref().unwrap_or(bytes), opts)
         .map_err(|e| err(load_error(&e)))?;
+    Ok((scene, warnings))
+}
 
+/// The joints of a scene, parents first, each joint's parent among them, and the scene's
+/// root node (a joint only when the bones hang from it).
+struct Chosen {
+    order: Vec<usize>,
+    parents: Vec<Option<usize>>,
+    root: usize,
+}
+
+fn choose(scene: &ufbx::Scene, limits: &ReadLimits, warnings: &mut Vec<String>) -> Result<Chosen> {
     // The joints: the bones of the file's largest skeleton and the nodes between them (an
     // exporter may put a plain node among its bones, as assimp does with a BVH's root),
     // headed by the lowest node above all of them; parents first.
@@ -190,6 +203,23 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) 
                 .and_then(|p| index_of.get(&index(p)).copied())
         })
         .collect();
+
+    Ok(Chosen {
+        order,
+        parents,
+        root,
+    })
+}
+
+pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) -> Result<Parsed> {
+    let (scene, mut warnings) = load(bytes, limits)?;
+    let nodes: &[ufbx::Ref<ufbx::Node>] = &scene.nodes;
+    let count = nodes.len();
+    let Chosen {
+        order,
+        parents,
+        root,
+    } = choose(&scene, limits, &mut warnings)?;
 
     // The animation: the stack asked for (else the first), sampled at the file's rate.
     let stacks: &[ufbx::Ref<ufbx::AnimStack>] = &scene.anim_stacks;
@@ -310,4 +340,73 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) 
             ..Default::default()
         },
     })
+}
+
+/// The skeleton of the file's skinned bones at their bind pose, one frame of values (file
+/// units and axes): what a character's bones stood in when its mesh was bound to them.
+/// A bone the skins bind stands where its cluster says it was bound; a joint between or
+/// below them (an end bone) keeps its resting place relative to its parent. A file without
+/// a skin (Mixamo's "without skin" download) stands as its nodes' properties rest them.
+pub(crate) fn bind_pose(bytes: &[u8], limits: &ReadLimits) -> Result<(Animation, Vec<String>)> {
+    let (scene, mut warnings) = load(bytes, limits)?;
+    let nodes: &[ufbx::Ref<ufbx::Node>] = &scene.nodes;
+    let count = nodes.len();
+    let index = |n: &ufbx::Node| (n.element.typed_id as usize).min(count);
+    let Chosen {
+        order,
+        parents,
+        root,
+    } = choose(&scene, limits, &mut warnings)?;
+    limits.check_shape(1, order.len())?;
+    let matrix = |m: &ufbx::Matrix| {
+        Matrix4::new(
+            m.m00, m.m01, m.m02, m.m03, m.m10, m.m11, m.m12, m.m13, m.m20, m.m21, m.m22, m.m23,
+            0.0, 0.0, 0.0, 1.0,
+        )
+    };
+    let mut bound: Vec<Option<Matrix4<f64>>> = vec![None; count + 1];
+    for skin in scene.skin_deformers.iter() {
+        for c in skin.clusters.iter() {
+            if let Some(bone) = c.bone_node.as_ref() {
+                bound[index(bone)] = Some(matrix(&c.bind_to_world));
+            }
+        }
+    }
+    if !bound.iter().any(Option::is_some) {
+        warnings.push(
+            "the file has no skin: its bones stand as their own properties rest them (a \
+             character's bind pose is where its skin binds them)"
+                .into(),
+        );
+    }
+    let mut world: Vec<Matrix4<f64>> = Vec::with_capacity(order.len());
+    for (k, &i) in order.iter().enumerate() {
+        let w = match (bound[i], parents[k]) {
+            (Some(b), _) => b,
+            (None, Some(p)) => world[p] * matrix(&nodes[i].node_to_parent),
+            (None, None) => matrix(&nodes[i].node_to_world),
+        };
+        world.push(w);
+    }
+    let names: Vec<String> = order
+        .iter()
+        .map(|&i| match nodes[i].element.name.to_string() {
+            _ if i == root => "root".to_string(),
+            n if n.trim().is_empty() => format!("node{}", nodes[i].element.typed_id),
+            n => n,
+        })
+        .collect();
+    let Skeletal {
+        skeleton,
+        warnings: scaled,
+        ..
+    } = Posed {
+        names,
+        parents,
+        frames: 1,
+        places: world.iter().map(place).collect(),
+    }
+    .skeleton()?;
+    warnings.extend(scaled);
+    Ok((skeleton, warnings))
 }

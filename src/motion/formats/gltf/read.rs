@@ -179,7 +179,7 @@ pub(crate) fn is_gltf_json(bytes: &[u8]) -> bool {
 }
 
 /// The JSON document and the binary chunk of a GLB, or the document of a `.gltf`.
-fn split(bytes: &[u8]) -> Result<(&[u8], Option<&[u8]>)> {
+pub(super) fn split(bytes: &[u8]) -> Result<(&[u8], Option<&[u8]>)> {
     if !bytes.starts_with(GLB_MAGIC) {
         return Ok((bytes, None));
     }
@@ -607,6 +607,101 @@ fn keyframe_rate(tracks: &[Track]) -> Option<f64> {
     })
 }
 
+/// The joints of a file: the largest skin's, else the nodes `moved` (an animation's); in
+/// the scene, parents first, headed by the lowest node above them all, with the plain end
+/// nodes below them. Each joint's node, and its parent among the joints.
+fn choose(
+    doc: &Doc,
+    tree: &Tree,
+    moved: &[usize],
+    warnings: &mut Vec<String>,
+) -> Result<(Vec<usize>, Vec<Option<usize>>)> {
+    let nodes = &doc.nodes;
+    let Tree { parents, order } = tree;
+    let count = nodes.len();
+    let in_scene = {
+        let mut s = vec![false; count];
+        for &i in order {
+            s[i] = true;
+        }
+        s
+    };
+    let mut marked = vec![false; count];
+    match doc.skins.iter().max_by_key(|s| s.joints.len()) {
+        Some(skin) => {
+            for &j in &skin.joints {
+                *marked
+                    .get_mut(j)
+                    .ok_or_else(|| err(format!("a skin names node {j}, which does not exist")))? =
+                    true;
+            }
+            if doc.skins.len() > 1 {
+                warnings.push(format!(
+                    "{} skins; the largest ({} joints) is the take's skeleton",
+                    doc.skins.len(),
+                    skin.joints.len()
+                ));
+            }
+        }
+        None => moved.iter().for_each(|&i| marked[i] = true),
+    }
+    // Marked nodes and meshes or cameras in each subtree, children before parents.
+    let mut below = vec![0usize; count];
+    let mut shown = vec![false; count];
+    for &i in order.iter().rev() {
+        below[i] += usize::from(marked[i] && in_scene[i]);
+        shown[i] |= nodes[i].mesh.is_some() || nodes[i].camera.is_some();
+        if let Some(p) = parents[i] {
+            below[p] += below[i];
+            shown[p] |= shown[i];
+        }
+    }
+    let tops: Vec<usize> = order
+        .iter()
+        .copied()
+        .filter(|&i| parents[i].is_none() && below[i] > 0)
+        .collect();
+    let mut head = *tops
+        .iter()
+        .max_by_key(|&&t| below[t])
+        .ok_or_else(|| err("no node of the scene is a joint or moves"))?;
+    for &other in tops.iter().filter(|&&t| t != head) {
+        warnings.push(format!(
+            "the nodes under {:?} left out: a take holds one skeleton, the largest",
+            nodes[other].name.clone().unwrap_or_default()
+        ));
+    }
+    // Down to the lowest node above every joint: a grouping node is not one.
+    while !marked[head] {
+        let mut branches = nodes[head].children.iter().filter(|&&c| below[c] > 0);
+        match (branches.next(), branches.next()) {
+            (Some(&only), None) => head = only,
+            _ => break,
+        }
+    }
+    let joint = |c: usize| below[c] > 0 || !shown[c];
+    let mut chosen = Vec::new();
+    let mut stack = vec![head];
+    while let Some(i) = stack.pop() {
+        chosen.push(i);
+        stack.extend(
+            nodes[i]
+                .children
+                .iter()
+                .rev()
+                .copied()
+                .filter(|&c| joint(c)),
+        );
+    }
+    let index_of: HashMap<usize, usize> = chosen.iter().enumerate().map(|(k, &i)| (i, k)).collect();
+    let joint_parents: Vec<Option<usize>> = chosen
+        .iter()
+        .map(|&i| parents[i].and_then(|p| index_of.get(&p).copied()))
+        .collect();
+
+    Ok((chosen, joint_parents))
+}
+
 pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
     let limits = &options.limits;
     let (json, bin) = split(bytes)?;
@@ -635,7 +730,8 @@ pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
     };
     let nodes = &doc.nodes;
     let count = nodes.len();
-    let Tree { parents, order } = tree(&doc, limits.max_depth)?;
+    let tree = tree(&doc, limits.max_depth)?;
+    let Tree { parents, order } = &tree;
 
     // The animation asked for, or the first.
     let names = animation_names(&doc);
@@ -713,85 +809,8 @@ pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
     }
 
     // The joints: the largest skin's, else the animated nodes; in the scene, parents first.
-    let in_scene = {
-        let mut s = vec![false; count];
-        for &i in &order {
-            s[i] = true;
-        }
-        s
-    };
-    let mut marked = vec![false; count];
-    match doc.skins.iter().max_by_key(|s| s.joints.len()) {
-        Some(skin) => {
-            for &j in &skin.joints {
-                *marked
-                    .get_mut(j)
-                    .ok_or_else(|| err(format!("a skin names node {j}, which does not exist")))? =
-                    true;
-            }
-            if doc.skins.len() > 1 {
-                warnings.push(format!(
-                    "{} skins; the largest ({} joints) is the take's skeleton",
-                    doc.skins.len(),
-                    skin.joints.len()
-                ));
-            }
-        }
-        None => tracks.iter().for_each(|t| marked[t.node] = true),
-    }
-    // Marked nodes and meshes or cameras in each subtree, children before parents.
-    let mut below = vec![0usize; count];
-    let mut shown = vec![false; count];
-    for &i in order.iter().rev() {
-        below[i] += usize::from(marked[i] && in_scene[i]);
-        shown[i] |= nodes[i].mesh.is_some() || nodes[i].camera.is_some();
-        if let Some(p) = parents[i] {
-            below[p] += below[i];
-            shown[p] |= shown[i];
-        }
-    }
-    let tops: Vec<usize> = order
-        .iter()
-        .copied()
-        .filter(|&i| parents[i].is_none() && below[i] > 0)
-        .collect();
-    let mut head = *tops
-        .iter()
-        .max_by_key(|&&t| below[t])
-        .ok_or_else(|| err("no node of the scene is a joint or moves"))?;
-    for &other in tops.iter().filter(|&&t| t != head) {
-        warnings.push(format!(
-            "the nodes under {:?} left out: a take holds one skeleton, the largest",
-            nodes[other].name.clone().unwrap_or_default()
-        ));
-    }
-    // Down to the lowest node above every joint: a grouping node is not one.
-    while !marked[head] {
-        let mut branches = nodes[head].children.iter().filter(|&&c| below[c] > 0);
-        match (branches.next(), branches.next()) {
-            (Some(&only), None) => head = only,
-            _ => break,
-        }
-    }
-    let joint = |c: usize| below[c] > 0 || !shown[c];
-    let mut chosen = Vec::new();
-    let mut stack = vec![head];
-    while let Some(i) = stack.pop() {
-        chosen.push(i);
-        stack.extend(
-            nodes[i]
-                .children
-                .iter()
-                .rev()
-                .copied()
-                .filter(|&c| joint(c)),
-        );
-    }
-    let index_of: HashMap<usize, usize> = chosen.iter().enumerate().map(|(k, &i)| (i, k)).collect();
-    let joint_parents: Vec<Option<usize>> = chosen
-        .iter()
-        .map(|&i| parents[i].and_then(|p| index_of.get(&p).copied()))
-        .collect();
+    let moved: Vec<usize> = tracks.iter().map(|t| t.node).collect();
+    let (chosen, joint_parents) = choose(&doc, &tree, &moved, &mut warnings)?;
 
     // The frames: the animation's keys, from its first to its last.
     let t0 = tracks
@@ -852,7 +871,7 @@ pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
                 Path::Scale => p.2 = v.xyz(),
             }
         }
-        for &i in &order {
+        for &i in order {
             let (t, r, s, m) = &pose[i];
             let local = match m {
                 Some(m) if !animated[i] => *m,
@@ -924,6 +943,108 @@ pub(crate) fn read(bytes: &[u8], options: &ReadOptions) -> Result<Parsed> {
             animation: pick,
             ..Default::default()
         },
+    })
+}
+
+/// A skinned character at its bind pose, as `POST /v1/skeletons` keeps a glTF character:
+/// the skeleton of its largest skin, standing as its nodes rest (animations aside), and
+/// where each joint lies in the file's node tree, so that motion on that skeleton can be
+/// written back onto the file's own nodes ([`super::character`]).
+pub(crate) struct Bind {
+    /// The skeleton, with one frame of values: the bind pose (metres, degrees).
+    pub skeleton: crate::motion::skeleton::Animation,
+    /// The file's node of each joint.
+    pub nodes: Vec<usize>,
+    /// Each joint's scale in the world (the product of its node's and its ancestors'; even
+    /// on all three axes).
+    pub scales: Vec<f64>,
+    /// The world transform of the node the head joint hangs from (identity for a scene
+    /// root): an `Armature` that turns Z-up to Y-up and centimetres to metres.
+    pub above: Matrix4<f64>,
+    pub warnings: Vec<String>,
+}
+
+/// How far a joint's world scale may differ between its axes: a skeleton has no scale, and
+/// one even on all axes is carried as a number; an uneven one would bend the mesh.
+const EVEN_SCALE: f64 = 1e-4;
+
+/// The bind pose of the skinned character `bytes` (a GLB, or a `.gltf` with its buffers
+/// embedded).
+pub(crate) fn bind_pose(bytes: &[u8], limits: &super::super::ReadLimits) -> Result<Bind> {
+    let (json, _) = split(bytes)?;
+    let doc: Doc = serde_json::from_slice(json).map_err(|e| err(format!("its JSON: {e}")))?;
+    if !doc.asset.version.starts_with("2.") {
+        return Err(err(format!(
+            "glTF version {}; only 2.x is read",
+            doc.asset.version
+        )));
+    }
+    if doc.skins.is_empty() {
+        return Err(err(
+            "the file has no skin: a character is a mesh skinned to a skeleton",
+        ));
+    }
+    let tree = tree(&doc, limits.max_depth)?;
+    let mut warnings = Vec::new();
+    let (chosen, joint_parents) = choose(&doc, &tree, &[], &mut warnings)?;
+    limits.check_shape(1, chosen.len())?;
+    let mut world = vec![Matrix4::identity(); doc.nodes.len()];
+    for &i in &tree.order {
+        let n = &doc.nodes[i];
+        let local = match n.matrix {
+            Some(m) => Matrix4::from_column_slice(&m),
+            None => trs(
+                Vector3::from(n.translation.unwrap_or([0.0; 3])),
+                rotation(Vector4::from(n.rotation.unwrap_or([0.0, 0.0, 0.0, 1.0]))),
+                Vector3::from(n.scale.unwrap_or([1.0; 3])),
+            ),
+        };
+        world[i] = match tree.parents[i] {
+            Some(p) => world[p] * local,
+            None => local,
+        };
+    }
+    let mut scales = Vec::with_capacity(chosen.len());
+    for &i in &chosen {
+        let m = &world[i];
+        let axes: Vec<f64> = (0..3).map(|c| m.fixed_view::<3, 1>(0, c).norm()).collect();
+        let mean = (axes[0] + axes[1] + axes[2]) / 3.0;
+        if !(mean.is_finite() && mean > 0.0)
+            || axes.iter().any(|a| (a - mean).abs() > EVEN_SCALE * mean)
+        {
+            return Err(err(format!(
+                "joint {:?} is scaled unevenly ({:.4}, {:.4}, {:.4}) in the world: a \
+                 character's skeleton may only scale evenly",
+                doc.nodes[i].name.clone().unwrap_or_default(),
+                axes[0],
+                axes[1],
+                axes[2]
+            )));
+        }
+        scales.push(mean);
+    }
+    let above = tree.parents[chosen[0]].map_or_else(Matrix4::identity, |p| world[p]);
+    let Skeletal {
+        skeleton,
+        warnings: scaled,
+        ..
+    } = Posed {
+        names: chosen
+            .iter()
+            .map(|&i| doc.nodes[i].name.clone().unwrap_or_default())
+            .collect(),
+        parents: joint_parents,
+        frames: 1,
+        places: chosen.iter().map(|&i| place(&world[i])).collect(),
+    }
+    .skeleton()?;
+    warnings.extend(scaled);
+    Ok(Bind {
+        skeleton,
+        nodes: chosen,
+        scales,
+        above,
+        warnings,
     })
 }
 
