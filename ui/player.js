@@ -156,8 +156,10 @@ class Figure {
 
 /**
  * A glTF the server wrote, played as three.js's GLTFLoader reads it (what Blender and
- * game engines will see): each node shows the file's gizmo mesh, its animation driven to
- * the player's time. Set beside the native figure, `offset` metres along X.
+ * game engines will see): each node shows the file's gizmo mesh (or, for a character
+ * the take was put on, the character's skinned meshes), its animation driven to the
+ * player's time. Set beside the native figure, `offset` metres to the camera's right (along
+ * the floor), so that both stand as far from the camera.
  */
 export class GltfFigure {
   /** Parsed from `bytes` (a GLB); resolves once loaded. */
@@ -170,7 +172,11 @@ export class GltfFigure {
     this.player = player;
     this.gltf = gltf;
     this.group = new THREE.Group();
-    this.group.position.x = offset;
+    player.camera.updateMatrixWorld();
+    const right = new THREE.Vector3().setFromMatrixColumn(player.camera.matrixWorld, 0);
+    right.y = 0;
+    if (right.lengthSq() < 1e-9) right.set(1, 0, 0);
+    this.group.position.copy(right.normalize().multiplyScalar(offset));
     this.group.add(gltf.scene);
     // Each node shows the file's own gizmo mesh, lit by a light of the page's.
     this.group.add(new THREE.HemisphereLight(0xffffff, 0x666666, 3));
@@ -191,8 +197,8 @@ export class GltfFigure {
     const n = this.gltf.scene.getObjectByName(THREE.PropertyBinding.sanitizeNodeName(name));
     if (!n) return null;
     this.group.updateMatrixWorld(true);
-    const v = new THREE.Vector3().setFromMatrixPosition(n.matrixWorld);
-    return [v.x - this.group.position.x, v.y, v.z];
+    const v = new THREE.Vector3().setFromMatrixPosition(n.matrixWorld).sub(this.group.position);
+    return [v.x, v.y, v.z];
   }
 
   dispose() {

@@ -151,6 +151,20 @@ export async function takePage(main, id, params) {
   const root = pick('out-root', 'root motion', [['keep', 'root: as captured'], ['in-place', 'root: in place'], ['extract', 'root: extracted']]);
   const up = pick('out-up', 'up axis', [['', 'up: as stored'], ['y', 'up: +Y'], ['z', 'up: +Z'], ['-y', 'up: −Y'], ['-z', 'up: −Z'], ['x', 'up: +X'], ['-x', 'up: −X']]);
   const unit = pick('out-unit', 'unit', [['', 'unit: as stored'], ['mm', 'mm'], ['cm', 'cm'], ['m', 'm'], ['in', 'in']]);
+  // The skeleton to put the take on: its own, a standard rig, or a rig uploaded on its own
+  // (POST /v1/skeletons; a character's GLB is then the character playing the take).
+  const rig = pick('out-rig', 'the skeleton the file puts the take on', [['', 'rig: its own'], ['mixamo', 'rig: Mixamo'], ['smpl', 'rig: SMPL']]);
+  rig.setAttribute('aria-label', 'skeleton to put the take on');
+  if (take.skeleton) {
+    json('/v1/skeletons?layout=uploaded').then((r) => {
+      for (const s of r.items || []) {
+        const what = s.uploaded_as === 'glb' || s.uploaded_as === 'gltf' ? `${s.uploaded_as} character` : `${s.uploaded_as} rig`;
+        rig.append(el('option', { value: s.id }, `rig: ${what} ${s.id.slice(0, 8)} (${s.joints} joints)`));
+      }
+    }).catch(() => {});
+  } else {
+    rig.disabled = true;
+  }
   // Root motion follows the pelvis along the floor: it needs both.
   if (!(body?.up && body.roles?.pelvis)) root.disabled = true;
   if (!body?.up) up.disabled = true;
@@ -159,13 +173,14 @@ export async function takePage(main, id, params) {
     const q = [];
     if (outFps.value) q.push(`fps=${encodeURIComponent(outFps.value)}`);
     if (root.value !== 'keep') q.push(`root=${root.value}`);
+    if (rig.value && f !== 'c3d') q.push(`skeleton=${encodeURIComponent(rig.value)}`);
     if (f !== 'glb' && f !== 'gltf') {
       if (up.value) q.push(`up=${up.value}`);
       if (unit.value) q.push(`unit=${unit.value}`);
     }
     return q.map((x) => `&${x}`).join('');
   };
-  main.append(el('h2', {}, 'Download'), el('p', { class: 'transforms' }, el('label', {}, outFps, ' fps'), ' ', root, up, unit),
+  main.append(el('h2', {}, 'Download'), el('p', { class: 'transforms' }, el('label', {}, outFps, ' fps'), ' ', root, up, unit, rig),
     el('p', {}, 'The loop range (or the whole take): ',
     ...formats.map((f) => el('button', { class: 'download', onclick: () => {
       const [a, b] = transport.loop.checked ? frameRange(transport.range()) : [0, total];

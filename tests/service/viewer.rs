@@ -1214,6 +1214,99 @@ async fn takes_stand_up_in_the_viewer() {
     t.finish().await;
 }
 
+/// Issue 52: the take page puts a take on a chosen rig beside the original. A CMU walk
+/// (131_02) on the Mixamo Y Bot uploaded as a skeleton opens, as the GLB the server writes,
+/// in three.js's GLTFLoader with the Y Bot's skinned meshes, upright (its head above its
+/// feet, as three.js evaluates the file's node tree) and walking (its hips cover ground)
+/// at several times; a screenshot shows it beside the take's own figure.
+#[tokio::test]
+async fn a_take_plays_on_an_uploaded_character_beside_the_original() {
+    let Some(browser) = Browser::with_corpus().await else {
+        return;
+    };
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let r = srv
+        .client
+        .post(format!("{}/v1/skeletons", srv.base))
+        .body(corpus_bytes("gltf/mixamo_ybot_character.glb"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let rig: Value = r.json().await.unwrap();
+    let ybot = rig["id"].as_str().unwrap().to_string();
+    let take = stored(&srv, "name=131_02&max_error_mm=1", "bvh/cmu/131_02.bvh").await;
+    let id = take["id"].as_str().unwrap().to_string();
+    browser
+        .visit(
+            &format!("{}/#/take/{id}?t=1", srv.base),
+            "the frame at 1 s",
+            "return document.querySelector('canvas.view')?.dataset.frame === '120';",
+        )
+        .await;
+    // The uploaded rigs join the choice once listed.
+    browser
+        .until(
+            "the Y Bot among the rigs",
+            &format!(
+                "const s = document.querySelector('select.out-rig'); \
+                 if (!s?.querySelector('option[value=\"{ybot}\"]')) return false; \
+                 s.value = '{ybot}'; return true;"
+            ),
+        )
+        .await;
+    browser.click("button.open-glb").await;
+    browser
+        .until("the GLB loaded", "return !!window.mocapstoreGlb;")
+        .await;
+    let skinned = browser
+        .js(
+            "let n = 0; window.mocapstoreGlb.gltf.scene.traverse((o) => { if (o.isSkinnedMesh) n++; }); return n;",
+            json!([]),
+        )
+        .await;
+    assert_eq!(skinned, 2, "the Y Bot's two skinned meshes");
+    let mut hips = Vec::new();
+    for at in [0.5, 2.0, 4.0, 6.0, 8.0, 10.0] {
+        let v = browser
+            .js(
+                "const g = window.mocapstoreGlb; g.at(arguments[0]); \
+                 return ['mixamorig:Head', 'mixamorig:LeftFoot', 'mixamorig:RightFoot', 'mixamorig:Hips'].map((n) => g.position(n));",
+                json!([at]),
+            )
+            .await;
+        let p = |i: usize| -> Vec<f64> {
+            v[i].as_array()
+                .unwrap_or_else(|| panic!("at {at} s: {v}"))
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect()
+        };
+        let (head, left, right) = (p(0), p(1), p(2));
+        assert!(
+            head[1] - left[1].max(right[1]) > 1.0,
+            "at {at} s the head is at {head:?}, the feet at {left:?} and {right:?}"
+        );
+        hips.push(p(3));
+    }
+    let (a, b) = (&hips[0], &hips[hips.len() - 1]);
+    let ground = ((b[0] - a[0]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
+    assert!(
+        ground > 1.0,
+        "the hips moved {ground} m across the floor: {hips:?}"
+    );
+    // Both at 1 s, the take's own figure and the Y Bot beside it.
+    browser
+        .js("window.mocapstoreGlb.at(1.0); return true;", json!([]))
+        .await;
+    browser.screenshot("take-on-ybot").await;
+    assert!(browser.console_errors().await.is_empty());
+    browser.quit().await;
+    srv.stop().await;
+    t.finish().await;
+}
+
 /// Issue 51: on a take page, the loop range is searched with "Find similar"; the ranges
 /// found are listed with their scores, nearest first (a copy of the take, at the very range,
 /// scores 0), and "play beside" plays the first one side by side with the query, each from
