@@ -11,6 +11,7 @@ import io
 import json
 import math
 import socket
+import struct
 import tempfile
 import threading
 import uuid
@@ -274,6 +275,13 @@ def test_a_library_comes_out_on_one_rig(
     assert places.read_bytes()[:6] == b"\x93NUMPY"
     with pytest.raises(mocapstore.BadRequest):
         client.export(cmu.id, tmp_path / "walk.c3d", skeleton="mixamo")
+    # A character uploaded as a skeleton: a GLB on it is the character playing the take.
+    rig = client.upload_skeleton(corpus / "gltf" / "mixamo_ybot_character.glb")
+    assert rig["character"] is True and rig["joints"] == 67
+    assert rig["id"] in [s["id"] for s in client.skeletons(layout="uploaded")]
+    glb = client.export(cmu.id, tmp_path / "ybot.glb", t1=1.0, skeleton=rig["id"])
+    doc = json.loads(glb.read_bytes()[20 : 20 + struct.unpack("<I", glb.read_bytes()[12:16])[0]])
+    assert len(doc["skins"]) == 1 and len(doc["meshes"]) == 2 and len(doc["animations"]) == 1
 
 
 def test_the_async_client_does_the_same(server: str) -> None:

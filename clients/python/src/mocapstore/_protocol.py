@@ -233,6 +233,21 @@ def delete(id: str) -> Op[None]:
     raise_for(r)
 
 
+def upload_skeleton(data: bytes, format: str | None) -> Op[dict[str, Any]]:
+    """A rig uploaded on its own (``POST /v1/skeletons``). Safe to repeat: the same file
+    is the same skeleton."""
+    r = yield Request("POST", "/v1/skeletons", params(format=format), content=data)
+    v: dict[str, Any] = json_of(r)
+    return v
+
+
+def skeletons(layout: str | None) -> Op[list[dict[str, Any]]]:
+    """The stored skeletons (``GET /v1/skeletons``), newest first."""
+    r = yield Request("GET", "/v1/skeletons", params(layout=layout))
+    v: list[dict[str, Any]] = json_of(r)["items"]
+    return v
+
+
 def stream_info(id: str) -> Op[dict[str, Any]]:
     """An open stream's state (where its next frame goes: ``frames_received``)."""
     r = yield Request("GET", f"/v1/streams/{id}", [])

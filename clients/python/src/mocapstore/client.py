@@ -603,6 +603,20 @@ class Client(_Base):
         self._run(p.delete(id))
         self._takes.pop(id, None)
 
+    def upload_skeleton(
+        self, file: bytes | str | os.PathLike[str], *, format: str | None = None
+    ) -> dict[str, Any]:
+        """Store a rig to put takes on (``skeleton=`` its ``id``): a glTF character (its
+        bind pose; glb and gltf exports on it are the character playing the take), an FBX
+        character or a BVH hierarchy. The same file again is the same skeleton."""
+        data = file if isinstance(file, bytes) else Path(file).read_bytes()
+        return self._run(p.upload_skeleton(data, format))
+
+    def skeletons(self, *, layout: str | None = None) -> list[dict[str, Any]]:
+        """The stored skeletons, newest first (``layout="uploaded"``: the rigs uploaded
+        on their own)."""
+        return self._run(p.skeletons(layout))
+
     def stats(
         self,
         *,
@@ -1085,6 +1099,17 @@ class AsyncClient(_Base):
         """Delete a take."""
         await self._run(p.delete(id))
         self._takes.pop(id, None)
+
+    async def upload_skeleton(
+        self, file: bytes | str | os.PathLike[str], *, format: str | None = None
+    ) -> dict[str, Any]:
+        """Store a rig to put takes on (see [`Client.upload_skeleton`])."""
+        data = file if isinstance(file, bytes) else Path(file).read_bytes()
+        return await self._run(p.upload_skeleton(data, format))
+
+    async def skeletons(self, *, layout: str | None = None) -> list[dict[str, Any]]:
+        """The stored skeletons, newest first."""
+        return await self._run(p.skeletons(layout))
 
     async def stats(
         self,
