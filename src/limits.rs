@@ -34,6 +34,15 @@ pub const MAX_LABEL_VALUE_CHARS: usize = 256;
 /// that claims more is refused, not allocated.
 pub const MAX_FBX_MEMORY: usize = 1 << 30;
 
+/// The largest character file a rig upload keeps (`POST /v1/skeletons`). Every glTF answer
+/// on the rig is that file again with the take in it, built in memory under the answer
+/// limit (four times the file, at most); a game character with its textures is a few MB.
+pub const MAX_CHARACTER_BYTES: u64 = 32 << 20;
+
+/// The largest JSON chunk of a character file: it is parsed as a document on every glTF
+/// answer on the rig, which takes some twenty times its size.
+pub const MAX_CHARACTER_JSON_BYTES: usize = 4 << 20;
+
 /// The largest coordinate magnitude, in metres, that motion capture can mean: 10 km. A
 /// value beyond it is not a position but a corrupt or hostile number, and refused.
 pub const MAX_COORDINATE_M: f64 = 1e4;

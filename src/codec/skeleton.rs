@@ -18,8 +18,9 @@
 //! what a take's skeleton does not need: flags u8 (bit 0: a rest pose, bit 1: a
 //! character), then the rest pose's channel values (one f64 per channel, in file order:
 //! the bind pose of a glTF character, whose joints rest turned) and the BLAKE3 hash of the
-//! character file (32 bytes) whose mesh the rig skins. A rig with neither is written as
-//! version 1, so a take's skeleton keeps the id it always had.
+//! character file (32 bytes) whose mesh the rig skins. An uploaded rig is always version
+//! 2, even with neither, so that its id never is a take's skeleton's (whose row, library
+//! and uses are not the uploader's to see); a take's skeleton stays version 1.
 
 use super::basis::hex;
 use super::error::{malformed, Error, Result};
@@ -59,15 +60,24 @@ impl Skeleton {
     /// The rig of these joints, checked as a skeleton is (parents first, one root, no
     /// channels on End Sites).
     pub fn new(joints: Vec<Joint>) -> Result<Skeleton> {
-        Skeleton::with_rest(joints, None, None)
+        Skeleton::build(joints, None, None, false)
     }
 
-    /// A rig standing in `rest` (channel values, one per channel; finite) and skinning the
-    /// character file of hash `character`: an uploaded rig (version 2).
-    pub fn with_rest(
+    /// An uploaded rig (version 2), standing in `rest` (channel values, one per channel;
+    /// finite) where given, and skinning the character file of hash `character`.
+    pub fn uploaded(
         joints: Vec<Joint>,
         rest: Option<Vec<f64>>,
         character: Option<[u8; 32]>,
+    ) -> Result<Skeleton> {
+        Skeleton::build(joints, rest, character, true)
+    }
+
+    fn build(
+        joints: Vec<Joint>,
+        rest: Option<Vec<f64>>,
+        character: Option<[u8; 32]>,
+        uploaded: bool,
     ) -> Result<Skeleton> {
         let joints = Animation::new(joints, Vec::new())
             .map_err(|e| Error::Invalid(format!("skeleton: {e}")))?
@@ -87,7 +97,7 @@ impl Skeleton {
                 return Err(Error::Invalid("a rest pose value is not finite".into()));
             }
         }
-        let uploaded = rest.is_some() || character.is_some();
+        let uploaded = uploaded || rest.is_some() || character.is_some();
         let version = if uploaded { VERSION_UPLOADED } else { VERSION };
         let mut w = Writer::new();
         w.bytes(MAGIC).bytes(&version.to_le_bytes());
@@ -210,8 +220,8 @@ impl Skeleton {
             }
         }
         r.finish()?;
-        let rig =
-            Skeleton::with_rest(joints, rest, character).map_err(|e| malformed(e.to_string()))?;
+        let rig = Skeleton::build(joints, rest, character, version == VERSION_UPLOADED)
+            .map_err(|e| malformed(e.to_string()))?;
         if rig.bytes != bytes {
             return Err(malformed("skeleton bytes are not in canonical form"));
         }
@@ -324,28 +334,26 @@ mod tests {
         }
     }
 
-    /// An uploaded rig keeps its rest pose and character through its bytes; the same
-    /// joints with neither are the version-1 rig a take stores, id unchanged.
+    /// An uploaded rig keeps its rest pose and character through its bytes; with neither
+    /// it is still version 2, never the id of a take's skeleton of the same joints.
     #[test]
     fn an_uploaded_rig_keeps_its_rest_and_character() {
         let plain = rig();
         let joints = plain.joints().to_vec();
         let rest: Vec<f64> = (0..plain.channel_count()).map(|i| i as f64 * 0.5).collect();
-        let up = Skeleton::with_rest(joints.clone(), Some(rest.clone()), Some([7; 32])).unwrap();
+        let up = Skeleton::uploaded(joints.clone(), Some(rest.clone()), Some([7; 32])).unwrap();
         assert_eq!(u16::from_le_bytes([up.bytes()[4], up.bytes()[5]]), 2);
         let again = Skeleton::parse(up.bytes(), 100).unwrap();
         assert_eq!(again.rest(), rest);
         assert_eq!(again.character(), Some(hex(&[7; 32])));
         assert_ne!(up.id(), plain.id());
-        assert_eq!(
-            Skeleton::with_rest(joints.clone(), None, None)
-                .unwrap()
-                .id(),
-            plain.id()
-        );
+        let bare = Skeleton::uploaded(joints.clone(), None, None).unwrap();
+        assert_ne!(bare.id(), plain.id());
+        assert_eq!(Skeleton::parse(bare.bytes(), 100).unwrap(), bare);
+        assert_eq!(bare.rest(), plain.rest());
         assert_eq!(plain.rest(), crate::motion::skeleton::rest_values(&joints));
-        assert!(Skeleton::with_rest(joints.clone(), Some(vec![0.0]), None).is_err());
-        assert!(Skeleton::with_rest(joints, Some(vec![f64::NAN; rest.len()]), None).is_err());
+        assert!(Skeleton::uploaded(joints.clone(), Some(vec![0.0]), None).is_err());
+        assert!(Skeleton::uploaded(joints, Some(vec![f64::NAN; rest.len()]), None).is_err());
         for cut in 0..up.bytes().len() {
             assert!(Skeleton::parse(&up.bytes()[..cut], 100).is_err());
         }

@@ -192,8 +192,10 @@ struct Whole {
     /// The metres a unit of the values is and the up axis they were turned to (FBX states
     /// both in its settings).
     space: (f64, Axis),
-    /// The character file the target skeleton skins: a glTF answer is it playing the take.
+    /// The character file the target skeleton skins: a glTF answer is it playing the take,
+    /// read back under the service's limits (as it was read when uploaded).
     character: Option<Arc<Vec<u8>>>,
+    read_limits: crate::motion::formats::ReadLimits,
     _held: Option<Held>,
 }
 
@@ -211,6 +213,7 @@ struct GltfFile {
     format: Format,
     space: (f64, Axis),
     character: Option<Arc<Vec<u8>>>,
+    read_limits: crate::motion::formats::ReadLimits,
     joints: Option<Vec<crate::motion::skeleton::Joint>>,
     names: Vec<String>,
     values: Vec<f64>,
@@ -227,6 +230,7 @@ impl Whole {
             format: self.format,
             space: self.space,
             character: self.character.clone(),
+            read_limits: self.read_limits,
             joints: self.joints.clone(),
             names: self.names.clone(),
             values: std::mem::take(&mut self.values),
@@ -252,9 +256,13 @@ impl GltfFile {
                 fps: self.fps,
                 extras: self.extras.clone(),
             };
-            let limits = crate::motion::formats::ReadLimits::default();
-            return character::animate(file, &limits, &motion, self.format == Format::Glb)
-                .map_err(|e| Error::Corrupt(format!("the stored character file: {e}")));
+            return character::animate(
+                file,
+                &self.read_limits,
+                &motion,
+                self.format == Format::Glb,
+            )
+            .map_err(|e| Error::Corrupt(format!("the stored character file: {e}")));
         }
         let figure = match &self.joints {
             Some(joints) => Figure::Skeleton {
@@ -674,9 +682,20 @@ async fn plan(
                 .joints()
                 .map_or(shaper.width() / 3, <[crate::motion::skeleton::Joint]>::len);
             // The character file the target skins comes along in a glTF.
-            let character = onto
-                .and_then(|t| t.character.clone())
-                .filter(|_| req.format != Format::Fbx);
+            let character = match onto.and_then(|t| t.character.as_deref()) {
+                Some(rig) if req.format != Format::Fbx => {
+                    if transform.root == crate::motion::transform::Root::Extract {
+                        return Err(Error::InvalidRequest(
+                            "root=extract adds a root_motion joint above the character's, \
+                             which its file does not have: ask for root=in-place, or for BVH \
+                             or FBX"
+                                .into(),
+                        ));
+                    }
+                    Some(super::skeletons::character(store, rig).await?)
+                }
+                _ => None,
+            };
             let file = match &character {
                 _ if req.format == Format::Fbx => {
                     crate::motion::formats::fbx::write::len_bound(frames_out, nodes)
@@ -726,6 +745,7 @@ async fn plan(
                     transform.up.unwrap_or(Axis::Y),
                 );
                 w.character = character;
+                w.read_limits = crate::motion::formats::ReadLimits::from(limits);
             }
             plan
         }
@@ -1004,6 +1024,7 @@ impl Plan {
             c3d,
             space: (prepared.metres_per_unit, Axis::Y),
             character: None,
+            read_limits: crate::motion::formats::ReadLimits::default(),
             _held: None,
         };
         Plan {

@@ -132,9 +132,10 @@ pub struct Target {
     /// Channel values of its rest pose: an uploaded character's bind pose, else its
     /// offsets' (rotations zero).
     pub rest: Vec<f64>,
-    /// The character file an uploaded skeleton skins: a GLB or glTF answer is that file
-    /// playing the take ([`crate::motion::formats::gltf::character`]).
-    pub character: Option<Arc<Vec<u8>>>,
+    /// The id of the uploaded skeleton whose character file it skins: a GLB or glTF answer
+    /// is that file playing the take ([`crate::motion::formats::gltf::character`]), loaded
+    /// only for them ([`super::skeletons::character`]).
+    pub character: Option<String>,
 }
 
 impl Target {
@@ -172,14 +173,17 @@ pub async fn target(store: &Store, grant: &Grant, onto: &Onto) -> Result<Arc<Tar
             let joints = rig.joints().to_vec();
             let rest = rig.rest();
             let roles = super::skeletons::roles(&rig);
-            let character = match rig.character() {
-                Some(_) => Some(super::skeletons::character(store, &row.id).await?),
-                None => None,
-            };
+            let character = rig.character().map(|_| row.id.clone());
             Target {
                 name: row.id,
                 up: standing_up(&joints, &rest, &roles),
-                metres_per_unit: unit_of(&joints, &rest),
+                // A glTF character is in metres by its format; any other rig's unit is
+                // read from its height.
+                metres_per_unit: if character.is_some() {
+                    1.0
+                } else {
+                    unit_of(&joints, &rest)
+                },
                 roles,
                 joints,
                 rest,

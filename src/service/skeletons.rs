@@ -99,7 +99,7 @@ pub async fn upload(
     let (rig, file, warnings) = blocking(move || -> Result<_> {
         let file = crate::motion::formats::rig::read(&bytes, format, &limits)?;
         let character = file.character.then(|| *blake3::hash(&bytes).as_bytes());
-        let rig = Skeleton::with_rest(file.joints, file.rest, character)
+        let rig = Skeleton::uploaded(file.joints, file.rest, character)
             .map_err(|e| Error::InvalidRequest(format!("skeleton: {e}")))?;
         Ok((
             rig,
@@ -121,28 +121,47 @@ pub async fn upload(
     })
 }
 
-/// The character file uploaded skeleton `id` skins, kept parsed-free and shared: a few are
-/// held (a library export writes every take onto the same one).
+/// The character file uploaded skeleton `id` skins, checked against the hash the rig
+/// names, and shared: the last few are held (a library export writes every take onto the
+/// same one), [`HELD_CHARACTER_BYTES`] at most.
 pub async fn character(store: &Store, id: &str) -> Result<Arc<Vec<u8>>> {
     static FILES: OnceLock<Mutex<HashMap<String, Arc<Vec<u8>>>>> = OnceLock::new();
-    const HELD: usize = 4;
     let files = FILES.get_or_init(|| Mutex::new(HashMap::new()));
     if let Some(f) = files.lock().ok().and_then(|c| c.get(id).cloned()) {
         return Ok(f);
     }
-    let file = Arc::new(store.skeleton_character(id).await?.ok_or_else(|| {
+    let rig = load(store, id).await?;
+    let want = rig
+        .character()
+        .ok_or_else(|| Error::Corrupt(format!("skeleton {id} skins no character")))?;
+    let file = store.skeleton_character(id).await?.ok_or_else(|| {
         Error::Corrupt(format!(
             "skeleton {id} names a character file that is not stored"
         ))
-    })?);
+    })?;
+    let (file, got) = blocking(move || {
+        let got = blake3::hash(&file).to_hex().to_string();
+        (file, got)
+    })
+    .await?;
+    if got != want {
+        return Err(Error::Corrupt(format!(
+            "skeleton {id}'s character file hashes to {got}, not the {want} it names"
+        )));
+    }
+    let file = Arc::new(file);
     if let Ok(mut c) = files.lock() {
-        if c.len() >= HELD {
+        let held: usize = c.values().map(|f| f.len()).sum();
+        if held + file.len() > HELD_CHARACTER_BYTES {
             c.clear();
         }
         c.insert(id.to_string(), file.clone());
     }
     Ok(file)
 }
+
+/// The character files [`character`] keeps at most (a couple of large ones).
+const HELD_CHARACTER_BYTES: usize = 2 * limits::MAX_CHARACTER_BYTES as usize;
 
 /// Stored skeletons, newest first, optionally of one layout (payloads not read). A grant
 /// limited to libraries sees those of its libraries' takes, each counted by those takes,

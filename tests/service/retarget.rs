@@ -444,6 +444,13 @@ async fn a_character_uploaded_plays_a_take_on_its_own_mesh() {
         angles[angles.len() / 2],
         angles[angles.len() - 1]
     );
+    // root=extract adds a joint the character's file does not have.
+    let (status, _, body) = srv
+        .get(&format!(
+            "/v1/takes/{id}/frames?format=glb&skeleton={skeleton}&root=extract&t0=0&t1=1"
+        ))
+        .await;
+    assert_eq!(status, 400, "{}", String::from_utf8_lossy(&body));
     // The Y Bot's skeleton in other formats: its joints, no mesh.
     let (status, _, bvh) = srv
         .get(&format!(
@@ -496,8 +503,17 @@ async fn a_character_uploaded_plays_a_take_on_its_own_mesh() {
     // What is no rig says why.
     let c3d = std::fs::read(root.join("c3d/btkdata__PiG__PiG_Calibration3_FF.c3d")).ok();
     let skinless = br#"{"asset": {"version": "2.0"}, "nodes": [{"name": "a"}]}"#.to_vec();
+    // A character whose buffer lies in another file cannot be written back: not kept.
+    let elsewhere = serde_json::to_vec(&serde_json::json!({
+        "asset": {"version": "2.0"},
+        "nodes": [{"name": "hips", "children": [1]}, {"name": "head", "translation": [0, 1, 0]}],
+        "skins": [{"joints": [0, 1]}],
+        "buffers": [{"byteLength": 4, "uri": "mesh.bin"}]
+    }))
+    .unwrap();
     for (body, says) in [
         (skinless, "no skin"),
+        (elsewhere, "another file"),
         (b"not a file".to_vec(), "not BVH"),
         (Vec::new(), "empty"),
     ]

@@ -1,9 +1,11 @@
 //! A rig uploaded on its own (`POST /v1/skeletons`): the skeleton of a character or rig
 //! file and the pose it stands in when nothing moves it.
 //!
-//! - **glTF** (`.glb`, `.gltf`): a skinned character at its bind pose
-//!   ([`super::gltf::read::bind_pose`]), metres and +Y up; the file is kept, so that
-//!   motion on its skeleton comes back as the character playing it.
+//! - **glTF** (`.glb`, `.gltf` with its one buffer embedded): a skinned character at its
+//!   bind pose ([`super::gltf::read::bind_pose`]: its nodes' resting transforms), metres and
+//!   +Y up; the file is kept (at most [`crate::limits::MAX_CHARACTER_BYTES`], and only if it
+//!   can be written back), so that motion on its skeleton comes back as the character
+//!   playing it.
 //! - **FBX**: the skinned bones at their bind pose ([`super::fbx::bind_pose`]), in the
 //!   file's unit and axes.
 //! - **BVH**: the hierarchy, standing as its offsets say (rotations zero).
@@ -33,7 +35,25 @@ pub fn read(bytes: &[u8], format: Option<Format>, limits: &ReadLimits) -> Result
     };
     match format {
         Format::Glb | Format::Gltf => {
+            let most = crate::limits::MAX_CHARACTER_BYTES;
+            if bytes.len() as u64 > most {
+                return Err(Error::Limit {
+                    what: "character file bytes",
+                    actual: bytes.len() as u64,
+                    limit: most,
+                });
+            }
             let bind = super::gltf::read::bind_pose(bytes, limits)?;
+            // Kept only if it can be written back: its bind pose as one frame.
+            let rest = super::gltf::character::Motion {
+                name: "bind pose",
+                joints: &bind.skeleton.joints,
+                values: &bind.skeleton.values,
+                frames: 1,
+                fps: 30.0,
+                extras: serde_json::Value::Null,
+            };
+            super::gltf::character::animate(bytes, limits, &rest, true)?;
             Ok(RigFile {
                 format,
                 joints: bind.skeleton.joints,

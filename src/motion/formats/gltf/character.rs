@@ -65,6 +65,9 @@ pub fn animate(
         ));
     }
     let cc: usize = motion.joints.iter().map(|j| j.channels.len()).sum();
+    if motion.frames == 0 {
+        return Err(err("no frames to put on the character"));
+    }
     if motion.values.len() != motion.frames * cc {
         return Err(err(format!(
             "{} channel values for {} frames of {cc} channels",
@@ -73,7 +76,28 @@ pub fn animate(
         )));
     }
     let (mut doc, mut bin) = document(character)?;
-    let (times, tracks) = tracks(&bind, motion);
+    let above = Above::of(&bind);
+    let (times, tracks) = tracks(&bind, &above, motion);
+    // A joint node given as a matrix cannot be animated (the specification forbids it): it
+    // is given as the translation, rotation and scale of its bind pose instead.
+    let cc_rest: Vec<usize> = offsets(&bind.skeleton.joints);
+    for (k, j) in bind.skeleton.joints.iter().enumerate() {
+        let node = &mut doc["nodes"][bind.nodes[k]];
+        if node.get("matrix").is_none() {
+            continue;
+        }
+        let vals = &bind.skeleton.values[cc_rest[k]..cc_rest[k] + j.channels.len()];
+        let (t, q) = above.local(&bind, j, vals);
+        let parent = j.parent.map_or(above.scale, |p| bind.scales[p]);
+        let s = bind.scales[k] / parent;
+        let c = q.coords;
+        if let Some(n) = node.as_object_mut() {
+            n.remove("matrix");
+            n.insert("translation".into(), json!([t.x, t.y, t.z]));
+            n.insert("rotation".into(), json!([c.x, c.y, c.z, c.w]));
+            n.insert("scale".into(), json!([s, s, s]));
+        }
+    }
 
     // The animation's data after the file's own, each accessor in a view of its own.
     let mut views = doc["bufferViews"].as_array().cloned().unwrap_or_default();
@@ -143,26 +167,72 @@ struct Track {
     values: Vec<f32>,
 }
 
+/// Where each joint's channel values start in a frame.
+fn offsets(joints: &[Joint]) -> Vec<usize> {
+    joints
+        .iter()
+        .scan(0, |at, j| {
+            let here = *at;
+            *at += j.channels.len();
+            Some(here)
+        })
+        .collect()
+}
+
+/// The fixed node the head joint hangs from, in the world: its position, rotation and
+/// (even) scale.
+struct Above {
+    at: Vector3<f64>,
+    rot: UnitQuaternion<f64>,
+    scale: f64,
+}
+
+impl Above {
+    fn of(bind: &Bind) -> Above {
+        let m = bind.above;
+        let scale = (0..3)
+            .map(|c| m.fixed_view::<3, 1>(0, c).norm())
+            .sum::<f64>()
+            / 3.0;
+        let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned() / scale;
+        Above {
+            at: Vector3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]),
+            rot: UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_eps(
+                &r,
+                1e-12,
+                64,
+                Rotation3::identity(),
+            )),
+            scale,
+        }
+    }
+
+    /// Joint `j`'s node-local translation and rotation for its channel values `vals`: the
+    /// channels give them relative to the parent joint in metres with no scale; the file's
+    /// node divides the translation by its parent's world scale, and the head joint's is
+    /// relative to the node above it.
+    fn local(&self, bind: &Bind, j: &Joint, vals: &[f64]) -> (Vector3<f64>, UnitQuaternion<f64>) {
+        let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+            local_rotation(j, vals),
+        ));
+        let t = Vector3::from(translation(j, vals));
+        match j.parent {
+            Some(p) => (t / bind.scales[p], q),
+            None => (
+                self.rot.inverse() * (t - self.at) / self.scale,
+                self.rot.inverse() * q,
+            ),
+        }
+    }
+}
+
 /// The key times and, for every joint with channels, its node's rotation (and, where it
 /// moves, translation) track.
-fn tracks(bind: &Bind, motion: &Motion<'_>) -> (Vec<f32>, Vec<Track>) {
+fn tracks(bind: &Bind, above: &Above, motion: &Motion<'_>) -> (Vec<f32>, Vec<Track>) {
     let times = (0..motion.frames)
         .map(|f| (f as f64 / motion.fps) as f32)
         .collect();
     let cc: usize = motion.joints.iter().map(|j| j.channels.len()).sum();
-    let above = bind.above;
-    let above_scale = (0..3)
-        .map(|c| above.fixed_view::<3, 1>(0, c).norm())
-        .sum::<f64>()
-        / 3.0;
-    let above_rot: Matrix3<f64> = above.fixed_view::<3, 3>(0, 0).into_owned() / above_scale;
-    let above_rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_eps(
-        &above_rot,
-        1e-12,
-        64,
-        Rotation3::identity(),
-    ));
-    let above_at = Vector3::new(above[(0, 3)], above[(1, 3)], above[(2, 3)]);
     let mut tracks = Vec::new();
     let mut start = 0;
     for (k, j) in motion.joints.iter().enumerate() {
@@ -179,17 +249,7 @@ fn tracks(bind: &Bind, motion: &Motion<'_>) -> (Vec<f32>, Vec<Track>) {
         let mut last: Option<UnitQuaternion<f64>> = None;
         for f in 0..motion.frames {
             let vals = &motion.values[f * cc + at..f * cc + at + n];
-            let mut q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
-                local_rotation(j, vals),
-            ));
-            let mut t = Vector3::from(translation(j, vals));
-            match j.parent {
-                Some(p) => t /= bind.scales[p],
-                None => {
-                    q = above_rot.inverse() * q;
-                    t = above_rot.inverse() * (t - above_at) / above_scale;
-                }
-            }
+            let (t, mut q) = above.local(bind, j, vals);
             // Kept on one hemisphere from key to key, so that interpolation goes the short way.
             if last.is_some_and(|l| l.coords.dot(&q.coords) < 0.0) {
                 q = UnitQuaternion::new_unchecked(-q.into_inner());
@@ -225,6 +285,13 @@ fn tracks(bind: &Bind, motion: &Motion<'_>) -> (Vec<f32>, Vec<Track>) {
 /// The character's document and its one buffer's bytes.
 fn document(character: &[u8]) -> Result<(Value, Vec<u8>)> {
     let (json, bin) = super::read::split(character)?;
+    if json.len() > crate::limits::MAX_CHARACTER_JSON_BYTES {
+        return Err(Error::Limit {
+            what: "character JSON chunk bytes",
+            actual: json.len() as u64,
+            limit: crate::limits::MAX_CHARACTER_JSON_BYTES as u64,
+        });
+    }
     let doc: Value = serde_json::from_slice(json).map_err(|e| err(format!("its JSON: {e}")))?;
     let buffers = doc["buffers"].as_array().map_or(0, Vec::len);
     if buffers != 1 {
@@ -233,7 +300,9 @@ fn document(character: &[u8]) -> Result<(Value, Vec<u8>)> {
              embedded)"
         )));
     }
-    let declared = doc["buffers"][0]["byteLength"].as_u64().unwrap_or(0) as usize;
+    let declared = doc["buffers"][0]["byteLength"]
+        .as_u64()
+        .ok_or_else(|| err("its buffer states no byteLength"))? as usize;
     let mut data = match (doc["buffers"][0]["uri"].as_str(), bin) {
         (None, Some(bin)) => bin.to_vec(),
         (Some(uri), _) => {
@@ -346,6 +415,87 @@ mod tests {
         assert_eq!(doc["meshes"].as_array().unwrap().len(), 2);
         assert_eq!(doc["skins"].as_array().unwrap().len(), 1);
         assert_eq!(doc["animations"].as_array().unwrap().len(), 1);
+    }
+
+    /// A small character: an Armature moved, turned (Z-up to Y-up) and scaled (cm to m)
+    /// over a hips → spine → head chain, the spine given as a matrix. Motion that is not
+    /// the bind pose (the hips travelling, the spine turning) written onto it and read back
+    /// as a take (the reader composes the file's node tree) is where forward kinematics of
+    /// the skeleton puts it; the spine's matrix became a translation, rotation and scale.
+    #[test]
+    fn motion_on_a_moved_turned_scaled_rig_plays_where_it_was_put() {
+        let (c, s) = (20f64.to_radians().cos(), 20f64.to_radians().sin());
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let doc = json!({
+            "asset": {"version": "2.0"},
+            "scene": 0,
+            "scenes": [{"nodes": [0]}],
+            "nodes": [
+                {"name": "Armature", "translation": [0.5, 0.0, -0.25],
+                 "rotation": [-h, 0.0, 0.0, h], "scale": [0.01, 0.01, 0.01], "children": [1]},
+                {"name": "hips", "translation": [0.0, 0.0, 100.0], "children": [2]},
+                {"name": "spine", "children": [3],
+                 "matrix": [c, 0.0, -s, 0.0, 0.0, 1.0, 0.0, 0.0, s, 0.0, c, 0.0, 0.0, 0.0, 30.0, 1.0]},
+                {"name": "head", "translation": [0.0, 0.0, 25.0]}
+            ],
+            "skins": [{"joints": [1, 2, 3]}],
+            "buffers": [{"byteLength": 4, "uri": "data:application/octet-stream;base64,AAAAAA=="}]
+        });
+        let bytes = serde_json::to_vec(&doc).unwrap();
+        let limits = ReadOptions::default().limits;
+        let bind = bind_pose(&bytes, &limits).unwrap();
+        let s = &bind.skeleton;
+        assert_eq!(s.joints.len(), 3);
+        // At rest, in the world: the hips 1 m above the Armature's place (Z-up turned to
+        // Y-up), the head 0.55 m above them, leaning 20° about the file's Y.
+        let rest = s.forward_kinematics();
+        assert!(
+            (rest[1] - 1.0).abs() < 1e-9 && (rest[0] - 0.5).abs() < 1e-9,
+            "{rest:?}"
+        );
+        let cc = s.channel_count();
+        let frames = 3;
+        let mut values = Vec::new();
+        for f in 0..frames {
+            let mut v = s.values.clone();
+            v[0] += 0.1 * f as f64; // the hips' position channels come first
+            v[2] += 0.05 * f as f64;
+            let spine = s.joints[0].channels.len();
+            v[spine] += 15.0 * f as f64; // the spine's first rotation channel
+            values.extend(v);
+        }
+        assert_eq!(values.len(), frames * cc);
+        let out = animate(
+            &bytes,
+            &limits,
+            &Motion {
+                name: "moved",
+                joints: &s.joints,
+                values: &values,
+                frames,
+                fps: 10.0,
+                extras: json!({}),
+            },
+            false,
+        )
+        .unwrap();
+        let written: Value = serde_json::from_slice(&out).unwrap();
+        let spine = &written["nodes"][2];
+        assert!(spine.get("matrix").is_none() && spine["scale"] == json!([1.0, 1.0, 1.0]));
+        let back = read(&out, &ReadOptions::default()).unwrap().motion;
+        let want = crate::motion::skeleton::Animation::new(s.joints.clone(), values)
+            .unwrap()
+            .forward_kinematics();
+        let got = back.positions();
+        assert_eq!(got.len(), want.len());
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                (f64::from(*g) - w).abs() < 1e-5,
+                "coordinate {i}: {g} vs {w}"
+            );
+        }
+        // The motion moved: the last frame's head is not where the first's was.
+        assert!((want[want.len() - 3] - want[6]).abs() > 0.1);
     }
 
     #[test]

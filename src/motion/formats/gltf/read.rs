@@ -1009,6 +1009,13 @@ pub(crate) fn bind_pose(bytes: &[u8], limits: &super::super::ReadLimits) -> Resu
         let m = &world[i];
         let axes: Vec<f64> = (0..3).map(|c| m.fixed_view::<3, 1>(0, c).norm()).collect();
         let mean = (axes[0] + axes[1] + axes[2]) / 3.0;
+        if m.fixed_view::<3, 3>(0, 0).determinant() <= 0.0 {
+            return Err(err(format!(
+                "joint {:?} is mirrored in the world (a negative scale): a skeleton has no \
+                 mirror",
+                doc.nodes[i].name.clone().unwrap_or_default()
+            )));
+        }
         if !(mean.is_finite() && mean > 0.0)
             || axes.iter().any(|a| (a - mean).abs() > EVEN_SCALE * mean)
         {
