@@ -506,8 +506,10 @@ async fn plan(
     req: &RangeRequest,
 ) -> Result<Planned> {
     let req = req.clone();
-    let (prepared, (start, asked_end)) = prepare(store, caches, id, req.range).await?;
+    // What the request asks is checked before the take is: a rate past the limit is a 400
+    // whatever the range (which is the take's to refuse, with a 416).
     let transform = transform_for(req.format, req.transform)?;
+    let (prepared, (start, asked_end)) = prepare(store, caches, id, req.range).await?;
     let onto = req.onto.as_deref();
     if onto.is_some() {
         super::retarget::check_format(req.format)?;
