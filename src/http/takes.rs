@@ -501,6 +501,9 @@ pub struct RangesQuery {
     root: Option<String>,
     up: Option<String>,
     unit: Option<String>,
+    /// The skeleton every part is put on, as `skeleton=` on a range.
+    skeleton: Option<String>,
+    feet: Option<String>,
 }
 
 /// A batch query as the parts and the shared points, format (f32 unless named) and
@@ -539,6 +542,8 @@ fn ranges_request(q: RangesQuery) -> Result<RangesRequest, ApiError> {
         points: q.points.map(|p| p.split(',').map(str::to_string).collect()),
         format,
         transform: transform_of(q.fps, q.root.as_deref(), q.up.as_deref(), q.unit.as_deref())?,
+        onto: None,
+        feet: feet_of(q.feet.as_deref())?,
     })
 }
 
@@ -552,8 +557,12 @@ pub async fn ranges(
     Extension(holder): Extension<Holder>,
     query: Result<Query<RangesQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let Query(q) = query?;
-    let request = ranges_request(q)?;
+    let Query(mut q) = query?;
+    let onto = onto_of(q.skeleton.take().as_deref())?;
+    let mut request = ranges_request(q)?;
+    if let Some(onto) = onto {
+        request.onto = Some(retarget::target(&state.store, &caller.grant, &onto).await?);
+    }
     let batch = ranges::open(
         &state.store,
         &state.caches,

@@ -50,6 +50,9 @@ pub struct RangesRequest {
     pub points: Option<Vec<String>>,
     pub format: Format,
     pub transform: Options,
+    /// The skeleton every part is put on (its joints' places), as `skeleton=` on a range.
+    pub onto: Option<Arc<super::retarget::Target>>,
+    pub feet: super::retarget::Feet,
 }
 
 /// A batch, checked: its parts' answers, opened one at a time by [`Ranges::next_part`].
@@ -138,8 +141,8 @@ fn part_request(batch: &RangesRequest, part: &Part, transform: Options) -> Range
         points: batch.points.clone(),
         format: batch.format,
         transform,
-        onto: None,
-        feet: Default::default(),
+        onto: batch.onto.clone(),
+        feet: batch.feet,
     }
 }
 

@@ -357,3 +357,45 @@ async fn a_take_the_token_does_not_reach_is_not_there_in_any_part() {
     }
     srv.stop().await;
 }
+
+/// Issue 52: a batch put on one skeleton (`skeleton=smpl`) is, part for part, what each
+/// range's own request with `skeleton=smpl` gives: the SMPL joints' places of takes of
+/// other rigs, a training batch on one body.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_batch_on_one_skeleton_is_each_range_on_it() {
+    let t = common::sqlite().await;
+    let srv = common::start(t.store.clone(), 64 << 20).await;
+    let (status, take) = srv
+        .post(
+            "name=walker&codec=bvh-lossless",
+            mocapstore::motion::synthetic::dancer_bvh(240, 60.0, 1, 4).into_bytes(),
+        )
+        .await;
+    assert_eq!(status, 201, "{take}");
+    let id = take["id"].as_str().unwrap();
+    let (status, headers, body) = srv
+        .get(&format!(
+            "/v1/ranges?ranges={id}:0-60,{id}:100-160&format=npy&skeleton=smpl"
+        ))
+        .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    let got = parts(headers["content-type"].to_str().unwrap(), &body);
+    assert_eq!(got.len(), 2);
+    for ((h, b), (start, end)) in got.iter().zip([(0, 60), (100, 160)]) {
+        let (status, _, own) = srv
+            .get(&format!(
+                "/v1/takes/{id}/frames?start={start}&end={end}&format=npy&skeleton=smpl"
+            ))
+            .await;
+        assert_eq!(status, 200);
+        assert_eq!(b, &own, "{start}-{end}");
+        assert_eq!(header(h, "x-frames"), "60");
+    }
+    // feet=lock without a skeleton is refused, as on a range.
+    let (status, _, _) = srv
+        .get(&format!("/v1/ranges?ranges={id}:0-60&feet=lock"))
+        .await;
+    assert_eq!(status, 400);
+    srv.stop().await;
+    t.finish().await;
+}
