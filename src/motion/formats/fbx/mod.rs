@@ -104,6 +104,18 @@ fn load(bytes: &[u8], limits: &ReadLimits) -> Result<(ufbx::SceneRoot, Vec<Strin
     Ok((scene, warnings))
 }
 
+/// The joints' names: the file's, `root` for the scene's root, `nodeN` for a nameless one.
+fn joint_names(nodes: &[ufbx::Ref<ufbx::Node>], order: &[usize], root: usize) -> Vec<String> {
+    order
+        .iter()
+        .map(|&i| match nodes[i].element.name.to_string() {
+            _ if i == root => "root".to_string(),
+            n if n.trim().is_empty() => format!("node{}", nodes[i].element.typed_id),
+            n => n,
+        })
+        .collect()
+}
+
 /// The joints of a scene, parents first, each joint's parent among them, and the scene's
 /// root node (a joint only when the bones hang from it).
 struct Chosen {
@@ -282,14 +294,7 @@ pub(crate) fn read(bytes: &[u8], limits: &ReadLimits, animation: Option<&Pick>) 
         }
     }
 
-    let names: Vec<String> = order
-        .iter()
-        .map(|&i| match nodes[i].element.name.to_string() {
-            _ if i == root => "root".to_string(),
-            n if n.trim().is_empty() => format!("node{}", nodes[i].element.typed_id),
-            n => n,
-        })
-        .collect();
+    let names = joint_names(nodes, &order, root);
     let Skeletal {
         names,
         positions,
@@ -388,14 +393,7 @@ pub(crate) fn bind_pose(bytes: &[u8], limits: &ReadLimits) -> Result<(Animation,
         };
         world.push(w);
     }
-    let names: Vec<String> = order
-        .iter()
-        .map(|&i| match nodes[i].element.name.to_string() {
-            _ if i == root => "root".to_string(),
-            n if n.trim().is_empty() => format!("node{}", nodes[i].element.typed_id),
-            n => n,
-        })
-        .collect();
+    let names = joint_names(nodes, &order, root);
     let Skeletal {
         skeleton,
         warnings: scaled,

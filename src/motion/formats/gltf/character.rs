@@ -151,7 +151,7 @@ pub fn animate(
     }]);
     doc["buffers"] = json!([{"byteLength": bin.len()}]);
     if binary {
-        return Ok(glb(&doc, &bin));
+        return Ok(super::write::pack_glb(&doc, &bin));
     }
     doc["buffers"][0]["uri"] = json!(format!(
         "data:application/octet-stream;base64,{}",
@@ -325,28 +325,6 @@ fn document(character: &[u8]) -> Result<(Value, Vec<u8>)> {
     }
     data.truncate(declared);
     Ok((doc, data))
-}
-
-/// A GLB of a document and its buffer.
-fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
-    let mut json = serde_json::to_vec(doc).expect("glTF JSON serialises");
-    while !json.len().is_multiple_of(4) {
-        json.push(b' ');
-    }
-    let padded = bin.len().next_multiple_of(4);
-    let total = 12 + 8 + json.len() + 8 + padded;
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
-    out.extend_from_slice(&(padded as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(bin);
-    out.resize(total, 0);
-    out
 }
 
 #[cfg(test)]

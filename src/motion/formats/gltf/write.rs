@@ -101,11 +101,18 @@ pub fn glb_len_bound(frames: usize, nodes: usize) -> u64 {
 /// The binary glTF (`.glb`) of `scene`.
 pub fn glb(scene: &Scene<'_>) -> Vec<u8> {
     let (doc, bin) = build(scene, None);
-    let mut json = serde_json::to_vec(&doc).expect("glTF JSON serialises");
-    while json.len() % 4 != 0 {
+    pack_glb(&doc, &bin)
+}
+
+/// A GLB of a document and its one buffer: the JSON chunk padded with spaces, the binary
+/// chunk with zeros, each to 4 bytes.
+pub(super) fn pack_glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut json = serde_json::to_vec(doc).expect("glTF JSON serialises");
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let padded = bin.len().next_multiple_of(4);
+    let total = 12 + 8 + json.len() + 8 + padded;
     let mut out = Vec::with_capacity(total);
     out.extend_from_slice(b"glTF");
     out.extend_from_slice(&2u32.to_le_bytes());
@@ -113,9 +120,10 @@ pub fn glb(scene: &Scene<'_>) -> Vec<u8> {
     out.extend_from_slice(&(json.len() as u32).to_le_bytes());
     out.extend_from_slice(b"JSON");
     out.extend_from_slice(&json);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(&(padded as u32).to_le_bytes());
     out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
+    out.extend_from_slice(bin);
+    out.resize(total, 0);
     out
 }
 
