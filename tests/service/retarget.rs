@@ -314,7 +314,9 @@ async fn another_librarys_skeleton_is_not_found() {
     }
     // An uploaded rig holds no library's motion: every reader may put takes on it.
     let ybot = std::fs::read(root.join("gltf/mixamo_ybot_character.glb")).unwrap();
-    let (status, rig) = upload_rig(&srv, ybot.clone(), Some(&reader)).await;
+    // (A small body: the scope is refused before the body is read, and a large one may
+    // meet a closed connection while it is still being sent.)
+    let (status, rig) = upload_rig(&srv, b"HIERARCHY".to_vec(), Some(&reader)).await;
     assert_eq!(status, 403, "a read token uploads nothing: {rig}");
     let (status, rig) = upload_rig(&srv, ybot, Some(&admin)).await;
     assert_eq!(status, 201, "{rig}");
