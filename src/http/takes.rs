@@ -468,16 +468,16 @@ pub async fn frames(
 fn answer_headers(a: &Answer) -> HeaderMap {
     let mut headers = HeaderMap::new();
     let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
-    headers.insert("x-frames", hv(a.frames_out.to_string()));
-    headers.insert("x-start-frame", hv(a.start.to_string()));
+    headers.insert("x-frames", HeaderValue::from(a.frames_out));
+    headers.insert("x-start-frame", HeaderValue::from(a.start));
     headers.insert("x-fps", hv(a.fps.to_string()));
     headers.insert("x-source-fps", hv(a.source_fps.to_string()));
     headers.insert("x-metres-per-unit", hv(a.metres_per_unit.to_string()));
     if let Some(points) = a.points {
-        headers.insert("x-points", hv(points.to_string()));
+        headers.insert("x-points", HeaderValue::from(points));
     }
     if let Some(n) = a.length {
-        headers.insert(header::CONTENT_LENGTH, hv(n.to_string()));
+        headers.insert(header::CONTENT_LENGTH, HeaderValue::from(n));
     }
     let content_type = match a.format {
         Format::Json | Format::Gltf => "application/json",
@@ -682,6 +682,9 @@ impl Pieces for Multipart {
 /// client sees as a body shorter than its length or an unfinished chunking.
 pub async fn streamed<P: Pieces>(mut a: P) -> Result<Body, ApiError> {
     let first = a.next_piece().await?;
+    if a.finished() {
+        return Ok(Body::from(first.unwrap_or_default()));
+    }
     let rest = futures_util::stream::unfold(Some(a), |a| async move {
         let mut a = a?;
         match a.next_piece().await {

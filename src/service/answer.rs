@@ -58,6 +58,11 @@ const TAIL_BYTES: usize = 64;
 /// Ranges of at most this many chunks are decoded through the server's chunk cache.
 pub const CACHED_CHUNKS: usize = 8;
 
+/// The most bytes of a cached chunk's frames an answer copies on the request's own task
+/// instead of the blocking pool: a few tens of microseconds of copying, less than the hop
+/// to the pool and back (what profiling a one-second range read showed, docs/PROFILING.md).
+const INLINE_COPY_BYTES: usize = 1 << 20;
+
 /// The names of the points a written file holds, in order: the take's `points`, then those
 /// the transforms add after them (`root=extract`'s path and heading) up to the answer's
 /// `count`; none when the file holds joints, not points (BVH: `count` is `None`).
@@ -87,6 +92,11 @@ pub trait Pieces: Send + 'static {
     fn next_piece(&mut self) -> impl std::future::Future<Output = Result<Option<Bytes>>> + Send;
     /// What the answer is, for the log when it fails part way.
     fn what(&self) -> String;
+    /// Whether every piece has been taken: an answer whole after its first piece is sent
+    /// as one body, not as a stream of one.
+    fn finished(&self) -> bool {
+        false
+    }
 }
 
 impl Pieces for Answer {
@@ -96,6 +106,10 @@ impl Pieces for Answer {
 
     fn what(&self) -> String {
         format!("range answer of take {}", self.id)
+    }
+
+    fn finished(&self) -> bool {
+        self.tail_done && self.pending.is_empty()
     }
 }
 
@@ -302,6 +316,12 @@ struct Block {
 
 enum Decoded {
     Positions(Vec<f32>),
+    /// Every point of a chunk's frames as the decoded-chunk cache holds them, from row
+    /// `first` on: written straight from the cache (the cache counts their memory).
+    Cached {
+        chunk: Arc<Vec<f32>>,
+        first: usize,
+    },
     Channels(codec::skeleton::Channels),
 }
 
@@ -1137,12 +1157,21 @@ impl Answer {
                 self.frames_left = self
                     .frames_left
                     .saturating_sub(block.frames - block.written);
-                let Decoded::Positions(mut v) = block.data else {
-                    unreachable!("a points answer decodes positions")
-                };
                 let width = self.points.unwrap_or(0) * 3;
-                v.drain(..block.written * width);
-                return Ok(Some((v, block._held)));
+                let v = match block.data {
+                    Decoded::Positions(mut v) => {
+                        v.drain(..block.written * width);
+                        v
+                    }
+                    Decoded::Cached { chunk, first } => {
+                        let rows = first + block.written..first + block.frames;
+                        chunk[rows.start * width..rows.end * width].to_vec()
+                    }
+                    Decoded::Channels(_) => unreachable!("a points answer decodes positions"),
+                };
+                let held = self.reservation.hold(v.capacity() as u64 * 4);
+                drop(block._held);
+                return Ok(Some((v, held)));
             }
             if self.next_chunk >= self.last_chunk {
                 return Ok(None);
@@ -1219,6 +1248,10 @@ impl Answer {
             (Writer::Points { writer, .. }, Decoded::Positions(v)) => {
                 writer.frames(n, &v[a * width..b * width], &mut self.pending);
             }
+            (Writer::Points { writer, .. }, Decoded::Cached { chunk, first }) => {
+                let rows = &chunk[(first + a) * width..(first + b) * width];
+                writer.frames(n, rows, &mut self.pending);
+            }
             (Writer::Channels { writer, .. }, Decoded::Channels(c)) => {
                 writer.frames(&c.values, c.printed.as_ref(), a..b, &mut self.pending);
             }
@@ -1260,6 +1293,49 @@ impl Answer {
         let block = match selected {
             Some(selected) => {
                 let cached = self.caches.chunks.get(&self.prepared, i);
+                let part_bytes =
+                    frames * selected.as_ref().map_or(header.points as usize, Vec::len) * 12;
+                if let (Some(d), None, Writer::Points { .. }) =
+                    (&cached, &self.shaper, &self.writer)
+                {
+                    if part_bytes <= INLINE_COPY_BYTES {
+                        // Decoded already and nothing to shape: the part is a copy, made here
+                        // rather than on the blocking pool (the hop there and back costs more
+                        // than the copy).
+                        let width = header.points as usize * 3;
+                        if d.len() != r.len() * width {
+                            return Err(Error::Internal(format!(
+                                "take {}: cached chunk {i} holds {} values, not {}",
+                                self.id,
+                                d.len(),
+                                r.len() * width
+                            )));
+                        }
+                        let (data, held) = match selected {
+                            // Every point: the writer reads the cached frames themselves.
+                            None => (
+                                Decoded::Cached {
+                                    chunk: d.clone(),
+                                    first: part.start - r.start,
+                                },
+                                self.reservation.hold(0),
+                            ),
+                            Some(ix) => {
+                                let one = One::new(i, OneChunk::Decoded(d.clone()), false);
+                                let held = self.reservation.hold(part_bytes as u64);
+                                let data = self.prepared.reader.read(part, Some(&ix), &one)?;
+                                (Decoded::Positions(data), held)
+                            }
+                        };
+                        self.block = Some(Block {
+                            frames,
+                            written: 0,
+                            data,
+                            _held: held,
+                        });
+                        return Ok(());
+                    }
+                }
                 let (chunk, payload_held) = match cached {
                     Some(d) => (OneChunk::Decoded(d), None),
                     None => {
@@ -1363,6 +1439,9 @@ impl Answer {
             // Gathered: counted in the reservation's gathering share from the start.
             match block.data {
                 Decoded::Positions(v) => w.values.extend(v.iter().map(|&x| f64::from(x))),
+                Decoded::Cached { .. } => {
+                    unreachable!("only points answers read cached frames in place")
+                }
                 Decoded::Channels(c) => w.values.extend_from_slice(&c.values),
             }
             self.frames_left = self.frames_left.saturating_sub(block.frames);

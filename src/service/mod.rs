@@ -50,6 +50,7 @@ pub mod retarget;
 pub mod search;
 pub mod shape;
 pub mod skeletons;
+pub mod stamps;
 pub mod streams;
 pub mod take;
 pub mod training;

@@ -6,7 +6,8 @@
 //!
 //! Nobody has to tell the caches that a take changed. A cached decoder carries the
 //! [`Stamp`] of the coding it was built from, and [`ReadCaches::current`] checks it against
-//! the stored one before each use (one indexed lookup): a take re-encoded or deleted since,
+//! the stored one before each use (one indexed lookup, batched with those of concurrent
+//! requests: [`super::stamps`]): a take re-encoded or deleted since,
 //! here or through another server sharing the database, is built again or answered 404.
 //! Decoded chunks are keyed by the take, its coding's stamp (a corrected body decodes the same
 //! chunks) and the chunk, so chunks of an older
@@ -17,6 +18,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use super::kept::Kept;
+use super::stamps::Stamps;
 use super::take::Take;
 use crate::codec::container::Header;
 use crate::codec::{CodecId, Reader, Shared};
@@ -225,13 +227,17 @@ impl DecoderCache {
 pub struct ReadCaches {
     pub decoders: DecoderCache,
     pub chunks: ChunkCache,
+    /// How cached decoders are checked: stamp lookups, batched across requests.
+    stamps: Stamps,
 }
 
 impl ReadCaches {
+    /// Caches of the takes of one store (the one every call passes).
     pub fn new(decoded_chunk_bytes: usize) -> Self {
         ReadCaches {
             decoders: DecoderCache::default(),
             chunks: ChunkCache::new(decoded_chunk_bytes),
+            stamps: Stamps::default(),
         }
     }
 
@@ -242,7 +248,7 @@ impl ReadCaches {
         let Some(p) = self.decoders.get(id) else {
             return Ok(None);
         };
-        match store.coding_stamp(id).await? {
+        match self.stamps.of(store, id).await? {
             None => {
                 self.decoders.remove_if(id, p.generation);
                 Err(super::Error::NotFound(format!("take {id}")))

@@ -136,6 +136,10 @@ impl Store {
                 .busy_timeout(Duration::from_secs(10));
             let pool = SqlitePoolOptions::new()
                 .max_connections(8)
+                // A connection to a file in this process cannot go stale as a network one
+                // can: the ping sqlx sends before handing one out is a round trip to its
+                // worker thread that tells nothing (a third of a range read's queries).
+                .test_before_acquire(false)
                 .connect_with(opts)
                 .await?;
             sqlx::migrate!("migrations/sqlite").run(&pool).await?;
@@ -648,6 +652,36 @@ impl Store {
         })
     }
 
+    /// [`Store::coding_stamp`] of each of `ids`, [`STAMPS_AT_ONCE`] to a query; the takes
+    /// that do not exist are left out.
+    pub async fn coding_stamps(&self, ids: &[&str]) -> Result<Vec<(String, StampRow)>> {
+        let mut out = Vec::with_capacity(ids.len());
+        for group in ids.chunks(STAMPS_AT_ONCE) {
+            let sql = format!(
+                "SELECT id, codec, stored_bytes, frames, body_rev FROM takes WHERE id IN ({})",
+                marks(1, group.len())
+            );
+            dispatch!(self, pool => {
+                let mut q = sqlx::query(&sql);
+                for id in group {
+                    q = q.bind(*id);
+                }
+                for r in q.fetch_all(pool).await? {
+                    out.push((
+                        r.try_get("id")?,
+                        StampRow {
+                            codec: r.try_get("codec")?,
+                            stored_bytes: r.try_get("stored_bytes")?,
+                            frames: r.try_get("frames")?,
+                            body_rev: r.try_get("body_rev")?,
+                        },
+                    ));
+                }
+            })
+        }
+        Ok(out)
+    }
+
     /// The library a take is in, `None` if there is no such take (one indexed lookup: what
     /// access checks read on every request, as the take may have moved since it was cached).
     pub async fn library_of(&self, id: &str) -> Result<Option<String>> {
@@ -740,6 +774,10 @@ impl Store {
         })
     }
 }
+
+/// Takes whose stamps one query of [`Store::coding_stamps`] reads (well under SQLite's
+/// and Postgres's limits on bound parameters).
+pub const STAMPS_AT_ONCE: usize = 256;
 
 const INSERT_LABEL: &str =
     "INSERT INTO take_labels (take_id, key, value, number) VALUES ($1, $2, $3, $4)";
