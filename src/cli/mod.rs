@@ -14,6 +14,7 @@ mod ingest;
 mod inspect;
 mod loadtest;
 mod search;
+mod stats;
 mod streamtest;
 mod token;
 mod train_bases;
@@ -46,6 +47,9 @@ enum Command {
     /// Find stored motion like a range of a stored take or of a clip file (a running
     /// service's `POST /v1/search`).
     Search(search::SearchArgs),
+    /// A running service's statistics: what its takes cost stored, by codec and library,
+    /// and where the database's bytes go (motion, records, indexes, free pages).
+    Stats(stats::StatsArgs),
     /// Live-stream ingest over HTTP: frames/s sustained, capture-to-fetchable delay.
     Streamtest(streamtest::StreamArgs),
     /// Train a shared basis on a running service's takes (library, tag, layout or ids).
@@ -336,6 +340,7 @@ pub fn main() -> ExitCode {
         Command::Ingest(args) => ingest::run(&args),
         Command::Fetch(args) => fetch::run(&args),
         Command::Search(args) => search::run(&args),
+        Command::Stats(args) => stats::run(&args),
         Command::Loadtest(args) => loadtest::run(&args),
         Command::TrainBases(args) => train_bases::run(&args),
         Command::Streamtest(args) => streamtest::run(&args),

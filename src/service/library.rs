@@ -262,6 +262,10 @@ pub struct Stats {
     pub total: Totals,
     pub by_codec: BTreeMap<String, Totals>,
     pub by_library: BTreeMap<String, Totals>,
+    /// The whole database's bytes by what they hold, for a caller who reaches every
+    /// library (they are every library's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub storage: Option<super::storage::Storage>,
 }
 
 /// Statistics of the takes of `query` that `grant` reaches.
@@ -274,7 +278,12 @@ pub async fn stats(store: &Store, grant: &Grant, query: &TakeQuery) -> Result<St
     let mut libraries: Vec<&str> = rows.iter().map(|r| r.library.as_str()).collect();
     libraries.sort();
     libraries.dedup();
+    let storage = match grant.libraries {
+        None => Some(super::storage::storage(store).await?),
+        Some(_) => None,
+    };
     Ok(Stats {
+        storage,
         total: crate::store::query::totals(rows.iter()),
         by_codec: codecs
             .iter()

@@ -51,6 +51,7 @@ pub mod search;
 pub mod shape;
 pub mod skeletons;
 pub mod stamps;
+pub mod storage;
 pub mod streams;
 pub mod take;
 pub mod training;

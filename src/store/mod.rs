@@ -834,6 +834,8 @@ pub use skeletons::SkeletonRow;
 pub use streams::{ChunkAppend, Closer, NewStream, StreamClaim, StreamOwnerRow, StreamRow};
 mod access;
 pub use access::{AuditRow, TokenRow};
+mod sizes;
+pub use sizes::{DatabaseBytes, ObjectBytes};
 
 /// One page of a listing.
 #[derive(Debug, Clone)]

@@ -355,3 +355,66 @@ async fn labels_are_given_changed_and_found() {
         t.finish().await;
     }
 }
+
+/// `GET /v1/stats` says where the database's bytes go: every table and index by what it
+/// holds, adding up to the database's size, with the chunk payloads among the motion.
+// Multi-threaded: the CLI's process asks the server while this test waits for it.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_databases_bytes_are_split_by_what_they_hold() {
+    for t in common::all().await {
+        let srv = common::start(t.store.clone(), 8 << 20).await;
+        for i in 0..3u64 {
+            let m = walker(300, 8, 120.0, i + 1, 0.0);
+            let body = formats::write(&m, Format::Json).unwrap();
+            let (status, r) = srv.post(&format!("name=bytes{i}"), body).await;
+            assert_eq!(status, 201, "{r}");
+        }
+        let (status, stats) = json(&srv, "/v1/stats").await;
+        assert_eq!(status, 200, "{stats}");
+        let s = &stats["storage"];
+        let objects = s["objects"].as_array().unwrap();
+        let find = |name: &str| objects.iter().find(|o| o["name"] == name).cloned();
+        let chunks = find("chunks").unwrap_or_else(|| panic!("{}: {s}", t.name));
+        assert_eq!(chunks["holds"], "motion");
+        assert_eq!(find("takes").unwrap()["holds"], "records");
+        // The chunk table's pages hold at least the payloads (SQLite does not compress).
+        let payload: i64 = stats["total"]["stored_bytes"].as_i64().unwrap();
+        let sum = |holds: &str| -> i64 {
+            objects
+                .iter()
+                .filter(|o| o["holds"] == holds)
+                .map(|o| o["bytes"].as_i64().unwrap())
+                .sum()
+        };
+        assert_eq!(s["motion_bytes"].as_i64().unwrap(), sum("motion"));
+        assert_eq!(s["record_bytes"].as_i64().unwrap(), sum("records"));
+        assert_eq!(s["index_bytes"].as_i64().unwrap(), sum("indexes"));
+        let indexes = objects.iter().filter(|o| o["holds"] == "indexes");
+        assert!(
+            indexes.clone().any(|o| o["table"] == "takes"),
+            "{}: the takes' indexes are named with their table: {s}",
+            t.name
+        );
+        let total = s["total_bytes"].as_i64().unwrap();
+        let all = sum("motion") + sum("records") + sum("indexes");
+        if t.name == "sqlite" {
+            assert!(chunks["bytes"].as_i64().unwrap() >= payload / 2, "{s}");
+            assert!(chunks["unused_bytes"].as_i64().unwrap() >= 0);
+            // Every page is a table's, an index's or free.
+            assert_eq!(all + s["free_bytes"].as_i64().unwrap(), total, "{s}");
+        } else {
+            assert!(s["free_bytes"].is_null(), "{s}");
+            assert_eq!(all, total, "{s}");
+        }
+        // The CLI prints the same split.
+        let (ok, out, err) = common::mocapstore(&["stats", "--server", &srv.base]);
+        assert!(ok, "{err}");
+        let motion = format!("| motion | {} |", s["motion_bytes"]);
+        assert!(
+            out.contains(&motion) && out.contains("| chunks | motion |"),
+            "{out}"
+        );
+        srv.stop().await;
+        t.finish().await;
+    }
+}
