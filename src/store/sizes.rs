@@ -59,15 +59,7 @@ impl Store {
                     .await?;
                 let objects = rows
                     .iter()
-                    .map(|r| {
-                        Ok(ObjectBytes {
-                            name: r.try_get("name")?,
-                            table: r.try_get("tbl")?,
-                            index: r.try_get("is_index")?,
-                            bytes: r.try_get("bytes")?,
-                            unused: Some(r.try_get("unused")?),
-                        })
-                    })
+                    .map(|r| object(r, Some(r.try_get("unused")?)))
                     .collect::<Result<Vec<_>>>()?;
                 Ok(DatabaseBytes {
                     objects,
@@ -92,15 +84,7 @@ impl Store {
                 .await?;
                 let objects = rows
                     .iter()
-                    .map(|r| {
-                        Ok(ObjectBytes {
-                            name: r.try_get("name")?,
-                            table: r.try_get("tbl")?,
-                            index: r.try_get("is_index")?,
-                            bytes: r.try_get("bytes")?,
-                            unused: None,
-                        })
-                    })
+                    .map(|r| object(r, None))
                     .collect::<Result<Vec<_>>>()?;
                 let total = objects.iter().map(|o| o.bytes).sum();
                 Ok(DatabaseBytes {
@@ -111,4 +95,21 @@ impl Store {
             }
         }
     }
+}
+
+/// A row of either backend's size query (`name`, `tbl`, `is_index`, `bytes`).
+fn object<'r, R: Row>(r: &'r R, unused: Option<i64>) -> Result<ObjectBytes>
+where
+    &'static str: sqlx::ColumnIndex<R>,
+    String: sqlx::Decode<'r, R::Database> + sqlx::Type<R::Database>,
+    bool: sqlx::Decode<'r, R::Database> + sqlx::Type<R::Database>,
+    i64: sqlx::Decode<'r, R::Database> + sqlx::Type<R::Database>,
+{
+    Ok(ObjectBytes {
+        name: r.try_get("name")?,
+        table: r.try_get("tbl")?,
+        index: r.try_get("is_index")?,
+        bytes: r.try_get("bytes")?,
+        unused,
+    })
 }
