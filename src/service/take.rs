@@ -125,9 +125,12 @@ pub struct TakeMeta {
 }
 
 impl TakeMeta {
-    /// As the take's row stores it (JSON text).
-    pub fn to_text(&self, id: &str) -> Result<String> {
-        serde_json::to_string(self).map_err(|e| Error::Internal(format!("take {id}: meta: {e}")))
+    /// As the take's row stores it: JSON text, packed ([`crate::store::packed`]).
+    pub fn to_record(&self, id: &str) -> Result<Vec<u8>> {
+        let text = serde_json::to_string(self)
+            .map_err(|e| Error::Internal(format!("take {id}: meta: {e}")))?;
+        crate::store::packed::pack(&text)
+            .map_err(|e| Error::Internal(format!("take {id}: meta: {e}")))
     }
 }
 
@@ -213,8 +216,10 @@ impl Take {
     pub fn from_row(row: TakeRow, rig: Option<&Skeleton>) -> Result<Take> {
         let id = row.id.clone();
         let corrupt = |what: String| Error::Corrupt(format!("stored take {id}: {what}"));
+        let text =
+            crate::store::packed::unpack(&row.meta).map_err(|e| corrupt(format!("meta: {e}")))?;
         let mut meta: TakeMeta =
-            serde_json::from_str(&row.meta).map_err(|e| corrupt(format!("meta: {e}")))?;
+            serde_json::from_str(&text).map_err(|e| corrupt(format!("meta: {e}")))?;
         match (&row.skeleton_id, rig) {
             (None, _) => {}
             (Some(want), Some(r)) if r.id() == *want && meta.point_names.is_empty() => {
@@ -313,9 +318,9 @@ impl Take {
                 point_names: Vec::new(),
                 ..self.meta.clone()
             }
-            .to_text(&self.id)?
+            .to_record(&self.id)?
         } else {
-            self.meta.to_text(&self.id)?
+            self.meta.to_record(&self.id)?
         };
         Ok(TakeRow {
             id: self.id.clone(),
@@ -628,7 +633,7 @@ mod tests {
             (r#"{"point_names": "a,b"}"#, "meta: invalid type"),
         ] {
             let mut row = take().to_row().unwrap();
-            row.meta = meta.into();
+            row.meta = crate::store::packed::pack(meta).unwrap();
             let e = Take::from_row(row, None).unwrap_err();
             assert!(matches!(e, Error::Corrupt(_)), "{meta}: {e}");
             assert!(
@@ -636,6 +641,16 @@ mod tests {
                 "{meta}: {e}"
             );
         }
+        // Bytes that are not a packed record at all (JSON text, as rows held before
+        // migration 0018 packed them).
+        let mut row = take().to_row().unwrap();
+        row.meta = take().meta.to_record("t").unwrap()[1..].to_vec();
+        let e = Take::from_row(row, None).unwrap_err();
+        assert!(e.to_string().contains("meta: "), "{e}");
+        let mut row = take().to_row().unwrap();
+        row.meta = serde_json::to_vec(&take().meta).unwrap();
+        let e = Take::from_row(row, None).unwrap_err();
+        assert!(e.to_string().contains("format byte 123"), "{e}");
         let mut row = take().to_row().unwrap();
         row.max_bound_mm = f64::NAN;
         assert!(matches!(Take::from_row(row, None), Err(Error::Corrupt(_))));

@@ -9,6 +9,7 @@
 //! A take and its chunks go in one transaction: readers never see half a take, and a failed
 //! ingest leaves nothing behind. Chunk payloads are checked against their CRC-32C on read.
 
+pub mod packed;
 pub mod query;
 mod rows;
 
@@ -157,6 +158,7 @@ impl Store {
         } else {
             return Err(Error::Url(url.to_string()));
         };
+        store.pack_records().await?;
         Ok(store)
     }
 
@@ -447,7 +449,7 @@ impl Store {
         &self,
         id: &str,
         header: &[u8],
-        meta: &str,
+        meta: &[u8],
         by: Closer<'_>,
     ) -> Result<bool> {
         dispatch!(self, pool => {
@@ -834,6 +836,7 @@ pub use skeletons::SkeletonRow;
 pub use streams::{ChunkAppend, Closer, NewStream, StreamClaim, StreamOwnerRow, StreamRow};
 mod access;
 pub use access::{AuditRow, TokenRow};
+mod migrate;
 mod sizes;
 pub use sizes::{DatabaseBytes, ObjectBytes};
 
@@ -944,7 +947,8 @@ impl Store {
         let w = query::where_clause(filter, None);
         let sql = format!(
             "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, \
-             max_mm, id, name, layout, source_format, meta, skeleton_id, \
+             max_mm, id, name, layout, source_format, CAST(LENGTH(meta) AS BIGINT) AS meta_bytes, \
+             skeleton_id, \
              (SELECT COUNT(*) FROM chunks c WHERE c.take_id = takes.id) \
               + (SELECT COUNT(*) FROM analog_chunks c WHERE c.take_id = takes.id) \
               AS chunk_rows, \
@@ -977,7 +981,7 @@ impl Store {
                         + text("name")?
                         + text("layout")?
                         + text("source_format")?
-                        + text("meta")?
+                        + r.try_get::<i64, _>("meta_bytes")?
                         + text("skeleton_id")?
                         + r.try_get::<i64, _>("tag_bytes")?
                         + r.try_get::<i64, _>("label_bytes")?;

@@ -57,8 +57,9 @@ pub struct TakeRow {
     pub mean_bound_mm: Option<f64>,
     /// The codec container header (chunk index included).
     pub header: Vec<u8>,
-    /// Point names, unit provenance, skeleton, codec decision, warnings: JSON text.
-    pub meta: String,
+    /// Point names, unit provenance, codec decision, axes, warnings: JSON text, packed
+    /// ([`super::packed`]).
+    pub meta: Vec<u8>,
     /// Milliseconds since the Unix epoch.
     pub created_at: i64,
     /// While a live stream codes the take: when its lease runs out (ms since the epoch).

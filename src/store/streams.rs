@@ -30,7 +30,7 @@ pub struct ChunkAppend<'a> {
     pub state: &'a str,
     /// The take's meta, when it changed (its body, derived from its first chunk's frames);
     /// `None` keeps it.
-    pub meta: Option<&'a str>,
+    pub meta: Option<&'a [u8]>,
 }
 
 /// A new stream's take's owner and coder state, inserted with it
@@ -78,7 +78,7 @@ pub struct StreamClaim<'a> {
     pub frames: i64,
     pub frames_received: i64,
     /// The take's metadata with the handover recorded.
-    pub meta: &'a str,
+    pub meta: &'a [u8],
 }
 
 impl Store {

@@ -19,7 +19,7 @@ use tokio::net::TcpStream;
 pub struct TestStore {
     pub name: &'static str,
     pub store: Store,
-    url: String,
+    pub url: String,
     cleanup: Cleanup,
 }
 
@@ -61,19 +61,55 @@ fn unique(prefix: &str) -> String {
     format!("{prefix}_{}", uuid::Uuid::now_v7().simple())
 }
 
-pub async fn sqlite() -> TestStore {
+/// A database not opened yet (no tables): its URL, and how to remove it after.
+pub struct Unopened {
+    pub name: &'static str,
+    pub url: String,
+    cleanup: Cleanup,
+}
+
+impl Unopened {
+    /// Open it as a store (which migrates it).
+    pub async fn open(self) -> TestStore {
+        TestStore {
+            store: Store::open(&self.url)
+                .await
+                .unwrap_or_else(|e| panic!("open {}: {e}", self.name)),
+            name: self.name,
+            url: self.url,
+            cleanup: self.cleanup,
+        }
+    }
+}
+
+/// SQLite always, Postgres when configured: databases with no tables yet.
+pub async fn all_unopened() -> Vec<Unopened> {
+    let mut v = vec![unopened_sqlite()];
+    if let Some(pg) = unopened_postgres().await {
+        v.push(pg);
+    }
+    v
+}
+
+fn unopened_sqlite() -> Unopened {
     let dir = std::env::temp_dir().join(unique("mocapstore-test"));
     std::fs::create_dir_all(&dir).unwrap();
-    let url = format!("sqlite://{}", dir.join("store.db").display());
-    TestStore {
+    Unopened {
         name: "sqlite",
-        store: Store::open(&url).await.expect("open sqlite"),
-        url,
+        url: format!("sqlite://{}", dir.join("store.db").display()),
         cleanup: Cleanup::Dir(dir),
     }
 }
 
+pub async fn sqlite() -> TestStore {
+    unopened_sqlite().open().await
+}
+
 pub async fn postgres() -> Option<TestStore> {
+    Some(unopened_postgres().await?.open().await)
+}
+
+async fn unopened_postgres() -> Option<Unopened> {
     let Ok(admin_url) = std::env::var("MOCAP_TEST_PG_URL") else {
         eprintln!("MOCAP_TEST_PG_URL is not set: skipping the Postgres half of this test");
         return None;
@@ -88,11 +124,9 @@ pub async fn postgres() -> Option<TestStore> {
         .expect("create test database");
     admin.close().await;
     let (base, _) = admin_url.rsplit_once('/').expect("URL has a database path");
-    let url = format!("{base}/{db}");
-    Some(TestStore {
+    Some(Unopened {
         name: "postgres",
-        store: Store::open(&url).await.expect("open postgres"),
-        url,
+        url: format!("{base}/{db}"),
         cleanup: Cleanup::Database { admin_url, db },
     })
 }

@@ -58,7 +58,7 @@ fn take(id: &str, n: usize) -> NewTake {
             max_bound_mm: 1.0,
             mean_bound_mm: None,
             header: vec![1, 2, 3, 255],
-            meta: r#"{"points": ["a", "b"], "decision": {"winner": "quant"}}"#.into(),
+            meta: br#"{"points": ["a", "b"], "decision": {"winner": "quant"}}"#.to_vec(),
             created_at: 1_700_000_000_000,
             live_until: None,
             skeleton_id: None,
@@ -207,16 +207,17 @@ async fn a_corrupt_meta_row_is_an_error_not_an_empty_record() {
         assert_eq!(ok["meta"]["point_names"].as_array().unwrap().len(), 3);
 
         let q = "UPDATE takes SET meta = $1 WHERE id = $2";
-        let corrupt = r#"{"point_names": "not a list"}"#;
+        // Packed as the store packs records, so that it is its JSON that does not parse.
+        let corrupt = mocapstore::store::packed::pack(r#"{"point_names": "not a list"}"#).unwrap();
         match &t.store {
             Store::Sqlite(p) => sqlx::query(q)
-                .bind(corrupt)
+                .bind(&corrupt)
                 .bind(&id)
                 .execute(p)
                 .await
                 .map(|_| ()),
             Store::Postgres(p) => sqlx::query(q)
-                .bind(corrupt)
+                .bind(&corrupt)
                 .bind(&id)
                 .execute(p)
                 .await
@@ -359,14 +360,14 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
             .await
             .unwrap());
         // Sent again (its answer lost): stored once; with the take's meta, which it writes.
-        let meta = r#"{"points": ["a", "b"], "axes": {"up": "y"}}"#;
+        let meta = br#"{"points": ["a", "b"], "axes": {"up": "y"}}"#;
         assert!(s
             .append_chunk(
                 "live",
                 &totals,
                 &chunk,
                 &ChunkAppend {
-                    meta: Some(meta),
+                    meta: Some(meta.as_slice()),
                     ..append("a")
                 }
             )
@@ -375,7 +376,7 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
         assert_eq!(s.chunk_index("live").await.unwrap().len(), 1, "{}", t.name);
         assert_eq!(
             s.get("live").await.unwrap().unwrap().meta,
-            meta,
+            meta.to_vec(),
             "{}",
             t.name
         );
@@ -394,7 +395,7 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
                 live_until: now + 5_000,
                 frames: 120,
                 frames_received: 130,
-                meta: "{}",
+                meta: b"{}",
             }
         }
         let (b, c) = (owner("b"), owner("c"));
@@ -421,7 +422,7 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
         assert_eq!(s.chunk_index("live").await.unwrap().len(), 1, "{}", t.name);
         // Nor may it close the take; an orphan close needs the lease run out and the
         // frames it read.
-        let close = |by| s.close_live("live", &[9], "{}", by);
+        let close = |by| s.close_live("live", &[9], b"{}", by);
         assert!(!close(Closer::Owner("a")).await.unwrap(), "{}", t.name);
         let orphan = |before, frames| Closer::Orphan { before, frames };
         assert!(
@@ -431,6 +432,194 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
         assert!(!close(orphan(10_000, 60)).await.unwrap(), "frames changed");
         assert!(close(Closer::Owner("b")).await.unwrap());
         assert!(s.stream("live").await.unwrap().is_none(), "closed");
+        t.finish().await;
+    }
+}
+
+/// Write `takes` (rows, their records' text and chunks) into `db` as the store did at
+/// migration 0017: the migrations up to it, and each take's record as JSON text in `meta`.
+async fn write_at_migration_17(db: &common::Unopened, takes: &[(TakeRow, String, Vec<ChunkRow>)]) {
+    use std::str::FromStr;
+    macro_rules! write {
+        ($pool:expr, $migrator:expr) => {{
+            let pool = $pool;
+            let mut before = $migrator;
+            let first: Vec<_> = before
+                .migrations
+                .iter()
+                .filter(|m| m.version <= 17)
+                .cloned()
+                .collect();
+            assert_eq!(first.len(), 17);
+            before.migrations = first.into();
+            before.run(&pool).await.unwrap();
+            for (row, text, chunks) in takes {
+                sqlx::query(
+                    "INSERT INTO takes (frames, duration_s, raw_bytes, stored_bytes, ratio, \
+                     mean_mm, rms_mm, max_mm, kg_percent, id, name, library, fps, points, \
+                     metres_per_unit, layout, source_format, codec, max_bound_mm, mean_bound_mm, \
+                     header, meta, created_at) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, \
+                     $11, $12, $13, $14, $15, $16, $17, $18, $19, $20, $21, $22, $23)",
+                )
+                .bind(row.totals.frames)
+                .bind(row.totals.duration_s)
+                .bind(row.totals.raw_bytes)
+                .bind(row.totals.stored_bytes)
+                .bind(row.totals.ratio)
+                .bind(row.totals.mean_mm)
+                .bind(row.totals.rms_mm)
+                .bind(row.totals.max_mm)
+                .bind(row.totals.kg_percent)
+                .bind(&row.id)
+                .bind(&row.name)
+                .bind(&row.library)
+                .bind(row.fps)
+                .bind(row.points)
+                .bind(row.metres_per_unit)
+                .bind(&row.layout)
+                .bind(&row.source_format)
+                .bind(&row.codec)
+                .bind(row.max_bound_mm)
+                .bind(row.mean_bound_mm)
+                .bind(&row.header)
+                .bind(text)
+                .bind(row.created_at)
+                .execute(&pool)
+                .await
+                .unwrap();
+                for tag in &row.tags {
+                    sqlx::query("INSERT INTO take_tags (take_id, tag) VALUES ($1, $2)")
+                        .bind(&row.id)
+                        .bind(tag)
+                        .execute(&pool)
+                        .await
+                        .unwrap();
+                }
+                for c in chunks {
+                    sqlx::query(
+                        "INSERT INTO chunks (take_id, idx, first_frame, frames, crc32c, payload) \
+                         VALUES ($1, $2, $3, $4, $5, $6)",
+                    )
+                    .bind(&row.id)
+                    .bind(c.idx)
+                    .bind(c.first_frame)
+                    .bind(c.frames)
+                    .bind(i64::from(c.crc32c))
+                    .bind(&c.payload)
+                    .execute(&pool)
+                    .await
+                    .unwrap();
+                }
+            }
+            pool.close().await;
+        }};
+    }
+    match db.name {
+        "sqlite" => write!(
+            sqlx::sqlite::SqlitePoolOptions::new()
+                .connect_with(
+                    sqlx::sqlite::SqliteConnectOptions::from_str(&db.url)
+                        .unwrap()
+                        .create_if_missing(true),
+                )
+                .await
+                .unwrap(),
+            sqlx::migrate!("migrations/sqlite")
+        ),
+        _ => write!(
+            sqlx::PgPool::connect(&db.url).await.unwrap(),
+            sqlx::migrate!("migrations/postgres")
+        ),
+    }
+}
+
+/// Migration 0018 packs the records of a store written at 0017 in place: every take reads
+/// back as it did (its record, its frames, its answer through the API, byte for byte), the
+/// JSON text column is gone, and opening the store again finds nothing left to do.
+#[tokio::test]
+async fn records_written_at_migration_17_are_packed_in_place() {
+    use mocapstore::motion::formats::{self, Format};
+    use mocapstore::motion::synthetic::walker;
+
+    // A take as today's store writes it, its record as JSON text (what 0017 stored).
+    let source = common::sqlite().await;
+    let srv = common::start(source.store.clone(), 1 << 24).await;
+    let (status, r) = srv
+        .post(
+            "name=walk&tags=old",
+            formats::write(&walker(360, 6, 120.0, 3, 0.0), Format::Json).unwrap(),
+        )
+        .await;
+    assert_eq!(status, 201, "{r}");
+    let id = r["id"].as_str().unwrap().to_string();
+    let (_, answer) = srv.get_json(&format!("/v1/takes/{id}")).await;
+    let (_, _, frames) = srv.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
+    let row = source.store.get(&id).await.unwrap().unwrap();
+    let text = mocapstore::store::packed::unpack(&row.meta).unwrap();
+    assert!(text.starts_with('{') && text.len() > 500, "{text}");
+    let chunks = source.store.chunks(&id, 0, i64::MAX).await.unwrap();
+    srv.stop().await;
+    source.finish().await;
+
+    for db in common::all_unopened().await {
+        write_at_migration_17(&db, &[(row.clone(), text.clone(), chunks.clone())]).await;
+        let t = db.open().await;
+        let again = t.store.get(&id).await.unwrap().unwrap();
+        assert_eq!(
+            again.meta, row.meta,
+            "{}: packed as today's store packs",
+            t.name
+        );
+        assert_eq!(again.tags, row.tags, "{}", t.name);
+        // The JSON text is gone from the table, and what is there is the packed record.
+        let (columns, packed): (i64, i64) = match &t.store {
+            Store::Sqlite(pool) => (
+                sqlx::query_scalar(
+                    "SELECT COUNT(*) FROM pragma_table_info('takes') WHERE name = 'meta_text'",
+                )
+                .fetch_one(pool)
+                .await
+                .unwrap(),
+                sqlx::query_scalar("SELECT LENGTH(meta) FROM takes WHERE typeof(meta) = 'blob'")
+                    .fetch_one(pool)
+                    .await
+                    .unwrap(),
+            ),
+            Store::Postgres(pool) => (
+                sqlx::query_scalar(
+                    "SELECT COUNT(*) FROM information_schema.columns WHERE table_schema = \
+                     current_schema() AND table_name = 'takes' AND column_name = 'meta_text'",
+                )
+                .fetch_one(pool)
+                .await
+                .unwrap(),
+                sqlx::query_scalar("SELECT CAST(LENGTH(meta) AS BIGINT) FROM takes")
+                    .fetch_one(pool)
+                    .await
+                    .unwrap(),
+            ),
+        };
+        assert_eq!(columns, 0, "{}", t.name);
+        assert!(
+            packed > 0 && (packed as usize) * 3 < text.len(),
+            "{}: {packed} bytes packed for {}",
+            t.name,
+            text.len()
+        );
+        // Through the API, the take answers as it did before.
+        let srv = common::start(t.store.clone(), 1 << 24).await;
+        let (status, now) = srv.get_json(&format!("/v1/takes/{id}")).await;
+        assert_eq!(status, 200, "{}: {now}", t.name);
+        assert_eq!(now, answer, "{}", t.name);
+        let (_, _, now_frames) = srv.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
+        assert!(now_frames == frames, "{}: frames differ", t.name);
+        srv.stop().await;
+        // Opened again: nothing left to pack, the take as it was.
+        let url = t.url.clone();
+        t.store.close().await;
+        let reopened = Store::open(&url).await.unwrap();
+        assert_eq!(reopened.get(&id).await.unwrap().unwrap().meta, row.meta);
+        reopened.close().await;
         t.finish().await;
     }
 }

@@ -122,7 +122,7 @@ impl Streams {
             match blocking(move || body::opening(&t, opening)).await? {
                 Ok(axes) => {
                     take.meta.axes = Some(axes);
-                    Some(take.meta.to_text(&take.id)?)
+                    Some(take.meta.to_record(&take.id)?)
                 }
                 // Its finish derives it from what it committed.
                 Err(e) => {

@@ -297,7 +297,7 @@ impl Streams {
                     live_until,
                     frames: row.frames,
                     frames_received: row.frames_received,
-                    meta: &meta.to_text(id)?,
+                    meta: &meta.to_record(id)?,
                 },
             )
             .await?;

@@ -422,7 +422,7 @@ impl Streams {
             .close_live(
                 id,
                 &take.header,
-                &take.meta.to_text(id)?,
+                &take.meta.to_record(id)?,
                 Closer::Owner(&self.node.id),
             )
             .await?;

@@ -249,7 +249,7 @@ impl Streams {
                 frames: take.frames as i64,
             };
             if store
-                .close_live(&id, &header.to_bytes(), &meta.to_text(&id)?, orphan)
+                .close_live(&id, &header.to_bytes(), &meta.to_record(&id)?, orphan)
                 .await?
             {
                 tracing::warn!(stream = %id, frames = take.frames, "closed a stream whose server stopped");
