@@ -143,8 +143,9 @@ impl Store {
                 .test_before_acquire(false)
                 .connect_with(opts)
                 .await?;
-            sqlx::migrate!("migrations/sqlite").run(&pool).await?;
-            Store::Sqlite(pool)
+            let store = Store::Sqlite(pool.clone());
+            migrate::migrate!(store, &pool, "migrations/sqlite");
+            store
         } else if url.starts_with("postgres:") || url.starts_with("postgresql:") {
             let pool = PgPoolOptions::new()
                 .max_connections(16)
@@ -153,12 +154,12 @@ impl Store {
                 .acquire_timeout(Duration::from_secs(5))
                 .connect(url)
                 .await?;
-            sqlx::migrate!("migrations/postgres").run(&pool).await?;
-            Store::Postgres(pool)
+            let store = Store::Postgres(pool.clone());
+            migrate::migrate!(store, &pool, "migrations/postgres");
+            store
         } else {
             return Err(Error::Url(url.to_string()));
         };
-        store.pack_records().await?;
         Ok(store)
     }
 

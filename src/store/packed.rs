@@ -13,7 +13,8 @@
 //! a record that does not unpack is its take's problem, which `verify` reports, and not a
 //! listing that fails.
 //!
-//! A packed record is one format byte, then a zstd frame. The byte names the dictionary, so
+//! A packed record is one format byte, then a zstd frame with its checksum (XXH64's low four
+//! bytes: a record changed on disk does not unpack). The byte names the dictionary, so
 //! a new dictionary is a new byte and a new file beside this one; a dictionary once used is
 //! frozen (the records packed with it name it). Rows written through migration 0017 held
 //! the JSON text; the store packs them when it opens (`Store::pack_records`).
@@ -59,6 +60,9 @@ pub fn pack(text: &str) -> Result<Vec<u8>> {
         )));
     }
     let mut c = zstd::bulk::Compressor::with_prepared_dictionary(encoder_dictionary())
+        .map_err(|e| Error::Corrupt(format!("packing a take's record: {e}")))?;
+    // Four bytes that make a flipped bit an error, not a different record.
+    c.set_parameter(zstd::zstd_safe::CParameter::ChecksumFlag(true))
         .map_err(|e| Error::Corrupt(format!("packing a take's record: {e}")))?;
     let frame = c
         .compress(text.as_bytes())
@@ -115,6 +119,13 @@ mod tests {
             [&[2u8][..], &packed[1..]].concat(),
             packed[..packed.len() - 1].to_vec(),
             [&packed[..], b"x"].concat(),
+            // A byte changed inside the frame: its checksum says so.
+            {
+                let mut p = pack(&"{\"a\": 1}".repeat(50)).unwrap();
+                let mid = p.len() / 2;
+                p[mid] ^= 0x10;
+                p
+            },
         ] {
             assert!(matches!(unpack(&bad), Err(Error::Corrupt(_))), "{bad:?}");
         }

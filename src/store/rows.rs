@@ -87,7 +87,7 @@ const CHUNK_ROW: i64 = 36 + 4 * 8;
 
 /// What a take costs on disk, beside the database's own page and index overhead: its
 /// container (header and chunk payloads, `stored_bytes`), its row's text columns
-/// (`text_bytes`: metadata JSON, names, ids) and numbers, and its chunk rows' keys. A
+/// (`text_bytes`: the packed record, names, ids) and numbers, and its chunk rows' keys. A
 /// skeleton or basis it shares with other takes is stored once and not counted here.
 pub fn disk_bytes(stored_bytes: i64, text_bytes: i64, chunk_rows: i64) -> i64 {
     stored_bytes + text_bytes + NUMERIC_COLUMNS * 8 + chunk_rows * CHUNK_ROW
