@@ -30,6 +30,8 @@ macro_rules! migrate {
             .cloned()
             .collect::<Vec<_>>()
             .into();
+        // A store already past them has the later ones applied: not this run's business.
+        first.set_ignore_missing(true);
         first.run($pool).await?;
         $store.pack_records().await?;
         sqlx::migrate!($dir).run($pool).await?;

@@ -227,9 +227,9 @@ impl Store {
                     .await?;
             }
             if let Some(e) = &s.errors {
-                sqlx::query("INSERT INTO take_errors (take_id, series) VALUES ($1, $2)")
-                    .bind(&s.id)
+                sqlx::query("UPDATE takes SET errors = $1 WHERE id = $2")
                     .bind(e)
+                    .bind(&s.id)
                     .execute(&mut *tx)
                     .await?;
             }
@@ -287,12 +287,11 @@ impl Store {
     /// A take's error series bytes: `None` if it has none (or there is no such take).
     pub async fn error_series(&self, id: &str) -> Result<Option<Vec<u8>>> {
         dispatch!(self, pool => {
-            Ok(sqlx::query_scalar::<_, Vec<u8>>(
-                "SELECT series FROM take_errors WHERE take_id = $1",
-            )
-            .bind(id)
-            .fetch_optional(pool)
-            .await?)
+            Ok(sqlx::query_scalar::<_, Option<Vec<u8>>>("SELECT errors FROM takes WHERE id = $1")
+                .bind(id)
+                .fetch_optional(pool)
+                .await?
+                .flatten())
         })
     }
 

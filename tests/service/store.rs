@@ -438,7 +438,18 @@ async fn a_stream_taken_over_fences_its_old_server_on_every_backend() {
 
 /// Write `takes` (rows, their records' text and chunks) into `db` as the store did at
 /// migration 0017: the migrations up to it, and each take's record as JSON text in `meta`.
-async fn write_at_migration_17(db: &common::Unopened, takes: &[(TakeRow, String, Vec<ChunkRow>)]) {
+/// A take as migration 0017's store held it.
+#[derive(Clone)]
+struct OldTake {
+    row: TakeRow,
+    /// Its record, JSON text.
+    text: String,
+    chunks: Vec<ChunkRow>,
+    /// Its error series, in `take_errors` then.
+    errors: Option<Vec<u8>>,
+}
+
+async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
     use std::str::FromStr;
     macro_rules! write {
         ($pool:expr, $migrator:expr) => {{
@@ -453,7 +464,13 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[(TakeRow, String,
             assert_eq!(first.len(), 17);
             before.migrations = first.into();
             before.run(&pool).await.unwrap();
-            for (row, text, chunks) in takes {
+            for OldTake {
+                row,
+                text,
+                chunks,
+                errors,
+            } in takes
+            {
                 sqlx::query(
                     "INSERT INTO takes (frames, duration_s, raw_bytes, stored_bytes, ratio, \
                      mean_mm, rms_mm, max_mm, kg_percent, id, name, library, fps, points, \
@@ -487,6 +504,14 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[(TakeRow, String,
                 .execute(&pool)
                 .await
                 .unwrap();
+                if let Some(e) = errors {
+                    sqlx::query("INSERT INTO take_errors (take_id, series) VALUES ($1, $2)")
+                        .bind(&row.id)
+                        .bind(e)
+                        .execute(&pool)
+                        .await
+                        .unwrap();
+                }
                 for tag in &row.tags {
                     sqlx::query("INSERT INTO take_tags (take_id, tag) VALUES ($1, $2)")
                         .bind(&row.id)
@@ -533,9 +558,10 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[(TakeRow, String,
     }
 }
 
-/// Migration 0018 packs the records of a store written at 0017 in place: every take reads
-/// back as it did (its record, its frames, its answer through the API, byte for byte), the
-/// JSON text column is gone, and opening the store again finds nothing left to do.
+/// Migration 0018 packs the records of a store written at 0017 in place, and 0019 moves each
+/// take's error series into its row: every take reads back as it did (its record, its error
+/// series, its frames, its answer through the API, byte for byte), the JSON text column is
+/// gone, and opening the store again finds nothing left to do.
 #[tokio::test]
 async fn records_written_at_migration_17_are_packed_in_place() {
     use mocapstore::motion::formats::{self, Format};
@@ -558,6 +584,8 @@ async fn records_written_at_migration_17_are_packed_in_place() {
     let text = mocapstore::store::packed::unpack(&row.meta).unwrap();
     assert!(text.starts_with('{') && text.len() > 500, "{text}");
     let chunks = source.store.chunks(&id, 0, i64::MAX).await.unwrap();
+    let errors = source.store.error_series(&id).await.unwrap();
+    assert!(errors.as_ref().is_some_and(|e| !e.is_empty()));
     srv.stop().await;
     source.finish().await;
 
@@ -576,9 +604,24 @@ async fn records_written_at_migration_17_are_packed_in_place() {
         write_at_migration_17(
             &db,
             &[
-                (row.clone(), text.clone(), chunks.clone()),
-                (empty.clone(), text.clone(), Vec::new()),
-                (bad.clone(), text.clone(), Vec::new()),
+                OldTake {
+                    row: row.clone(),
+                    text: text.clone(),
+                    chunks: chunks.clone(),
+                    errors: errors.clone(),
+                },
+                OldTake {
+                    row: empty.clone(),
+                    text: text.clone(),
+                    chunks: Vec::new(),
+                    errors: None,
+                },
+                OldTake {
+                    row: bad.clone(),
+                    text: text.clone(),
+                    chunks: Vec::new(),
+                    errors: None,
+                },
             ],
         )
         .await;
@@ -599,6 +642,14 @@ async fn records_written_at_migration_17_are_packed_in_place() {
             t.name
         );
         assert_eq!(again.tags, row.tags, "{}", t.name);
+        // 0019 moved the error series into the take's row.
+        assert_eq!(
+            t.store.error_series(&id).await.unwrap(),
+            errors,
+            "{}",
+            t.name
+        );
+        assert_eq!(t.store.error_series("").await.unwrap(), None, "{}", t.name);
         assert_eq!(t.store.get("").await.unwrap().unwrap().meta, row.meta);
         // Kept as it was, not packed: that take reads as corrupt (verify names it), and the
         // store opens.
