@@ -230,6 +230,12 @@ pub const TOKEN_LAST_USED_EVERY: Duration = Duration::from_secs(60);
 /// year 3000. Earlier than the epoch is refused too.
 pub const MAX_CAPTURE_MS: i64 = 32_503_680_000_000;
 
+/// The longest take record (its meta JSON) the store packs or unpacks
+/// (`store::packed`): far above any record the service writes (point names, events and
+/// model outputs are bounded by the readers' limits), so that a corrupt stored frame cannot
+/// ask for unbounded memory.
+pub const MAX_RECORD_BYTES: usize = 64 << 20;
+
 /// The tunable limits, with their defaults in [`Limits::default`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {

@@ -22,6 +22,7 @@
 use std::sync::OnceLock;
 
 use super::{Error, Result};
+use crate::limits::MAX_RECORD_BYTES;
 
 /// The format byte of a record packed with `DICTIONARY_1`.
 const WITH_DICTIONARY_1: u8 = 1;
@@ -33,11 +34,6 @@ const DICTIONARY_1: &[u8] = include_bytes!("records/dictionary-1.json");
 /// does (146 and 147 bytes of 1,783) at 20× the speed (11 µs): what the dictionary gives is
 /// most of it, and a listing counts each take's record size by packing it.
 const LEVEL: i32 = 9;
-
-/// The longest record text the store writes or reads back: far above any record the service
-/// writes (point names, events and model outputs are bounded by the readers' limits), so
-/// that a corrupt frame cannot ask for unbounded memory.
-pub const MAX_RECORD_BYTES: usize = 64 << 20;
 
 /// The dictionary prepared once for every packing and unpacking (loading it is a good share
 /// of the work for a record this small).
