@@ -4,7 +4,10 @@
 //! It starts the real service on 127.0.0.1:0 over a temporary SQLite file, ingests a
 //! generated take (default 10 minutes, 38 points, 120 fps), stores the same frames as raw f32
 //! in one-second BLOBs, then runs a fixed number of requests from concurrent clients to
-//! each route and prints p50/p99 latency and requests per second.
+//! each route and prints p50/p99 latency and requests per second. The routes take turns,
+//! a share of the requests each, four times over, so that what else the machine does falls
+//! on all of them alike; the route with a read token is served by a second server over a
+//! copy of the database (once a token exists, every request to a database needs one).
 //!
 //! With `--server URL` (repeatable) it measures running servers instead — several behind
 //! no balancer, sharing one database: the take is ingested through the first, and the
@@ -100,22 +103,19 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let url = format!("sqlite://{}", dir.join("load.db").display());
     let store = Store::open(&url).await.map_err(|e| e.to_string())?;
-    let app = Application::with_store(
-        store.clone(),
-        Config {
-            listen: "127.0.0.1:0".into(),
-            database_url: url.clone(),
-            decoded_cache_mib: args.decoded_cache_mib,
-            // The limiter runs for requests with a token (measured below) but never refuses.
-            limits: mocapstore::limits::Limits {
-                requests_per_s: 1_000_000_000,
-                request_burst: 1_000_000_000,
-                ..mocapstore::limits::Limits::default()
-            },
-            ..Config::default()
+    let config = Config {
+        listen: "127.0.0.1:0".into(),
+        database_url: url.clone(),
+        decoded_cache_mib: args.decoded_cache_mib,
+        // The limiter runs for requests with a token (measured below) but never refuses.
+        limits: mocapstore::limits::Limits {
+            requests_per_s: 1_000_000_000,
+            request_burst: 1_000_000_000,
+            ..mocapstore::limits::Limits::default()
         },
-    )
-    .await?;
+        ..Config::default()
+    };
+    let app = Application::with_store(store.clone(), config.clone()).await?;
     let base = format!("http://{}", app.local_addr());
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let server = tokio::spawn(app.run_until(async {
@@ -178,6 +178,7 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
 
     let seconds = args.seconds.max(2);
     let fps = args.fps;
+    let id_for_token = id.clone();
     let codec_url = move |_client: usize, s: usize| {
         format!("{base}/v1/takes/{id}/frames?t0={s}&t1={}&format=f32", s + 1)
     };
@@ -199,22 +200,21 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
     );
     let codec_url: Arc<UrlOf> = Arc::new(codec_url);
     let route = "GET /v1/takes/{id}/frames?t0&t1&format=f32";
-    for (name, url) in [
-        (route.to_string(), codec_url.clone()),
-        (
-            "raw f32 BLOB from SQLite (baseline)".to_string(),
-            Arc::new(raw_url) as Arc<UrlOf>,
-        ),
-    ] {
-        let (p50, p99, rps) =
-            hammer(&client, url, seconds - 1, args.clients, args.requests).await?;
-        out += &format!("| {name} | {p50:.3} | {p99:.3} | {rps:.0} |\n");
-    }
-    // The cost of access control: the same route on the same server once a token exists,
-    // each request's bearer checked (a cached lookup), its scope and the rate limiter. The
-    // anonymous run above is the row without it (no token can exist then).
+
+    // The cost of access control: the same route on a second server over a copy of the
+    // database in which a read token exists, each request's bearer checked (a cached
+    // lookup), its scope and the rate limiter. A copy, because once a token exists every
+    // request to that database needs one: the first server stays anonymous.
+    let token_db = dir.join("token.db");
+    sqlx::query("VACUUM INTO $1")
+        .bind(token_db.display().to_string())
+        .execute(pool)
+        .await
+        .map_err(|e| e.to_string())?;
+    let token_url = format!("sqlite://{}", token_db.display());
+    let token_store = Store::open(&token_url).await.map_err(|e| e.to_string())?;
     let token = mocapstore::service::access::create_token(
-        &store,
+        &token_store,
         mocapstore::service::access::TokenRequest {
             name: "loadtest".into(),
             scope: "read".into(),
@@ -224,14 +224,63 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
     )
     .await
     .map_err(|e| e.to_string())?;
-    // The server notices the first token within its cache time.
-    tokio::time::sleep(mocapstore::limits::TOKEN_CACHE + Duration::from_millis(100)).await;
+    let token_app = Application::with_store(
+        token_store,
+        Config {
+            database_url: token_url,
+            ..config.clone()
+        },
+    )
+    .await?;
+    let token_base = format!("http://{}", token_app.local_addr());
+    let (token_stop, token_stopped) = tokio::sync::oneshot::channel::<()>();
+    let token_server = tokio::spawn(token_app.run_until(async {
+        let _ = token_stopped.await;
+    }));
+    let take = id_for_token;
+    let token_url: Arc<UrlOf> = Arc::new(move |_client: usize, s: usize| {
+        format!(
+            "{token_base}/v1/takes/{take}/frames?t0={s}&t1={}&format=f32",
+            s + 1
+        )
+    });
     let authed = super::token::client(Some(&token.secret))?;
-    let (p50, p99, rps) =
-        hammer(&authed, codec_url, seconds - 1, args.clients, args.requests).await?;
-    out += &format!(
-        "| {route}, with a read token (auth + rate limiter) | {p50:.3} | {p99:.3} | {rps:.0} |\n"
-    );
+
+    // The rows take turns, ROUNDS times over (A B C A B C …), each a share of the requests:
+    // what the machine does meanwhile falls on all of them alike, not on whichever ran last.
+    let rows: [(String, &reqwest::Client, Arc<UrlOf>); 3] = [
+        (route.to_string(), &client, codec_url),
+        (
+            "raw f32 BLOB from SQLite (baseline)".to_string(),
+            &client,
+            Arc::new(raw_url) as Arc<UrlOf>,
+        ),
+        (
+            format!("{route}, with a read token (auth + rate limiter)"),
+            &authed,
+            token_url,
+        ),
+    ];
+    let mut runs: Vec<Run> = rows.iter().map(|_| Run::default()).collect();
+    for _ in 0..ROUNDS {
+        for ((_, client, url), run) in rows.iter().zip(runs.iter_mut()) {
+            let r = hammer(
+                client,
+                url.clone(),
+                seconds - 1,
+                args.clients,
+                args.requests.div_ceil(ROUNDS),
+            )
+            .await?;
+            run.add(r);
+        }
+    }
+    for ((name, _, _), run) in rows.iter().zip(runs.iter_mut()) {
+        let (p50, p99, rps) = run.summary();
+        out += &format!("| {name} | {p50:.3} | {p99:.3} | {rps:.0} |\n");
+    }
+    let _ = token_stop.send(());
+    let _ = token_server.await;
     let _ = stop.send(());
     let _ = server.await;
     raw_server.abort();
@@ -242,14 +291,40 @@ async fn load(args: &LoadArgs) -> Result<String, String> {
 /// The URL client `c` asks for range `s`.
 type UrlOf = dyn Fn(usize, usize) -> String + Send + Sync;
 
-/// `requests` GETs of random ranges from `clients` concurrent tasks; (p50 ms, p99 ms, req/s).
+/// How many turns each row of the loadtest takes.
+const ROUNDS: usize = 4;
+
+/// One row's requests over its turns: every latency, and the time its turns took.
+#[derive(Default)]
+struct Run {
+    latencies: Vec<Duration>,
+    seconds: f64,
+}
+
+impl Run {
+    fn add(&mut self, (latencies, seconds): (Vec<Duration>, f64)) {
+        self.latencies.extend(latencies);
+        self.seconds += seconds;
+    }
+
+    /// (p50 ms, p99 ms, req/s).
+    fn summary(&mut self) -> (f64, f64, f64) {
+        let all = &mut self.latencies;
+        all.sort();
+        let pct = |p: f64| all[((all.len() - 1) as f64 * p) as usize].as_secs_f64() * 1e3;
+        (pct(0.5), pct(0.99), all.len() as f64 / self.seconds)
+    }
+}
+
+/// `requests` GETs of random ranges from `clients` concurrent tasks: every latency, and the
+/// seconds they took together.
 async fn hammer(
     client: &reqwest::Client,
     url: Arc<UrlOf>,
     ranges: usize,
     clients: usize,
     requests: usize,
-) -> Result<(f64, f64, f64), String> {
+) -> Result<(Vec<Duration>, f64), String> {
     let per_client = requests.div_ceil(clients.max(1));
     let t0 = Instant::now();
     let mut tasks = Vec::new();
@@ -275,10 +350,7 @@ async fn hammer(
     for t in tasks {
         all.extend(t.await.map_err(|e| e.to_string())??);
     }
-    let elapsed = t0.elapsed().as_secs_f64();
-    all.sort();
-    let pct = |p: f64| all[((all.len() - 1) as f64 * p) as usize].as_secs_f64() * 1e3;
-    Ok((pct(0.5), pct(0.99), all.len() as f64 / elapsed))
+    Ok((all, t0.elapsed().as_secs_f64()))
 }
 
 /// The run against `--server`s: the take ingested through the first, the clients spread over
@@ -327,7 +399,13 @@ async fn load_servers(args: &LoadArgs) -> Result<String, String> {
             s + 1
         )
     });
-    let result = hammer(&client, url, seconds - 1, args.clients, args.requests).await;
+    let result = hammer(&client, url, seconds - 1, args.clients, args.requests)
+        .await
+        .map(|r| {
+            let mut run = Run::default();
+            run.add(r);
+            run.summary()
+        });
     // Leave no take behind (an admin token may delete it; others leave it, and say so).
     let deleted = client
         .delete(format!("{}/v1/takes/{id}", servers[servers.len() - 1]))
