@@ -183,6 +183,7 @@ impl Store {
                     .await?;
             }
             let r = rows::bind_take(sqlx::query(rows::INSERT_TAKE), s)
+                .bind(s.errors.as_deref())
                 .execute(&mut *tx)
                 .await;
             if let Err(e) = r {
@@ -223,13 +224,6 @@ impl Store {
                 sqlx::query("INSERT INTO take_bases (take_id, basis_id) VALUES ($1, $2)")
                     .bind(&s.id)
                     .bind(b)
-                    .execute(&mut *tx)
-                    .await?;
-            }
-            if let Some(e) = &s.errors {
-                sqlx::query("UPDATE takes SET errors = $1 WHERE id = $2")
-                    .bind(e)
-                    .bind(&s.id)
                     .execute(&mut *tx)
                     .await?;
             }

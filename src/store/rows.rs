@@ -189,8 +189,8 @@ pub const SET_TOTALS: &str = "frames = $1, duration_s = $2, raw_bytes = $3, stor
 pub const INSERT_TAKE: &str = "INSERT INTO takes (frames, duration_s, raw_bytes, \
     stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, id, name, library, fps, points, \
     metres_per_unit, layout, source_format, codec, max_bound_mm, mean_bound_mm, header, meta, \
-    created_at, live_until, skeleton_id) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, \
-    $12, $13, $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24, $25)";
+    created_at, live_until, skeleton_id, errors) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, \
+    $10, $11, $12, $13, $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24, $25, $26)";
 
 /// Bind a take's running totals, in [`SET_TOTALS`] order, to a query of either backend.
 pub fn bind_totals<'q, DB: sqlx::Database>(
@@ -212,7 +212,8 @@ where
         .bind(t.kg_percent)
 }
 
-/// Bind a take's columns, in [`INSERT_TAKE`] order, to a query of either backend.
+/// Bind a take's columns, in [`INSERT_TAKE`] order, to a query of either backend: all but
+/// the last, `errors`, which is [`NewTake::errors`].
 pub fn bind_take<'q, DB: sqlx::Database>(
     q: sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>,
     s: &'q TakeRow,
