@@ -189,6 +189,7 @@ impl Store {
             if let Err(e) = r {
                 return Err(conflict_or(e, &format!("take {}", s.id)));
             }
+            let key: i64 = sqlx::query_scalar(TAKE_KEY).bind(&s.id).fetch_one(&mut *tx).await?;
             if let Some(n) = &s.stream {
                 sqlx::query(
                     "UPDATE takes SET stream_server = $1, stream_url = $2, \
@@ -218,7 +219,7 @@ impl Store {
                     .await?;
             }
             for c in &s.chunks {
-                bind_chunk(sqlx::query(INSERT_CHUNK), &s.id, c).execute(&mut *tx).await?;
+                bind_chunk(sqlx::query(INSERT_CHUNK), key, c)?.execute(&mut *tx).await?;
             }
             if let Some(b) = &s.basis {
                 sqlx::query("INSERT INTO take_bases (take_id, basis_id) VALUES ($1, $2)")
@@ -239,7 +240,7 @@ impl Store {
                 .execute(&mut *tx)
                 .await?;
                 for c in &a.chunks {
-                    bind_chunk(sqlx::query(INSERT_ANALOG_CHUNK), &s.id, c)
+                    bind_chunk(sqlx::query(INSERT_ANALOG_CHUNK), key, c)?
                         .execute(&mut *tx)
                         .await?;
                 }
@@ -322,16 +323,21 @@ impl Store {
             if r.rows_affected() == 0 {
                 return Ok(false);
             }
+            let key: i64 = sqlx::query_scalar(TAKE_KEY).bind(&row.id).fetch_one(&mut *tx).await?;
             if replace {
-                for sql in [
-                    "DELETE FROM chunks WHERE take_id = $1",
-                    "DELETE FROM take_bases WHERE take_id = $1",
-                ] {
-                    sqlx::query(sql).bind(&row.id).execute(&mut *tx).await?;
-                }
+                let (from, to) = chunk_keys(key)?;
+                sqlx::query("DELETE FROM chunks WHERE key >= $1 AND key < $2")
+                    .bind(from)
+                    .bind(to)
+                    .execute(&mut *tx)
+                    .await?;
+                sqlx::query("DELETE FROM take_bases WHERE take_id = $1")
+                    .bind(&row.id)
+                    .execute(&mut *tx)
+                    .await?;
             }
             for c in chunks {
-                bind_chunk(sqlx::query(INSERT_CHUNK), &row.id, c).execute(&mut *tx).await?;
+                bind_chunk(sqlx::query(INSERT_CHUNK), key, c)?.execute(&mut *tx).await?;
             }
             if let Some(b) = basis {
                 sqlx::query(
@@ -383,18 +389,16 @@ impl Store {
             if r.rows_affected() == 0 {
                 return Ok(false);
             }
+            let key: i64 = sqlx::query_scalar(TAKE_KEY).bind(id).fetch_one(&mut *tx).await?;
             // Once: a commit whose answer was lost (the connection dropped as it committed)
             // is sent again, and finds its chunk stored, with the same bytes.
-            let sql = format!("{INSERT_CHUNK} ON CONFLICT (take_id, idx) DO NOTHING");
-            let inserted = bind_chunk(sqlx::query(&sql), id, chunk).execute(&mut *tx).await?;
+            let sql = format!("{INSERT_CHUNK} ON CONFLICT (key) DO NOTHING");
+            let inserted = bind_chunk(sqlx::query(&sql), key, chunk)?.execute(&mut *tx).await?;
             if inserted.rows_affected() == 0 {
-                let crc: i64 = sqlx::query_scalar(
-                    "SELECT crc32c FROM chunks WHERE take_id = $1 AND idx = $2",
-                )
-                .bind(id)
-                .bind(chunk.idx)
-                .fetch_one(&mut *tx)
-                .await?;
+                let crc: i64 = sqlx::query_scalar("SELECT crc32c FROM chunks WHERE key = $1")
+                    .bind(chunk_key(key, chunk.idx)?)
+                    .fetch_one(&mut *tx)
+                    .await?;
                 if crc != i64::from(chunk.crc32c) {
                     return Err(Error::Conflict(format!(
                         "chunk {} of take {id}, stored already with other bytes",
@@ -479,8 +483,10 @@ impl Store {
     pub async fn chunk_index(&self, id: &str) -> Result<Vec<ChunkEntry>> {
         dispatch!(self, pool => {
             sqlx::query(
-                "SELECT idx, first_frame, frames, crc32c, length(payload) AS len FROM chunks \
-                 WHERE take_id = $1 ORDER BY idx",
+                "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, c.frames, c.crc32c, \
+                 length(c.payload) AS len FROM takes t JOIN chunks c \
+                 ON c.key >= t.key * 4294967296 AND c.key < (t.key + 1) * 4294967296 \
+                 WHERE t.id = $1 ORDER BY c.key",
             )
             .bind(id)
             .fetch_all(pool)
@@ -522,18 +528,11 @@ impl Store {
 
     /// Chunks `first..end` (indices) of a take, checked against their CRC-32C.
     pub async fn chunks(&self, id: &str, first: i64, end: i64) -> Result<Vec<ChunkRow>> {
-        self.chunk_range(
-            "SELECT idx, first_frame, frames, crc32c, payload FROM chunks \
-             WHERE take_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
-            id,
-            first,
-            end,
-        )
-        .await
+        self.chunk_range(CHUNK_RANGE, id, first, end).await
     }
 
-    /// Chunks `first..end` of one take from `select` (the points' or the analog channels'
-    /// table: the same columns), each checked against its CRC-32C.
+    /// Chunks `first..end` of one take by `select` ([`CHUNK_RANGE`] or
+    /// [`ANALOG_CHUNK_RANGE`]), each checked against its CRC-32C.
     async fn chunk_range(
         &self,
         select: &'static str,
@@ -541,6 +540,8 @@ impl Store {
         first: i64,
         end: i64,
     ) -> Result<Vec<ChunkRow>> {
+        // Indices outside what a take spans hold no chunk of it.
+        let (first, end) = (first.clamp(0, CHUNK_KEYS), end.clamp(0, CHUNK_KEYS));
         dispatch!(self, pool => {
             let rows = sqlx::query(select)
                 .bind(id)
@@ -576,14 +577,7 @@ impl Store {
 
     /// Analog chunks `first..end` (indices) of a take, checked against their CRC-32C.
     pub async fn analog_chunks(&self, id: &str, first: i64, end: i64) -> Result<Vec<ChunkRow>> {
-        self.chunk_range(
-            "SELECT idx, first_frame, frames, crc32c, payload FROM analog_chunks \
-             WHERE take_id = $1 AND idx >= $2 AND idx < $3 ORDER BY idx",
-            id,
-            first,
-            end,
-        )
-        .await
+        self.chunk_range(ANALOG_CHUNK_RANGE, id, first, end).await
     }
 
     /// The parameters a take's file carried; `None` if it carried none.
@@ -734,11 +728,28 @@ impl Store {
         })
     }
 
-    /// Delete a take (chunks and tags cascade); false if there was none.
+    /// Delete a take, and its chunks with it, in one transaction (tags and the rest
+    /// cascade); false if there was none. The take's row goes first: on Postgres that
+    /// waits for a chunk being appended to it meanwhile, whose row the deletes then see.
     pub async fn delete(&self, id: &str) -> Result<bool> {
         dispatch!(self, pool => {
-            let r = sqlx::query("DELETE FROM takes WHERE id = $1").bind(id).execute(pool).await?;
-            Ok(r.rows_affected() > 0)
+            let mut tx = pool.begin_write().await?;
+            let key: Option<i64> = sqlx::query_scalar("DELETE FROM takes WHERE id = $1 RETURNING key")
+                .bind(id)
+                .fetch_optional(&mut *tx)
+                .await?;
+            let Some(key) = key else {
+                return Ok(false);
+            };
+            let (from, to) = chunk_keys(key)?;
+            for sql in [
+                "DELETE FROM chunks WHERE key >= $1 AND key < $2",
+                "DELETE FROM analog_chunks WHERE key >= $1 AND key < $2",
+            ] {
+                sqlx::query(sql).bind(from).bind(to).execute(&mut *tx).await?;
+            }
+            tx.commit().await?;
+            Ok(true)
         })
     }
 
@@ -778,29 +789,60 @@ pub const STAMPS_AT_ONCE: usize = 256;
 const INSERT_LABEL: &str =
     "INSERT INTO take_labels (take_id, key, value, number) VALUES ($1, $2, $3, $4)";
 
-const INSERT_CHUNK: &str = "INSERT INTO chunks (take_id, idx, first_frame, frames, crc32c, \
-    payload) VALUES ($1, $2, $3, $4, $5, $6)";
+const INSERT_CHUNK: &str =
+    "INSERT INTO chunks (key, first_frame, frames, crc32c, payload) VALUES ($1, $2, $3, $4, $5)";
 
-const INSERT_ANALOG_CHUNK: &str = "INSERT INTO analog_chunks (take_id, idx, first_frame, \
-    frames, crc32c, payload) VALUES ($1, $2, $3, $4, $5, $6)";
+const INSERT_ANALOG_CHUNK: &str = "INSERT INTO analog_chunks (key, first_frame, frames, crc32c, \
+    payload) VALUES ($1, $2, $3, $4, $5)";
 
-/// Bind a chunk's columns, in [`INSERT_CHUNK`] order, to a query of either backend.
+/// Chunk keys one take spans (migration 0020): a chunk's row is keyed by its take's key
+/// (`takes.key`) times this, plus its index; one B-tree, no second index.
+const CHUNK_KEYS: i64 = 1 << 32;
+
+/// Chunks `$2..$3` (indices) of take `$1`, the points' and the analog channels'.
+const CHUNK_RANGE: &str = "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, c.frames, \
+    c.crc32c, c.payload FROM takes t JOIN chunks c ON c.key >= t.key * 4294967296 + $2 \
+    AND c.key < t.key * 4294967296 + $3 WHERE t.id = $1 ORDER BY c.key";
+const ANALOG_CHUNK_RANGE: &str = "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, \
+    c.frames, c.crc32c, c.payload FROM takes t JOIN analog_chunks c \
+    ON c.key >= t.key * 4294967296 + $2 AND c.key < t.key * 4294967296 + $3 \
+    WHERE t.id = $1 ORDER BY c.key";
+
+/// The key of chunk `idx` of the take of key `take`; an index past what a key holds is an
+/// error, not another take's row.
+fn chunk_key(take: i64, idx: i64) -> Result<i64> {
+    if !(0..CHUNK_KEYS).contains(&idx) {
+        return Err(Error::Corrupt(format!("chunk index {idx} out of range")));
+    }
+    take.checked_mul(CHUNK_KEYS)
+        .and_then(|k| k.checked_add(idx))
+        .ok_or_else(|| Error::Corrupt(format!("take key {take} out of range")))
+}
+
+/// The range of chunk keys of the take of key `take`.
+fn chunk_keys(take: i64) -> Result<(i64, i64)> {
+    Ok((chunk_key(take, 0)?, chunk_key(take, CHUNK_KEYS - 1)? + 1))
+}
+
+/// The key of take `$1` (`takes.key`), read in the transaction that writes its chunks.
+const TAKE_KEY: &str = "SELECT key FROM takes WHERE id = $1";
+
+/// Bind a chunk's columns, in [`INSERT_CHUNK`] order, to a query of either backend: the
+/// chunk of the take of key `take`.
 fn bind_chunk<'q, DB: sqlx::Database>(
     q: sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>,
-    id: &'q str,
+    take: i64,
     c: &'q ChunkRow,
-) -> sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>
+) -> Result<sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>>
 where
-    &'q str: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
     &'q [u8]: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
 {
-    q.bind(id)
-        .bind(c.idx)
+    Ok(q.bind(chunk_key(take, c.idx)?)
         .bind(c.first_frame)
         .bind(c.frames)
         .bind(i64::from(c.crc32c))
-        .bind(c.payload.as_slice())
+        .bind(c.payload.as_slice()))
 }
 
 /// Bind `values` in order to a query of either backend.
@@ -943,9 +985,10 @@ impl Store {
             "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, \
              max_mm, id, name, layout, source_format, CAST(LENGTH(meta) AS BIGINT) AS meta_bytes, \
              skeleton_id, \
-             (SELECT COUNT(*) FROM chunks c WHERE c.take_id = takes.id) \
-              + (SELECT COUNT(*) FROM analog_chunks c WHERE c.take_id = takes.id) \
-              AS chunk_rows, \
+             (SELECT COUNT(*) FROM chunks c WHERE c.key >= takes.key * 4294967296 \
+              AND c.key < (takes.key + 1) * 4294967296) \
+              + (SELECT COUNT(*) FROM analog_chunks c WHERE c.key >= takes.key * 4294967296 \
+              AND c.key < (takes.key + 1) * 4294967296) AS chunk_rows, \
              (SELECT a.raw_bytes FROM take_analog a WHERE a.take_id = takes.id) \
               AS analog_raw_bytes, \
              (SELECT a.stored_bytes FROM take_analog a WHERE a.take_id = takes.id) \

@@ -44,6 +44,7 @@ impl Store {
                      COALESCE(m.type, 'table') = 'index' AS is_index, \
                      SUM(s.pgsize) AS bytes, SUM(s.unused) AS unused \
                      FROM dbstat AS s LEFT JOIN sqlite_schema AS m ON m.name = s.name \
+                     AND m.type IN ('table', 'index') \
                      GROUP BY s.name ORDER BY s.name",
                 )
                 .fetch_all(&mut *c)

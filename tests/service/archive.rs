@@ -206,21 +206,24 @@ async fn verify_names_a_damaged_take_and_export_import_round_trips_byte_for_byte
     let mocapstore::store::Store::Sqlite(pool) = &a.store else {
         unreachable!()
     };
-    let (payload,): (Vec<u8>,) =
-        sqlx::query_as("SELECT payload FROM chunks WHERE take_id = $1 AND idx = 0")
-            .bind(victim)
-            .fetch_one(pool)
-            .await
-            .unwrap();
+    let (payload,): (Vec<u8>,) = sqlx::query_as(
+        "SELECT payload FROM chunks WHERE key = (SELECT key FROM takes WHERE id = $1) << 32",
+    )
+    .bind(victim)
+    .fetch_one(pool)
+    .await
+    .unwrap();
     let mut bad = payload.clone();
     let last = bad.len() - 1;
     bad[last] ^= 0x10;
-    sqlx::query("UPDATE chunks SET payload = $1 WHERE take_id = $2 AND idx = 0")
-        .bind(bad)
-        .bind(victim)
-        .execute(pool)
-        .await
-        .unwrap();
+    sqlx::query(
+        "UPDATE chunks SET payload = $1 WHERE key = (SELECT key FROM takes WHERE id = $2) << 32",
+    )
+    .bind(bad)
+    .bind(victim)
+    .execute(pool)
+    .await
+    .unwrap();
     let (ok, out, _) = mocapstore(&["verify", "--database-url", &url]);
     assert!(!ok, "a damaged chunk makes verify fail: {out}");
     let bad_lines: Vec<&str> = out.lines().filter(|l| l.starts_with("BAD")).collect();

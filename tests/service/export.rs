@@ -450,20 +450,23 @@ async fn export_skips_a_damaged_take_and_writes_one_as_large_as_the_share_allows
     let mocapstore::store::Store::Sqlite(pool) = &t.store else {
         unreachable!()
     };
-    let (mut payload,): (Vec<u8>,) =
-        sqlx::query_as("SELECT payload FROM chunks WHERE take_id = $1 AND idx = 0")
-            .bind(&ids[0])
-            .fetch_one(pool)
-            .await
-            .unwrap();
+    let (mut payload,): (Vec<u8>,) = sqlx::query_as(
+        "SELECT payload FROM chunks WHERE key = (SELECT key FROM takes WHERE id = $1) << 32",
+    )
+    .bind(&ids[0])
+    .fetch_one(pool)
+    .await
+    .unwrap();
     let last = payload.len() - 1;
     payload[last] ^= 0x10;
-    sqlx::query("UPDATE chunks SET payload = $1 WHERE take_id = $2 AND idx = 0")
-        .bind(payload)
-        .bind(&ids[0])
-        .execute(pool)
-        .await
-        .unwrap();
+    sqlx::query(
+        "UPDATE chunks SET payload = $1 WHERE key = (SELECT key FROM takes WHERE id = $2) << 32",
+    )
+    .bind(payload)
+    .bind(&ids[0])
+    .execute(pool)
+    .await
+    .unwrap();
 
     let (status, _, zip) = srv.get("/v1/export?library=d&format=json").await;
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&zip));

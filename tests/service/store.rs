@@ -162,7 +162,8 @@ async fn a_body_write_from_a_stale_record_changes_nothing() {
 async fn altered_chunks_fail_their_checksum() {
     for t in common::all().await {
         t.store.insert(&take("x", 2)).await.unwrap();
-        let q = "UPDATE chunks SET payload = $1 WHERE take_id = 'x' AND idx = 1";
+        let q = "UPDATE chunks SET payload = $1 \
+            WHERE key = (SELECT key FROM takes WHERE id = 'x') * 4294967296 + 1";
         match &t.store {
             Store::Sqlite(p) => sqlx::query(q)
                 .bind(vec![0u8; 5])
@@ -558,10 +559,12 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
     }
 }
 
-/// Migration 0018 packs the records of a store written at 0017 in place, and 0019 moves each
-/// take's error series into its row: every take reads back as it did (its record, its error
-/// series, its frames, its answer through the API, byte for byte), the JSON text column is
-/// gone, and opening the store again finds nothing left to do.
+/// Migration 0018 packs the records of a store written at 0017 in place, 0019 moves each
+/// take's error series into its row, and 0020 keys chunks by their take's integer key:
+/// every take reads back as it did (its record, its error series, its chunks, its frames,
+/// its answer through the API, byte for byte), the JSON text column is gone, a new take's
+/// chunks and a deleted one's keep apart, and opening the store again finds nothing left
+/// to do.
 #[tokio::test]
 async fn records_written_at_migration_17_are_packed_in_place() {
     use mocapstore::motion::formats::{self, Format};
@@ -573,7 +576,7 @@ async fn records_written_at_migration_17_are_packed_in_place() {
     let (status, r) = srv
         .post(
             "name=walk&tags=old",
-            formats::write(&walker(360, 6, 120.0, 3, 0.0), Format::Json).unwrap(),
+            formats::write(&walker(2400, 6, 120.0, 3, 0.0), Format::Json).unwrap(),
         )
         .await;
     assert_eq!(status, 201, "{r}");
@@ -584,6 +587,7 @@ async fn records_written_at_migration_17_are_packed_in_place() {
     let text = mocapstore::store::packed::unpack(&row.meta).unwrap();
     assert!(text.starts_with('{') && text.len() > 500, "{text}");
     let chunks = source.store.chunks(&id, 0, i64::MAX).await.unwrap();
+    assert!(chunks.len() > 2, "{} chunks", chunks.len());
     let errors = source.store.error_series(&id).await.unwrap();
     assert!(errors.as_ref().is_some_and(|e| !e.is_empty()));
     srv.stop().await;
@@ -703,12 +707,43 @@ async fn records_written_at_migration_17_are_packed_in_place() {
         assert_eq!(now, answer, "{}", t.name);
         let (_, _, now_frames) = srv.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
         assert!(now_frames == frames, "{}: frames differ", t.name);
+        // 0020 keyed the chunks by the take's integer key: each reads back as it was; a
+        // take stored after it gets a key of its own, and deleting the old take deletes
+        // its chunks and no other's.
+        assert_eq!(t.store.chunks(&id, 0, i64::MAX).await.unwrap(), chunks);
+        assert_eq!(t.store.chunks(&id, 1, 2).await.unwrap(), chunks[1..2]);
+        let (status, r) = srv
+            .post(
+                "name=new",
+                formats::write(&walker(240, 6, 120.0, 3, 0.0), Format::Json).unwrap(),
+            )
+            .await;
+        assert_eq!(status, 201, "{}: {r}", t.name);
+        let new = r["id"].as_str().unwrap().to_string();
+        let new_chunks = t.store.chunks(&new, 0, i64::MAX).await.unwrap();
+        assert!(!new_chunks.is_empty());
+        let before = t.store.chunk_count().await.unwrap();
+        assert_eq!(
+            before,
+            (chunks.len() + new_chunks.len()) as i64,
+            "{}",
+            t.name
+        );
+        assert!(t.store.delete(&id).await.unwrap());
+        assert_eq!(
+            t.store.chunk_count().await.unwrap(),
+            new_chunks.len() as i64,
+            "{}",
+            t.name
+        );
+        assert_eq!(t.store.chunks(&new, 0, i64::MAX).await.unwrap(), new_chunks);
+        assert!(t.store.chunks(&id, 0, i64::MAX).await.unwrap().is_empty());
         srv.stop().await;
         // Opened again: nothing left to pack, the take as it was.
         let url = t.url.clone();
         t.store.close().await;
         let reopened = Store::open(&url).await.unwrap();
-        assert_eq!(reopened.get(&id).await.unwrap().unwrap().meta, row.meta);
+        assert_eq!(reopened.get("").await.unwrap().unwrap().meta, row.meta);
         reopened.close().await;
         t.finish().await;
     }
