@@ -156,7 +156,7 @@ impl Store {
     ) -> Result<std::collections::HashMap<String, i64>> {
         let sql = format!(
             "SELECT sb.basis_id AS id, COUNT(*) AS n FROM take_bases sb \
-             JOIN takes s ON s.id = sb.take_id \
+             JOIN takes s ON s.key = sb.take_key \
              WHERE s.library IN ({}) GROUP BY sb.basis_id",
             super::marks(1, libraries.len())
         );

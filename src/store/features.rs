@@ -63,11 +63,11 @@ impl Store {
     /// take changed or deleted meanwhile keeps what it has); false if it was not.
     pub async fn put_features(&self, id: &str, row: &FeatureRow) -> Result<bool> {
         let sql = "INSERT INTO take_features \
-            (take_id, codec, stored_bytes, frames, body_rev, payload, failed) \
-            SELECT $1, $2, $3, $4, $5, $6, $7 WHERE EXISTS (SELECT 1 FROM takes \
+            (take_key, codec, stored_bytes, frames, body_rev, payload, failed) \
+            SELECT key, $2, $3, $4, $5, $6, $7 FROM takes \
             WHERE id = $1 AND codec = $2 AND stored_bytes = $3 AND frames = $4 \
-            AND body_rev = $5) \
-            ON CONFLICT (take_id) DO UPDATE SET codec = excluded.codec, \
+            AND body_rev = $5 \
+            ON CONFLICT (take_key) DO UPDATE SET codec = excluded.codec, \
             stored_bytes = excluded.stored_bytes, frames = excluded.frames, \
             body_rev = excluded.body_rev, payload = excluded.payload, failed = excluded.failed";
         let s = &row.stamp;
@@ -93,10 +93,10 @@ impl Store {
         let sql = format!(
             "SELECT t.id, t.name, t.library, t.fps, t.live_until, t.codec, t.stored_bytes, \
              t.frames, t.body_rev, \
-             CASE WHEN f.take_id IS NOT NULL AND ({STAMP_MATCHES}) THEN 1 ELSE 0 END AS current \
-             FROM (SELECT id, name, library, fps, live_until, codec, stored_bytes, frames, \
+             CASE WHEN f.take_key IS NOT NULL AND ({STAMP_MATCHES}) THEN 1 ELSE 0 END AS current \
+             FROM (SELECT key, id, name, library, fps, live_until, codec, stored_bytes, frames, \
              body_rev, created_at FROM takes {}) t \
-             LEFT JOIN take_features f ON f.take_id = t.id ORDER BY t.created_at, t.id",
+             LEFT JOIN take_features f ON f.take_key = t.key ORDER BY t.created_at, t.id",
             w.text
         );
         dispatch!(self, pool => {
@@ -124,8 +124,8 @@ impl Store {
         }
         let marks: Vec<String> = (1..=ids.len()).map(|i| format!("${i}")).collect();
         let sql = format!(
-            "SELECT take_id, codec, stored_bytes, frames, body_rev, payload, failed \
-             FROM take_features WHERE take_id IN ({})",
+            "SELECT t.id AS take_id, f.codec, f.stored_bytes, f.frames, f.body_rev, f.payload, \
+             f.failed FROM take_features f JOIN takes t ON t.key = f.take_key WHERE t.id IN ({})",
             marks.join(", ")
         );
         let values: Vec<query::Value> = ids.iter().map(|i| query::Value::Text(i.clone())).collect();
@@ -152,8 +152,8 @@ impl Store {
     /// the ones after them.
     pub async fn stale_features(&self, after: Option<&str>, limit: usize) -> Result<Vec<String>> {
         let sql = format!(
-            "SELECT t.id FROM takes t LEFT JOIN take_features f ON f.take_id = t.id \
-             WHERE t.live_until IS NULL AND (f.take_id IS NULL OR NOT ({STAMP_MATCHES})) \
+            "SELECT t.id FROM takes t LEFT JOIN take_features f ON f.take_key = t.key \
+             WHERE t.live_until IS NULL AND (f.take_key IS NULL OR NOT ({STAMP_MATCHES})) \
              AND t.id > $1 ORDER BY t.id LIMIT {limit}"
         );
         let after = after.unwrap_or("").to_string();

@@ -203,15 +203,15 @@ impl Store {
                 .await?;
             }
             for tag in &s.tags {
-                sqlx::query("INSERT INTO take_tags (take_id, tag) VALUES ($1, $2)")
-                    .bind(&s.id)
+                sqlx::query("INSERT INTO take_tags (take_key, tag) VALUES ($1, $2)")
+                    .bind(key)
                     .bind(tag)
                     .execute(&mut *tx)
                     .await?;
             }
             for l in &s.labels {
                 sqlx::query(INSERT_LABEL)
-                    .bind(&s.id)
+                    .bind(key)
                     .bind(&l.key)
                     .bind(&l.value)
                     .bind(l.number)
@@ -222,18 +222,18 @@ impl Store {
                 bind_chunk(sqlx::query(INSERT_CHUNK), key, c)?.execute(&mut *tx).await?;
             }
             if let Some(b) = &s.basis {
-                sqlx::query("INSERT INTO take_bases (take_id, basis_id) VALUES ($1, $2)")
-                    .bind(&s.id)
+                sqlx::query("INSERT INTO take_bases (take_key, basis_id) VALUES ($1, $2)")
+                    .bind(key)
                     .bind(b)
                     .execute(&mut *tx)
                     .await?;
             }
             if let Some(a) = &s.analog {
                 sqlx::query(
-                    "INSERT INTO take_analog (take_id, header, raw_bytes, stored_bytes) \
+                    "INSERT INTO take_analog (take_key, header, raw_bytes, stored_bytes) \
                      VALUES ($1, $2, $3, $4)",
                 )
-                .bind(&s.id)
+                .bind(key)
                 .bind(&a.header)
                 .bind(a.raw_bytes)
                 .bind(a.stored_bytes)
@@ -247,17 +247,17 @@ impl Store {
             }
             if let Some(p) = &s.parameters {
                 sqlx::query(
-                    "INSERT INTO take_parameters (take_id, format, payload) VALUES ($1, $2, $3)",
+                    "INSERT INTO take_parameters (take_key, format, payload) VALUES ($1, $2, $3)",
                 )
-                .bind(&s.id)
+                .bind(key)
                 .bind(&p.format)
                 .bind(&p.payload)
                 .execute(&mut *tx)
                 .await?;
             }
             if let Some(o) = &s.outputs {
-                sqlx::query("INSERT INTO take_outputs (take_id, payload) VALUES ($1, $2)")
-                    .bind(&s.id)
+                sqlx::query("INSERT INTO take_outputs (take_key, payload) VALUES ($1, $2)")
+                    .bind(key)
                     .bind(o)
                     .execute(&mut *tx)
                     .await?;
@@ -271,7 +271,8 @@ impl Store {
     pub async fn outputs(&self, id: &str) -> Result<Option<Vec<u8>>> {
         dispatch!(self, pool => {
             Ok(sqlx::query_scalar::<_, Vec<u8>>(
-                "SELECT payload FROM take_outputs WHERE take_id = $1",
+                "SELECT o.payload FROM take_outputs o JOIN takes t ON t.key = o.take_key \
+                 WHERE t.id = $1",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -331,8 +332,8 @@ impl Store {
                     .bind(to)
                     .execute(&mut *tx)
                     .await?;
-                sqlx::query("DELETE FROM take_bases WHERE take_id = $1")
-                    .bind(&row.id)
+                sqlx::query("DELETE FROM take_bases WHERE take_key = $1")
+                    .bind(key)
                     .execute(&mut *tx)
                     .await?;
             }
@@ -341,10 +342,10 @@ impl Store {
             }
             if let Some(b) = basis {
                 sqlx::query(
-                    "INSERT INTO take_bases (take_id, basis_id) VALUES ($1, $2) \
+                    "INSERT INTO take_bases (take_key, basis_id) VALUES ($1, $2) \
                      ON CONFLICT DO NOTHING",
                 )
-                .bind(&row.id)
+                .bind(key)
                 .bind(b)
                 .execute(&mut *tx)
                 .await?;
@@ -558,7 +559,8 @@ impl Store {
     pub async fn analog(&self, id: &str) -> Result<Option<AnalogRows>> {
         dispatch!(self, pool => {
             let row = sqlx::query(
-                "SELECT header, raw_bytes, stored_bytes FROM take_analog WHERE take_id = $1",
+                "SELECT a.header, a.raw_bytes, a.stored_bytes FROM take_analog a \
+                 JOIN takes t ON t.key = a.take_key WHERE t.id = $1",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -584,7 +586,8 @@ impl Store {
     pub async fn parameters(&self, id: &str) -> Result<Option<ParametersRow>> {
         dispatch!(self, pool => {
             let row = sqlx::query(
-                "SELECT format, payload FROM take_parameters WHERE take_id = $1",
+                "SELECT p.format, p.payload FROM take_parameters p \
+                 JOIN takes t ON t.key = p.take_key WHERE t.id = $1",
             )
             .bind(id)
             .fetch_optional(pool)
@@ -787,7 +790,7 @@ impl Store {
 pub const STAMPS_AT_ONCE: usize = 256;
 
 const INSERT_LABEL: &str =
-    "INSERT INTO take_labels (take_id, key, value, number) VALUES ($1, $2, $3, $4)";
+    "INSERT INTO take_labels (take_key, key, value, number) VALUES ($1, $2, $3, $4)";
 
 const INSERT_CHUNK: &str =
     "INSERT INTO chunks (key, first_frame, frames, crc32c, payload) VALUES ($1, $2, $3, $4, $5)";
@@ -896,15 +899,19 @@ impl Store {
     ) -> Result<Page> {
         let w = query::where_clause(filter, cursor);
         let sql = format!(
-            "SELECT {} FROM takes {} {} LIMIT {}",
+            "SELECT key, {} FROM takes {} {} LIMIT {}",
             rows::TAKE_COLUMNS,
             w.text,
             query::order_by(sort, descending),
             limit + 1
         );
-        let mut items: Vec<TakeRow> = dispatch!(self, pool => {
+        let (mut items, keys): (Vec<TakeRow>, Vec<i64>) = dispatch!(self, pool => {
             let rows = bind_all!(sqlx::query(&sql), &w.values).fetch_all(pool).await?;
-            rows.iter().map(rows::take_from_row).collect::<Result<Vec<_>>>()?
+            rows.iter()
+                .map(|r| Ok((rows::take_from_row(r)?, r.try_get::<i64, _>("key")?)))
+                .collect::<Result<Vec<_>>>()?
+                .into_iter()
+                .unzip()
         });
         let more = items.len() > limit;
         items.truncate(limit);
@@ -914,7 +921,7 @@ impl Store {
                 sort,
                 descending,
                 value: query::sort_value(sort, last),
-                id: last.id.clone(),
+                key: keys[items.len() - 1],
             }),
             _ => None,
         };
@@ -932,12 +939,13 @@ impl Store {
             .map(|s| query::Value::Text(s.id.clone()))
             .collect();
         let tags_sql = format!(
-            "SELECT take_id, tag FROM take_tags WHERE take_id IN ({}) ORDER BY tag",
+            "SELECT t.id AS take_id, g.tag FROM take_tags g JOIN takes t ON t.key = g.take_key \
+             WHERE t.id IN ({}) ORDER BY g.tag",
             marks.join(", ")
         );
         let labels_sql = format!(
-            "SELECT take_id, key, value, number FROM take_labels WHERE take_id IN ({}) \
-             ORDER BY key",
+            "SELECT t.id AS take_id, l.key, l.value, l.number FROM take_labels l \
+             JOIN takes t ON t.key = l.take_key WHERE t.id IN ({}) ORDER BY l.key",
             marks.join(", ")
         );
         type ById<T> = Vec<(String, T)>;
@@ -989,16 +997,16 @@ impl Store {
               AND c.key < (takes.key + 1) * 4294967296) \
               + (SELECT COUNT(*) FROM analog_chunks c WHERE c.key >= takes.key * 4294967296 \
               AND c.key < (takes.key + 1) * 4294967296) AS chunk_rows, \
-             (SELECT a.raw_bytes FROM take_analog a WHERE a.take_id = takes.id) \
+             (SELECT a.raw_bytes FROM take_analog a WHERE a.take_key = takes.key) \
               AS analog_raw_bytes, \
-             (SELECT a.stored_bytes FROM take_analog a WHERE a.take_id = takes.id) \
+             (SELECT a.stored_bytes FROM take_analog a WHERE a.take_key = takes.key) \
               AS analog_stored_bytes, \
              (SELECT CAST(LENGTH(p.payload) AS BIGINT) FROM take_parameters p \
-              WHERE p.take_id = takes.id) AS parameters_bytes, \
-             (SELECT COALESCE(SUM(LENGTH(t.tag) + LENGTH(t.take_id)), 0) \
-              FROM take_tags t WHERE t.take_id = takes.id) AS tag_bytes, \
-             (SELECT COALESCE(SUM(LENGTH(l.key) + LENGTH(l.value) + LENGTH(l.take_id)), 0) \
-              FROM take_labels l WHERE l.take_id = takes.id) AS label_bytes \
+              WHERE p.take_key = takes.key) AS parameters_bytes, \
+             (SELECT COALESCE(SUM(LENGTH(t.tag) + 8), 0) \
+              FROM take_tags t WHERE t.take_key = takes.key) AS tag_bytes, \
+             (SELECT COALESCE(SUM(LENGTH(l.key) + LENGTH(l.value) + 8), 0) \
+              FROM take_labels l WHERE l.take_key = takes.key) AS label_bytes \
              FROM takes {}",
             w.text
         );
@@ -1076,14 +1084,13 @@ impl Store {
     pub async fn update(&self, id: &str, edit: &TakeEdit<'_>) -> Result<bool> {
         dispatch!(self, pool => {
             let mut tx = pool.begin_write().await?;
-            let found = sqlx::query("SELECT id FROM takes WHERE id = $1")
+            let key: Option<i64> = sqlx::query_scalar(TAKE_KEY)
                 .bind(id)
                 .fetch_optional(&mut *tx)
-                .await?
-                .is_some();
-            if !found {
+                .await?;
+            let Some(key) = key else {
                 return Ok(false);
-            }
+            };
             if let Some(n) = edit.name {
                 sqlx::query("UPDATE takes SET name = $1 WHERE id = $2").bind(n).bind(id).execute(&mut *tx).await?;
             }
@@ -1091,20 +1098,20 @@ impl Store {
                 sqlx::query("UPDATE takes SET library = $1 WHERE id = $2").bind(l).bind(id).execute(&mut *tx).await?;
             }
             if let Some(tags) = edit.tags {
-                sqlx::query("DELETE FROM take_tags WHERE take_id = $1").bind(id).execute(&mut *tx).await?;
+                sqlx::query("DELETE FROM take_tags WHERE take_key = $1").bind(key).execute(&mut *tx).await?;
                 for t in tags {
-                    sqlx::query("INSERT INTO take_tags (take_id, tag) VALUES ($1, $2)")
-                        .bind(id)
+                    sqlx::query("INSERT INTO take_tags (take_key, tag) VALUES ($1, $2)")
+                        .bind(key)
                         .bind(t)
                         .execute(&mut *tx)
                         .await?;
                 }
             }
             if let Some(labels) = edit.labels {
-                sqlx::query("DELETE FROM take_labels WHERE take_id = $1").bind(id).execute(&mut *tx).await?;
+                sqlx::query("DELETE FROM take_labels WHERE take_key = $1").bind(key).execute(&mut *tx).await?;
                 for l in labels {
                     sqlx::query(INSERT_LABEL)
-                        .bind(id)
+                        .bind(key)
                         .bind(&l.key)
                         .bind(&l.value)
                         .bind(l.number)

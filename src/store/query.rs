@@ -65,13 +65,15 @@ pub enum Value {
     Text(String),
 }
 
-/// Where the previous page ended: the sort value and id of its last take.
+/// Where the previous page ended: the sort value and key of its last take (the store's
+/// integer key: takes of equal values come in the order they were stored, and the
+/// library's indexes end with it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Cursor {
     pub sort: SortKey,
     pub descending: bool,
     pub value: Value,
-    pub id: String,
+    pub key: i64,
 }
 
 impl Cursor {
@@ -134,7 +136,7 @@ pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
     }
     if let Some(v) = &f.tag {
         s.push(
-            "id IN (SELECT take_id FROM take_tags WHERE tag = ?)",
+            "key IN (SELECT take_key FROM take_tags WHERE tag = ?)",
             Value::Text(v.clone()),
         );
     }
@@ -142,7 +144,7 @@ pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
         s.values.push(Value::Text(k.clone()));
         let key = s.values.len();
         s.push(
-            &format!("id IN (SELECT take_id FROM take_labels WHERE key = ${key} AND value = ?)"),
+            &format!("key IN (SELECT take_key FROM take_labels WHERE key = ${key} AND value = ?)"),
             Value::Text(v.clone()),
         );
     }
@@ -191,9 +193,9 @@ pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
         let col = c.sort.column();
         let op = if c.descending { "<" } else { ">" };
         s.values.push(c.value.clone());
-        s.values.push(Value::Text(c.id.clone()));
+        s.values.push(Value::Int(c.key));
         let n = s.values.len();
-        s.text += &format!(" AND ({col}, id) {op} (${}, ${n})", n - 1);
+        s.text += &format!(" AND ({col}, key) {op} (${}, ${n})", n - 1);
     }
     s
 }
@@ -201,7 +203,7 @@ pub fn where_clause(f: &Filter, cursor: Option<&Cursor>) -> Sql {
 /// `ORDER BY …` for a sort.
 pub fn order_by(sort: SortKey, descending: bool) -> String {
     let dir = if descending { "DESC" } else { "ASC" };
-    format!("ORDER BY {} {dir}, id {dir}", sort.column())
+    format!("ORDER BY {} {dir}, key {dir}", sort.column())
 }
 
 /// The cursor value of a row for a sort key.
@@ -336,7 +338,7 @@ mod tests {
             sort: SortKey::Ratio,
             descending: true,
             value: Value::Real(12.5),
-            id: "abc".into(),
+            key: 7,
         };
         assert_eq!(Cursor::decode(&c.encode()), Some(c));
         assert_eq!(Cursor::decode("zz"), None);
@@ -354,12 +356,12 @@ mod tests {
             sort: SortKey::Name,
             descending: false,
             value: Value::Text("m".into()),
-            id: "x".into(),
+            key: 3,
         };
         let s = where_clause(&f, Some(&c));
         assert_eq!(
             s.text,
-            "WHERE 1 = 1 AND library = $1 AND frames >= $2 AND (name, id) > ($3, $4)"
+            "WHERE 1 = 1 AND library = $1 AND frames >= $2 AND (name, key) > ($3, $4)"
         );
         assert_eq!(s.values.len(), 4);
     }

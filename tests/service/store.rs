@@ -521,6 +521,19 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
                         .await
                         .unwrap();
                 }
+                for l in &row.labels {
+                    sqlx::query(
+                        "INSERT INTO take_labels (take_id, key, value, number) \
+                         VALUES ($1, $2, $3, $4)",
+                    )
+                    .bind(&row.id)
+                    .bind(&l.key)
+                    .bind(&l.value)
+                    .bind(l.number)
+                    .execute(&pool)
+                    .await
+                    .unwrap();
+                }
                 for c in chunks {
                     sqlx::query(
                         "INSERT INTO chunks (take_id, idx, first_frame, frames, crc32c, payload) \
@@ -560,9 +573,10 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
 }
 
 /// Migration 0018 packs the records of a store written at 0017 in place, 0019 moves each
-/// take's error series into its row, and 0020 keys chunks by their take's integer key:
-/// every take reads back as it did (its record, its error series, its chunks, its frames,
-/// its answer through the API, byte for byte), the JSON text column is gone, a new take's
+/// take's error series into its row, 0020 keys chunks by their take's integer key and 0021
+/// keys everything else of a take by it: every take reads back as it did (its record, its
+/// error series, its tags and labels, its chunks, its frames, its answer through the API,
+/// byte for byte), the JSON text column is gone, a new take's
 /// chunks and a deleted one's keep apart, and opening the store again finds nothing left
 /// to do.
 #[tokio::test]
@@ -581,9 +595,21 @@ async fn records_written_at_migration_17_are_packed_in_place() {
         .await;
     assert_eq!(status, 201, "{r}");
     let id = r["id"].as_str().unwrap().to_string();
+    // With a label, as a dataset's sidecar file gives (kept by the take's key since 0021).
+    let labels = [mocapstore::store::LabelRow {
+        key: "subject".into(),
+        value: "07".into(),
+        number: true,
+    }];
+    let edit = mocapstore::store::TakeEdit {
+        labels: Some(&labels),
+        ..Default::default()
+    };
+    assert!(source.store.update(&id, &edit).await.unwrap());
     let (_, answer) = srv.get_json(&format!("/v1/takes/{id}")).await;
     let (_, _, frames) = srv.get(&format!("/v1/takes/{id}/frames?format=f32")).await;
     let row = source.store.get(&id).await.unwrap().unwrap();
+    assert_eq!(row.labels.len(), 1);
     let text = mocapstore::store::packed::unpack(&row.meta).unwrap();
     assert!(text.starts_with('{') && text.len() > 500, "{text}");
     let chunks = source.store.chunks(&id, 0, i64::MAX).await.unwrap();
@@ -646,6 +672,7 @@ async fn records_written_at_migration_17_are_packed_in_place() {
             t.name
         );
         assert_eq!(again.tags, row.tags, "{}", t.name);
+        assert_eq!(again.labels, row.labels, "{}", t.name);
         // 0019 moved the error series into the take's row.
         assert_eq!(
             t.store.error_series(&id).await.unwrap(),
