@@ -82,8 +82,11 @@ pub struct LabelRow {
 
 /// Numeric columns of a take's row (8 bytes each on disk).
 const NUMERIC_COLUMNS: i64 = 21;
-/// A chunk row beside its payload: the take's id (36 characters) and four integers.
-const CHUNK_ROW: i64 = 36 + 4 * 8;
+/// A chunk row beside its payload: its key (the take's and its index, migration 0020) and
+/// three integers.
+const CHUNK_ROW: i64 = 4 * 8;
+/// A tag's or label's row beside its text: the take's key.
+const KEY: usize = 8;
 
 /// What a take costs on disk, beside the database's own page and index overhead: its
 /// container (header and chunk payloads, `stored_bytes`), its row's text columns
@@ -96,15 +99,11 @@ pub fn disk_bytes(stored_bytes: i64, text_bytes: i64, chunk_rows: i64) -> i64 {
 impl TakeRow {
     /// Bytes of the row's text columns (and tags and labels).
     pub fn text_bytes(&self) -> i64 {
-        let tags: usize = self
-            .tags
-            .iter()
-            .map(|t| t.len() + self.id.len())
-            .sum::<usize>()
+        let tags: usize = self.tags.iter().map(|t| t.len() + KEY).sum::<usize>()
             + self
                 .labels
                 .iter()
-                .map(|l| l.key.len() + l.value.len() + self.id.len())
+                .map(|l| l.key.len() + l.value.len() + KEY)
                 .sum::<usize>();
         (self.id.len()
             + self.name.len()
