@@ -25,7 +25,7 @@ CREATE TABLE chunks_by_key (
 );
 INSERT INTO chunks_by_key (key, first_frame, frames, crc32c, payload)
     SELECT t.key * 4294967296 + c.idx, c.first_frame, c.frames, c.crc32c, c.payload
-    FROM chunks c JOIN takes t ON t.id = c.take_id ORDER BY 1;
+    FROM chunks c JOIN takes t ON t.id = c.take_id ORDER BY t.key, c.idx;
 DROP TABLE chunks;
 ALTER TABLE chunks_by_key RENAME TO chunks;
 ALTER INDEX chunks_by_key_pkey RENAME TO chunks_pkey;
@@ -39,7 +39,7 @@ CREATE TABLE analog_chunks_by_key (
 );
 INSERT INTO analog_chunks_by_key (key, first_frame, frames, crc32c, payload)
     SELECT t.key * 4294967296 + c.idx, c.first_frame, c.frames, c.crc32c, c.payload
-    FROM analog_chunks c JOIN takes t ON t.id = c.take_id ORDER BY 1;
+    FROM analog_chunks c JOIN takes t ON t.id = c.take_id ORDER BY t.key, c.idx;
 DROP TABLE analog_chunks;
 ALTER TABLE analog_chunks_by_key RENAME TO analog_chunks;
 ALTER INDEX analog_chunks_by_key_pkey RENAME TO analog_chunks_pkey;

@@ -17,6 +17,9 @@ BEGIN
     WHERE rowid = NEW.rowid;
 END;
 
+-- Copied take after take, in key order (CROSS JOIN keeps takes as the outer loop, walked
+-- by takes_key): the new table fills at its end, and only one take's chunks are sorted at
+-- a time.
 CREATE TABLE chunks_by_key (
     key         INTEGER PRIMARY KEY,  -- take key × 2^32 + chunk index
     first_frame INTEGER NOT NULL,
@@ -26,7 +29,7 @@ CREATE TABLE chunks_by_key (
 );
 INSERT INTO chunks_by_key (key, first_frame, frames, crc32c, payload)
     SELECT t.key * 4294967296 + c.idx, c.first_frame, c.frames, c.crc32c, c.payload
-    FROM chunks c JOIN takes t ON t.id = c.take_id ORDER BY 1;
+    FROM takes t CROSS JOIN chunks c ON c.take_id = t.id ORDER BY t.key, c.idx;
 DROP TABLE chunks;
 ALTER TABLE chunks_by_key RENAME TO chunks;
 
@@ -39,6 +42,6 @@ CREATE TABLE analog_chunks_by_key (
 );
 INSERT INTO analog_chunks_by_key (key, first_frame, frames, crc32c, payload)
     SELECT t.key * 4294967296 + c.idx, c.first_frame, c.frames, c.crc32c, c.payload
-    FROM analog_chunks c JOIN takes t ON t.id = c.take_id ORDER BY 1;
+    FROM takes t CROSS JOIN analog_chunks c ON c.take_id = t.id ORDER BY t.key, c.idx;
 DROP TABLE analog_chunks;
 ALTER TABLE analog_chunks_by_key RENAME TO analog_chunks;

@@ -96,7 +96,7 @@ impl Store {
              CASE WHEN f.take_key IS NOT NULL AND ({STAMP_MATCHES}) THEN 1 ELSE 0 END AS current \
              FROM (SELECT key, id, name, library, fps, live_until, codec, stored_bytes, frames, \
              body_rev, created_at FROM takes {}) t \
-             LEFT JOIN take_features f ON f.take_key = t.key ORDER BY t.created_at, t.id",
+             LEFT JOIN take_features f ON f.take_key = t.key ORDER BY t.created_at, t.key",
             w.text
         );
         dispatch!(self, pool => {

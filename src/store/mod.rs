@@ -184,12 +184,12 @@ impl Store {
             }
             let r = rows::bind_take(sqlx::query(rows::INSERT_TAKE), s)
                 .bind(s.errors.as_deref())
-                .execute(&mut *tx)
+                .fetch_one(&mut *tx)
                 .await;
-            if let Err(e) = r {
-                return Err(conflict_or(e, &format!("take {}", s.id)));
-            }
-            let key: i64 = sqlx::query_scalar(TAKE_KEY).bind(&s.id).fetch_one(&mut *tx).await?;
+            let key: i64 = match r {
+                Ok(r) => r.try_get("key")?,
+                Err(e) => return Err(conflict_or(e, &format!("take {}", s.id))),
+            };
             if let Some(n) = &s.stream {
                 sqlx::query(
                     "UPDATE takes SET stream_server = $1, stream_url = $2, \
@@ -308,7 +308,7 @@ impl Store {
             let mut tx = pool.begin_write().await?;
             let sql = format!(
                 "UPDATE takes SET {}, codec = $10, max_bound_mm = $11, mean_bound_mm = $12, \
-                 header = $13, meta = $14 WHERE id = $15 AND body_rev = $16",
+                 header = $13, meta = $14 WHERE id = $15 AND body_rev = $16 RETURNING key",
                 rows::SET_TOTALS
             );
             let r = rows::bind_totals(sqlx::query(&sql), &row.totals)
@@ -319,15 +319,15 @@ impl Store {
             .bind(&row.meta)
             .bind(&row.id)
             .bind(row.body_rev)
-            .execute(&mut *tx)
+            .fetch_optional(&mut *tx)
             .await?;
-            if r.rows_affected() == 0 {
+            let Some(r) = r else {
                 return Ok(false);
-            }
-            let key: i64 = sqlx::query_scalar(TAKE_KEY).bind(&row.id).fetch_one(&mut *tx).await?;
+            };
+            let key: i64 = r.try_get("key")?;
             if replace {
                 let (from, to) = chunk_keys(key)?;
-                sqlx::query("DELETE FROM chunks WHERE key >= $1 AND key < $2")
+                sqlx::query("DELETE FROM chunks WHERE key BETWEEN $1 AND $2")
                     .bind(from)
                     .bind(to)
                     .execute(&mut *tx)
@@ -375,7 +375,7 @@ impl Store {
             let sql = format!(
                 "UPDATE takes SET {}, live_until = $10, frames_received = $11, \
                  stream_state = $12, meta = COALESCE($15, meta) \
-                 WHERE id = $13 AND live_until IS NOT NULL AND stream_server = $14",
+                 WHERE id = $13 AND live_until IS NOT NULL AND stream_server = $14 RETURNING key",
                 rows::SET_TOTALS
             );
             let r = rows::bind_totals(sqlx::query(&sql), totals)
@@ -385,12 +385,12 @@ impl Store {
             .bind(id)
             .bind(append.server)
             .bind(append.meta)
-            .execute(&mut *tx)
+            .fetch_optional(&mut *tx)
             .await?;
-            if r.rows_affected() == 0 {
+            let Some(r) = r else {
                 return Ok(false);
-            }
-            let key: i64 = sqlx::query_scalar(TAKE_KEY).bind(id).fetch_one(&mut *tx).await?;
+            };
+            let key: i64 = r.try_get("key")?;
             // Once: a commit whose answer was lost (the connection dropped as it committed)
             // is sent again, and finds its chunk stored, with the same bytes.
             let sql = format!("{INSERT_CHUNK} ON CONFLICT (key) DO NOTHING");
@@ -486,7 +486,7 @@ impl Store {
             sqlx::query(
                 "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, c.frames, c.crc32c, \
                  length(c.payload) AS len FROM takes t JOIN chunks c \
-                 ON c.key >= t.key * 4294967296 AND c.key < (t.key + 1) * 4294967296 \
+                 ON c.key >= t.key * 4294967296 AND c.key <= t.key * 4294967296 + 4294967295 \
                  WHERE t.id = $1 ORDER BY c.key",
             )
             .bind(id)
@@ -746,8 +746,8 @@ impl Store {
             };
             let (from, to) = chunk_keys(key)?;
             for sql in [
-                "DELETE FROM chunks WHERE key >= $1 AND key < $2",
-                "DELETE FROM analog_chunks WHERE key >= $1 AND key < $2",
+                "DELETE FROM chunks WHERE key BETWEEN $1 AND $2",
+                "DELETE FROM analog_chunks WHERE key BETWEEN $1 AND $2",
             ] {
                 sqlx::query(sql).bind(from).bind(to).execute(&mut *tx).await?;
             }
@@ -811,20 +811,25 @@ const ANALOG_CHUNK_RANGE: &str = "SELECT c.key - t.key * 4294967296 AS idx, c.fi
     ON c.key >= t.key * 4294967296 + $2 AND c.key < t.key * 4294967296 + $3 \
     WHERE t.id = $1 ORDER BY c.key";
 
-/// The key of chunk `idx` of the take of key `take`; an index past what a key holds is an
-/// error, not another take's row.
+/// Take keys a chunk key holds: below 2^31 − 1, so that the SQL's `take key × 2^32 + end`
+/// (an end index up to 2^32) stays within an i64.
+const TAKE_KEYS: i64 = i64::MAX / CHUNK_KEYS;
+
+/// The key of chunk `idx` of the take of key `take`; an index or a take past what a key
+/// holds is an error, not another take's row.
 fn chunk_key(take: i64, idx: i64) -> Result<i64> {
     if !(0..CHUNK_KEYS).contains(&idx) {
         return Err(Error::Corrupt(format!("chunk index {idx} out of range")));
     }
-    take.checked_mul(CHUNK_KEYS)
-        .and_then(|k| k.checked_add(idx))
-        .ok_or_else(|| Error::Corrupt(format!("take key {take} out of range")))
+    if !(0..TAKE_KEYS).contains(&take) {
+        return Err(Error::Corrupt(format!("take key {take} out of range")));
+    }
+    Ok(take * CHUNK_KEYS + idx)
 }
 
-/// The range of chunk keys of the take of key `take`.
+/// The first and last chunk key of the take of key `take`, both included.
 fn chunk_keys(take: i64) -> Result<(i64, i64)> {
-    Ok((chunk_key(take, 0)?, chunk_key(take, CHUNK_KEYS - 1)? + 1))
+    Ok((chunk_key(take, 0)?, chunk_key(take, CHUNK_KEYS - 1)?))
 }
 
 /// The key of take `$1` (`takes.key`), read in the transaction that writes its chunks.
@@ -994,9 +999,9 @@ impl Store {
              max_mm, id, name, layout, source_format, CAST(LENGTH(meta) AS BIGINT) AS meta_bytes, \
              skeleton_id, \
              (SELECT COUNT(*) FROM chunks c WHERE c.key >= takes.key * 4294967296 \
-              AND c.key < (takes.key + 1) * 4294967296) \
+              AND c.key <= takes.key * 4294967296 + 4294967295) \
               + (SELECT COUNT(*) FROM analog_chunks c WHERE c.key >= takes.key * 4294967296 \
-              AND c.key < (takes.key + 1) * 4294967296) AS chunk_rows, \
+              AND c.key <= takes.key * 4294967296 + 4294967295) AS chunk_rows, \
              (SELECT a.raw_bytes FROM take_analog a WHERE a.take_key = takes.key) \
               AS analog_raw_bytes, \
              (SELECT a.stored_bytes FROM take_analog a WHERE a.take_key = takes.key) \

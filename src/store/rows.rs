@@ -185,11 +185,13 @@ pub const TAKE_COLUMNS: &str = "id, name, library, fps, frames, points, duration
 pub const SET_TOTALS: &str = "frames = $1, duration_s = $2, raw_bytes = $3, stored_bytes = $4, \
     ratio = $5, mean_mm = $6, rms_mm = $7, max_mm = $8, kg_percent = $9";
 
+/// Insert a take's row, answering its key (`takes.key`, which the database gives).
 pub const INSERT_TAKE: &str = "INSERT INTO takes (frames, duration_s, raw_bytes, \
     stored_bytes, ratio, mean_mm, rms_mm, max_mm, kg_percent, id, name, library, fps, points, \
     metres_per_unit, layout, source_format, codec, max_bound_mm, mean_bound_mm, header, meta, \
     created_at, live_until, skeleton_id, errors) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, \
-    $10, $11, $12, $13, $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24, $25, $26)";
+    $10, $11, $12, $13, $14, $15, $16, $17, $18, $19, $20, $21, $22, $23, $24, $25, $26) \
+    RETURNING key";
 
 /// Bind a take's running totals, in [`SET_TOTALS`] order, to a query of either backend.
 pub fn bind_totals<'q, DB: sqlx::Database>(

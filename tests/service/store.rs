@@ -448,6 +448,21 @@ struct OldTake {
     chunks: Vec<ChunkRow>,
     /// Its error series, in `take_errors` then.
     errors: Option<Vec<u8>>,
+    /// With a row in every other table of a take's: a skeleton, a basis, analog channels
+    /// (their header and a chunk), parameters, outputs and features (bytes of their own).
+    extras: bool,
+}
+
+/// The analog chunk an old take with extras has.
+fn old_analog_chunk() -> ChunkRow {
+    let payload = vec![7u8, 8, 9];
+    ChunkRow {
+        idx: 0,
+        first_frame: 0,
+        frames: 5,
+        crc32c: crc32c::crc32c(&payload),
+        payload,
+    }
 }
 
 async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
@@ -470,6 +485,7 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
                 text,
                 chunks,
                 errors,
+                extras,
             } in takes
             {
                 sqlx::query(
@@ -545,6 +561,77 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
                     .bind(c.frames)
                     .bind(i64::from(c.crc32c))
                     .bind(&c.payload)
+                    .execute(&pool)
+                    .await
+                    .unwrap();
+                }
+                if *extras {
+                    let a = old_analog_chunk();
+                    let id = row.id.as_str();
+                    // (statement, the take's id bound as $1, the bytes bound after it)
+                    let steps: [(&str, bool, Option<Vec<u8>>); 8] = [
+                        (
+                            "INSERT INTO skeletons (id, layout, joints, payload, created_at) \
+                             VALUES ('sk', 'l', 2, $1, 0)",
+                            false,
+                            Some(vec![1]),
+                        ),
+                        ("UPDATE takes SET skeleton_id = 'sk' WHERE id = $1", true, None),
+                        (
+                            "INSERT INTO bases (id, kind, layout, points, dims, payload, \
+                             provenance, created_at) VALUES ('b', 'pca', 'l', 2, '[]', $1, '{}', 0)",
+                            false,
+                            Some(vec![2]),
+                        ),
+                        (
+                            "INSERT INTO take_bases (take_id, basis_id) VALUES ($1, 'b')",
+                            true,
+                            None,
+                        ),
+                        (
+                            "INSERT INTO take_analog (take_id, header, raw_bytes, stored_bytes) \
+                             VALUES ($1, $2, 10, 2)",
+                            true,
+                            Some(vec![10, 11]),
+                        ),
+                        (
+                            "INSERT INTO take_parameters (take_id, format, payload) \
+                             VALUES ($1, 'c3d', $2)",
+                            true,
+                            Some(vec![12]),
+                        ),
+                        (
+                            "INSERT INTO take_outputs (take_id, payload) VALUES ($1, $2)",
+                            true,
+                            Some(vec![13]),
+                        ),
+                        (
+                            "INSERT INTO take_features (take_id, codec, stored_bytes, frames, \
+                             body_rev, payload, failed) VALUES ($1, 'raw', 1, 2, 0, $2, NULL)",
+                            true,
+                            Some(vec![14]),
+                        ),
+                    ];
+                    for (sql, with_id, bytes) in steps {
+                        let mut q = sqlx::query(sql);
+                        if with_id {
+                            q = q.bind(id);
+                        }
+                        if let Some(b) = bytes {
+                            q = q.bind(b);
+                        }
+                        q.execute(&pool).await.unwrap();
+                    }
+                    sqlx::query(
+                        "INSERT INTO analog_chunks (take_id, idx, first_frame, frames, \
+                         crc32c, payload) VALUES ($1, $2, $3, $4, $5, $6)",
+                    )
+                    .bind(id)
+                    .bind(a.idx)
+                    .bind(a.first_frame)
+                    .bind(a.frames)
+                    .bind(i64::from(a.crc32c))
+                    .bind(&a.payload)
                     .execute(&pool)
                     .await
                     .unwrap();
@@ -630,6 +717,13 @@ async fn records_written_at_migration_17_are_packed_in_place() {
         tags: Vec::new(),
         ..row.clone()
     };
+    // And one with a row in every other table of a take's.
+    let full = TakeRow {
+        id: "full".into(),
+        tags: Vec::new(),
+        labels: Vec::new(),
+        ..row.clone()
+    };
     for db in common::all_unopened().await {
         write_at_migration_17(
             &db,
@@ -639,18 +733,28 @@ async fn records_written_at_migration_17_are_packed_in_place() {
                     text: text.clone(),
                     chunks: chunks.clone(),
                     errors: errors.clone(),
+                    extras: false,
                 },
                 OldTake {
                     row: empty.clone(),
                     text: text.clone(),
                     chunks: Vec::new(),
                     errors: None,
+                    extras: false,
                 },
                 OldTake {
                     row: bad.clone(),
                     text: text.clone(),
                     chunks: Vec::new(),
                     errors: None,
+                    extras: false,
+                },
+                OldTake {
+                    row: full.clone(),
+                    text: text.clone(),
+                    chunks: Vec::new(),
+                    errors: None,
+                    extras: true,
                 },
             ],
         )
@@ -690,6 +794,57 @@ async fn records_written_at_migration_17_are_packed_in_place() {
         } else {
             assert_eq!(kept, row.meta);
         }
+        // 0021 re-keyed every other table of a take's: each row reads back as written, and
+        // goes with its take.
+        let full = t.store.get("full").await.unwrap().unwrap();
+        assert_eq!(full.skeleton_id.as_deref(), Some("sk"), "{}", t.name);
+        let analog = t.store.analog("full").await.unwrap().unwrap();
+        assert_eq!(
+            (analog.header, analog.raw_bytes, analog.stored_bytes),
+            (vec![10, 11], 10, 2),
+            "{}",
+            t.name
+        );
+        assert_eq!(
+            t.store.analog_chunks("full", 0, i64::MAX).await.unwrap(),
+            vec![old_analog_chunk()],
+            "{}",
+            t.name
+        );
+        let p = t.store.parameters("full").await.unwrap().unwrap();
+        assert_eq!((p.format.as_str(), p.payload), ("c3d", vec![12]));
+        assert_eq!(t.store.outputs("full").await.unwrap(), Some(vec![13]));
+        let features = t.store.features_of(&["full".to_string()]).await.unwrap();
+        assert_eq!(features.len(), 1, "{}", t.name);
+        assert_eq!(features[0].1.payload, vec![14]);
+        let used = t
+            .store
+            .basis_use_within(std::slice::from_ref(&full.library))
+            .await
+            .unwrap();
+        assert_eq!(used.get("b"), Some(&1), "{}", t.name);
+        assert!(t.store.delete("full").await.unwrap());
+        assert_eq!(t.store.analog("full").await.unwrap(), None);
+        assert!(t
+            .store
+            .analog_chunks("full", 0, i64::MAX)
+            .await
+            .unwrap()
+            .is_empty());
+        assert_eq!(t.store.parameters("full").await.unwrap(), None);
+        assert_eq!(t.store.outputs("full").await.unwrap(), None);
+        assert!(t
+            .store
+            .features_of(&["full".to_string()])
+            .await
+            .unwrap()
+            .is_empty());
+        assert!(t
+            .store
+            .basis_use_within(std::slice::from_ref(&full.library))
+            .await
+            .unwrap()
+            .is_empty());
         // The JSON text is gone from the table, and what is there is the packed record.
         let (columns, packed): (i64, i64) = match &t.store {
             Store::Sqlite(pool) => (
