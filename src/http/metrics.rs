@@ -91,10 +91,15 @@ impl Metrics {
         }
         self.latency_us_sum
             .fetch_add((seconds * 1e6) as u64, Ordering::Relaxed);
-        for (b, c) in BUCKETS.iter().zip(&self.latency_buckets) {
-            if seconds <= *b {
-                c.fetch_add(1, Ordering::Relaxed);
-            }
+        // One count, in the first bucket that holds it (the rendering sums them up): every
+        // request pays one increment, not one per bucket it is under (ten, for a fast one),
+        // on counters every thread shares.
+        if let Some(c) = BUCKETS
+            .iter()
+            .zip(&self.latency_buckets)
+            .find_map(|(b, c)| (seconds <= *b).then_some(c))
+        {
+            c.fetch_add(1, Ordering::Relaxed);
         }
     }
 
@@ -116,11 +121,10 @@ impl Metrics {
         s += "# TYPE mocapstore_http_errors_total counter\n";
         s += &format!("mocapstore_http_errors_total {}\n", g(&self.errors));
         s += "# TYPE mocapstore_http_request_seconds histogram\n";
+        let mut below = 0;
         for (b, c) in BUCKETS.iter().zip(&self.latency_buckets) {
-            s += &format!(
-                "mocapstore_http_request_seconds_bucket{{le=\"{b}\"}} {}\n",
-                g(c)
-            );
+            below += g(c);
+            s += &format!("mocapstore_http_request_seconds_bucket{{le=\"{b}\"}} {below}\n");
         }
         s += &format!(
             "mocapstore_http_request_seconds_bucket{{le=\"+Inf\"}} {}\n",
@@ -287,6 +291,26 @@ mod tests {
     /// Another thread's work shows in the count (the main thread waits meanwhile), and
     /// the count does not run ahead of the CPU the process can have had.
     #[cfg(target_os = "linux")]
+    #[test]
+    fn latency_buckets_count_every_request_at_or_under_their_bound() {
+        let m = Metrics::default();
+        for seconds in [0.0005, 0.001, 0.003, 2.0, 9.0] {
+            m.observe(seconds, false);
+        }
+        let text = m.render_text();
+        let bucket = |le: &str| -> u64 {
+            let prefix = format!("mocapstore_http_request_seconds_bucket{{le=\"{le}\"}} ");
+            let line = text.lines().find(|l| l.starts_with(&prefix)).unwrap();
+            line[prefix.len()..].parse().unwrap()
+        };
+        assert_eq!(bucket("0.001"), 2);
+        assert_eq!(bucket("0.002"), 2);
+        assert_eq!(bucket("0.005"), 3);
+        assert_eq!(bucket("1"), 3);
+        assert_eq!(bucket("5"), 4);
+        assert_eq!(bucket("+Inf"), 5);
+    }
+
     #[test]
     fn process_cpu_time_counts_the_work_of_every_thread() {
         let before = process_cpu_seconds().expect("/proc/self/stat reads");
