@@ -288,9 +288,8 @@ pub async fn render(State(state): State<super::AppState>) -> Response {
 mod tests {
     use super::*;
 
-    /// Another thread's work shows in the count (the main thread waits meanwhile), and
-    /// the count does not run ahead of the CPU the process can have had.
-    #[cfg(target_os = "linux")]
+    /// `/metrics` gives each bucket every request at or under its bound, though a request
+    /// is counted once.
     #[test]
     fn latency_buckets_count_every_request_at_or_under_their_bound() {
         let m = Metrics::default();
@@ -311,6 +310,9 @@ mod tests {
         assert_eq!(bucket("+Inf"), 5);
     }
 
+    /// Another thread's work shows in the count (the main thread waits meanwhile), and
+    /// the count does not run ahead of the CPU the process can have had.
+    #[cfg(target_os = "linux")]
     #[test]
     fn process_cpu_time_counts_the_work_of_every_thread() {
         let before = process_cpu_seconds().expect("/proc/self/stat reads");
