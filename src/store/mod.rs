@@ -125,6 +125,38 @@ macro_rules! dispatch {
     };
 }
 
+/// SQL: rows `c` of a chunk table are chunks `$first..=$last` (indices, SQL expressions)
+/// of take `$take` (a row of `takes`). In the SQL here, 4294967296 is [`CHUNK_KEYS`] (a
+/// test holds the two together).
+macro_rules! chunks_of {
+    ($take:literal, $first:literal, $last:literal) => {
+        concat!(
+            "c.key BETWEEN ",
+            $take,
+            ".key * 4294967296 + ",
+            $first,
+            " AND ",
+            $take,
+            ".key * 4294967296 + ",
+            $last
+        )
+    };
+}
+
+/// Chunks `$2..=$3` (indices) of take `$1` from chunk table `$table`, with their indices.
+macro_rules! chunk_range {
+    ($table:literal) => {
+        concat!(
+            "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, c.frames, c.crc32c, \
+             c.payload FROM takes t JOIN ",
+            $table,
+            " c ON ",
+            chunks_of!("t", "$2", "$3"),
+            " WHERE t.id = $1 ORDER BY c.key"
+        )
+    };
+}
+
 impl Store {
     /// Open (creating a SQLite file if needed) and migrate.
     pub async fn open(url: &str) -> Result<Store> {
@@ -484,10 +516,12 @@ impl Store {
     pub async fn chunk_index(&self, id: &str) -> Result<Vec<ChunkEntry>> {
         dispatch!(self, pool => {
             sqlx::query(
-                "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, c.frames, c.crc32c, \
-                 length(c.payload) AS len FROM takes t JOIN chunks c \
-                 ON c.key >= t.key * 4294967296 AND c.key <= t.key * 4294967296 + 4294967295 \
-                 WHERE t.id = $1 ORDER BY c.key",
+                concat!(
+                    "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, c.frames, \
+                     c.crc32c, length(c.payload) AS len FROM takes t JOIN chunks c ON ",
+                    chunks_of!("t", "0", "4294967295"),
+                    " WHERE t.id = $1 ORDER BY c.key"
+                ),
             )
             .bind(id)
             .fetch_all(pool)
@@ -541,13 +575,14 @@ impl Store {
         first: i64,
         end: i64,
     ) -> Result<Vec<ChunkRow>> {
-        // Indices outside what a take spans hold no chunk of it.
-        let (first, end) = (first.clamp(0, CHUNK_KEYS), end.clamp(0, CHUNK_KEYS));
+        // Indices outside what a take spans hold no chunk of it (and `last < first` holds
+        // none at all).
+        let (first, last) = (first.clamp(0, CHUNK_KEYS), end.clamp(0, CHUNK_KEYS) - 1);
         dispatch!(self, pool => {
             let rows = sqlx::query(select)
                 .bind(id)
                 .bind(first)
-                .bind(end)
+                .bind(last)
                 .fetch_all(pool)
                 .await?;
             rows.iter().map(rows::chunk_from_row).collect()
@@ -802,14 +837,12 @@ const INSERT_ANALOG_CHUNK: &str = "INSERT INTO analog_chunks (key, first_frame, 
 /// (`takes.key`) times this, plus its index; one B-tree, no second index.
 const CHUNK_KEYS: i64 = 1 << 32;
 
-/// Chunks `$2..$3` (indices) of take `$1`, the points' and the analog channels'.
-const CHUNK_RANGE: &str = "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, c.frames, \
-    c.crc32c, c.payload FROM takes t JOIN chunks c ON c.key >= t.key * 4294967296 + $2 \
-    AND c.key < t.key * 4294967296 + $3 WHERE t.id = $1 ORDER BY c.key";
-const ANALOG_CHUNK_RANGE: &str = "SELECT c.key - t.key * 4294967296 AS idx, c.first_frame, \
-    c.frames, c.crc32c, c.payload FROM takes t JOIN analog_chunks c \
-    ON c.key >= t.key * 4294967296 + $2 AND c.key < t.key * 4294967296 + $3 \
-    WHERE t.id = $1 ORDER BY c.key";
+/// Chunks of a take, the points' and the analog channels' ([`chunk_range!`]).
+const CHUNK_RANGE: &str = chunk_range!("chunks");
+const ANALOG_CHUNK_RANGE: &str = chunk_range!("analog_chunks");
+
+/// The chunk rows `c` of the take `takes` in a query over the takes table.
+const ALL_CHUNKS_OF_TAKES: &str = chunks_of!("takes", "0", "4294967295");
 
 /// Take keys a chunk key holds: below 2^31 − 1, so that the SQL's `take key × 2^32 + end`
 /// (an end index up to 2^32) stays within an i64.
@@ -832,7 +865,7 @@ fn chunk_keys(take: i64) -> Result<(i64, i64)> {
     Ok((chunk_key(take, 0)?, chunk_key(take, CHUNK_KEYS - 1)?))
 }
 
-/// The key of take `$1` (`takes.key`), read in the transaction that writes its chunks.
+/// The key of take `$1` (`takes.key`), read in the transaction that writes what is keyed by it.
 const TAKE_KEY: &str = "SELECT key FROM takes WHERE id = $1";
 
 /// Bind a chunk's columns, in [`INSERT_CHUNK`] order, to a query of either backend: the
@@ -998,10 +1031,8 @@ impl Store {
             "SELECT library, codec, frames, points, duration_s, raw_bytes, stored_bytes, mean_mm, \
              max_mm, id, name, layout, source_format, CAST(LENGTH(meta) AS BIGINT) AS meta_bytes, \
              skeleton_id, \
-             (SELECT COUNT(*) FROM chunks c WHERE c.key >= takes.key * 4294967296 \
-              AND c.key <= takes.key * 4294967296 + 4294967295) \
-              + (SELECT COUNT(*) FROM analog_chunks c WHERE c.key >= takes.key * 4294967296 \
-              AND c.key <= takes.key * 4294967296 + 4294967295) AS chunk_rows, \
+             (SELECT COUNT(*) FROM chunks c WHERE {ALL_CHUNKS_OF_TAKES}) \
+              + (SELECT COUNT(*) FROM analog_chunks c WHERE {ALL_CHUNKS_OF_TAKES}) AS chunk_rows, \
              (SELECT a.raw_bytes FROM take_analog a WHERE a.take_key = takes.key) \
               AS analog_raw_bytes, \
              (SELECT a.stored_bytes FROM take_analog a WHERE a.take_key = takes.key) \
@@ -1146,5 +1177,24 @@ fn conflict_or(e: sqlx::Error, what: &str) -> Error {
     match &e {
         sqlx::Error::Database(d) if d.is_unique_violation() => Error::Conflict(what.to_string()),
         _ => Error::Database(e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The SQL's chunk keys and [`chunk_key`]'s are one layout: the literal the queries
+    /// multiply by is [`CHUNK_KEYS`], and a take's range runs from its first key to its last.
+    #[test]
+    fn the_sql_and_the_code_key_chunks_alike() {
+        assert_eq!(CHUNK_KEYS.to_string(), "4294967296");
+        for sql in [CHUNK_RANGE, ANALOG_CHUNK_RANGE, ALL_CHUNKS_OF_TAKES] {
+            assert!(sql.contains(".key * 4294967296 + "), "{sql}");
+        }
+        assert!(ALL_CHUNKS_OF_TAKES.ends_with(&format!("+ {}", CHUNK_KEYS - 1)));
+        assert_eq!(chunk_keys(3).unwrap(), (3 << 32, (4 << 32) - 1));
+        assert!(chunk_key(1, CHUNK_KEYS).is_err());
+        assert!(chunk_key(TAKE_KEYS, 0).is_err());
     }
 }
