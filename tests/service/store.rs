@@ -550,23 +550,29 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
                     .await
                     .unwrap();
                 }
-                for c in chunks {
-                    sqlx::query(
-                        "INSERT INTO chunks (take_id, idx, first_frame, frames, crc32c, payload) \
-                         VALUES ($1, $2, $3, $4, $5, $6)",
-                    )
-                    .bind(&row.id)
-                    .bind(c.idx)
-                    .bind(c.first_frame)
-                    .bind(c.frames)
-                    .bind(i64::from(c.crc32c))
-                    .bind(&c.payload)
-                    .execute(&pool)
-                    .await
-                    .unwrap();
+                let analog = if *extras {
+                    vec![old_analog_chunk()]
+                } else {
+                    Vec::new()
+                };
+                for (table, list) in [("chunks", chunks), ("analog_chunks", &analog)] {
+                    for c in list {
+                        sqlx::query(&format!(
+                            "INSERT INTO {table} (take_id, idx, first_frame, frames, crc32c, \
+                             payload) VALUES ($1, $2, $3, $4, $5, $6)"
+                        ))
+                        .bind(&row.id)
+                        .bind(c.idx)
+                        .bind(c.first_frame)
+                        .bind(c.frames)
+                        .bind(i64::from(c.crc32c))
+                        .bind(&c.payload)
+                        .execute(&pool)
+                        .await
+                        .unwrap();
+                    }
                 }
                 if *extras {
-                    let a = old_analog_chunk();
                     let id = row.id.as_str();
                     // (statement, the take's id bound as $1, the bytes bound after it)
                     let steps: [(&str, bool, Option<Vec<u8>>); 8] = [
@@ -622,19 +628,6 @@ async fn write_at_migration_17(db: &common::Unopened, takes: &[OldTake]) {
                         }
                         q.execute(&pool).await.unwrap();
                     }
-                    sqlx::query(
-                        "INSERT INTO analog_chunks (take_id, idx, first_frame, frames, \
-                         crc32c, payload) VALUES ($1, $2, $3, $4, $5, $6)",
-                    )
-                    .bind(id)
-                    .bind(a.idx)
-                    .bind(a.first_frame)
-                    .bind(a.frames)
-                    .bind(i64::from(a.crc32c))
-                    .bind(&a.payload)
-                    .execute(&pool)
-                    .await
-                    .unwrap();
                 }
             }
             pool.close().await;
