@@ -4,7 +4,7 @@
 use axum::body::{Body, Bytes};
 use axum::extract::rejection::{BytesRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
-use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::http::{header, HeaderMap, HeaderName, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
 use axum::Json;
@@ -458,23 +458,31 @@ pub async fn frames(
     state
         .metrics
         .decoded(a.frames(), a.frames() * a.points.unwrap_or(0) * 12);
-    let headers = answer_headers(&a);
-    Ok((headers, streamed(a).await?).into_response())
+    // Sized for these and what the outer layers add, so that the map never grows.
+    let mut headers = HeaderMap::with_capacity(16);
+    answer_headers(&a, &mut headers);
+    let mut response = Response::new(streamed(a).await?);
+    *response.headers_mut() = headers;
+    Ok(response)
 }
 
 /// What an answer's headers say of it: its frames and where they start, its rate and the
 /// take's, its points and unit, its length where the format fixes it, its content type.
 /// The same for a whole answer and for each part of a batch ([`ranges`]).
-fn answer_headers(a: &Answer) -> HeaderMap {
-    let mut headers = HeaderMap::new();
-    let hv = |v: String| HeaderValue::from_str(&v).expect("numbers are valid header values");
-    headers.insert("x-frames", HeaderValue::from(a.frames_out));
-    headers.insert("x-start-frame", HeaderValue::from(a.start));
-    headers.insert("x-fps", hv(a.fps.to_string()));
-    headers.insert("x-source-fps", hv(a.source_fps.to_string()));
-    headers.insert("x-metres-per-unit", hv(a.metres_per_unit.to_string()));
+fn answer_headers(a: &Answer, headers: &mut HeaderMap) {
+    const FRAMES: HeaderName = HeaderName::from_static("x-frames");
+    const START: HeaderName = HeaderName::from_static("x-start-frame");
+    const FPS: HeaderName = HeaderName::from_static("x-fps");
+    const SOURCE_FPS: HeaderName = HeaderName::from_static("x-source-fps");
+    const METRES: HeaderName = HeaderName::from_static("x-metres-per-unit");
+    const POINTS: HeaderName = HeaderName::from_static("x-points");
+    headers.insert(FRAMES, HeaderValue::from(a.frames_out));
+    headers.insert(START, HeaderValue::from(a.start));
+    headers.insert(FPS, number_value(a.fps));
+    headers.insert(SOURCE_FPS, number_value(a.source_fps));
+    headers.insert(METRES, number_value(a.metres_per_unit));
     if let Some(points) = a.points {
-        headers.insert("x-points", HeaderValue::from(points));
+        headers.insert(POINTS, HeaderValue::from(points));
     }
     if let Some(n) = a.length {
         headers.insert(header::CONTENT_LENGTH, HeaderValue::from(n));
@@ -488,7 +496,16 @@ fn answer_headers(a: &Answer) -> HeaderMap {
         _ => "application/octet-stream",
     };
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
-    headers
+}
+
+/// A number as a header value, as `f64`'s `Display` writes it (whole numbers without a
+/// fraction: `120`, not `120.0`); whole ones, the usual rates, without float formatting.
+fn number_value(v: f64) -> HeaderValue {
+    const WHOLE: f64 = 9_007_199_254_740_992.0; // 2^53: every integer below is exact
+    if v.fract() == 0.0 && v.abs() < WHOLE && !(v == 0.0 && v.is_sign_negative()) {
+        return HeaderValue::from(v as i64);
+    }
+    HeaderValue::from_str(&v.to_string()).expect("numbers are valid header values")
 }
 
 #[derive(Deserialize, Default)]
@@ -632,7 +649,8 @@ impl Multipart {
         };
         self.metrics
             .decoded(a.frames(), a.frames() * a.points.unwrap_or(0) * 12);
-        let mut headers = answer_headers(&a);
+        let mut headers = HeaderMap::with_capacity(10);
+        answer_headers(&a, &mut headers);
         let id = HeaderValue::from_str(&a.id).map_err(|_| {
             crate::service::Error::Corrupt(format!("take id {:?} is no header value", a.id))
         })?;
@@ -880,6 +898,27 @@ pub async fn parameters(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A number's header value is what `Display` writes, whole or not.
+    #[test]
+    fn numbers_in_headers_read_as_display_writes_them() {
+        for v in [
+            120.0,
+            29.97,
+            0.001,
+            0.0,
+            -0.0,
+            -3.0,
+            1e15,
+            9_007_199_254_740_992.0,
+            1e300,
+            f64::INFINITY,
+            f64::NAN,
+            1.0 / 3.0,
+        ] {
+            assert_eq!(number_value(v).to_str().unwrap(), v.to_string(), "{v:?}");
+        }
+    }
 
     /// Each header field fills its own field of the query (and CORS allows exactly these):
     /// a field added to the table but wired to nothing, or twice, fails here.
