@@ -939,14 +939,15 @@ impl Plan {
         shaped: Option<&Options>,
     ) -> Result<Plan> {
         let (selected, names) = match (shaped, names) {
-            (Some(_), Some(n)) => (None, n.to_vec()),
+            (Some(_), Some(n)) => (None, n.into()),
             (_, None) => (None, prepared.point_names.clone()),
             (None, Some(n)) => {
                 let ix = point_indices(prepared, n)?;
                 let names = ix
                     .iter()
                     .map(|&i| prepared.point_names[i].clone())
-                    .collect();
+                    .collect::<Vec<_>>()
+                    .into();
                 (Some(ix), names)
             }
         };

@@ -95,7 +95,8 @@ pub struct Prepared {
     /// cache entry is.
     pub generation: u64,
     pub reader: Reader,
-    pub point_names: Vec<String>,
+    /// Shared with every answer that writes them: an answer of every point copies none.
+    pub point_names: Arc<[String]>,
     pub fps: f64,
     pub metres_per_unit: f64,
     pub frames: usize,
@@ -120,7 +121,7 @@ impl Prepared {
             stamp: Stamp::of(take),
             generation: GENERATIONS.fetch_add(1, Ordering::Relaxed),
             reader,
-            point_names: take.meta.point_names.clone(),
+            point_names: take.meta.point_names.as_slice().into(),
             fps: take.fps,
             metres_per_unit: take.metres_per_unit,
             frames: take.frames,
@@ -357,7 +358,7 @@ mod tests {
             },
             generation: 0,
             reader: Reader::new(enc.container.header, None).unwrap(),
-            point_names: vec!["a".into(), "b".into()],
+            point_names: vec!["a".into(), "b".into()].into(),
             fps: 30.0,
             metres_per_unit: 0.001,
             frames: 20,

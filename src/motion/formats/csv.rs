@@ -29,7 +29,7 @@ impl Writer {
 impl FrameWriter for Writer {
     fn head(&mut self, out: &mut Vec<u8>) {
         out.extend_from_slice(b"frame,time");
-        for n in &self.shape.point_names {
+        for n in self.shape.point_names.iter() {
             for axis in ["x", "y", "z"] {
                 out.push(b',');
                 out.extend_from_slice(cell(&format!("{n}_{axis}")).as_bytes());

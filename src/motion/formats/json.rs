@@ -128,7 +128,7 @@ impl FrameWriter for Writer {
         let mut fields = std::mem::take(&mut self.fields);
         fields.insert("fps".into(), self.shape.fps.into());
         fields.insert("unit".into(), unit);
-        fields.insert("points".into(), self.shape.point_names.clone().into());
+        fields.insert("points".into(), self.shape.point_names.to_vec().into());
         let header = serde_json::Value::Object(fields).to_string();
         out.extend_from_slice(&header.as_bytes()[..header.len() - 1]);
         out.extend_from_slice(b",\"frames\":[");

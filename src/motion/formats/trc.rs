@@ -219,7 +219,7 @@ impl FrameWriter for Writer {
             "{fps}\t{fps}\t{frames}\t{points}\t{unit}\t{fps}\t1\t{frames}"
         );
         out.extend_from_slice(b"Frame#\tTime");
-        for n in &self.shape.point_names {
+        for n in self.shape.point_names.iter() {
             let _ = write!(out, "\t{n}\t\t");
         }
         out.extend_from_slice(b"\n\t");

@@ -15,7 +15,8 @@ use crate::motion::units::Unit;
 pub struct Shape {
     pub fps: f64,
     pub unit: Unit,
-    pub point_names: Vec<String>,
+    /// Shared: an answer of every point of a take names them as its decoder does.
+    pub point_names: std::sync::Arc<[String]>,
     /// Frames the answer will hold: headers that state a count (TRC, NPY) state this one.
     pub frames: usize,
 }
@@ -26,7 +27,7 @@ impl Shape {
         Shape {
             fps: m.fps,
             unit: m.unit.clone(),
-            point_names: m.point_names.clone(),
+            point_names: m.point_names.as_slice().into(),
             frames: m.frame_count(),
         }
     }
