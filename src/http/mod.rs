@@ -112,9 +112,20 @@ impl Default for Config {
     }
 }
 
-/// Shared by every handler.
+/// Shared by every handler: one `Arc`, so that the clone each extractor and layer makes per
+/// request is one count, not one for each part.
 #[derive(Clone)]
-pub struct AppState {
+pub struct AppState(Arc<Shared>);
+
+impl std::ops::Deref for AppState {
+    type Target = Shared;
+    fn deref(&self) -> &Shared {
+        &self.0
+    }
+}
+
+/// What [`AppState`] holds.
+pub struct Shared {
     pub store: Store,
     pub limits: Limits,
     /// Request bodies held now, against [`Limits::inflight_bytes`] (a share per caller).
@@ -430,7 +441,7 @@ impl Application {
         let node = Node::new(advertised(&config, bound)?);
         let answers = Arc::new(Budget::new(limits.answer_bytes, limits.answer_share_bytes));
         let caches = Arc::new(ReadCaches::new(config.decoded_cache_mib << 20));
-        let state = AppState {
+        let state = AppState(Arc::new(Shared {
             store: store.clone(),
             limits,
             bodies: Arc::new(Budget::new(limits.inflight_bytes, limits.body_share_bytes)),
@@ -450,7 +461,7 @@ impl Application {
             histories: (!config.exhaustive_choice).then(|| Arc::new(Histories::default())),
             auth: Arc::new(Authenticator::default()),
             audit: Arc::new(AuditLog::default()),
-        };
+        }));
         // Without tokens the server answers anyone who reaches it: only loopback, unless
         // the operator says otherwise.
         let addr = bound;
