@@ -1,12 +1,14 @@
 //! Prometheus text metrics: request counts and latency, ingested and decoded frames.
 
+use std::future::Future;
+use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
+use std::task::{Context, Poll};
 use std::time::Instant;
 
 use axum::extract::{Request, State};
 use axum::http::header;
-use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
 /// Latency histogram bucket bounds in seconds.
@@ -218,14 +220,82 @@ impl Drop for InFlight {
     }
 }
 
-pub async fn count_requests(State(m): State<Arc<Metrics>>, req: Request, next: Next) -> Response {
-    let t0 = Instant::now();
-    m.started.fetch_add(1, Ordering::Relaxed);
-    m.in_flight.fetch_add(1, Ordering::Relaxed);
-    let _guard = InFlight(m.clone());
-    let resp = next.run(req).await;
-    m.observe(t0.elapsed().as_secs_f64(), !resp.status().is_success());
-    resp
+/// Counts every request that reaches the router, and its latency when it is answered: the
+/// outermost layer but tracing's. Written as a service, not with `middleware::from_fn`,
+/// which boxes the layers within and the future anew for every request.
+#[derive(Clone)]
+pub struct CountRequests(pub Arc<Metrics>);
+
+impl<S> tower::Layer<S> for CountRequests {
+    type Service = RequestCounter<S>;
+
+    fn layer(&self, inner: S) -> RequestCounter<S> {
+        RequestCounter {
+            inner,
+            metrics: self.0.clone(),
+        }
+    }
+}
+
+/// A service whose requests are counted ([`CountRequests`]).
+#[derive(Clone)]
+pub struct RequestCounter<S> {
+    inner: S,
+    metrics: Arc<Metrics>,
+}
+
+impl<S> tower::Service<Request> for RequestCounter<S>
+where
+    S: tower::Service<Request, Response = Response>,
+{
+    type Response = Response;
+    type Error = S::Error;
+    type Future = Counting<S::Future>;
+
+    fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<Result<(), S::Error>> {
+        self.inner.poll_ready(cx)
+    }
+
+    fn call(&mut self, req: Request) -> Self::Future {
+        let m = &self.metrics;
+        m.started.fetch_add(1, Ordering::Relaxed);
+        m.in_flight.fetch_add(1, Ordering::Relaxed);
+        Counting {
+            t0: Instant::now(),
+            guard: InFlight(m.clone()),
+            inner: self.inner.call(req),
+        }
+    }
+}
+
+pin_project_lite::pin_project! {
+    /// A counted request until it is answered; dropped unanswered, it stops counting as in
+    /// flight and is not observed.
+    pub struct Counting<F> {
+        #[pin]
+        inner: F,
+        t0: Instant,
+        guard: InFlight,
+    }
+}
+
+impl<F, E> Future for Counting<F>
+where
+    F: Future<Output = Result<Response, E>>,
+{
+    type Output = Result<Response, E>;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
+        let this = self.project();
+        let answered = std::task::ready!(this.inner.poll(cx));
+        if let Ok(r) = &answered {
+            let failed = !r.status().is_success();
+            this.guard
+                .0
+                .observe(this.t0.elapsed().as_secs_f64(), failed);
+        }
+        Poll::Ready(answered)
+    }
 }
 
 pub async fn render(State(state): State<super::AppState>) -> Response {

@@ -360,10 +360,7 @@ pub fn router(state: AppState, policy: Policy) -> (Router, Option<Forget>) {
             axum::http::HeaderName::from_static("x-mocapstore-version"),
             axum::http::HeaderValue::from_static(env!("CARGO_PKG_VERSION")),
         ))
-        .layer(axum::middleware::from_fn_with_state(
-            state.metrics.clone(),
-            metrics::count_requests,
-        ))
+        .layer(metrics::CountRequests(state.metrics.clone()))
         .layer(TraceLayer::new_for_http());
     (router, forget)
 }
