@@ -12,7 +12,7 @@ PARTS = [
     ("decode or copy of chunks", r"decode_next"),
     ("writing the format", r"write_some|rawf32"),
     ("rest of the handler (plan, headers)", r"takes::frames::"),
-    ("middleware (auth, audit, metrics, routing)", r"auth::front|count_requests"),
+    ("middleware (auth, audit, metrics, routing)", r"auth::front|count_requests|metrics::Counting|metrics::RequestCounter"),
     ("socket writes", r"poll_write|poll_flush|writev"),
     ("socket reads, HTTP parsing", r"poll_read|parse_headers|Http1Transaction>::parse"),
     ("scheduler, parking", r"park|Parker|run_task|steal|schedule"),
