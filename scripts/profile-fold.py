@@ -12,6 +12,7 @@ PARTS = [
     ("decode or copy of chunks", r"decode_next"),
     ("writing the format", r"write_some|rawf32"),
     ("rest of the handler (plan, headers)", r"takes::frames::"),
+    # count_requests: the metrics layer's name before a368536, for profiles of older builds.
     ("middleware (auth, audit, metrics, routing)", r"auth::front|count_requests|metrics::Counting|metrics::RequestCounter"),
     ("socket writes", r"poll_write|poll_flush|writev"),
     ("socket reads, HTTP parsing", r"poll_read|parse_headers|Http1Transaction>::parse"),

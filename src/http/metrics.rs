@@ -262,7 +262,7 @@ where
         m.in_flight.fetch_add(1, Ordering::Relaxed);
         Counting {
             t0: Instant::now(),
-            guard: InFlight(m.clone()),
+            guard: Some(InFlight(m.clone())),
             inner: self.inner.call(req),
         }
     }
@@ -275,7 +275,8 @@ pin_project_lite::pin_project! {
         #[pin]
         inner: F,
         t0: Instant,
-        guard: InFlight,
+        // Taken when the answer is ready: in flight until then, not until the future is dropped.
+        guard: Option<InFlight>,
     }
 }
 
@@ -288,11 +289,10 @@ where
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
         let this = self.project();
         let answered = std::task::ready!(this.inner.poll(cx));
-        if let Ok(r) = &answered {
-            let failed = !r.status().is_success();
-            this.guard
-                .0
-                .observe(this.t0.elapsed().as_secs_f64(), failed);
+        // Observed, then no longer in flight (the guard dropped), as the answer is ready.
+        let guard = this.guard.take();
+        if let (Some(InFlight(m)), Ok(r)) = (&guard, &answered) {
+            m.observe(this.t0.elapsed().as_secs_f64(), !r.status().is_success());
         }
         Poll::Ready(answered)
     }

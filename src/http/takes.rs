@@ -915,6 +915,11 @@ mod tests {
             f64::INFINITY,
             f64::NAN,
             1.0 / 3.0,
+            9_007_199_254_740_991.0,
+            -2.5,
+            f64::NEG_INFINITY,
+            2f64.powi(60),
+            f64::MIN_POSITIVE / 4.0,
         ] {
             assert_eq!(number_value(v).to_str().unwrap(), v.to_string(), "{v:?}");
         }

@@ -95,7 +95,8 @@ pub struct Prepared {
     /// cache entry is.
     pub generation: u64,
     pub reader: Reader,
-    /// Shared with every answer that writes them: an answer of every point copies none.
+    /// Shared with every answer that writes them: a binary answer of every point (f32, NPY)
+    /// copies none.
     pub point_names: Arc<[String]>,
     pub fps: f64,
     pub metres_per_unit: f64,

@@ -15,7 +15,7 @@ use crate::motion::units::Unit;
 pub struct Shape {
     pub fps: f64,
     pub unit: Unit,
-    /// Shared: an answer of every point of a take names them as its decoder does.
+    /// Shared with the take's decoder, so that an answer of every point need not copy them.
     pub point_names: std::sync::Arc<[String]>,
     /// Frames the answer will hold: headers that state a count (TRC, NPY) state this one.
     pub frames: usize,
