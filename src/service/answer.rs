@@ -946,8 +946,7 @@ impl Plan {
                 let names = ix
                     .iter()
                     .map(|&i| prepared.point_names[i].clone())
-                    .collect::<Vec<_>>()
-                    .into();
+                    .collect();
                 (Some(ix), names)
             }
         };
